@@ -1,0 +1,355 @@
+"""Steppers behind one interface (DESIGN §7, modelled on scipy's ``OdeSolver``).
+
+An :class:`Integrator` advances a state across one *smooth segment*: an interval over which the
+held input ``u`` is constant and the scene has no discontinuity (the simulation loop splits
+the run at torque-window edges and control ticks, so discontinuities are integrated across
+exactly, by stopping at them). Within a segment it must land exactly on each requested time.
+
+Registered integrators
+----------------------
+``dop853``      Dormand-Prince 8(5,3), error-controlled (rtol/atol), one compiled step per call
+                (all 12 stages + FSAL + error norm in generated C); Python only decides h.
+``rk4``         Classical Runge-Kutta 4, fixed step (``simulation.step``, default 1 s), whole
+                segment as one compiled call.
+``scipy_dop853``, ``scipy_rk45``, ``scipy_radau``, ``scipy_bdf``, ``scipy_lsoda``
+                scipy ``solve_ivp`` on the compiled right-hand side: reference paths.
+
+Time-dependent terms (array profiles, orbit) are evaluated at the stage times.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import casadi as ca
+import numpy as np
+from scipy.integrate import DOP853 as _ScipyDOP853
+from scipy.integrate import solve_ivp
+
+from ._compile import FastCall
+
+__all__ = ["Integrator", "IntegrationError", "INTEGRATORS", "get_integrator"]
+
+
+class IntegrationError(RuntimeError):
+    """The integrator could not continue; ``t`` is where it stopped."""
+
+    def __init__(self, t: float, reason: str, partial: np.ndarray | None = None):
+        super().__init__(f"integration stopped at t = {t:.6g} s: {reason}")
+        self.t = t
+        self.reason = reason
+        self.partial = partial  # rows already integrated in the current segment
+
+
+class Integrator:
+    """Base class. Rules for implementers:
+
+    1. Set ``name``, ``order`` and ``adaptive``.
+    2. ``build(rhs, nx, nu, npar)`` (classmethod) returns the casadi Functions the integrator
+       wants compiled (they are compiled once per model structure together with the RHS);
+       ``rhs`` is ``f(t, x, u, p) -> xdot``.
+    3. ``_integrate(ts, x0, u)`` returns the states at every time of ``ts`` (``ts[0]`` is the
+       start, ``x0`` the state there) as an array ``(len(ts), nx)``; it adds the RHS
+       evaluations it made to ``self.n_rhs`` and accepted steps to ``self.n_steps``.
+    4. It may keep memory between calls (step size) - segments follow each other in time.
+    """
+
+    name: ClassVar[str] = ""
+    order: ClassVar[int] = 0
+    adaptive: ClassVar[bool] = False
+
+    def __init__(self, funcs: dict, p: np.ndarray, nx: int, *, rtol=1e-9, atol=1e-12, step=None, max_step=None):
+        self.funcs = funcs
+        self.p = np.asarray(p, dtype=float)
+        self.nx = nx
+        self.rtol = float(rtol)
+        self.atol = float(atol)
+        self.step = step
+        self.max_step = math.inf if max_step is None else float(max_step)
+        self.n_rhs = 0
+        self.n_steps = 0
+        self._rhs = FastCall(funcs["rhs"])
+        self._rhs.args[3][:] = self.p
+
+    @classmethod
+    def build(cls, rhs: ca.Function, nx: int, nu: int, npar: int) -> list[ca.Function]:
+        return []
+
+    def f(self, t, x, u) -> np.ndarray:
+        """One right-hand-side evaluation (counted)."""
+        a = self._rhs.args
+        a[0][0] = t
+        a[1][:] = x
+        a[2][:] = u
+        self._rhs()
+        self.n_rhs += 1
+        return self._rhs.res[0].copy()
+
+    def integrate(self, ts, x0, u) -> np.ndarray:
+        ts = np.asarray(ts, dtype=float)
+        if ts.ndim != 1 or ts.size < 2 or np.any(np.diff(ts) <= 0):
+            raise ValueError("ts must be an increasing sequence of at least two times")
+        x0 = np.asarray(x0, dtype=float)
+        if not np.all(np.isfinite(x0)):
+            raise IntegrationError(ts[0], "state is not finite (NaN or inf)")
+        return self._integrate(ts, x0, np.asarray(u, dtype=float))
+
+    def _integrate(self, ts, x0, u):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+# ---------------------------------------------------------------------------------------
+# Dormand-Prince 8(5,3)
+# ---------------------------------------------------------------------------------------
+
+
+class DOP853(Integrator):
+    """Dormand-Prince 8(5,3) with Hairer's error norm and step control (as scipy's DOP853).
+
+    The Butcher table is scipy's (``scipy.integrate.DOP853.A/B/C/E3/E5``): data, not code.
+    """
+
+    name = "dop853"
+    order = 8
+    adaptive = True
+    SAFETY = 0.9
+    MIN_FACTOR = 0.2
+    MAX_FACTOR = 10.0
+    N_STAGES = 12
+
+    @classmethod
+    def build(cls, rhs, nx, nu, npar):
+        A, B, C = _ScipyDOP853.A, _ScipyDOP853.B, _ScipyDOP853.C
+        E3, E5 = _ScipyDOP853.E3, _ScipyDOP853.E5
+        t = ca.SX.sym("t")
+        x = ca.SX.sym("x", nx)
+        k1 = ca.SX.sym("k1", nx)
+        h = ca.SX.sym("h")
+        u = ca.SX.sym("u", nu)
+        p = ca.SX.sym("p", npar)
+        tol = ca.SX.sym("tol", 2)  # rtol, atol
+        K = [k1]
+        for s in range(1, cls.N_STAGES):
+            dy = sum(float(A[s, j]) * K[j] for j in range(s) if A[s, j] != 0.0)
+            K.append(rhs(t + float(C[s]) * h, x + h * dy, u, p))
+        x_new = x + h * sum(float(B[i]) * K[i] for i in range(cls.N_STAGES) if B[i] != 0.0)
+        K.append(rhs(t + h, x_new, u, p))
+        scale = tol[1] + ca.fmax(ca.fabs(x), ca.fabs(x_new)) * tol[0]
+        err5 = sum(float(E5[i]) * K[i] for i in range(len(E5)) if E5[i] != 0.0) / scale
+        err3 = sum(float(E3[i]) * K[i] for i in range(len(E3)) if E3[i] != 0.0) / scale
+        e5 = ca.sumsqr(err5)
+        e3 = ca.sumsqr(err3)
+        denom = e5 + 0.01 * e3
+        err = ca.if_else(denom > 0, ca.fabs(h) * e5 / ca.sqrt(ca.fmax(denom, 1e-300) * nx), 0.0)
+        return [ca.Function("dop853_step", [t, x, k1, h, u, p, tol], [x_new, K[-1], err])]
+
+    def __init__(self, funcs, p, nx, **kw):
+        super().__init__(funcs, p, nx, **kw)
+        self._step = FastCall(funcs["dop853_step"])
+        self._step.args[5][:] = self.p
+        self._step.args[6][:] = [self.rtol, self.atol]
+        self.h = None  # step size memory across segments
+        self.n_rejected = 0
+
+    def _initial_step(self, t, x, f0, u, t_end):
+        """Hairer & Wanner's starting step (II.4), as in scipy's ``select_initial_step``."""
+        scale = self.atol + np.abs(x) * self.rtol
+        d0 = np.linalg.norm(x / scale) / math.sqrt(self.nx)
+        d1 = np.linalg.norm(f0 / scale) / math.sqrt(self.nx)
+        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = min(h0, t_end - t)
+        f1 = self.f(t + h0, x + h0 * f0, u)
+        d2 = np.linalg.norm((f1 - f0) / scale) / math.sqrt(self.nx) / h0
+        if d1 <= 1e-15 and d2 <= 1e-15:
+            h1 = max(1e-6, h0 * 1e-3)
+        else:
+            h1 = (0.01 / max(d1, d2)) ** (1.0 / (self.order + 1))
+        return min(100 * h0, h1, self.max_step)
+
+    def _integrate(self, ts, x0, u):
+        out = np.empty((ts.size, self.nx))
+        out[0] = x0
+        x = x0.copy()
+        t = ts[0]
+        k1 = self.f(t, x, u)
+        if self.h is None:
+            self.h = self._initial_step(t, x, k1, u, ts[-1])
+        s = self._step
+        a = s.args
+        a[4][:] = u
+        for i in range(1, ts.size):
+            t_target = ts[i]
+            rejected = False
+            while t < t_target:
+                remaining = t_target - t
+                h = min(self.h, self.max_step)
+                clipped = h >= remaining * (1.0 - 1e-12)
+                if clipped:
+                    h = remaining
+                elif h > 0.5 * remaining:
+                    h = 0.5 * remaining  # two even steps rather than one step and a sliver
+                if h <= 1e-12 * max(1.0, abs(t)):
+                    raise IntegrationError(t, f"step size underflow (h = {h:.3g} s)", out[:i])
+                a[0][0] = t
+                a[1][:] = x
+                a[2][:] = k1
+                a[3][0] = h
+                s()
+                self.n_rhs += self.N_STAGES
+                err = s.res[2][0]
+                if not math.isfinite(err):
+                    if not np.all(np.isfinite(x)):
+                        raise IntegrationError(t, "state is not finite (NaN or inf)", out[:i])
+                    err = math.inf
+                if err <= 1.0:
+                    t = t_target if clipped else t + h
+                    x[:] = s.res[0]
+                    k1[:] = s.res[1]
+                    self.n_steps += 1
+                    factor = self.MAX_FACTOR if err == 0.0 else min(self.MAX_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
+                    if rejected:
+                        factor = min(1.0, factor)
+                    self.h = max(self.h, h * factor) if clipped else h * factor
+                    rejected = False
+                else:
+                    self.n_rejected += 1
+                    self.h = h * max(self.MIN_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
+                    rejected = True
+            out[i] = x
+        return out
+
+
+# ---------------------------------------------------------------------------------------
+# Classical RK4, fixed step
+# ---------------------------------------------------------------------------------------
+
+
+class RK4(Integrator):
+    """Classical 4th-order Runge-Kutta with a fixed step (``simulation.step``, default 1 s).
+
+    Each requested interval is split into ``ceil(dt / step)`` equal steps, so output and
+    discontinuity times are hit exactly; the steps of one interval run in one compiled call.
+    """
+
+    name = "rk4"
+    order = 4
+    adaptive = False
+    DEFAULT_STEP_S = 1.0
+    MAX_STEPS_PER_CALL = 64
+
+    @classmethod
+    def build(cls, rhs, nx, nu, npar):
+        t = ca.SX.sym("t")
+        x = ca.SX.sym("x", nx)
+        h = ca.SX.sym("h")
+        u = ca.SX.sym("u", nu)
+        p = ca.SX.sym("p", npar)
+        k1 = rhs(t, x, u, p)
+        k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
+        k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
+        k4 = rhs(t + h, x + h * k3, u, p)
+        x_new = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        one = ca.Function("rk4_one", [ca.vertcat(t, x), ca.vertcat(h, u, p)], [ca.vertcat(t + h, x_new)])
+        # n steps in one call: mapaccum over the (t, x) carry; n_active masks the unused tail
+        n = cls.MAX_STEPS_PER_CALL
+        multi = one.mapaccum("rk4_multi_acc", n)
+        # MX outer function: the generated C is a loop over one compiled step, not n copies
+        tx0 = ca.MX.sym("tx0", 1 + nx)
+        hup = ca.MX.sym("hup", 1 + nu + npar)
+        n_act = ca.MX.sym("n_act")
+        hs = ca.if_else(ca.DM(list(range(n))).T < n_act, hup[0], 0.0)
+        rest = ca.repmat(hup[1:], 1, n)
+        traj = multi(tx0, ca.vertcat(hs, rest))
+        return [ca.Function("rk4_multi", [tx0, hup, n_act], [traj[:, -1]])]
+
+    def __init__(self, funcs, p, nx, **kw):
+        super().__init__(funcs, p, nx, **kw)
+        self.h_nominal = float(self.step) if self.step else self.DEFAULT_STEP_S
+        self._multi = FastCall(funcs["rk4_multi"])
+
+    def _integrate(self, ts, x0, u):
+        out = np.empty((ts.size, self.nx))
+        out[0] = x0
+        m = self._multi
+        tx, hup, n_act = m.args
+        hup[1 : 1 + u.size] = u
+        hup[1 + u.size :] = self.p
+        x = x0.copy()
+        for i in range(1, ts.size):
+            dt = ts[i] - ts[i - 1]
+            n = max(1, math.ceil(dt / self.h_nominal - 1e-9))
+            h = dt / n
+            hup[0] = h
+            t = ts[i - 1]
+            while n > 0:
+                k = min(n, self.MAX_STEPS_PER_CALL)
+                tx[0] = t
+                tx[1:] = x
+                n_act[0] = k
+                m()
+                x = m.res[0][1:].copy()
+                t += k * h
+                n -= k
+                self.n_rhs += 4 * k
+                self.n_steps += k
+            if not np.all(np.isfinite(x)):
+                raise IntegrationError(ts[i], "state is not finite (NaN or inf)", out[:i])
+            out[i] = x
+        return out
+
+
+# ---------------------------------------------------------------------------------------
+# scipy reference paths
+# ---------------------------------------------------------------------------------------
+
+
+class ScipyIVP(Integrator):
+    """scipy ``solve_ivp`` on the compiled RHS (a reference path, not the fast one)."""
+
+    name = "scipy_dop853"
+    method = "DOP853"
+    order = 8
+    adaptive = True
+
+    def _integrate(self, ts, x0, u):
+        def fun(t, x):
+            return self.f(t, x, u)
+
+        kw = {}
+        if math.isfinite(self.max_step):
+            kw["max_step"] = self.max_step
+        sol = solve_ivp(fun, (ts[0], ts[-1]), x0, method=self.method, t_eval=ts, rtol=self.rtol, atol=self.atol, **kw)
+        if sol.status != 0:
+            t_fail = float(sol.t[-1]) if sol.t.size else float(ts[0])
+            raise IntegrationError(t_fail, f"solve_ivp({self.method}): {sol.message}", sol.y.T)
+        self.n_steps += max(0, sol.t.size - 1)
+        return sol.y.T.copy()
+
+
+def _scipy(method: str, order: int) -> type[ScipyIVP]:
+    return type(f"Scipy{method}", (ScipyIVP,), {"name": f"scipy_{method.lower()}", "method": method, "order": order})
+
+
+INTEGRATORS: dict[str, type[Integrator]] = {
+    cls.name: cls
+    for cls in (
+        DOP853,
+        RK4,
+        ScipyIVP,
+        _scipy("RK45", 5),
+        _scipy("Radau", 5),
+        _scipy("BDF", 1),
+        _scipy("LSODA", 1),
+    )
+}
+
+
+def get_integrator(name_or_cls) -> type[Integrator]:
+    """The integrator class for a registry name or an :class:`Integrator` subclass."""
+    if isinstance(name_or_cls, type) and issubclass(name_or_cls, Integrator):
+        return name_or_cls
+    try:
+        return INTEGRATORS[name_or_cls]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown integrator {name_or_cls!r}; valid: {', '.join(sorted(INTEGRATORS))}") from None
