@@ -142,13 +142,32 @@ class DOP853(Integrator):
         e3 = ca.sumsqr(err3)
         denom = e5 + 0.01 * e3
         err = ca.if_else(denom > 0, ca.fabs(h) * e5 / ca.sqrt(ca.fmax(denom, 1e-300) * nx), 0.0)
-        return [ca.Function("dop853_step", [t, x, k1, h, u, p, tol], [x_new, K[-1], err])]
+        step = ca.Function("dop853_step", [t, x, k1, h, u, p, tol], [x_new, K[-1], err])
+        # Dense output (Hairer's 7th-order interpolant, scipy's Dop853DenseOutput): three extra
+        # stages, then y(t + θh) = x + Σ F-polynomial in θ. Used only for steps that contain an
+        # output time, so outputs never cap the step size.
+        A_EXTRA, C_EXTRA, D = _ScipyDOP853.A_EXTRA, _ScipyDOP853.C_EXTRA, _ScipyDOP853.D
+        Kx = list(K)
+        for j, (a_row, c) in enumerate(zip(A_EXTRA, C_EXTRA)):
+            s = cls.N_STAGES + 1 + j
+            dy = sum(float(a_row[i]) * Kx[i] for i in range(s) if a_row[i] != 0.0)
+            Kx.append(rhs(t + float(c) * h, x + h * dy, u, p))
+        dx = x_new - x
+        F = [dx, h * k1 - dx, 2 * dx - h * (K[-1] + k1)]
+        for row in D:
+            F.append(h * sum(float(row[i]) * Kx[i] for i in range(len(row)) if row[i] != 0.0))
+        dense = ca.Function(
+            "dop853_dense", [t, x, k1, h, u, p, tol], [x_new, K[-1], err, ca.horzcat(*F)]
+        )
+        return [step, dense]
 
     def __init__(self, funcs, p, nx, **kw):
         super().__init__(funcs, p, nx, **kw)
         self._step = FastCall(funcs["dop853_step"])
-        self._step.args[5][:] = self.p
-        self._step.args[6][:] = [self.rtol, self.atol]
+        self._dense = FastCall(funcs["dop853_dense"])
+        for fc in (self._step, self._dense):
+            fc.args[5][:] = self.p
+            fc.args[6][:] = [self.rtol, self.atol]
         self.h = None  # step size memory across segments
         self.n_rejected = 0
 
@@ -167,56 +186,80 @@ class DOP853(Integrator):
             h1 = (0.01 / max(d1, d2)) ** (1.0 / (self.order + 1))
         return min(100 * h0, h1, self.max_step)
 
+    @staticmethod
+    def _interpolate(x0, F, theta):
+        """scipy's Dop853DenseOutput polynomial at fractions ``theta`` (k,) of the step."""
+        th = theta[:, None]
+        y = np.zeros((theta.size, x0.size))
+        for i, f in enumerate(F[::-1]):
+            y += f
+            y *= th if i % 2 == 0 else (1.0 - th)
+        return y + x0
+
     def _integrate(self, ts, x0, u):
         out = np.empty((ts.size, self.nx))
         out[0] = x0
         x = x0.copy()
         t = ts[0]
+        t_end = ts[-1]
         k1 = self.f(t, x, u)
         if self.h is None:
-            self.h = self._initial_step(t, x, k1, u, ts[-1])
-        s = self._step
-        a = s.args
-        a[4][:] = u
-        for i in range(1, ts.size):
-            t_target = ts[i]
-            rejected = False
-            while t < t_target:
-                remaining = t_target - t
-                h = min(self.h, self.max_step)
-                clipped = h >= remaining * (1.0 - 1e-12)
-                if clipped:
-                    h = remaining
-                elif h > 0.5 * remaining:
-                    h = 0.5 * remaining  # two even steps rather than one step and a sliver
-                if h <= 1e-12 * max(1.0, abs(t)):
-                    raise IntegrationError(t, f"step size underflow (h = {h:.3g} s)", out[:i])
-                a[0][0] = t
-                a[1][:] = x
-                a[2][:] = k1
-                a[3][0] = h
-                s()
-                self.n_rhs += self.N_STAGES
-                err = s.res[2][0]
-                if not math.isfinite(err):
-                    if not np.all(np.isfinite(x)):
-                        raise IntegrationError(t, "state is not finite (NaN or inf)", out[:i])
-                    err = math.inf
-                if err <= 1.0:
-                    t = t_target if clipped else t + h
-                    x[:] = s.res[0]
-                    k1[:] = s.res[1]
-                    self.n_steps += 1
-                    factor = self.MAX_FACTOR if err == 0.0 else min(self.MAX_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
-                    if rejected:
-                        factor = min(1.0, factor)
-                    self.h = max(self.h, h * factor) if clipped else h * factor
-                    rejected = False
-                else:
-                    self.n_rejected += 1
-                    self.h = h * max(self.MIN_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
-                    rejected = True
-            out[i] = x
+            self.h = self._initial_step(t, x, k1, u, t_end)
+        for fc in (self._step, self._dense):
+            fc.args[4][:] = u
+        i = 1  # next requested time
+        rejected = False
+        while t < t_end:
+            remaining = t_end - t
+            h = min(self.h, self.max_step)
+            clipped = h >= remaining * (1.0 - 1e-12)
+            if clipped:
+                h = remaining
+            elif h > 0.5 * remaining:
+                h = 0.5 * remaining  # two even steps rather than one step and a sliver
+            if h <= 1e-12 * max(1.0, abs(t)):
+                raise IntegrationError(t, f"step size underflow (h = {h:.3g} s)", out[:i])
+            # interior requested times inside this step need the interpolant
+            dense = (i < ts.size - 1) and ts[i] < t + h
+            s = self._dense if dense else self._step
+            a = s.args
+            a[0][0] = t
+            a[1][:] = x
+            a[2][:] = k1
+            a[3][0] = h
+            s()
+            self.n_rhs += self.N_STAGES + (3 if dense else 0)
+            err = s.res[2][0]
+            if not math.isfinite(err):
+                if not np.all(np.isfinite(x)):
+                    raise IntegrationError(t, "state is not finite (NaN or inf)", out[:i])
+                err = math.inf
+            if err <= 1.0:
+                t_new = t_end if clipped else t + h
+                if dense:
+                    j = i
+                    while j < ts.size - 1 and ts[j] < t_new:
+                        j += 1
+                    F = s.res[3].reshape(7, self.nx)
+                    out[i:j] = self._interpolate(x, F, (ts[i:j] - t) / h)
+                    i = j
+                t = t_new
+                x[:] = s.res[0]
+                k1[:] = s.res[1]
+                if i < ts.size and ts[i] == t:
+                    out[i] = x
+                    i += 1
+                self.n_steps += 1
+                factor = self.MAX_FACTOR if err == 0.0 else min(self.MAX_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
+                if rejected:
+                    factor = min(1.0, factor)
+                self.h = max(self.h, h * factor) if clipped else h * factor
+                rejected = False
+            else:
+                self.n_rejected += 1
+                self.h = h * max(self.MIN_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
+                rejected = True
+        out[-1] = x
         return out
 
 

@@ -1,0 +1,34 @@
+# stationbed - everything installs into a local virtual environment (.venv) on first use.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+SCENE  ?= scenarios/power_tower_free_drift.toml
+OUT    ?= out/power_tower_free_drift
+# pytest workers: both cores of the CI machine
+JOBS   ?= 2
+
+.PHONY: run test bench check install clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[test,plot]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/stationbed run $(SCENE) --out $(OUT) --rrd $(OUT)/recording.rrd
+
+test: $(STAMP)
+	$(PY) -m pytest -n $(JOBS) -q
+
+check: $(STAMP)
+	@for s in scenarios/*.toml; do $(VENV)/bin/stationbed check $$s || exit 1; done
+
+bench: $(STAMP)
+	$(PY) benchmarks/bench_core.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

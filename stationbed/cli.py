@@ -1,0 +1,172 @@
+"""``stationbed`` command line (DESIGN §6).
+
+    stationbed run SCENE.toml [--out DIR] [--formulation NAME] [--integrator NAME]
+                              [--rtol X] [--atol X] [--duration S] [--step S] [--rrd FILE]
+    stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE]
+    stationbed list
+
+Any bad input or failed run: one line on stderr (``stationbed: error: ...``), non-zero exit
+(2 = bad input, 1 = the run or the check failed), and whatever was computed kept on disk.
+Set ``STATIONBED_DEBUG=1`` to see the Python traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse's own convention)
+        self.exit(EXIT_BAD_INPUT, f"stationbed: error: {message}\n")
+
+
+def _positive(name):
+    def conv(s):
+        try:
+            v = float(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {s!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{name} must be a positive finite number, got {s!r}")
+        return v
+
+    return conv
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="stationbed", description="Space-station attitude control test bed")
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("run", help="simulate a scene, write trajectory.csv (and a rerun recording)")
+    r.add_argument("scene", type=Path)
+    r.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene name>)")
+    r.add_argument("--formulation", default=None)
+    r.add_argument("--integrator", default=None)
+    r.add_argument("--rtol", type=_positive("--rtol"), default=None)
+    r.add_argument("--atol", type=_positive("--atol"), default=None)
+    r.add_argument("--duration", type=_positive("--duration"), default=None, help="[s]")
+    r.add_argument("--step", type=_positive("--step"), default=None, help="fixed step [s]")
+    r.add_argument("--rrd", type=Path, default=None, help="also write a rerun recording")
+
+    c = sub.add_parser("check", help="run every formulation and compare them")
+    c.add_argument("scene", type=Path)
+    c.add_argument("--rtol", type=_positive("--rtol"), default=None)
+    c.add_argument("--duration", type=_positive("--duration"), default=None, help="[s]")
+    c.add_argument("--rrd", type=Path, default=None, help="all formulations in one recording")
+
+    sub.add_parser("list", help="registered formulations and integrators")
+    return p
+
+
+def _fail(msg: str, code: int) -> int:
+    print(f"stationbed: error: {msg}", file=sys.stderr)
+    return code
+
+
+def _cmd_run(args) -> int:
+    from .scene import load_scene
+    from .simulate import SimulationError, simulate
+    from .trajectory import CsvSink, base_columns
+
+    scene = load_scene(args.scene)
+    out = args.out or Path("out") / scene.name
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = out / "trajectory.csv"
+    status = {"scene": str(args.scene)}
+    with open(csv_path, "w", newline="") as fh:
+        sink = CsvSink(fh, base_columns(scene.appendage_names))
+        try:
+            traj = simulate(
+                scene,
+                formulation=args.formulation,
+                integrator=args.integrator,
+                rtol=args.rtol,
+                atol=args.atol,
+                duration=args.duration,
+                step=args.step,
+                sink=sink,
+            )
+        except SimulationError as e:
+            status.update(e.trajectory.meta)
+            (out / "summary.json").write_text(json.dumps(status, indent=2))
+            if args.rrd:
+                _write_rrd(e.trajectory, scene, args.rrd)
+            return _fail(f"{e}; {len(e.trajectory)} rows kept in {csv_path}", EXIT_FAILED)
+    status.update(traj.meta)
+    (out / "summary.json").write_text(json.dumps(status, indent=2))
+    msg = (
+        f"{scene.name}: {len(traj)} rows, t = 0..{traj.t[-1]:g} s, {traj.meta['formulation']}/"
+        f"{traj.meta['integrator']}, {traj.meta['n_rhs']} RHS evaluations, "
+        f"{traj.meta['wall_s'] * 1e3:.1f} ms -> {csv_path}"
+    )
+    if args.rrd:
+        _write_rrd(traj, scene, args.rrd)
+        msg += f", {args.rrd}"
+    print(msg)
+    return 0
+
+
+def _write_rrd(traj, scene, path):
+    from .rerun_log import write_recording
+
+    write_recording(traj, scene, path)
+
+
+def _cmd_check(args) -> int:
+    from .check import check_scene
+    from .scene import load_scene
+
+    scene = load_scene(args.scene)
+    res = check_scene(scene, rtol=args.rtol, duration=args.duration)
+    print(res.table())
+    if args.rrd:
+        from .rerun_log import write_check_recording
+
+        write_check_recording(res, scene, args.rrd)
+    if not res.ok:
+        return _fail(f"formulations disagree on {scene.name} beyond tolerance (table above)", EXIT_FAILED)
+    print("ok: all formulations agree")
+    return 0
+
+
+def _cmd_list(args) -> int:
+    from .formulations import FORMULATIONS
+    from .integrators import INTEGRATORS
+
+    print("formulations:")
+    for n, c in FORMULATIONS.items():
+        print(f"  {n:<14} {c.description}")
+    print("integrators:")
+    for n, c in INTEGRATORS.items():
+        print(f"  {n:<14} order {c.order}, {'adaptive' if c.adaptive else 'fixed step'}")
+    return 0
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    from .scene import SceneError
+
+    try:
+        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list}[args.cmd](args)
+    except SceneError as e:
+        return _fail(str(e), EXIT_BAD_INPUT)
+    except ValueError as e:  # unknown formulation/integrator names and other bad arguments
+        return _fail(str(e), EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        return _fail("interrupted; rows computed so far are on disk", EXIT_FAILED)
+    except Exception as e:  # never a traceback for a user; keep it one line
+        if os.environ.get("STATIONBED_DEBUG"):
+            raise
+        return _fail(f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}", EXIT_FAILED)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""Scene builders and paths shared by the tests (importable as ``scenes``)."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
+
+
+def scenario_ids():
+    return [p.stem for p in SCENARIOS]
+
+
+RIGID = {
+    "name": "test_rigid",
+    "simulation": {"duration": 100.0, "rtol": 1e-12, "atol": 1e-14, "output_dt": 1.0},
+    "initial": {"q_BN": [1.0, 0.0, 0.0, 0.0], "omega_BN_B": [0.0, 0.0, 0.0]},
+    "body": {"mass": 1000.0, "inertia": [[100.0, 0, 0], [0, 200.0, 0], [0, 0, 250.0]], "cm": [0, 0, 0]},
+}
+
+
+def articulated_dict(duration=300.0, rtol=1e-12, atol=1e-14, alpha_rate=0.01):
+    """A hub with two arrays on sine profiles, deep space, products of inertia everywhere."""
+    return {
+        "name": "test_articulated",
+        "simulation": {"duration": duration, "rtol": rtol, "atol": atol, "output_dt": 5.0},
+        "initial": {"q_BN": [1.0, 0.0, 0.0, 0.0], "omega_BN_B": [0.003, -0.002, 0.004]},
+        "body": {
+            "mass": 5.0e4,
+            "inertia": [[2.0e6, 1.0e5, -5.0e4], [1.0e5, 1.5e6, 2.0e4], [-5.0e4, 2.0e4, 2.8e6]],
+            "cm": [0.3, -0.1, 0.2],
+        },
+        "appendage": [
+            {
+                "name": "a",
+                "mass": 4000.0,
+                "inertia": [[3.0e5, 1.0e4, 0.0], [1.0e4, 8.0e4, 2.0e3], [0.0, 2.0e3, 3.5e5]],
+                "cm": [0.0, 15.0, 1.0],
+                "alpha": {"a0": 0.1, "rate": alpha_rate, "amp": 0.6, "freq": 0.04, "phase": 0.2},
+                "beta": {"a0": -0.1, "amp": 0.4, "freq": 0.03, "phase": 1.0},
+            },
+            {
+                "name": "b",
+                "mass": 3000.0,
+                "inertia": [[2.0e5, 0.0, 5.0e3], [0.0, 6.0e4, 0.0], [5.0e3, 0.0, 2.4e5]],
+                "cm": [1.0, -14.0, 0.0],
+                "alpha": {"a0": 0.3, "rate": -alpha_rate, "amp": 0.5, "freq": 0.05},
+                "beta": {"a0": 0.2, "amp": 0.3, "freq": 0.02, "phase": -0.4},
+            },
+        ],
+    }
+
