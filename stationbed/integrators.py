@@ -186,15 +186,20 @@ class DOP853(Integrator):
             h1 = (0.01 / max(d1, d2)) ** (1.0 / (self.order + 1))
         return min(100 * h0, h1, self.max_step)
 
-    @staticmethod
-    def _interpolate(x0, F, theta):
-        """scipy's Dop853DenseOutput polynomial at fractions ``theta`` (k,) of the step."""
-        th = theta[:, None]
-        y = np.zeros((theta.size, x0.size))
-        for i, f in enumerate(F[::-1]):
-            y += f
-            y *= th if i % 2 == 0 else (1.0 - th)
-        return y + x0
+    # scipy's Dop853DenseOutput evaluates y = x + θ(F0 + (1-θ)(F1 + θ(F2 + ...))) by Horner;
+    # the same polynomial in the power basis: y = x + Σ_m θ^m (Σ_j P[m, j] F_j), so a batch of
+    # output times costs one Vandermonde matrix and two small matrix products.
+    _BASIS = [(1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3), (4, 3)]  # θ^a (1-θ)^b for F_j
+    P = np.zeros((8, 7))
+    for _j, (_a, _b) in enumerate(_BASIS):
+        _c = np.polynomial.polynomial.polymul([0.0] * _a + [1.0], np.polynomial.polynomial.polypow([1.0, -1.0], _b))
+        P[: _c.size, _j] = _c
+    del _j, _a, _b, _c
+
+    @classmethod
+    def _interpolate(cls, x0, F, theta):
+        """The 7th-order dense output at fractions ``theta`` (k,) of the step."""
+        return x0 + np.vander(theta, 8, increasing=True) @ (cls.P @ F)
 
     def _integrate(self, ts, x0, u):
         out = np.empty((ts.size, self.nx))
@@ -237,9 +242,7 @@ class DOP853(Integrator):
             if err <= 1.0:
                 t_new = t_end if clipped else t + h
                 if dense:
-                    j = i
-                    while j < ts.size - 1 and ts[j] < t_new:
-                        j += 1
+                    j = min(int(np.searchsorted(ts, t_new, side="left")), ts.size - 1)
                     F = s.res[3].reshape(7, self.nx)
                     out[i:j] = self._interpolate(x, F, (ts[i:j] - t) / h)
                     i = j
