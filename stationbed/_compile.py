@@ -43,15 +43,19 @@ def compiler() -> str | None:
     return None
 
 
-def compile_functions(functions: list[ca.Function], tag: str) -> dict[str, ca.Function]:
-    """Compile ``functions`` into one library; return name -> callable casadi Function."""
+def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "") -> dict:
+    """Compile ``functions`` into one library; return name -> callable casadi Function.
+
+    ``extra_c`` is appended to the generated source (a driver that calls the generated
+    functions by name); when a library was built, its path is under the key ``"__lib__"``.
+    """
     cc = compiler()
     if cc is None:
         return {f.name(): f for f in functions}
     cg = ca.CodeGenerator(f"sb_{tag}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
-    src = cg.dump()
+    src = cg.dump() + extra_c
     digest = hashlib.sha256((src + " ".join(CFLAGS)).encode()).hexdigest()[:20]
     lib = cache_dir() / f"sb_{tag}_{digest}.so"
     if not lib.exists():
@@ -63,7 +67,9 @@ def compile_functions(functions: list[ca.Function], tag: str) -> dict[str, ca.Fu
             if res.returncode != 0:  # compiler broken: fall back, never fail the run
                 return {f.name(): f for f in functions}
             os.replace(tmp_lib, lib)  # atomic: concurrent test workers never see half a file
-    return {f.name(): ca.external(f.name(), str(lib)) for f in functions}
+    funcs = {f.name(): ca.external(f.name(), str(lib)) for f in functions}
+    funcs["__lib__"] = str(lib)
+    return funcs
 
 
 class FastCall:
@@ -85,3 +91,14 @@ class FastCall:
 
     def __call__(self):
         self._trigger()
+
+    _cache: dict = {}
+
+    @classmethod
+    def of(cls, f: ca.Function) -> "FastCall":
+        """A shared FastCall per Function (buffers reused across runs; not thread-safe)."""
+        key = id(f)
+        hit = cls._cache.get(key)
+        if hit is None or hit.f is not f:
+            hit = cls._cache[key] = cls(f)
+        return hit

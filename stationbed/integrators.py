@@ -19,7 +19,9 @@ Time-dependent terms (array profiles, orbit) are evaluated at the stage times.
 
 from __future__ import annotations
 
+import ctypes
 import math
+from pathlib import Path
 from typing import ClassVar
 
 import casadi as ca
@@ -30,6 +32,8 @@ from scipy.integrate import solve_ivp
 from ._compile import FastCall
 
 __all__ = ["Integrator", "IntegrationError", "INTEGRATORS", "get_integrator"]
+
+_DP = ctypes.POINTER(ctypes.c_double)
 
 
 class IntegrationError(RuntimeError):
@@ -69,8 +73,11 @@ class Integrator:
         self.max_step = math.inf if max_step is None else float(max_step)
         self.n_rhs = 0
         self.n_steps = 0
-        self._rhs = FastCall(funcs["rhs"])
+        self._rhs = FastCall.of(funcs["rhs"])
         self._rhs.args[3][:] = self.p
+
+    #: C source appended to the generated code (a driver calling the built functions by name)
+    extra_c: ClassVar[str] = ""
 
     @classmethod
     def build(cls, rhs: ca.Function, nx: int, nu: int, npar: int) -> list[ca.Function]:
@@ -113,6 +120,7 @@ class DOP853(Integrator):
     name = "dop853"
     order = 8
     adaptive = True
+    extra_c = (Path(__file__).with_name("_dop853_driver.c")).read_text()
     SAFETY = 0.9
     MIN_FACTOR = 0.2
     MAX_FACTOR = 10.0
@@ -163,13 +171,23 @@ class DOP853(Integrator):
 
     def __init__(self, funcs, p, nx, **kw):
         super().__init__(funcs, p, nx, **kw)
-        self._step = FastCall(funcs["dop853_step"])
-        self._dense = FastCall(funcs["dop853_dense"])
+        self._step = FastCall.of(funcs["dop853_step"])
+        self._dense = FastCall.of(funcs["dop853_dense"])
         for fc in (self._step, self._dense):
             fc.args[5][:] = self.p
             fc.args[6][:] = [self.rtol, self.atol]
         self.h = None  # step size memory across segments
         self.n_rejected = 0
+        self._c = None
+        if "__lib__" in funcs and not self.force_python:
+            lib = ctypes.CDLL(funcs["__lib__"])
+            self._c = lib.sb_dop853_segment
+            self._c.restype = ctypes.c_int
+            self._tol = np.array([self.rtol, self.atol])
+            self._P = np.ascontiguousarray(self.P)
+
+    #: use the Python step loop even when the C driver is available (tests compare the two)
+    force_python = False
 
     def _initial_step(self, t, x, f0, u, t_end):
         """Hairer & Wanner's starting step (II.4), as in scipy's ``select_initial_step``."""
@@ -202,6 +220,37 @@ class DOP853(Integrator):
         return x0 + np.vander(theta, 8, increasing=True) @ (cls.P @ F)
 
     def _integrate(self, ts, x0, u):
+        if self._c is None:
+            return self._integrate_python(ts, x0, u)
+        ts = np.ascontiguousarray(ts, dtype=float)
+        out = np.empty((ts.size, self.nx))
+        x = np.array(x0, dtype=float)
+        k1 = self.f(ts[0], x, u)
+        if self.h is None:
+            self.h = self._initial_step(ts[0], x, k1, u, ts[-1])
+        u = np.ascontiguousarray(u, dtype=float)
+        h = ctypes.c_double(self.h)
+        t_stop = ctypes.c_double(0.0)
+        info = np.zeros(4, dtype=np.int64)
+        def ptr(a):
+            return a.ctypes.data_as(_DP)
+
+        status = self._c(
+            ctypes.c_int(self.nx), ctypes.c_int(ts.size), ptr(ts), ptr(x), ptr(k1), ptr(u), ptr(self.p),
+            ptr(self._tol), ctypes.byref(h), ctypes.c_double(self.max_step), ptr(self._P), ptr(out),
+            info.ctypes.data_as(ctypes.POINTER(ctypes.c_longlong)), ctypes.byref(t_stop),
+        )
+        self.h = h.value
+        self.n_rhs += int(info[0])
+        self.n_steps += int(info[1])
+        self.n_rejected += int(info[2])
+        if status != 0:
+            reason = "step size underflow" if status == 1 else "state is not finite (NaN or inf)"
+            raise IntegrationError(t_stop.value, reason, out[: int(info[3])])
+        return out
+
+    def _integrate_python(self, ts, x0, u):
+        """The same algorithm as the C driver, step by step in Python (no-compiler fallback)."""
         out = np.empty((ts.size, self.nx))
         out[0] = x0
         x = x0.copy()
@@ -312,7 +361,7 @@ class RK4(Integrator):
     def __init__(self, funcs, p, nx, **kw):
         super().__init__(funcs, p, nx, **kw)
         self.h_nominal = float(self.step) if self.step else self.DEFAULT_STEP_S
-        self._multi = FastCall(funcs["rk4_multi"])
+        self._multi = FastCall.of(funcs["rk4_multi"])
 
     def _integrate(self, ts, x0, u):
         out = np.empty((ts.size, self.nx))

@@ -85,7 +85,7 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     out_map = out.map("out_map", "serial", OUT_CHUNK, [2], [])
     fs = [rhs, out, out_map, init] + integ_cls.build(rhs, nx, NU, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
-    funcs = compile_functions(fs, tag)
+    funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)
     system = System(form, integ_cls, funcs, time.perf_counter() - t0)
     _SYSTEMS[key] = system
     return system
@@ -182,7 +182,7 @@ def simulate(
     integ = system.integrator_cls(funcs, p, nx, rtol=rtol, atol=atol, step=step, max_step=sim.max_step)
 
     q0, w0 = initial_state(scene)
-    init = FastCall(funcs["init"])
+    init = FastCall.of(funcs["init"])
     init.args[0][0] = 0.0
     init.args[1][:] = q0
     init.args[2][:] = w0
@@ -190,7 +190,7 @@ def simulate(
     init()
     x = init.res[0].copy()
 
-    out = FastCall(funcs["out_map"])
+    out = FastCall.of(funcs["out_map"])
     out.args[2][:] = p
     columns = base_columns(scene.appendage_names)
     n_out = funcs["out"].numel_out(0)
