@@ -11,7 +11,7 @@ For one orbit (T = 2 pi / n) of the scene at rtol 1e-9, atol 1e-12:
 * accuracy: the max attitude difference (principal rotation angle) of each path against a tight
   reference (the library's momentum form at rtol 1e-12), and numpy vs library directly; as an
   independent check of the reference itself, the numpy RHS at rtol 1e-13 against it.
-* two "(info)" rows on the step grid (see the note printed under the table).
+* one "(info)" row: the library with outputs at 0 and T only (the cost of the output grid).
 
 Prints a markdown table, the targets (<= 10 ms per orbit compiled, >= 50x faster than
 scipy + numpy) with PASS/FAIL, and the machine; ``--json PATH`` writes the numbers.
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=7, help="timed runs per compiled path (default 7)")
     ap.add_argument("--scipy-repeats", type=int, default=3, help="timed scipy+numpy runs (default 3)")
     ap.add_argument("--no-numpy-ref", action="store_true", help="skip the numpy rtol 1e-13 cross-check")
-    ap.add_argument("--no-diagnostics", action="store_true", help="skip the two (info) step-grid rows")
+    ap.add_argument("--no-diagnostics", action="store_true", help="skip the (info) row")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers as JSON")
     args = ap.parse_args(argv)
 
@@ -144,32 +144,10 @@ def main(argv=None) -> int:
             err_vs_ref_rad=float(np.max(quat_angle(q_np, q_ref))),
         )
     )
-    # -- diagnostics: the step grid -----------------------------------------------------
-    # The library's DOP853 lands exactly on every output time (no dense output), so with
-    # output_dt = 10 s its step is capped at 10 s whatever rtol says; scipy interpolates to
-    # t_eval and takes its own (much longer) steps. Two extra rows separate the effects:
-    # scipy + numpy forced onto the same step cap (equal accuracy), and the library with
-    # outputs only at 0 and T (its own step control; error at T only).
-    dt_out = float(np.max(np.diff(t_eval)))
+    # -- diagnostic: the cost of the 10 s output grid itself ------------------------------
+    # The library's outputs come from DOP853's dense output (as scipy's t_eval), so they do not
+    # cap the step; this row shows what is left when only t = 0 and T are requested.
     if not args.no_diagnostics:
-        f = make_rhs(scene)
-        x0 = np_initial_state(scene)
-        t0 = time.perf_counter()
-        sol_cap = solve_ivp(
-            f, (0.0, T), x0, method="DOP853", rtol=RTOL, atol=ATOL, t_eval=t_eval, max_step=dt_out
-        )
-        wall_cap = time.perf_counter() - t0
-        rows.append(
-            dict(
-                path=f"(info) scipy DOP853 + numpy RHS, max_step = {dt_out:g} s (library's step cap), 1 run",
-                key="scipy_numpy_capped",
-                median_wall_ms=1e3 * wall_cap,
-                median_integrate_ms=1e3 * wall_cap,
-                n_rhs=int(sol_cap.nfev),
-                n_steps=None,
-                err_vs_ref_rad=float(np.max(quat_angle(sol_cap.y[:4].T, q_ref))),
-            )
-        )
         coarse, wall_c, inner_c = _time_library(scene, "momentum", T, args.repeats, output_dt=T)
         ref_T = q_ref[-1] if abs(t_eval[-1] - coarse.t[-1]) < 1e-9 * T else None
         rows.append(
@@ -253,17 +231,6 @@ def main(argv=None) -> int:
         "wall = the whole `simulate()` call (incl. output rows); integrator alone (meta wall_s): "
         + ", ".join(f"{r['key']} {r['median_integrate_ms']:.2f} ms" for r in rows if r["key"] in forms)
     )
-    print(
-        f"note: the library's dop853 lands on every output time (output_dt = {dt_out:g} s), so its step is "
-        "capped there and rtol barely matters; scipy interpolates to t_eval with its own steps. The "
-        "reference (library, rtol 1e-12) shares that step cap: compare with numpy_ref_vs_library_ref below."
-    )
-    cap = next((r for r in rows if r["key"] == "scipy_numpy_capped"), None)
-    if cap is not None:
-        print(
-            f"equal step grid (equal accuracy): scipy+numpy with max_step = {dt_out:g} s takes "
-            f"{cap['median_wall_ms'] / mom['median_wall_ms']:.0f}x the compiled momentum time"
-        )
     print()
     print("| target | value | result |")
     print("|---|---:|---|")
