@@ -68,7 +68,8 @@ class Integrator:
         self.p = np.asarray(p, dtype=float)
         self.nx = nx
         self.rtol = float(rtol)
-        self.atol = float(atol)
+        # atol: a scalar, or one value per state component (simulate passes the scaled vector)
+        self.atol = np.broadcast_to(np.asarray(atol, dtype=float), (nx,)).copy()
         self.step = step
         self.max_step = math.inf if max_step is None else float(max_step)
         self.n_rhs = 0
@@ -136,14 +137,14 @@ class DOP853(Integrator):
         h = ca.SX.sym("h")
         u = ca.SX.sym("u", nu)
         p = ca.SX.sym("p", npar)
-        tol = ca.SX.sym("tol", 2)  # rtol, atol
+        tol = ca.SX.sym("tol", 1 + nx)  # rtol, atol per component
         K = [k1]
         for s in range(1, cls.N_STAGES):
             dy = sum(float(A[s, j]) * K[j] for j in range(s) if A[s, j] != 0.0)
             K.append(rhs(t + float(C[s]) * h, x + h * dy, u, p))
         x_new = x + h * sum(float(B[i]) * K[i] for i in range(cls.N_STAGES) if B[i] != 0.0)
         K.append(rhs(t + h, x_new, u, p))
-        scale = tol[1] + ca.fmax(ca.fabs(x), ca.fabs(x_new)) * tol[0]
+        scale = tol[1:] + ca.fmax(ca.fabs(x), ca.fabs(x_new)) * tol[0]
         err5 = sum(float(E5[i]) * K[i] for i in range(len(E5)) if E5[i] != 0.0) / scale
         err3 = sum(float(E3[i]) * K[i] for i in range(len(E3)) if E3[i] != 0.0) / scale
         e5 = ca.sumsqr(err5)
@@ -175,7 +176,7 @@ class DOP853(Integrator):
         self._dense = FastCall.of(funcs["dop853_dense"])
         for fc in (self._step, self._dense):
             fc.args[5][:] = self.p
-            fc.args[6][:] = [self.rtol, self.atol]
+            fc.args[6][:] = np.concatenate([[self.rtol], self.atol])
         self.h = None  # step size memory across segments
         self.n_rejected = 0
         self._c = None
@@ -183,7 +184,7 @@ class DOP853(Integrator):
             lib = ctypes.CDLL(funcs["__lib__"])
             self._c = lib.sb_dop853_segment
             self._c.restype = ctypes.c_int
-            self._tol = np.array([self.rtol, self.atol])
+            self._tol = np.concatenate([[self.rtol], self.atol])
             self._P = np.ascontiguousarray(self.P)
 
     #: use the Python step loop even when the C driver is available (tests compare the two)

@@ -104,6 +104,29 @@ def initial_state(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return q, w
 
 
+#: Floor of the characteristic rate: 1 mrad/s, the order of a LEO station's orbital rate.
+RATE_SCALE_FLOOR_RAD_S = 1e-3
+
+
+def characteristic_scales(scene: Scene, w0, model, p) -> tuple[float, float]:
+    """Rate [rad/s] and momentum [N m s] units for the dimensionless ``atol``.
+
+    rate = max(|ω0|, orbital rate, fastest array rate amplitude, 1 mrad/s); momentum = the
+    largest principal moment of the total inertia at t = 0 times that rate.
+    """
+    rates = [float(np.linalg.norm(w0)), RATE_SCALE_FLOOR_RAD_S]
+    if scene.orbit is not None:
+        rates.append(scene.orbit.mean_motion)
+    for a in scene.appendage:
+        for pr in (a.alpha, a.beta):
+            rates.append(abs(pr.rate) + abs(pr.amp * pr.freq))
+    rate = max(rates)
+    # about O: hub + parallel-axis terms, plus the arrays' own inertia (orientation ignored: a scale)
+    I_total = p[model.layout["I0"]].reshape(3, 3) + sum((np.array(a.inertia) for a in scene.appendage), np.zeros((3, 3)))
+    I_max = float(np.linalg.eigvalsh(I_total).max())
+    return rate, I_max * rate
+
+
 def _output_times(duration: float, dt: float) -> np.ndarray:
     n = int(math.floor(duration / dt + 1e-9))
     ts = np.arange(n + 1) * dt
@@ -179,9 +202,11 @@ def simulate(
     form, funcs = system.formulation, system.funcs
     p = form.model.params(scene)
     nx = form.nx
-    integ = system.integrator_cls(funcs, p, nx, rtol=rtol, atol=atol, step=step, max_step=sim.max_step)
-
     q0, w0 = initial_state(scene)
+    rate_scale, momentum_scale = characteristic_scales(scene, w0, form.model, p)
+    atol_vec = form.atol_vector(atol, rate_scale, momentum_scale)
+    integ = system.integrator_cls(funcs, p, nx, rtol=rtol, atol=atol_vec, step=step, max_step=sim.max_step)
+
     init = FastCall.of(funcs["init"])
     init.args[0][0] = 0.0
     init.args[1][:] = q0

@@ -206,6 +206,9 @@ class Formulation:
     name: ClassVar[str] = ""
     state_names: ClassVar[tuple[str, ...]] = ()
     description: ClassVar[str] = ""
+    #: per state: "attitude" (dimensionless), "rate" [rad/s] or "momentum" [N m s]; sets the
+    #: units in which the scene's dimensionless atol is applied (see :meth:`atol_vector`)
+    state_kinds: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, model: StationModel):
         self.model = model
@@ -226,6 +229,18 @@ class Formulation:
 
     def state(self, t, q, omega, p):
         return self._state(t, q, omega, p)
+
+    def atol_vector(self, atol: float, rate_scale: float, momentum_scale: float) -> np.ndarray:
+        """Absolute tolerance per state component.
+
+        A scene's ``atol`` is dimensionless: it applies as given to the Euler parameters and,
+        for rate or momentum states, in units of the scene's characteristic rate [rad/s] or
+        momentum [N m s]. So every formulation controls the same physical accuracy: without this,
+        atol = 1e-12 is 1e-12 *relative* on an H state of 1e5 N m s but 1e-9 relative on an
+        ω state of 1e-3 rad/s, and the ω-state forms would be a thousand times less accurate.
+        """
+        unit = {"attitude": 1.0, "rate": rate_scale, "momentum": momentum_scale}
+        return np.array([atol * unit[k] for k in self.state_kinds])
 
     def H_O_B(self, t, x, p):
         """Total angular momentum about O, B components: ``I ω + Σ I_p ω_p`` [N m s]."""

@@ -16,6 +16,7 @@ from .base import Formulation, coriolis_matrix, inv3, omega_state_kinematics
 class DAlembertForm(Formulation):
     name = "dalembert"
     state_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
+    state_kinds = ("attitude",) * 4 + ("rate",) * 3
     description = "TP-2511 Eq. 16/42: D'Alembert form with the Coriolis matrix Cp*"
 
     def _omega(self, t, x, p):

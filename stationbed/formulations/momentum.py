@@ -17,6 +17,7 @@ from .base import Formulation, inv3
 class MomentumForm(Formulation):
     name = "momentum"
     state_names = ("qw", "qx", "qy", "qz", "HBx", "HBy", "HBz")
+    state_kinds = ("attitude",) * 4 + ("momentum",) * 3
     description = "TP-2511 Eq. 17-19: total angular momentum H in B as state, omega recovered"
 
     def _omega(self, t, x, p):

@@ -17,6 +17,7 @@ from .base import Formulation, inv3, omega_state_kinematics
 class Momentum27Form(Formulation):
     name = "momentum27"
     state_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
+    state_kinds = ("attitude",) * 4 + ("rate",) * 3
     description = "TP-2511 Eq. 27: expanded momentum equation, omega as state"
 
     def _omega(self, t, x, p):
