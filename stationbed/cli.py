@@ -83,6 +83,8 @@ def _cmd_run(args) -> int:
     status = {"scene": str(args.scene)}
     with open(csv_path, "w", newline="") as fh:
         sink = CsvSink(fh, base_columns(scene.appendage_names))
+        if args.rrd:  # stream the rows into the recording too, as they are computed
+            sink = _write_rrd(sink, scene, args.rrd, args.duration)
         try:
             traj = simulate(
                 scene,
@@ -97,9 +99,11 @@ def _cmd_run(args) -> int:
         except SimulationError as e:
             status.update(e.trajectory.meta)
             (out / "summary.json").write_text(json.dumps(status, indent=2))
-            if args.rrd:
-                _write_rrd(e.trajectory, scene, args.rrd)
-            return _fail(f"{e}; {len(e.trajectory)} rows kept in {csv_path}", EXIT_FAILED)
+            kept = f"{csv_path} and {args.rrd}" if args.rrd else str(csv_path)
+            return _fail(f"{e}; {len(e.trajectory)} rows kept in {kept}", EXIT_FAILED)
+        finally:
+            if args.rrd:  # flush and finish the recording whatever happened
+                sink.close()
     status.update(traj.meta)
     (out / "summary.json").write_text(json.dumps(status, indent=2))
     msg = (
@@ -108,16 +112,16 @@ def _cmd_run(args) -> int:
         f"{traj.meta['wall_s'] * 1e3:.1f} ms -> {csv_path}"
     )
     if args.rrd:
-        _write_rrd(traj, scene, args.rrd)
         msg += f", {args.rrd}"
     print(msg)
     return 0
 
 
-def _write_rrd(traj, scene, path):
-    from .rerun_log import write_recording
+def _write_rrd(csv_sink, scene, path, duration=None):
+    """``csv_sink`` teed with a rerun recording streamed to ``path``; close it when done."""
+    from .rerun_log import RrdSink, TeeSink
 
-    write_recording(traj, scene, path)
+    return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=duration))
 
 
 def _cmd_check(args) -> int:
