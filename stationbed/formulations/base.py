@@ -274,9 +274,35 @@ class Formulation:
         raise NotImplementedError
 
 
-def omega_state_kinematics(x):
-    """Shared by the omega-state forms: ``q_dot`` from ``x = [q, omega]``."""
-    return quat_kinematics(x[0:4], x[4:7])
+class OmegaStateForm(Formulation):
+    """Base of the forms whose state is ``[q_BN, omega_BN_B]`` (TP Eq. 16 and Eq. 27).
+
+    Both read ``I ω̇ = L - ω × I ω - Σ_p a_p``; a subclass writes only the array term
+    ``a_p = _array_term(ω, I_p, ω_p, ω̇_p)`` (everything an array adds to the left-hand side
+    besides its share of ``I ω̇`` and ``ω × I ω``).
+    """
+
+    state_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
+    state_kinds = ("attitude",) * 4 + ("rate",) * 3
+
+    def _omega(self, t, x, p):
+        return x[4:7]
+
+    def _state(self, t, q, omega, p):
+        return ca.vertcat(q, omega)
+
+    def _rhs(self, t, x, u, p):
+        m = self.model
+        arrays = m.arrays(t, p)
+        I = m.inertia(t, p, arrays)
+        w = x[4:7]
+        rhs = m.external_torque(t, x[0:4], u, p, I) - ca.cross(w, ca.mtimes(I, w))
+        for I_p, w_p, wd_p, *_ in arrays:
+            rhs = rhs - self._array_term(w, I_p, w_p, wd_p)
+        return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs))
+
+    def _array_term(self, w, I_p, w_p, wd_p):  # pragma: no cover - abstract
+        raise NotImplementedError
 
 
-__all__ += ["omega_state_kinematics", "coriolis_matrix"]
+__all__ += ["OmegaStateForm", "coriolis_matrix"]
