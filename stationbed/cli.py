@@ -84,7 +84,7 @@ def _cmd_run(args) -> int:
     with open(csv_path, "w", newline="") as fh:
         sink = CsvSink(fh, base_columns(scene.appendage_names))
         if args.rrd:  # stream the rows into the recording too, as they are computed
-            sink = _write_rrd(sink, scene, args.rrd, args.duration)
+            sink = _with_recording(sink, scene, args.rrd, args.duration)
         try:
             traj = simulate(
                 scene,
@@ -117,7 +117,7 @@ def _cmd_run(args) -> int:
     return 0
 
 
-def _write_rrd(csv_sink, scene, path, duration=None):
+def _with_recording(csv_sink, scene, path, duration=None):
     """``csv_sink`` teed with a rerun recording streamed to ``path``; close it when done."""
     from .rerun_log import RrdSink, TeeSink
 

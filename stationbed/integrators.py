@@ -7,10 +7,11 @@ exactly, by stopping at them). Within a segment it must land exactly on each req
 
 Registered integrators
 ----------------------
-``dop853``      Dormand-Prince 8(5,3), error-controlled (rtol/atol), one compiled step per call
-                (all 12 stages + FSAL + error norm in generated C); Python only decides h.
-``rk4``         Classical Runge-Kutta 4, fixed step (``simulation.step``, default 1 s), whole
-                segment as one compiled call.
+``dop853``      Dormand-Prince 8(5,3), error-controlled (rtol/atol), dense output; the step
+                (12 stages + FSAL + error norm) is generated C and a C driver runs the step
+                control, one call per segment (a Python loop when no compiler is present).
+``rk4``         Classical Runge-Kutta 4, fixed step (``simulation.step``, default 1 s), up to
+                64 steps per compiled call.
 ``scipy_dop853``, ``scipy_rk45``, ``scipy_radau``, ``scipy_bdf``, ``scipy_lsoda``
                 scipy ``solve_ivp`` on the compiled right-hand side: reference paths.
 
@@ -34,6 +35,10 @@ from ._compile import FastCall
 __all__ = ["Integrator", "IntegrationError", "INTEGRATORS", "get_integrator"]
 
 _DP = ctypes.POINTER(ctypes.c_double)
+
+
+def _ptr(a: np.ndarray):
+    return a.ctypes.data_as(_DP)
 
 
 class IntegrationError(RuntimeError):
@@ -172,11 +177,12 @@ class DOP853(Integrator):
 
     def __init__(self, funcs, p, nx, **kw):
         super().__init__(funcs, p, nx, **kw)
+        self._tol = np.concatenate([[self.rtol], self.atol])
         self._step = FastCall.of(funcs["dop853_step"])
         self._dense = FastCall.of(funcs["dop853_dense"])
         for fc in (self._step, self._dense):
             fc.args[5][:] = self.p
-            fc.args[6][:] = np.concatenate([[self.rtol], self.atol])
+            fc.args[6][:] = self._tol
         self.h = None  # step size memory across segments
         self.n_rejected = 0
         self._c = None
@@ -184,7 +190,6 @@ class DOP853(Integrator):
             lib = ctypes.CDLL(funcs["__lib__"])
             self._c = lib.sb_dop853_segment
             self._c.restype = ctypes.c_int
-            self._tol = np.concatenate([[self.rtol], self.atol])
             self._P = np.ascontiguousarray(self.P)
 
     #: use the Python step loop even when the C driver is available (tests compare the two)
@@ -233,12 +238,9 @@ class DOP853(Integrator):
         h = ctypes.c_double(self.h)
         t_stop = ctypes.c_double(0.0)
         info = np.zeros(4, dtype=np.int64)
-        def ptr(a):
-            return a.ctypes.data_as(_DP)
-
         status = self._c(
-            ctypes.c_int(self.nx), ctypes.c_int(ts.size), ptr(ts), ptr(x), ptr(k1), ptr(u), ptr(self.p),
-            ptr(self._tol), ctypes.byref(h), ctypes.c_double(self.max_step), ptr(self._P), ptr(out),
+            ctypes.c_int(self.nx), ctypes.c_int(ts.size), _ptr(ts), _ptr(x), _ptr(k1), _ptr(u), _ptr(self.p),
+            _ptr(self._tol), ctypes.byref(h), ctypes.c_double(self.max_step), _ptr(self._P), _ptr(out),
             info.ctypes.data_as(ctypes.POINTER(ctypes.c_longlong)), ctypes.byref(t_stop),
         )
         self.h = h.value

@@ -474,17 +474,22 @@ def _H_scale(H):
     return np.linalg.norm(H, axis=1).max()
 
 
+def _assert_matches_reference(tr, formulation, t, q_ref, w_ref, H_ref, att_tol, omega_tol):
+    """Same output times; attitude, ω and H_O_N within the given tolerances."""
+    assert_allclose(tr["t"], t, rtol=0, atol=0)
+    att, _ = _max_errors(tr, q_ref, w_ref)
+    assert att < att_tol, f"{formulation}: attitude differs by {att:.3e} rad"
+    assert_allclose(tr.omega_BN_B, w_ref, rtol=0, atol=omega_tol)
+    assert_allclose(tr.H_O_N, H_ref, rtol=0, atol=H_RTOL * _H_scale(H_ref))
+
+
 @pytest.mark.parametrize("formulation", FORMULATIONS, ids=FORMULATIONS)
 def test_deep_space_articulated_matches_point_masses(deep_space, deep_space_reference, formulation):
     """Torque-free hub + 2 arrays on sine + ramp profiles: q, omega, H_N and T agree."""
     st, scene = deep_space
     t, q_ref, w_ref, H_ref, _ = deep_space_reference
     tr = simulate(scene, formulation=formulation, rtol=RTOL, atol=ATOL)
-    assert_allclose(tr["t"], t, rtol=0, atol=0)
-    att, _ = _max_errors(tr, q_ref, w_ref)
-    assert att < ATT_TOL_RAD, f"{formulation}: attitude differs by {att:.3e} rad"
-    assert_allclose(tr.omega_BN_B, w_ref, rtol=0, atol=OMEGA_TOL_RAD_S)
-    assert_allclose(tr.H_O_N, H_ref, rtol=0, atol=H_RTOL * _H_scale(H_ref))
+    _assert_matches_reference(tr, formulation, t, q_ref, w_ref, H_ref, ATT_TOL_RAD, OMEGA_TOL_RAD_S)
     T_ref = np.array([st.kinetic_energy(ti, wi) for ti, wi in zip(t, w_ref)])
     assert_allclose(tr["T"], T_ref, rtol=T_RTOL, atol=0)
 
@@ -496,11 +501,9 @@ def test_gravity_gradient_matches_first_order_point_masses(in_orbit, in_orbit_re
     t, refs = in_orbit_references
     q_ref, w_ref, H_ref, _ = refs["first_order"]
     tr = simulate(scene, formulation=formulation, rtol=RTOL, atol=ATOL)
-    assert_allclose(tr["t"], t, rtol=0, atol=0)
-    att, _ = _max_errors(tr, q_ref, w_ref)
-    assert att < GG_FIRST_ORDER_ATT_TOL_RAD, f"{formulation}: attitude differs by {att:.3e} rad"
-    assert_allclose(tr.omega_BN_B, w_ref, rtol=0, atol=GG_FIRST_ORDER_OMEGA_TOL_RAD_S)
-    assert_allclose(tr.H_O_N, H_ref, rtol=0, atol=H_RTOL * _H_scale(H_ref))
+    _assert_matches_reference(
+        tr, formulation, t, q_ref, w_ref, H_ref, GG_FIRST_ORDER_ATT_TOL_RAD, GG_FIRST_ORDER_OMEGA_TOL_RAD_S
+    )
 
 
 def test_exact_gravity_reference_differs_from_first_order_only_at_order_rho_over_R(in_orbit_references):

@@ -242,14 +242,17 @@ class Formulation:
         unit = {"attitude": 1.0, "rate": rate_scale, "momentum": momentum_scale}
         return np.array([atol * unit[k] for k in self.state_kinds])
 
-    def H_O_B(self, t, x, p):
-        """Total angular momentum about O, B components: ``I ω + Σ I_p ω_p`` [N m s]."""
+    def momentum_of(self, t, omega, p):
+        """Total angular momentum about O, B components, at rate ``omega``: ``I ω + Σ I_p ω_p``."""
         arrays = self.model.arrays(t, p)
-        w = self._omega(t, x, p)
-        H = ca.mtimes(self.model.inertia(t, p, arrays), w)
+        H = ca.mtimes(self.model.inertia(t, p, arrays), omega)
         for I_p, w_p, *_ in arrays:
             H = H + ca.mtimes(I_p, w_p)
         return H
+
+    def H_O_B(self, t, x, p):
+        """Total angular momentum about O, B components [N m s]."""
+        return self.momentum_of(t, self._omega(t, x, p), p)
 
     def H_O_N(self, t, x, p):
         return ca.mtimes(dcm(x[0:4]).T, self.H_O_B(t, x, p))

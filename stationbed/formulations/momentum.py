@@ -20,31 +20,25 @@ class MomentumForm(Formulation):
     state_kinds = ("attitude",) * 4 + ("momentum",) * 3
     description = "TP-2511 Eq. 17-19: total angular momentum H in B as state, omega recovered"
 
+    @staticmethod
+    def _omega_from(H, arrays, I):
+        """``ω = I⁻¹ (H - Σ I_p ω_p)``."""
+        for I_p, w_p, *_ in arrays:
+            H = H - ca.mtimes(I_p, w_p)
+        return ca.mtimes(inv3(I), H)
+
     def _omega(self, t, x, p):
         arrays = self.model.arrays(t, p)
-        return self._omega_from(t, x, p, arrays)
-
-    def _omega_from(self, t, x, p, arrays):
-        H_rel = x[4:7]
-        for I_p, w_p, *_ in arrays:
-            H_rel = H_rel - ca.mtimes(I_p, w_p)
-        return ca.mtimes(inv3(self.model.inertia(t, p, arrays)), H_rel)
+        return self._omega_from(x[4:7], arrays, self.model.inertia(t, p, arrays))
 
     def _rhs(self, t, x, u, p):
         m = self.model
         arrays = m.arrays(t, p)
         I = m.inertia(t, p, arrays)
         H = x[4:7]
-        H_rel = H
-        for I_p, w_p, *_ in arrays:
-            H_rel = H_rel - ca.mtimes(I_p, w_p)
-        w = ca.mtimes(inv3(I), H_rel)
+        w = self._omega_from(H, arrays, I)
         L = m.external_torque(t, x[0:4], u, p, I)
         return ca.vertcat(quat_kinematics(x[0:4], w), L - ca.cross(w, H))
 
     def _state(self, t, q, omega, p):
-        arrays = self.model.arrays(t, p)
-        H = ca.mtimes(self.model.inertia(t, p, arrays), omega)
-        for I_p, w_p, *_ in arrays:
-            H = H + ca.mtimes(I_p, w_p)
-        return ca.vertcat(q, H)
+        return ca.vertcat(q, self.momentum_of(t, omega, p))
