@@ -1,8 +1,15 @@
-"""Articulated arrays: angle profiles, ``Ap(alpha, beta) = C_PB``, relative rates.
+"""Articulated arrays: angle profiles, ``Ap(alpha, beta) = C_PB``, relative rates, sun tracking.
 
-A profile is ``a0 + rate t + amp sin(freq t + phase)`` [rad]; its first and second derivatives
-are analytic. Functions accept numpy or casadi ``t`` and coefficient vectors, so the same code
+A profile is ``a0 + rate t + amp sin(freq t + phase) + Σ_k delta_k max(0, t - t_k)`` [rad]: the
+last terms are instantaneous rate steps (impulses). Its first and second derivatives are
+analytic. Functions accept numpy or casadi ``t`` and coefficient vectors, so the same code
 builds the equations of motion and evaluates the trajectory's angle columns.
+
+Sun tracking: the array's sun-facing normal is ``+z`` of P. With the sun ``s_B`` in B and
+``C_PB = Ax(β) Ay(α)``, the normal points at the sun (``C_PB s_B = ẑ``) for
+``α* = atan2(s_x, s_z)``, ``β* = atan2(-v_y, v_z)``, ``v = Ay(α) s_B`` (with ``α = α*``,
+``β* = -asin(s_y)``). A SARJ/BGA drive follows the target with a rate loop that bounds the rate
+and the acceleration (:func:`drive_acceleration`).
 """
 
 from __future__ import annotations
@@ -10,24 +17,92 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .rotation import Ap, omega_PB_P, omega_PB_P_dot
+from .rotation import Ap, Ay, omega_PB_P, omega_PB_P_dot
 
-__all__ = ["profile", "joint_kinematics"]
+__all__ = [
+    "profile",
+    "joint_kinematics",
+    "sun_targets",
+    "drive_acceleration",
+    "wrap_angle",
+    "tracking_error",
+]
 
 
-def profile(t, c):
-    """Angle, rate and acceleration of ``c = (a0, rate, amp, freq, phase)`` at time ``t``."""
+def _sym(*xs) -> bool:
+    return any(isinstance(x, (ca.SX, ca.MX)) for x in xs)
+
+
+def profile(t, c, n_steps: int = 0):
+    """Angle, rate and acceleration of ``c = (a0, rate, amp, freq, phase, t_1, d_1, ...)`` at ``t``.
+
+    ``n_steps`` rate steps ``(t_k, d_k)`` follow the five profile coefficients. A step is
+    right-continuous: at ``t = t_k`` the new rate already holds.
+    """
     a0, rate, amp, freq, phase = c[0], c[1], c[2], c[3], c[4]
     arg = freq * t + phase
-    if isinstance(t, (ca.SX, ca.MX)) or isinstance(c, (ca.SX, ca.MX)):
+    sym = _sym(t, c)
+    if sym:
         s, co = ca.sin(arg), ca.cos(arg)
     else:
         s, co = np.sin(arg), np.cos(arg)
-    return (a0 + rate * t + amp * s, rate + amp * freq * co, -amp * freq * freq * s)
+    angle = a0 + rate * t + amp * s
+    rate_t = rate + amp * freq * co
+    for k in range(n_steps):
+        tk, dk = c[5 + 2 * k], c[6 + 2 * k]
+        if sym:
+            angle = angle + dk * ca.fmax(0.0, t - tk)
+            rate_t = rate_t + dk * ca.if_else(t >= tk, 1.0, 0.0)
+        else:
+            angle = angle + dk * np.maximum(0.0, t - tk)
+            rate_t = rate_t + dk * (np.asarray(t) >= tk)
+    return (angle, rate_t, -amp * freq * freq * s)
 
 
-def joint_kinematics(t, c_alpha, c_beta):
-    """``C_PB``, ``omega_PB_P`` and its derivative for profiled gimbal angles at time ``t``.
+def wrap_angle(a):
+    """Angle wrapped to (-π, π] (casadi or numpy)."""
+    if _sym(a):
+        return ca.atan2(ca.sin(a), ca.cos(a))
+    return np.arctan2(np.sin(a), np.cos(a))
+
+
+def sun_targets(s_B, alpha):
+    """Target angles ``(α*, β*)`` pointing the array normal (+z of P) at the sun ``s_B`` [rad].
+
+    ``β*`` is computed for the actual ``alpha`` (best normal for the SARJ where it is).
+    """
+    atan2 = ca.atan2 if _sym(s_B, alpha) else np.arctan2
+    a_star = atan2(s_B[0], s_B[2])
+    v = Ay(alpha) @ s_B if not _sym(s_B, alpha) else ca.mtimes(Ay(alpha), s_B)
+    return a_star, atan2(-v[1], v[2])
+
+
+def drive_acceleration(theta, theta_dot, target, target_rate, drive):
+    """SARJ/BGA drive law: joint acceleration [rad/s²] (casadi).
+
+    ``rate_cmd = clip(gain wrap(target - θ) + target_rate, ±max_rate)``;
+    ``θ̈ = clip((rate_cmd - θ̇) / rate_tau, ±max_acc)``. ``drive = (max_rate, max_acc, gain,
+    rate_tau)``.
+    """
+    max_rate, max_acc, gain, tau = drive[0], drive[1], drive[2], drive[3]
+    rate_cmd = ca.fmin(ca.fmax(gain * wrap_angle(target - theta) + target_rate, -max_rate), max_rate)
+    return ca.fmin(ca.fmax((rate_cmd - theta_dot) / tau, -max_acc), max_acc)
+
+
+def tracking_error(C_PB, s_B):
+    """Angle between the array normal (+z of P) and the sun [rad] (numpy, rows or single)."""
+    n_B = np.asarray(C_PB)[..., 2, :]  # third row of C_PB: P's z axis in B components
+    c = np.sum(n_B * s_B, axis=-1)
+    s = np.linalg.norm(np.cross(n_B, s_B), axis=-1)
+    return np.arctan2(s, c)
+
+
+def joint_kinematics(t, c_alpha, c_beta, n_steps=(0, 0), states=(None, None)):
+    """``C_PB``, ``omega_PB_P`` and its derivative at time ``t``.
+
+    Each joint follows its profile coefficients (``c_alpha``/``c_beta`` with ``n_steps`` rate
+    steps), unless ``states`` gives it an ``(angle, rate, acceleration)`` triple (a driven joint;
+    the acceleration may be None when not needed, then ``omega_PB_P_dot`` is None).
 
     Returns
     -------
@@ -36,11 +111,7 @@ def joint_kinematics(t, c_alpha, c_beta):
     omega_PB_P_dot : (3,)  Its time derivative [rad/s²] (same in P or, rotated, in B).
     angles : tuple (alpha, beta) [rad]
     """
-    a, ad, add = profile(t, c_alpha)
-    b, bd, bdd = profile(t, c_beta)
-    return (
-        Ap(a, b),
-        omega_PB_P(a, b, ad, bd),
-        omega_PB_P_dot(a, b, ad, bd, add, bdd),
-        (a, b),
-    )
+    a, ad, add = states[0] if states[0] is not None else profile(t, c_alpha, n_steps[0])
+    b, bd, bdd = states[1] if states[1] is not None else profile(t, c_beta, n_steps[1])
+    wd = None if (add is None or bdd is None) else omega_PB_P_dot(a, b, ad, bd, add, bdd)
+    return (Ap(a, b), omega_PB_P(a, b, ad, bd), wd, (a, b))

@@ -74,7 +74,8 @@ def _fail(msg: str, code: int) -> int:
 def _cmd_run(args) -> int:
     from .scene import load_scene
     from .simulate import SimulationError, simulate
-    from .trajectory import CsvSink, base_columns
+    from .simulate import trajectory_columns
+    from .trajectory import CsvSink
 
     scene = load_scene(args.scene)
     out = args.out or Path("out") / scene.name
@@ -82,7 +83,7 @@ def _cmd_run(args) -> int:
     csv_path = out / "trajectory.csv"
     status = {"scene": str(args.scene)}
     with open(csv_path, "w", newline="") as fh:
-        sink = CsvSink(fh, base_columns(scene.appendage_names))
+        sink = CsvSink(fh, trajectory_columns(scene))
         if args.rrd:  # stream the rows into the recording too, as they are computed
             sink = _with_recording(sink, scene, args.rrd, args.duration)
         try:

@@ -20,7 +20,14 @@ __all__ = [
     "C_ON",
     "omega_ON_O",
     "gravity_gradient_torque",
+    "sun_direction_N",
+    "q_ON",
+    "Q_OR",
 ]
+
+#: Quaternion of LVLH relative to the radial/along-track/normal frame R (x radial, z orbit normal):
+#: x_O = y_R, y_O = -z_R, z_O = -x_R.
+Q_OR = (0.5, -0.5, -0.5, 0.5)
 
 
 def _trig(u):
@@ -70,3 +77,35 @@ def gravity_gradient_torque(R_hat_B, I_O_B, mean_motion_sq):
     if isinstance(R_hat_B, (ca.SX, ca.MX)) or isinstance(I_O_B, (ca.SX, ca.MX)):
         return 3.0 * mean_motion_sq * ca.cross(R_hat_B, ca.mtimes(I_O_B, R_hat_B))
     return 3.0 * mean_motion_sq * np.cross(R_hat_B, I_O_B @ R_hat_B)
+
+
+def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
+    """Unit vector to the sun, N components, from a scene's ``[sun]`` table.
+
+    With a solar beta angle ``β`` and the argument of latitude of orbit noon ``u_noon``:
+    ``s_N = cos β (cos u_noon x̂_node + sin u_noon ŷ_90) + sin β n̂``, where ``x̂_node = (1,0,0)``,
+    ``ŷ_90 = (0, cos i, sin i)`` span the orbit plane and ``n̂ = (0, -sin i, cos i)`` is the
+    orbit normal (along ``R × V``). β > 0 puts the sun on the orbit normal's side.
+    """
+    if sun.direction_N is not None:
+        v = np.array(sun.direction_N, dtype=float)
+        return v / np.linalg.norm(v)
+    b, u = sun.beta, sun.u_noon
+    ci, si = np.cos(inclination), np.sin(inclination)
+    in_plane = np.cos(u) * np.array([1.0, 0.0, 0.0]) + np.sin(u) * np.array([0.0, ci, si])
+    return np.cos(b) * in_plane + np.sin(b) * np.array([0.0, -si, ci])
+
+
+def q_ON(u, inclination):
+    """Quaternion (scalar first) of LVLH relative to N, continuous in ``u``: ``dcm(q_ON) = C_ON``.
+
+    ``q_ON = q_x(i) ⊗ q_z(u) ⊗ Q_OR`` (``dcm(a ⊗ b) = dcm(b) dcm(a)``): node, then the argument of
+    latitude, then the fixed LVLH axes.
+    """
+    from .rotation import quat_mult
+
+    ci, si = _trig(0.5 * inclination)
+    cu, su = _trig(0.5 * u)
+    q_i = _stack([ci, si, 0.0 * si, 0.0 * si], u)
+    q_u = _stack([cu, 0.0 * su, 0.0 * su, su], u)
+    return quat_mult(quat_mult(q_i, q_u), _stack(list(Q_OR), u))

@@ -108,6 +108,12 @@ class Integrator:
             raise IntegrationError(ts[0], "state is not finite (NaN or inf)")
         return self._integrate(ts, x0, np.asarray(u, dtype=float))
 
+    def advance(self, t0: float, t1: float, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The state at ``t1`` from ``x0`` at ``t0`` with held input ``u`` (one control period)."""
+        if not np.all(np.isfinite(x0)):
+            raise IntegrationError(t0, "state is not finite (NaN or inf)")
+        return self._integrate(np.array([t0, t1]), x0, u)[-1]
+
     def _integrate(self, ts, x0, u):  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -359,12 +365,44 @@ class RK4(Integrator):
         hs = ca.if_else(ca.DM(list(range(n))).T < n_act, hup[0], 0.0)
         rest = ca.repmat(hup[1:], 1, n)
         traj = multi(tx0, ca.vertcat(hs, rest))
-        return [ca.Function("rk4_multi", [tx0, hup, n_act], [traj[:, -1]])]
+        return [one, ca.Function("rk4_multi", [tx0, hup, n_act], [traj[:, -1]])]
 
     def __init__(self, funcs, p, nx, **kw):
         super().__init__(funcs, p, nx, **kw)
         self.h_nominal = float(self.step) if self.step else self.DEFAULT_STEP_S
         self._multi = FastCall.of(funcs["rk4_multi"])
+        self._one = FastCall.of(funcs["rk4_one"])
+        for fc in (self._multi, self._one):
+            hup = fc.args[1]
+            hup[hup.size - self.p.size :] = self.p
+
+    #: up to this many steps per period run as single-step calls (the multi-step call always
+    #: evaluates all MAX_STEPS_PER_CALL steps, masked, so it pays only for long intervals)
+    ONE_STEP_CALLS = 8
+
+    def advance(self, t0, t1, x0, u):
+        """One period in (usually) one compiled call: the closed loop's hot path."""
+        n = max(1, math.ceil((t1 - t0) / self.h_nominal - 1e-9))
+        if n > self.ONE_STEP_CALLS:
+            return super().advance(t0, t1, x0, u)
+        m = self._one
+        tx, hup = m.args
+        h = (t1 - t0) / n
+        hup[0] = h
+        hup[1 : 1 + u.size] = u
+        tx[0] = t0
+        tx[1:] = x0
+        res = m.res[0]
+        for i in range(n):
+            m()
+            tx[:] = res
+        tx[0] = t1
+        self.n_rhs += 4 * n
+        self.n_steps += n
+        x = res[1:]
+        if not math.isfinite(x.sum()):
+            raise IntegrationError(t1, "state is not finite (NaN or inf)")
+        return x.copy()
 
     def _integrate(self, ts, x0, u):
         out = np.empty((ts.size, self.nx))

@@ -11,10 +11,10 @@ import difflib
 import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator, model_validator
 
 from .massprops import InvalidMassProperties, check_inertia
 
@@ -38,17 +38,61 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
+class RateStep(_Strict):
+    """An instantaneous change of a joint rate by ``delta`` [rad/s] at time ``t`` [s] (an impulse)."""
+
+    t: float = Field(gt=0.0)
+    delta: float
+
+
 class Profile(_Strict):
-    """Joint-angle profile ``a0 + rate t + amp sin(freq t + phase)`` [rad, rad/s, rad, rad/s, rad]."""
+    """Joint-angle profile ``a0 + rate t + amp sin(freq t + phase) + Σ delta_k max(0, t - t_k)``.
+
+    Units: rad, rad/s, rad, rad/s, rad; ``rate_step`` lists instantaneous rate changes.
+    """
 
     a0: float = 0.0
     rate: float = 0.0
     amp: float = 0.0
     freq: float = 0.0
     phase: float = 0.0
+    rate_step: list[RateStep] = []
+
+    tracked: ClassVar[bool] = False
 
     def coeffs(self) -> list[float]:
         return [self.a0, self.rate, self.amp, self.freq, self.phase]
+
+
+class SunTrack(_Strict):
+    """Closed-loop sun tracking of one joint (SARJ ``alpha`` or BGA ``beta``).
+
+    Drive law: ``rate_cmd = clip(gain * wrap(θ* - θ) + θ̇*, ±max_rate)``,
+    ``θ̈ = clip((rate_cmd - θ̇) / rate_tau, ±max_acc)``: rate and acceleration stay bounded.
+    """
+
+    track: Literal["sun"]
+    a0: float | None = None  # rad; default: start on the target angle
+    rate0: float = 0.0  # rad/s
+    max_rate: float = Field(default=0.01, gt=0.0)  # rad/s
+    max_acc: float = Field(default=1.0e-4, gt=0.0)  # rad/s²
+    gain: float = Field(default=0.05, gt=0.0)  # 1/s, angle loop
+    rate_tau: float = Field(default=5.0, gt=0.0)  # s, rate loop time constant
+
+    tracked: ClassVar[bool] = True
+
+
+def _joint_tag(v) -> str:
+    if isinstance(v, dict):
+        return "track" if "track" in v else "profile"
+    return "track" if getattr(v, "tracked", False) else "profile"
+
+
+Joint = Annotated[
+    Union[Annotated[SunTrack, Tag("track")], Annotated[Profile, Tag("profile")]], Discriminator(_joint_tag)
+]
+#: pydantic's union tags -> the model they select (tags are not user keys)
+_TAGS = {}
 
 
 class Simulation(_Strict):
@@ -60,6 +104,9 @@ class Simulation(_Strict):
     output_dt: float = Field(default=10.0, gt=0.0)
     step: float | None = Field(default=None, gt=0.0)  # fixed-step integrators [s]
     max_step: float | None = Field(default=None, gt=0.0)  # adaptive integrators [s]
+    # at an array-rate step (impulse), re-initialise omega-state formulations so that H is
+    # continuous (omega jumps); false integrates through it (the stability study's failure case)
+    impulse_jump: bool = True
 
 
 class Initial(_Strict):
@@ -92,8 +139,12 @@ class Body(_Strict):
 
 class Appendage(Body):
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
-    alpha: Profile = Profile()
-    beta: Profile = Profile()
+    alpha: Joint = Profile()
+    beta: Joint = Profile()
+
+    @property
+    def tracks_sun(self) -> bool:
+        return self.alpha.tracked or self.beta.tracked
 
 
 class Orbit(_Strict):
@@ -163,6 +214,103 @@ class HarmonicTorque(_Strict):
 Torque = Annotated[Union[ConstantTorque, HarmonicTorque], Field(discriminator="kind")]
 
 
+class Sun(_Strict):
+    """Sun direction, fixed in N over a run (it moves ~1 deg/day; no eclipse model).
+
+    Either ``beta`` (solar beta angle: sun elevation above the orbit plane [rad]) and ``u_noon``
+    (argument of latitude at which the sun's projection lies in the orbit plane [rad]), which
+    need an [orbit]; or ``direction_N`` (any non-zero vector, normalised).
+    """
+
+    beta: float | None = None
+    u_noon: float = 0.0
+    direction_N: Vec3 | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.beta is None) == (self.direction_N is None):
+            raise ValueError("give exactly one of 'beta' (with u_noon) or 'direction_N'")
+        if self.direction_N is not None and math.sqrt(sum(x * x for x in self.direction_N)) < 1e-12:
+            raise ValueError("direction_N must be a non-zero vector")
+        return self
+
+
+#: Default skew of the four-CMG pyramid, atan(4/3) = 53.13 deg (Wie) [rad].
+PYRAMID_SKEW_RAD = math.atan2(4.0, 3.0)
+
+
+class Cmg(_Strict):
+    """The CMG cluster (issue 3). See stationbed/cmg.py for the models and steering laws."""
+
+    kind: Literal["ideal", "dgcmg", "sgcmg_pyramid"]
+    # ideal: a momentum store h driven by the torque command
+    max_torque: float | None = Field(default=None, gt=0.0)  # N m, |tau| limit (ideal)
+    max_momentum: float | None = Field(default=None, gt=0.0)  # N m s, |h| limit (ideal)
+    h0_B: Vec3 = [0.0, 0.0, 0.0]  # N m s, initial momentum (ideal)
+    # gimballed kinds
+    count: int | None = Field(default=None, ge=1, le=12)  # dgcmg units (default 4; pyramid is 4)
+    h_rotor: float = Field(default=4760.0, gt=0.0)  # N m s per unit (ISS CMG)
+    max_gimbal_rate: float = Field(default=0.0175, gt=0.0)  # rad/s, per gimbal
+    skew: float = Field(default=PYRAMID_SKEW_RAD, gt=0.0, lt=math.pi / 2)  # rad, pyramid
+    outer_axes_B: list[Vec3] | None = None  # dgcmg outer-gimbal axes (unit vectors, B)
+    gimbal0: list[float] | None = None  # rad, initial gimbal angles (default: zero momentum)
+    steering: Literal["mp", "sr", "odsr"] = "sr"
+    sr_lambda0: float = Field(default=0.01, ge=0.0)  # SR / o-DSR gain scale (Wie 2005)
+    sr_mu: float = Field(default=10.0, ge=0.0)  # λ = λ0 exp(-μ det(Â Âᵀ))
+    dither_eps0: float = Field(default=0.01, ge=0.0)  # o-DSR off-diagonal amplitude
+    dither_omega: float = Field(default=math.pi / 2, gt=0.0)  # rad/s, o-DSR dither frequency
+    saturation_fraction: float = Field(default=0.9, gt=0.0, le=1.0)  # |h| / capacity flagged saturated
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if self.kind == "ideal":
+            bad = [k for k in ("count", "outer_axes_B", "gimbal0") if getattr(self, k) is not None]
+            if bad:
+                raise ValueError(f"'{bad[0]}' applies to gimballed CMGs, not kind = 'ideal'")
+        else:
+            n_units = 4 if self.kind == "sgcmg_pyramid" else (self.count or 4)
+            if self.kind == "sgcmg_pyramid" and self.count not in (None, 4):
+                raise ValueError("sgcmg_pyramid has exactly 4 units")
+            if self.kind == "sgcmg_pyramid" and self.outer_axes_B is not None:
+                raise ValueError("outer_axes_B applies to kind = 'dgcmg'")
+            if self.outer_axes_B is not None:
+                if len(self.outer_axes_B) != n_units:
+                    raise ValueError(f"outer_axes_B needs {n_units} axes, got {len(self.outer_axes_B)}")
+                for a in self.outer_axes_B:
+                    if math.sqrt(sum(x * x for x in a)) < 1e-9:
+                        raise ValueError("outer_axes_B contains a zero vector")
+            n_g = n_units * (2 if self.kind == "dgcmg" else 1)
+            if self.gimbal0 is not None and len(self.gimbal0) != n_g:
+                raise ValueError(f"gimbal0 needs {n_g} angles for {self.kind} x {n_units}, got {len(self.gimbal0)}")
+        return self
+
+    @property
+    def n_units(self) -> int:
+        return 0 if self.kind == "ideal" else (4 if self.kind == "sgcmg_pyramid" else (self.count or 4))
+
+    @property
+    def n_gimbals(self) -> int:
+        return self.n_units * (2 if self.kind == "dgcmg" else 1)
+
+
+class Sensor(_Strict):
+    """Measurement errors seen by the controller (truth is logged unchanged)."""
+
+    attitude_noise: float = Field(default=0.0, ge=0.0)  # rad, 1 sigma per axis (small rotation)
+    rate_noise: float = Field(default=0.0, ge=0.0)  # rad/s, 1 sigma per axis
+    delay: float = Field(default=0.0, ge=0.0)  # s, whole controller periods
+    seed: int = 0
+
+
+class ControllerSpec(_Strict):
+    """``[controller]``: a registry name (controllers/) or ``module:Class``, its period and parameters."""
+
+    name: str
+    period: float = Field(default=0.1, gt=0.0)  # s
+    params: dict[str, Any] = {}
+    sensor: Sensor = Sensor()
+
+
 class Scene(_Strict):
     """A validated scene. Build it with :func:`load_scene` or :func:`scene_from_dict`."""
 
@@ -174,6 +322,9 @@ class Scene(_Strict):
     appendage: list[Appendage] = []
     orbit: Orbit | None = None
     torque: list[Torque] = []
+    sun: Sun | None = None
+    cmg: Cmg | None = None
+    controller: ControllerSpec | None = None
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -186,6 +337,22 @@ class Scene(_Strict):
                 raise ValueError("initial.frame = 'lvlh' needs an [orbit] table")
             if any(isinstance(t, HarmonicTorque) for t in self.torque):
                 raise ValueError("torque kind 'orbital_harmonic' needs an [orbit] table")
+            if self.sun is not None and self.sun.beta is not None:
+                raise ValueError("sun.beta needs an [orbit] table (or give sun.direction_N)")
+        tracking = [a.name for a in self.appendage if a.tracks_sun]
+        if tracking and self.sun is None:
+            raise ValueError(f"appendage '{tracking[0]}' tracks the sun: add a [sun] table")
+        if self.controller is not None:
+            c = self.controller
+            ticks = self.simulation.output_dt / c.period
+            if abs(ticks - round(ticks)) > 1e-9 * ticks or round(ticks) < 1:
+                raise ValueError(
+                    f"simulation.output_dt ({self.simulation.output_dt} s) must be a whole number of "
+                    f"controller periods ({c.period} s)"
+                )
+            d = c.sensor.delay / c.period
+            if abs(d - round(d)) > 1e-9 * max(d, 1.0):
+                raise ValueError(f"controller.sensor.delay ({c.sensor.delay} s) must be a whole number of periods")
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -213,6 +380,9 @@ class Scene(_Strict):
 # ---------------------------------------------------------------------------------------
 
 
+_TAGS.update(constant=ConstantTorque, orbital_harmonic=HarmonicTorque, track=SunTrack, profile=Profile)
+
+
 def _valid_keys(model: type[BaseModel]) -> list[str]:
     return list(model.model_fields)
 
@@ -225,8 +395,8 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
             return None
         if isinstance(part, int):
             continue
-        if part in ("constant", "orbital_harmonic"):
-            model = ConstantTorque if part == "constant" else HarmonicTorque
+        if part in _TAGS:
+            model = _TAGS[part]
             continue
         field = model.model_fields.get(part)
         if field is None:
@@ -252,7 +422,7 @@ def _path(loc: tuple) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part in ("constant", "orbital_harmonic"):
+        elif part in _TAGS:
             continue  # pydantic's discriminator tag, not a user key
         else:
             out += ("." if out else "") + str(part)

@@ -47,33 +47,56 @@ def inv3(A):
 
 @dataclass(frozen=True)
 class Structure:
-    """What a scene's equations contain; two scenes with equal structure share compiled code."""
+    """What a scene's equations contain; two scenes with equal structure share compiled code.
+
+    ``joints`` has per appendage ``((kind, n_steps) for alpha, (kind, n_steps) for beta)`` with
+    kind ``"p"`` (profile with ``n_steps`` rate steps) or ``"s"`` (sun-tracking drive, a state).
+    ``cmg`` is ``(kind, n_units, steering)`` or None.
+    """
 
     n_app: int
     orbit: bool
     gravity_gradient: bool
     harmonic: bool
+    joints: tuple = ()
+    sun: bool = False
+    cmg: tuple | None = None
 
     @classmethod
     def of(cls, scene) -> "Structure":
         from ..scene import HarmonicTorque
 
+        def joint(j):
+            return ("s", 0) if j.tracked else ("p", len(j.rate_step))
+
+        c = scene.cmg
         return cls(
             n_app=len(scene.appendage),
             orbit=scene.orbit is not None,
             gravity_gradient=scene.orbit is not None and scene.orbit.gravity_gradient,
             harmonic=any(isinstance(t, HarmonicTorque) for t in scene.torque),
+            joints=tuple((joint(a.alpha), joint(a.beta)) for a in scene.appendage),
+            sun=scene.sun is not None,
+            cmg=None if c is None else (c.kind, c.n_units, c.steering if c.kind != "ideal" else "-"),
         )
 
     @property
     def key(self) -> str:
-        return f"a{self.n_app}o{int(self.orbit)}g{int(self.gravity_gradient)}h{int(self.harmonic)}"
+        j = "".join(f"{k}{n}" for a in self.joints for k, n in a)
+        c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}"
+        return (
+            f"a{self.n_app}o{int(self.orbit)}g{int(self.gravity_gradient)}h{int(self.harmonic)}"
+            f"j{j}s{int(self.sun)}{c}"
+        )
+
+
+JOINTS = ("alpha", "beta")
 
 
 class ParamLayout:
     """Names and slices of the parameter vector ``p`` (declared once, owns the indices)."""
 
-    def __init__(self, structure: Structure):
+    def __init__(self, structure: Structure, cmg_n_par: int = 0):
         self.slices: dict[str, slice] = {}
         n = 0
 
@@ -85,12 +108,17 @@ class ParamLayout:
         add("I0", 9)  # hub + all parallel-axis terms, about O, B axes [kg m²]
         for k in range(structure.n_app):
             add(f"J{k}", 9)  # array inertia about its own mass centre, P axes [kg m²]
-            add(f"alpha{k}", 5)  # profile coefficients (a0, rate, amp, freq, phase)
-            add(f"beta{k}", 5)
+            for j, (kind, n_steps) in zip(JOINTS, structure.joints[k]):
+                # profile: (a0, rate, amp, freq, phase, t1, d1, ...); drive: (max_rate, max_acc, gain, tau)
+                add(f"{j}{k}", 5 + 2 * n_steps if kind == "p" else 4)
         if structure.orbit:
             add("orbit", 4)  # radius [m], inclination [rad], u0 [rad], n [rad/s]
         if structure.harmonic:
             add("harm", 15)  # bias, cos1, sin1, cos2, sin2 (B, N m), summed over torques
+        if structure.sun:
+            add("sun", 3)  # unit vector to the sun, N components
+        if structure.cmg is not None:
+            add("cmg", cmg_n_par)
         self.size = n
 
     def __getitem__(self, name) -> slice:
@@ -98,15 +126,39 @@ class ParamLayout:
 
 
 class StationModel:
-    """Symbolic station quantities for one :class:`Structure`."""
+    """Symbolic station quantities for one :class:`Structure`.
+
+    Besides the formulation's own seven states (q_BN and one 3-vector), a scene may add
+    *extra states*, owned here and appended after them: the CMG cluster's (``h`` or the gimbal
+    angles) and, per sun-tracking joint, its angle and rate. The held input ``u`` is the
+    external body torque (3) followed by the CMG input (torque command or gimbal rates).
+    """
 
     def __init__(self, structure: Structure):
+        from ..cmg import CmgModel
+
         self.structure = structure
-        self.layout = ParamLayout(structure)
+        self.cmg = None if structure.cmg is None else CmgModel(*structure.cmg)
+        self.layout = ParamLayout(structure, 0 if self.cmg is None else self.cmg.n_par)
+        names, kinds = [], []
+        if self.cmg is not None:
+            names += list(self.cmg.state_names)
+            kinds += ["momentum" if self.cmg.kind == "ideal" else "attitude"] * self.cmg.nx
+        self.driven = []  # (appendage index, joint name, offset of its angle in the extra states)
+        for k in range(structure.n_app):
+            for j, (kind, _) in zip(JOINTS, structure.joints[k]):
+                if kind == "s":
+                    self.driven.append((k, j, len(names)))
+                    names += [f"{j}{k}", f"{j}{k}_rate"]
+                    kinds += ["attitude", "rate"]
+        self.extra_names = tuple(names)
+        self.extra_kinds = tuple(kinds)
+        self.nu = 3 + (0 if self.cmg is None else self.cmg.nu)
 
     # -- numbers ------------------------------------------------------------------------
     def params(self, scene) -> np.ndarray:
         """The numeric parameter vector of ``scene`` (composite mass centre computed here)."""
+        from ..environment import sun_direction_N
         from ..scene import HarmonicTorque
 
         L = self.layout
@@ -118,8 +170,13 @@ class StationModel:
         for k, a in enumerate(scene.appendage):
             I0 += parallel_axis(a.mass, np.array(a.cm) - r_O)
             p[L[f"J{k}"]] = np.array(a.inertia).ravel()
-            p[L[f"alpha{k}"]] = a.alpha.coeffs()
-            p[L[f"beta{k}"]] = a.beta.coeffs()
+            for j in JOINTS:
+                jt = getattr(a, j)
+                if jt.tracked:
+                    p[L[f"{j}{k}"]] = [jt.max_rate, jt.max_acc, jt.gain, jt.rate_tau]
+                else:
+                    steps = [v for st in jt.rate_step for v in (st.t, st.delta)]
+                    p[L[f"{j}{k}"]] = jt.coeffs() + steps
         p[L["I0"]] = I0.ravel()
         if self.structure.orbit:
             o = scene.orbit
@@ -130,38 +187,144 @@ class StationModel:
                 if isinstance(t, HarmonicTorque):
                     h += np.concatenate([t.bias_B, t.cos1_B, t.sin1_B, t.cos2_B, t.sin2_B])
             p[L["harm"]] = h
+        if self.structure.sun:
+            incl = scene.orbit.inclination if scene.orbit is not None else 0.0
+            p[L["sun"]] = sun_direction_N(scene.sun, incl)
+        if self.cmg is not None:
+            p[L["cmg"]] = self.cmg.params(scene.cmg)
         return p
+
+    def initial_extra(self, scene, q_BN, p) -> np.ndarray:
+        """Extra states at t = 0 (CMG state; driven joints start on target unless ``a0`` is given)."""
+        from ..appendages import sun_targets
+
+        xe = np.zeros(len(self.extra_names))
+        if self.cmg is not None:
+            xe[: self.cmg.nx] = self.cmg.initial_state(scene.cmg)
+        if self.driven:
+            s_B = dcm(np.asarray(q_BN, float)) @ p[self.layout["sun"]]
+        for k, j, off in self.driven:
+            jt = getattr(scene.appendage[k], j)
+            if jt.a0 is not None:
+                angle = jt.a0
+            else:
+                alpha = xe[off - 2] if (j == "beta" and self.structure.joints[k][0][0] == "s") else None
+                if alpha is None:
+                    alpha = scene.appendage[k].alpha.a0 if not scene.appendage[k].alpha.tracked else 0.0
+                a_star, b_star = sun_targets(s_B, alpha)
+                angle = a_star if j == "alpha" else b_star
+            xe[off] = angle
+            xe[off + 1] = jt.rate0
+        return xe
 
     # -- symbols ------------------------------------------------------------------------
     def _mat(self, p, name):
         return ca.reshape(p[self.layout[name]], 3, 3).T  # row-major in p
 
-    def arrays(self, t, p):
-        """Per array: ``(I_p, omega_p, omega_p_dot, (alpha, beta), C_PB, J_p, omega_PB_P)`` in B."""
+    def sun_B(self, q, p):
+        return ca.mtimes(dcm(q), p[self.layout["sun"]])
+
+    def _driven_targets(self, k, q, xe, p, w, alpha, alpha_rate):
+        """Sun-tracking targets of array k and their rates (analytic, ṡ_B = -ω × s_B)."""
+        s_B = self.sun_B(q, p)
+        sd = -ca.cross(w, s_B)
+        den_a = ca.fmax(s_B[0] ** 2 + s_B[2] ** 2, 1e-12)
+        a_star = ca.atan2(s_B[0], s_B[2])
+        a_star_rate = (s_B[2] * sd[0] - s_B[0] * sd[2]) / den_a
+        ca_, sa_ = ca.cos(alpha), ca.sin(alpha)
+        v = ca.vertcat(ca_ * s_B[0] - sa_ * s_B[2], s_B[1], sa_ * s_B[0] + ca_ * s_B[2])
+        vd = ca.vertcat(
+            (-sa_ * s_B[0] - ca_ * s_B[2]) * alpha_rate + ca_ * sd[0] - sa_ * sd[2],
+            sd[1],
+            (ca_ * s_B[0] - sa_ * s_B[2]) * alpha_rate + sa_ * sd[0] + ca_ * sd[2],
+        )
+        b_star = ca.atan2(-v[1], v[2])
+        b_star_rate = (-v[2] * vd[1] + v[1] * vd[2]) / ca.fmax(v[1] ** 2 + v[2] ** 2, 1e-12)
+        return (a_star, a_star_rate), (b_star, b_star_rate)
+
+    def joint_states(self, t, q, xe, p, w=None):
+        """Per array ``[(angle, rate, accel) or None for alpha, ... for beta]``; accel needs ``w``."""
+        from ..appendages import drive_acceleration, profile
+
+        out = [[None, None] for _ in range(self.structure.n_app)]
+        for k, j, off in self.driven:
+            out[k][JOINTS.index(j)] = [xe[off], xe[off + 1], None]
+        if w is not None:
+            for k in {k for k, _, _ in self.driven}:
+                ja, jb = out[k]
+                if ja is None:
+                    c = p[self.layout[f"alpha{k}"]]
+                    alpha, alpha_rate, _ = profile(t, c, self.structure.joints[k][0][1])
+                else:
+                    alpha, alpha_rate = ja[0], ja[1]
+                targets = self._driven_targets(k, q, xe, p, w, alpha, alpha_rate)
+                for i, js in enumerate(out[k]):
+                    if js is not None:
+                        js[2] = drive_acceleration(js[0], js[1], *targets[i], p[self.layout[f"{JOINTS[i]}{k}"]])
+        return out
+
+    def arrays(self, t, q, xe, p, w=None):
+        """Per array: ``(I_p, omega_p, omega_p_dot, (alpha, beta), C_PB, J_p, omega_PB_P)`` in B.
+
+        ``omega_p_dot`` of a sun-tracking array needs ``w`` (its drive follows a target that
+        moves with the body); without it that entry is None.
+        """
+        states = self.joint_states(t, q, xe, p, w)
         out = []
         for k in range(self.structure.n_app):
             J = self._mat(p, f"J{k}")
-            C_PB, w_P, wd_P, ang = joint_kinematics(t, p[self.layout[f"alpha{k}"]], p[self.layout[f"beta{k}"]])
+            (_, na), (_, nb) = self.structure.joints[k]
+            C_PB, w_P, wd_P, ang = joint_kinematics(
+                t, p[self.layout[f"alpha{k}"]], p[self.layout[f"beta{k}"]], (na, nb), tuple(states[k])
+            )
             C_BP = C_PB.T
             I_p = ca.mtimes([C_BP, J, C_PB])
-            out.append((I_p, ca.mtimes(C_BP, w_P), ca.mtimes(C_BP, wd_P), ang, C_PB, J, w_P))
+            wd_p = None if wd_P is None else ca.mtimes(C_BP, wd_P)
+            out.append((I_p, ca.mtimes(C_BP, w_P), wd_p, ang, C_PB, J, w_P))
         return out
 
-    def inertia(self, t, p, arrays=None):
+    def inertia(self, t, p, arrays):
         """Total inertia about O, B axes, at time t [kg m²]."""
-        arrays = self.arrays(t, p) if arrays is None else arrays
         I = self._mat(p, "I0")
         for a in arrays:
             I = I + a[0]
         return I
+
+    # -- CMG cluster --------------------------------------------------------------------
+    def _cmg_x(self, xe):
+        return xe[0 : self.cmg.nx]
+
+    def h(self, xe, p):
+        """CMG momentum relative to the body, B components [N m s] (0 without a cluster)."""
+        if self.cmg is None:
+            return ca.SX.zeros(3)
+        return self.cmg.h(self._cmg_x(xe), p[self.layout["cmg"]])
+
+    def h_dot(self, xe, u, w, p):
+        """Body-frame derivative of the CMG momentum [N m]."""
+        if self.cmg is None:
+            return ca.SX.zeros(3)
+        return self.cmg.h_dot(self._cmg_x(xe), u[3 : self.nu], w, p[self.layout["cmg"]])
+
+    def extra_dot(self, t, q, xe, u, w, p):
+        """Derivative of the extra states (CMG state, driven joint angles and rates)."""
+        parts = []
+        if self.cmg is not None:
+            parts.append(self.cmg.state_dot(self._cmg_x(xe), u[3 : self.nu], w, p[self.layout["cmg"]]))
+        if self.driven:
+            states = self.joint_states(t, q, xe, p, w)
+            for k, j, off in self.driven:
+                _, rate, acc = states[k][JOINTS.index(j)]
+                parts += [rate, acc]
+        return ca.vertcat(*parts) if parts else ca.SX(0, 1)
 
     def orbit_u(self, t, p):
         radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
         return u0 + n * t
 
     def external_torque(self, t, q, u, p, I):
-        """Sum of the scene's external torques, B components [N m]; ``u`` is the held input."""
-        L = u
+        """Sum of the scene's external torques, B components [N m]; ``u[0:3]`` is the held torque."""
+        L = u[0:3]
         s = self.structure
         if s.orbit:
             radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
@@ -192,43 +355,70 @@ class Formulation:
 
     Rules for implementers:
 
-    1. Set ``name`` (the registry/scene name) and ``state_names`` (the state layout; the first
-       four entries are always ``qw, qx, qy, qz``, the Euler parameters of B relative to N).
-    2. Write ``_rhs(t, x, u, p)`` returning the state derivative as a casadi column, using
-       ``self.model`` for inertia, arrays and external torque. ``u`` (3,) is a body torque held
-       constant by the caller over each integration segment [N m].
-    3. Write ``_omega(t, x, p)`` (omega_BN_B from the state) and ``_state(t, q, omega, p)``
-       (the state that has attitude q and rate omega at time t).
+    1. Set ``name`` (the registry/scene name), ``core_names`` (seven states: ``qw, qx, qy, qz``,
+       the Euler parameters of B relative to N, then one 3-vector) and ``core_kinds``. The
+       model's extra states (CMG, driven array joints) follow; the base class integrates them.
+    2. Write ``_rhs(t, x, u, p)`` returning ``(d/dt of the seven core states, omega_BN_B)`` as
+       casadi columns, using ``self.model`` for inertia, arrays (:meth:`arrays`), CMG momentum
+       ``h`` / ``ḣ`` and external torque. ``u`` is held constant by the caller over each
+       integration segment: ``u[0:3]`` a body torque [N m], then the CMG input.
+    3. Write ``_omega(t, x, p)`` (omega_BN_B from the state) and ``_core(t, q, omega, xe, p)``
+       (the 3-vector core state that has rate ``omega`` at time t with extra states ``xe``).
     4. Do not report energy or momentum yourself: :meth:`H_O_B` and :meth:`kinetic_energy`
        derive them from ``_omega`` so conservation tests are generic over formulations.
     """
 
     name: ClassVar[str] = ""
-    state_names: ClassVar[tuple[str, ...]] = ()
+    core_names: ClassVar[tuple[str, ...]] = ()
     description: ClassVar[str] = ""
-    #: per state: "attitude" (dimensionless), "rate" [rad/s] or "momentum" [N m s]; sets the
+    #: per core state: "attitude" (dimensionless), "rate" [rad/s] or "momentum" [N m s]; sets the
     #: units in which the scene's dimensionless atol is applied (see :meth:`atol_vector`)
-    state_kinds: ClassVar[tuple[str, ...]] = ()
+    core_kinds: ClassVar[tuple[str, ...]] = ()
+    #: whether omega_BN_B is a state (then an impulsive array-rate step needs a jump, see
+    #: :meth:`jump`); the momentum form recovers omega algebraically and needs none
+    omega_is_state: ClassVar[bool] = False
 
     def __init__(self, model: StationModel):
         self.model = model
+        self.state_names = tuple(self.core_names) + model.extra_names
+        self.state_kinds = tuple(self.core_kinds) + model.extra_kinds
 
     @property
     def nx(self) -> int:
         return len(self.state_names)
 
+    # -- helpers for implementers --------------------------------------------------------
+    def arrays(self, t, x, p, w=None):
+        return self.model.arrays(t, x[0:4], x[7:], p, w)
+
     # -- public, checked -----------------------------------------------------------------
     def rhs(self, t, x, u, p):
-        xdot = self._rhs(t, x, u, p)
-        if xdot.shape != (self.nx, 1):
-            raise ValueError(f"{self.name}: _rhs returned shape {xdot.shape}, expected ({self.nx}, 1)")
-        return xdot
+        core_dot, w = self._rhs(t, x, u, p)
+        if core_dot.shape != (7, 1):
+            raise ValueError(f"{self.name}: _rhs returned shape {core_dot.shape}, expected (7, 1)")
+        return ca.vertcat(core_dot, self.model.extra_dot(t, x[0:4], x[7:], u, w, p))
 
     def omega(self, t, x, p):
         return self._omega(t, x, p)
 
-    def state(self, t, q, omega, p):
-        return self._state(t, q, omega, p)
+    def state(self, t, q, omega, xe, p):
+        """The state with attitude ``q``, rate ``omega`` and extra states ``xe`` at time ``t``."""
+        return ca.vertcat(q, self._core(t, q, omega, xe, p), xe)
+
+    def jump(self, t_minus, t_plus, x, p):
+        """State just after an impulsive change of the array rates at ``t``: H is continuous.
+
+        The total momentum is taken with the arrays at ``t_minus`` and the rate recovered with
+        them at ``t_plus``. For the momentum form this is the identity (H is the state).
+        """
+        q, xe = x[0:4], x[7:]
+        H = self.H_O_B(t_minus, x, p)
+        arrays = self.model.arrays(t_plus, q, xe, p)
+        rest = H - self.model.h(xe, p)
+        for I_p, w_p, *_ in arrays:
+            rest = rest - ca.mtimes(I_p, w_p)
+        w_plus = ca.mtimes(inv3(self.model.inertia(t_plus, p, arrays)), rest)
+        return self.state(t_plus, q, w_plus, xe, p)
 
     def atol_vector(self, atol: float, rate_scale: float, momentum_scale: float) -> np.ndarray:
         """Absolute tolerance per state component.
@@ -242,24 +432,25 @@ class Formulation:
         unit = {"attitude": 1.0, "rate": rate_scale, "momentum": momentum_scale}
         return np.array([atol * unit[k] for k in self.state_kinds])
 
-    def momentum_of(self, t, omega, p):
-        """Total angular momentum about O, B components, at rate ``omega``: ``I ω + Σ I_p ω_p``."""
-        arrays = self.model.arrays(t, p)
-        H = ca.mtimes(self.model.inertia(t, p, arrays), omega)
+    def momentum_of(self, t, q, omega, xe, p):
+        """Total angular momentum about O, B components, at rate ``omega``: ``I ω + Σ I_p ω_p + h``."""
+        arrays = self.model.arrays(t, q, xe, p)
+        H = ca.mtimes(self.model.inertia(t, p, arrays), omega) + self.model.h(xe, p)
         for I_p, w_p, *_ in arrays:
             H = H + ca.mtimes(I_p, w_p)
         return H
 
     def H_O_B(self, t, x, p):
-        """Total angular momentum about O, B components [N m s]."""
-        return self.momentum_of(t, self._omega(t, x, p), p)
+        """Total angular momentum about O (CMG momentum included), B components [N m s]."""
+        return self.momentum_of(t, x[0:4], self._omega(t, x, p), x[7:], p)
 
     def H_O_N(self, t, x, p):
         return ca.mtimes(dcm(x[0:4]).T, self.H_O_B(t, x, p))
 
     def kinetic_energy(self, t, x, p):
-        """Rotational kinetic energy about O: ``½ωᵀIω + Σ ωᵀI_pω_p + ½ Σ ω_pᵀI_pω_p`` [J]."""
-        arrays = self.model.arrays(t, p)
+        """Rotational kinetic energy about O of the structure (body and arrays; CMG rotors
+        excluded): ``½ωᵀIω + Σ ωᵀI_pω_p + ½ Σ ω_pᵀI_pω_p`` [J]."""
+        arrays = self.arrays(t, x, p)
         w = self._omega(t, x, p)
         T = 0.5 * ca.dot(w, ca.mtimes(self.model.inertia(t, p, arrays), w))
         for I_p, w_p, *_ in arrays:
@@ -273,39 +464,42 @@ class Formulation:
     def _omega(self, t, x, p):  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _state(self, t, q, omega, p):  # pragma: no cover - abstract
+    def _core(self, t, q, omega, xe, p):  # pragma: no cover - abstract
         raise NotImplementedError
 
 
 class OmegaStateForm(Formulation):
-    """Base of the forms whose state is ``[q_BN, omega_BN_B]`` (TP Eq. 16 and Eq. 27).
+    """Base of the forms whose core state is ``[q_BN, omega_BN_B]`` (TP Eq. 16 and Eq. 27).
 
-    Both read ``I ω̇ = L - ω × I ω - Σ_p a_p``; a subclass writes only the array term
+    Both read ``I ω̇ = L - ω × (I ω + h) - ḣ - Σ_p a_p``; a subclass writes only the array term
     ``a_p = _array_term(ω, I_p, ω_p, ω̇_p)`` (everything an array adds to the left-hand side
     besides its share of ``I ω̇`` and ``ω × I ω``).
     """
 
-    state_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
-    state_kinds = ("attitude",) * 4 + ("rate",) * 3
+    core_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
+    core_kinds = ("attitude",) * 4 + ("rate",) * 3
+    omega_is_state = True
 
     def _omega(self, t, x, p):
         return x[4:7]
 
-    def _state(self, t, q, omega, p):
-        return ca.vertcat(q, omega)
+    def _core(self, t, q, omega, xe, p):
+        return omega
 
     def _rhs(self, t, x, u, p):
         m = self.model
-        arrays = m.arrays(t, p)
-        I = m.inertia(t, p, arrays)
         w = x[4:7]
-        rhs = m.external_torque(t, x[0:4], u, p, I) - ca.cross(w, ca.mtimes(I, w))
+        xe = x[7:]
+        arrays = self.arrays(t, x, p, w)
+        I = m.inertia(t, p, arrays)
+        h = m.h(xe, p)
+        rhs = m.external_torque(t, x[0:4], u, p, I) - ca.cross(w, ca.mtimes(I, w) + h) - m.h_dot(xe, u, w, p)
         for I_p, w_p, wd_p, *_ in arrays:
             rhs = rhs - self._array_term(w, I_p, w_p, wd_p)
-        return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs))
+        return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs)), w
 
     def _array_term(self, w, I_p, w_p, wd_p):  # pragma: no cover - abstract
         raise NotImplementedError
 
 
-__all__ += ["OmegaStateForm", "coriolis_matrix"]
+__all__ += ["OmegaStateForm", "coriolis_matrix", "JOINTS"]

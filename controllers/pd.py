@@ -1,0 +1,119 @@
+"""``pd``: quaternion feedback in Wie's eigenaxis form, with a slew-rate limit.
+
+Wie, Weiss & Arapostathis (JGCD 12(3), 1989) and Wie & Lu (JGCD 18(6), 1995):
+
+    τ = -c J [ sat_ω_max((k / c) e) + ω_e ] + ω × (J ω + h)
+
+with ``e`` the vector part of the error quaternion ``q_BR = conj(q_RN) ⊗ q_BN`` (sign chosen
+so that its scalar part is ≥ 0: the short way round), ``ω_e = ω_BN_B - C_BR ω_RN_R`` the rate
+relative to the reference frame R, and ``sat`` scaling the *vector* (k/c)e down to a length of
+``max_slew_rate``: the rate command keeps the eigenaxis direction, so a large slew turns about
+the eigenaxis at no more than ``max_slew_rate``. The last term cancels the gyroscopic torque of
+the body and the CMG momentum. For small angles (e ≈ θ/2) every axis is a second-order system
+with ``ω_n² = k / 2`` and ``2 ζ ω_n = c``: the parameters are ``bandwidth`` (ω_n) and ``damping``.
+
+The reference frame R is LVLH (``reference = "lvlh"``, the station's flight attitude) or N
+(``"inertial"``); ``q_ref`` is R's target attitude relative to that frame.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field, field_validator
+
+from stationbed.controller import Controller, ControllerParams
+
+from ._quat import qmul, rotate
+
+
+class PDParams(ControllerParams):
+    reference: Literal["lvlh", "inertial"] = "lvlh"
+    q_ref: list[float] = Field(default=[1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4)
+    bandwidth: float = Field(default=0.01, gt=0.0)  # rad/s, closed-loop natural frequency ω_n
+    damping: float = Field(default=0.9, gt=0.0)  # ζ
+    max_slew_rate: float = Field(default=0.005, gt=0.0)  # rad/s, eigenaxis rate limit
+    gyro_compensation: bool = True
+
+    @field_validator("q_ref")
+    @classmethod
+    def _unit(cls, q):
+        n = math.sqrt(sum(v * v for v in q))
+        if abs(n - 1.0) > 1e-6:
+            raise ValueError(f"q_ref norm is {n:.9g}, not 1")
+        return [v / n for v in q]
+
+
+class PD(Controller):
+    name = "pd"
+    command = "torque"
+    Params = PDParams
+
+    def _reset(self, plant):
+        P = self.params
+        if P.reference == "lvlh" and plant.mean_motion is None:
+            raise ValueError("pd: reference = 'lvlh' needs an [orbit] in the scene")
+        self.k = 2.0 * P.bandwidth**2
+        self.c = 2.0 * P.damping * P.bandwidth
+        self.J = tuple(tuple(float(v) for v in row) for row in plant.inertia_O_B)
+        self.q_RO = tuple(P.q_ref)
+        n = plant.mean_motion or 0.0
+        # rate of R relative to N in R components: R is fixed in LVLH, which turns at (0, -n, 0)
+        self.w_RN_R = rotate(self.q_RO, (0.0, -n, 0.0)) if P.reference == "lvlh" else (0.0, 0.0, 0.0)
+        self.lvlh = P.reference == "lvlh"
+        self.kc = self.k / self.c
+        self.lim = P.max_slew_rate
+        self.lim2 = P.max_slew_rate**2
+        self.gyro = P.gyro_compensation
+
+    def reference_N(self, meas):
+        """``q_RN``: the reference attitude relative to N at this tick."""
+        return qmul(tuple(meas.q_ON.tolist()), self.q_RO) if self.lvlh else self.q_RO
+
+    def _update(self, t, meas):
+        # Written out on floats: this runs every tick (see controllers/_quat.py for the helpers
+        # it inlines; tests/test_controllers.py checks it against them).
+        qw, qx, qy, qz = meas.q_BN.tolist()
+        wx, wy, wz = meas.omega_BN_B.tolist()
+        if self.lvlh:
+            rw, rx, ry, rz = qmul(meas.q_ON.tolist(), self.q_RO)
+        else:
+            rw, rx, ry, rz = self.q_RO
+        self.q_ref_BN = (rw, rx, ry, rz)
+        # q_BR = conj(q_RN) ⊗ q_BN
+        ew = rw * qw + rx * qx + ry * qy + rz * qz
+        ex = rw * qx - rx * qw - ry * qz + rz * qy
+        ey = rw * qy + rx * qz - ry * qw - rz * qx
+        ez = rw * qz - rx * qy + ry * qx - rz * qw
+        kc = self.kc if ew >= 0.0 else -self.kc
+        r0, r1, r2 = kc * ex, kc * ey, kc * ez  # eigenaxis rate command (before the limit)
+        rn2 = r0 * r0 + r1 * r1 + r2 * r2
+        if rn2 > self.lim2:
+            f = self.lim / math.sqrt(rn2)
+            r0, r1, r2 = r0 * f, r1 * f, r2 * f
+        # C_BR ω_RN_R (rotate(), inlined)
+        vx, vy, vz = self.w_RN_R
+        tx = 2.0 * (ey * vz - ez * vy)
+        ty = 2.0 * (ez * vx - ex * vz)
+        tz = 2.0 * (ex * vy - ey * vx)
+        v0 = r0 + wx - (vx - ew * tx + (ey * tz - ez * ty))
+        v1 = r1 + wy - (vy - ew * ty + (ez * tx - ex * tz))
+        v2 = r2 + wz - (vz - ew * tz + (ex * ty - ey * tx))
+        (J00, J01, J02), (J10, J11, J12), (J20, J21, J22) = self.J
+        c = self.c
+        t0 = -c * (J00 * v0 + J01 * v1 + J02 * v2)
+        t1 = -c * (J10 * v0 + J11 * v1 + J12 * v2)
+        t2 = -c * (J20 * v0 + J21 * v1 + J22 * v2)
+        if self.gyro:
+            hx, hy, hz = meas.h_B.tolist()
+            Hx = J00 * wx + J01 * wy + J02 * wz + hx
+            Hy = J10 * wx + J11 * wy + J12 * wz + hy
+            Hz = J20 * wx + J21 * wy + J22 * wz + hz
+            t0 += wy * Hz - wz * Hy
+            t1 += wz * Hx - wx * Hz
+            t2 += wx * Hy - wy * Hx
+        return (t0, t1, t2)
+
+    def summary(self):
+        return {"pd_bandwidth_rad_s": self.params.bandwidth, "pd_damping": self.params.damping}

@@ -1,0 +1,207 @@
+"""The controller extension point (DESIGN §7): base class, measurement, plant facts, registry.
+
+A controller runs on an integer tick clock at its own ``period``; the simulation holds each
+command constant over the period (zero-order hold). Per tick it receives a
+:class:`Measurement` and returns a command:
+
+* ``command = "torque"``: a body-torque request ``tau_B`` (3,) [N m] for the CMG steering law
+  (the cluster delivers it within its limits; a scene without a CMG applies it directly, as an
+  ideal torquer);
+* ``command = "gimbal_rates"``: gimbal rates (n_gimbals,) [rad/s], bypassing the steering law
+  (the rate limit still applies, and is reported).
+
+Rules for implementers (the scipy ``OdeSolver`` pattern):
+
+1. Set ``name`` (registry name), ``command`` and ``Params``, a pydantic model of the
+   parameters (``extra="forbid"`` is inherited from :class:`ControllerParams`: an unknown
+   parameter is an error naming it).
+2. Write ``_reset(plant)`` (design gains from the :class:`Plant` facts; it runs once per run)
+   and ``_update(t, meas)`` returning the command as a sequence of floats.
+3. Set ``self.q_ref_BN`` (4,) in ``_update`` when the law has a reference attitude: the run
+   logs ``att_err_deg`` against it.
+4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
+5. Optionally write ``symbolic(t, y, params)`` (casadi) for the fused loop (see simulate).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+__all__ = [
+    "Controller",
+    "ControllerParams",
+    "Measurement",
+    "Plant",
+    "ControllerError",
+    "get_controller",
+    "controller_registry",
+    "measurement_layout",
+]
+
+
+class ControllerError(ValueError):
+    """A controller that cannot be built (unknown name, bad parameters)."""
+
+
+class ControllerParams(BaseModel):
+    """Base of every controller's parameter model: unknown keys and NaN/inf are errors."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def measurement_layout(n_gimbals: int, n_app: int) -> dict[str, tuple[int, int]]:
+    """Name -> (offset, size) of the measurement vector the compiled ``meas`` function writes."""
+    sizes = [
+        ("q_BN", 4),
+        ("omega_BN_B", 3),
+        ("h_B", 3),
+        ("gimbal", n_gimbals),
+        ("alpha", n_app),
+        ("beta", n_app),
+        ("r_N", 3),
+        ("C_ON", 9),
+        ("q_ON", 4),
+        ("sun_N", 3),
+    ]
+    out, n = {}, 0
+    for name, k in sizes:
+        out[name] = (n, k)
+        n += k
+    return out
+
+
+class Measurement:
+    """What a controller sees at a tick; every field is a numpy view refreshed in place.
+
+    Attributes
+    ----------
+    t : float  Time of the tick [s].
+    q_BN : (4,)  Attitude quaternion of B relative to N, scalar first.
+    omega_BN_B : (3,)  Body rate, B components [rad/s].
+    h_B : (3,)  CMG cluster momentum, B components [N m s] (zeros without a cluster).
+    gimbal : (n_gimbals,)  Gimbal angles [rad] (dgcmg: outer, inner per unit).
+    alpha, beta : (n_arrays,)  Array joint angles [rad].
+    r_N : (3,)  Station position, N components [m] (zeros without an orbit).
+    C_ON : (3, 3)  DCM from N to LVLH (identity without an orbit).
+    q_ON : (4,)  The same as a quaternion, continuous in time (``dcm(q_ON) = C_ON``).
+    sun_N : (3,)  Unit vector to the sun, N components (zeros without a [sun] table).
+    """
+
+    __slots__ = ("t", "y", "q_BN", "omega_BN_B", "h_B", "gimbal", "alpha", "beta", "r_N", "C_ON", "q_ON", "sun_N")
+
+    def __init__(self, y: np.ndarray, layout: dict[str, tuple[int, int]]):
+        self.t = 0.0
+        self.y = y
+        for name, (o, k) in layout.items():
+            v = y[o : o + k]
+            setattr(self, name, v.reshape(3, 3) if name == "C_ON" else v)
+
+
+@dataclass
+class Plant:
+    """Facts about the plant a controller may design with (from the scene, at t = 0).
+
+    inertia_O_B : (3, 3)  Total inertia about the composite mass centre, B axes [kg m²].
+    mean_motion : float or None  Orbital rate n [rad/s]; None in deep space.
+    cmg_kind : str or None  "ideal", "dgcmg", "sgcmg_pyramid" or None.
+    h_capacity : float  Cluster momentum capacity [N m s] (inf without a limit).
+    max_torque : float  Torque limit of an ideal cluster [N m] (inf when none).
+    n_gimbals : int ; max_gimbal_rate : float [rad/s] ; h_rotor : float [N m s]
+    cmg_functions : dict of casadi Functions ``h``, ``A``, ``actuate`` (see cmg.cluster_functions)
+    period : float  Controller period [s].
+    """
+
+    scene: Any
+    inertia_O_B: np.ndarray
+    mean_motion: float | None
+    period: float
+    cmg_kind: str | None = None
+    h_capacity: float = math.inf
+    max_torque: float = math.inf
+    n_gimbals: int = 0
+    max_gimbal_rate: float = math.inf
+    h_rotor: float = 0.0
+    cmg_functions: dict = field(default_factory=dict)
+
+
+class Controller:
+    """Base class of attitude laws; see the module docstring for the contract."""
+
+    name: ClassVar[str] = ""
+    command: ClassVar[str] = "torque"
+    Params: ClassVar[type[ControllerParams]] = ControllerParams
+
+    def __init__(self, period: float = 0.1, **params):
+        if not (period > 0 and math.isfinite(period)):
+            raise ControllerError(f"controller period must be a positive number of seconds, got {period}")
+        self.period = float(period)
+        try:
+            self.params = self.Params(**params)
+        except ValidationError as e:
+            err = e.errors()[0]
+            where = ".".join(str(x) for x in err["loc"]) or "params"
+            if err["type"] == "extra_forbidden":
+                valid = ", ".join(self.Params.model_fields) or "(none)"
+                raise ControllerError(
+                    f"controller '{self.name}': unknown parameter '{where}'; valid: {valid}"
+                ) from None
+            raise ControllerError(f"controller '{self.name}': params.{where}: {err['msg']}") from None
+        self.q_ref_BN: np.ndarray | None = None
+        self.n_updates = 0
+        self.plant: Plant | None = None
+
+    def reset(self, plant: Plant) -> None:
+        """Prepare for a run (design gains); called once before the first tick."""
+        self.plant = plant
+        self.n_updates = 0
+        self.q_ref_BN = None
+        self._reset(plant)
+
+    def update(self, t: float, meas: Measurement):
+        """The command for the period starting at ``t`` [s] (counted)."""
+        self.n_updates += 1
+        return self._update(t, meas)
+
+    def summary(self) -> dict:
+        """Design facts to report (poles, margins...); empty by default."""
+        return {}
+
+    # -- plug-in -------------------------------------------------------------------------
+    def _reset(self, plant: Plant) -> None:
+        pass
+
+    def _update(self, t: float, meas: Measurement):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def controller_registry() -> dict[str, type[Controller]]:
+    """The shipped controllers (the ``controllers`` package beside stationbed)."""
+    try:
+        from controllers import CONTROLLERS
+    except ImportError:  # pragma: no cover - installed without the package
+        return {}
+    return dict(CONTROLLERS)
+
+
+def get_controller(name: str) -> type[Controller]:
+    """A controller class from a registry name or ``module:Class``."""
+    if ":" in name:
+        mod_name, _, cls_name = name.partition(":")
+        try:
+            mod = importlib.import_module(mod_name)
+        except ImportError as e:
+            raise ControllerError(f"controller '{name}': cannot import module '{mod_name}' ({e})") from None
+        cls = getattr(mod, cls_name, None)
+        if not (isinstance(cls, type) and issubclass(cls, Controller)):
+            raise ControllerError(f"controller '{name}': '{cls_name}' is not a Controller subclass in '{mod_name}'")
+        return cls
+    reg = controller_registry()
+    if name not in reg:
+        raise ControllerError(f"unknown controller '{name}'; valid: {', '.join(sorted(reg))} or module:Class")
+    return reg[name]
