@@ -99,14 +99,14 @@ def _cmd_run(args) -> int:
             )
         except SimulationError as e:
             status.update(e.trajectory.meta)
-            (out / "summary.json").write_text(json.dumps(status, indent=2))
+            (out / "summary.json").write_text(json.dumps(status, indent=2, default=str))
             kept = f"{csv_path} and {args.rrd}" if args.rrd else str(csv_path)
             return _fail(f"{e}; {len(e.trajectory)} rows kept in {kept}", EXIT_FAILED)
         finally:
             if args.rrd:  # flush and finish the recording whatever happened
                 sink.close()
     status.update(traj.meta)
-    (out / "summary.json").write_text(json.dumps(status, indent=2))
+    (out / "summary.json").write_text(json.dumps(status, indent=2, default=str))
     msg = (
         f"{scene.name}: {len(traj)} rows, t = 0..{traj.t[-1]:g} s, {traj.meta['formulation']}/"
         f"{traj.meta['integrator']}, {traj.meta['n_rhs']} RHS evaluations, "
@@ -115,7 +115,26 @@ def _cmd_run(args) -> int:
     if args.rrd:
         msg += f", {args.rrd}"
     print(msg)
+    if "summary" in traj.meta:
+        print(_summary_line(traj.meta["summary"]))
     return 0
+
+
+def _summary_line(s: dict) -> str:
+    """The closed loop's run summary in one line (saturation is never silent)."""
+    parts = [f"controller {s['controller']} at {1 / s['period_s']:g} Hz, {s['ticks']} ticks"]
+    if "final_att_err_deg" in s:
+        parts.append(f"attitude error final {s['final_att_err_deg']:.3g} deg, max {s['max_att_err_deg']:.3g} deg")
+    if "max_h_Nms" in s:
+        frac = f" ({100 * s['max_h_fraction']:.0f} % of capacity)" if "max_h_fraction" in s else ""
+        parts.append(f"max |h| {s['max_h_Nms']:.4g} N m s{frac}")
+    if "min_singularity" in s:
+        parts.append(f"min singularity measure {s['min_singularity']:.3g}")
+    if "rate_limited_ticks" in s:
+        parts.append(
+            f"gimbal-rate limited {s['rate_limited_ticks']} ticks, momentum saturated {s['momentum_saturated_ticks']} ticks"
+        )
+    return "; ".join(parts)
 
 
 def _with_recording(csv_sink, scene, path, duration=None):
