@@ -115,5 +115,39 @@ class PD(Controller):
             t2 += wx * Hy - wy * Hx
         return (t0, t1, t2)
 
+    # -- fused form (stationbed/_fused.py): the same law in casadi --------------------------
+    def symbolic_params(self):
+        return [v for row in self.J for v in row] + [self.kc, self.c, self.lim, *self.w_RN_R, *self.q_RO,
+                                                     float(self.lvlh), float(self.gyro)]
+
+    def symbolic(self, t, y, cp):
+        import casadi as ca
+
+        from stationbed.controller import measurement_layout
+        from stationbed.rotation import quat_mult
+
+        plant = self.plant
+        lay = measurement_layout(plant.n_gimbals, len(plant.scene.appendage))
+
+        def part(name):
+            o, k = lay[name]
+            return y[o : o + k]
+
+        q, w, h, q_ON = part("q_BN"), part("omega_BN_B"), part("h_B"), part("q_ON")
+        J = ca.reshape(cp[0:9], 3, 3).T
+        kc, c, lim = cp[9], cp[10], cp[11]
+        w_RN_R, q_RO, lvlh, gyro = cp[12:15], cp[15:19], cp[19], cp[20]
+        q_RN = ca.if_else(lvlh > 0.5, quat_mult(q_ON, q_RO), q_RO)
+        conj = ca.vertcat(q_RN[0], -q_RN[1:4])
+        qe = quat_mult(conj, q)
+        r = ca.if_else(qe[0] >= 0, kc, -kc) * qe[1:4]
+        rn = ca.norm_2(r)
+        r = ca.if_else(rn > lim, r * (lim / ca.fmax(rn, 1e-300)), r)
+        tv = 2.0 * ca.cross(qe[1:4], w_RN_R)
+        w_ref = w_RN_R - qe[0] * tv + ca.cross(qe[1:4], tv)
+        tau = -c * ca.mtimes(J, r + w - w_ref)
+        tau = tau + gyro * ca.cross(w, ca.mtimes(J, w) + h)
+        return tau, q_RN
+
     def summary(self):
         return {"pd_bandwidth_rad_s": self.params.bandwidth, "pd_damping": self.params.damping}

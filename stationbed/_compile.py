@@ -23,7 +23,18 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["compile_functions", "FastCall", "cache_dir", "compiler"]
+__all__ = ["compile_functions", "FastCall", "cache_dir", "compiler", "sx_function"]
+
+
+def sx_function(name: str, inputs: list, outputs: list) -> ca.Function:
+    """An SX Function with common-subexpression elimination.
+
+    The model builds the same quantities in several places (array kinematics for the momentum
+    and for the joint drives, ω for the RHS and the extra states); casadi's ``cse`` shares them:
+    15-30 % fewer operations per RHS (measured: 1017 -> 865 momentum, 1663 -> 1191 dalembert on
+    iss_lvlh_hold), identical values.
+    """
+    return ca.Function(name, inputs, outputs, {"cse": True})
 
 CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno"]
 

@@ -20,7 +20,11 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 3. Set ``self.q_ref_BN`` (4,) in ``_update`` when the law has a reference attitude: the run
    logs ``att_err_deg`` against it.
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
-5. Optionally write ``symbolic(t, y, params)`` (casadi) for the fused loop (see simulate).
+5. Optionally, for the fused loop (stationbed/_fused.py: controller and dynamics in one
+   compiled loop), write ``symbolic_params()`` (the law's numbers as a flat array, set by
+   ``_reset``) and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` with casadi ``t``, ``y`` (the
+   measurement vector, offsets from :func:`measurement_layout`) and ``cp``; it must compute
+   what ``_update`` computes (a test runs both) and keep no state between ticks.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.integrate import DOP853 as _ScipyDOP853
 from scipy.integrate import solve_ivp
 
-from ._compile import FastCall
+from ._compile import FastCall, sx_function
 
 __all__ = ["Integrator", "IntegrationError", "INTEGRATORS", "get_integrator"]
 
@@ -162,7 +162,7 @@ class DOP853(Integrator):
         e3 = ca.sumsqr(err3)
         denom = e5 + 0.01 * e3
         err = ca.if_else(denom > 0, ca.fabs(h) * e5 / ca.sqrt(ca.fmax(denom, 1e-300) * nx), 0.0)
-        step = ca.Function("dop853_step", [t, x, k1, h, u, p, tol], [x_new, K[-1], err])
+        step = sx_function("dop853_step", [t, x, k1, h, u, p, tol], [x_new, K[-1], err])
         # Dense output (Hairer's 7th-order interpolant, scipy's Dop853DenseOutput): three extra
         # stages, then y(t + θh) = x + Σ F-polynomial in θ. Used only for steps that contain an
         # output time, so outputs never cap the step size.
@@ -176,7 +176,7 @@ class DOP853(Integrator):
         F = [dx, h * k1 - dx, 2 * dx - h * (K[-1] + k1)]
         for row in D:
             F.append(h * sum(float(row[i]) * Kx[i] for i in range(len(row)) if row[i] != 0.0))
-        dense = ca.Function(
+        dense = sx_function(
             "dop853_dense", [t, x, k1, h, u, p, tol], [x_new, K[-1], err, ca.horzcat(*F)]
         )
         return [step, dense]
@@ -354,7 +354,7 @@ class RK4(Integrator):
         k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
         k4 = rhs(t + h, x + h * k3, u, p)
         x_new = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        one = ca.Function("rk4_one", [ca.vertcat(t, x), ca.vertcat(h, u, p)], [ca.vertcat(t + h, x_new)])
+        one = sx_function("rk4_one", [ca.vertcat(t, x), ca.vertcat(h, u, p)], [ca.vertcat(t + h, x_new)])
         # n steps in one call: mapaccum over the (t, x) carry; n_active masks the unused tail
         n = cls.MAX_STEPS_PER_CALL
         multi = one.mapaccum("rk4_multi_acc", n)

@@ -17,7 +17,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ._compile import FastCall, compile_functions
+from ._compile import FastCall, compile_functions, sx_function
 from .cmg import capacity, singularity_measure
 from .environment import C_ON, omega_ON_O, orbit_position_N, q_ON
 from .formulations import Formulation, StationModel, Structure, get_formulation
@@ -50,6 +50,7 @@ class System:
     funcs: dict
     build_s: float
     n_out: int
+    sx: dict = None  # the SX Functions before compilation (the fused loop composes them)
 
 
 _SYSTEMS: dict[tuple, System] = {}
@@ -93,7 +94,7 @@ def _tick_functions(model, rhs, fs, nx, nu, npar, ng) -> list[ca.Function]:
         k4 = rhs(t + h, x + h * k3, u, p)
         x1 = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         y1 = by_name["meas"](t + h, x1, p)
-        out.append(ca.Function(f"tick_{kind}", [t, h, x, cmd, u_ext, p], [x1, y1, act]))
+        out.append(sx_function(f"tick_{kind}", [t, h, x, cmd, u_ext, p], [x1, y1, act]))
     return out
 
 
@@ -118,7 +119,7 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     q = ca.SX.sym("q", 4)
     w = ca.SX.sym("w", 3)
     xe = ca.SX.sym("xe", len(model.extra_names))
-    rhs = ca.Function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)])
+    rhs = sx_function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)])
     arrays = form.arrays(t, x, p)
     outs = [form.omega(t, x, p), form.H_O_N(t, x, p), form.kinetic_energy(t, x, p)]
     for a in arrays:
@@ -131,11 +132,11 @@ def build_system(structure: Structure, formulation, integrator) -> System:
             outs.append(singularity_measure(cmg.A_hat(x[7 : 7 + cmg.nx], pc)))
     if structure.sun:
         outs += _track_errors(model, t, x, p)
-    out = ca.Function("out", [t, x, p], [ca.vertcat(*outs)])
-    init = ca.Function("init", [t, q, w, xe, p], [form.state(t, q, w, xe, p)])
+    out = sx_function("out", [t, x, p], [ca.vertcat(*outs)])
+    init = sx_function("init", [t, q, w, xe, p], [form.state(t, q, w, xe, p)])
     fs = [rhs, out, out.map("out_map", "serial", OUT_CHUNK, [2], []), init]
     if form.omega_is_state:
-        fs.append(ca.Function("jump", [t, t2, x, p], [form.jump(t, t2, x, p)]))
+        fs.append(sx_function("jump", [t, t2, x, p], [form.jump(t, t2, x, p)]))
     # controller side: the measurement vector, and the actuation (steering law + limits)
     ng = 0 if cmg is None else cmg.n_gimbals
     lay = measurement_layout(ng, structure.n_app)
@@ -151,24 +152,24 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     meas.append(p[model.layout["sun"]] if structure.sun else ca.DM.zeros(3))
     y = ca.vertcat(*meas)
     assert y.numel() == sum(k for _, k in lay.values())
-    fs.append(ca.Function("meas", [t, x, p], [y]))
+    fs.append(sx_function("meas", [t, x, p], [y]))
     if cmg is not None:
         cmd = ca.SX.sym("cmd", 3)
         rates = ca.SX.sym("rates", max(ng, 1))
         pc = p[model.layout["cmg"]]
         xc = x[7 : 7 + cmg.nx]
         steered = cmg.actuate(t, xc, cmd, wv, pc)
-        fs.append(ca.Function("actuate", [t, x, cmd, p], [ca.vertcat(*steered)]))
+        fs.append(sx_function("actuate", [t, x, cmd, p], [ca.vertcat(*steered)]))
         if ng:
             direct = cmg.actuate(t, xc, cmd, wv, pc, direct_rates=rates[0:ng])
-            fs.append(ca.Function("actuate_rates", [t, x, rates, p], [ca.vertcat(*direct)]))
-    fs.append(ca.Function("inertia", [t, x, p], [model.inertia(t, p, arrays)]))
+            fs.append(sx_function("actuate_rates", [t, x, rates, p], [ca.vertcat(*direct)]))
+    fs.append(sx_function("inertia", [t, x, p], [model.inertia(t, p, arrays)]))
     if integ_cls.name == "rk4":
         fs += _tick_functions(model, rhs, fs, nx, nu, npar, ng)
     fs += integ_cls.build(rhs, nx, nu, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
     funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)
-    system = System(form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0))
+    system = System(form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0), {f.name(): f for f in fs})
     _SYSTEMS[key] = system
     return system
 
@@ -359,6 +360,7 @@ def simulate(
     output_dt: float | None = None,
     sink=None,
     controller=None,
+    fused: bool = True,
 ) -> Trajectory:
     """Run a scene and return its :class:`Trajectory`.
 
@@ -374,6 +376,10 @@ def simulate(
     controller : Controller, optional
         A controller instance to use instead of the scene's ``[controller]`` (which the scene
         must still have, for its period and sensor).
+    fused : bool
+        Run controller and dynamics in one compiled loop when the controller offers a symbolic
+        form and the scene allows it (RK4 at one step per period, no discontinuity, no sensor
+        errors); ``False`` always calls the Python ``_update`` every tick. Same numbers.
 
     Raises
     ------
@@ -439,7 +445,7 @@ def simulate(
 
     wall0 = time.perf_counter()
     if scene.controller is not None:
-        loop = _ControlLoop(scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller)
+        loop = _ControlLoop(scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused)
         try:
             loop.run()
         except (IntegrationError, _ControllerFailure) as e:
@@ -500,11 +506,12 @@ class _ControlLoop:
     integrator keeps its memory (step size) across periods, so nothing restarts per tick.
     """
 
-    def __init__(self, scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller):
+    def __init__(self, scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused):
         from .cmg import cluster_functions
         from .controller import Measurement, Plant, get_controller, measurement_layout
 
         spec = scene.controller
+        self.system, self.fused, self.used_fused = system, fused, False
         self.scene, self.integ, self.p, self.x, self.rows = scene, integ, p, x, rows
         self.duration, self.bps, self.apply_jump = duration, bps, apply_jump
         self.period = spec.period
@@ -652,6 +659,11 @@ class _ControlLoop:
     def run(self) -> None:
         period, duration = self.period, self.duration
         K = max(1, math.ceil(duration / period - 1e-9))
+        if self.fused:
+            from ._fused import fused_ok, run_fused
+
+            if fused_ok(self):
+                return run_fused(self, K)
         pending_t, pending_x, pending_h = [], [], []
         sat_since_row = 0
 
@@ -804,6 +816,7 @@ class _ControlLoop:
         rows = self.rows
         out = {
             "controller": self.ctrl.name,
+            "fused": self.used_fused,
             "period_s": self.period,
             "ticks": self.ticks,
             "controller_updates": self.ctrl.n_updates,

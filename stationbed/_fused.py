@@ -1,0 +1,224 @@
+"""The fused closed loop: controller, steering law and dynamics in one compiled loop (DESIGN §9).
+
+When a controller offers a symbolic form (``Controller.symbolic``), a whole stretch of ticks
+between two output rows runs in one compiled call: per tick, measure -> control -> actuate ->
+one RK4 step, composed from the same SX functions the per-tick path compiles (``meas``,
+``actuate``, ``rhs``), as a casadi ``mapaccum`` loop generated as C. Python then runs once per
+output row instead of once per tick.
+
+Conditions (otherwise the per-tick loop runs, with the same numbers): integrator ``rk4`` with one
+step per control period, no discontinuity inside the run (torque windows, rate steps), no sensor
+noise or delay, a controller with ``symbolic``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import casadi as ca
+import numpy as np
+
+from ._compile import FastCall, compile_functions, sx_function
+from .integrators import IntegrationError
+
+__all__ = ["fused_ok", "run_fused"]
+
+_CHUNKS: dict[tuple, dict] = {}
+
+
+def fused_ok(loop) -> bool:
+    ctrl = loop.ctrl
+    integ = loop.integ
+    return (
+        callable(getattr(ctrl, "symbolic", None))
+        and integ.name == "rk4"
+        and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
+        and not [b for b in loop.bps if 0.0 < b < loop.duration]
+        and not loop.noisy
+        and loop.system.sx is not None
+    )
+
+
+def _build(loop, n: int) -> dict:
+    """Compiled ``info`` (one tick's command, actuation, reference) and ``chunk`` (n ticks)."""
+    system, ctrl = loop.system, loop.ctrl
+    sx = system.sx
+    form = system.formulation
+    model = form.model
+    nx, nu, npar = form.nx, model.nu, model.layout.size
+    ncp = len(ctrl.symbolic_params())
+    kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
+    ng = loop.ng
+    t, t0, h = ca.SX.sym("t"), ca.SX.sym("t0"), ca.SX.sym("h")
+    x = ca.SX.sym("x", nx)
+    p = ca.SX.sym("p", npar)
+    cp = ca.SX.sym("cp", ncp)
+    u_ext = ca.SX.sym("u_ext", 3)
+    y = sx["meas"](t, x, p)
+    cmd, q_ref = ctrl.symbolic(t, y, cp)
+    cmd = ca.vertcat(cmd)
+    if model.cmg is None:
+        act = ca.SX.zeros(0, 1)
+        u = u_ext + cmd
+        flags = ca.SX.zeros(2)
+    else:
+        if kind == "torque":
+            act = sx["actuate"](t, x, cmd, p)
+        else:
+            act = sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
+        u = ca.vertcat(u_ext, act[0 : nu - 3])
+        k = nu - 3
+        flags = ca.vertcat(act[k + 1], act[k + 2])
+    info = sx_function("fused_info", [t, x, cp, u_ext, p], [ca.vertcat(cmd, act, q_ref)])
+    rhs = sx["rhs"]
+    k1 = rhs(t, x, u, p)
+    k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
+    k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
+    k4 = rhs(t + h, x + h * k3, u, p)
+    x1 = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    # carry: tick index i (exact integer in a double: t = t0 + i h, no accumulation), state,
+    # counts of rate-limited and saturated ticks; n_act masks the unused tail of the chunk
+    i = ca.SX.sym("i")
+    cnt = ca.SX.sym("cnt", 2)
+    n_act = ca.SX.sym("n_act")
+    x_i = ca.SX.sym("x_i", nx)
+    one = sx_function("one", [t, x, cp, u_ext, p, h], [x1, flags])
+    x_new, fl = one(t0 + i * h, x_i, cp, u_ext, p, h)
+    active = i < n_act
+    carry = ca.vertcat(i, x_i, cnt)
+    carry_new = ca.vertcat(
+        i + 1,
+        ca.if_else(active, x_new, x_i),
+        cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2)),
+    )
+    step = sx_function("fused_step", [carry, ca.vertcat(t0, h, n_act, cp, u_ext, p)], [carry_new])
+    acc = step.mapaccum("fused_acc", n)
+    c0 = ca.MX.sym("c0", 1 + nx + 2)
+    par = ca.MX.sym("par", 3 + ncp + 3 + npar)
+    traj = acc(c0, ca.repmat(par, 1, n))
+    chunk = ca.Function("fused_chunk", [c0, par], [traj[:, -1]])
+    tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{loop.system.formulation.model.structure.key}"
+    funcs = compile_functions([info, chunk], tag)
+    return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp}
+
+
+def run_fused(loop, K: int) -> None:
+    """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
+    ctrl = loop.ctrl
+    n = loop.n_per_out
+    key = (id(loop.system), type(ctrl), n, ctrl.command)
+    if key not in _CHUNKS:
+        t0 = time.perf_counter()
+        _CHUNKS[key] = _build(loop, n)
+        _CHUNKS[key]["build_s"] = time.perf_counter() - t0
+    fns = _CHUNKS[key]
+    info, chunk = fns["info"], fns["chunk"]
+    cp = np.asarray(ctrl.symbolic_params(), dtype=float)
+    nx = loop.system.formulation.nx
+    p, period, duration = loop.p, loop.period, loop.duration
+    u_ext = loop.u[0:3].copy()
+    from .simulate import _held_torque  # the scene's constant torque (no window inside the run)
+
+    u_ext[:] = _held_torque(loop.scene, 0.5 * duration)
+    info.args[2][:] = cp
+    info.args[3][:] = u_ext
+    info.args[4][:] = p
+    c0, par = chunk.args
+    par[0] = 0.0
+    par[1] = period
+    par[3 : 3 + len(cp)] = cp
+    par[3 + len(cp) : 6 + len(cp)] = u_ext
+    par[6 + len(cp) :] = p
+    nu_cmg = loop.nu_cmg
+    ncmd = loop.n_cmd
+    x = np.array(loop.x, dtype=float)
+    rows_t, rows_x, rows_h = [], [], []
+    tail_flag = 0
+    ticks = 0
+    loop.used_fused = True
+    row_ks = sorted(set(range(0, K, n)) | {K})  # the row ticks, as in the per-tick loop
+    try:
+        for j, k in enumerate(row_ks):
+            t = min(k * period, duration)
+            # the row at tick k: the command, actuation and reference of this tick
+            info.args[0][0] = t
+            info.args[1][:] = x
+            info()
+            r = info.res[0]
+            cmd = r[:ncmd]
+            act = r[ncmd : ncmd + (nu_cmg + 3 if loop.act is not None else 0)]
+            q_ref = r[-4:]
+            lim = sat = 0
+            if loop.act is not None:
+                lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
+                loop.u[3:] = act[:nu_cmg]
+            flag = lim | sat
+            if ncmd == 3:
+                loop.last_cmd = tuple(cmd)
+            ctrl.q_ref_BN = tuple(q_ref)
+            rows_t.append(t)
+            rows_x.append(x.copy())
+            loop.x = x
+            rows_h.append(loop._held_row(flag | tail_flag))
+            if len(rows_t) >= 64:
+                _flush(loop, rows_t, rows_x, rows_h)
+            if k == K:
+                break
+            n_act = row_ks[j + 1] - k
+            # ticks k .. k + n_act - 1 in one call (tick k's actuation is recomputed inside: same)
+            last_len = duration - (k + n_act - 1) * period  # the final period may be shorter
+            if last_len < period * (1 - 1e-12):
+                # a short last period: run the full ticks fused, the last one on its own
+                n_full = n_act - 1
+            else:
+                n_full = n_act
+            c0[0] = 0.0
+            c0[1 : 1 + nx] = x
+            c0[1 + nx :] = 0.0
+            par[0] = k * period
+            par[1] = period
+            par[2] = n_full
+            if n_full > 0:
+                chunk()
+                res = chunk.res[0]
+                x = res[1 : 1 + nx].copy()
+                counts = res[1 + nx :]
+            else:
+                counts = np.zeros(2)
+            if n_full < n_act:  # the short final period
+                par[0] = (k + n_full) * period
+                par[1] = last_len
+                par[2] = 1
+                c0[1 : 1 + nx] = x
+                c0[1 + nx :] = 0.0
+                chunk()
+                res = chunk.res[0]
+                x = res[1 : 1 + nx].copy()
+                counts = counts + res[1 + nx :]
+                par[1] = period
+            ticks += n_act
+            loop.n_rate_limited += int(counts[0])
+            loop.n_momentum_saturated += int(counts[1])
+            # saturation in this chunk's ticks after the row tick goes into the next row (as the
+            # per-tick loop does: a row reports the ticks since the previous row)
+            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
+            if not np.all(np.isfinite(x)):
+                loop.ticks = ticks
+                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+    finally:
+        loop.ticks = ticks
+        loop.x = x
+        ctrl.n_updates += ticks + 1
+        loop.integ.n_rhs += 4 * ticks
+        loop.integ.n_steps += ticks
+        _flush(loop, rows_t, rows_x, rows_h)
+
+
+def _flush(loop, rows_t, rows_x, rows_h) -> None:
+    if rows_t:
+        from .simulate import _check_rows
+
+        rows = loop.rows.make(rows_t, rows_x, rows_h)
+        rows_t.clear(), rows_x.clear(), rows_h.clear()
+        _check_rows(rows[:, :12], lambda ok: loop.rows.emit(rows[: len(ok)]))
