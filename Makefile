@@ -29,6 +29,7 @@ check: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
+	$(PY) benchmarks/bench_control.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -1,0 +1,108 @@
+"""Closed-loop speed benchmark: one orbit of iss_lvlh_hold with the 10 Hz pd (issue 3, DESIGN §9).
+
+    python benchmarks/bench_control.py [--scene PATH] [--repeats N] [--json PATH]
+
+Paths, timed side by side in one process (interleaved, median of ``--repeats`` runs each, after a
+warm-up run that compiles or loads the cached build):
+
+* ``python``: the controller's Python ``_update`` called every tick, the fused per-tick compiled
+  call (steering law + one RK4 step + measurement) in between (``simulate(..., fused=False)``);
+* ``fused``: controller (its casadi form), steering and RK4 in one compiled loop per output
+  interval (``simulate(..., fused=True)``);
+* ``dop853`` (info, one run): the per-tick Python controller with the adaptive DOP853 driver
+  called once per period (rtol 1e-9) — the accurate but slower path.
+
+Accuracy: each path's largest attitude difference from a reference run with the same
+zero-order-hold loop integrated by DOP853 at rtol 1e-12.
+
+Targets (issue 3): <= 0.3 s per orbit with the controller in Python; <= 0.1 s fused.
+For scale (issue text, not measured here): Basilisk 2.12 takes ~1.5 s for one orbit of a
+comparable station with 4 CMGs and a 10 Hz controller on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import stationbed  # noqa: E402
+from stationbed.rotation import rotation_angle  # noqa: E402
+
+DEFAULT_SCENE = ROOT / "scenarios" / "iss_lvlh_hold.toml"
+TARGET_PYTHON_S = 0.3
+TARGET_FUSED_S = 0.1
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", type=Path, default=DEFAULT_SCENE)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--no-dop853", action="store_true", help="skip the DOP853 info row")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+
+    scene = stationbed.load_scene(args.scene)
+    T = 2 * math.pi / scene.orbit.mean_motion
+    t_build = time.perf_counter()
+    runs = {
+        "python": lambda: stationbed.simulate(scene, duration=T, fused=False),
+        "fused": lambda: stationbed.simulate(scene, duration=T, fused=True),
+    }
+    first = {name: f() for name, f in runs.items()}  # warm-up: compile / load cached builds
+    build_s = time.perf_counter() - t_build
+    walls = {name: [] for name in runs}
+    for _ in range(args.repeats):
+        for name, f in runs.items():  # interleaved: both see the same machine load
+            t0 = time.perf_counter()
+            f()
+            walls[name].append(time.perf_counter() - t0)
+    med = {k: statistics.median(v) for k, v in walls.items()}
+
+    ref = stationbed.simulate(scene, duration=T, integrator="dop853", rtol=1e-12, atol=1e-14)
+    rows = []
+    for name in runs:
+        tr = first[name]
+        err = float(np.max(rotation_angle(tr.q_BN, ref.q_BN)))
+        rows.append((name, med[name], tr.meta["n_rhs"], err, tr.meta["summary"]["fused"]))
+    if not args.no_dop853:
+        t0 = time.perf_counter()
+        tr = stationbed.simulate(scene, duration=T, integrator="dop853", rtol=1e-9)
+        wall = time.perf_counter() - t0
+        err = float(np.max(rotation_angle(tr.q_BN, ref.q_BN)))
+        rows.append(("dop853 (info, 1 run)", wall, tr.meta["n_rhs"], err, False))
+
+    ticks = first["python"].meta["summary"]["ticks"]
+    print(f"# closed loop, one orbit ({T:.1f} s, {ticks} ticks at 10 Hz) of {scene.name}")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"python {platform.python_version()}; warm-up incl. compile/load: {build_s:.1f} s")
+    print()
+    print("| path | wall per orbit [s] | per tick [us] | RHS evaluations | max attitude error [rad] |")
+    print("|---|---|---|---|---|")
+    for name, wall, n_rhs, err, _ in rows:
+        print(f"| {name} | {wall:.3f} | {wall / ticks * 1e6:.2f} | {n_rhs} | {err:.1e} |")
+    print()
+    ok_py = med["python"] <= TARGET_PYTHON_S
+    ok_fu = med["fused"] <= TARGET_FUSED_S
+    print(f"python controller: {med['python']:.3f} s/orbit (target <= {TARGET_PYTHON_S} s): {'PASS' if ok_py else 'FAIL'}")
+    print(f"fused:             {med['fused']:.3f} s/orbit (target <= {TARGET_FUSED_S} s): {'PASS' if ok_fu else 'FAIL'}")
+    print(f"fused / python speed-up: {med['python'] / med['fused']:.1f}x; all runs: "
+          + ", ".join(f"{k} {[round(w, 3) for w in v]}" for k, v in walls.items()))
+    if args.json:
+        args.json.write_text(json.dumps({"median_s": med, "walls_s": walls, "rows": rows, "ticks": ticks}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""``example_hold``: the "write your own controller" example of the README.
+
+A plain PD that holds LVLH (or an inertial attitude), written for reading rather than speed:
+numpy and the library's rotation helpers, no tricks. Copy this file, rename the class, change
+``_update``, and name it in a scene as ``name = "my_module:MyHold"`` (any importable module) or
+add the module to ``controllers.MODULES``.
+
+    τ = -J (kp e + kd (ω - ω_ref))        e = 2 sign(q_e,w) q_e,vec ≈ attitude error angle [rad]
+
+with ``q_e = conj(q_ref) ⊗ q_BN``. Compare controllers/pd.py: the same law in Wie's eigenaxis
+form with a slew-rate limit, written on floats for speed, with a casadi form for the fused loop.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from stationbed.controller import Controller, ControllerParams
+from stationbed.rotation import dcm, quat_mult
+
+
+class ExampleHoldParams(ControllerParams):
+    """Every parameter with its unit; unknown keys in [controller.params] are errors."""
+
+    reference: Literal["lvlh", "inertial"] = "lvlh"
+    kp: float = Field(default=4.0e-5, gt=0.0)  # 1/s², proportional gain (ω_n² of each axis)
+    kd: float = Field(default=1.2e-2, gt=0.0)  # 1/s, derivative gain (2 ζ ω_n)
+
+
+class ExampleHold(Controller):
+    name = "example_hold"
+    command = "torque"  # a body-torque request [N m]; the CMG steering law delivers it
+    Params = ExampleHoldParams
+
+    def _reset(self, plant):
+        # design from the plant's facts (called once per run)
+        if self.params.reference == "lvlh" and plant.mean_motion is None:
+            raise ValueError("example_hold: reference = 'lvlh' needs an [orbit]")
+        self.J = np.array(plant.inertia_O_B)
+        n = plant.mean_motion or 0.0
+        self.w_RN_R = np.array([0.0, -n, 0.0]) if self.params.reference == "lvlh" else np.zeros(3)
+
+    def _update(self, t, meas):
+        # the reference attitude R relative to N: LVLH now, or N itself
+        q_RN = meas.q_ON.copy() if self.params.reference == "lvlh" else np.array([1.0, 0.0, 0.0, 0.0])
+        self.q_ref_BN = q_RN  # the run logs att_err_deg against this
+        q_e = quat_mult(q_RN * [1, -1, -1, -1], meas.q_BN)  # B relative to R
+        e = 2.0 * np.sign(q_e[0] or 1.0) * q_e[1:]
+        w_ref_B = dcm(q_e) @ self.w_RN_R  # the reference's rate, in B
+        p = self.params
+        tau = -self.J @ (p.kp * e + p.kd * (meas.omega_BN_B - w_ref_B))
+        return tau  # any sequence of 3 floats
