@@ -67,9 +67,11 @@ def _build(loop, n: int) -> dict:
             act = sx["actuate"](t, x, cmd, p)
         else:
             act = sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
-        u = ca.vertcat(u_ext, act[0 : nu - 3])
-        k = nu - 3
+        u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
+        k = model.nu_cmg
         flags = ca.vertcat(act[k + 1], act[k + 2])
+    if model.has_steps:
+        u = ca.vertcat(u, t + h / 2)  # (steps lie outside a fused run; keeps u's layout)
     info = sx_function("fused_info", [t, x, cp, u_ext, p], [ca.vertcat(cmd, act, q_ref)])
     rhs = sx["rhs"]
     k1 = rhs(t, x, u, p)
@@ -152,7 +154,7 @@ def run_fused(loop, K: int) -> None:
             lim = sat = 0
             if loop.act is not None:
                 lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
-                loop.u[3:] = act[:nu_cmg]
+                loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
             flag = lim | sat
             if ncmd == 3:
                 loop.last_cmd = tuple(cmd)

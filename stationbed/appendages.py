@@ -33,11 +33,13 @@ def _sym(*xs) -> bool:
     return any(isinstance(x, (ca.SX, ca.MX)) for x in xs)
 
 
-def profile(t, c, n_steps: int = 0):
+def profile(t, c, n_steps: int = 0, t_switch=None):
     """Angle, rate and acceleration of ``c = (a0, rate, amp, freq, phase, t_1, d_1, ...)`` at ``t``.
 
-    ``n_steps`` rate steps ``(t_k, d_k)`` follow the five profile coefficients. A step is
-    right-continuous: at ``t = t_k`` the new rate already holds.
+    ``n_steps`` rate steps ``(t_k, d_k)`` follow the five profile coefficients. The new rate
+    holds where ``t_switch >= t_k`` (``t_switch`` defaults to ``t``: right-continuous). The
+    integrators pass the time of the segment being integrated, so every stage of a step that
+    ends (or starts) on ``t_k`` sees one side only.
     """
     a0, rate, amp, freq, phase = c[0], c[1], c[2], c[3], c[4]
     arg = freq * t + phase
@@ -48,14 +50,18 @@ def profile(t, c, n_steps: int = 0):
         s, co = np.sin(arg), np.cos(arg)
     angle = a0 + rate * t + amp * s
     rate_t = rate + amp * freq * co
+    ts = t if t_switch is None else t_switch
     for k in range(n_steps):
         tk, dk = c[5 + 2 * k], c[6 + 2 * k]
-        if sym:
-            angle = angle + dk * ca.fmax(0.0, t - tk)
-            rate_t = rate_t + dk * ca.if_else(t >= tk, 1.0, 0.0)
+        if sym or _sym(ts):
+            after = ca.if_else(ts >= tk, 1.0, 0.0)
+            # angle continuous; its slope is the side's rate (so d(angle)/dt = rate in a segment)
+            angle = angle + dk * ca.if_else(ts >= tk, t - tk, 0.0)
+            rate_t = rate_t + dk * after
         else:
-            angle = angle + dk * np.maximum(0.0, t - tk)
-            rate_t = rate_t + dk * (np.asarray(t) >= tk)
+            after = np.asarray(ts) >= tk
+            angle = angle + dk * np.where(after, t - tk, 0.0)
+            rate_t = rate_t + dk * after
     return (angle, rate_t, -amp * freq * freq * s)
 
 
@@ -97,7 +103,7 @@ def tracking_error(C_PB, s_B):
     return np.arctan2(s, c)
 
 
-def joint_kinematics(t, c_alpha, c_beta, n_steps=(0, 0), states=(None, None)):
+def joint_kinematics(t, c_alpha, c_beta, n_steps=(0, 0), states=(None, None), t_switch=None):
     """``C_PB``, ``omega_PB_P`` and its derivative at time ``t``.
 
     Each joint follows its profile coefficients (``c_alpha``/``c_beta`` with ``n_steps`` rate
@@ -111,7 +117,7 @@ def joint_kinematics(t, c_alpha, c_beta, n_steps=(0, 0), states=(None, None)):
     omega_PB_P_dot : (3,)  Its time derivative [rad/s²] (same in P or, rotated, in B).
     angles : tuple (alpha, beta) [rad]
     """
-    a, ad, add = states[0] if states[0] is not None else profile(t, c_alpha, n_steps[0])
-    b, bd, bdd = states[1] if states[1] is not None else profile(t, c_beta, n_steps[1])
+    a, ad, add = states[0] if states[0] is not None else profile(t, c_alpha, n_steps[0], t_switch)
+    b, bd, bdd = states[1] if states[1] is not None else profile(t, c_beta, n_steps[1], t_switch)
     wd = None if (add is None or bdd is None) else omega_PB_P_dot(a, b, ad, bd, add, bdd)
     return (Ap(a, b), omega_PB_P(a, b, ad, bd), wd, (a, b))

@@ -3,6 +3,7 @@
     stationbed run SCENE.toml [--out DIR] [--formulation NAME] [--integrator NAME]
                               [--rtol X] [--atol X] [--duration S] [--step S] [--rrd FILE]
     stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE]
+    stationbed replay FILE.rrd [--web]
     stationbed list
 
 Any bad input or failed run: one line on stderr (``stationbed: error: ...``), non-zero exit
@@ -63,10 +64,15 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--rrd", type=Path, default=None, help="all formulations in one recording")
 
     sub.add_parser("list", help="registered formulations and integrators")
+
+    rp = sub.add_parser("replay", help="open a rerun recording in the viewer (or say how to)")
+    rp.add_argument("file", type=Path, help="a .rrd recording (stationbed run/check --rrd)")
+    rp.add_argument("--web", action="store_true", help="serve the web viewer instead (rerun --web-viewer)")
     return p
 
 
 def _fail(msg: str, code: int) -> int:
+    msg = " | ".join(line.strip() for line in str(msg).splitlines() if line.strip())  # one line
     print(f"stationbed: error: {msg}", file=sys.stderr)
     return code
 
@@ -174,12 +180,108 @@ def _cmd_list(args) -> int:
     return 0
 
 
+#: First bytes of a rerun recording file (RRF2 in rerun 0.41; RRF0/RRF1 in older files).
+RRD_MAGIC = b"RRF"
+#: Environment variable naming the rerun viewer binary `stationbed replay` starts (tests, or
+#: a viewer outside the venv); default: the binary rerun-sdk bundles, then `rerun` on PATH.
+RERUN_BINARY_ENV = "STATIONBED_RERUN"
+
+
+def _rerun_binary() -> str | None:
+    """The rerun viewer executable: $STATIONBED_RERUN, rerun-sdk's bundled binary, or PATH."""
+    import importlib.util
+    import shutil
+
+    override = os.environ.get(RERUN_BINARY_ENV)
+    if override:
+        return override
+    spec = importlib.util.find_spec("rerun_cli")  # the package rerun-sdk installs the binary in
+    if spec is not None and spec.origin:
+        exe = Path(spec.origin).parent / ("rerun.exe" if sys.platform.startswith("win") else "rerun")
+        if exe.is_file():
+            return str(exe)
+    venv = Path(sys.executable).parent / "rerun"
+    return str(venv) if venv.is_file() else shutil.which("rerun")
+
+
+def _rerun_command(exe: str | None) -> str:
+    """How a user types the viewer: the override, else ``rerun`` when on PATH, else the venv's."""
+    import shlex
+    import shutil
+
+    if os.environ.get(RERUN_BINARY_ENV) or exe is None:
+        return shlex.quote(exe or "rerun")
+    if shutil.which("rerun"):
+        return "rerun"
+    venv = Path(sys.executable).parent / "rerun"
+    return shlex.quote(str(venv) if venv.is_file() else exe)
+
+
+def _has_display() -> bool:
+    """False on Linux/BSD without an X or Wayland display (the native viewer cannot open)."""
+    if sys.platform.startswith(("win", "darwin")):
+        return True
+    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
+
+
+def _cmd_replay(args) -> int:
+    """Open FILE in the rerun viewer and wait until it is closed.
+
+    Exit 0: the viewer ran (and closed normally), or there is no display: then the commands
+    that show the recording are printed on stdout (the answer, not an error). Exit 1: the
+    viewer binary is missing or failed (the same commands printed, the reason on stderr).
+    Exit 2: FILE is missing or not a rerun recording. ``--web`` serves the web viewer
+    (``rerun --web-viewer FILE``, http://localhost:9090), which needs no display.
+    """
+    import shlex
+    import subprocess
+
+    f = args.file
+    if not f.is_file():
+        return _fail(f"no recording at {f}", EXIT_BAD_INPUT)
+    with open(f, "rb") as fh:
+        if fh.read(len(RRD_MAGIC)) != RRD_MAGIC:
+            return _fail(f"{f} is not a rerun recording (.rrd)", EXIT_BAD_INPUT)
+    exe = _rerun_binary()
+    shown = _rerun_command(exe)
+    native = f"{shown} {shlex.quote(str(f))}"
+    web = f"{shown} --web-viewer {shlex.quote(str(f))}"
+
+    def how(reason: str) -> None:
+        print(f"{reason}; to replay {f}:")
+        print(f"  {native}    # native viewer, on a machine with a display")
+        print(f"  {web}    # web viewer here, then open http://localhost:9090 (ssh -L 9090:localhost:9090 ...)")
+
+    if exe is None:
+        how("the rerun viewer is not installed (pip install rerun-sdk==0.41.0)")
+        return _fail("no rerun binary found", EXIT_FAILED)
+    if not args.web and not _has_display():
+        how("no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so no viewer window can open")
+        return 0
+    cmd = [exe, "--web-viewer", str(f)] if args.web else [exe, str(f)]
+    try:
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+    except OSError as e:
+        how(f"{exe} could not be started")
+        return _fail(f"{exe}: {e.strerror or e}", EXIT_FAILED)
+    try:
+        code = proc.wait()
+    except KeyboardInterrupt:  # Ctrl-C reached the viewer too; make sure it is gone
+        proc.terminate()
+        proc.wait()
+        return 130
+    if code != 0:
+        how(f"the viewer exited with status {code}")
+        return _fail(f"{' '.join(map(shlex.quote, cmd))} exited with status {code}", EXIT_FAILED)
+    return 0
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from .scene import SceneError
 
     try:
-        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list}[args.cmd](args)
+        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay}[args.cmd](args)
     except SceneError as e:
         return _fail(str(e), EXIT_BAD_INPUT)
     except ValueError as e:  # unknown formulation/integrator names and other bad arguments

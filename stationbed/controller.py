@@ -149,13 +149,15 @@ class Controller:
             self.params = self.Params(**params)
         except ValidationError as e:
             err = e.errors()[0]
-            where = ".".join(str(x) for x in err["loc"]) or "params"
+            where = ".".join(str(x) for x in err["loc"])
             if err["type"] == "extra_forbidden":
                 valid = ", ".join(self.Params.model_fields) or "(none)"
                 raise ControllerError(
                     f"controller '{self.name}': unknown parameter '{where}'; valid: {valid}"
                 ) from None
-            raise ControllerError(f"controller '{self.name}': params.{where}: {err['msg']}") from None
+            field = f"params.{where}" if where else "params"
+            msg = err["msg"].removeprefix("Value error, ")
+            raise ControllerError(f"controller '{self.name}': {field}: {msg}") from None
         self.q_ref_BN: np.ndarray | None = None
         self.n_updates = 0
         self.plant: Plant | None = None

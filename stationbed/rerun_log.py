@@ -10,24 +10,38 @@ A recording holds
   direction; the total angular momentum ``H_O_N`` as an arrow; the orbit as a ring (scaled,
   Earth-centred) with a dot at the station's argument of latitude;
 * time series on the ``sim_time`` timeline [s] under ``telemetry/`` (one entity per quantity,
-  its components as named series: one ``send_columns`` call per quantity per batch);
+  its components as named series: one ``send_columns`` call per quantity per send);
 * a blueprint (3-D view beside stacked plots), stored in the same file as a blueprint store.
 
-:class:`RrdSink` streams: it writes each batch of rows the moment :func:`stationbed.simulate`
-hands it over and flushes, so a run that dies part-way leaves a readable recording. The static
-parts (geometry, axes, series names, blueprint) are sent once when the sink opens.
+:class:`RrdSink` streams: the rows :func:`stationbed.simulate` hands over are sent and flushed
+to the file at most ``flush_interval_s`` of wall time after they arrive, and all of them when the
+sink closes (which the command line does on every way out, failed runs included), so a run that
+fails part-way leaves a complete, verifiable recording up to the failure; a killed process leaves
+everything but the last interval. The static parts (geometry, axes, series names, blueprint) are
+sent once when the sink opens.
 
 Rotations go to rerun as quaternions ``(x, y, z, w)`` of the matrix that maps the child
 entity's components into its parent's (DESIGN §3): ``C_NB`` for the station, ``C_BP`` for an
 array, ``C_NO`` for LVLH. Rerun stores them as float32 (~6e-8 resolution); scalars as float64.
 
-A fixed inertial sun vector is not part of the core scene yet, so none is drawn.
+With a ``[cmg]`` the station carries one arrow per CMG unit (its rotor momentum, B components,
+from the logged gimbal angles and the geometry of :mod:`stationbed.cmg`) and the cluster's total
+``h``; with a ``[sun]`` the (inertially fixed) sun direction is drawn. Columns of issue 3 (CMG,
+controller, sun tracking) are logged under ``telemetry/cmg``, ``telemetry/control`` and
+``telemetry/arrays/<name>/track_err_deg``; any other column under ``telemetry/extra``.
+
+Cost: the per-call overhead of the SDK (~0.1 ms per ``send_columns``, ~1 ms per blocking flush)
+is what logging costs, so rows are collected and sent at most every ``flush_interval_s`` of wall
+time (and on :meth:`RrdSink.close`), not per batch the simulation hands over.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+import re
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -63,10 +77,24 @@ AXES_O_FRACTION = 0.6
 EARTH_ARROW_FRACTION = 1.0
 H_ARROW_FRACTION = 0.8  # |H| of the first row with H != 0 is drawn this long
 ORBIT_RING_FRACTION = 1.3
+SUN_ARROW_FRACTION = 1.2
+#: One CMG rotor's momentum (h_rotor; ideal cluster: max_momentum, or its first non-zero |h|)
+#: is drawn this long; each unit's arrow starts this far out along its (outer) gimbal axis.
+CMG_ARROW_FRACTION = 0.25
+CMG_ORIGIN_FRACTION = 0.12
+
+#: Wall time [s] rows may wait in an RrdSink before they are sent and flushed to the file.
+#: Each send costs ~0.1 ms per entity (23 for iss_lvlh_hold) plus the flush; the closed loop
+#: hands over 64 rows every ~40 ms, and sending each batch cost 15-18 % of a 3-orbit run against
+#: ~5 % when collected (benchmarks/bench_rerun.py, docs/rerun.md). A killed process loses at
+#: most this much; a failed run nothing (close sends the rest). 0: send and flush every batch.
+FLUSH_INTERVAL_S = 0.5
 
 RGB_X, RGB_Y, RGB_Z = (230, 60, 60), (60, 190, 60), (70, 110, 240)
 RGB_BODY, RGB_TRUSS, RGB_ARRAY = (170, 170, 180), (120, 120, 130), (40, 70, 170)
 RGB_EARTH, RGB_H, RGB_ORBIT = (40, 150, 220), (250, 170, 20), (120, 160, 200)
+RGB_SUN, RGB_CMG_TOTAL = (255, 215, 0), (230, 90, 200)
+RGB_CMG_UNITS = [(200, 60, 160), (60, 180, 200), (150, 110, 230), (240, 130, 60), (90, 200, 120), (200, 200, 80)]
 
 
 def _rr():
@@ -158,6 +186,130 @@ class _Geometry:
         self.extent = extent  # L [m]
 
 
+# -- telemetry layout -------------------------------------------------------------------------
+_GIMBAL_COLUMN = re.compile(r"gimbal_\d+(_outer|_inner)?")
+
+
+@dataclass(frozen=True)
+class _Series:
+    """One telemetry entity: ``columns`` of the rows as named series (plus their norm)."""
+
+    entity: str
+    columns: tuple[str, ...]
+    names: tuple[str, ...]
+    norm: bool = False  # append the Euclidean norm of the columns as the last series
+
+
+def _telemetry_series(columns, appendage_names) -> tuple[list[_Series], list[str]]:
+    """The telemetry entities of rows with ``columns``, and the columns left for ``extra/``.
+
+    Base columns (DESIGN §6) and those of issue 3 (CMG, controller, sun tracking) get their own
+    entity; a group is taken only when all its columns are present.
+    """
+    present, used = set(columns), set()
+    out: list[_Series] = []
+
+    def take(entity, cols, names=None, norm=False):
+        cols = tuple(cols)
+        if cols and all(c in present and c not in used for c in cols):
+            out.append(_Series(entity, cols, tuple(names or cols), norm))
+            used.update(cols)
+
+    take("telemetry/omega_BN_B", ["wx", "wy", "wz"], ["x", "y", "z"])
+    take("telemetry/H_O_N", ["HNx", "HNy", "HNz"], ["x", "y", "z", "|H|"], norm=True)
+    take("telemetry/T", ["T"])
+    for n in appendage_names:
+        take(f"telemetry/arrays/{n}", [f"alpha_{n}", f"beta_{n}"], [f"{n} alpha", f"{n} beta"])
+    used.update(c for c in ("t", "qw", "qx", "qy", "qz") if c in present)
+    take("telemetry/cmg/h_B", ["hx", "hy", "hz"], ["x", "y", "z", "|h|"], norm=True)
+    gimbals = [c for c in columns if _GIMBAL_COLUMN.fullmatch(c)]
+    take("telemetry/cmg/gimbal/angle", gimbals)
+    take("telemetry/cmg/gimbal/rate", [f"{g}_rate" for g in gimbals])
+    take("telemetry/cmg/singularity", ["cmg_singularity"], ["singularity measure"])
+    take("telemetry/cmg/saturated", ["cmg_saturated"], ["saturated (0/1)"])
+    take("telemetry/control/tau_cmd_B", ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z"], ["x", "y", "z"])
+    take("telemetry/control/att_err_deg", ["att_err_deg"])
+    for n in appendage_names:
+        take(f"telemetry/arrays/{n}/track_err_deg", [f"track_err_deg_{n}"], [n])
+    extra = [c for c in columns if c not in used]
+    for c in extra:
+        out.append(_Series(f"telemetry/extra/{c}", (c,), (c,)))
+    return out, extra
+
+
+class _CmgDrawing:
+    """Arrows of the CMG cluster in B: one per unit (its rotor momentum) and the total ``h``.
+
+    Per unit, from the gimbal angles with the geometry of :mod:`stationbed.cmg`:
+    dgcmg ``h_i = h_rotor (sin δi e1 + cos δi (cos δo e3 - sin δo e2))`` (:func:`dgcmg_triads`),
+    pyramid ``h_i = h_rotor (cos δ s0 + sin δ (g × s0))`` (:func:`pyramid_axes`); the ideal
+    cluster has no units, only ``h``. Built only when the rows have the columns it needs.
+    """
+
+    def __init__(self, cfg, columns, geom: _Geometry):
+        from .cmg import dgcmg_triads, pyramid_axes
+
+        j = {c: i for i, c in enumerate(columns)}
+        self.kind = cfg.kind
+        self.j_h = [j[c] for c in ("hx", "hy", "hz")]
+        L = geom.extent
+        center = geom.body_center
+        if cfg.kind == "ideal":
+            self.n_units = 0
+            self.h_ref = cfg.max_momentum  # None: the first non-zero |h| (fixed when seen)
+            self.origins = np.zeros((0, 3))
+        else:
+            self.n_units = cfg.n_units
+            self.h_ref = cfg.h_rotor
+            if cfg.kind == "dgcmg":
+                self.triads = dgcmg_triads(cfg.outer_axes_B)  # (n, 3, 3): e1, e2, e3
+                self.j_g = [(j[f"gimbal_{i + 1}_outer"], j[f"gimbal_{i + 1}_inner"]) for i in range(self.n_units)]
+                axes = self.triads[:, 0]
+            else:
+                self.g, self.s0 = pyramid_axes(cfg.skew)
+                self.gxs0 = np.cross(self.g, self.s0)
+                self.j_g = [j[f"gimbal_{i + 1}"] for i in range(self.n_units)]
+                axes = self.g
+            self.origins = center + CMG_ORIGIN_FRACTION * L * axes
+        self.center = center
+        self.length = CMG_ARROW_FRACTION * L  # drawn length of h_ref
+
+    @classmethod
+    def of(cls, scene: Scene, columns, geom: _Geometry):
+        """The drawing, or None when the scene has no cluster or the rows lack its columns."""
+        c = scene.cmg
+        if c is None or not {"hx", "hy", "hz"} <= set(columns):
+            return None
+        if c.kind == "dgcmg":
+            need = {f"gimbal_{i + 1}_{w}" for i in range(c.n_units) for w in ("outer", "inner")}
+        elif c.kind == "sgcmg_pyramid":
+            need = {f"gimbal_{i + 1}" for i in range(c.n_units)}
+        else:
+            need = set()
+        return cls(c, list(columns), geom) if need <= set(columns) else None
+
+    def unit_momenta(self, rows: np.ndarray) -> np.ndarray:
+        """Rotor momentum of each unit, B components [N m s], shape (k, n_units, 3)."""
+        if self.kind == "dgcmg":
+            jo, ji = (list(x) for x in zip(*self.j_g))
+            do, di = rows[:, jo][..., None], rows[:, ji][..., None]
+            e1, e2, e3 = (self.triads[None, :, m] for m in range(3))
+            spin = np.sin(di) * e1 + np.cos(di) * (np.cos(do) * e3 - np.sin(do) * e2)
+        else:
+            d = rows[:, self.j_g][..., None]
+            spin = np.cos(d) * self.s0[None] + np.sin(d) * self.gxs0[None]
+        return self.h_ref * spin
+
+    def scale(self, h: np.ndarray) -> float:
+        """Drawing scale [m per N m s] (fixes an unlimited ideal cluster's at its first |h| > 0)."""
+        if self.h_ref is None:
+            n = np.linalg.norm(h, axis=1)
+            if not np.any(n > 0):
+                return 0.0
+            self.h_ref = float(n[np.argmax(n > 0)])
+        return self.length / self.h_ref
+
+
 # -- sinks ------------------------------------------------------------------------------------
 class TeeSink:
     """Hands every batch of rows to several sinks (e.g. a :class:`~stationbed.trajectory.CsvSink`
@@ -194,21 +346,29 @@ class RrdSink:
         The ``.rrd`` file (parent folders are created).
     columns : list of str
         Column names of the rows :meth:`write` receives; must start with
-        :func:`~stationbed.trajectory.base_columns` of the scene. Columns beyond those are logged
-        under ``telemetry/extra/<column>``.
+        :func:`~stationbed.trajectory.base_columns` of the scene. The CMG, controller and sun
+        columns of :func:`~stationbed.simulate.trajectory_columns` get their own entities
+        (``telemetry/cmg/...``, ``telemetry/control/...``,
+        ``telemetry/arrays/<name>/track_err_deg``); any other column is logged under
+        ``telemetry/extra/<column>``.
     duration : float, optional
         Run length [s], for the blueprint only: the plots' time axis and the playback speed
         (default: the scene's ``simulation.duration``).
+    flush_interval_s : float, optional
+        Rows handed to :meth:`write` are collected and sent (one chunk per entity,
+        ``send_columns``) and flushed to the file once this much wall time [s] has passed since
+        the last send; :meth:`flush` and :meth:`close` send what is left. Default
+        :data:`FLUSH_INTERVAL_S`; 0 sends and flushes every batch at once.
 
     Notes
     -----
-    Every :meth:`write` sends one chunk per entity (``send_columns``) and flushes the stream to
-    the file, so the file is readable up to the last batch even if the process is killed
-    (without the footer/manifest then, which :meth:`close` writes). Use as a context manager or
-    call :meth:`close`.
+    Whatever has been sent is on disk: the file is readable up to the last send even if the
+    process is killed (without the footer/manifest then, which :meth:`close` writes). Use as a
+    context manager or call :meth:`close`.
     """
 
-    def __init__(self, scene: Scene, path, columns, *, duration: float | None = None):
+    def __init__(self, scene: Scene, path, columns, *, duration: float | None = None,
+                 flush_interval_s: float = FLUSH_INTERVAL_S):
         rr = _rr()
         self.rr = rr
         self.scene = scene
@@ -217,22 +377,29 @@ class RrdSink:
         base = base_columns(scene.appendage_names)
         if self.columns[: len(base)] != base:
             raise ValueError(f"rows must start with columns {base}, got {self.columns[: len(base)]}")
-        self.extra = self.columns[len(base) :]
+        self.series, self.extra = _telemetry_series(self.columns, scene.appendage_names)
         self._j = {c: j for j, c in enumerate(self.columns)}
         self._jq = np.array([self._j[c] for c in ("qw", "qx", "qy", "qz")])
+        self._series_idx = [
+            (s.entity, np.array([self._j[c] for c in s.columns]), s.norm) for s in self.series
+        ]
         self.geom = _Geometry(scene)
+        self.cmg = _CmgDrawing.of(scene, self.columns, self.geom)
+        self.flush_interval_s = float(flush_interval_s)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
-        self.n_rows = 0
-        self.t_last = None
+        self._pending: list[np.ndarray] = []
+        self.n_rows = 0  # rows sent to the file
+        self.t_last = None  # time of the last row sent [s]
         self._closed = False
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(APPLICATION_ID)
         self.rec.save(self.path)
         self.rec.send_recording_name(scene.name)
         self.rec.send_property("scene", rr.AnyValues(name=scene.name, description=scene.description))
-        self.rec.send_blueprint(run_blueprint(scene, self.extra, duration), make_active=True, make_default=True)
+        self.rec.send_blueprint(run_blueprint(scene, self.columns[len(base) :], duration), make_active=True, make_default=True)
         self._log_static()
-        self.rec.flush()
+        self.rec.flush(timeout_sec=0.0)  # start writing the static parts, do not wait
+        self._t_sent = time.monotonic()
 
     # -- context manager
     def __enter__(self):
@@ -313,37 +480,75 @@ class RrdSink:
                 static=True,
             )
             rec.log("world/orbit/station", rr.Points3D.from_fields(colors=[RGB_ORBIT], radii=0.02 * L), static=True)
+        if scene.sun is not None:
+            rec.log(
+                "world/sun",
+                rr.Arrows3D(vectors=[SUN_ARROW_FRACTION * L * _sun_vector_N(scene)], colors=[RGB_SUN], labels=["sun"],
+                            radii=0.006 * L),
+                static=True,
+            )
         rec.log("world/H_O_N", rr.Arrows3D.from_fields(colors=[RGB_H], labels=["H_O_N"]), static=True)
+        cmg = self.cmg
+        if cmg is not None:
+            if cmg.n_units:
+                rec.log(
+                    "world/station/cmg/units",
+                    rr.Arrows3D.from_fields(
+                        origins=cmg.origins,
+                        colors=[RGB_CMG_UNITS[i % len(RGB_CMG_UNITS)] for i in range(cmg.n_units)],
+                        labels=[f"CMG {i + 1}" for i in range(cmg.n_units)],
+                    ),
+                    static=True,
+                )
+            rec.log(
+                "world/station/cmg/h_B",
+                rr.Arrows3D.from_fields(origins=[cmg.center], colors=[RGB_CMG_TOTAL], labels=["h (CMG total)"]),
+                static=True,
+            )
         # series names (static, once)
-        names = {
-            "telemetry/omega_BN_B": ["x", "y", "z"],
-            "telemetry/H_O_N": ["x", "y", "z", "|H|"],
-            "telemetry/T": ["T"],
-        }
+        names = {s.entity: list(s.names) for s in self.series}
         if scene.orbit is not None:
             names["telemetry/euler_lvlh_deg"] = ["roll", "pitch", "yaw"]
-        for name in scene.appendage_names:
-            names[f"telemetry/arrays/{name}"] = [f"{name} alpha", f"{name} beta"]
-        for c in self.extra:
-            names[f"telemetry/extra/{c}"] = [c]
         for path, n in names.items():
             rec.log(path, rr.SeriesLines(names=n), static=True)
 
     # -- streaming
     def write(self, rows: np.ndarray) -> None:
-        """Log a batch of rows (shape (k, len(columns))) and flush it to the file."""
+        """Take a batch of rows (shape (k, len(columns))); send it once ``flush_interval_s`` has
+        passed since the last send."""
+        if self._closed:
+            raise ValueError("RrdSink is closed")
         rows = np.atleast_2d(np.asarray(rows, dtype=float))
         if rows.shape[0] == 0:
             return
-        if self._closed:
-            raise ValueError("RrdSink is closed")
+        self._pending.append(rows)
+        if self.flush_interval_s <= 0.0:
+            self.flush()
+        elif time.monotonic() - self._t_sent >= self.flush_interval_s:
+            self._send_pending()
+            self.rec.flush(timeout_sec=0.0)  # the SDK's writer thread puts it on disk meanwhile
+
+    def flush(self) -> None:
+        """Send the rows collected so far and wait until they are in the file."""
+        self._send_pending()
+        self.rec.flush()
+
+    def _send_pending(self) -> None:
+        if self._pending:
+            rows = self._pending[0] if len(self._pending) == 1 else np.vstack(self._pending)
+            self._pending = []
+            self._send(rows)
+        self._t_sent = time.monotonic()
+
+    def _send(self, rows: np.ndarray) -> None:
         rr, rec, g, scene = self.rr, self.rec, self.geom, self.scene
-        col = lambda c: rows[:, self._j[c]]  # noqa: E731
-        t = col("t")
+        j = self._j
+        t = rows[:, j["t"]]
         k = rows.shape[0]
+        index = [rr.TimeColumn(TIMELINE, duration=t)]
 
         def send(path, columns):
-            rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=columns)
+            rec.send_columns(path, indexes=index, columns=columns)
 
         def scalars(path, values):
             send(path, rr.Scalars.columns(scalars=values))
@@ -351,12 +556,13 @@ class RrdSink:
         # 3-D scene
         send("world/station", rr.Transform3D.columns(quaternion=rows[:, self._jq[[1, 2, 3, 0]]]))
         for name, r, _, _ in g.arrays:
-            q = _xyzw_C_BP(col(f"alpha_{name}"), col(f"beta_{name}"))
+            q = _xyzw_C_BP(rows[:, j[f"alpha_{name}"]], rows[:, j[f"beta_{name}"]])
             send(f"world/station/{name}", rr.Transform3D.columns(translation=np.tile(r, (k, 1)), quaternion=q))
-        H = rows[:, [self._j["HNx"], self._j["HNy"], self._j["HNz"]]]
-        H_norm = np.linalg.norm(H, axis=1)
-        if self._H_scale is None and np.any(H_norm > 0):
-            self._H_scale = H_ARROW_FRACTION * g.extent / float(H_norm[np.argmax(H_norm > 0)])
+        H = rows[:, [j["HNx"], j["HNy"], j["HNz"]]]
+        if self._H_scale is None:
+            H_norm = np.linalg.norm(H, axis=1)
+            if np.any(H_norm > 0):
+                self._H_scale = H_ARROW_FRACTION * g.extent / float(H_norm[np.argmax(H_norm > 0)])
         send("world/H_O_N", rr.Arrows3D.columns(vectors=H * (self._H_scale or 0.0)))
         if scene.orbit is not None:
             o = scene.orbit
@@ -365,25 +571,40 @@ class RrdSink:
             R_hat_N = _unit_R_N(u, o.inclination)
             send("world/orbit/station", rr.Points3D.columns(positions=ORBIT_RING_FRACTION * g.extent * R_hat_N))
             scalars("telemetry/euler_lvlh_deg", np.degrees(_euler_321_lvlh(rows[:, self._jq], u, o.inclination)))
+        cmg = self.cmg
+        if cmg is not None:
+            h = rows[:, cmg.j_h]
+            s = cmg.scale(h)
+            if cmg.n_units:
+                units = cmg.unit_momenta(rows).reshape(-1, 3) * s
+                send("world/station/cmg/units", rr.Arrows3D.columns(vectors=units).partition([cmg.n_units] * k))
+            send("world/station/cmg/h_B", rr.Arrows3D.columns(vectors=h * s))
         # time series
-        scalars("telemetry/omega_BN_B", rows[:, [self._j["wx"], self._j["wy"], self._j["wz"]]])
-        scalars("telemetry/H_O_N", np.column_stack([H, H_norm]))
-        scalars("telemetry/T", col("T"))
-        for name in scene.appendage_names:
-            scalars(f"telemetry/arrays/{name}", rows[:, [self._j[f"alpha_{name}"], self._j[f"beta_{name}"]]])
-        for c in self.extra:
-            scalars(f"telemetry/extra/{c}", col(c))
-        rec.flush()
+        for entity, idx, norm in self._series_idx:
+            v = rows[:, idx]
+            if norm:
+                v = np.column_stack([v, np.linalg.norm(v, axis=1)])
+            scalars(entity, v)
         self.n_rows += k
         self.t_last = float(t[-1])
 
     def close(self) -> None:
-        """Flush, write the file's footer and release it (idempotent)."""
+        """Send what is left, write the file's footer and release it (idempotent)."""
         if self._closed:
             return
         self._closed = True
-        self.rec.flush()
-        self.rec.disconnect()
+        try:
+            self._send_pending()
+        finally:
+            self.rec.disconnect()  # flushes everything, writes the footer, closes the file
+
+
+def _sun_vector_N(scene: Scene) -> np.ndarray:
+    """Unit sun direction of ``scene``'s ``[sun]`` table, N components (as the model sees it)."""
+    from .environment import sun_direction_N
+
+    incl = scene.orbit.inclination if scene.orbit is not None else 0.0
+    return sun_direction_N(scene.sun, incl)
 
 
 def _unit_R_N(u, inclination) -> np.ndarray:
@@ -461,7 +682,11 @@ def _xyzw_C_BP(alpha, beta) -> np.ndarray:
 
 # -- blueprints -------------------------------------------------------------------------------
 def run_blueprint(scene: Scene, extra=(), duration: float | None = None):
-    """3-D station view beside stacked time-series panels."""
+    """3-D station view beside stacked time-series panels.
+
+    ``extra`` are the row columns beyond the base ones: the CMG, controller and sun-tracking
+    panels appear (in a second column of plots) when their columns are there.
+    """
     import rerun.blueprint as rrb
 
     g = _Geometry(scene)
@@ -478,25 +703,50 @@ def run_blueprint(scene: Scene, extra=(), duration: float | None = None):
             start=rrb.TimeRangeBoundary.absolute(seconds=0.0), end=rrb.TimeRangeBoundary.absolute(seconds=duration)
         )
     )
+    base = base_columns(scene.appendage_names)
+    series, unknown = _telemetry_series(base + [c for c in extra if c not in base], scene.appendage_names)
+    have = {s.entity for s in series}
 
-    def plot(name, origin):
-        return rrb.TimeSeriesView(name=name, origin=origin, axis_x=whole_run)
+    def plot(name, origin, contents=None):
+        if contents is None:
+            return rrb.TimeSeriesView(name=name, origin=origin, axis_x=whole_run)
+        return rrb.TimeSeriesView(name=name, origin=origin, contents=[f"/{c}" for c in contents], axis_x=whole_run)
 
-    plots = [plot("omega_BN_B [rad/s]", "telemetry/omega_BN_B")]
+    state = [plot("omega_BN_B [rad/s]", "telemetry/omega_BN_B")]
     if scene.orbit is not None:
-        plots.append(plot("attitude vs LVLH, 3-2-1 [deg]", "telemetry/euler_lvlh_deg"))
-    plots.append(plot("H_O_N [N m s]", "telemetry/H_O_N"))
-    plots.append(plot("T [J]", "telemetry/T"))
-    if scene.appendage:
-        plots.append(plot("array angles [rad]", "telemetry/arrays"))
-    if extra:
-        plots.append(plot("extra", "telemetry/extra"))
+        state.append(plot("attitude vs LVLH, 3-2-1 [deg]", "telemetry/euler_lvlh_deg"))
+    state.append(plot("H_O_N [N m s]", "telemetry/H_O_N"))
+    state.append(plot("T [J]", "telemetry/T"))
+    if scene.appendage:  # the angles only, not the tracking errors below them
+        state.append(plot("array angles [rad]", "telemetry/arrays", [f"telemetry/arrays/{n}" for n in scene.appendage_names]))
+    if unknown:
+        state.append(plot("extra", "telemetry/extra"))
+
+    control = []
+    for name, origin in (
+        ("attitude error [deg]", "telemetry/control/att_err_deg"),
+        ("torque command tau_cmd_B [N m]", "telemetry/control/tau_cmd_B"),
+        ("CMG momentum h_B [N m s]", "telemetry/cmg/h_B"),
+        ("gimbal angles [rad]", "telemetry/cmg/gimbal/angle"),
+        ("gimbal rates [rad/s]", "telemetry/cmg/gimbal/rate"),
+    ):
+        if origin in have:
+            control.append(plot(name, origin))
+    flags = [e for e in ("telemetry/cmg/singularity", "telemetry/cmg/saturated") if e in have]
+    if flags:
+        control.append(plot("CMG singularity measure, saturated (0/1)", "telemetry/cmg", flags))
+    track = [f"telemetry/arrays/{n}/track_err_deg" for n in scene.appendage_names]
+    track = [e for e in track if e in have]
+    if track:
+        control.append(plot("array sun-tracking error [deg]", "telemetry/arrays", track))
+
+    view3d = rrb.Spatial3DView(name=f"{scene.name} (N axes, CM at origin)", origin="world", eye_controls=eye)
+    if control:
+        layout = rrb.Horizontal(view3d, rrb.Vertical(*state), rrb.Vertical(*control), column_shares=[2, 1, 1])
+    else:
+        layout = rrb.Horizontal(view3d, rrb.Vertical(*state), column_shares=[3, 2])
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name=f"{scene.name} (N axes, CM at origin)", origin="world", eye_controls=eye),
-            rrb.Vertical(*plots),
-            column_shares=[3, 2],
-        ),
+        layout,
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(timeline=TIMELINE, playback_speed=max(1.0, duration / 60.0), play_state="paused"),

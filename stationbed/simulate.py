@@ -87,7 +87,9 @@ def _tick_functions(model, rhs, fs, nx, nu, npar, ng) -> list[ca.Function]:
         else:
             f_act = by_name["actuate" if kind == "torque" else "actuate_rates"]
             act = f_act(t, x, cmd if kind == "torque" else ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
-            u = ca.vertcat(u_ext, act[0 : nu - 3])
+            u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
+        if model.has_steps:
+            u = ca.vertcat(u, t + h / 2)  # the segment's time for the side of a rate step
         k1 = rhs(t, x, u, p)
         k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
         k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
@@ -461,10 +463,11 @@ def simulate(
     rows.emit(rows.make([0.0], [x]))
     try:
         for a, b in zip(edges[:-1], edges[1:]):
-            x = apply_jump(a, x)
             inner = t_out[(t_out > a) & (t_out < b)]
             ts = np.concatenate([[a], inner, [b]])
             u[0:3] = _held_torque(scene, 0.5 * (a + b))
+            if model.has_steps:
+                u[-1] = 0.5 * (a + b)
             try:
                 xs = integ.integrate(ts, x, u)
             except IntegrationError as e:
@@ -473,7 +476,8 @@ def simulate(
                     keep = np.isin(ts_done, t_out)
                     rows.emit(rows.make(ts_done[keep], e.partial[1:][keep]))
                 raise
-            x = xs[-1].copy()
+            x = apply_jump(b, xs[-1].copy())  # an array rate step at b: the state just after it
+            xs[-1] = x
             keep = np.isin(ts[1:], t_out)
             _check_rows(rows.make(ts[1:][keep], xs[1:][keep]), rows.emit)
     except IntegrationError as e:
@@ -570,7 +574,7 @@ class _ControlLoop:
             self.act = FastCall.of(f[name])
             self.act.args[3][:] = p
         self.u = np.zeros(model.nu)
-        self.nu_cmg = model.nu - 3
+        self.nu_cmg = model.nu_cmg
         self.n_cmd = self.ng if self.ctrl.command == "gimbal_rates" else 3
         self.last_cmd = (0.0, 0.0, 0.0)
         self.meas_out = None  # where the fused tick writes y, when the controller reads it there
@@ -617,7 +621,7 @@ class _ControlLoop:
             o = self.layout["omega_BN_B"][0]
             self.seen[o : o + 3] += self.rng.normal(0.0, s.rate_noise, 3)
 
-    def _actuate(self, t: float, cmd) -> int:
+    def _actuate(self, t: float, cmd, count: bool = True) -> int:
         """Set the held input from the command; returns the saturation flag (0/1)."""
         if self.act is None:  # no cluster: the torque request acts directly (ideal torquer)
             return 0
@@ -626,26 +630,28 @@ class _ControlLoop:
         a.args[1][:] = self.x
         a.args[2][: self.n_cmd] = cmd
         a()
-        return self._flags(a.res[0])
+        return self._flags(a.res[0], count)
 
     def _advance(self, t0: float, t1: float, cmd) -> None:
         """Generic path: one integrator call per period, split at discontinuities inside it."""
         inner = [b for b in self.bps if t0 < b < t1]
         edges = [t0] + inner + [t1]
         for a, b in zip(edges[:-1], edges[1:]):
-            x = self.apply_jump(a, self.x)  # identity unless an array rate steps at a
             self.u[0:3] = _held_torque(self.scene, 0.5 * (a + b))
             if hasattr(self, "u_ext"):
                 self.u_ext[:] = self.u[0:3]  # the fused tick's copy of the held torque
             u = self.u.copy()
+            if self.model.has_steps:
+                u[-1] = 0.5 * (a + b)
             if self.act is None:
                 u[0:3] += cmd
-            self.x[:] = self.integ.advance(a, b, x, u)
+            # an array rate step at b: continue from the state just after it
+            self.x[:] = self.apply_jump(b, self.integ.advance(a, b, self.x, u))
 
     def _held_row(self, sat_flag: int):
         vals = []
         if self.model.cmg is not None:
-            vals += list(self.u[3:]) if self.ng else []
+            vals += list(self.u[3 : 3 + self.ng]) if self.ng else []
             vals.append(float(sat_flag))
         q_ref = self.ctrl.q_ref_BN
         if q_ref is None:
@@ -687,6 +693,7 @@ class _ControlLoop:
         nu = self.nu_cmg
         i_lim, i_sat = nu + 1, nu + 2
         has_act = self.act is not None
+        ncmd = self.n_cmd
         noisy = self.noisy
         M = self.M
         ticks = 0
@@ -709,27 +716,28 @@ class _ControlLoop:
                 t_next = (k + 1) * period
                 if t_next > duration:
                     t_next = duration
-                smooth = fast and k < K and next_bp >= t_next
+                smooth = fast and k < K and next_bp > t_next  # a step at t_next needs the jump
                 if smooth:  # fused: actuate + one RK4 step + measure, one compiled call
                     a_t[0] = t
                     if t_next - t != h_set:
                         h_set = t_next - t
                         a_h[0] = h_set
-                    try:
-                        a_cmd[:] = cmd
-                    except (ValueError, TypeError):
+                    if cmd is None or len(cmd) != ncmd:
                         self._check_command(t, cmd)
+                    a_cmd[:] = cmd
                     trigger()
                     if has_act and (res_act[i_lim] or res_act[i_sat]):
                         sat_since_row |= self._flags(res_act)
                 else:
                     self._check_command(t, cmd)
-                    sat_since_row |= self._actuate(t, cmd)
+                    # the final tick's actuation is reported in its row but never integrated:
+                    # it is not counted in the summary
+                    sat_since_row |= self._actuate(t, cmd, count=k < K)
                 if k % n_per_out == 0 or k == K:
                     if len(cmd) == 3:
                         self.last_cmd = cmd
-                    if smooth:
-                        self._flags(res_act)
+                    if smooth and has_act:
+                        self.u[3 : 3 + nu] = res_act[:nu]  # the row's held rates (flags counted above)
                     pending_t.append(t)
                     pending_x.append(self.x.copy())
                     pending_h.append(self._held_row(sat_since_row))
@@ -751,7 +759,7 @@ class _ControlLoop:
                         self._corrupt(k + 1)
                 else:
                     self.ticks = ticks
-                    while ib < len(bps) and bps[ib] < t_next:
+                    while ib < len(bps) and bps[ib] <= t_next:
                         ib += 1
                     next_bp = bps[ib] if ib < len(bps) else math.inf
                     self._advance(t, t_next, cmd)
@@ -802,14 +810,15 @@ class _ControlLoop:
             self.M = Measurement(self.meas_out, self.layout)
         return fc, fc.args[2], fc.res[0], fc.res[1], fc.res[2]
 
-    def _flags(self, r) -> int:
+    def _flags(self, r, count: bool = True) -> int:
         if self.act is None:
             return 0
         nu = self.nu_cmg
-        self.u[3:] = r[:nu]
+        self.u[3 : 3 + nu] = r[:nu]
         lim, sat = r[nu + 1] > 0.5, r[nu + 2] > 0.5
-        self.n_rate_limited += lim
-        self.n_momentum_saturated += sat
+        if count:
+            self.n_rate_limited += lim
+            self.n_momentum_saturated += sat
         return int(lim or sat)
 
     def summary(self) -> dict:

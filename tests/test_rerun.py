@@ -4,7 +4,10 @@ Recordings are read with ``rerun.chunk.RrdReader`` (rerun-sdk 0.41): the recordi
 blueprint store are two stores in the same ``.rrd`` file.
 """
 
+import copy
 import io
+import math
+import os
 import shutil
 import subprocess
 import sys
@@ -16,13 +19,16 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
-from scenes import ROOT
+from scenes import RIGID, ROOT
 from stationbed import Trajectory, load_scene, simulate
+from stationbed.cli import main as cli_main
+from stationbed.cmg import cluster_functions
 from stationbed.environment import C_ON
 from stationbed.massprops import composite_cm
 from stationbed.rerun_log import RrdSink, TeeSink, box_half_sizes, write_recording
 from stationbed.rotation import Ap, dcm, euler_321
 from stationbed.scene import scene_from_dict
+from stationbed.simulate import trajectory_columns
 from stationbed.trajectory import CsvSink, base_columns
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
@@ -37,8 +43,16 @@ QUAT_F32_TOL = 1e-6
 #: Euler angles are computed here (float64) and in the library by a different route (5-element
 #: products vs full matrices): round-off of a few 1e-16 rad, ~1e-13 deg.
 EULER_TOL_DEG = 1e-9
+#: Arrows3D vectors are float32 (relative eps 6e-8); rebuilding h [N m s] from four unit arrows
+#: of 4760 N m s each (normalised, then summed): ~4 x 4760 x 2e-7 = 4e-3 N m s.
+CMG_F32_TOL_NMS = 1e-2
+#: Angle between two float32-built unit vectors (two f32 quaternions and an f32 arrow, a few
+#: 1e-7 rad each): ~1e-5 deg; atan2 of |cross| and dot keeps small angles well conditioned.
+ANGLE_F32_TOL_DEG = 1e-4
 
 ISS = ROOT / "scenarios" / "iss_lvlh_gravity_gradient.toml"
+HOLD = ROOT / "scenarios" / "iss_lvlh_hold.toml"  # 4 DGCMGs, 10 Hz PD, sun-tracking arrays
+HOLD_DURATION_S = 200.0  # s: 21 rows at output_dt = 10 s, the arrays still slewing to the sun
 RERUN = Path(sys.executable).parent / "rerun"
 STATIONBED = Path(sys.executable).parent / "stationbed"
 
@@ -86,6 +100,41 @@ def read_temporal(path) -> dict[str, dict[str, np.ndarray]]:
 
 def static_entities(path) -> set[str]:
     return {c.entity_path.lstrip("/") for c in rerun_chunk.RrdReader(path).stream().to_chunks() if c.is_static}
+
+
+def blueprint_views(path) -> list[dict]:
+    """Views of the blueprint store: class ("3D", "TimeSeries"), origin, name and the entity
+    query expressions they show (``$origin/**`` unless the view lists its contents)."""
+    reader = rerun_chunk.RrdReader(path)
+    (bp,) = reader.blueprints()
+    views, contents = {}, {}
+    for c in reader.stream(store=bp).to_chunks():
+        rb = c.to_record_batch()
+        ent = c.entity_path.lstrip("/")
+        if "ViewBlueprint:class_identifier" in rb.schema.names:
+            views[ent] = {
+                "class": rb.column("ViewBlueprint:class_identifier").to_pylist()[0][0],
+                "origin": rb.column("ViewBlueprint:space_origin").to_pylist()[0][0],
+                "name": rb.column("ViewBlueprint:display_name").to_pylist()[0][0],
+            }
+        if "ViewContents:query" in rb.schema.names:
+            contents[ent.rsplit("/", 1)[0]] = rb.column("ViewContents:query").to_pylist()[0]
+    for ent, v in views.items():
+        v["contents"] = contents.get(ent, ["$origin/**"])
+    return list(views.values())
+
+
+def shown_by(view, entities) -> set[str]:
+    """The entities of ``entities`` a view shows (its ``$origin/**`` or exact ``/path`` queries)."""
+    out = set()
+    for q in view["contents"]:
+        q = q.replace("$origin", view["origin"]).lstrip("+ ").lstrip("/")
+        if q.endswith("/**"):
+            root = q[:-3]
+            out |= {e for e in entities if e == root or e.startswith(root + "/")}
+        else:
+            out |= {q} & set(entities)
+    return out
 
 
 def verify(path) -> subprocess.CompletedProcess:
@@ -193,18 +242,12 @@ def test_lvlh_rotation_and_euler_angles(iss_run):
 
 
 def test_blueprint_is_a_second_store_in_the_file(iss_run):
-    _, _, path, _ = iss_run
+    _, _, path, data = iss_run
     reader = rerun_chunk.RrdReader(path)
     (rec,) = reader.recordings()
     (bp,) = reader.blueprints()
     assert rec.application_id == bp.application_id == "stationbed"
-    views = {}
-    for c in reader.stream(store=bp).to_chunks():
-        rb = c.to_record_batch()
-        if "ViewBlueprint:class_identifier" in rb.schema.names:
-            views[rb.column("ViewBlueprint:space_origin").to_pylist()[0][0]] = rb.column(
-                "ViewBlueprint:class_identifier"
-            ).to_pylist()[0][0]
+    views = {v["origin"]: v["class"] for v in blueprint_views(path)}
     assert views["world"] == "3D"
     for origin in ("telemetry/omega_BN_B", "telemetry/euler_lvlh_deg", "telemetry/H_O_N", "telemetry/T", "telemetry/arrays"):
         assert views[origin] == "TimeSeries", origin
@@ -217,13 +260,14 @@ def test_rrd_verify_passes(iss_run):
 
 # -- streaming, failure, extras ---------------------------------------------------------------
 def test_readable_after_every_batch_without_close(tmp_path, rigid_scene_dict):
-    """Each write is flushed: a copy taken before close (as a killed process would leave it) has
-    every row so far and is well formed apart from the footer (the chunk manifest that ``close``
-    writes); ``rerun rrd optimize`` adds the footer back. After close the file verifies fully."""
+    """With ``flush_interval_s = 0`` each write is sent and flushed: a copy taken before close
+    (as a killed process would leave it) has every row so far and is well formed apart from the
+    footer (the chunk manifest that ``close`` writes); ``rerun rrd optimize`` adds the footer
+    back. After close the file verifies fully."""
     scene = scene_from_dict(rigid_scene_dict)
     traj = simulate(scene, duration=20.0)
     live = tmp_path / "live.rrd"
-    sink = RrdSink(scene, live, traj.columns)
+    sink = RrdSink(scene, live, traj.columns, flush_interval_s=0.0)
     try:
         n = 0
         for k, rows in enumerate((traj.data[:1], traj.data[1:11], traj.data[11:])):
@@ -241,6 +285,25 @@ def test_readable_after_every_batch_without_close(tmp_path, rigid_scene_dict):
     finally:
         sink.close()
     assert verify(live).returncode == 0
+
+
+def test_rows_wait_for_the_interval_and_all_reach_the_file_on_close(tmp_path, rigid_scene_dict):
+    """Rows are sent at most every ``flush_interval_s``: with an infinite interval nothing but
+    the static parts is in the file before close, and every row is after it."""
+    scene = scene_from_dict(rigid_scene_dict)
+    traj = simulate(scene, duration=20.0)
+    live = tmp_path / "live.rrd"
+    sink = RrdSink(scene, live, traj.columns, flush_interval_s=math.inf)
+    for k in range(0, len(traj), 5):
+        sink.write(traj.data[k : k + 5])
+    sink.rec.flush()  # whatever the sink has sent is now in the file
+    snap = tmp_path / "snap.rrd"
+    shutil.copyfile(live, snap)
+    with pytest.warns(Warning, match="no footer"):
+        assert read_temporal(snap) == {}
+    sink.close()
+    assert verify(live).returncode == 0
+    assert len(read_temporal(live)["telemetry/omega_BN_B"]["t"]) == len(traj) == sink.n_rows
 
 
 def test_extra_columns_go_under_telemetry_extra(tmp_path, rigid_scene_dict):
@@ -309,3 +372,260 @@ def test_check_rrd_writes_formulations_and_diffs(tmp_path):
         for what in ("attitude_rad", "rate", "H"):
             d = data[f"check/diff/{a}_vs_{b}/{what}"]["Scalars:scalars"]
             assert d.shape == (21, 1) and np.all(d >= 0.0)
+
+
+# -- closed loop: CMG cluster, controller, sun-tracking arrays (issue 3 columns) ------------------
+@pytest.fixture(scope="module")
+def hold_run(tmp_path_factory):
+    """``stationbed run iss_lvlh_hold.toml --duration 200 --rrd``: the command-line path (CSV teed
+    with the recording); the CSV (%.17g, exact) is the trajectory the recording must match."""
+    out = tmp_path_factory.mktemp("hold")
+    rrd = out / "recording.rrd"
+    res = subprocess.run(
+        [str(STATIONBED), "run", str(HOLD), "--out", str(out), "--duration", str(HOLD_DURATION_S), "--rrd", str(rrd)],
+        capture_output=True, text=True,
+    )
+    assert res.returncode == 0, res.stderr
+    return load_scene(HOLD), Trajectory.from_csv(out / "trajectory.csv"), rrd, read_temporal(rrd)
+
+
+HOLD_SERIES = [
+    ("telemetry/cmg/h_B", ["hx", "hy", "hz"]),
+    ("telemetry/cmg/gimbal/angle", [f"gimbal_{i}_{w}" for i in range(1, 5) for w in ("outer", "inner")]),
+    ("telemetry/cmg/gimbal/rate", [f"gimbal_{i}_{w}_rate" for i in range(1, 5) for w in ("outer", "inner")]),
+    ("telemetry/cmg/singularity", ["cmg_singularity"]),
+    ("telemetry/cmg/saturated", ["cmg_saturated"]),
+    ("telemetry/control/tau_cmd_B", ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z"]),
+    ("telemetry/control/att_err_deg", ["att_err_deg"]),
+    ("telemetry/arrays/stbd_pair/track_err_deg", ["track_err_deg_stbd_pair"]),
+    ("telemetry/arrays/port_pair/track_err_deg", ["track_err_deg_port_pair"]),
+]
+
+
+def test_hold_records_cmg_control_and_sun_entities(hold_run):
+    """Every issue-3 column has its place in the station's tree; none is left under extra/."""
+    _, traj, path, data = hold_run
+    assert traj.columns == trajectory_columns(load_scene(HOLD))
+    expected = {e for e, _ in HOLD_SERIES} | {"world/station/cmg/units", "world/station/cmg/h_B"}
+    assert expected <= set(data)
+    assert not [e for e in data if e.startswith("telemetry/extra")]
+    assert {"world/sun", "world/station/cmg/units", "world/station/cmg/h_B"} <= static_entities(path)
+
+
+def test_hold_row_counts_and_times_match_trajectory(hold_run):
+    _, traj, _, data = hold_run
+    assert len(traj) == int(HOLD_DURATION_S / 10.0) + 1
+    for ent, cols in data.items():
+        assert len(cols["t"]) == len(traj), ent
+        assert_allclose(cols["t"], traj.t, rtol=0, atol=TIME_TOL_S, err_msg=ent)
+
+
+@pytest.mark.parametrize("entity, columns", HOLD_SERIES, ids=[e.split("telemetry/")[1] for e, _ in HOLD_SERIES])
+def test_hold_logged_series_equal_trajectory(hold_run, entity, columns):
+    _, traj, _, data = hold_run
+    logged = data[entity]["Scalars:scalars"]
+    assert_allclose(logged[:, : len(columns)], traj.cols(*columns), rtol=0, atol=SCALAR_TOL)
+
+
+def test_hold_logged_h_norm_is_the_cluster_momentum_magnitude(hold_run):
+    _, traj, _, data = hold_run
+    h = data["telemetry/cmg/h_B"]["Scalars:scalars"]
+    assert_allclose(h[:, 3], np.linalg.norm(traj.cols("hx", "hy", "hz"), axis=1), rtol=1e-15, atol=0)
+    assert h[-1, 3] > 0.1 * 4 * 4760.0  # N m s: the PD law is working the cluster (the arrows below move)
+
+
+def _dgcmg_unit_momenta(h_rotor, outer, inner):
+    """Rotor momenta of the default ISS-style layout, written out here from the DGCMG geometry
+    (outer axes +x, +y, -x, -y; spins +z, +x, -z, -x at zero angles; e2 = e3 x e1; spin
+    sin(inner) e1 + cos(inner) (cos(outer) e3 - sin(outer) e2)), shape (n, 4, 3)."""
+    e1 = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    e3 = np.array([[0, 0, 1], [1, 0, 0], [0, 0, -1], [-1, 0, 0]], float)
+    e2 = np.cross(e3, e1)
+    so, co, si, ci = (f(a)[..., None] for f, a in ((np.sin, outer), (np.cos, outer), (np.sin, inner), (np.cos, inner)))
+    return h_rotor * (si * e1 + ci * (co * e3 - so * e2))
+
+
+def test_hold_cmg_arrows_are_the_rotor_momenta(hold_run):
+    """One arrow per unit: all four as long as one rotor's momentum, pointing along that unit's
+    spin axis from its gimbal angles, summing to the trajectory's h (the dynamics' own model);
+    the total arrow is h at the same scale."""
+    scene, traj, _, data = hold_run
+    h_rotor = scene.cmg.h_rotor
+    units = data["world/station/cmg/units"]["Arrows3D:vectors"].reshape(len(traj), 4, 3)
+    length = np.linalg.norm(units, axis=2)
+    assert_allclose(length, length[0, 0], rtol=1e-6)  # float32 lengths of ~20 m
+    scale = length[0, 0] / h_rotor  # [m per N m s]
+    outer = traj.cols(*[f"gimbal_{i}_outer" for i in range(1, 5)])
+    inner = traj.cols(*[f"gimbal_{i}_inner" for i in range(1, 5)])
+    assert_allclose(units / scale, _dgcmg_unit_momenta(h_rotor, outer, inner), rtol=0, atol=CMG_F32_TOL_NMS)
+    h = traj.cols("hx", "hy", "hz")
+    assert_allclose(units.sum(axis=1) / scale, h, rtol=0, atol=CMG_F32_TOL_NMS)
+    assert_allclose(data["world/station/cmg/h_B"]["Arrows3D:vectors"] / scale, h, rtol=0, atol=CMG_F32_TOL_NMS)
+
+
+def _angle_deg(a, b):
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...i,...i", a, b)))
+
+
+def test_hold_sun_vector_is_where_the_arrays_point(hold_run):
+    """The drawn sun is the one the arrays track: the angle between each array's normal (+z_P,
+    turned into N by the logged C_NB and C_BP) and the drawn sun vector is the logged tracking
+    error, row by row (it rises to ~0.4 deg as the station starts turning, then decays)."""
+    scene, traj, path, data = hold_run
+    sun = [c for c in rerun_chunk.RrdReader(path).stream().to_chunks() if c.is_static and c.entity_path.lstrip("/") == "world/sun"]
+    s_N = np.asarray(sun[0].to_record_batch().column("Arrows3D:vectors").to_pylist()[0][0], float)
+    C_NB = Rotation.from_quat(data["world/station"]["Transform3D:quaternion"]).as_matrix()
+    for a in scene.appendage:
+        C_BP = Rotation.from_quat(data[f"world/station/{a.name}"]["Transform3D:quaternion"]).as_matrix()
+        n_N = np.einsum("nij,njk,k->ni", C_NB, C_BP, [0.0, 0.0, 1.0])
+        err = traj[f"track_err_deg_{a.name}"]
+        assert_allclose(_angle_deg(n_N, s_N), err, rtol=0, atol=ANGLE_F32_TOL_DEG, err_msg=a.name)
+        assert err.max() > 0.1  # deg: a real variation, resolved to ANGLE_F32_TOL_DEG
+
+
+def test_hold_sun_vector_has_the_scene_beta_and_noon(hold_run):
+    """The sun sits beta above the orbit plane (the angle to the logged y_O = -orbit normal is
+    90 deg + beta) and its in-plane part points at the station's position at u = u_noon
+    (DESIGN §5: R_N = (cos u, sin u cos i, sin u sin i))."""
+    scene, _, path, data = hold_run
+    sun = [c for c in rerun_chunk.RrdReader(path).stream().to_chunks() if c.is_static and c.entity_path.lstrip("/") == "world/sun"]
+    s_N = np.asarray(sun[0].to_record_batch().column("Arrows3D:vectors").to_pylist()[0][0], float)
+    y_O_N = Rotation.from_quat(data["world/lvlh"]["Transform3D:quaternion"][0]).as_matrix()[:, 1]
+    beta, u, i = scene.sun.beta, scene.sun.u_noon, scene.orbit.inclination
+    assert _angle_deg(s_N, y_O_N) == pytest.approx(90.0 + math.degrees(beta), abs=ANGLE_F32_TOL_DEG)
+    in_plane = s_N - np.dot(s_N, y_O_N) * y_O_N  # y_O is a unit vector: remove the normal part
+    R_noon = np.array([math.cos(u), math.sin(u) * math.cos(i), math.sin(u) * math.sin(i)])
+    assert _angle_deg(in_plane, R_noon) == pytest.approx(0.0, abs=ANGLE_F32_TOL_DEG)
+
+
+def test_hold_blueprint_shows_every_series_in_some_panel(hold_run):
+    """3-D view plus time-series panels; every panel shows at least one logged series and every
+    logged telemetry entity is in a panel (the control column holds the issue-3 series)."""
+    _, _, path, data = hold_run
+    views = blueprint_views(path)
+    assert [v["origin"] for v in views if v["class"] == "3D"] == ["world"]
+    telemetry = [e for e in data if e.startswith("telemetry/")]
+    shown = set()
+    for v in (v for v in views if v["class"] == "TimeSeries"):
+        s = shown_by(v, telemetry)
+        assert s, v
+        shown |= s
+    assert shown == set(telemetry)
+    # the angle panel shows the angles only, the tracking errors (deg) have their own
+    (angles,) = [v for v in views if v["name"] == "array angles [rad]"]
+    assert shown_by(angles, telemetry) == {"telemetry/arrays/stbd_pair", "telemetry/arrays/port_pair"}
+
+
+def test_hold_recording_verifies(hold_run):
+    res = verify(hold_run[2])
+    assert res.returncode == 0, res.stderr
+
+
+CMG_KINDS = {
+    "dgcmg_user_axes": {"kind": "dgcmg", "count": 3, "h_rotor": 100.0,
+                         "outer_axes_B": [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [0.0, -1.0, 1.0]]},
+    "sgcmg_pyramid": {"kind": "sgcmg_pyramid", "h_rotor": 100.0},
+    "ideal": {"kind": "ideal", "max_momentum": 300.0},
+}
+
+
+@pytest.mark.parametrize("cmg", CMG_KINDS.values(), ids=CMG_KINDS.keys())
+def test_cmg_arrows_sum_to_the_model_momentum(tmp_path, rng, cmg):
+    """For every cluster kind, at random gimbal angles: the unit arrows have one rotor's length
+    and sum to h of the dynamics' own model (``cluster_functions(cfg)["h"]``); the total arrow
+    is h; an ideal cluster has no units, only the total."""
+    d = copy.deepcopy(RIGID)
+    d["cmg"] = cmg
+    scene = scene_from_dict(d)
+    cols = trajectory_columns(scene)
+    n = 7
+    data = np.zeros((n, len(cols)))
+    j = {c: k for k, c in enumerate(cols)}
+    data[:, j["t"]] = np.arange(n) * 1.0
+    data[:, j["qw"]] = 1.0
+    h_of = cluster_functions(scene.cmg)["h"]
+    gimbals = [c for c in cols if c.startswith("gimbal_") and not c.endswith("_rate")]
+    for row in data:
+        if gimbals:
+            row[[j[c] for c in gimbals]] = rng.uniform(-math.pi, math.pi, len(gimbals))
+            row[[j["hx"], j["hy"], j["hz"]]] = np.asarray(h_of(row[[j[c] for c in gimbals]])).ravel()
+        else:
+            row[[j["hx"], j["hy"], j["hz"]]] = rng.uniform(-170.0, 170.0, 3)  # N m s, inside 300
+    traj = Trajectory(cols, data)
+    rec = read_temporal(write_recording(traj, scene, tmp_path / "cmg.rrd"))
+    h = traj.cols("hx", "hy", "hz")
+    total = rec["world/station/cmg/h_B"]["Arrows3D:vectors"]
+    if scene.cmg.kind == "ideal":
+        assert "world/station/cmg/units" not in rec
+        scale = np.linalg.norm(total[0]) / np.linalg.norm(h[0])
+    else:
+        units = rec["world/station/cmg/units"]["Arrows3D:vectors"].reshape(n, scene.cmg.n_units, 3)
+        length = np.linalg.norm(units, axis=2)
+        assert_allclose(length, length[0, 0], rtol=1e-6)
+        scale = length[0, 0] / scene.cmg.h_rotor
+        assert_allclose(units.sum(axis=1) / scale, h, rtol=0, atol=1e-4)  # 100 N m s rotors in float32
+    assert_allclose(total / scale, h, rtol=0, atol=1e-4)
+
+
+# -- stationbed replay ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def small_rrd(tmp_path_factory):
+    scene = scene_from_dict(copy.deepcopy(RIGID))
+    return write_recording(simulate(scene, duration=5.0), scene, tmp_path_factory.mktemp("replay") / "small.rrd")
+
+
+def fake_viewer(tmp_path, status: int) -> Path:
+    """A stand-in for the rerun binary: records its arguments, exits with ``status``."""
+    exe = tmp_path / "fake_rerun"
+    exe.write_text(f'#!/bin/sh\nprintf "%s\\n" "$@" > "{tmp_path}/argv.txt"\nexit {status}\n')
+    exe.chmod(0o755)
+    return exe
+
+
+def test_replay_missing_file_is_a_one_line_error_exit_2(tmp_path):
+    res = subprocess.run([str(STATIONBED), "replay", str(tmp_path / "nope.rrd")], capture_output=True, text=True)
+    assert res.returncode == 2
+    assert res.stderr == f"stationbed: error: no recording at {tmp_path / 'nope.rrd'}\n"
+
+
+def test_replay_rejects_a_file_that_is_not_a_recording(tmp_path, capsys):
+    (tmp_path / "scene.toml").write_text("name = 'x'\n")
+    assert cli_main(["replay", str(tmp_path / "scene.toml")]) == 2
+    assert "not a rerun recording" in capsys.readouterr().err
+
+
+def _no_display(monkeypatch):
+    for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(v, raising=False)
+
+
+def test_replay_without_display_prints_the_commands_exit_0(tmp_path, small_rrd, monkeypatch, capsys):
+    exe = fake_viewer(tmp_path, 0)
+    monkeypatch.setenv("STATIONBED_RERUN", str(exe))
+    _no_display(monkeypatch)
+    assert cli_main(["replay", str(small_rrd)]) == 0
+    out = capsys.readouterr().out
+    assert "no display" in out
+    assert f"{exe} {small_rrd}" in out and f"{exe} --web-viewer {small_rrd}" in out
+    assert not (tmp_path / "argv.txt").exists()  # nothing was started
+
+
+@pytest.mark.parametrize("web, argv", [(False, []), (True, ["--web-viewer"])], ids=["native", "web"])
+def test_replay_starts_the_viewer_on_the_file(tmp_path, small_rrd, monkeypatch, web, argv):
+    monkeypatch.setenv("STATIONBED_RERUN", str(fake_viewer(tmp_path, 0)))
+    if web:
+        _no_display(monkeypatch)  # the web viewer needs no display
+    else:
+        monkeypatch.setenv("DISPLAY", ":0")
+    assert cli_main(["replay", str(small_rrd)] + (["--web"] if web else [])) == 0
+    assert (tmp_path / "argv.txt").read_text().splitlines() == argv + [str(small_rrd)]
+
+
+def test_replay_failing_viewer_prints_the_commands_exit_1(tmp_path, small_rrd, monkeypatch, capsys):
+    exe = fake_viewer(tmp_path, 3)
+    monkeypatch.setenv("STATIONBED_RERUN", str(exe))
+    monkeypatch.setenv("DISPLAY", ":0")
+    assert cli_main(["replay", str(small_rrd)]) == 1
+    out, err = capsys.readouterr()
+    assert "exited with status 3" in out and f"{exe} --web-viewer {small_rrd}" in out
+    assert err.count("\n") == 1 and "status 3" in err

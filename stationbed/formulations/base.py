@@ -77,7 +77,7 @@ class Structure:
             harmonic=any(isinstance(t, HarmonicTorque) for t in scene.torque),
             joints=tuple((joint(a.alpha), joint(a.beta)) for a in scene.appendage),
             sun=scene.sun is not None,
-            cmg=None if c is None else (c.kind, c.n_units, c.steering if c.kind != "ideal" else "-"),
+            cmg=None if c is None else (c.kind, c.n_units, c.steering if c.kind != "ideal" else "none"),
         )
 
     @property
@@ -153,7 +153,11 @@ class StationModel:
                     kinds += ["attitude", "rate"]
         self.extra_names = tuple(names)
         self.extra_kinds = tuple(kinds)
-        self.nu = 3 + (0 if self.cmg is None else self.cmg.nu)
+        self.nu_cmg = 0 if self.cmg is None else self.cmg.nu
+        #: profiles with rate steps: u ends with the segment's mid time, which decides the side of
+        #: a step for every stage (a step on a segment edge is then exact for any integrator)
+        self.has_steps = any(n > 0 for a in structure.joints for _, n in a)
+        self.nu = 3 + self.nu_cmg + (1 if self.has_steps else 0)
 
     # -- numbers ------------------------------------------------------------------------
     def params(self, scene) -> np.ndarray:
@@ -242,7 +246,11 @@ class StationModel:
         b_star_rate = (-v[2] * vd[1] + v[1] * vd[2]) / ca.fmax(v[1] ** 2 + v[2] ** 2, 1e-12)
         return (a_star, a_star_rate), (b_star, b_star_rate)
 
-    def joint_states(self, t, q, xe, p, w=None):
+    def t_switch(self, u):
+        """The time that decides which side of a rate step a stage is on (None: t itself)."""
+        return u[self.nu - 1] if (self.has_steps and u is not None) else None
+
+    def joint_states(self, t, q, xe, p, w=None, u=None):
         """Per array ``[(angle, rate, accel) or None for alpha, ... for beta]``; accel needs ``w``."""
         from ..appendages import drive_acceleration, profile
 
@@ -254,7 +262,7 @@ class StationModel:
                 ja, jb = out[k]
                 if ja is None:
                     c = p[self.layout[f"alpha{k}"]]
-                    alpha, alpha_rate, _ = profile(t, c, self.structure.joints[k][0][1])
+                    alpha, alpha_rate, _ = profile(t, c, self.structure.joints[k][0][1], self.t_switch(u))
                 else:
                     alpha, alpha_rate = ja[0], ja[1]
                 targets = self._driven_targets(k, q, xe, p, w, alpha, alpha_rate)
@@ -263,19 +271,21 @@ class StationModel:
                         js[2] = drive_acceleration(js[0], js[1], *targets[i], p[self.layout[f"{JOINTS[i]}{k}"]])
         return out
 
-    def arrays(self, t, q, xe, p, w=None):
+    def arrays(self, t, q, xe, p, w=None, u=None):
         """Per array: ``(I_p, omega_p, omega_p_dot, (alpha, beta), C_PB, J_p, omega_PB_P)`` in B.
 
         ``omega_p_dot`` of a sun-tracking array needs ``w`` (its drive follows a target that
-        moves with the body); without it that entry is None.
+        moves with the body); without it that entry is None. ``u`` (the held input) places
+        rate steps by the segment time (see :meth:`t_switch`); without it a step is
+        right-continuous in t.
         """
-        states = self.joint_states(t, q, xe, p, w)
+        states = self.joint_states(t, q, xe, p, w, u)
         out = []
         for k in range(self.structure.n_app):
             J = self._mat(p, f"J{k}")
             (_, na), (_, nb) = self.structure.joints[k]
             C_PB, w_P, wd_P, ang = joint_kinematics(
-                t, p[self.layout[f"alpha{k}"]], p[self.layout[f"beta{k}"]], (na, nb), tuple(states[k])
+                t, p[self.layout[f"alpha{k}"]], p[self.layout[f"beta{k}"]], (na, nb), tuple(states[k]), self.t_switch(u)
             )
             C_BP = C_PB.T
             I_p = ca.mtimes([C_BP, J, C_PB])
@@ -304,15 +314,15 @@ class StationModel:
         """Body-frame derivative of the CMG momentum [N m]."""
         if self.cmg is None:
             return ca.SX.zeros(3)
-        return self.cmg.h_dot(self._cmg_x(xe), u[3 : self.nu], w, p[self.layout["cmg"]])
+        return self.cmg.h_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], w, p[self.layout["cmg"]])
 
     def extra_dot(self, t, q, xe, u, w, p):
         """Derivative of the extra states (CMG state, driven joint angles and rates)."""
         parts = []
         if self.cmg is not None:
-            parts.append(self.cmg.state_dot(self._cmg_x(xe), u[3 : self.nu], w, p[self.layout["cmg"]]))
+            parts.append(self.cmg.state_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], w, p[self.layout["cmg"]]))
         if self.driven:
-            states = self.joint_states(t, q, xe, p, w)
+            states = self.joint_states(t, q, xe, p, w, u)
             for k, j, off in self.driven:
                 _, rate, acc = states[k][JOINTS.index(j)]
                 parts += [rate, acc]
@@ -388,8 +398,8 @@ class Formulation:
         return len(self.state_names)
 
     # -- helpers for implementers --------------------------------------------------------
-    def arrays(self, t, x, p, w=None):
-        return self.model.arrays(t, x[0:4], x[7:], p, w)
+    def arrays(self, t, x, p, w=None, u=None):
+        return self.model.arrays(t, x[0:4], x[7:], p, w, u)
 
     # -- public, checked -----------------------------------------------------------------
     def rhs(self, t, x, u, p):
@@ -490,7 +500,7 @@ class OmegaStateForm(Formulation):
         m = self.model
         w = x[4:7]
         xe = x[7:]
-        arrays = self.arrays(t, x, p, w)
+        arrays = self.arrays(t, x, p, w, u)
         I = m.inertia(t, p, arrays)
         h = m.h(xe, p)
         rhs = m.external_torque(t, x[0:4], u, p, I) - ca.cross(w, ca.mtimes(I, w) + h) - m.h_dot(xe, u, w, p)

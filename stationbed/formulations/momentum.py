@@ -33,7 +33,7 @@ class MomentumForm(Formulation):
 
     def _rhs(self, t, x, u, p):
         m = self.model
-        arrays = self.arrays(t, x, p)
+        arrays = self.arrays(t, x, p, u=u)
         I = m.inertia(t, p, arrays)
         H = x[4:7]
         w = self._omega_from(H, arrays, I, x[7:], p)

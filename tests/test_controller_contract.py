@@ -1,0 +1,169 @@
+"""One contract for every registered controller (STYLE 6: the moment a law is registered in
+``controllers/``, these tests exercise it).
+
+Per controller: it builds from its defaults (plus the documented example values of any
+parameter that has no default, :data:`EXAMPLE_PARAMS`), names an unknown parameter in a
+:class:`ControllerError`, runs a short closed loop on a scene that has what it may need (an orbit
+for LVLH references, a gimballed CMG cluster so both torque requests and gimbal rates can act),
+returns a finite command of the right length at every tick, the run logs that command, and its
+``summary()`` is plain JSON.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from stationbed import simulate
+from stationbed.controller import Controller, ControllerError, controller_registry
+from stationbed.scene import scene_from_dict
+
+REGISTRY = controller_registry()
+NAMES = sorted(REGISTRY)
+
+#: Values for parameters that have no default (a law that needs them says so: a missing one is
+#: a ControllerError naming it, tested below). Every such parameter must appear here.
+EXAMPLE_PARAMS = {"torque_command": {"torque_B": [2.0, -1.0, 0.5]}}  # N m
+
+PERIOD_S = 0.1  # s
+#: ticks per run: enough for the warm-up of every law (filters, integrators, plan shifts) to be
+#: exercised; the MPC solves an NLP per tick (~0.25 s here), so it gets fewer
+TICKS = {"default": 30, "mpc": 5}
+
+#: An ISS-sized rigid station (JEOD inertia with products) in a 400 km, 51.6 deg orbit with
+#: gravity gradient, 0.55 deg off LVLH, with a 4-CMG pyramid (gimbal rates or SR-steered torque).
+CONTRACT_SCENE = {
+    "name": "controller_contract",
+    "simulation": {"duration": 1.0, "integrator": "rk4", "step": PERIOD_S, "output_dt": PERIOD_S},
+    "initial": {"frame": "lvlh", "q_BN": [0.99998858, 0.0035, -0.0025, 0.0018]},
+    "body": {"mass": 4.0e5, "inertia": [[1.02e8, -6.96e6, -5.48e6], [-6.96e6, 0.91e8, 5.9e5],
+                                        [-5.48e6, 5.9e5, 1.64e8]]},
+    "orbit": {"altitude": 400000.0, "inclination": 0.9006},
+    "cmg": {"kind": "sgcmg_pyramid", "h_rotor": 4760.0, "steering": "sr"},
+    "controller": {"name": "pd", "period": PERIOD_S},
+}
+
+
+def params_of(name: str) -> dict:
+    return copy.deepcopy(EXAMPLE_PARAMS.get(name, {}))
+
+
+def test_registry_has_the_shipped_laws():
+    """The issue's laws are registered under their scene names (the contract below runs on all)."""
+    assert "pd" in REGISTRY
+    for name, cls in REGISTRY.items():
+        assert issubclass(cls, Controller) and cls.name == name
+        assert cls.command in ("torque", "gimbal_rates")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_builds_from_defaults(name):
+    cls = REGISTRY[name]
+    required = [k for k, f in cls.Params.model_fields.items() if f.is_required()]
+    missing = [k for k in required if k not in params_of(name)]
+    assert not missing, f"add example values for {name}'s required parameters {missing} to EXAMPLE_PARAMS"
+    ctrl = cls(period=PERIOD_S, **params_of(name))
+    assert ctrl.period == PERIOD_S
+    for k in required:  # a missing required parameter is a clear error naming it
+        with pytest.raises(ControllerError, match=rf"controller '{name}': params\.{k}"):
+            cls(period=PERIOD_S, **{kk: v for kk, v in params_of(name).items() if kk != k})
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_rejects_an_unknown_parameter(name):
+    with pytest.raises(ControllerError, match=rf"controller '{name}': unknown parameter 'no_such_param'"):
+        REGISTRY[name](period=PERIOD_S, no_such_param=1.0, **params_of(name))
+
+
+def contract_scene(name: str):
+    d = copy.deepcopy(CONTRACT_SCENE)
+    ticks = TICKS.get(name, TICKS["default"])
+    d["simulation"]["duration"] = ticks * PERIOD_S
+    d["controller"] = {"name": name, "period": PERIOD_S, "params": params_of(name)}
+    return scene_from_dict(d), ticks
+
+
+@pytest.fixture(scope="module", params=NAMES)
+def contract_run(request):
+    """A short closed loop of one law on the contract scene; every command recorded."""
+    name = request.param
+    scene, ticks = contract_scene(name)
+    ctrl = REGISTRY[name](period=PERIOD_S, **params_of(name))
+    update = ctrl._update
+    commands = []
+
+    def recording(t, meas):  # sees every tick the per-tick loop runs
+        cmd = update(t, meas)
+        commands.append((t, cmd))
+        return cmd
+
+    ctrl._update = recording
+    traj = simulate(scene, controller=ctrl, fused=False)
+    return name, scene, ctrl, traj, commands, ticks
+
+
+def test_returns_a_finite_command_of_the_right_length_every_tick(contract_run):
+    name, scene, ctrl, traj, commands, ticks = contract_run
+    n_cmd = 3 if ctrl.command == "torque" else scene.cmg.n_gimbals
+    assert [t for t, _ in commands] == [k * PERIOD_S for k in range(ticks)] + [ticks * PERIOD_S]
+    for t, cmd in commands:
+        v = np.asarray(cmd, dtype=float)
+        assert v.shape == (n_cmd,), f"{name} at t = {t}: {cmd!r}"
+        assert np.all(np.isfinite(v)), f"{name} at t = {t}: {cmd!r}"
+    assert traj.meta["summary"]["controller_updates"] == ticks + 1 == ctrl.n_updates
+
+
+def test_the_run_logs_the_command(contract_run):
+    """Torque laws: ``tau_cmd`` is the request of each row's tick; gimbal-rate laws: the logged
+    gimbal rates are the command (inside the rate limit, where nothing is scaled)."""
+    name, scene, ctrl, traj, commands, ticks = contract_run
+    cmds = np.array([c for _, c in commands], dtype=float)
+    if ctrl.command == "torque":
+        assert np.array_equal(traj.cols("tau_cmd_x", "tau_cmd_y", "tau_cmd_z"), cmds)
+    else:
+        names = [f"gimbal_{i + 1}_rate" for i in range(scene.cmg.n_gimbals)]
+        inside = np.abs(cmds).max(axis=1) <= scene.cmg.max_gimbal_rate
+        assert np.array_equal(traj.cols(*names)[inside], cmds[inside])
+        assert np.all(np.isnan(traj.cols("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")))
+
+
+def test_the_run_stays_physical(contract_run):
+    """A short run of any law from 0.55 deg off LVLH: the state stays finite and the station does
+    not start to tumble (|ω| below ten times the orbital rate)."""
+    name, scene, ctrl, traj, commands, ticks = contract_run
+    assert np.all(np.isfinite(traj.data[:, :12]))
+    assert np.linalg.norm(traj.omega_BN_B, axis=1).max() < 10 * scene.orbit.mean_motion
+
+
+def test_summary_is_json(contract_run):
+    """``summary()`` holds JSON types only (no numpy scalars, complex poles or arrays), before and
+    after the run's own keys are merged in."""
+    name, scene, ctrl, traj, commands, ticks = contract_run
+    s = ctrl.summary()
+    assert isinstance(s, dict)
+    text = json.dumps(s)  # what `stationbed run` writes to summary.json
+    assert json.loads(text).keys() == s.keys()
+    json.dumps(traj.meta["summary"])
+    for k in s:
+        assert k in traj.meta["summary"], f"{name}: summary key {k!r} missing from the run summary"
+
+
+#: the same arithmetic compiled as two programs (fused loop vs per-tick calls): round-off only
+FUSED_RTOL = 1e-9
+
+
+@pytest.mark.parametrize("name", [n for n in NAMES if callable(getattr(REGISTRY[n], "symbolic", None))])
+def test_symbolic_form_gives_the_python_law(name):
+    """A law that offers ``symbolic`` (the fused compiled loop) flies the same trajectory as its
+    Python ``_update`` called every tick."""
+    scene, _ = contract_scene(name)
+    per_tick = simulate(scene, fused=False)
+    fused = simulate(scene, fused=True)
+    assert fused.meta["summary"]["fused"] is True and per_tick.meta["summary"]["fused"] is False
+    assert np.array_equal(np.isnan(fused.data), np.isnan(per_tick.data))
+    scale = np.maximum(np.abs(per_tick.data).max(axis=0), 1e-300)
+    rel = np.nan_to_num(np.abs(fused.data - per_tick.data), nan=0.0) / scale
+    assert rel.max() <= FUSED_RTOL, f"{per_tick.columns[int(np.argmax(rel.max(axis=0)))]}: {rel.max():.2e}"
