@@ -2,14 +2,15 @@
 
 Wie, Weiss & Arapostathis (JGCD 12(3), 1989) and Wie & Lu (JGCD 18(6), 1995):
 
-    τ = -c J [ sat_ω_max((k / c) e) + ω_e ] + ω × (J ω + h)
+    τ = -c J [ sat_ω_max((k / c) e) + ω_e ] + ω × J ω
 
 with ``e`` the vector part of the error quaternion ``q_BR = conj(q_RN) ⊗ q_BN`` (sign chosen
 so that its scalar part is ≥ 0: the short way round), ``ω_e = ω_BN_B - C_BR ω_RN_R`` the rate
 relative to the reference frame R, and ``sat`` scaling the *vector* (k/c)e down to a length of
 ``max_slew_rate``: the rate command keeps the eigenaxis direction, so a large slew turns about
-the eigenaxis at no more than ``max_slew_rate``. The last term cancels the gyroscopic torque of
-the body and the CMG momentum. For small angles (e ≈ θ/2) every axis is a second-order system
+the eigenaxis at no more than ``max_slew_rate``. The last term cancels the body's gyroscopic
+torque. (Not ``ω × h``: the steering law already commands ``ḣ = -τ - ω × h``, so the body
+receives exactly ``τ``; adding ``ω × h`` here would apply it twice.) For small angles (e ≈ θ/2) every axis is a second-order system
 with ``ω_n² = k / 2`` and ``2 ζ ω_n = c``: the parameters are ``bandwidth`` (ω_n) and ``damping``.
 
 The reference frame R is LVLH (``reference = "lvlh"``, the station's flight attitude) or N
@@ -106,10 +107,9 @@ class PD(Controller):
         t1 = -c * (J10 * v0 + J11 * v1 + J12 * v2)
         t2 = -c * (J20 * v0 + J21 * v1 + J22 * v2)
         if self.gyro:
-            hx, hy, hz = meas.h_B.tolist()
-            Hx = J00 * wx + J01 * wy + J02 * wz + hx
-            Hy = J10 * wx + J11 * wy + J12 * wz + hy
-            Hz = J20 * wx + J21 * wy + J22 * wz + hz
+            Hx = J00 * wx + J01 * wy + J02 * wz
+            Hy = J10 * wx + J11 * wy + J12 * wz
+            Hz = J20 * wx + J21 * wy + J22 * wz
             t0 += wy * Hz - wz * Hy
             t1 += wz * Hx - wx * Hz
             t2 += wx * Hy - wy * Hx
@@ -133,7 +133,7 @@ class PD(Controller):
             o, k = lay[name]
             return y[o : o + k]
 
-        q, w, h, q_ON = part("q_BN"), part("omega_BN_B"), part("h_B"), part("q_ON")
+        q, w, q_ON = part("q_BN"), part("omega_BN_B"), part("q_ON")
         J = ca.reshape(cp[0:9], 3, 3).T
         kc, c, lim = cp[9], cp[10], cp[11]
         w_RN_R, q_RO, lvlh, gyro = cp[12:15], cp[15:19], cp[19], cp[20]
@@ -146,7 +146,7 @@ class PD(Controller):
         tv = 2.0 * ca.cross(qe[1:4], w_RN_R)
         w_ref = w_RN_R - qe[0] * tv + ca.cross(qe[1:4], tv)
         tau = -c * ca.mtimes(J, r + w - w_ref)
-        tau = tau + gyro * ca.cross(w, ca.mtimes(J, w) + h)
+        tau = tau + gyro * ca.cross(w, ca.mtimes(J, w))
         return tau, q_RN
 
     def summary(self):

@@ -1,0 +1,192 @@
+"""``momentum_manager``: TEA-seeking attitude/momentum control (Wie, Byun, Warren, Geller, Long &
+Sunkel, "New approach to attitude/momentum control for the Space Station", JGCD 12(5), 1989).
+
+A station whose LVLH attitude is not a torque-equilibrium attitude (products of inertia, an
+aerodynamic bias) needs a steady control torque to hold it, and a CMG cluster that supplies a
+steady torque fills up (``h`` grows by that torque times time). Wie et al. control attitude and
+CMG momentum together: with the integral of the momentum as a state, the only equilibrium of the
+closed loop has ``h = 0`` on average, so the control torque averages to zero and the station
+settles where gravity gradient balances the other torques — its torque-equilibrium attitude
+(TEA), found by the loop, not commanded. Cyclic torques leave a bounded cyclic ``h``.
+
+Design model (:mod:`controllers._linear`, ``cmg=True``), 12 states:
+``x = (θ, δω, h, z)``: attitude ``θ = 2 vec(q_BO)`` relative to LVLH [rad], rate relative to LVLH
+``δω = ω_BN_B - C_BO (0, -n, 0)`` [rad/s], CMG momentum ``h`` (B) [N m s] with
+``ḣ = -u - ω × h``, and ``z = ∫ h dt`` [N m s²]; input: the body control torque ``u`` [N m];
+rigid body with the plant's inertia about O and gravity gradient. ``A, B`` are casadi Jacobians
+at the linearisation point, ``K`` from python-control's ``lqr`` with Bryson weights.
+
+The linearisation point (``linearize_about``):
+
+* ``"tea"`` (default): the TEA of the design model (the principal-axis attitude nearest LVLH,
+  found by Newton on the nonlinear model; ``h = 0``, ``u = 0``): the gains fit where the station
+  will fly, which matters when products of inertia put the TEA tens of degrees from LVLH;
+* ``"lvlh"``: Wie et al.'s choice, LVLH itself with ``ω = (0, -n, 0)``; the torque the model needs
+  there is treated as a bias the momentum integral rejects.
+
+Law (every tick, on floats): ``u = -K (x - x_e)``, ``z ← z + T h`` (rectangle rule, period T).
+The law keeps a state (``z``), so it has no stateless ``symbolic`` form and runs on the per-tick
+path of the loop, not the fused one.
+Reported (``summary()``, prefix ``mm_``): closed-loop poles [rad/s], per-input gain/phase margins
+(loop broken at that input), the predicted settling time ``4/|Re s_slow|`` [s], the design TEA
+and the TEA the loop actually found (the attitude averaged over the last whole orbit), both as
+``theta = 2 vec(q_BO)`` in degrees (≈ roll, pitch, yaw for small angles).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from stationbed.controller import Controller, ControllerError, ControllerParams
+
+from ._linear import design_model, linearize, loop_margins, settling_time, torque_equilibrium_attitude
+from .lqr import MAX_POLE_PERIOD, _finite_or_none, bryson, design_lqr, pole_report
+
+
+class MomentumManagerParams(ControllerParams):
+    max_attitude: float = Field(default=0.1, gt=0.0)  # rad, Bryson: attitude excursion from the TEA
+    max_rate: float = Field(default=1.0e-4, gt=0.0)  # rad/s, rate relative to LVLH
+    max_momentum: float = Field(default=2000.0, gt=0.0)  # N m s, CMG momentum per axis
+    max_momentum_integral: float | None = Field(default=None, gt=0.0)  # N m s², default max_momentum / n
+    max_torque: float = Field(default=10.0, gt=0.0)  # N m, control torque per axis
+    linearize_about: Literal["tea", "lvlh"] = "tea"
+
+
+def _theta_to_q(th) -> tuple[float, float, float, float]:
+    e = [0.5 * float(v) for v in th]
+    return (math.sqrt(max(0.0, 1.0 - sum(v * v for v in e))), *e)
+
+
+class MomentumManager(Controller):
+    name = "momentum_manager"
+    command = "torque"
+    Params = MomentumManagerParams
+
+    def _reset(self, plant):
+        P = self.params
+        if plant.mean_motion is None:
+            raise ControllerError("controller 'momentum_manager': needs an [orbit] (gravity gradient, LVLH)")
+        n = plant.mean_motion
+        gg = bool(getattr(getattr(plant.scene, "orbit", None), "gravity_gradient", True))
+        self.w_ON_O = (0.0, -n, 0.0)
+        self._vy = -n
+        try:
+            self.tea_design = torque_equilibrium_attitude(plant.inertia_O_B, n, gravity_gradient=gg)
+        except ControllerError as e:
+            raise ControllerError(f"controller 'momentum_manager': {e}") from None
+        f = design_model(plant.inertia_O_B, n, gravity_gradient=gg, cmg=True)
+        self.x_e = np.zeros(12)
+        if P.linearize_about == "tea":
+            self.x_e[0:3] = self.tea_design
+        self.A, self.B = linearize(f, self.x_e, np.zeros(3))
+        z_max = P.max_momentum / n if P.max_momentum_integral is None else P.max_momentum_integral
+        self.Q = bryson([P.max_attitude] * 3 + [P.max_rate] * 3 + [P.max_momentum] * 3 + [z_max] * 3)
+        self.R = bryson([P.max_torque] * 3)
+        try:
+            self.K, _ = design_lqr(self.A, self.B, self.Q, self.R)
+        except Exception as e:  # noqa: BLE001 - python-control's own message says why
+            raise ControllerError(f"controller 'momentum_manager': LQR design failed: {e}") from None
+        self.poles = np.linalg.eigvals(self.A - self.B @ self.K)
+        if not np.all(self.poles.real < 0):
+            raise ControllerError(f"controller 'momentum_manager': closed loop not stable, poles {self.poles}")
+        fastest = float(np.max(np.abs(self.poles)))
+        if fastest * plant.period > MAX_POLE_PERIOD:
+            raise ControllerError(
+                f"controller 'momentum_manager': fastest closed-loop pole {fastest:.3g} rad/s is too fast for the "
+                f"period {plant.period} s; lower params.max_torque"
+            )
+        self.margins = loop_margins(self.A, self.B, self.K)
+        self.settling_time_s = settling_time(self.poles)
+        self.q_TO = _theta_to_q(self.tea_design)  # the design TEA as a quaternion relative to LVLH
+        self._k = tuple(tuple(float(v) for v in row) for row in self.K)
+        self._xe = tuple(float(v) for v in self.x_e[0:3])
+        self._T = plant.period
+        self.z = [0.0, 0.0, 0.0]
+        # TEA the loop finds: the attitude relative to LVLH averaged over each whole orbit
+        self._orbit_s = 2.0 * math.pi / n
+        self._next_orbit = self._orbit_s
+        self._sum = [0.0, 0.0, 0.0]
+        self._count = 0
+        self.tea_found = None
+
+    def _update(self, t, meas):
+        # Written out on floats (it runs every tick; _linear.lvlh_error and _quat.qmul inlined,
+        # tests/test_momentum_manager.py checks the command against K (x - x_e) in numpy).
+        ow, ox, oy, oz = meas.q_ON.tolist()
+        aw, ax, ay, az = self.q_TO
+        self.q_ref_BN = (
+            ow * aw - ox * ax - oy * ay - oz * az,
+            ow * ax + ox * aw + oy * az - oz * ay,
+            ow * ay - ox * az + oy * aw + oz * ax,
+            ow * az + ox * ay - oy * ax + oz * aw,
+        )
+        qw, qx, qy, qz = meas.q_BN.tolist()
+        # q_BO = conj(q_ON) ⊗ q_BN, short way round; theta = 2 vec(q_BO)
+        ew = ow * qw + ox * qx + oy * qy + oz * qz
+        ex = ow * qx - ox * qw - oy * qz + oz * qy
+        ey = ow * qy + ox * qz - oy * qw - oz * qx
+        ez = ow * qz - ox * qy + oy * qx - oz * qw
+        if ew < 0.0:
+            ew, ex, ey, ez = -ew, -ex, -ey, -ez
+        th0, th1, th2 = 2.0 * ex, 2.0 * ey, 2.0 * ez
+        # domega = omega_BN_B - C_BO (0, -n, 0): C v = v - w t + e × t, t = 2 e × v, v = (0, vy, 0)
+        vy = self._vy
+        tx = -2.0 * ez * vy
+        tz = 2.0 * ex * vy
+        wx, wy, wz = meas.omega_BN_B.tolist()
+        w0 = wx - (-ew * tx + ey * tz)
+        w1 = wy - (vy + (ez * tx - ex * tz))
+        w2 = wz - (-ew * tz - ey * tx)
+        h0, h1, h2 = meas.h_B.tolist()
+        z = self.z
+        e0, e1, e2 = self._xe
+        x0, x1, x2 = th0 - e0, th1 - e1, th2 - e2
+        z0, z1, z2 = z
+        (a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11), (b0, b1, b2, b3, b4, b5, b6, b7, b8, b9, b10, b11), (
+            c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10, c11
+        ) = self._k
+        u = (
+            -(a0 * x0 + a1 * x1 + a2 * x2 + a3 * w0 + a4 * w1 + a5 * w2)
+            - (a6 * h0 + a7 * h1 + a8 * h2 + a9 * z0 + a10 * z1 + a11 * z2),
+            -(b0 * x0 + b1 * x1 + b2 * x2 + b3 * w0 + b4 * w1 + b5 * w2)
+            - (b6 * h0 + b7 * h1 + b8 * h2 + b9 * z0 + b10 * z1 + b11 * z2),
+            -(c0 * x0 + c1 * x1 + c2 * x2 + c3 * w0 + c4 * w1 + c5 * w2)
+            - (c6 * h0 + c7 * h1 + c8 * h2 + c9 * z0 + c10 * z1 + c11 * z2),
+        )
+        T = self._T
+        z[0] += T * h0
+        z[1] += T * h1
+        z[2] += T * h2
+        s = self._sum
+        if t >= self._next_orbit:
+            c = self._count
+            self.tea_found = (s[0] / c, s[1] / c, s[2] / c)
+            s[0] = s[1] = s[2] = 0.0
+            self._count = 0
+            self._next_orbit += self._orbit_s
+        s[0] += th0
+        s[1] += th1
+        s[2] += th2
+        self._count += 1
+        return u
+
+    def summary(self):
+        if self.plant is None:
+            return {}
+        out = {
+            "mm_poles_rad_s": pole_report(self.poles),
+            "mm_slowest_pole_rad_s": float(np.min(np.abs(self.poles.real))),
+            "mm_settling_time_s": self.settling_time_s,
+            "mm_gain_margin_down": [m["gain_margin_down"] for m in self.margins],
+            "mm_gain_margin_up": [_finite_or_none(m["gain_margin_up"]) for m in self.margins],  # None: unbounded
+            "mm_phase_margin_deg": [m["phase_margin_deg"] for m in self.margins],
+            "mm_linearized_about": self.params.linearize_about,
+            "mm_tea_design_deg": np.degrees(self.tea_design).tolist(),
+        }
+        if self.tea_found is not None:
+            out["mm_tea_found_deg"] = [math.degrees(v) for v in self.tea_found]
+        return out
