@@ -41,6 +41,19 @@ def _ptr(a: np.ndarray):
     return a.ctypes.data_as(_DP)
 
 
+_DRIVERS: dict[str, object] = {}
+
+
+def _c_driver(lib_path: str):
+    """The C step-control driver of a compiled library (loaded once per process)."""
+    f = _DRIVERS.get(lib_path)
+    if f is None:
+        f = ctypes.CDLL(lib_path).sb_dop853_segment
+        f.restype = ctypes.c_int
+        _DRIVERS[lib_path] = f
+    return f
+
+
 class IntegrationError(RuntimeError):
     """The integrator could not continue; ``t`` is where it stopped."""
 
@@ -193,9 +206,7 @@ class DOP853(Integrator):
         self.n_rejected = 0
         self._c = None
         if "__lib__" in funcs and not self.force_python:
-            lib = ctypes.CDLL(funcs["__lib__"])
-            self._c = lib.sb_dop853_segment
-            self._c.restype = ctypes.c_int
+            self._c = _c_driver(funcs["__lib__"])
             self._P = np.ascontiguousarray(self.P)
 
     #: use the Python step loop even when the C driver is available (tests compare the two)
