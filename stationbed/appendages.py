@@ -86,12 +86,21 @@ def sun_targets(s_B, alpha):
 def drive_acceleration(theta, theta_dot, target, target_rate, drive):
     """SARJ/BGA drive law: joint acceleration [rad/s²] (casadi).
 
-    ``rate_cmd = clip(gain wrap(target - θ) + target_rate, ±max_rate)``;
+    ``rate_cmd = clip(gain wrap(θ* - θ) + θ̇*, ±max_rate)``;
     ``θ̈ = clip((rate_cmd - θ̇) / rate_tau, ±max_acc)``. ``drive = (max_rate, max_acc, gain,
-    rate_tau)``.
+    rate_tau)``. ``target`` is the target angle θ*, or the pair ``(Y, X)`` with θ* = atan2(Y, X):
+    then the wrapped error is one ``atan2(Y cos θ - X sin θ, X cos θ + Y sin θ)`` (cos θ, sin θ
+    are shared with C_PB), instead of atan2, sin, cos and atan2 again - the drives' trigonometry
+    is a large part of a right-hand side's cost.
     """
     max_rate, max_acc, gain, tau = drive[0], drive[1], drive[2], drive[3]
-    rate_cmd = ca.fmin(ca.fmax(gain * wrap_angle(target - theta) + target_rate, -max_rate), max_rate)
+    if isinstance(target, tuple):
+        Y, X = target
+        c, s = ca.cos(theta), ca.sin(theta)
+        err = ca.atan2(Y * c - X * s, X * c + Y * s)
+    else:
+        err = wrap_angle(target - theta)
+    rate_cmd = ca.fmin(ca.fmax(gain * err + target_rate, -max_rate), max_rate)
     return ca.fmin(ca.fmax((rate_cmd - theta_dot) / tau, -max_acc), max_acc)
 
 

@@ -13,6 +13,7 @@ momentum are generic: they need only the formulation's ``omega(t, x, p)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -112,7 +113,7 @@ class ParamLayout:
                 # profile: (a0, rate, amp, freq, phase, t1, d1, ...); drive: (max_rate, max_acc, gain, tau)
                 add(f"{j}{k}", 5 + 2 * n_steps if kind == "p" else 4)
         if structure.orbit:
-            add("orbit", 4)  # radius [m], inclination [rad], u0 [rad], n [rad/s]
+            add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
         if structure.harmonic:
             add("harm", 15)  # bias, cos1, sin1, cos2, sin2 (B, N m), summed over torques
         if structure.sun:
@@ -184,7 +185,8 @@ class StationModel:
         p[L["I0"]] = I0.ravel()
         if self.structure.orbit:
             o = scene.orbit
-            p[L["orbit"]] = [o.radius_m, o.inclination, o.u0, o.mean_motion]
+            i = o.inclination  # cos/sin of a parameter: computed once here, not per RHS stage
+            p[L["orbit"]] = [o.radius_m, i, o.u0, o.mean_motion, math.cos(i), math.sin(i)]
         if self.structure.harmonic:
             h = np.zeros(15)
             for t in scene.torque:
@@ -233,7 +235,6 @@ class StationModel:
         s_B = self.sun_B(q, p)
         sd = -ca.cross(w, s_B)
         den_a = ca.fmax(s_B[0] ** 2 + s_B[2] ** 2, 1e-12)
-        a_star = ca.atan2(s_B[0], s_B[2])
         a_star_rate = (s_B[2] * sd[0] - s_B[0] * sd[2]) / den_a
         ca_, sa_ = ca.cos(alpha), ca.sin(alpha)
         v = ca.vertcat(ca_ * s_B[0] - sa_ * s_B[2], s_B[1], sa_ * s_B[0] + ca_ * s_B[2])
@@ -242,9 +243,9 @@ class StationModel:
             sd[1],
             (ca_ * s_B[0] - sa_ * s_B[2]) * alpha_rate + sa_ * sd[0] + ca_ * sd[2],
         )
-        b_star = ca.atan2(-v[1], v[2])
         b_star_rate = (-v[2] * vd[1] + v[1] * vd[2]) / ca.fmax(v[1] ** 2 + v[2] ** 2, 1e-12)
-        return (a_star, a_star_rate), (b_star, b_star_rate)
+        # targets as (Y, X) with θ* = atan2(Y, X): the drive wraps the error with one atan2
+        return ((s_B[0], s_B[2]), a_star_rate), ((-v[1], v[2]), b_star_rate)
 
     def t_switch(self, u):
         """The time that decides which side of a rate step a stage is on (None: t itself)."""
@@ -337,10 +338,11 @@ class StationModel:
         L = u[0:3]
         s = self.structure
         if s.orbit:
-            radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
+            radius, incl, u0, n, ci, si = (p[self.layout["orbit"]][i] for i in range(6))
             arg = u0 + n * t
+            cu, su = ca.cos(arg), ca.sin(arg)
             if s.gravity_gradient:
-                R_hat_N = orbit_position_N(arg, 1.0, incl)
+                R_hat_N = ca.vertcat(cu, su * ci, su * si)  # orbit_position_N(arg, 1, incl)
                 R_hat_B = ca.mtimes(dcm(q), R_hat_N)
                 L = L + gravity_gradient_torque(R_hat_B, I, n * n)
             if s.harmonic:
@@ -348,10 +350,10 @@ class StationModel:
                 L = (
                     L
                     + h[0:3]
-                    + h[3:6] * ca.cos(arg)
-                    + h[6:9] * ca.sin(arg)
-                    + h[9:12] * ca.cos(2 * arg)
-                    + h[12:15] * ca.sin(2 * arg)
+                    + h[3:6] * cu
+                    + h[6:9] * su
+                    + h[9:12] * (cu * cu - su * su)  # cos 2u
+                    + h[12:15] * (2 * su * cu)  # sin 2u
                 )
         return L
 
