@@ -24,9 +24,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
-from stationbed.controller import Controller, ControllerError, ControllerParams
+from stationbed.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 
 from ._linear import design_model, equilibrium_torque, linearize, loop_margins, lvlh_error, settling_time
 from ._quat import qmul, rotate
@@ -38,19 +38,12 @@ MAX_POLE_PERIOD = 0.5
 
 
 class LQRParams(ControllerParams):
-    q_ref: list[float] = Field(default=[1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4)  # R relative to LVLH
+    q_ref: UnitQuaternion = [1.0, 0.0, 0.0, 0.0]  # R relative to LVLH
     max_attitude: float = Field(default=0.01, gt=0.0)  # rad, Bryson: acceptable attitude error per axis
     max_rate: float = Field(default=1.0e-4, gt=0.0)  # rad/s, acceptable rate error per axis
     max_torque: float = Field(default=20.0, gt=0.0)  # N m, acceptable torque per axis
     feedforward: bool = True  # add the equilibrium torque u0 that holds R
 
-    @field_validator("q_ref")
-    @classmethod
-    def _unit(cls, q):
-        nq = math.sqrt(sum(v * v for v in q))
-        if abs(nq - 1.0) > 1e-6:
-            raise ValueError(f"q_ref norm is {nq:.9g}, not 1")
-        return [v / nq for v in q]
 
 
 def bryson(maxima) -> np.ndarray:

@@ -65,9 +65,9 @@ from typing import ClassVar
 
 import casadi as ca
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
-from stationbed.controller import Controller, ControllerError, ControllerParams
+from stationbed.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 from stationbed.environment import gravity_gradient_torque, orbit_position_N
 from stationbed.rotation import dcm, quat_kinematics
 
@@ -86,7 +86,7 @@ class MPCFailure(RuntimeError):
 
 
 class MPCParams(ControllerParams):
-    q_ref: list[float] = Field(default=[1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4)  # target q_BN
+    q_ref: UnitQuaternion = [1.0, 0.0, 0.0, 0.0]  # target q_BN
     horizon: int = Field(default=10, ge=2, le=200)  # intervals of one controller period
     substeps: int = Field(default=1, ge=1, le=50)  # RK4 steps per interval
     momentum_fraction: float = Field(default=0.7, gt=0.0, le=1.0)  # |h| bound / h_capacity
@@ -99,13 +99,6 @@ class MPCParams(ControllerParams):
     max_iter: int = Field(default=200, ge=1)  # ipopt iterations per solve
     tol: float = Field(default=1e-8, gt=0.0, lt=1.0)  # ipopt tolerance
 
-    @field_validator("q_ref")
-    @classmethod
-    def _unit(cls, q):
-        n = math.sqrt(sum(v * v for v in q))
-        if abs(n - 1.0) > 1e-6:
-            raise ValueError(f"q_ref norm is {n:.9g}, not 1")
-        return [v / n for v in q]
 
 
 def _error_vector(r, q):

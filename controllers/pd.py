@@ -22,28 +22,21 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field
 
-from stationbed.controller import Controller, ControllerParams
+from stationbed.controller import Controller, ControllerParams, UnitQuaternion
 
 from ._quat import qmul, rotate
 
 
 class PDParams(ControllerParams):
     reference: Literal["lvlh", "inertial"] = "lvlh"
-    q_ref: list[float] = Field(default=[1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4)
+    q_ref: UnitQuaternion = [1.0, 0.0, 0.0, 0.0]
     bandwidth: float = Field(default=0.01, gt=0.0)  # rad/s, closed-loop natural frequency ω_n
     damping: float = Field(default=0.9, gt=0.0)  # ζ
     max_slew_rate: float = Field(default=0.005, gt=0.0)  # rad/s, eigenaxis rate limit
     gyro_compensation: bool = True
 
-    @field_validator("q_ref")
-    @classmethod
-    def _unit(cls, q):
-        n = math.sqrt(sum(v * v for v in q))
-        if abs(n - 1.0) > 1e-6:
-            raise ValueError(f"q_ref norm is {n:.9g}, not 1")
-        return [v / n for v in q]
 
 
 class PD(Controller):

@@ -35,7 +35,9 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from typing import Annotated
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 __all__ = [
     "Controller",
@@ -46,7 +48,22 @@ __all__ = [
     "get_controller",
     "controller_registry",
     "measurement_layout",
+    "UnitQuaternion",
 ]
+
+#: A quaternion typed by a person (~8 digits) is unit to ~1e-8; further off is a mistake.
+QUAT_PARAM_TOL = 1e-6
+
+
+def _unit_quaternion(q: list[float]) -> list[float]:
+    n = math.sqrt(sum(v * v for v in q))
+    if abs(n - 1.0) > QUAT_PARAM_TOL:
+        raise ValueError(f"quaternion norm is {n:.9g}, not 1")
+    return [v / n for v in q]
+
+
+#: A scalar-first unit quaternion parameter (normalised; a norm off by > 1e-6 is an error).
+UnitQuaternion = Annotated[list[float], Field(min_length=4, max_length=4), AfterValidator(_unit_quaternion)]
 
 
 class ControllerError(ValueError):
