@@ -33,6 +33,9 @@ def exact_q(t):
 SETTINGS = {
     "dop853": ({"rtol": 1e-11}, 1e-9),
     "rk4": ({"step": 0.5}, 1e-7),  # (0.06 rad/s * 0.5 s)^4 / 120 per step * 400 steps ≈ 3e-9
+    "lie_rk4": ({"step": 0.5}, 1e-7),  # as rk4 (measured 2.1e-9)
+    "lgvi": ({"step": 0.1}, 2e-4),  # 2nd order: (0.06 rad/s * 0.1 s)^2 phase error over 200 s (measured 5.0e-5)
+    "radau": ({"step": 0.5}, 1e-9),  # order 5 (measured 1.1e-12)
     "scipy_dop853": ({"rtol": 1e-11}, 1e-9),
     "scipy_rk45": ({"rtol": 1e-10}, 1e-7),
     "scipy_radau": ({"rtol": 1e-10}, 1e-7),
@@ -72,5 +75,5 @@ def test_rk4_order_four(rigid_scene_dict):
 
 
 def test_unknown_integrator_lists_valid_names(rigid_scene_dict):
-    with pytest.raises(ValueError, match="valid: dop853, rk4"):
+    with pytest.raises(ValueError, match="valid: dop853, lgvi, lie_rk4, radau, rk4"):
         simulate(scene_from_dict(rigid_scene_dict), integrator="euler")
