@@ -9,8 +9,15 @@ from .simulate import SimulationError, simulate
 from .trajectory import Trajectory
 from .formulations import FORMULATIONS
 from .integrators import INTEGRATORS
+from .batch import BatchResult, disperse_initial, simulate_batch
+from .controller import Controller, ControllerParams
 
 __all__ = [
+    "BatchResult",
+    "Controller",
+    "ControllerParams",
+    "disperse_initial",
+    "simulate_batch",
     "FORMULATIONS",
     "INTEGRATORS",
     "Scene",
