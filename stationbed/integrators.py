@@ -435,8 +435,8 @@ class RK4(Integrator):
             h = dt / n
             hup[0] = h
             t = ts[i - 1]
-            while n > 0:
-                k = min(n, self.MAX_STEPS_PER_CALL)
+            while n >= self.MAX_STEPS_PER_CALL:  # whole blocks: one call each
+                k = self.MAX_STEPS_PER_CALL
                 tx[0] = t
                 tx[1:] = x
                 n_act[0] = k
@@ -446,6 +446,18 @@ class RK4(Integrator):
                 n -= k
                 self.n_rhs += 4 * k
                 self.n_steps += k
+            if n:  # the rest one step per call (the block call would run all 64, masked)
+                one = self._one
+                o_tx, o_hup = one.args
+                o_hup[:] = hup
+                o_tx[0] = t
+                o_tx[1:] = x
+                for _ in range(n):
+                    one()
+                    o_tx[:] = one.res[0]
+                x = o_tx[1:].copy()
+                self.n_rhs += 4 * n
+                self.n_steps += n
             if not np.all(np.isfinite(x)):
                 raise IntegrationError(ts[i], "state is not finite (NaN or inf)", out[:i])
             out[i] = x
@@ -577,8 +589,8 @@ class FixedStep(Integrator):
             n = max(1, math.ceil(dt / self.h_nominal - 1e-9))
             hup[0] = dt / n
             t = ts[i - 1]
-            while n > 0:
-                k = min(n, self.MAX_STEPS_PER_CALL)
+            while n >= self.MAX_STEPS_PER_CALL:  # whole blocks: one call each
+                k = self.MAX_STEPS_PER_CALL
                 txd[0] = t
                 txd[1:-1] = x
                 txd[-1] = 0.0
@@ -590,6 +602,21 @@ class FixedStep(Integrator):
                 n -= k
                 self.n_rhs += self.RHS_PER_STEP * k
                 self.n_steps += k
+            if n:  # the rest one step per call (the block call would run all 64, masked)
+                one = self._one
+                o_txd, o_hup = one.args
+                o_hup[:] = hup
+                o_txd[0] = t
+                o_txd[1:-1] = x
+                o_txd[-1] = 0.0
+                res = one.res[0]
+                for _ in range(n):
+                    one()
+                    o_txd[:] = res
+                self._check(t + n * hup[0], res, out[:i])
+                x = res[1:-1].copy()
+                self.n_rhs += self.RHS_PER_STEP * n
+                self.n_steps += n
             out[i] = x
         return out
 
