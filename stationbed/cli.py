@@ -68,6 +68,20 @@ def _parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("replay", help="open a rerun recording in the viewer (or say how to)")
     rp.add_argument("file", type=Path, help="a .rrd recording (stationbed run/check --rrd)")
     rp.add_argument("--web", action="store_true", help="serve the web viewer instead (rerun --web-viewer)")
+
+    st = sub.add_parser("study", help="work-precision and stability studies (CSV + PNG charts)")
+    ss = st.add_subparsers(dest="study", required=True, parser_class=_Parser)
+    sp = ss.add_parser("precision", help="work-precision diagram of one scene: error vs wall time and RHS evaluations")
+    sp.add_argument("scene", type=Path)
+    sp.add_argument("--out", type=Path, default=Path("out") / "study", help="output folder (default: out/study)")
+    sp.add_argument("--duration", type=_positive("--duration"), default=None, help="[s] (default: the scene's)")
+    sp.add_argument("--formulations", nargs="+", default=None, metavar="NAME", help="default: all registered")
+    sp.add_argument("--integrators", nargs="+", default=None, metavar="NAME", help="default: all registered")
+    sp.add_argument("--quick", action="store_true", help="a small sweep, one repeat (tests, CI)")
+    sb = ss.add_parser("stability", help="cases where methods fail: detector, verdict and chart per case")
+    sb.add_argument("--out", type=Path, default=Path("out") / "study", help="output folder (default: out/study)")
+    sb.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="default: all cases")
+    sb.add_argument("--quick", action="store_true", help="shrink every case to seconds (tests, CI)")
     return p
 
 
@@ -78,6 +92,17 @@ def _fail(msg: str, code: int) -> int:
 
 
 def _cmd_run(args) -> int:
+    recorder = None
+    if args.rrd:  # started by main() before the heavy imports; here when called directly
+        recorder = getattr(args, "recorder", None) or _start_recording(args)
+    try:
+        return _run(args, recorder)
+    finally:
+        if recorder is not None:  # the run never opened it (bad scene, ...): stop the child
+            recorder.abort()
+
+
+def _run(args, recorder) -> int:
     from .scene import load_scene
     from .simulate import SimulationError, simulate
     from .simulate import trajectory_columns
@@ -88,10 +113,11 @@ def _cmd_run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / "trajectory.csv"
     status = {"scene": str(args.scene)}
+    rrd_error = None
     with open(csv_path, "w", newline="") as fh:
         sink = CsvSink(fh, trajectory_columns(scene))
         if args.rrd:  # stream the rows into the recording too, as they are computed
-            sink = _with_recording(sink, scene, args.rrd, args.duration)
+            sink = _with_recording(sink, scene, args.rrd, args.duration, recorder)
         try:
             traj = simulate(
                 scene,
@@ -104,13 +130,16 @@ def _cmd_run(args) -> int:
                 sink=sink,
             )
         except SimulationError as e:
+            if args.rrd:  # finish the recording first: the message says whether it is complete
+                rrd_error = sink.close()
             status.update(e.trajectory.meta)
             (out / "summary.json").write_text(json.dumps(status, indent=2, default=str))
-            kept = f"{csv_path} and {args.rrd}" if args.rrd else str(csv_path)
-            return _fail(f"{e}; {len(e.trajectory)} rows kept in {kept}", EXIT_FAILED)
+            kept = f"{csv_path} and {args.rrd}" if args.rrd and not rrd_error else str(csv_path)
+            failed = f"; recording {args.rrd} failed: {rrd_error}" if rrd_error else ""
+            return _fail(f"{e}; {len(e.trajectory)} rows kept in {kept}{failed}", EXIT_FAILED)
         finally:
             if args.rrd:  # flush and finish the recording whatever happened
-                sink.close()
+                rrd_error = sink.close()
     status.update(traj.meta)
     (out / "summary.json").write_text(json.dumps(status, indent=2, default=str))
     msg = (
@@ -118,11 +147,13 @@ def _cmd_run(args) -> int:
         f"{traj.meta['integrator']}, {traj.meta['n_rhs']} RHS evaluations, "
         f"{traj.meta['wall_s'] * 1e3:.1f} ms -> {csv_path}"
     )
-    if args.rrd:
+    if args.rrd and not rrd_error:
         msg += f", {args.rrd}"
     print(msg)
     if "summary" in traj.meta:
         print(_summary_line(traj.meta["summary"]))
+    if rrd_error:  # the run and its CSV are fine; the recording is not
+        return _fail(f"recording {args.rrd} failed: {rrd_error}; {csv_path} is complete", EXIT_FAILED)
     return 0
 
 
@@ -143,11 +174,43 @@ def _summary_line(s: dict) -> str:
     return "; ".join(parts)
 
 
-def _with_recording(csv_sink, scene, path, duration=None):
-    """``csv_sink`` teed with a rerun recording streamed to ``path``; close it when done."""
-    from .rerun_log import RrdSink, TeeSink
+def _start_recording(args):
+    """Start the process that writes ``run --rrd``'s recording (stationbed/_rrd_child.py).
 
-    return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=duration))
+    Called first thing for ``run --rrd``, before the simulation's modules are imported, so that
+    the child's ``import rerun`` and set-up overlap the parent's start-up and run.
+    """
+    from ._rrd_child import RecordingChild
+
+    return RecordingChild.start(args.scene, args.rrd)
+
+
+class _RecordingTee:
+    """Every batch to the CSV sink and to the recording child; :meth:`close` returns ``None`` or
+    why the recording failed (the CSV is never affected by the recording)."""
+
+    def __init__(self, csv_sink, recorder):
+        self.csv_sink, self.recorder = csv_sink, recorder
+        self.columns = csv_sink.columns
+
+    def write(self, rows) -> None:
+        self.csv_sink.write(rows)
+        self.recorder.write(rows)
+
+    def close(self) -> str | None:
+        return self.recorder.close()
+
+
+def _with_recording(csv_sink, scene, path, duration=None, recorder=None):
+    """``csv_sink`` teed with a rerun recording at ``path``, written by ``recorder`` (a started
+    :class:`~stationbed._rrd_child.RecordingChild`, which builds the same
+    :class:`~stationbed.rerun_log.RrdSink`); ``close()`` finishes it and returns ``None`` or the
+    reason it failed (one line)."""
+    if recorder is None:  # no child (a caller without one): the same sink, in this process
+        from .rerun_log import RrdSink, TeeSink
+
+        return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=duration))
+    return _RecordingTee(csv_sink, recorder.open(csv_sink.columns, duration, scene.name))
 
 
 def _cmd_check(args) -> int:
@@ -276,12 +339,33 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _cmd_study(args) -> int:
+    from .study import StudyError, precision_study, stability_study
+
+    try:
+        if args.study == "precision":
+            res = precision_study(
+                args.scene, out=args.out, duration=args.duration, formulations=args.formulations,
+                integrators=args.integrators, quick=args.quick,
+            )
+            print(res.table())
+        else:
+            res = stability_study(out=args.out, quick=args.quick, cases=args.cases)
+        files = res.files if args.study == "precision" else [f for c in res for f in c.files]
+    except StudyError as e:
+        return _fail(str(e), EXIT_FAILED)
+    print(f"wrote {len(files)} files to {args.out}")
+    return 0
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    if args.cmd == "run" and args.rrd:  # first, so the recorder's start-up overlaps the run's
+        args.recorder = _start_recording(args)
     from .scene import SceneError
 
     try:
-        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay}[args.cmd](args)
+        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study}[args.cmd](args)
     except SceneError as e:
         return _fail(str(e), EXIT_BAD_INPUT)
     except ValueError as e:  # unknown formulation/integrator names and other bad arguments

@@ -9,8 +9,10 @@ import io
 import math
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +30,7 @@ from stationbed.massprops import composite_cm
 from stationbed.rerun_log import RrdSink, TeeSink, box_half_sizes, write_recording
 from stationbed.rotation import Ap, dcm, euler_321
 from stationbed.scene import scene_from_dict
-from stationbed.simulate import trajectory_columns
+from stationbed.simulate import ROW_BATCH, trajectory_columns
 from stationbed.trajectory import CsvSink, base_columns
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
@@ -372,6 +374,162 @@ def test_check_rrd_writes_formulations_and_diffs(tmp_path):
         for what in ("attitude_rad", "rate", "H"):
             d = data[f"check/diff/{a}_vs_{b}/{what}"]["Scalars:scalars"]
             assert d.shape == (21, 1) and np.all(d >= 0.0)
+
+
+# -- command line: the recording process (stationbed/_rrd_child.py) ----------------------------
+#: Long enough that the run is still going when it is killed (3 orbits take ~1 s; this ~60x).
+KILL_DURATION_S = 1.0e6
+#: Rows in the CSV before the parent is killed: a few batches, while the child may still import.
+KILL_AFTER_ROWS = 3 * ROW_BATCH
+#: Wall-time limits [s] for a run to reach a state or a child to finish (never reached when fine).
+WAIT_S = 60.0
+needs_proc = pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="finds the child in /proc (Linux)")
+RIGID_TOML = FAILING.split("[[torque]]")[0].replace("duration = 100.0", "duration = 20.0") + "[initial]\nomega_BN_B = [0.1, 0.02, -0.05]\n"
+
+
+def _csv_rows(path) -> int:
+    try:
+        with open(path) as fh:
+            return max(sum(1 for _ in fh) - 1, 0)
+    except FileNotFoundError:
+        return 0
+
+
+def _children(pid) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def _alive(pid) -> bool:
+    """Running (a zombie left unreaped by an orphan's new parent counts as ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except (OSError, IndexError):
+        return False
+
+
+def _wait_for(cond, what):
+    deadline = time.monotonic() + WAIT_S
+    while not cond():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.01)
+
+
+@needs_proc
+def test_killed_run_leaves_the_child_to_finish_the_recording(tmp_path):
+    """SIGKILL the parent mid-run: the recording process reads to the end of the pipe and closes
+    the file, so it verifies in full (footer included) and holds, exactly, every row handed over
+    before the kill: at least the CSV's rows when the kill was sent, but the batch being written
+    (the CSV gets each batch first), and no row the CSV does not have."""
+    out = tmp_path / "o"
+    rrd = out / "recording.rrd"
+    proc = subprocess.Popen(
+        [str(STATIONBED), "run", str(HOLD), "--out", str(out), "--duration", str(KILL_DURATION_S), "--rrd", str(rrd)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    child = None
+    try:
+        _wait_for(lambda: _children(proc.pid), "the recording process")
+        (child,) = _children(proc.pid)
+        _wait_for(lambda: _csv_rows(out / "trajectory.csv") >= KILL_AFTER_ROWS or proc.poll() is not None, "rows")
+        assert proc.poll() is None, "the run ended before it was killed"
+        n_seen = _csv_rows(out / "trajectory.csv")
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        _wait_for(lambda: not _alive(child), "the recording process to finish")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        if child is not None and _alive(child):
+            os.kill(child, signal.SIGKILL)
+    res = verify(rrd)
+    assert res.returncode == 0, res.stderr
+    csv = Trajectory.from_csv(out / "trajectory.csv")
+    w = read_temporal(rrd)["telemetry/omega_BN_B"]
+    n = len(w["t"])
+    assert n_seen - ROW_BATCH <= n <= len(csv)
+    assert_allclose(w["t"], csv.t[:n], rtol=0, atol=TIME_TOL_S)
+    assert_allclose(w["Scalars:scalars"], csv.omega_BN_B[:n], rtol=0, atol=SCALAR_TOL)
+
+
+@needs_proc
+def test_recording_process_killed_mid_run_keeps_the_run_and_its_csv(tmp_path):
+    """The recording process dies while the run goes on: the run still completes, every row
+    (t = 0..duration at output_dt) is in the CSV, and the CLI says in one line that the recording
+    failed and why, exit 1."""
+    scene = load_scene(HOLD)
+    out = tmp_path / "o"
+    rrd = out / "recording.rrd"
+    proc = subprocess.Popen(
+        [str(STATIONBED), "run", str(HOLD), "--out", str(out), "--rrd", str(rrd)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        _wait_for(lambda: _children(proc.pid), "the recording process")
+        (child,) = _children(proc.pid)
+        _wait_for(lambda: _csv_rows(out / "trajectory.csv") > 0 or proc.poll() is not None, "the first rows")
+        os.kill(child, signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=WAIT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 1
+    assert stderr.count("\n") == 1 and f"recording {rrd} failed" in stderr and "killed by signal 9" in stderr
+    csv = Trajectory.from_csv(out / "trajectory.csv")
+    sim = scene.simulation
+    assert len(csv) == math.floor(sim.duration / sim.output_dt) + 1 + (sim.duration % sim.output_dt > 0)
+    assert csv.t[-1] == pytest.approx(sim.duration, abs=TIME_TOL_S)
+    assert f"{len(csv)} rows" in stdout
+
+
+def test_recording_process_that_cannot_start_keeps_the_run(tmp_path, monkeypatch, capsys):
+    """No Python to start the recording process with: the run and its CSV are complete, one line
+    names the failure, exit 1, no recording."""
+    scene = tmp_path / "rigid.toml"
+    scene.write_text(RIGID_TOML)
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "no-such-python"))
+    rrd = tmp_path / "o" / "recording.rrd"
+    assert cli_main(["run", str(scene), "--out", str(tmp_path / "o"), "--rrd", str(rrd)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot start the recording process" in err
+    csv = Trajectory.from_csv(tmp_path / "o" / "trajectory.csv")
+    assert len(csv) == 21 and csv.t[-1] == 20.0  # duration 20 s at output_dt = 1 s
+    assert not rrd.exists()
+
+
+def test_recording_process_that_cannot_write_reports_why(tmp_path, capsys):
+    """The recording's folder is a file: the child fails at once with the reason, the run goes
+    on to a complete CSV, exit 1 with that reason in one line."""
+    scene = tmp_path / "rigid.toml"
+    scene.write_text(RIGID_TOML)
+    (tmp_path / "afile").write_text("")
+    rrd = tmp_path / "afile" / "recording.rrd"
+    assert cli_main(["run", str(scene), "--out", str(tmp_path / "o"), "--rrd", str(rrd)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exit status 1" in err and "afile" in err
+    assert len(Trajectory.from_csv(tmp_path / "o" / "trajectory.csv")) == 21
+
+
+def test_bad_scene_stops_the_recording_process_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    """A scene that does not load: exit 2 as without --rrd, the recording process (already
+    started) is stopped and no file is made."""
+    from stationbed import _rrd_child
+
+    started = []
+    start = _rrd_child.RecordingChild.start
+    monkeypatch.setattr(_rrd_child.RecordingChild, "start", classmethod(lambda cls, *a: started.append(start(*a)) or started[-1]))
+    scene = tmp_path / "bad.toml"
+    scene.write_text("name = 'bad'\n[body]\nmass = -1.0\n")
+    rrd = tmp_path / "o" / "recording.rrd"
+    assert cli_main(["run", str(scene), "--out", str(tmp_path / "o"), "--rrd", str(rrd)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    (rec,) = started
+    assert rec.proc.poll() is not None
+    assert not rrd.exists()
 
 
 # -- closed loop: CMG cluster, controller, sun-tracking arrays (issue 3 columns) ------------------
