@@ -31,6 +31,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
 	$(PY) benchmarks/bench_control.py
 	$(PY) benchmarks/bench_batch.py
+	$(PY) benchmarks/bench_basilisk.py  # optional: says so when bsk is not installed
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
