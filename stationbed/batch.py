@@ -42,12 +42,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._compile import FastCall
-from .environment import C_ON, omega_ON_O
 from .formulations import Structure
 from .integrators import DOP853
-from .rotation import dcm, quat_from_dcm, quat_mult
+from .rotation import quat_mult
 from .scene import QUAT_NORM_TOL, Scene, load_scene
-from .simulate import _breakpoints, _held_torque, _output_times, build_system, characteristic_scales
+from .simulate import (
+    _breakpoints,
+    _held_torque,
+    _output_times,
+    build_system,
+    characteristic_scales,
+    from_lvlh,
+    initial_x,
+)
 
 __all__ = ["BatchResult", "disperse_initial", "simulate_batch"]
 
@@ -297,7 +304,6 @@ def simulate_batch(
     TOL = np.empty((n, 1 + nx))
     QN = np.empty((n, 4))
     WN = np.empty((n, 3))
-    init = FastCall.of(funcs["init"])
     p_cache: dict[int, np.ndarray] = {}
     for i, s in enumerate(scenes):
         p = p_cache.get(id(s))
@@ -305,19 +311,9 @@ def simulate_batch(
             p = p_cache[id(s)] = model.params(s)
         q, w = q0s[i], w0s[i]
         if frame == "lvlh":
-            o = s.orbit
-            C_BO = dcm(q)
-            q = quat_from_dcm(C_BO @ C_ON(o.u0, o.inclination))
-            w = w + C_BO @ omega_ON_O(o.mean_motion)
+            q, w = from_lvlh(s.orbit, q, w)
         rate_scale, momentum_scale = characteristic_scales(s, w, model, p)
-        xe0 = model.initial_extra(s, q, p)
-        init.args[0][0] = 0.0
-        init.args[1][:] = q
-        init.args[2][:] = w
-        init.args[3][:] = xe0
-        init.args[4][:] = p
-        init()
-        P[i], X0[i], QN[i], WN[i] = p, init.res[0], q, w
+        P[i], X0[i], QN[i], WN[i] = p, initial_x(system, s, q, w, p), q, w
         TOL[i, 0] = rtol
         TOL[i, 1:] = form.atol_vector(atol, rate_scale, momentum_scale)
     max_step = math.inf if sim.max_step is None else float(sim.max_step)

@@ -26,7 +26,7 @@ from .rotation import dcm, quat_from_dcm, rotation_angle
 from .scene import ConstantTorque, Scene, load_scene
 from .trajectory import Trajectory, base_columns
 
-__all__ = ["simulate", "SimulationError", "build_system", "System", "initial_state"]
+__all__ = ["simulate", "SimulationError", "build_system", "System", "initial_state", "initial_x", "from_lvlh"]
 
 OUT_CHUNK = 64  # output rows evaluated per compiled call
 
@@ -176,17 +176,34 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     return system
 
 
+def from_lvlh(orbit, q_BO, omega_BO_B) -> tuple[np.ndarray, np.ndarray]:
+    """``(q_BN, omega_BN_B)`` at t = 0 from an attitude and rate relative to LVLH."""
+    C_BO = dcm(np.asarray(q_BO, dtype=float))
+    q = quat_from_dcm(C_BO @ C_ON(orbit.u0, orbit.inclination))
+    return q, np.asarray(omega_BO_B, dtype=float) + C_BO @ omega_ON_O(orbit.mean_motion)
+
+
 def initial_state(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """``(q_BN, omega_BN_B)`` at t = 0, converting from LVLH when ``initial.frame = 'lvlh'``."""
     q = np.array(scene.initial.q_BN, dtype=float)
     w = np.array(scene.initial.omega_BN_B, dtype=float)
     if scene.initial.frame == "lvlh":
-        o = scene.orbit
-        C_BO = dcm(q)
-        C_BN = C_BO @ C_ON(o.u0, o.inclination)
-        q = quat_from_dcm(C_BN)
-        w = w + C_BO @ omega_ON_O(o.mean_motion)
+        q, w = from_lvlh(scene.orbit, q, w)
     return q, w
+
+
+def initial_x(system: System, scene: Scene, q_BN, omega_BN_B, p) -> np.ndarray:
+    """The formulation's state at t = 0 with attitude ``q_BN``, rate ``omega_BN_B`` and the
+    scene's extra states (CMG, sun-tracking joints)."""
+    xe0 = system.formulation.model.initial_extra(scene, q_BN, p)
+    init = FastCall.of(system.funcs["init"])
+    init.args[0][0] = 0.0
+    init.args[1][:] = q_BN
+    init.args[2][:] = omega_BN_B
+    init.args[3][:] = xe0
+    init.args[4][:] = p
+    init()
+    return init.res[0].copy()
 
 
 #: Floor of the characteristic rate: 1 mrad/s, the order of a LEO station's orbital rate.
@@ -408,19 +425,10 @@ def simulate(
     p = model.params(scene)
     nx = form.nx
     q0, w0 = initial_state(scene)
-    xe0 = model.initial_extra(scene, q0, p)
     rate_scale, momentum_scale = characteristic_scales(scene, w0, model, p)
     atol_vec = form.atol_vector(atol, rate_scale, momentum_scale)
     integ = system.integrator_cls(funcs, p, nx, rtol=rtol, atol=atol_vec, step=step, max_step=sim.max_step)
-
-    init = FastCall.of(funcs["init"])
-    init.args[0][0] = 0.0
-    init.args[1][:] = q0
-    init.args[2][:] = w0
-    init.args[3][:] = xe0
-    init.args[4][:] = p
-    init()
-    x = init.res[0].copy()
+    x = initial_x(system, scene, q0, w0, p)
 
     rows = _Rows(scene, system, p, sink)
     bps, steps = _breakpoints(scene, duration)
