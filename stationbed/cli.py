@@ -240,6 +240,15 @@ def _cmd_list(args) -> int:
     print("integrators:")
     for n, c in INTEGRATORS.items():
         print(f"  {n:<14} order {c.order}, {'adaptive' if c.adaptive else 'fixed step'}")
+    from .cmg import STEERING_LAWS
+    from .controller import controller_registry
+
+    print("controllers (or module:Class):")
+    for n, c in sorted(controller_registry().items()):
+        doc = (sys.modules[c.__module__].__doc__ or "").strip().splitlines()
+        line = doc[0].split(":", 1)[-1].strip() if doc else ""
+        print(f"  {n:<18} {c.command:<13} {line}")
+    print(f"CMG kinds: ideal, dgcmg, sgcmg_pyramid; steering laws: {', '.join(STEERING_LAWS)}")
     return 0
 
 
