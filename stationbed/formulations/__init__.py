@@ -8,11 +8,12 @@ from __future__ import annotations
 
 from .base import Formulation, StationModel, Structure
 from .dalembert import DAlembertForm
+from .hamel import HamelForm
 from .momentum import MomentumForm
 from .momentum27 import Momentum27Form
 
 FORMULATIONS: dict[str, type[Formulation]] = {
-    cls.name: cls for cls in (MomentumForm, Momentum27Form, DAlembertForm)
+    cls.name: cls for cls in (MomentumForm, Momentum27Form, DAlembertForm, HamelForm)
 }
 
 
