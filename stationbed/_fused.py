@@ -119,10 +119,9 @@ def run_fused(loop, K: int) -> None:
     cp = np.asarray(ctrl.symbolic_params(), dtype=float)
     nx = loop.system.formulation.nx
     p, period, duration = loop.p, loop.period, loop.duration
-    u_ext = loop.u[0:3].copy()
-    from .simulate import _held_torque  # the scene's constant torque (no window inside the run)
+    from .simulate import _held_torque
 
-    u_ext[:] = _held_torque(loop.scene, 0.5 * duration)
+    u_ext = _held_torque(loop.scene, 0.5 * duration)  # constant: no torque window inside a fused run
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p

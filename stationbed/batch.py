@@ -48,12 +48,12 @@ from .rotation import quat_mult
 from .scene import QUAT_NORM_TOL, Scene, load_scene
 from .simulate import (
     _breakpoints,
-    _held_torque,
     _output_times,
     build_system,
     characteristic_scales,
     from_lvlh,
     initial_x,
+    segment_input,
 )
 
 __all__ = ["BatchResult", "disperse_initial", "simulate_batch"]
@@ -332,9 +332,7 @@ def simulate_batch(
     for a, b in zip(edges[:-1], edges[1:]):
         inner = t_out[(t_out > a) & (t_out < b)]
         ts = np.concatenate([[a], inner, [b]])
-        u[0:3] = _held_torque(scene, 0.5 * (a + b))
-        if model.has_steps:
-            u[-1] = 0.5 * (a + b)
+        segment_input(scene, model, a, b, u)
         whole = ts.size == t_out.size  # one segment over the whole grid: write rows in place
         xs = run.segment(ts, x, u, out=X if whole else None)  # (n, len(ts), nx)
         x = xs[:, -1].copy()

@@ -268,6 +268,15 @@ def _held_torque(scene: Scene, t_mid: float) -> np.ndarray:
     return u
 
 
+def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.ndarray) -> None:
+    """Set the held input of the smooth segment [a, b] in place: the external torque held over it
+    and, when the scene has array rate steps, the segment's time that decides their side."""
+    t_mid = 0.5 * (a + b)
+    u[0:3] = _held_torque(scene, t_mid)
+    if model.has_steps:
+        u[-1] = t_mid
+
+
 def trajectory_columns(scene: Scene) -> list[str]:
     """The CSV columns of a run of ``scene`` (DESIGN §6 core, then CMG, controller, sun)."""
     from .cmg import CmgModel
@@ -473,9 +482,7 @@ def simulate(
         for a, b in zip(edges[:-1], edges[1:]):
             inner = t_out[(t_out > a) & (t_out < b)]
             ts = np.concatenate([[a], inner, [b]])
-            u[0:3] = _held_torque(scene, 0.5 * (a + b))
-            if model.has_steps:
-                u[-1] = 0.5 * (a + b)
+            segment_input(scene, model, a, b, u)
             try:
                 xs = integ.integrate(ts, x, u)
             except IntegrationError as e:
@@ -586,6 +593,7 @@ class _ControlLoop:
         self.n_cmd = self.ng if self.ctrl.command == "gimbal_rates" else 3
         self.last_cmd = (0.0, 0.0, 0.0)
         self.meas_out = None  # where the fused tick writes y, when the controller reads it there
+        self.u_ext = None  # the fused tick's held-torque input, when the loop has a fused tick
         self.n_slow = 0  # periods integrated by the generic path
         self.ticks = 0
         self.n_rate_limited = 0
@@ -645,12 +653,10 @@ class _ControlLoop:
         inner = [b for b in self.bps if t0 < b < t1]
         edges = [t0] + inner + [t1]
         for a, b in zip(edges[:-1], edges[1:]):
-            self.u[0:3] = _held_torque(self.scene, 0.5 * (a + b))
-            if hasattr(self, "u_ext"):
+            segment_input(self.scene, self.model, a, b, self.u)
+            if self.u_ext is not None:
                 self.u_ext[:] = self.u[0:3]  # the fused tick's copy of the held torque
             u = self.u.copy()
-            if self.model.has_steps:
-                u[-1] = 0.5 * (a + b)
             if self.act is None:
                 u[0:3] += cmd
             # an array rate step at b: continue from the state just after it
@@ -838,19 +844,18 @@ class _ControlLoop:
             "ticks": self.ticks,
             "controller_updates": self.ctrl.n_updates,
         }
+        traj = rows.trajectory({}) if rows.rows else None
         if self.model.cmg is not None:
             out["rate_limited_ticks"] = int(self.n_rate_limited)
             out["momentum_saturated_ticks"] = int(self.n_momentum_saturated)
-            if rows.rows:
-                traj = rows.trajectory({})
+            if traj is not None:
                 h = np.linalg.norm(traj.cols("hx", "hy", "hz"), axis=1)
                 out["max_h_Nms"] = float(h.max())
                 if math.isfinite(self.capacity):
                     out["max_h_fraction"] = float(h.max() / self.capacity)
                 if "cmg_singularity" in traj.columns:
                     out["min_singularity"] = float(traj["cmg_singularity"].min())
-        if rows.rows:
-            traj = rows.trajectory({})
+        if traj is not None:
             err = traj["att_err_deg"]
             if np.isfinite(err).any():
                 out["final_att_err_deg"] = float(err[-1])
