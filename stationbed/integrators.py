@@ -342,130 +342,7 @@ class DOP853(Integrator):
 
 
 # ---------------------------------------------------------------------------------------
-# Classical RK4, fixed step
-# ---------------------------------------------------------------------------------------
-
-
-class RK4(Integrator):
-    """Classical 4th-order Runge-Kutta with a fixed step (``simulation.step``, default 1 s).
-
-    Each requested interval is split into ``ceil(dt / step)`` equal steps, so output and
-    discontinuity times are hit exactly; the steps of one interval run in one compiled call.
-    """
-
-    name = "rk4"
-    order = 4
-    adaptive = False
-    DEFAULT_STEP_S = 1.0
-    MAX_STEPS_PER_CALL = 64
-
-    @classmethod
-    def build(cls, rhs, nx, nu, npar):
-        t = ca.SX.sym("t")
-        x = ca.SX.sym("x", nx)
-        h = ca.SX.sym("h")
-        u = ca.SX.sym("u", nu)
-        p = ca.SX.sym("p", npar)
-        k1 = rhs(t, x, u, p)
-        k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
-        k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
-        k4 = rhs(t + h, x + h * k3, u, p)
-        x_new = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        one = sx_function("rk4_one", [ca.vertcat(t, x), ca.vertcat(h, u, p)], [ca.vertcat(t + h, x_new)])
-        # n steps in one call: mapaccum over the (t, x) carry; n_active masks the unused tail
-        n = cls.MAX_STEPS_PER_CALL
-        multi = one.mapaccum("rk4_multi_acc", n)
-        # MX outer function: the generated C is a loop over one compiled step, not n copies
-        tx0 = ca.MX.sym("tx0", 1 + nx)
-        hup = ca.MX.sym("hup", 1 + nu + npar)
-        n_act = ca.MX.sym("n_act")
-        hs = ca.if_else(ca.DM(list(range(n))).T < n_act, hup[0], 0.0)
-        rest = ca.repmat(hup[1:], 1, n)
-        traj = multi(tx0, ca.vertcat(hs, rest))
-        return [one, ca.Function("rk4_multi", [tx0, hup, n_act], [traj[:, -1]])]
-
-    def __init__(self, funcs, p, nx, **kw):
-        super().__init__(funcs, p, nx, **kw)
-        self.h_nominal = float(self.step) if self.step else self.DEFAULT_STEP_S
-        self._multi = FastCall.of(funcs["rk4_multi"])
-        self._one = FastCall.of(funcs["rk4_one"])
-        for fc in (self._multi, self._one):
-            hup = fc.args[1]
-            hup[hup.size - self.p.size :] = self.p
-
-    #: up to this many steps per period run as single-step calls (the multi-step call always
-    #: evaluates all MAX_STEPS_PER_CALL steps, masked, so it pays only for long intervals)
-    ONE_STEP_CALLS = 8
-
-    def advance(self, t0, t1, x0, u):
-        """One period in (usually) one compiled call: the closed loop's hot path."""
-        n = max(1, math.ceil((t1 - t0) / self.h_nominal - 1e-9))
-        if n > self.ONE_STEP_CALLS:
-            return super().advance(t0, t1, x0, u)
-        m = self._one
-        tx, hup = m.args
-        h = (t1 - t0) / n
-        hup[0] = h
-        hup[1 : 1 + u.size] = u
-        tx[0] = t0
-        tx[1:] = x0
-        res = m.res[0]
-        for i in range(n):
-            m()
-            tx[:] = res
-        tx[0] = t1
-        self.n_rhs += 4 * n
-        self.n_steps += n
-        x = res[1:]
-        if not math.isfinite(x.sum()):
-            raise IntegrationError(t1, "state is not finite (NaN or inf)")
-        return x.copy()
-
-    def _integrate(self, ts, x0, u):
-        out = np.empty((ts.size, self.nx))
-        out[0] = x0
-        m = self._multi
-        tx, hup, n_act = m.args
-        hup[1 : 1 + u.size] = u
-        hup[1 + u.size :] = self.p
-        x = x0.copy()
-        for i in range(1, ts.size):
-            dt = ts[i] - ts[i - 1]
-            n = max(1, math.ceil(dt / self.h_nominal - 1e-9))
-            h = dt / n
-            hup[0] = h
-            t = ts[i - 1]
-            while n >= self.MAX_STEPS_PER_CALL:  # whole blocks: one call each
-                k = self.MAX_STEPS_PER_CALL
-                tx[0] = t
-                tx[1:] = x
-                n_act[0] = k
-                m()
-                x = m.res[0][1:].copy()
-                t += k * h
-                n -= k
-                self.n_rhs += 4 * k
-                self.n_steps += k
-            if n:  # the rest one step per call (the block call would run all 64, masked)
-                one = self._one
-                o_tx, o_hup = one.args
-                o_hup[:] = hup
-                o_tx[0] = t
-                o_tx[1:] = x
-                for _ in range(n):
-                    one()
-                    o_tx[:] = one.res[0]
-                x = o_tx[1:].copy()
-                self.n_rhs += 4 * n
-                self.n_steps += n
-            if not np.all(np.isfinite(x)):
-                raise IntegrationError(ts[i], "state is not finite (NaN or inf)", out[:i])
-            out[i] = x
-        return out
-
-
-# ---------------------------------------------------------------------------------------
-# Fixed-step methods with an inner iteration: a shared driver
+# Fixed-step methods: a shared driver (rk4, and those with an inner iteration)
 # ---------------------------------------------------------------------------------------
 
 
@@ -488,7 +365,7 @@ def _body_rate(q, q_dot):
 
 
 class FixedStep(Integrator):
-    """Driver for the fixed-step methods below (``lie_rk4``, ``lgvi``, ``radau``).
+    """Driver for the fixed-step methods below (``rk4``, ``lie_rk4``, ``lgvi``, ``radau``).
 
     A subclass writes ``_step(rhs, t, x, h, u, p, tol) -> (x_new, defect)`` in casadi SX, one
     step of size ``h`` (``tol`` = ``[rtol, atol per component]``). ``defect`` is its inner
@@ -619,6 +496,26 @@ class FixedStep(Integrator):
                 self.n_steps += n
             out[i] = x
         return out
+
+
+class RK4(FixedStep):
+    """Classical 4th-order Runge-Kutta with a fixed step (``simulation.step``, default 1 s).
+
+    Each requested interval is split into ``ceil(dt / step)`` equal steps, so output and
+    discontinuity times are hit exactly (the :class:`FixedStep` driver). Explicit: no defect.
+    """
+
+    name = "rk4"
+    order = 4
+    RHS_PER_STEP = 4
+
+    @classmethod
+    def _step(cls, rhs, t, x, h, u, p, tol):
+        k1 = rhs(t, x, u, p)
+        k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
+        k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
+        k4 = rhs(t + h, x + h * k3, u, p)
+        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 0.0
 
 
 class LieRK4(FixedStep):
