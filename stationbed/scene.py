@@ -137,14 +137,98 @@ class Body(_Strict):
             raise ValueError(str(e).removeprefix("inertia: ")) from None
 
 
+AxisName = Literal["x", "y", "z", "+x", "+y", "+z", "-x", "-y", "-z"]
+
+
+class Beam(_Strict):
+    """A uniform Euler–Bernoulli cantilever standing for the array in one mode (P axes).
+
+    It runs from ``root`` (m, relative to the array's mass centre) a ``length`` along ``span``
+    and bends along ``deflection``; ``n`` is the mode number (1..6); ``mass`` defaults to the
+    array's. The shape is normalised to 1 at the tip, so the mode's coordinate is the tip
+    deflection [m]."""
+
+    length: float = Field(gt=0.0)
+    span: AxisName
+    deflection: AxisName
+    root: Vec3 = [0.0, 0.0, 0.0]
+    n: int = Field(default=1, ge=1, le=6)
+    mass: float | None = Field(default=None, gt=0.0)
+
+    @model_validator(mode="after")
+    def _axes(self):
+        if self.span.lstrip("+-") == self.deflection.lstrip("+-"):
+            raise ValueError(f"span ({self.span}) and deflection ({self.deflection}) must be different axes")
+        return self
+
+
+class Mode(_Strict):
+    """One elastic mode of an array (Quinn Eq. 22–24): its clamped frequency, damping ratio and
+    shape, given either by a ``beam`` or by the participation integrals directly:
+    ``translation`` = ∫Φ dm [kg], ``rotation`` = ∫ a × Φ dm about the array's mass centre
+    [kg m] (P axes), ``modal_mass`` = ∫ΦᵀΦ dm [kg]."""
+
+    frequency_hz: float = Field(gt=0.0)
+    damping: float = Field(default=0.0, ge=0.0, lt=1.0)
+    beam: Beam | None = None
+    translation: Vec3 | None = None
+    rotation: Vec3 | None = None
+    modal_mass: float | None = Field(default=None, gt=0.0)
+    eta0: float = 0.0  # initial modal coordinate
+    eta_rate0: float = 0.0  # initial modal rate [1/s x coordinate]
+
+    @model_validator(mode="after")
+    def _one_shape(self):
+        direct = self.translation is not None or self.rotation is not None or self.modal_mass is not None
+        if (self.beam is None) == (not direct):
+            raise ValueError("give a mode either 'beam' or 'translation'/'rotation' (with 'modal_mass')")
+        if direct and self.modal_mass is None:
+            raise ValueError("a mode given by 'translation'/'rotation' needs 'modal_mass' [kg]")
+        return self
+
+    def integrals(self, array_mass: float):
+        """``(Φ̄, Ĥ, M)`` in P axes (Quinn Eq. 24a, 24b, 24e)."""
+        from .flex import beam_mode
+
+        if self.beam is not None:
+            b = self.beam
+            return beam_mode(b.n, b.length, b.mass or array_mass, b.root, b.span, b.deflection)
+        zero = [0.0, 0.0, 0.0]
+        return np.array(self.translation or zero), np.array(self.rotation or zero), float(self.modal_mass)
+
+    @property
+    def omega(self) -> float:
+        """Clamped circular frequency [rad/s]."""
+        return 2.0 * math.pi * self.frequency_hz
+
+
+#: the modes may take all of an array's mass or inertia in some direction, not more (see
+#: :func:`stationbed.flex.check_participation`; rounding of typed numbers allowed)
+PARTICIPATION_TOL = 1e-9
+
+
 class Appendage(Body):
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
     alpha: Joint = Profile()
     beta: Joint = Profile()
+    mode: list[Mode] = []
 
     @property
     def tracks_sun(self) -> bool:
         return self.alpha.tracked or self.beta.tracked
+
+    @model_validator(mode="after")
+    def _participation(self):
+        if self.mode:
+            from .flex import check_participation
+
+            left = check_participation(self.mass, np.array(self.inertia), [m.integrals(self.mass) for m in self.mode])
+            if left < -PARTICIPATION_TOL:
+                raise ValueError(
+                    f"modes of '{self.name}' take more than its mass or inertia (effective-mass residual "
+                    f"{left:.3g} < 0): lower translation/rotation, raise modal_mass, or check the beam's mass and root"
+                )
+        return self
 
 
 class Orbit(_Strict):

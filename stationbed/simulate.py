@@ -120,7 +120,7 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     p = ca.SX.sym("p", npar)
     q = ca.SX.sym("q", 4)
     w = ca.SX.sym("w", 3)
-    xe = ca.SX.sym("xe", len(model.extra_names))
+    xe = ca.SX.sym("xe", model.n_extra + 2 * model.n_modes)
     rhs = sx_function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)])
     arrays = form.arrays(t, x, p)
     outs = [form.omega(t, x, p), form.H_O_N(t, x, p), form.kinetic_energy(t, x, p)]
@@ -134,6 +134,8 @@ def build_system(structure: Structure, formulation, integrator) -> System:
             outs.append(singularity_measure(cmg.A_hat(x[7 : 7 + cmg.nx], pc)))
     if structure.sun:
         outs += _track_errors(model, t, x, p)
+    if model.n_modes:
+        outs += [model.eta(x[7:]), form.modal_rates(t, x, p), form.strain_energy(t, x, p)]
     out = sx_function("out", [t, x, p], [ca.vertcat(*outs)])
     init = sx_function("init", [t, q, w, xe, p], [form.state(t, q, w, xe, p)])
     fs = [rhs, out, out.map("out_map", "serial", OUT_CHUNK, [2], []), init]
@@ -294,6 +296,9 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
+    modes = [(a.name, k + 1) for a in scene.appendage for k in range(len(a.mode))]
+    if modes:
+        cols += [f"eta_{n}_{k}" for n, k in modes] + [f"etadot_{n}_{k}" for n, k in modes] + ["U_strain"]
     return cols
 
 
@@ -322,6 +327,8 @@ class _Rows:
         self.k_track = self.k_m + (1 if self.gimbaled else 0) if cmg is not None else 7 + 2 * n_app
         self.has_sun = scene.sun is not None
         self.has_ctrl = scene.controller is not None
+        # modal outputs (eta, etadot, U_strain) close the compiled row
+        self.n_flex = 2 * self.form.model.n_modes + 1 if self.form.model.n_modes else 0
 
     def make(self, ts, xs, held=None) -> np.ndarray:
         """Rows for times ``ts`` and states ``xs``; ``held`` (k, m) are the loop's values per row:
@@ -352,7 +359,9 @@ class _Rows:
             parts.append(held[:, j : j + 4])
             j += 4
         if self.has_sun:
-            parts.append(np.rad2deg(comp[:, self.k_track :]))
+            parts.append(np.rad2deg(comp[:, self.k_track : self.n_out - self.n_flex]))
+        if self.n_flex:
+            parts.append(comp[:, self.n_out - self.n_flex :])
         return np.hstack(parts)
 
     def emit(self, rows: np.ndarray) -> None:

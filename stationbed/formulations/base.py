@@ -62,6 +62,8 @@ class Structure:
     joints: tuple = ()
     sun: bool = False
     cmg: tuple | None = None
+    #: elastic modes per appendage (all 0: a rigid scene, whose equations and key do not change)
+    modes: tuple = ()
 
     @classmethod
     def of(cls, scene) -> "Structure":
@@ -79,16 +81,21 @@ class Structure:
             joints=tuple((joint(a.alpha), joint(a.beta)) for a in scene.appendage),
             sun=scene.sun is not None,
             cmg=None if c is None else (c.kind, c.n_units, c.steering if c.kind != "ideal" else "none"),
+            modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
         )
 
     @property
     def key(self) -> str:
         j = "".join(f"{k}{n}" for a in self.joints for k, n in a)
         c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}"
+        f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
         return (
             f"a{self.n_app}o{int(self.orbit)}g{int(self.gravity_gradient)}h{int(self.harmonic)}"
-            f"j{j}s{int(self.sun)}{c}"
+            f"j{j}s{int(self.sun)}{c}{f}"
         )
+
+    def n_modes(self, k: int) -> int:
+        return self.modes[k] if self.modes else 0
 
 
 JOINTS = ("alpha", "beta")
@@ -112,6 +119,9 @@ class ParamLayout:
             for j, (kind, n_steps) in zip(JOINTS, structure.joints[k]):
                 # profile: (a0, rate, amp, freq, phase, t1, d1, ...); drive: (max_rate, max_acc, gain, tau)
                 add(f"{j}{k}", 5 + 2 * n_steps if kind == "p" else 4)
+            if structure.n_modes(k):
+                add(f"rho{k}", 3)  # array mass centre from O, B axes [m]
+                add(f"modes{k}", 9 * structure.n_modes(k))  # per mode: Φ̄ (3), Ĥ (3), M, K, C (P axes)
         if structure.orbit:
             add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
         if structure.harmonic:
@@ -154,6 +164,17 @@ class StationModel:
                     kinds += ["attitude", "rate"]
         self.extra_names = tuple(names)
         self.extra_kinds = tuple(kinds)
+        self.n_extra = len(names)
+        #: flexible arrays: (appendage index, slice of the modal coordinates); the modal states
+        #: (η, then the formulation's second modal state) follow the extra states
+        self.flexible = []
+        n = 0
+        for k in range(structure.n_app):
+            if structure.n_modes(k):
+                self.flexible.append((k, slice(n, n + structure.n_modes(k))))
+                n += structure.n_modes(k)
+        self.n_modes = n
+        self.eta_names = tuple(f"eta{k}_{j + 1}" for k, sl in self.flexible for j in range(sl.stop - sl.start))
         self.nu_cmg = 0 if self.cmg is None else self.cmg.nu
         #: profiles with rate steps: u ends with the segment's mid time, which decides the side of
         #: a step for every stage (a step on a segment edge is then exact for any integrator)
@@ -198,13 +219,27 @@ class StationModel:
             p[L["sun"]] = sun_direction_N(scene.sun, incl)
         if self.cmg is not None:
             p[L["cmg"]] = self.cmg.params(scene.cmg)
+        for k, _ in self.flexible:
+            a = scene.appendage[k]
+            p[L[f"rho{k}"]] = np.array(a.cm) - r_O
+            vals = []
+            for mode in a.mode:
+                phi_bar, H_hat, M = mode.integrals(a.mass)
+                w = mode.omega
+                vals += list(phi_bar) + list(H_hat) + [M, w * w * M, 2.0 * mode.damping * w * M]
+            p[L[f"modes{k}"]] = vals
         return p
 
     def initial_extra(self, scene, q_BN, p) -> np.ndarray:
-        """Extra states at t = 0 (CMG state; driven joints start on target unless ``a0`` is given)."""
+        """Extra states at t = 0 (CMG state; driven joints start on target unless ``a0`` is given),
+        then the modal coordinates and rates ``η, η̇`` (the formulation converts η̇ to its state)."""
         from ..appendages import sun_targets
 
-        xe = np.zeros(len(self.extra_names))
+        xe = np.zeros(self.n_extra + 2 * self.n_modes)
+        for k, sl in self.flexible:
+            modes = scene.appendage[k].mode
+            xe[self.n_extra + sl.start : self.n_extra + sl.stop] = [m.eta0 for m in modes]
+            xe[self.n_extra + self.n_modes + sl.start : self.n_extra + self.n_modes + sl.stop] = [m.eta_rate0 for m in modes]
         if self.cmg is not None:
             xe[: self.cmg.nx] = self.cmg.initial_state(scene.cmg)
         if self.driven:
@@ -294,6 +329,42 @@ class StationModel:
             out.append((I_p, ca.mtimes(C_BP, w_P), wd_p, ang, C_PB, J, w_P))
         return out
 
+    # -- flexible arrays ----------------------------------------------------------------
+    def eta(self, xe):
+        """The modal coordinates ``η`` from the extra states ``xe`` (= x[7:])."""
+        return xe[self.n_extra : self.n_extra + self.n_modes]
+
+    def modal_state(self, xe):
+        """The formulation's second modal state (``η̇``, or ``p_η`` in the momentum form)."""
+        return xe[self.n_extra + self.n_modes : self.n_extra + 2 * self.n_modes]
+
+    def modal(self, arrays, p):
+        """Per flexible array its :class:`~stationbed.flex.ModalArray` (empty for a rigid scene)."""
+        from ..flex import ModalArray
+
+        L = self.layout
+        return [ModalArray(k, sl, arrays[k][4], arrays[k][1], p[L[f"rho{k}"]], p[L[f"modes{k}"]]) for k, sl in self.flexible]
+
+    def velocities(self, H, p_eta, arrays, modal, I, xe, p):
+        """``(ω, η̇)`` from the total momentum ``H`` about O and the modal momenta ``p_η``.
+
+        Solves ``[I Δ; Δᵀ M] [ω; η̇] = [H - Σ I_p ω_p - h; p_η - Dᵀ ω_p]`` by the Schur
+        complement on the (diagonal) modal masses: ``(I - Σ Δ M⁻¹ Δᵀ) ω = ...``.
+        """
+        rest = H - self.h(xe, p)
+        for I_p, w_p, *_ in arrays:
+            rest = rest - ca.mtimes(I_p, w_p)
+        A = I
+        bs = []
+        for f in modal:
+            b = (p_eta[f.sl] - ca.mtimes(f.D.T, f.w_p)) / f.M
+            rest = rest - ca.mtimes(f.Delta, b)
+            A = A - ca.mtimes(f.Delta, ca.mtimes(ca.diag(1.0 / f.M), f.Delta.T))
+            bs.append(b)
+        w = ca.mtimes(inv3(A), rest)
+        eta_dot = [b - ca.mtimes(f.Delta.T, w) / f.M for f, b in zip(modal, bs)]
+        return w, (ca.vertcat(*eta_dot) if eta_dot else ca.SX(0, 1))
+
     def inertia(self, t, p, arrays):
         """Total inertia about O, B axes, at time t [kg m²]."""
         I = self._mat(p, "I0")
@@ -370,12 +441,17 @@ class Formulation:
     1. Set ``name`` (the registry/scene name), ``core_names`` (seven states: ``qw, qx, qy, qz``,
        the Euler parameters of B relative to N, then one 3-vector) and ``core_kinds``. The
        model's extra states (CMG, driven array joints) follow; the base class integrates them.
+       A scene with flexible arrays adds the modal coordinates ``η`` and a second modal state
+       (``η̇``; a form may choose another, e.g. the modal momenta, see ``modal_state_prefix``).
     2. Write ``_rhs(t, x, u, p)`` returning ``(d/dt of the seven core states, omega_BN_B)`` as
        casadi columns, using ``self.model`` for inertia, arrays (:meth:`arrays`), CMG momentum
        ``h`` / ``ḣ`` and external torque. ``u`` is held constant by the caller over each
-       integration segment: ``u[0:3]`` a body torque [N m], then the CMG input.
+       integration segment: ``u[0:3]`` a body torque [N m], then the CMG input. A form that
+       models elastic modes returns a third item, the derivative of the modal states.
     3. Write ``_omega(t, x, p)`` (omega_BN_B from the state) and ``_core(t, q, omega, xe, p)``
-       (the 3-vector core state that has rate ``omega`` at time t with extra states ``xe``).
+       (the 3-vector core state that has rate ``omega`` at time t with extra states ``xe``,
+       whose modal part is ``η, η̇``). A form whose second modal state is not ``η̇`` also writes
+       ``modal_rates`` and ``_modal_state``.
     4. Do not report energy or momentum yourself: :meth:`H_O_B` and :meth:`kinetic_energy`
        derive them from ``_omega`` so conservation tests are generic over formulations.
     """
@@ -389,11 +465,14 @@ class Formulation:
     #: whether omega_BN_B is a state (then an impulsive array-rate step needs a jump, see
     #: :meth:`jump`); the momentum form recovers omega algebraically and needs none
     omega_is_state: ClassVar[bool] = False
+    #: state-name prefix of the second modal state (``etadot``: η̇)
+    modal_state_prefix: ClassVar[str] = "etadot"
 
     def __init__(self, model: StationModel):
         self.model = model
-        self.state_names = tuple(self.core_names) + model.extra_names
-        self.state_kinds = tuple(self.core_kinds) + model.extra_kinds
+        second = tuple(n.replace("eta", self.modal_state_prefix, 1) for n in model.eta_names)
+        self.state_names = tuple(self.core_names) + model.extra_names + model.eta_names + second
+        self.state_kinds = tuple(self.core_kinds) + model.extra_kinds + ("attitude",) * (2 * model.n_modes)
 
     @property
     def nx(self) -> int:
@@ -403,34 +482,68 @@ class Formulation:
     def arrays(self, t, x, p, w=None, u=None):
         return self.model.arrays(t, x[0:4], x[7:], p, w, u)
 
+    def modal_rates(self, t, x, p):
+        """``η̇`` from the state (here: the second modal state itself)."""
+        return self.model.modal_state(x[7:])
+
+    def physical_extra(self, t, x, p):
+        """``x[7:]`` with its second modal state replaced by ``η̇`` (what :meth:`state` takes)."""
+        m = self.model
+        xe = x[7:]
+        if not m.n_modes:
+            return xe
+        return ca.vertcat(xe[0 : m.n_extra + m.n_modes], self.modal_rates(t, x, p))
+
+    @staticmethod
+    def modal_momenta(modal, w, eta_dot):
+        """``p_η`` of every flexible array, stacked."""
+        return ca.vertcat(*[f.momentum(w, eta_dot[f.sl]) for f in modal])
+
     # -- public, checked -----------------------------------------------------------------
     def rhs(self, t, x, u, p):
-        core_dot, w = self._rhs(t, x, u, p)
+        out = self._rhs(t, x, u, p)
+        core_dot, w = out[0], out[1]
         if core_dot.shape != (7, 1):
             raise ValueError(f"{self.name}: _rhs returned shape {core_dot.shape}, expected (7, 1)")
-        return ca.vertcat(core_dot, self.model.extra_dot(t, x[0:4], x[7:], u, w, p))
+        parts = [core_dot, self.model.extra_dot(t, x[0:4], x[7:], u, w, p)]
+        if self.model.n_modes:
+            if len(out) < 3:
+                raise ValueError(f"formulation {self.name!r} does not model flexible arrays (elastic modes)")
+            parts.append(out[2])
+        return ca.vertcat(*parts)
 
     def omega(self, t, x, p):
         return self._omega(t, x, p)
 
     def state(self, t, q, omega, xe, p):
-        """The state with attitude ``q``, rate ``omega`` and extra states ``xe`` at time ``t``."""
-        return ca.vertcat(q, self._core(t, q, omega, xe, p), xe)
+        """The state with attitude ``q``, rate ``omega`` and extra states ``xe`` at time ``t``
+        (``xe``: the model's extra states, then ``η`` and ``η̇`` of flexible arrays)."""
+        m = self.model
+        parts = [q, self._core(t, q, omega, xe, p), xe[0 : m.n_extra]]
+        if m.n_modes:
+            parts += [m.eta(xe), self._modal_state(t, q, omega, xe, p)]
+        return ca.vertcat(*parts)
+
+    def _modal_state(self, t, q, omega, xe, p):
+        return self.model.modal_state(xe)
 
     def jump(self, t_minus, t_plus, x, p):
         """State just after an impulsive change of the array rates at ``t``: H is continuous.
 
-        The total momentum is taken with the arrays at ``t_minus`` and the rate recovered with
-        them at ``t_plus``. For the momentum form this is the identity (H is the state).
+        The total momentum (and the modal momenta ``p_η``, whose rate ``-Kη - Cη̇`` is bounded)
+        are taken with the arrays at ``t_minus`` and the rates recovered with the arrays at
+        ``t_plus``. For the momentum form this is the identity (H and p_η are its states).
         """
+        m = self.model
         q, xe = x[0:4], x[7:]
-        H = self.H_O_B(t_minus, x, p)
-        arrays = self.model.arrays(t_plus, q, xe, p)
-        rest = H - self.model.h(xe, p)
-        for I_p, w_p, *_ in arrays:
-            rest = rest - ca.mtimes(I_p, w_p)
-        w_plus = ca.mtimes(inv3(self.model.inertia(t_plus, p, arrays)), rest)
-        return self.state(t_plus, q, w_plus, xe, p)
+        xp = self.physical_extra(t_minus, x, p)
+        w = self._omega(t_minus, x, p)
+        H = self.momentum_of(t_minus, q, w, xp, p)
+        p_eta = self.modal_momenta(m.modal(m.arrays(t_minus, q, xe, p), p), w, m.modal_state(xp))
+        arrays = m.arrays(t_plus, q, xe, p)
+        w_plus, eta_dot = m.velocities(H, p_eta, arrays, m.modal(arrays, p), m.inertia(t_plus, p, arrays), xe, p)
+        xe_plus = ca.vertcat(xe[0 : m.n_extra + m.n_modes], eta_dot) if m.n_modes else xe
+        return self.state(t_plus, q, w_plus, xe_plus, p)
 
     def atol_vector(self, atol: float, rate_scale: float, momentum_scale: float) -> np.ndarray:
         """Absolute tolerance per state component.
@@ -445,29 +558,48 @@ class Formulation:
         return np.array([atol * unit[k] for k in self.state_kinds])
 
     def momentum_of(self, t, q, omega, xe, p):
-        """Total angular momentum about O, B components, at rate ``omega``: ``I ω + Σ I_p ω_p + h``."""
-        arrays = self.model.arrays(t, q, xe, p)
-        H = ca.mtimes(self.model.inertia(t, p, arrays), omega) + self.model.h(xe, p)
+        """Total angular momentum about O, B components, at rate ``omega``:
+        ``I ω + Σ I_p ω_p + h + Σ Δ η̇`` (``xe`` with ``η̇``, as for :meth:`state`)."""
+        m = self.model
+        arrays = m.arrays(t, q, xe, p)
+        H = ca.mtimes(m.inertia(t, p, arrays), omega) + m.h(xe, p)
         for I_p, w_p, *_ in arrays:
             H = H + ca.mtimes(I_p, w_p)
+        eta_dot = m.modal_state(xe)
+        for f in m.modal(arrays, p):
+            H = H + ca.mtimes(f.Delta, eta_dot[f.sl])
         return H
 
     def H_O_B(self, t, x, p):
         """Total angular momentum about O (CMG momentum included), B components [N m s]."""
-        return self.momentum_of(t, x[0:4], self._omega(t, x, p), x[7:], p)
+        return self.momentum_of(t, x[0:4], self._omega(t, x, p), self.physical_extra(t, x, p), p)
 
     def H_O_N(self, t, x, p):
         return ca.mtimes(dcm(x[0:4]).T, self.H_O_B(t, x, p))
 
     def kinetic_energy(self, t, x, p):
-        """Rotational kinetic energy about O of the structure (body and arrays; CMG rotors
-        excluded): ``½ωᵀIω + Σ ωᵀI_pω_p + ½ Σ ω_pᵀI_pω_p`` [J]."""
+        """Kinetic energy about O of the structure (body, arrays and their elastic motion; CMG
+        rotors excluded): ``½ωᵀIω + Σ ωᵀI_pω_p + ½ Σ ω_pᵀI_pω_p + Σ T_e`` [J]."""
+        m = self.model
         arrays = self.arrays(t, x, p)
         w = self._omega(t, x, p)
-        T = 0.5 * ca.dot(w, ca.mtimes(self.model.inertia(t, p, arrays), w))
+        T = 0.5 * ca.dot(w, ca.mtimes(m.inertia(t, p, arrays), w))
         for I_p, w_p, *_ in arrays:
             T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
+        if m.n_modes:
+            eta_dot = self.modal_rates(t, x, p)
+            for f in m.modal(arrays, p):
+                T = T + f.kinetic(w, eta_dot[f.sl])
         return T
+
+    def strain_energy(self, t, x, p):
+        """Elastic strain energy of the arrays ``½ ηᵀ K η`` [J] (0 for a rigid scene)."""
+        m = self.model
+        eta = m.eta(x[7:])
+        U = ca.SX(0)
+        for f in m.modal(self.arrays(t, x, p), p):
+            U = U + f.strain(eta[f.sl])
+        return U
 
     # -- plug-in -------------------------------------------------------------------------
     def _rhs(self, t, x, u, p):  # pragma: no cover - abstract
@@ -486,6 +618,11 @@ class OmegaStateForm(Formulation):
     Both read ``I ω̇ = L - ω × (I ω + h) - ḣ - Σ_p a_p``; a subclass writes only the array term
     ``a_p = _array_term(ω, I_p, ω_p, ω̇_p)`` (everything an array adds to the left-hand side
     besides its share of ``I ω̇`` and ``ω × I ω``).
+
+    Flexible arrays (the same for both forms: the modal terms are not where they differ) add
+    ``Σ Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Σ Δ η̇`` in H), and
+    Lagrange's equation of the modes ``M η̈ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
+    two are solved together by the Schur complement on the diagonal modal masses.
     """
 
     core_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
@@ -508,7 +645,22 @@ class OmegaStateForm(Formulation):
         rhs = m.external_torque(t, x[0:4], u, p, I) - ca.cross(w, ca.mtimes(I, w) + h) - m.h_dot(xe, u, w, p)
         for I_p, w_p, wd_p, *_ in arrays:
             rhs = rhs - self._array_term(w, I_p, w_p, wd_p)
-        return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs)), w
+        if not m.n_modes:
+            return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs)), w
+        eta, eta_dot = m.eta(xe), m.modal_state(xe)
+        modal = m.modal(arrays, p)
+        A, r_eta = I, []
+        for f in modal:
+            ed = eta_dot[f.sl]
+            rhs = rhs - ca.mtimes(f.Delta_dot, ed) - ca.cross(w, ca.mtimes(f.Delta, ed))
+            wd_p = arrays[f.index][2]
+            r = f.momentum_rate(eta[f.sl], ed) - ca.mtimes(f.Delta_dot.T, w) - ca.mtimes(f.D.T, wd_p)
+            r_eta.append(r)
+            rhs = rhs - ca.mtimes(f.Delta, r / f.M)
+            A = A - ca.mtimes(f.Delta, ca.mtimes(ca.diag(1.0 / f.M), f.Delta.T))
+        w_dot = ca.mtimes(inv3(A), rhs)
+        eta_ddot = ca.vertcat(*[(r - ca.mtimes(f.Delta.T, w_dot)) / f.M for f, r in zip(modal, r_eta)])
+        return ca.vertcat(quat_kinematics(x[0:4], w), w_dot), w, ca.vertcat(eta_dot, eta_ddot)
 
     def _array_term(self, w, I_p, w_p, wd_p):  # pragma: no cover - abstract
         raise NotImplementedError

@@ -76,68 +76,116 @@ class HamelForm(Formulation):
 
     # -- the user-facing energies ---------------------------------------------------------
     def kinetic(self, t, q, C, w, xe, p, u=None):
-        """``T(ω, C, t, xe)`` [J] (array kinematics without ω do not depend on q or C)."""
+        """``T(ω, C, t, xe, η̇)`` [J] (array kinematics without ω do not depend on q or C);
+        ``xe`` holds the model's extra states, then ``η`` and ``η̇``."""
         m = self.model
         arrays = m.arrays(t, q, xe, p, u=u)
         I = m.inertia(t, p, arrays)
         T = 0.5 * ca.dot(w, ca.mtimes(I, w)) + ca.dot(w, m.h(xe, p))
         for I_p, w_p, *_ in arrays:
             T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
+        eta_dot = m.modal_state(xe)
+        for f in m.modal(arrays, p):  # elastic: ½ η̇ᵀMη̇ + η̇ᵀ(Δᵀω + Dᵀω_p)
+            T = T + f.kinetic(w, eta_dot[f.sl])
         return T
 
     def potential(self, t, q, C, xe, p, u=None):
-        """Gravity-gradient potential ``(3/2) n² R̂_Bᵀ I R̂_B``, ``R̂_B = C R̂_N`` [J] (0 off orbit)."""
+        """Gravity-gradient potential ``(3/2) n² R̂_Bᵀ I R̂_B``, ``R̂_B = C R̂_N`` (0 off orbit),
+        plus the arrays' strain energy ``½ ηᵀ K η`` [J]."""
         m = self.model
-        if not m.structure.gravity_gradient:
-            return ca.SX(0)
-        radius, incl, u0, n, ci, si = (p[m.layout["orbit"]][i] for i in range(6))
-        arg = u0 + n * t
-        R_hat_N = ca.vertcat(ca.cos(arg), ca.sin(arg) * ci, ca.sin(arg) * si)
-        R_hat_B = ca.mtimes(C, R_hat_N)
-        I = m.inertia(t, p, m.arrays(t, q, xe, p, u=u))
-        return 1.5 * n * n * ca.dot(R_hat_B, ca.mtimes(I, R_hat_B))
+        arrays = m.arrays(t, q, xe, p, u=u)
+        V = ca.SX(0)
+        if m.structure.gravity_gradient:
+            radius, incl, u0, n, ci, si = (p[m.layout["orbit"]][i] for i in range(6))
+            arg = u0 + n * t
+            R_hat_N = ca.vertcat(ca.cos(arg), ca.sin(arg) * ci, ca.sin(arg) * si)
+            R_hat_B = ca.mtimes(C, R_hat_N)
+            I = m.inertia(t, p, arrays)
+            V = 1.5 * n * n * ca.dot(R_hat_B, ca.mtimes(I, R_hat_B))
+        eta = m.eta(xe)
+        for f in m.modal(arrays, p):
+            V = V + f.strain(eta[f.sl])
+        return V
+
+    def dissipation(self, t, q, xe, p, u=None):
+        """Rayleigh's dissipation function ``½ η̇ᵀ C η̇`` of the modal damping [W/2]."""
+        m = self.model
+        eta_dot = m.modal_state(xe)
+        R = ca.SX(0)
+        for f in m.modal(m.arrays(t, q, xe, p, u=u), p):
+            R = R + 0.5 * ca.dot(eta_dot[f.sl], f.C * eta_dot[f.sl])
+        return R
 
     # -- equations by AD ----------------------------------------------------------------
     def _build_terms(self) -> ca.Function:
-        """The partials of T and V as one SX Function (inlined into the RHS when called)."""
+        """The partials of T, V (and R) as one SX Function (inlined into the RHS when called).
+
+        Velocities ``v = [ω; η̇]``, momenta ``P = ∂T/∂v``; coordinates: the attitude (through
+        θ), the extra states ``xe`` (CMG, driven joints: their rates come from the model) and
+        ``η``."""
         m = self.model
+        N = m.n_modes
         w = ca.SX.sym("w", 3)
         t = ca.SX.sym("t")
         q = ca.SX.sym("q", 4)
         Cs = ca.SX.sym("C", 3, 3)
-        xe = ca.SX.sym("xe", len(m.extra_names))
+        xm = ca.SX.sym("xe", m.n_extra)
+        eta = ca.SX.sym("eta", N)
+        eta_dot = ca.SX.sym("eta_dot", N)
         p = ca.SX.sym("p", m.layout.size)
         u = ca.SX.sym("u", m.nu)
         theta = ca.SX.sym("theta", 3)
+        xe = ca.vertcat(xm, eta, eta_dot)
         C = perturbed(Cs, theta)
         T = self.kinetic(t, q, C, w, xe, p, u)
         V = self.potential(t, q, C, xe, p, u)
-        mom = ca.gradient(T, w)  # p = ∂T/∂ω
+        v = ca.vertcat(w, eta_dot)
+        mom = ca.gradient(T, v)  # P = ∂T/∂v
         outs = [
             mom,
-            ca.jacobian(mom, w),  # ∂²T/∂ω²: the inertia about O
+            ca.jacobian(mom, v),  # ∂²T/∂v²: the inertia about O, couplings Δ, modal masses
             ca.jacobian(mom, t),
-            ca.jacobian(mom, xe),
+            ca.jacobian(mom, xm),
             ca.jacobian(mom, theta),
+            ca.jacobian(mom, eta),
             orientation_gradient(T, Cs, theta),
             orientation_gradient(V, Cs, theta),
+            ca.gradient(T - V, eta),  # ∂T/∂η - ∂V/∂η
+            ca.gradient(self.dissipation(t, q, xe, p, u), eta_dot),
         ]
-        f = ca.Function("hamel_terms", [w, t, q, Cs, xe, p, u, theta], outs)
+        f = ca.Function("hamel_terms", [w, t, q, Cs, xm, eta, eta_dot, p, u, theta], outs)
         return f
 
     def terms(self, t, q, w, xe, p, u):
-        """``(p, ∂p/∂ω, ∂p/∂t, ∂p/∂xe, ∂p/∂θ, ∂T/∂C, ∂V/∂C)`` at the state, θ = 0."""
-        u = np.zeros(self.model.nu) if u is None else u
-        return self._terms(w, t, q, dcm(q), xe, p, u, np.zeros(3))
+        """``(P, ∂P/∂v, ∂P/∂t, ∂P/∂xe, ∂P/∂θ, ∂P/∂η, ∂T/∂C, ∂V/∂C, ∂(T-V)/∂η, ∂R/∂η̇)`` at the
+        state, θ = 0 (``xe`` the extra states with ``η, η̇``)."""
+        m = self.model
+        u = np.zeros(m.nu) if u is None else u
+        return self._terms(w, t, q, dcm(q), xe[0 : m.n_extra], m.eta(xe), m.modal_state(xe), p, u, np.zeros(3))
 
     def _rhs(self, t, x, u, p):
+        """``∂²T/∂v² v̇ = [M - ω × p_ω + ∂T/∂C - ∂V/∂C; ∂(T-V)/∂η - ∂R/∂η̇] - Ṗ|_v̇=0``, solved by the
+        Schur complement on the modal block (normal modes: ``∂²T/∂η̇²`` is diagonal)."""
         m = self.model
+        N = m.n_modes
         q, w, xe = x[0:4], x[4:7], x[7:]
-        mom, I, dp_dt, dp_dxe, dp_dth, gT, gV = self.terms(t, q, w, xe, p, u)
+        mom, Mvv, dp_dt, dp_dxe, dp_dth, dp_deta, gT, gV, dL_deta, dR = self.terms(t, q, w, xe, p, u)
         xe_dot = m.extra_dot(t, q, xe, u, w, p)
+        eta_dot = m.modal_state(xe)
+        I = Mvv[0:3, 0:3]
         M = self._torque_model.external_torque(t, q, u, p, I)
-        rhs = M - ca.cross(w, mom) + gT - gV - dp_dt - ca.mtimes(dp_dxe, xe_dot) - ca.mtimes(dp_dth, w)
-        return ca.vertcat(quat_kinematics(q, w), ca.mtimes(inv3(I), rhs)), w
+        # the rate of P with v̇ = 0: explicit time, extra states, attitude (δθ = ω dt), modes
+        Pdot0 = dp_dt + ca.mtimes(dp_dxe, xe_dot) + ca.mtimes(dp_dth, w) + ca.mtimes(dp_deta, eta_dot)
+        rhs = M - ca.cross(w, mom[0:3]) + gT - gV - Pdot0[0:3]
+        if not N:
+            return ca.vertcat(quat_kinematics(q, w), ca.mtimes(inv3(I), rhs)), w
+        r_eta = dL_deta - dR - Pdot0[3:]
+        B = Mvv[0:3, 3:]
+        m_inv = 1.0 / ca.diag(Mvv[3:, 3:])
+        A = I - ca.mtimes(B, ca.mtimes(ca.diag(m_inv), B.T))
+        w_dot = ca.mtimes(inv3(A), rhs - ca.mtimes(B, m_inv * r_eta))
+        eta_ddot = m_inv * (r_eta - ca.mtimes(B.T, w_dot))
+        return ca.vertcat(quat_kinematics(q, w), w_dot), w, ca.vertcat(eta_dot, eta_ddot)
 
     def _omega(self, t, x, p):
         return x[4:7]

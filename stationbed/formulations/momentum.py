@@ -4,6 +4,11 @@ State ``[q_BN (4), H_O_B (3)]``: the total angular momentum about O in B compone
 ``dH/dt|_B = L - ω × H`` and ω is recovered algebraically,
 ``ω = I⁻¹ (H - Σ I_p ω_p - h)`` (h: CMG momentum). No array acceleration is needed, and a step in an array rate
 leaves H continuous (ω jumps) without any special handling.
+
+Flexible arrays keep that character: their second modal state is the modal momentum
+``p_η = ∂T/∂η̇ = M η̇ + Δᵀ ω + Dᵀ ω_p``, whose rate is ``-K η - C η̇`` (Lagrange Eq. 31b,
+no acceleration), and ``(ω, η̇)`` are recovered together from ``(H, p_η)``
+(:meth:`StationModel.velocities`).
 """
 
 from __future__ import annotations
@@ -20,25 +25,37 @@ class MomentumForm(Formulation):
     core_kinds = ("attitude",) * 4 + ("momentum",) * 3
     description = "TP-2511 Eq. 17-19: total angular momentum H in B as state, omega recovered"
 
-    def _omega_from(self, H, arrays, I, xe, p):
-        """``ω = I⁻¹ (H - Σ I_p ω_p - h)``."""
-        H = H - self.model.h(xe, p)
-        for I_p, w_p, *_ in arrays:
-            H = H - ca.mtimes(I_p, w_p)
-        return ca.mtimes(inv3(I), H)
+    modal_state_prefix = "peta"
 
-    def _omega(self, t, x, p):
-        arrays = self.arrays(t, x, p)
-        return self._omega_from(x[4:7], arrays, self.model.inertia(t, p, arrays), x[7:], p)
-
-    def _rhs(self, t, x, u, p):
+    def _velocities(self, t, x, p, u=None):
         m = self.model
         arrays = self.arrays(t, x, p, u=u)
         I = m.inertia(t, p, arrays)
+        modal = m.modal(arrays, p)
+        w, eta_dot = m.velocities(x[4:7], m.modal_state(x[7:]), arrays, modal, I, x[7:], p)
+        return w, eta_dot, I, modal
+
+    def _omega(self, t, x, p):
+        return self._velocities(t, x, p)[0]
+
+    def modal_rates(self, t, x, p):
+        return self._velocities(t, x, p)[1]
+
+    def _rhs(self, t, x, u, p):
+        m = self.model
         H = x[4:7]
-        w = self._omega_from(H, arrays, I, x[7:], p)
+        w, eta_dot, I, modal = self._velocities(t, x, p, u)
         L = m.external_torque(t, x[0:4], u, p, I)
-        return ca.vertcat(quat_kinematics(x[0:4], w), L - ca.cross(w, H)), w
+        core_dot = ca.vertcat(quat_kinematics(x[0:4], w), L - ca.cross(w, H))
+        if not m.n_modes:
+            return core_dot, w
+        eta = m.eta(x[7:])
+        p_dot = ca.vertcat(*[f.momentum_rate(eta[f.sl], eta_dot[f.sl]) for f in modal])
+        return core_dot, w, ca.vertcat(eta_dot, p_dot)
 
     def _core(self, t, q, omega, xe, p):
         return self.momentum_of(t, q, omega, xe, p)
+
+    def _modal_state(self, t, q, omega, xe, p):
+        m = self.model
+        return self.modal_momenta(m.modal(m.arrays(t, q, xe, p), p), omega, m.modal_state(xe))
