@@ -11,6 +11,7 @@ state; over the ~10²-10⁴ steps of a shipped scenario the global error stays b
 * rate:     ``CHECK_GAIN * rtol * max|ω|`` rad/s,
 * momentum: ``CHECK_GAIN * rtol * max(|H|, |h|)`` N m s (H about the composite CM, N components;
   h the CMG cluster's momentum, which sets the scale when a station starts at rest),
+* modes (flexible scenes): ``CHECK_GAIN * rtol * max|η|`` on every modal coordinate ``eta_*``,
 
 floored at ``FLOOR`` times the scale for very tight rtol (float64 round-off over a run).
 """
@@ -43,6 +44,7 @@ class PairDiff:
     att_rad: float
     rate: float
     H: float
+    eta: float | None = None  # largest modal-coordinate difference (flexible scenes)
 
 
 @dataclass
@@ -54,25 +56,33 @@ class CheckResult:
     tol_H: float
     pairs: list[PairDiff]
     trajectories: dict[str, Trajectory]
+    tol_eta: float | None = None
+
+    def pair_ok(self, p: PairDiff) -> bool:
+        ok = p.att_rad <= self.tol_att_rad and p.rate <= self.tol_rate and p.H <= self.tol_H
+        return ok and (p.eta is None or p.eta <= self.tol_eta)
 
     @property
     def ok(self) -> bool:
-        return all(
-            p.att_rad <= self.tol_att_rad and p.rate <= self.tol_rate and p.H <= self.tol_H for p in self.pairs
-        )
+        return all(self.pair_ok(p) for p in self.pairs)
 
     def table(self) -> str:
+        flex = self.tol_eta is not None
         lines = [
             f"scene {self.scene}: {len(self.trajectories)} formulations at rtol {self.rtol:g}",
-            f"{'pair':<26} {'attitude [rad]':>15} {'rate [rad/s]':>14} {'H [N m s]':>12}  verdict",
+            f"{'pair':<26} {'attitude [rad]':>15} {'rate [rad/s]':>14} {'H [N m s]':>12}"
+            + (f" {'modes eta':>12}" if flex else "")
+            + "  verdict",
         ]
         for p in self.pairs:
-            ok = p.att_rad <= self.tol_att_rad and p.rate <= self.tol_rate and p.H <= self.tol_H
             lines.append(
-                f"{p.a + ' vs ' + p.b:<26} {p.att_rad:15.3e} {p.rate:14.3e} {p.H:12.3e}  {'ok' if ok else 'DISAGREE'}"
+                f"{p.a + ' vs ' + p.b:<26} {p.att_rad:15.3e} {p.rate:14.3e} {p.H:12.3e}"
+                + (f" {p.eta:12.3e}" if flex else "")
+                + f"  {'ok' if self.pair_ok(p) else 'DISAGREE'}"
             )
         lines.append(
             f"{'tolerance':<26} {self.tol_att_rad:15.3e} {self.tol_rate:14.3e} {self.tol_H:12.3e}"
+            + (f" {self.tol_eta:12.3e}" if flex else "")
         )
         return "\n".join(lines)
 
@@ -85,6 +95,16 @@ def compare(a: Trajectory, b: Trajectory) -> tuple[float, float, float]:
     rate = float(np.max(np.linalg.norm(a.omega_BN_B - b.omega_BN_B, axis=1)))
     H = float(np.max(np.linalg.norm(a.H_O_N - b.H_O_N, axis=1)))
     return att, rate, H
+
+
+def eta_columns(tr: Trajectory) -> list[str]:
+    return [c for c in tr.columns if c.startswith("eta_")]
+
+
+def compare_modes(a: Trajectory, b: Trajectory) -> float:
+    """Largest difference of the modal coordinates ``eta_*`` of two runs (0 if rigid)."""
+    cols = eta_columns(a)
+    return float(np.max(np.abs(a.cols(*cols) - b.cols(*cols)))) if cols else 0.0
 
 
 def check_scene(
@@ -104,7 +124,12 @@ def check_scene(
     if "hx" in ref.columns:  # momentum exchange from rest: H_O_N ~ 0, the cluster's h sets the scale
         H_scale = max(H_scale, float(np.max(np.linalg.norm(ref.cols("hx", "hy", "hz"), axis=1))))
     gain = max(CHECK_GAIN * rtol, FLOOR)
-    pairs = [PairDiff(a, b, *compare(trajs[a], trajs[b])) for a, b in itertools.combinations(names, 2)]
+    flex = bool(eta_columns(ref))
+    pairs = [
+        PairDiff(a, b, *compare(trajs[a], trajs[b]), compare_modes(trajs[a], trajs[b]) if flex else None)
+        for a, b in itertools.combinations(names, 2)
+    ]
+    eta_scale = float(np.max(np.abs(ref.cols(*eta_columns(ref))))) if flex else 0.0
     return CheckResult(
         scene=scene.name,
         rtol=rtol,
@@ -113,4 +138,5 @@ def check_scene(
         tol_H=gain * max(H_scale, 1e-12),
         pairs=pairs,
         trajectories=trajs,
+        tol_eta=gain * max(eta_scale, 1e-12) if flex else None,
     )

@@ -8,7 +8,7 @@ import pytest
 
 from scenes import SCENARIOS, scenario_ids
 from stationbed import FORMULATIONS, load_scene
-from stationbed.check import check_scene, compare
+from stationbed.check import check_scene, compare, compare_modes
 from stationbed.formulations.dalembert import DAlembertForm
 from stationbed.formulations.base import coriolis_matrix
 
@@ -27,6 +27,9 @@ def test_formulations_agree(checked, pair):
     assert att <= checked.tol_att_rad, f"attitude differs by {att:.3e} rad"
     assert rate <= checked.tol_rate, f"rate differs by {rate:.3e} rad/s"
     assert H <= checked.tol_H, f"H_O_N differs by {H:.3e} N m s"
+    if checked.tol_eta is not None:  # flexible scene: the modal coordinates agree too
+        eta = compare_modes(checked.trajectories[a], checked.trajectories[b])
+        assert eta <= checked.tol_eta, f"modal coordinates differ by {eta:.3e}"
 
 
 class WrongSignCoriolis(DAlembertForm):
