@@ -597,7 +597,7 @@ class LGVI(FixedStep):
         """``(Jinv(p), M(t, q, u, p))`` read from the RHS, or ValueError saying why not."""
         why = "lgvi integrates a rigid body in the momentum form (state q_BN, H_O_B)"
         if nx != 7:
-            raise ValueError(f"{why}: this system has {nx - 7} extra states (CMG gimbals or driven array joints)")
+            raise ValueError(f"{why}: this system has {nx - 7} extra states (CMG, driven array joints or elastic modes)")
         t, q, s = ca.SX.sym("t"), ca.SX.sym("q", 4), ca.SX.sym("s", 3)
         u, p = ca.SX.sym("u", nu), ca.SX.sym("p", npar)
         # ω at the identity attitude (so the quaternion algebra folds away structurally)
