@@ -30,6 +30,14 @@ with ``∂f/∂C`` the orientation gradient of DESIGN §4: ``δf = gᵀ δθ`` f
 ``M`` is every external torque of the scene *except* gravity gradient, which enters only
 through ``V``: the model's torque is taken from a twin model whose structure has
 ``gravity_gradient=False`` (same parameter layout). State ``[q_BN (4), omega_BN_B (3)]``.
+
+Flexible arrays (stationbed/flex.py) add the elastic kinetic energy
+``T_e = ½ η̇ᵀ M η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` to T, the strain energy ``½ ηᵀ K η`` to V and a
+Rayleigh dissipation ``R = ½ η̇ᵀ C η̇``; the modal coordinates obey Lagrange's equation (Quinn
+Eq. 31b) ``d/dt(∂T/∂η̇) - ∂T/∂η + ∂V/∂η + ∂R/∂η̇ = 0``. With velocities ``v = [ω; η̇]`` and
+``P = ∂T/∂v`` everything above holds with p → P (plus ``(∂P/∂η) η̇`` in Ṗ), and the mass matrix
+``∂²T/∂v² = [I Δ; Δᵀ M]`` is solved by the Schur complement on its diagonal modal block. The
+states then continue ``..., η, η̇`` after the extra states.
 """
 
 from __future__ import annotations
