@@ -514,7 +514,9 @@ def _path(loc: tuple) -> str:
 
 
 def _one_line(err: ValidationError) -> str:
-    e = err.errors()[0]
+    errors = err.errors()
+    # a typo'd key also makes the intended key "missing": name the typo, it is the cause
+    e = next((x for x in errors if x["type"] == "extra_forbidden"), errors[0])
     loc = tuple(e["loc"])
     path = _path(loc)
     etype = e["type"]
