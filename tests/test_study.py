@@ -26,11 +26,16 @@ from stationbed.study import (
     H_JUMP_REL,
     QUICK_DIVISIONS,
     QUICK_RTOLS,
+    QUICK_STIFF_FREQS_HZ,
     ROUNDOFF_REL,
     STABILITY_CASES,
+    STIFF_TARGET_RAD,
     TARGETS_RAD,
     _FLIP_SCENE,
+    _RK4_TABLEAU,
     flip_times,
+    stability_boundary,
+    stability_function,
 )
 
 PRECISION_SCENE = ROOT / "scenarios" / "articulated_stress.toml"
@@ -261,3 +266,74 @@ def test_flip_detector_matches_jacobi_elliptic_period():
     assert tf.size >= 4
     # output every 0.5 s, cubic interpolation of ω_y: ~1e-4 s on an interval of ~290 s
     np.testing.assert_allclose(np.diff(tf), interval, rtol=1e-5, atol=0.0)
+
+
+# ---------------------------------------------------------------------------------------
+# stiff array modes
+# ---------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def stiff(stability):
+    """``stiff(part, integrator=None)``: rows of the stiff-modes case's CSV (its quick run)."""
+    _, rows = _read(stability("stiff_modes") / "stability_stiff_modes.csv")
+
+    def get(part, integrator=None):
+        return [r for r in rows if r["part"] == part and (integrator is None or r["integrator"] == integrator)]
+
+    return get
+
+
+def test_rk4_stability_boundary_on_the_imaginary_axis_is_two_root_two():
+    """Classical RK4 on ẋ = iωx multiplies by R(iy) = 1 - y²/2 + y⁴/24 + i(y - y³/6) per step
+    (y = ωh); |R(iy)|² = 1 - y⁶/72 + y⁸/576 equals 1 at y = 2√2 (Hairer & Wanner IV.2)."""
+    R = stability_function(*_RK4_TABLEAU)
+    assert stability_boundary(R, 1j) == pytest.approx(2 * math.sqrt(2), rel=1e-9)
+    assert abs(R(2j)) < 1.0 < abs(R(3j))
+
+
+@pytest.mark.parametrize("name", ["rk4", "lie_rk4"])
+def test_stiff_mode_sets_the_explicit_fixed_step_at_two_root_two_over_omega(stiff, name):
+    """An explicit RK4 step is stable on a lightly damped mode only while ω h <= 2√2: the
+    largest stable step the scan finds, times the stiff mode's clamped circular frequency, is
+    2√2 at every frequency (coupling raises ω by 0.5 %, damping the boundary by 0.4 %; the
+    bisection brackets the limit to 2^(1/64) = 1.1 %), and the first failing step is beyond it."""
+    rows = stiff("fixed", name)
+    assert rows, "no fixed-step rows"
+    for f in QUICK_STIFF_FREQS_HZ:
+        mine = [r for r in rows if float(r["f_hi_hz"]) == f]
+        omega = 2 * math.pi * f  # rad/s, clamped
+        h_ok = max(float(r["step_s"]) for r in mine if r["passed"] == "1")
+        h_bad = min(float(r["step_s"]) for r in mine if r["passed"] == "0")
+        assert 0.97 * 2 * math.sqrt(2) < omega * h_ok <= omega * h_bad, f
+        assert 2 * math.sqrt(2) * 0.99 < omega * h_bad < 2 * math.sqrt(2) * 1.03, f
+
+
+def test_stiff_mode_leaves_radau_stable_and_its_newton_converged(stiff):
+    """Radau IIA is A-stable (|R(z)| <= 1 on the left half-plane): no step makes a damped mode
+    grow. Its simplified Newton iteration uses the exact Jacobian at the step's start, which
+    solves a linear mode's stage equations at once: the defect stays far below the tolerance at
+    every step, 100x past rk4's limit, while the nonlinear rigid tumble (|ω| h ~ 0.7) defeats it."""
+    tol = INTEGRATORS["radau"].DEFECT_TOL
+    rows = stiff("fixed", "radau")
+    assert rows and all(r["passed"] == "1" for r in rows)
+    f_hi = QUICK_STIFF_FREQS_HZ[-1]
+    h_rk4 = max(float(r["step_s"]) for r in stiff("fixed", "rk4") if r["passed"] == "1" and float(r["f_hi_hz"]) == f_hi)
+    assert max(float(r["step_s"]) for r in rows if float(r["f_hi_hz"]) == f_hi) > 100 * h_rk4
+    assert max(float(r["newton_defect"]) for r in stiff("newton", "radau")) < 0.1 * tol  # ~8e-3 measured
+    assert max(float(r["newton_defect"]) for r in stiff("newton_rigid_tumble", "radau")) > tol
+
+
+def test_stiff_mode_sets_the_cost_of_explicit_adaptive_methods_only(stiff):
+    """For the same attitude accuracy an explicit adaptive method pays for the stiff mode (its
+    step is held at the stability boundary, h ∝ 1/ω: 20x the frequency, several times the RHS
+    evaluations), an L-stable implicit one does not."""
+    f_lo, f_hi = QUICK_STIFF_FREQS_HZ[0], QUICK_STIFF_FREQS_HZ[-1]
+
+    def cost(name, f):
+        ok = [r for r in stiff("adaptive", name) if float(r["f_hi_hz"]) == f and r["status"] == "ok"
+              and float(r["att_err_rad"]) <= STIFF_TARGET_RAD]
+        return int(ok[0]["n_rhs"])
+
+    assert cost("dop853", f_hi) > 5 * cost("dop853", f_lo)
+    assert cost("scipy_radau", f_hi) < 2 * cost("scipy_radau", f_lo)
