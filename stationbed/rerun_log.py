@@ -30,6 +30,12 @@ from the logged gimbal angles and the geometry of :mod:`stationbed.cmg`) and the
 controller, sun tracking) are logged under ``telemetry/cmg``, ``telemetry/control`` and
 ``telemetry/arrays/<name>/track_err_deg``; any other column under ``telemetry/extra``.
 
+With flexible arrays (issue 6) the modal columns ``eta_<array>_<k>``, ``etadot_<array>_<k>`` are
+one entity per array and quantity under ``telemetry/modes/<array>/`` and ``U_strain`` is
+``telemetry/modes/U_strain`` (a third column of plots in the blueprint); an array's ``beam``
+modes are drawn as its bent centre line, exaggerated, in its own frame (:class:`_ElasticLines`).
+A rigid scene's recording has none of these.
+
 Cost: the per-call overhead of the SDK (~0.1 ms per ``send_columns``, ~1 ms per blocking flush)
 is what logging costs, so rows are collected and sent at most every ``flush_interval_s`` of wall
 time (and on :meth:`RrdSink.close`), not per batch the simulation hands over.
@@ -81,6 +87,10 @@ SUN_ARROW_FRACTION = 1.2
 #: is drawn this long; each unit's arrow starts this far out along its (outer) gimbal axis.
 CMG_ARROW_FRACTION = 0.25
 CMG_ORIGIN_FRACTION = 0.12
+#: A flexible array's beam is drawn as a line of this many stations, root to tip; its largest
+#: tip amplitude at the first row with elastic motion is drawn this fraction of the longest beam.
+ELASTIC_POINTS = 21
+ELASTIC_FRACTION = 0.2
 
 #: Wall time [s] rows may wait in an RrdSink before they are sent and flushed to the file.
 #: Each send costs ~0.1 ms per entity (23 for iss_lvlh_hold) plus the flush; the closed loop
@@ -93,6 +103,7 @@ RGB_X, RGB_Y, RGB_Z = (230, 60, 60), (60, 190, 60), (70, 110, 240)
 RGB_BODY, RGB_TRUSS, RGB_ARRAY = (170, 170, 180), (120, 120, 130), (40, 70, 170)
 RGB_EARTH, RGB_H, RGB_ORBIT = (40, 150, 220), (250, 170, 20), (120, 160, 200)
 RGB_SUN, RGB_CMG_TOTAL = (255, 215, 0), (230, 90, 200)
+RGB_ELASTIC = (250, 120, 40)
 RGB_CMG_UNITS = [(200, 60, 160), (60, 180, 200), (150, 110, 230), (240, 130, 60), (90, 200, 120), (200, 200, 80)]
 
 
@@ -204,11 +215,14 @@ class _Series:
     norm: bool = False  # append the Euclidean norm of the columns as the last series
 
 
-def _telemetry_series(columns, appendage_names) -> tuple[list[_Series], list[str]]:
+def _telemetry_series(columns, appendage_names, modes=None) -> tuple[list[_Series], list[str]]:
     """The telemetry entities of rows with ``columns``, and the columns left for ``extra/``.
 
     Base columns (DESIGN §6) and those of issue 3 (CMG, controller, sun tracking) get their own
-    entity; a group is taken only when all its columns are present.
+    entity; a group is taken only when all its columns are present. ``modes`` maps an array's
+    name to its number of elastic modes (issue 6): its ``eta_<array>_<k>`` and
+    ``etadot_<array>_<k>`` are one entity each under ``telemetry/modes/<array>/``, ``U_strain``
+    is ``telemetry/modes/U_strain``.
     """
     present, used = set(columns), set()
     out: list[_Series] = []
@@ -235,6 +249,13 @@ def _telemetry_series(columns, appendage_names) -> tuple[list[_Series], list[str
     take("telemetry/control/att_err_deg", ["att_err_deg"])
     for n in appendage_names:
         take(f"telemetry/arrays/{n}/track_err_deg", [f"track_err_deg_{n}"], [n])
+    modes = {n: m for n, m in (modes or {}).items() if m}
+    for n, m in modes.items():
+        ks = range(1, m + 1)
+        take(f"telemetry/modes/{n}/eta", [f"eta_{n}_{k}" for k in ks], [f"{n} eta_{k}" for k in ks])
+        take(f"telemetry/modes/{n}/etadot", [f"etadot_{n}_{k}" for k in ks], [f"{n} etadot_{k}" for k in ks])
+    if modes:
+        take("telemetry/modes/U_strain", ["U_strain"])
     extra = [c for c in columns if c not in used]
     for c in extra:
         out.append(_Series(f"telemetry/extra/{c}", (c,), (c,)))
@@ -314,6 +335,98 @@ class _CmgDrawing:
         return self.length / self.h_ref
 
 
+def _mode_counts(scene: Scene) -> dict[str, int]:
+    """Number of elastic modes per array (issue 6), for arrays that have any."""
+    return {a.name: len(a.mode) for a in scene.appendage if a.mode}
+
+
+class _ElasticLines:
+    """The deflected centre line of each flexible array's beam modes, in P, exaggerated.
+
+    Modes given by a ``beam`` (:class:`~stationbed.scene.Beam`) with the same root, span and
+    length are one beam: its points ``a(s) = root + s e_span`` (s in [0, L], ``ELASTIC_POINTS``
+    stations) are drawn at ``a(s) + k Σ_m η_m ψ_m(s) e_defl,m`` with ψ_m the tip-normalised
+    cantilever shape (:func:`stationbed.flex.cantilever_shape`, the one the model's integrals come
+    from), one strip per beam, in the array's entity (so ``C_BP`` turns it with the array).
+    Modes given by their integrals alone have no shape to draw (their η are plotted all the same).
+
+    ``k`` (the exaggeration, one for the whole scene) is fixed at the first row with any motion:
+    the largest free-vibration tip amplitude ``Σ_m sqrt(η_m² + (η̇_m/ω_m)²)`` of a beam there is
+    drawn ``ELASTIC_FRACTION`` of the longest beam. Built only when the rows have the columns.
+    """
+
+    def __init__(self, scene: Scene, columns):
+        from .flex import cantilever_shape  # the scene's modes imported .flex already
+
+        j = {c: i for i, c in enumerate(columns)}
+        self.arrays = []  # (name, base points (g, n, 3), eta index (m,), psi (g, m, n), e_defl (g, m, 3))
+        amp_idx, amp_omega = [], []
+        self.longest = 0.0
+        for a in scene.appendage:
+            groups: dict[tuple, list] = {}
+            for k, mode in enumerate(a.mode, start=1):
+                b = mode.beam
+                if b is not None:
+                    groups.setdefault((tuple(b.root), b.span, b.length), []).append((k, mode))
+            if not groups:
+                continue
+            m_all = len(a.mode)
+            s = np.linspace(0.0, 1.0, ELASTIC_POINTS)
+            base, psi, e_d = [], np.zeros((len(groups), m_all, ELASTIC_POINTS)), np.zeros((len(groups), m_all, 3))
+            for g, ((root, span, length), modes) in enumerate(groups.items()):
+                e_s = _axis_vector(span)
+                base.append(np.asarray(root, float) + (length * s)[:, None] * e_s)
+                for k, mode in modes:
+                    psi[g, k - 1] = cantilever_shape(mode.beam.n, length * s, length)
+                    e_d[g, k - 1] = _axis_vector(mode.beam.deflection)
+                    amp_idx.append((j[f"eta_{a.name}_{k}"], j[f"etadot_{a.name}_{k}"], len(self.arrays), g))
+                    amp_omega.append(2.0 * math.pi * mode.frequency_hz)
+                self.longest = max(self.longest, float(length))
+            eta_idx = np.array([j[f"eta_{a.name}_{k}"] for k in range(1, m_all + 1)])
+            self.arrays.append((a.name, np.array(base), eta_idx, psi, e_d))
+        self._amp_idx = amp_idx
+        self._amp_omega = np.array(amp_omega)
+        self.scale = None  # drawn metres per metre of deflection, fixed at the first motion
+
+    @classmethod
+    def of(cls, scene: Scene, columns):
+        """The drawing, or None when no array has beam modes or the rows lack their columns."""
+        counts = _mode_counts(scene)
+        if not any(m.beam is not None for a in scene.appendage for m in a.mode):
+            return None
+        need = {f"{w}_{n}_{k}" for n, c in counts.items() for k in range(1, c + 1) for w in ("eta", "etadot")}
+        return cls(scene, columns) if need <= set(columns) else None
+
+    def fix_scale(self, rows: np.ndarray) -> bool:
+        """Fix the exaggeration at the first row with motion; True when it was fixed now."""
+        if self.scale is not None:
+            return False
+        amp = np.zeros((rows.shape[0], len(self.arrays), max(len(x[1]) for x in self.arrays)))
+        for (je, jd, i, g), w in zip(self._amp_idx, self._amp_omega):
+            amp[:, i, g] += np.hypot(rows[:, je], rows[:, jd] / w)
+        peak = amp.reshape(rows.shape[0], -1).max(axis=1)
+        moving = np.flatnonzero(peak > 0.0)
+        if not len(moving):
+            return False
+        self.scale = ELASTIC_FRACTION * self.longest / float(peak[moving[0]])
+        return True
+
+    def strips(self, rows: np.ndarray):
+        """Per array: ``(name, points)``, points of shape (k * g, n, 3) in P [m], g beams."""
+        k = self.scale or 0.0
+        for name, base, eta_idx, psi, e_d in self.arrays:
+            eta = rows[:, eta_idx]  # (rows, m)
+            u = np.einsum("rm,gmn,gmi->rgni", eta, psi, e_d)  # deflection (rows, g, n, 3)
+            yield name, (base[None] + k * u).reshape(-1, *base.shape[1:])
+
+
+def _axis_vector(name: str) -> np.ndarray:
+    """Unit vector of an axis name like ``"y"`` or ``"-z"`` (scene's ``Beam``)."""
+    e = np.zeros(3)
+    e["xyz".index(name.lstrip("+-")[0])] = -1.0 if name.startswith("-") else 1.0
+    return e
+
+
 # -- sinks ------------------------------------------------------------------------------------
 class TeeSink:
     """Hands every batch of rows to several sinks (e.g. a :class:`~stationbed.trajectory.CsvSink`
@@ -353,7 +466,8 @@ class RrdSink:
         :func:`~stationbed.trajectory.base_columns` of the scene. The CMG, controller and sun
         columns of :func:`~stationbed.simulate.trajectory_columns` get their own entities
         (``telemetry/cmg/...``, ``telemetry/control/...``,
-        ``telemetry/arrays/<name>/track_err_deg``); any other column is logged under
+        ``telemetry/arrays/<name>/track_err_deg``), and so do the modal columns of flexible
+        arrays (``telemetry/modes/...``); any other column is logged under
         ``telemetry/extra/<column>``.
     duration : float, optional
         Run length [s], for the blueprint only: the plots' time axis and the playback speed
@@ -381,7 +495,7 @@ class RrdSink:
         base = base_columns(scene.appendage_names)
         if self.columns[: len(base)] != base:
             raise ValueError(f"rows must start with columns {base}, got {self.columns[: len(base)]}")
-        self.series, self.extra = _telemetry_series(self.columns, scene.appendage_names)
+        self.series, self.extra = _telemetry_series(self.columns, scene.appendage_names, _mode_counts(scene))
         self._j = {c: j for j, c in enumerate(self.columns)}
         self._jq = np.array([self._j[c] for c in ("qw", "qx", "qy", "qz")])
         self._series_idx = [
@@ -389,6 +503,7 @@ class RrdSink:
         ]
         self.geom = _Geometry(scene)
         self.cmg = _CmgDrawing.of(scene, self.columns, self.geom)
+        self.elastic = _ElasticLines.of(scene, self.columns)
         self.flush_interval_s = float(flush_interval_s)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
         self._pending: list[np.ndarray] = []
@@ -460,6 +575,10 @@ class RrdSink:
                 ),
                 static=True,
             )
+        if self.elastic is not None:
+            for name, *_ in self.elastic.arrays:
+                rec.log(f"world/station/{name}/elastic_line",
+                        rr.LineStrips3D.from_fields(colors=[RGB_ELASTIC], radii=0.003 * L), static=True)
         if scene.orbit is not None:
             rec.log(
                 "world/lvlh/axes",
@@ -562,6 +681,15 @@ class RrdSink:
         for name, r, _, _ in g.arrays:
             q = _xyzw_C_BP(rows[:, j[f"alpha_{name}"]], rows[:, j[f"beta_{name}"]])
             send(f"world/station/{name}", rr.Transform3D.columns(translation=np.tile(r, (k, 1)), quaternion=q))
+        el = self.elastic
+        if el is not None:
+            if el.fix_scale(rows):
+                for name, *_ in el.arrays:
+                    rec.log(f"world/station/{name}/elastic_line",
+                            rr.LineStrips3D.from_fields(labels=[f"{name} deflection x{el.scale:.3g}"]), static=True)
+            for name, pts in el.strips(rows):
+                n_beams = pts.shape[0] // k
+                send(f"world/station/{name}/elastic_line", rr.LineStrips3D.columns(strips=pts).partition([n_beams] * k))
         H = rows[:, [j["HNx"], j["HNy"], j["HNz"]]]
         if self._H_scale is None:
             H_norm = np.linalg.norm(H, axis=1)
@@ -689,7 +817,8 @@ def run_blueprint(scene: Scene, extra=(), duration: float | None = None):
     """3-D station view beside stacked time-series panels.
 
     ``extra`` are the row columns beyond the base ones: the CMG, controller and sun-tracking
-    panels appear (in a second column of plots) when their columns are there.
+    panels appear (in a second column of plots) when their columns are there, the modal
+    coordinates, rates and strain energy of flexible arrays in a column of their own.
     """
     import rerun.blueprint as rrb
 
@@ -708,7 +837,8 @@ def run_blueprint(scene: Scene, extra=(), duration: float | None = None):
         )
     )
     base = base_columns(scene.appendage_names)
-    series, unknown = _telemetry_series(base + [c for c in extra if c not in base], scene.appendage_names)
+    counts = _mode_counts(scene)
+    series, unknown = _telemetry_series(base + [c for c in extra if c not in base], scene.appendage_names, counts)
     have = {s.entity for s in series}
 
     def plot(name, origin, contents=None):
@@ -744,11 +874,20 @@ def run_blueprint(scene: Scene, extra=(), duration: float | None = None):
     if track:
         control.append(plot("array sun-tracking error [deg]", "telemetry/arrays", track))
 
+    elastic = []
+    for name, what in (("modal coordinates eta (beam modes: tip deflection [m])", "eta"), ("modal rates etadot", "etadot")):
+        ents = [f"telemetry/modes/{n}/{what}" for n in counts if f"telemetry/modes/{n}/{what}" in have]
+        if ents:
+            elastic.append(plot(name, "telemetry/modes", ents))
+    if "telemetry/modes/U_strain" in have:
+        elastic.append(plot("strain energy U_strain [J]", "telemetry/modes/U_strain"))
+
     view3d = rrb.Spatial3DView(name=f"{scene.name} (N axes, CM at origin)", origin="world", eye_controls=eye)
-    if control:
-        layout = rrb.Horizontal(view3d, rrb.Vertical(*state), rrb.Vertical(*control), column_shares=[2, 1, 1])
+    columns = [rrb.Vertical(*c) for c in (state, control, elastic) if c]
+    if len(columns) > 1:
+        layout = rrb.Horizontal(view3d, *columns, column_shares=[2] + [1] * len(columns))
     else:
-        layout = rrb.Horizontal(view3d, rrb.Vertical(*state), column_shares=[3, 2])
+        layout = rrb.Horizontal(view3d, *columns, column_shares=[3, 2])
     return rrb.Blueprint(
         layout,
         rrb.BlueprintPanel(state="collapsed"),

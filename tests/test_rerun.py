@@ -725,6 +725,173 @@ def test_cmg_arrows_sum_to_the_model_momentum(tmp_path, rng, cmg):
     assert_allclose(total / scale, h, rtol=0, atol=1e-4)
 
 
+# -- flexible arrays (issue 6): modal coordinates and the arrays' elastic lines -------------------
+#: power_tower_free_drift with two beam modes per array (a 30 m array bending out of its plane
+#: at 0.1 Hz and in its plane at 0.25 Hz), 60 s at 1 s: both modes resolved (>= 4 rows a period).
+FLEX_TOML = """
+name = "rrd_flex_case"
+[simulation]
+duration = 60.0  # s
+output_dt = 1.0  # s
+rtol = 1e-9
+atol = 1e-12
+[initial]
+frame = "lvlh"
+[body]
+mass = 2.2e5  # kg
+inertia = [[9.1e7, -1.5e6, -2.0e6], [-1.5e6, 8.7e7, 4.0e5], [-2.0e6, 4.0e5, 7.5e6]]  # kg m²
+cm = [0.0, 0.0, 10.0]  # m
+[[appendage]]
+name = "stbd"
+mass = 3000.0  # kg
+inertia = [[2.25e5, 0.0, 0.0], [0.0, 3.6e4, 0.0], [0.0, 0.0, 2.61e5]]  # kg m²
+cm = [0.0, 25.0, -60.0]  # m
+alpha = { a0 = 0.0, rate = -0.0011313 }  # rad, rad/s
+beta = { a0 = 0.25 }  # rad
+[[appendage.mode]]
+frequency_hz = 0.1
+beam = { length = 30.0, root = [0.0, -15.0, 0.0], span = "y", deflection = "z", n = 1 }
+eta0 = 0.05  # m
+[[appendage.mode]]
+frequency_hz = 0.25
+beam = { length = 30.0, root = [0.0, -15.0, 0.0], span = "y", deflection = "x", n = 1 }
+eta_rate0 = 0.01  # m/s
+[[appendage]]
+name = "port"
+mass = 3000.0
+inertia = [[2.25e5, 0.0, 0.0], [0.0, 3.6e4, 0.0], [0.0, 0.0, 2.61e5]]
+cm = [0.0, -25.0, -60.0]
+alpha = { a0 = 0.0, rate = -0.0011313 }
+beta = { a0 = -0.25 }
+[[appendage.mode]]
+frequency_hz = 0.1
+damping = 0.02
+beam = { length = 30.0, root = [0.0, 15.0, 0.0], span = "-y", deflection = "z", n = 1 }
+eta_rate0 = -0.02  # m/s
+[[appendage.mode]]
+frequency_hz = 0.25
+beam = { length = 30.0, root = [0.0, 15.0, 0.0], span = "-y", deflection = "x", n = 1 }
+[orbit]
+altitude = 400000.0  # m
+inclination = 0.4974  # rad
+gravity_gradient = true
+"""
+FLEX_BEAM_M = 30.0  # m, both arrays' beams
+#: Largest free-vibration tip amplitude sum(sqrt(eta² + (etadot/omega)²)) of one array at t = 0
+#: [m]: stbd's 0.05 m plus 0.01 m/s at 0.25 Hz (port: 0.02 m/s at 0.1 Hz, 0.0318 m, is less).
+FLEX_AMP0_M = 0.05 + 0.01 / (2.0 * math.pi * 0.25)
+#: Strip points are float32 (~1e-7 relative) on a ~15 m lever: ~1e-5 m; divided by the
+#: exaggeration (~100), a drawn deflection reads back to ~1e-7 m of the modal coordinate.
+ELASTIC_F32_TOL_M = 1e-6
+MODE_COLUMNS = {
+    f"telemetry/modes/{a}/{w}": [f"{w}_{a}_{k}" for k in (1, 2)] for a in ("stbd", "port") for w in ("eta", "etadot")
+}
+MODE_COLUMNS["telemetry/modes/U_strain"] = ["U_strain"]
+
+
+@pytest.fixture(scope="module")
+def flex_run(tmp_path_factory):
+    """``stationbed run FLEX --rrd``: the recording process and the CSV (%.17g, exact) side by side."""
+    out = tmp_path_factory.mktemp("flex")
+    scene = out / "flex.toml"
+    scene.write_text(FLEX_TOML)
+    rrd = out / "recording.rrd"
+    res = subprocess.run([str(STATIONBED), "run", str(scene), "--out", str(out), "--rrd", str(rrd)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return load_scene(scene), Trajectory.from_csv(out / "trajectory.csv"), rrd, read_temporal(rrd)
+
+
+def test_flex_rows_have_the_modal_columns(flex_run):
+    scene, traj, _, data = flex_run
+    assert traj.columns == trajectory_columns(scene) and traj.columns[-1] == "U_strain"
+    assert len(traj) == 61
+    for ent, cols in data.items():
+        assert_allclose(cols["t"], traj.t, rtol=0, atol=TIME_TOL_S, err_msg=ent)
+    assert not [e for e in data if e.startswith("telemetry/extra")]
+
+
+@pytest.mark.parametrize("entity, columns", MODE_COLUMNS.items(), ids=[e.split("modes/")[1] for e in MODE_COLUMNS])
+def test_flex_modal_series_equal_csv(flex_run, entity, columns):
+    """eta, etadot per array and U_strain are the CSV's float64 values, exactly."""
+    _, traj, _, data = flex_run
+    assert_allclose(data[entity]["Scalars:scalars"], traj.cols(*columns), rtol=0, atol=SCALAR_TOL)
+    assert np.ptp(traj.cols(*columns), axis=0).min() > 0.0  # every series moves: a real comparison
+
+
+def test_flex_blueprint_has_a_modes_column_and_shows_every_series(flex_run):
+    _, _, path, data = flex_run
+    views = blueprint_views(path)
+    telemetry = [e for e in data if e.startswith("telemetry/")]
+    shown = set()
+    for v in (v for v in views if v["class"] == "TimeSeries"):
+        s = shown_by(v, telemetry)
+        assert s, v
+        shown |= s
+    assert shown == set(telemetry)
+    by_name = {v["name"]: shown_by(v, telemetry) for v in views}
+    assert by_name["modal coordinates eta (beam modes: tip deflection [m])"] == {"telemetry/modes/stbd/eta", "telemetry/modes/port/eta"}
+    assert by_name["modal rates etadot"] == {"telemetry/modes/stbd/etadot", "telemetry/modes/port/etadot"}
+    assert by_name["strain energy U_strain [J]"] == {"telemetry/modes/U_strain"}
+
+
+def _static_labels(path, entity):
+    chunks = [c for c in rerun_chunk.RrdReader(path).stream().to_chunks() if c.is_static and c.entity_path.lstrip("/") == entity]
+    rb = [c.to_record_batch() for c in chunks if "LineStrips3D:labels" in c.to_record_batch().schema.names]
+    return rb[-1].column("LineStrips3D:labels").to_pylist()[0]
+
+
+@pytest.mark.parametrize("array, root_y, span_y", [("stbd", -15.0, 1.0), ("port", 15.0, -1.0)], ids=["stbd", "port"])
+def test_flex_elastic_line_is_the_tip_deflection(flex_run, array, root_y, span_y):
+    """The drawn line of an array (P axes, child of its C_BP transform) runs from the beam's root,
+    which does not move, to its tip, displaced by the exaggeration k times eta_1 z_P + eta_2 x_P
+    (the shapes are tip-normalised, so eta is the tip deflection [m]); k is the same in every
+    row, in the label, and makes the largest tip amplitude at t = 0 draw as 0.2 x the beam."""
+    _, traj, path, data = flex_run
+    pts = data[f"world/station/{array}/elastic_line"]["LineStrips3D:strips"].reshape(len(traj), -1, 3)
+    assert_allclose(pts[:, 0], np.tile([0.0, root_y, 0.0], (len(traj), 1)), rtol=0, atol=1e-5)  # m
+    tip_rigid = np.array([0.0, root_y + span_y * FLEX_BEAM_M, 0.0])
+    k = 0.2 * FLEX_BEAM_M / FLEX_AMP0_M  # drawn m per m
+    eta1, eta2 = traj[f"eta_{array}_1"], traj[f"eta_{array}_2"]
+    expected = np.column_stack([eta2, np.zeros_like(eta1), eta1])
+    assert_allclose((pts[:, -1] - tip_rigid) / k, expected, rtol=0, atol=ELASTIC_F32_TOL_M)
+    label = _static_labels(path, f"world/station/{array}/elastic_line")
+    assert label == [f"{array} deflection x{k:.3g}"]
+
+
+def test_flex_exaggeration_is_fixed_at_the_first_motion(tmp_path, flex_run):
+    """Rows streamed in two batches, the arrays at rest in the first: those lines are straight
+    (no scale yet), and the scale is fixed by the first row that moves (stbd: eta_1 = 0.1 m at
+    rest, amplitude 0.1 m -> drawn 0.2 x 30 m), then kept for later, larger motion."""
+    scene = flex_run[0]
+    cols = trajectory_columns(scene)
+    j = {c: k for k, c in enumerate(cols)}
+    data = np.zeros((6, len(cols)))
+    data[:, j["t"]] = np.arange(6) * 1.0  # s
+    data[:, j["qw"]] = 1.0
+    data[3:, j["eta_stbd_1"]] = [0.1, 0.3, -0.2]  # m
+    with RrdSink(scene, tmp_path / "k.rrd", cols, flush_interval_s=0.0) as sink:
+        sink.write(data[:2])
+        sink.write(data[2:])
+    pts = read_temporal(tmp_path / "k.rrd")["world/station/stbd/elastic_line"]["LineStrips3D:strips"].reshape(6, -1, 3)
+    k = 0.2 * FLEX_BEAM_M / 0.1  # drawn m per m
+    assert_allclose(pts[:, -1, 2] / k, data[:, j["eta_stbd_1"]], rtol=0, atol=ELASTIC_F32_TOL_M)
+    assert _static_labels(tmp_path / "k.rrd", "world/station/stbd/elastic_line") == [f"stbd deflection x{k:.3g}"]
+
+
+def test_rigid_recording_has_no_elastic_parts(iss_run):
+    """A rigid scene: no modes entities, no elastic lines, no modes panels (its recording is as
+    before issue 6)."""
+    _, _, path, data = iss_run
+    everything = set(data) | static_entities(path)
+    assert not [e for e in everything if e.startswith("telemetry/modes") or e.endswith("elastic_line")]
+    assert not [v for v in blueprint_views(path) if v["origin"].startswith("telemetry/modes")]
+
+
+def test_flex_recording_verifies(flex_run):
+    res = verify(flex_run[2])
+    assert res.returncode == 0, res.stderr
+
+
 # -- stationbed replay ------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def small_rrd(tmp_path_factory):
