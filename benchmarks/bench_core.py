@@ -1,11 +1,23 @@
 """Core speed benchmark: one orbit, compiled library paths vs scipy + numpy (DESIGN §9).
 
-    python benchmarks/bench_core.py [--scene PATH] [--repeats N] [--scipy-repeats N] [--json PATH]
+    python benchmarks/bench_core.py [--scene PATH] [--repeats N] [--scipy-repeats N] [--rk4-step S]
+                                    [--no-flex] [--json PATH]
 
 For one orbit (T = 2 pi / n) of the scene at rtol 1e-9, atol 1e-12:
 
-* every formulation in ``stationbed.FORMULATIONS`` through ``stationbed.simulate`` (one warm-up
-  run, compilation is cached; then the median of ``--repeats`` runs) and its RHS count;
+* every formulation in ``stationbed.FORMULATIONS`` through ``stationbed.simulate`` with DOP853 and
+  with fixed-step RK4 (``--rk4-step``, default 1 s), and its RHS count; every compiled path is
+  timed side by side: one warm-up run each (compilation is cached), then ``--repeats`` rounds in
+  which every path runs an untimed call and ``BLOCK`` timed ones back to back (interleaved, the
+  order rotated each round, so that the load of a shared machine hits them alike), the median
+  per path (:func:`_time_interleaved`). Issue 6's target: ``hamel`` costs at most 2x
+  ``momentum`` on a rigid scene (ratio printed per integrator);
+* the cost of flexibility (issue 6, skipped with ``--no-flex``): the same scene with two elastic
+  modes per array (:func:`flexible_scene`: each array's two halves as cantilevers bending out
+  of the array's plane at 0.1 Hz, 0.5 % damping, one wing bent 5 cm at t = 0), ``momentum``
+  and ``hamel`` with both integrators, in the same interleaved rounds as the rigid paths; its
+  accuracy against the flexible ``momentum`` at rtol 1e-12 (attitude and modal coordinates). The
+  rigid rows' state size and RHS count show that a rigid scene's equations are those of before;
 * scipy ``solve_ivp(method="DOP853")`` with the plain-numpy momentum RHS of
   ``benchmarks/numpy_rhs.py`` at the same output times (median of ``--scipy-repeats`` runs);
 * accuracy: the max attitude difference (principal rotation angle) of each path against a tight
@@ -13,14 +25,17 @@ For one orbit (T = 2 pi / n) of the scene at rtol 1e-9, atol 1e-12:
   independent check of the reference itself, the numpy RHS at rtol 1e-13 against it.
 * one "(info)" row: the library with outputs at 0 and T only (the cost of the output grid).
 
-Prints a markdown table, the targets (<= 10 ms per orbit compiled, >= 50x faster than
-scipy + numpy) with PASS/FAIL, and the machine; ``--json PATH`` writes the numbers.
+Prints markdown tables, the targets (<= 10 ms per orbit compiled, >= 50x faster than
+scipy + numpy, ``hamel`` <= 2x ``momentum`` per integrator) with PASS/FAIL, and the machine;
+``--json PATH`` writes the numbers. BLAS runs single-threaded (see below) unless the environment
+says otherwise.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import gc
 import json
 import math
 import os
@@ -30,6 +45,14 @@ import sys
 import time
 from pathlib import Path
 
+# Every path here is single-threaded; a multi-threaded BLAS only adds threads that spin after a
+# LAPACK call and, on a busy 2-core machine, take the core the run needs. The flexible scene's
+# set-up (the beam modes' Gauss-Legendre nodes, numpy's `leggauss` -> `eigvalsh`, at every
+# `simulate`) measured 64 ms median with OpenBLAS's default threads at load 3.7, 4.3 ms with one.
+# Set before numpy is imported; an explicit setting in the environment wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 import numpy as np
 from scipy.integrate import solve_ivp
 
@@ -38,6 +61,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 import stationbed  # noqa: E402
+from stationbed.scene import scene_from_dict  # noqa: E402
 from numpy_rhs import initial_state as np_initial_state  # noqa: E402
 from numpy_rhs import make_rhs, quat_angle  # noqa: E402
 
@@ -48,12 +72,80 @@ REF_RTOL, REF_ATOL = 1e-12, 1e-14
 NP_REF_RTOL, NP_REF_ATOL = 1e-13, 1e-16  # independent check of the reference (scipy + numpy)
 TARGET_MS = 10.0
 TARGET_SPEEDUP = 50.0
+TARGET_HAMEL_RATIO = 2.0  # issue 6: a rigid scene through `hamel` costs <= 2x `momentum`
+INTEGRATORS = ("dop853", "rk4")
+BLOCK = 3  # timed back-to-back calls per path and round (see _time_interleaved)
+RK4_STEP_S = 1.0  # s: RK4's fixed step (the library's default); dop853 is adaptive
+FLEX_FORMS = ("momentum", "hamel")
+#: Elastic modes added to every array by flexible_scene (issue 6), one per wing (see there).
+FLEX_FREQUENCY_HZ = 0.1  # first bending mode of a large array (order of magnitude)
+FLEX_DAMPING = 0.005
+FLEX_ETA0_M = 0.05  # m, tip deflection of the first wing at t = 0 (the other starts straight)
 
 
 def _orbit_period(scene) -> float:
     if scene.orbit is None:
         raise SystemExit(f"scene {scene.name!r} has no [orbit]: 'one orbit' is undefined")
     return 2.0 * math.pi / scene.orbit.mean_motion
+
+
+def flexible_scene(scene):
+    """``scene`` with two elastic modes per array: its two halves (wings) along its long axis.
+
+    Per array (inertia diagonal in P): the long axis is that of the smallest moment, the plate's
+    normal that of the largest; each half is a uniform cantilever of half the array's mass from
+    the array's mass centre along +-long axis, as long as half the equivalent box's side
+    (``side² = 6 (I_a + I_b - I_long) / m``; ~36 m for the ISS array pairs), bending along the
+    normal (out of the blanket), first mode at ``FLEX_FREQUENCY_HZ``; the first wing is bent
+    ``FLEX_ETA0_M`` at its tip at t = 0.
+    """
+    d = scene.model_dump(exclude_unset=True)
+    d["name"] = f"{scene.name}_flex"
+    axes = "xyz"
+    for a in d["appendage"]:
+        moments = np.diag(np.asarray(a["inertia"], float))
+        i_long, i_normal = int(np.argmin(moments)), int(np.argmax(moments))
+        half = 0.5 * math.sqrt(6.0 * (moments.sum() - 2.0 * moments[i_long]) / a["mass"])
+        beam = dict(length=half, root=[0.0, 0.0, 0.0], deflection=axes[i_normal], n=1, mass=0.5 * a["mass"])
+        a["mode"] = [
+            dict(frequency_hz=FLEX_FREQUENCY_HZ, damping=FLEX_DAMPING, beam=dict(beam, span=f"+{axes[i_long]}"), eta0=FLEX_ETA0_M),
+            dict(frequency_hz=FLEX_FREQUENCY_HZ, damping=FLEX_DAMPING, beam=dict(beam, span=f"-{axes[i_long]}")),
+        ]
+    return scene_from_dict(d)
+
+
+def _state_size(scene, form: str, integrator: str) -> int:
+    from stationbed.simulate import Structure, build_system
+
+    return int(build_system(Structure.of(scene), form, integrator).formulation.nx)
+
+
+def _time_interleaved(runs: dict, repeats: int, block: int = BLOCK) -> dict:
+    """``runs``: key -> zero-argument callable returning a Trajectory. One warm-up call each, then
+    ``repeats`` rounds; in each round every path in turn (the order rotated each round) runs one
+    untimed call and ``block`` timed calls back to back. Interleaving makes the load of a shared
+    machine hit every path alike; the untimed call and the block make each timed call a warm
+    one, as in back-to-back runs (a ~1 ms run timed right after a 20 ms run of another path
+    starts with cold caches: measured, that made the rigid DOP853 rows ~1.5x slower).
+    Returns key -> (last trajectory, median wall [s] of the call, median integrator wall
+    ``meta["wall_s"]`` [s]) over the ``repeats * block`` timed calls."""
+    keys = list(runs)
+    for k in keys:
+        runs[k]()  # warm-up: compiles, or loads the cached build
+    walls = {k: [] for k in keys}
+    inner = {k: [] for k in keys}
+    last = {}
+    for r in range(repeats):
+        for k in keys[r % len(keys):] + keys[: r % len(keys)]:
+            gc.collect()  # the previous path's garbage is not this path's cost
+            runs[k]()
+            for _ in range(block):
+                t0 = time.perf_counter()
+                traj = runs[k]()
+                walls[k].append(time.perf_counter() - t0)
+                inner[k].append(traj.meta.get("wall_s", float("nan")))
+            last[k] = traj
+    return {k: (last[k], statistics.median(walls[k]), statistics.median(inner[k])) for k in keys}
 
 
 def _time_library(scene, form: str, duration: float, repeats: int, output_dt=None):
@@ -67,6 +159,10 @@ def _time_library(scene, form: str, duration: float, repeats: int, output_dt=Non
         walls.append(time.perf_counter() - t0)
         inner.append(traj.meta.get("wall_s", float("nan")))
     return traj, statistics.median(walls), statistics.median(inner)
+
+
+def _integ_label(r) -> str:
+    return f"rk4, h = {r['step_s']:g} s" if r["integrator"] == "rk4" else r["integrator"]
 
 
 def _time_scipy(scene, duration: float, t_eval: np.ndarray, repeats: int, rtol=RTOL, atol=ATOL):
@@ -86,10 +182,12 @@ def _time_scipy(scene, duration: float, t_eval: np.ndarray, repeats: int, rtol=R
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", type=Path, default=DEFAULT_SCENE, help="scene file (default: %(default)s)")
-    ap.add_argument("--repeats", type=int, default=7, help="timed runs per compiled path (default 7)")
+    ap.add_argument("--repeats", type=int, default=15, help="interleaved rounds of the compiled paths (default 15)")
     ap.add_argument("--scipy-repeats", type=int, default=3, help="timed scipy+numpy runs (default 3)")
     ap.add_argument("--no-numpy-ref", action="store_true", help="skip the numpy rtol 1e-13 cross-check")
     ap.add_argument("--no-diagnostics", action="store_true", help="skip the (info) row")
+    ap.add_argument("--rk4-step", type=float, default=RK4_STEP_S, help="RK4's fixed step [s] (default %(default)s)")
+    ap.add_argument("--no-flex", action="store_true", help="skip the flexible-scene rows (issue 6)")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers as JSON")
     args = ap.parse_args(argv)
 
@@ -109,13 +207,51 @@ def main(argv=None) -> int:
     t_eval = ref.t
     q_ref = ref.q_BN
 
-    # -- compiled paths -----------------------------------------------------------------
+    # -- compiled paths: every formulation x integrator, rigid and flexible, interleaved -------
+    flex = None if args.no_flex or not scene.appendage else flexible_scene(scene)
+    runs = {}
+
+    def add(tag, sc, form, integ):
+        step = args.rk4_step if integ == "rk4" else None
+        runs[(tag, form, integ)] = lambda: stationbed.simulate(
+            sc, formulation=form, integrator=integ, rtol=RTOL, atol=ATOL, duration=T, step=step
+        )
+
+    for integ in INTEGRATORS:
+        for form in forms:
+            add("rigid", scene, form, integ)
+        if flex is not None:
+            for form in FLEX_FORMS:
+                add("flex", flex, form, integ)
+    timed = _time_interleaved(runs, args.repeats)
+    for (tag, form, integ), (traj, _, _) in timed.items():
+        if tag == "rigid" and not np.array_equal(traj.t, t_eval):
+            raise SystemExit(f"{form}/{integ}: output times differ from the reference run")
+
+    def summary(tag, form, integ, q_ref_, eta_ref=None):
+        traj, wall, inner = timed[(tag, form, integ)]
+        out = dict(
+            scene=tag,
+            formulation=form,
+            integrator=integ,
+            step_s=args.rk4_step if integ == "rk4" else None,
+            nx=_state_size(flex if tag == "flex" else scene, form, integ),
+            median_wall_ms=1e3 * wall,
+            median_integrate_ms=1e3 * inner,
+            n_rhs=int(traj.meta["n_rhs"]),
+            n_steps=int(traj.meta.get("n_steps", -1)),
+            us_per_rhs=1e6 * inner / max(int(traj.meta["n_rhs"]), 1),
+            err_vs_ref_rad=float(np.max(quat_angle(traj.q_BN, q_ref_))),
+        )
+        if eta_ref is not None:
+            out["eta_err_vs_ref_m"] = float(np.max(np.abs(traj.cols(*eta_cols) - eta_ref)))
+        return out
+
     rows = []
     lib = {}
+    forms_table = []
     for form in forms:
-        traj, wall, inner = _time_library(scene, form, T, args.repeats)
-        if not np.array_equal(traj.t, t_eval):
-            raise SystemExit(f"{form}: output times differ from the reference run")
+        traj, wall, inner = timed[("rigid", form, "dop853")]
         lib[form] = traj
         rows.append(
             dict(
@@ -128,6 +264,22 @@ def main(argv=None) -> int:
                 err_vs_ref_rad=float(np.max(quat_angle(traj.q_BN, q_ref))),
             )
         )
+        forms_table += [summary("rigid", form, integ, q_ref) for integ in INTEGRATORS]
+    for r in forms_table:
+        mom = next(m for m in forms_table if m["formulation"] == "momentum" and m["integrator"] == r["integrator"])
+        r["ratio_to_momentum"] = r["median_wall_ms"] / mom["median_wall_ms"]
+
+    flex_table = []
+    if flex is not None:
+        ref_flex = stationbed.simulate(flex, formulation="momentum", rtol=REF_RTOL, atol=REF_ATOL, duration=T)
+        eta_cols = [c for c in ref_flex.columns if c.startswith("eta_")]
+        for form in FLEX_FORMS:
+            for integ in INTEGRATORS:
+                rigid = next(r for r in forms_table if r["formulation"] == form and r["integrator"] == integ)
+                f = summary("flex", form, integ, ref_flex.q_BN, ref_flex.cols(*eta_cols))
+                f["ratio_to_rigid"] = f["median_wall_ms"] / rigid["median_wall_ms"]
+                f["rigid"] = rigid
+                flex_table.append(f)
 
     # -- scipy + numpy ------------------------------------------------------------------
     sol, wall_sp = _time_scipy(scene, T, t_eval, args.scipy_repeats)
@@ -200,6 +352,15 @@ def main(argv=None) -> int:
             ok=mom["ratio_to_scipy_numpy"] >= TARGET_SPEEDUP,
         ),
     ]
+    for r in forms_table:
+        if r["formulation"] == "hamel":
+            targets.append(
+                dict(
+                    target=f"rigid scene: `hamel` <= {TARGET_HAMEL_RATIO:g}x `momentum` ({_integ_label(r)})",
+                    value=f"{r['ratio_to_momentum']:.2f}x",
+                    ok=r["ratio_to_momentum"] <= TARGET_HAMEL_RATIO,
+                )
+            )
     now = _dt.datetime.now().astimezone()
     machine = dict(
         platform=platform.platform(),
@@ -215,7 +376,7 @@ def main(argv=None) -> int:
     print(
         f"scene `{scene_path.relative_to(ROOT) if scene_path.is_relative_to(ROOT) else scene_path}`, "
         f"T = {T:.1f} s, rtol {RTOL:g}, atol {ATOL:g}, {len(t_eval)} output times; "
-        f"compiled: median of {args.repeats} after 1 warm-up, scipy: median of {args.scipy_repeats}; "
+        f"compiled: median of {args.repeats} interleaved rounds after 1 warm-up each, scipy: median of {args.scipy_repeats}; "
         f"reference: stationbed `momentum` at rtol {REF_RTOL:g}, atol {REF_ATOL:g}"
     )
     print()
@@ -231,6 +392,53 @@ def main(argv=None) -> int:
         "wall = the whole `simulate()` call (incl. output rows); integrator alone (meta wall_s): "
         + ", ".join(f"{r['key']} {r['median_integrate_ms']:.2f} ms" for r in rows if r["key"] in forms)
     )
+    print()
+    print(
+        f"### every formulation x integrator, rigid scene (one orbit; medians of {args.repeats} interleaved rounds)"
+    )
+    print()
+    print("| formulation | integrator | states | median wall [ms] | ratio to `momentum` | integration alone [ms] | RHS evals | µs per RHS (integration alone) | max attitude error vs reference [rad] |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    for r in forms_table:
+        print(
+            f"| `{r['formulation']}` | {_integ_label(r)} | {r['nx']} | {r['median_wall_ms']:.2f} | "
+            f"{r['ratio_to_momentum']:.2f}x | {r['median_integrate_ms']:.2f} | {r['n_rhs']} | {r['us_per_rhs']:.2f} | "
+            f"{r['err_vs_ref_rad']:.2e} |"
+        )
+    print()
+    print(
+        "wall = the whole `simulate()` call (set-up: parameters, initial state; integration; output rows); "
+        "integration alone = the integrator's own loop (`meta['wall_s']`)"
+    )
+    if flex_table:
+        print()
+        print(
+            f"### cost of flexibility: `{flex.name}` = the scene with 2 beam modes per array "
+            f"({FLEX_FREQUENCY_HZ:g} Hz, damping {FLEX_DAMPING:g}), same interleaved rounds"
+        )
+        print()
+        print("| formulation | integrator | rigid wall [ms] | flexible wall [ms] | flexible / rigid | integration alone rigid / flexible [ms] | states rigid / flexible | RHS evals rigid / flexible | µs per RHS rigid / flexible | flexible: max attitude error [rad] / max eta error [m] vs its reference |")
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+        for f in flex_table:
+            r = f["rigid"]
+            print(
+                f"| `{f['formulation']}` | {_integ_label(f)} | {r['median_wall_ms']:.2f} | {f['median_wall_ms']:.2f} | "
+                f"{f['ratio_to_rigid']:.1f}x | {r['median_integrate_ms']:.2f} / {f['median_integrate_ms']:.2f} | "
+                f"{r['nx']} / {f['nx']} | {r['n_rhs']} / {f['n_rhs']} | "
+                f"{r['us_per_rhs']:.2f} / {f['us_per_rhs']:.2f} | {f['err_vs_ref_rad']:.1e} / {f['eta_err_vs_ref_m']:.1e} |"
+            )
+        print()
+        for integ in INTEGRATORS:
+            h, m = (next(f for f in flex_table if f["formulation"] == x and f["integrator"] == integ) for x in ("hamel", "momentum"))
+            print(
+                f"flexible scene, {_integ_label(h)}: `hamel` / `momentum` = {h['median_wall_ms'] / m['median_wall_ms']:.2f}x "
+                f"(integration alone {h['median_integrate_ms'] / m['median_integrate_ms']:.2f}x)"
+            )
+        print()
+        print(
+            f"flexible reference: `momentum` at rtol {REF_RTOL:g}, atol {REF_ATOL:g} on the flexible scene; "
+            "a rigid scene's rows above are the rigid equations (no modal states), the same as before issue 6"
+        )
     print()
     print("| target | value | result |")
     print("|---|---:|---|")
@@ -260,6 +468,12 @@ def main(argv=None) -> int:
             repeats=args.repeats,
             scipy_repeats=args.scipy_repeats,
             rows=rows,
+            forms_table=forms_table,
+            flex_table=[{k: v for k, v in f.items() if k != "rigid"} for f in flex_table],
+            flex_scene=None if flex is None else dict(
+                name=flex.name, frequency_hz=FLEX_FREQUENCY_HZ, damping=FLEX_DAMPING, eta0_m=FLEX_ETA0_M
+            ),
+            rk4_step_s=args.rk4_step,
             targets=targets,
             checks=checks,
             machine=machine,
