@@ -16,9 +16,11 @@ With the array's mass centre at ``ρ`` from the composite mass centre O (B compo
 ``C_BP`` its orientation, the kinetic energy of the elastic motion, to first order in the
 elastic coordinates (the *linear hybrid-coordinate* model, see docs/design.md), is
 
-``T_e = ½ η̇ᵀ M η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)``,  ``D = C_BP Ĥ``,  ``Δ = D + ρ̃ C_BP Φ̄``
+``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)``,  ``D = C_BP Ĥ``,  ``Δ = D + ρ̃ C_BP Φ̄``,
 
-(``ω_p`` the array's rate relative to B, in B). The strain energy is ``½ ηᵀ K η``.
+``M_eff = diag(M) - Uᵀ U / m``, ``U = [C_BP Φ̄]`` over all arrays (``ω_p`` the array's rate
+relative to B, in B; the ``Uᵀ U / m`` term is the hub's recoil, see :class:`Modes`). The strain
+energy is ``½ ηᵀ K η``.
 
 :func:`beam_mode` gives the integrals of a uniform Euler–Bernoulli cantilever (root, span and
 deflection directions in P), with the shape normalised to 1 at the tip: ``η_k`` is then the
@@ -27,6 +29,7 @@ tip deflection of mode k in metres.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import casadi as ca
@@ -34,7 +37,7 @@ import numpy as np
 
 from .rotation import skew
 
-__all__ = ["beam_mode", "BETA_L", "check_participation", "ModalArray"]
+__all__ = ["beam_mode", "BETA_L", "check_participation", "Modes"]
 
 #: roots of 1 + cos(βL) cosh(βL) = 0: clamped-free Euler–Bernoulli beam, modes 1..6
 BETA_L = (1.8751040687119611, 4.6940911329741745, 7.8547574382376126, 10.995540734875467, 14.137168391046471, 17.278759532088237)
@@ -50,13 +53,27 @@ def _axis(name: str) -> np.ndarray:
 
 
 def cantilever_shape(n: int, s: np.ndarray, length: float) -> np.ndarray:
-    """Mode ``n`` (1-based) of a uniform clamped-free beam at stations ``s`` in [0, L], tip = 1."""
+    """Mode ``n`` (1-based) of a uniform clamped-free beam at stations ``s`` in [0, L], tip = 1.
+
+    ``ψ = cosh x - cos x - σ (sinh x - sin x)``, ``x = β s``, evaluated without cancellation:
+    ``cosh x - σ sinh x = ((1 - σ) eˣ + (1 + σ) e⁻ˣ) / 2`` with
+    ``1 - σ = (sin βL - cos βL - e^(-βL)) / (sinh βL + sin βL)`` (σ → 1 as βL grows, and the
+    direct form loses ~cosh βL of precision: 1.6e7 at mode 6)."""
     bl = BETA_L[n - 1]
-    b = bl / length
-    sigma = (math.cosh(bl) + math.cos(bl)) / (math.sinh(bl) + math.sin(bl))
-    psi = np.cosh(b * s) - np.cos(b * s) - sigma * (np.sinh(b * s) - np.sin(b * s))
-    tip = math.cosh(bl) - math.cos(bl) - sigma * (math.sinh(bl) - math.sin(bl))
-    return psi / tip
+    den = math.sinh(bl) + math.sin(bl)
+    one_m = (math.sin(bl) - math.cos(bl) - math.exp(-bl)) / den  # 1 - σ
+    sigma = 1.0 - one_m
+
+    def psi(x):
+        return 0.5 * (one_m * np.exp(x) + (1.0 + sigma) * np.exp(-x)) - np.cos(x) + sigma * np.sin(x)
+
+    return psi(bl / length * np.asarray(s, float)) / psi(np.array(bl))
+
+
+@functools.lru_cache(maxsize=8)
+def _gauss_legendre(n: int):
+    """Nodes and weights on [-1, 1] (cached: numpy computes them by an eigenvalue problem)."""
+    return np.polynomial.legendre.leggauss(n)
 
 
 def beam_mode(n: int, length: float, mass: float, root, span: str, deflection: str, n_quad: int = 96):
@@ -67,7 +84,7 @@ def beam_mode(n: int, length: float, mass: float, root, span: str, deflection: s
     e_s, e_d = _axis(span), _axis(deflection)
     if abs(e_s @ e_d) > 0.5:
         raise ValueError(f"span {span!r} and deflection {deflection!r} must be different axes")
-    xg, wg = np.polynomial.legendre.leggauss(n_quad)
+    xg, wg = _gauss_legendre(n_quad)
     s = 0.5 * length * (xg + 1.0)
     w = 0.5 * length * wg * (mass / length)  # dm at each station
     psi = cantilever_shape(n, s, length)
@@ -97,44 +114,82 @@ def check_participation(mass: float, J: np.ndarray, modes) -> float:
     return float(np.linalg.eigvalsh(R).min())
 
 
-class ModalArray:
-    """Symbolic modal matrices of one flexible array at one configuration (B components).
+class Modes:
+    """Symbolic modal matrices of all flexible arrays at one configuration (B components).
 
-    ``Delta`` (3 x n), ``D`` (3 x n) as in the module docstring; ``Delta_dot`` the B-frame
-    derivative of ``Delta`` for the array turning at ``ω_p`` (``Ċ_BP = ω̃_p C_BP``); ``M``,
-    ``K``, ``C`` the modal masses, stiffnesses and damping coefficients (n-vectors: diagonal
-    matrices); ``index`` the appendage, ``sl`` its slice of the modal coordinates.
-    (``d/dt(Dᵀ ω_p) = Dᵀ ω̇_p``: the ``Ḋ`` part, ``(ω̃_p D)ᵀ ω_p``, vanishes.)
+    Built from per-array pieces (``add``): ``Delta`` (3 x N) and ``D`` (3 x N) as in the module
+    docstring, ``Delta_dot`` the B-frame derivative of ``Delta`` (``Ċ_BP = ω̃_p C_BP``),
+    ``U = [C_BP Φ̄]`` (3 x N, the translational participations in B) and ``U_dot``; ``M``,
+    ``K``, ``C`` the modal masses, stiffnesses and damping coefficients (N-vectors); ``D_wp`` the
+    stacked ``Dᵀ ω_p``. ``m`` is the station's total mass.
+
+    The elastic displacement moves the system's mass centre by ``U η / m`` unless the hub
+    recoils; it does (no external force), so the velocities are relative to the moving mass
+    centre and T loses ``½ |U η̇|² / m`` (König): the modal mass matrix is
+    ``M_eff = diag(M) - Uᵀ U / m``, which couples the arrays. (``d/dt(Dᵀ ω_p) = Dᵀ ω̇_p``: the
+    ``Ḋ`` part, ``(ω̃_p D)ᵀ ω_p``, vanishes.)
     """
 
-    def __init__(self, index, sl, C_PB, w_p, rho, modes):
+    def __init__(self, m_total):
+        self.m = m_total
+        self._parts = {k: [] for k in ("Delta", "D", "Delta_dot", "U", "U_dot", "D_wp", "M", "K", "C")}
+
+    def add(self, C_PB, w_p, rho, modes):
+        """Append one array: ``modes`` holds per mode Φ̄ (3), Ĥ (3), M, K, C (P axes)."""
         n = modes.numel() // 9
         cols = [modes[9 * j : 9 * j + 9] for j in range(n)]
         C_BP = C_PB.T
-        phi = ca.horzcat(*[ca.mtimes(C_BP, c[0:3]) for c in cols])  # C_BP Φ̄ (3 x n)
-        self.D = ca.horzcat(*[ca.mtimes(C_BP, c[3:6]) for c in cols])
-        rho_x = skew(rho)
-        self.Delta = self.D + ca.mtimes(rho_x, phi)
-        wx = skew(w_p)
-        self.Delta_dot = ca.mtimes(wx, self.D) + ca.mtimes(rho_x, ca.mtimes(wx, phi))
-        self.M = ca.vertcat(*[c[6] for c in cols])
-        self.K = ca.vertcat(*[c[7] for c in cols])
-        self.C = ca.vertcat(*[c[8] for c in cols])
-        self.index = index
-        self.sl = sl
-        self.w_p = w_p
+        U = ca.horzcat(*[ca.mtimes(C_BP, c[0:3]) for c in cols])  # C_BP Φ̄ (3 x n)
+        D = ca.horzcat(*[ca.mtimes(C_BP, c[3:6]) for c in cols])
+        rho_x, wx = skew(rho), skew(w_p)
+        U_dot = ca.mtimes(wx, U)
+        P = self._parts
+        P["U"].append(U)
+        P["U_dot"].append(U_dot)
+        P["D"].append(D)
+        P["Delta"].append(D + ca.mtimes(rho_x, U))
+        P["Delta_dot"].append(ca.mtimes(wx, D) + ca.mtimes(rho_x, U_dot))
+        P["D_wp"].append(ca.mtimes(D.T, w_p))
+        for j, name in ((6, "M"), (7, "K"), (8, "C")):
+            P[name].append(ca.vertcat(*[c[j] for c in cols]))
 
+    def done(self):
+        for k, v in self._parts.items():
+            setattr(self, k, (ca.horzcat if k in ("Delta", "D", "Delta_dot", "U", "U_dot") else ca.vertcat)(*v))
+        del self._parts
+        return self
+
+    # -- the modal mass matrix M_eff = diag(M) - UᵀU/m ---------------------------------
+    def mass_times(self, v):
+        return self.M * v - ca.mtimes(self.U.T, ca.mtimes(self.U, v)) / self.m
+
+    def mass_rate_times(self, v):
+        """``Ṁ_eff v = -(U̇ᵀ U + Uᵀ U̇) v / m``."""
+        return -(ca.mtimes(self.U_dot.T, ca.mtimes(self.U, v)) + ca.mtimes(self.U.T, ca.mtimes(self.U_dot, v))) / self.m
+
+    def solve(self, X):
+        """``M_eff⁻¹ X`` by the Woodbury identity: one 3x3 inverse,
+        ``M_eff⁻¹ = M⁻¹ + M⁻¹Uᵀ (m E - U M⁻¹ Uᵀ)⁻¹ U M⁻¹`` (M diagonal)."""
+        from .formulations.base import inv3
+
+        inv_m = ca.diag(1.0 / self.M)
+        Y = ca.mtimes(inv_m, X)
+        MU = ca.mtimes(inv_m, self.U.T)  # N x 3
+        G = self.m * ca.SX.eye(3) - ca.mtimes(self.U, MU)
+        return Y + ca.mtimes(MU, ca.mtimes(inv3(G), ca.mtimes(self.U, Y)))
+
+    # -- energies and momenta -------------------------------------------------------------
     def momentum(self, w, eta_dot):
-        """``p_η = M η̇ + Δᵀ ω + Dᵀ ω_p`` (= ∂T/∂η̇)."""
-        return self.M * eta_dot + ca.mtimes(self.Delta.T, w) + ca.mtimes(self.D.T, self.w_p)
+        """``p_η = M_eff η̇ + Δᵀ ω + Dᵀ ω_p`` (= ∂T/∂η̇)."""
+        return self.mass_times(eta_dot) + ca.mtimes(self.Delta.T, w) + self.D_wp
 
     def momentum_rate(self, eta, eta_dot):
         """``ṗ_η = -K η - C η̇`` (Lagrange Eq. 31b: T_e has no η, V = ½ ηᵀKη, Rayleigh damping)."""
         return -self.K * eta - self.C * eta_dot
 
     def kinetic(self, w, eta_dot):
-        """``T_e = ½ η̇ᵀ M η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` [J]."""
-        return ca.dot(eta_dot, self.momentum(w, eta_dot) - 0.5 * self.M * eta_dot)
+        """``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` [J]."""
+        return ca.dot(eta_dot, self.momentum(w, eta_dot) - 0.5 * self.mass_times(eta_dot))
 
     def strain(self, eta):
         """``½ ηᵀ K η`` [J]."""

@@ -122,6 +122,8 @@ class ParamLayout:
             if structure.n_modes(k):
                 add(f"rho{k}", 3)  # array mass centre from O, B axes [m]
                 add(f"modes{k}", 9 * structure.n_modes(k))  # per mode: Φ̄ (3), Ĥ (3), M, K, C (P axes)
+        if structure.modes:
+            add("mtot", 1)  # total mass [kg]: the hub's recoil when the arrays bend
         if structure.orbit:
             add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
         if structure.harmonic:
@@ -219,6 +221,8 @@ class StationModel:
             p[L["sun"]] = sun_direction_N(scene.sun, incl)
         if self.cmg is not None:
             p[L["cmg"]] = self.cmg.params(scene.cmg)
+        if self.flexible:
+            p[L["mtot"]] = sum(masses)
         for k, _ in self.flexible:
             a = scene.appendage[k]
             p[L[f"rho{k}"]] = np.array(a.cm) - r_O
@@ -339,31 +343,33 @@ class StationModel:
         return xe[self.n_extra + self.n_modes : self.n_extra + 2 * self.n_modes]
 
     def modal(self, arrays, p):
-        """Per flexible array its :class:`~stationbed.flex.ModalArray` (empty for a rigid scene)."""
-        from ..flex import ModalArray
+        """The :class:`~stationbed.flex.Modes` of the flexible arrays (None for a rigid scene)."""
+        from ..flex import Modes
 
+        if not self.flexible:
+            return None
         L = self.layout
-        return [ModalArray(k, sl, arrays[k][4], arrays[k][1], p[L[f"rho{k}"]], p[L[f"modes{k}"]]) for k, sl in self.flexible]
+        modes = Modes(p[L["mtot"]][0])
+        for k, _ in self.flexible:
+            modes.add(arrays[k][4], arrays[k][1], p[L[f"rho{k}"]], p[L[f"modes{k}"]])
+        return modes.done()
 
     def velocities(self, H, p_eta, arrays, modal, I, xe, p):
         """``(ω, η̇)`` from the total momentum ``H`` about O and the modal momenta ``p_η``.
 
-        Solves ``[I Δ; Δᵀ M] [ω; η̇] = [H - Σ I_p ω_p - h; p_η - Dᵀ ω_p]`` by the Schur
-        complement on the (diagonal) modal masses: ``(I - Σ Δ M⁻¹ Δᵀ) ω = ...``.
+        Solves ``[I Δ; Δᵀ M_eff] [ω; η̇] = [H - Σ I_p ω_p - h; p_η - Dᵀ ω_p]`` by the Schur
+        complement on the modal block: ``(I - Δ M_eff⁻¹ Δᵀ) ω = ...`` (``M_eff⁻¹`` by
+        :meth:`~stationbed.flex.Modes.solve`).
         """
         rest = H - self.h(xe, p)
         for I_p, w_p, *_ in arrays:
             rest = rest - ca.mtimes(I_p, w_p)
-        A = I
-        bs = []
-        for f in modal:
-            b = (p_eta[f.sl] - ca.mtimes(f.D.T, f.w_p)) / f.M
-            rest = rest - ca.mtimes(f.Delta, b)
-            A = A - ca.mtimes(f.Delta, ca.mtimes(ca.diag(1.0 / f.M), f.Delta.T))
-            bs.append(b)
-        w = ca.mtimes(inv3(A), rest)
-        eta_dot = [b - ca.mtimes(f.Delta.T, w) / f.M for f, b in zip(modal, bs)]
-        return w, (ca.vertcat(*eta_dot) if eta_dot else ca.SX(0, 1))
+        if modal is None:
+            return ca.mtimes(inv3(I), rest), ca.SX(0, 1)
+        sol = modal.solve(ca.horzcat(p_eta - modal.D_wp, modal.Delta.T))  # M_eff⁻¹ [b, Δᵀ]
+        b, MD = sol[:, 0], sol[:, 1:4]
+        w = ca.mtimes(inv3(I - ca.mtimes(modal.Delta, MD)), rest - ca.mtimes(modal.Delta, b))
+        return w, b - ca.mtimes(MD, w)
 
     def inertia(self, t, p, arrays):
         """Total inertia about O, B axes, at time t [kg m²]."""
@@ -496,8 +502,8 @@ class Formulation:
 
     @staticmethod
     def modal_momenta(modal, w, eta_dot):
-        """``p_η`` of every flexible array, stacked."""
-        return ca.vertcat(*[f.momentum(w, eta_dot[f.sl]) for f in modal])
+        """``p_η`` of the flexible arrays (none for a rigid scene)."""
+        return ca.SX(0, 1) if modal is None else modal.momentum(w, eta_dot)
 
     # -- public, checked -----------------------------------------------------------------
     def rhs(self, t, x, u, p):
@@ -565,9 +571,9 @@ class Formulation:
         H = ca.mtimes(m.inertia(t, p, arrays), omega) + m.h(xe, p)
         for I_p, w_p, *_ in arrays:
             H = H + ca.mtimes(I_p, w_p)
-        eta_dot = m.modal_state(xe)
-        for f in m.modal(arrays, p):
-            H = H + ca.mtimes(f.Delta, eta_dot[f.sl])
+        modal = m.modal(arrays, p)
+        if modal is not None:
+            H = H + ca.mtimes(modal.Delta, m.modal_state(xe))
         return H
 
     def H_O_B(self, t, x, p):
@@ -587,19 +593,15 @@ class Formulation:
         for I_p, w_p, *_ in arrays:
             T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
         if m.n_modes:
-            eta_dot = self.modal_rates(t, x, p)
-            for f in m.modal(arrays, p):
-                T = T + f.kinetic(w, eta_dot[f.sl])
+            T = T + m.modal(arrays, p).kinetic(w, self.modal_rates(t, x, p))
         return T
 
     def strain_energy(self, t, x, p):
         """Elastic strain energy of the arrays ``½ ηᵀ K η`` [J] (0 for a rigid scene)."""
         m = self.model
-        eta = m.eta(x[7:])
-        U = ca.SX(0)
-        for f in m.modal(self.arrays(t, x, p), p):
-            U = U + f.strain(eta[f.sl])
-        return U
+        if not m.n_modes:
+            return ca.SX(0)
+        return m.modal(self.arrays(t, x, p), p).strain(m.eta(x[7:]))
 
     # -- plug-in -------------------------------------------------------------------------
     def _rhs(self, t, x, u, p):  # pragma: no cover - abstract
@@ -620,9 +622,10 @@ class OmegaStateForm(Formulation):
     besides its share of ``I ω̇`` and ``ω × I ω``).
 
     Flexible arrays (the same for both forms: the modal terms are not where they differ) add
-    ``Σ Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Σ Δ η̇`` in H), and
-    Lagrange's equation of the modes ``M η̈ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
-    two are solved together by the Schur complement on the diagonal modal masses.
+    ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H), and Lagrange's
+    equation of the modes ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
+    two are solved together by the Schur complement on the modal block (``M_eff⁻¹`` by the
+    Woodbury identity, :meth:`stationbed.flex.Modes.solve`).
     """
 
     core_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
@@ -648,19 +651,18 @@ class OmegaStateForm(Formulation):
         if not m.n_modes:
             return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs)), w
         eta, eta_dot = m.eta(xe), m.modal_state(xe)
-        modal = m.modal(arrays, p)
-        A, r_eta = I, []
-        for f in modal:
-            ed = eta_dot[f.sl]
-            rhs = rhs - ca.mtimes(f.Delta_dot, ed) - ca.cross(w, ca.mtimes(f.Delta, ed))
-            wd_p = arrays[f.index][2]
-            r = f.momentum_rate(eta[f.sl], ed) - ca.mtimes(f.Delta_dot.T, w) - ca.mtimes(f.D.T, wd_p)
-            r_eta.append(r)
-            rhs = rhs - ca.mtimes(f.Delta, r / f.M)
-            A = A - ca.mtimes(f.Delta, ca.mtimes(ca.diag(1.0 / f.M), f.Delta.T))
-        w_dot = ca.mtimes(inv3(A), rhs)
-        eta_ddot = ca.vertcat(*[(r - ca.mtimes(f.Delta.T, w_dot)) / f.M for f, r in zip(modal, r_eta)])
+        f = m.modal(arrays, p)
+        rhs = rhs - ca.mtimes(f.Delta_dot, eta_dot) - ca.cross(w, ca.mtimes(f.Delta, eta_dot))
+        wd_p = ca.vertcat(*[ca.mtimes(f_D.T, arrays[k][2]) for f_D, (k, _) in zip(self._split(f.D), m.flexible)])
+        r_eta = f.momentum_rate(eta, eta_dot) - ca.mtimes(f.Delta_dot.T, w) - wd_p - f.mass_rate_times(eta_dot)
+        sol = f.solve(ca.horzcat(r_eta, f.Delta.T))  # M_eff⁻¹ [r_η, Δᵀ]
+        w_dot = ca.mtimes(inv3(I - ca.mtimes(f.Delta, sol[:, 1:4])), rhs - ca.mtimes(f.Delta, sol[:, 0]))
+        eta_ddot = sol[:, 0] - ca.mtimes(sol[:, 1:4], w_dot)
         return ca.vertcat(quat_kinematics(x[0:4], w), w_dot), w, ca.vertcat(eta_dot, eta_ddot)
+
+    def _split(self, D):
+        """Per flexible array its columns of a 3 x N modal matrix."""
+        return [D[:, sl] for _, sl in self.model.flexible]
 
     def _array_term(self, w, I_p, w_p, wd_p):  # pragma: no cover - abstract
         raise NotImplementedError

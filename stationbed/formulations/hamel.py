@@ -36,7 +36,7 @@ Flexible arrays (stationbed/flex.py) add the elastic kinetic energy
 Rayleigh dissipation ``R = ½ η̇ᵀ C η̇``; the modal coordinates obey Lagrange's equation (Quinn
 Eq. 31b) ``d/dt(∂T/∂η̇) - ∂T/∂η + ∂V/∂η + ∂R/∂η̇ = 0``. With velocities ``v = [ω; η̇]`` and
 ``P = ∂T/∂v`` everything above holds with p → P (plus ``(∂P/∂η) η̇`` in Ṗ), and the mass matrix
-``∂²T/∂v² = [I Δ; Δᵀ M]`` is solved by the Schur complement on its diagonal modal block. The
+``∂²T/∂v² = [I Δ; Δᵀ M_eff]`` is solved by the Schur complement on its modal block. The
 states then continue ``..., η, η̇`` after the extra states.
 """
 
@@ -92,9 +92,9 @@ class HamelForm(Formulation):
         T = 0.5 * ca.dot(w, ca.mtimes(I, w)) + ca.dot(w, m.h(xe, p))
         for I_p, w_p, *_ in arrays:
             T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
-        eta_dot = m.modal_state(xe)
-        for f in m.modal(arrays, p):  # elastic: ½ η̇ᵀMη̇ + η̇ᵀ(Δᵀω + Dᵀω_p)
-            T = T + f.kinetic(w, eta_dot[f.sl])
+        modal = m.modal(arrays, p)
+        if modal is not None:  # elastic: ½ η̇ᵀ M_eff η̇ + η̇ᵀ(Δᵀω + Dᵀω_p)
+            T = T + modal.kinetic(w, m.modal_state(xe))
         return T
 
     def potential(self, t, q, C, xe, p, u=None):
@@ -110,19 +110,17 @@ class HamelForm(Formulation):
             R_hat_B = ca.mtimes(C, R_hat_N)
             I = m.inertia(t, p, arrays)
             V = 1.5 * n * n * ca.dot(R_hat_B, ca.mtimes(I, R_hat_B))
-        eta = m.eta(xe)
-        for f in m.modal(arrays, p):
-            V = V + f.strain(eta[f.sl])
+        if m.n_modes:
+            V = V + m.modal(arrays, p).strain(m.eta(xe))
         return V
 
     def dissipation(self, t, q, xe, p, u=None):
         """Rayleigh's dissipation function ``½ η̇ᵀ C η̇`` of the modal damping [W/2]."""
         m = self.model
+        if not m.n_modes:
+            return ca.SX(0)
         eta_dot = m.modal_state(xe)
-        R = ca.SX(0)
-        for f in m.modal(m.arrays(t, q, xe, p, u=u), p):
-            R = R + 0.5 * ca.dot(eta_dot[f.sl], f.C * eta_dot[f.sl])
-        return R
+        return 0.5 * ca.dot(eta_dot, m.modal(m.arrays(t, q, xe, p, u=u), p).C * eta_dot)
 
     # -- equations by AD ----------------------------------------------------------------
     def _build_terms(self) -> ca.Function:
@@ -173,7 +171,8 @@ class HamelForm(Formulation):
 
     def _rhs(self, t, x, u, p):
         """``∂²T/∂v² v̇ = [M - ω × p_ω + ∂T/∂C - ∂V/∂C; ∂(T-V)/∂η - ∂R/∂η̇] - Ṗ|_v̇=0``, solved by the
-        Schur complement on the modal block (normal modes: ``∂²T/∂η̇²`` is diagonal)."""
+        Schur complement on the modal block ``∂²T/∂η̇²`` (a symbolic linear solve of that block:
+        the hub's recoil couples the arrays' modes, so it is not diagonal)."""
         m = self.model
         N = m.n_modes
         q, w, xe = x[0:4], x[4:7], x[7:]
@@ -189,10 +188,9 @@ class HamelForm(Formulation):
             return ca.vertcat(quat_kinematics(q, w), ca.mtimes(inv3(I), rhs)), w
         r_eta = dL_deta - dR - Pdot0[3:]
         B = Mvv[0:3, 3:]
-        m_inv = 1.0 / ca.diag(Mvv[3:, 3:])
-        A = I - ca.mtimes(B, ca.mtimes(ca.diag(m_inv), B.T))
-        w_dot = ca.mtimes(inv3(A), rhs - ca.mtimes(B, m_inv * r_eta))
-        eta_ddot = m_inv * (r_eta - ca.mtimes(B.T, w_dot))
+        sol = ca.solve(Mvv[3:, 3:], ca.horzcat(r_eta, B.T))  # the modal block, as AD gives it
+        w_dot = ca.mtimes(inv3(I - ca.mtimes(B, sol[:, 1:4])), rhs - ca.mtimes(B, sol[:, 0]))
+        eta_ddot = sol[:, 0] - ca.mtimes(sol[:, 1:4], w_dot)
         return ca.vertcat(quat_kinematics(q, w), w_dot), w, ca.vertcat(eta_dot, eta_ddot)
 
     def _omega(self, t, x, p):

@@ -50,7 +50,7 @@ class MomentumForm(Formulation):
         if not m.n_modes:
             return core_dot, w
         eta = m.eta(x[7:])
-        p_dot = ca.vertcat(*[f.momentum_rate(eta[f.sl], eta_dot[f.sl]) for f in modal])
+        p_dot = modal.momentum_rate(eta, eta_dot)
         return core_dot, w, ca.vertcat(eta_dot, p_dot)
 
     def _core(self, t, q, omega, xe, p):
