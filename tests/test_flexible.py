@@ -745,22 +745,18 @@ def test_rate_step_jump_matches_point_masses(form):
 # ---------------------------------------------------------------------------------------------
 
 
+def _node(d, path):
+    for k in path:
+        d = d[k]
+    return d
+
+
 def _set(path, **kw):
-    def mutate(d):
-        node = d
-        for k in path:
-            node = node[k]
-        node.update(kw)
-    return mutate
+    return lambda d: _node(d, path).update(kw)
 
 
 def _pop(path, key):
-    def mutate(d):
-        node = d
-        for k in path:
-            node = node[k]
-        node.pop(key)
-    return mutate
+    return lambda d: _node(d, path).pop(key)
 
 
 MODE_B = ("appendage", 1, "mode", 0)

@@ -656,6 +656,16 @@ def test_hold_sun_vector_has_the_scene_beta_and_noon(hold_run):
     assert _angle_deg(in_plane, R_noon) == pytest.approx(0.0, abs=ANGLE_F32_TOL_DEG)
 
 
+def assert_every_panel_and_series_shown(views, telemetry):
+    """Every time-series panel shows at least one logged series, and every series is in a panel."""
+    shown = set()
+    for v in (v for v in views if v["class"] == "TimeSeries"):
+        s = shown_by(v, telemetry)
+        assert s, v
+        shown |= s
+    assert shown == set(telemetry)
+
+
 def test_hold_blueprint_shows_every_series_in_some_panel(hold_run):
     """3-D view plus time-series panels; every panel shows at least one logged series and every
     logged telemetry entity is in a panel (the control column holds the issue-3 series)."""
@@ -663,12 +673,7 @@ def test_hold_blueprint_shows_every_series_in_some_panel(hold_run):
     views = blueprint_views(path)
     assert [v["origin"] for v in views if v["class"] == "3D"] == ["world"]
     telemetry = [e for e in data if e.startswith("telemetry/")]
-    shown = set()
-    for v in (v for v in views if v["class"] == "TimeSeries"):
-        s = shown_by(v, telemetry)
-        assert s, v
-        shown |= s
-    assert shown == set(telemetry)
+    assert_every_panel_and_series_shown(views, telemetry)
     # the angle panel shows the angles only, the tracking errors (deg) have their own
     (angles,) = [v for v in views if v["name"] == "array angles [rad]"]
     assert shown_by(angles, telemetry) == {"telemetry/arrays/stbd_pair", "telemetry/arrays/port_pair"}
@@ -822,12 +827,7 @@ def test_flex_blueprint_has_a_modes_column_and_shows_every_series(flex_run):
     _, _, path, data = flex_run
     views = blueprint_views(path)
     telemetry = [e for e in data if e.startswith("telemetry/")]
-    shown = set()
-    for v in (v for v in views if v["class"] == "TimeSeries"):
-        s = shown_by(v, telemetry)
-        assert s, v
-        shown |= s
-    assert shown == set(telemetry)
+    assert_every_panel_and_series_shown(views, telemetry)
     by_name = {v["name"]: shown_by(v, telemetry) for v in views}
     assert by_name["modal coordinates eta (beam modes: tip deflection [m])"] == {"telemetry/modes/stbd/eta", "telemetry/modes/port/eta"}
     assert by_name["modal rates etadot"] == {"telemetry/modes/stbd/etadot", "telemetry/modes/port/etadot"}
