@@ -5,6 +5,8 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
+import numpy as np
+
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
@@ -12,6 +14,15 @@ SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 
 def scenario_ids():
     return [p.stem for p in SCENARIOS]
+
+
+def C_PB(alpha, beta):
+    """``Ax(β) Ay(α)`` (DESIGN §4), written out independently of the library; complex angles
+    allowed (complex-step derivatives)."""
+    ca_, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
+    Ay = np.array([[ca_, 0, -sa], [0, 1, 0], [sa, 0, ca_]])
+    Ax = np.array([[1, 0, 0], [0, cb, sb], [0, -sb, cb]])
+    return Ax @ Ay
 
 
 RIGID = {

@@ -35,6 +35,7 @@ from numpy.testing import assert_allclose
 from scipy.linalg import eigh
 from scipy.optimize import brentq, least_squares
 
+from scenes import C_PB
 from stationbed import FORMULATIONS, SceneError, simulate
 from stationbed.check import check_scene
 from stationbed.flex import beam_mode
@@ -82,14 +83,6 @@ def cantilever(n: int, s, length: float):
         return np.cosh(b * x) - np.cos(b * x) - k * (np.sinh(b * x) - np.sin(b * x))
 
     return w(np.asarray(s, float)) / w(length)
-
-
-def C_PB(alpha, beta):
-    """``Ax(β) Ay(α)`` (DESIGN §4), written out; complex angles allowed (complex step)."""
-    ca_, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
-    Ay = np.array([[ca_, 0, -sa], [0, 1, 0], [sa, 0, ca_]])
-    Ax = np.array([[1, 0, 0], [0, cb, sb], [0, -sb, cb]])
-    return Ax @ Ay
 
 
 def omega_PB_P(alpha, beta, alpha_dot, beta_dot, h=1e-20):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from scenes import ROOT
+from scenes import ROOT, C_PB
 from stationbed import FORMULATIONS, load_scene, simulate
 from stationbed.check import CHECK_GAIN, check_scene, compare
 from stationbed.scene import scene_from_dict
@@ -36,13 +36,6 @@ OMEGA_TOL = 5e-11  # rad/s
 # ---------------------------------------------------------------------------------------
 # the closed form, from first principles
 # ---------------------------------------------------------------------------------------
-
-
-def C_PB(alpha, beta):
-    ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
-    Ay = np.array([[ca, 0, -sa], [0, 1, 0], [sa, 0, ca]])
-    Ax = np.array([[1, 0, 0], [0, cb, sb], [0, -sb, cb]])
-    return Ax @ Ay
 
 
 def omega_PB_P(alpha, beta, alpha_dot, beta_dot, h=1e-6):
