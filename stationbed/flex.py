@@ -120,8 +120,9 @@ class Modes:
     Built from per-array pieces (``add``): ``Delta`` (3 x N) and ``D`` (3 x N) as in the module
     docstring, ``Delta_dot`` the B-frame derivative of ``Delta`` (``Ċ_BP = ω̃_p C_BP``),
     ``U = [C_BP Φ̄]`` (3 x N, the translational participations in B) and ``U_dot``; ``M``,
-    ``K``, ``C`` the modal masses, stiffnesses and damping coefficients (N-vectors); ``D_wp`` the
-    stacked ``Dᵀ ω_p``. ``m`` is the station's total mass.
+    ``K``, ``C`` the modal masses, stiffnesses and damping coefficients (N-vectors); ``D_wp`` and
+    ``D_wdp`` the stacked ``Dᵀ ω_p`` and ``Dᵀ ω̇_p`` (the latter only when every array's ``ω̇_p``
+    was given). ``m`` is the station's total mass.
 
     The elastic displacement moves the system's mass centre by ``U η / m`` unless the hub
     recoils; it does (no external force), so the velocities are relative to the moving mass
@@ -132,10 +133,11 @@ class Modes:
 
     def __init__(self, m_total):
         self.m = m_total
-        self._parts = {k: [] for k in ("Delta", "D", "Delta_dot", "U", "U_dot", "D_wp", "M", "K", "C")}
+        self._parts = {k: [] for k in ("Delta", "D", "Delta_dot", "U", "U_dot", "D_wp", "D_wdp", "M", "K", "C")}
 
-    def add(self, C_PB, w_p, rho, modes):
-        """Append one array: ``modes`` holds per mode Φ̄ (3), Ĥ (3), M, K, C (P axes)."""
+    def add(self, C_PB, w_p, rho, modes, wd_p=None):
+        """Append one array: ``modes`` holds per mode Φ̄ (3), Ĥ (3), M, K, C (P axes); ``wd_p``
+        its relative rate's B-frame derivative, when known."""
         n = modes.numel() // 9
         cols = [modes[9 * j : 9 * j + 9] for j in range(n)]
         C_BP = C_PB.T
@@ -150,11 +152,16 @@ class Modes:
         P["Delta"].append(D + ca.mtimes(rho_x, U))
         P["Delta_dot"].append(ca.mtimes(wx, D) + ca.mtimes(rho_x, U_dot))
         P["D_wp"].append(ca.mtimes(D.T, w_p))
+        if wd_p is not None:
+            P["D_wdp"].append(ca.mtimes(D.T, wd_p))
         for j, name in ((6, "M"), (7, "K"), (8, "C")):
             P[name].append(ca.vertcat(*[c[j] for c in cols]))
 
     def done(self):
+        n_arrays = len(self._parts["D"])
         for k, v in self._parts.items():
+            if k == "D_wdp" and len(v) < n_arrays:
+                v = []  # some ω̇_p unknown: not available
             setattr(self, k, (ca.horzcat if k in ("Delta", "D", "Delta_dot", "U", "U_dot") else ca.vertcat)(*v))
         del self._parts
         return self

@@ -333,6 +333,22 @@ class StationModel:
             out.append((I_p, ca.mtimes(C_BP, w_P), wd_p, ang, C_PB, J, w_P))
         return out
 
+    def kinetic_energy(self, t, q, w, xe, p, u=None, h_coupling=False):
+        """``T = ½ωᵀIω + Σ (ωᵀI_pω_p + ½ω_pᵀI_pω_p) + T_e`` [J] at rate ``w`` (``xe`` with ``η̇``,
+        as for :meth:`Formulation.state`); ``T_e`` the arrays' elastic kinetic energy
+        (:meth:`stationbed.flex.Modes.kinetic`). ``h_coupling`` adds ``ωᵀh``, the only part of
+        the CMG rotors' energy that depends on ω (what the ``hamel`` form differentiates)."""
+        arrays = self.arrays(t, q, xe, p, u=u)
+        T = 0.5 * ca.dot(w, ca.mtimes(self.inertia(t, p, arrays), w))
+        if h_coupling:
+            T = T + ca.dot(w, self.h(xe, p))
+        for I_p, w_p, *_ in arrays:
+            T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
+        modal = self.modal(arrays, p)
+        if modal is not None:
+            T = T + modal.kinetic(w, self.modal_state(xe))
+        return T
+
     # -- flexible arrays ----------------------------------------------------------------
     def eta(self, xe):
         """The modal coordinates ``η`` from the extra states ``xe`` (= x[7:])."""
@@ -351,7 +367,7 @@ class StationModel:
         L = self.layout
         modes = Modes(p[L["mtot"]][0])
         for k, _ in self.flexible:
-            modes.add(arrays[k][4], arrays[k][1], p[L[f"rho{k}"]], p[L[f"modes{k}"]])
+            modes.add(arrays[k][4], arrays[k][1], p[L[f"rho{k}"]], p[L[f"modes{k}"]], wd_p=arrays[k][2])
         return modes.done()
 
     def velocities(self, H, p_eta, arrays, modal, I, xe, p):
@@ -585,16 +601,8 @@ class Formulation:
 
     def kinetic_energy(self, t, x, p):
         """Kinetic energy about O of the structure (body, arrays and their elastic motion; CMG
-        rotors excluded): ``½ωᵀIω + Σ ωᵀI_pω_p + ½ Σ ω_pᵀI_pω_p + Σ T_e`` [J]."""
-        m = self.model
-        arrays = self.arrays(t, x, p)
-        w = self._omega(t, x, p)
-        T = 0.5 * ca.dot(w, ca.mtimes(m.inertia(t, p, arrays), w))
-        for I_p, w_p, *_ in arrays:
-            T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
-        if m.n_modes:
-            T = T + m.modal(arrays, p).kinetic(w, self.modal_rates(t, x, p))
-        return T
+        rotors excluded) [J]: :meth:`StationModel.kinetic_energy` at the state's rates."""
+        return self.model.kinetic_energy(t, x[0:4], self._omega(t, x, p), self.physical_extra(t, x, p), p)
 
     def strain_energy(self, t, x, p):
         """Elastic strain energy of the arrays ``½ ηᵀ K η`` [J] (0 for a rigid scene)."""
@@ -653,16 +661,11 @@ class OmegaStateForm(Formulation):
         eta, eta_dot = m.eta(xe), m.modal_state(xe)
         f = m.modal(arrays, p)
         rhs = rhs - ca.mtimes(f.Delta_dot, eta_dot) - ca.cross(w, ca.mtimes(f.Delta, eta_dot))
-        wd_p = ca.vertcat(*[ca.mtimes(f_D.T, arrays[k][2]) for f_D, (k, _) in zip(self._split(f.D), m.flexible)])
-        r_eta = f.momentum_rate(eta, eta_dot) - ca.mtimes(f.Delta_dot.T, w) - wd_p - f.mass_rate_times(eta_dot)
+        r_eta = f.momentum_rate(eta, eta_dot) - ca.mtimes(f.Delta_dot.T, w) - f.D_wdp - f.mass_rate_times(eta_dot)
         sol = f.solve(ca.horzcat(r_eta, f.Delta.T))  # M_eff⁻¹ [r_η, Δᵀ]
         w_dot = ca.mtimes(inv3(I - ca.mtimes(f.Delta, sol[:, 1:4])), rhs - ca.mtimes(f.Delta, sol[:, 0]))
         eta_ddot = sol[:, 0] - ca.mtimes(sol[:, 1:4], w_dot)
         return ca.vertcat(quat_kinematics(x[0:4], w), w_dot), w, ca.vertcat(eta_dot, eta_ddot)
-
-    def _split(self, D):
-        """Per flexible array its columns of a 3 x N modal matrix."""
-        return [D[:, sl] for _, sl in self.model.flexible]
 
     def _array_term(self, w, I_p, w_p, wd_p):  # pragma: no cover - abstract
         raise NotImplementedError

@@ -32,7 +32,7 @@ through ``V``: the model's torque is taken from a twin model whose structure has
 ``gravity_gradient=False`` (same parameter layout). State ``[q_BN (4), omega_BN_B (3)]``.
 
 Flexible arrays (stationbed/flex.py) add the elastic kinetic energy
-``T_e = ½ η̇ᵀ M η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` to T, the strain energy ``½ ηᵀ K η`` to V and a
+``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` to T, the strain energy ``½ ηᵀ K η`` to V and a
 Rayleigh dissipation ``R = ½ η̇ᵀ C η̇``; the modal coordinates obey Lagrange's equation (Quinn
 Eq. 31b) ``d/dt(∂T/∂η̇) - ∂T/∂η + ∂V/∂η + ∂R/∂η̇ = 0``. With velocities ``v = [ω; η̇]`` and
 ``P = ∂T/∂v`` everything above holds with p → P (plus ``(∂P/∂η) η̇`` in Ṗ), and the mass matrix
@@ -85,17 +85,10 @@ class HamelForm(Formulation):
     # -- the user-facing energies ---------------------------------------------------------
     def kinetic(self, t, q, C, w, xe, p, u=None):
         """``T(ω, C, t, xe, η̇)`` [J] (array kinematics without ω do not depend on q or C);
-        ``xe`` holds the model's extra states, then ``η`` and ``η̇``."""
-        m = self.model
-        arrays = m.arrays(t, q, xe, p, u=u)
-        I = m.inertia(t, p, arrays)
-        T = 0.5 * ca.dot(w, ca.mtimes(I, w)) + ca.dot(w, m.h(xe, p))
-        for I_p, w_p, *_ in arrays:
-            T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
-        modal = m.modal(arrays, p)
-        if modal is not None:  # elastic: ½ η̇ᵀ M_eff η̇ + η̇ᵀ(Δᵀω + Dᵀω_p)
-            T = T + modal.kinetic(w, m.modal_state(xe))
-        return T
+        ``xe`` holds the model's extra states, then ``η`` and ``η̇``. The structure's energy
+        (:meth:`StationModel.kinetic_energy`) plus ``ωᵀh``: the rotors' own energy does not
+        depend on ω or C and drops out."""
+        return self.model.kinetic_energy(t, q, w, xe, p, u=u, h_coupling=True)
 
     def potential(self, t, q, C, xe, p, u=None):
         """Gravity-gradient potential ``(3/2) n² R̂_Bᵀ I R̂_B``, ``R̂_B = C R̂_N`` (0 off orbit),
