@@ -75,7 +75,7 @@ def _reset_hwm() -> bool:
 def _runner(name: str, n: int, threads: int, rtol: float | None = None):
     """(warm-up, full run) callables of a path."""
     import stationbed
-    from stationbed.batch import disperse_initial, simulate_batch
+    from stationbed.run.batch import disperse_initial, simulate_batch
 
     if name == "open_loop":
         scene = stationbed.load_scene(GG_SCENE)

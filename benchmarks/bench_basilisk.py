@@ -108,7 +108,7 @@ def _bsk_base(data: dict, step: float):
     from Basilisk.utilities import RigidBodyKinematics as rbk
     from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody
 
-    from stationbed.simulate import initial_state
+    from stationbed.run.initial import initial_state
     from stationbed.scene import scene_from_dict
 
     scene = scene_from_dict(data)
@@ -185,7 +185,7 @@ def _on_grid(t_ref, q_ref, t, q):
 
 
 def _max_angle(t_a, q_a, t_b, q_b) -> float:
-    from stationbed.rotation import rotation_angle
+    from stationbed.core.rotation import rotation_angle
 
     qa, qb = _on_grid(t_a, q_a, t_b, q_b)
     return float(np.max(rotation_angle(qa, qb)))
@@ -378,8 +378,8 @@ def basilisk_closed_loop(data: dict, pd_bandwidth: float, pd_damping: float):
 
 def closed_loop(repeats: int) -> list[dict]:
     import stationbed
-    from stationbed.environment import q_ON
-    from stationbed.rotation import rotation_angle
+    from stationbed.model.environment import q_ON
+    from stationbed.core.rotation import rotation_angle
     from stationbed.scene import scene_from_dict
 
     data = hold_scene()

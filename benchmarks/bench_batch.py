@@ -52,8 +52,8 @@ sys.path.insert(0, str(ROOT))
 
 import _mem  # noqa: E402
 import stationbed  # noqa: E402
-from stationbed.batch import disperse_initial, simulate_batch  # noqa: E402
-from stationbed.rotation import rotation_angle  # noqa: E402
+from stationbed.run.batch import disperse_initial, simulate_batch  # noqa: E402
+from stationbed.core.rotation import rotation_angle  # noqa: E402
 
 SCENE = ROOT / "scenarios" / "iss_lvlh_gravity_gradient.toml"
 TARGET_S = 60.0

@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import stationbed  # noqa: E402
-from stationbed.rotation import rotation_angle  # noqa: E402
+from stationbed.core.rotation import rotation_angle  # noqa: E402
 
 DEFAULT_SCENE = ROOT / "scenarios" / "iss_lvlh_hold.toml"
 TARGET_PYTHON_S = 0.3

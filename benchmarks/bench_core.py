@@ -115,7 +115,8 @@ def flexible_scene(scene):
 
 
 def _state_size(scene, form: str, integrator: str) -> int:
-    from stationbed.simulate import Structure, build_system
+    from stationbed.model import Structure
+    from stationbed.run.system import build_system
 
     return int(build_system(Structure.of(scene), form, integrator).formulation.nx)
 

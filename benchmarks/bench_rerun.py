@@ -68,9 +68,9 @@ class _TimedSink:
 
 def _variants(scene, tmp: Path, inside: dict):
     import stationbed
-    from stationbed.rerun_log import RrdSink, TeeSink
-    from stationbed.simulate import trajectory_columns
-    from stationbed.trajectory import CsvSink
+    from stationbed.output.rerun.sink import RrdSink, TeeSink
+    from stationbed.run.rows import trajectory_columns
+    from stationbed.output.csv import CsvSink
 
     cols = trajectory_columns(scene)
     csv_path, rrd_path = tmp / "trajectory.csv", tmp / "recording.rrd"
@@ -120,7 +120,7 @@ def _interleaved_medians_ms(fns: dict, repeats: int) -> tuple[dict, dict]:
 def _parts_ms(scene, traj, tmp: Path, repeats: int) -> dict:
     import numpy as np
 
-    from stationbed.rerun_log import RrdSink
+    from stationbed.output.rerun.sink import RrdSink
 
     def once():
         t0 = time.perf_counter()

@@ -167,7 +167,7 @@ def make_rhs(scene):
 
 def initial_state(scene) -> np.ndarray:
     """``x0 = [q_BN, H_O_B]`` at t = 0 from the scene's initial attitude and rate."""
-    from stationbed.simulate import initial_state as lib_initial_state
+    from stationbed.run.initial import initial_state as lib_initial_state
 
     q0, w0 = lib_initial_state(scene)
     model = Model(scene)

@@ -1,37 +1,7 @@
-"""Shipped attitude laws (DESIGN §7). ``CONTROLLERS`` maps scene names to classes.
+"""Shipped attitude laws, installed as ``stationbed.controllers`` (DESIGN §7).
 
-Write your own: subclass :class:`stationbed.controller.Controller` (see ``example_hold.py``)
-and name it in a scene as ``name = "your_module:YourClass"``, or register it here.
-
-Every module listed in ``MODULES`` is imported and each :class:`Controller` subclass it defines
-with a ``name`` is registered (an import error is an error, never skipped).
+Each law is registered by name as an entry point of the group ``stationbed.controllers`` in
+pyproject.toml; a package of your own can register its laws the same way, or a scene can name a
+class directly as ``name = "your_module:YourClass"``. Write your own: subclass
+:class:`stationbed.Controller` (see ``example_hold.py``).
 """
-
-from __future__ import annotations
-
-import importlib
-import inspect
-
-from stationbed.controller import Controller
-
-MODULES = ("pd", "lqr", "momentum_manager", "mpc", "torque_command", "example_hold")
-
-
-def _collect() -> dict[str, type[Controller]]:
-    from pathlib import Path
-
-    here = Path(__file__).parent
-    reg = {}
-    for mod_name in MODULES:
-        if not (here / f"{mod_name}.py").exists():
-            continue
-        mod = importlib.import_module(f"{__name__}.{mod_name}")
-        for _, cls in inspect.getmembers(mod, inspect.isclass):
-            if issubclass(cls, Controller) and cls.name and cls.__module__ == mod.__name__:
-                reg[cls.name] = cls
-    return reg
-
-
-CONTROLLERS = _collect()
-
-__all__ = ["CONTROLLERS", "MODULES"]

@@ -29,8 +29,8 @@ import math
 import casadi as ca
 import numpy as np
 
-from stationbed.controller import ControllerError
-from stationbed.rotation import dcm
+from stationbed.run.controller import ControllerError
+from stationbed.core.rotation import dcm
 
 __all__ = [
     "design_model",

@@ -3,7 +3,7 @@
 A plain PD that holds LVLH (or an inertial attitude), written for reading rather than speed:
 numpy and the library's rotation helpers, no tricks. Copy this file, rename the class, change
 ``_update``, and name it in a scene as ``name = "my_module:MyHold"`` (any importable module) or
-add the module to ``controllers.MODULES``.
+register it as an entry point of the group ``stationbed.controllers`` (see pyproject.toml).
 
     τ = -J (kp e + kd (ω - ω_ref))        e = 2 sign(q_e,w) q_e,vec ≈ attitude error angle [rad]
 
@@ -18,8 +18,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from stationbed.controller import Controller, ControllerParams
-from stationbed.rotation import dcm, quat_mult
+from stationbed.run.controller import Controller, ControllerParams
+from stationbed.core.rotation import dcm, quat_mult
 
 
 class ExampleHoldParams(ControllerParams):

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from pydantic import Field
 
-from stationbed.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
+from stationbed.run.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 
 from ._linear import design_model, equilibrium_torque, linearize, loop_margins, lvlh_error, settling_time
 from ._quat import qmul, rotate
@@ -129,8 +129,8 @@ class LQR(Controller):
     def symbolic(self, t, y, cp):
         import casadi as ca
 
-        from stationbed.controller import measurement_layout
-        from stationbed.rotation import quat_mult
+        from stationbed.run.controller import measurement_layout
+        from stationbed.core.rotation import quat_mult
 
         lay = measurement_layout(self.plant.n_gimbals, len(self.plant.scene.appendage))
 

@@ -41,7 +41,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from stationbed.controller import Controller, ControllerError, ControllerParams
+from stationbed.run.controller import Controller, ControllerError, ControllerParams
 
 from ._linear import design_model, linearize, loop_margins, settling_time, torque_equilibrium_attitude
 from .lqr import MAX_POLE_PERIOD, _finite_or_none, bryson, design_lqr, pole_report

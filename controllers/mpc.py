@@ -67,9 +67,9 @@ import casadi as ca
 import numpy as np
 from pydantic import Field
 
-from stationbed.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
-from stationbed.environment import gravity_gradient_torque, orbit_position_N
-from stationbed.rotation import dcm, quat_kinematics
+from stationbed.run.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
+from stationbed.model.environment import gravity_gradient_torque, orbit_position_N
+from stationbed.core.rotation import dcm, quat_kinematics
 
 __all__ = ["MPC", "MPCParams", "MPCFailure"]
 

@@ -24,7 +24,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from stationbed.controller import Controller, ControllerParams, UnitQuaternion
+from stationbed.run.controller import Controller, ControllerParams, UnitQuaternion
 
 from ._quat import qmul, rotate
 
@@ -116,8 +116,8 @@ class PD(Controller):
     def symbolic(self, t, y, cp):
         import casadi as ca
 
-        from stationbed.controller import measurement_layout
-        from stationbed.rotation import quat_mult
+        from stationbed.run.controller import measurement_layout
+        from stationbed.core.rotation import quat_mult
 
         plant = self.plant
         lay = measurement_layout(plant.n_gimbals, len(plant.scene.appendage))

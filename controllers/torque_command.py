@@ -15,7 +15,7 @@ import math
 
 from pydantic import Field, model_validator
 
-from stationbed.controller import Controller, ControllerParams
+from stationbed.run.controller import Controller, ControllerParams
 
 
 class TorqueCommandParams(ControllerParams):

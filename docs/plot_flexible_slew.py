@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import stationbed as sb  # noqa: E402
 import numpy as np  # noqa: E402
 
-from stationbed.rotation import rotation_angle  # noqa: E402
+from stationbed.core.rotation import rotation_angle  # noqa: E402
 from stationbed.scene import scene_from_dict  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

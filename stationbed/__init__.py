@@ -5,26 +5,27 @@ several independent forms that are checked against each other and against closed
 
 The names below are imported on first use (PEP 562), not by ``import stationbed``: the command
 line must be able to start ``run --rrd``'s recording process before casadi, scipy and pydantic
-are imported (stationbed/_rrd_child.py).
+are imported (stationbed/output/rerun/child.py).
 """
 
 import importlib as _importlib
-import types as _types
 
 _LAZY = {
     "Scene": "scene",
     "SceneError": "scene",
     "load_scene": "scene",
-    "SimulationError": "simulate",
-    "simulate": "simulate",
-    "Trajectory": "trajectory",
+    "SimulationError": "run.simulation",
+    "simulate": "run.simulation",
+    "Trajectory": "run.trajectory",
     "FORMULATIONS": "formulations",
     "INTEGRATORS": "integrators",
-    "BatchResult": "batch",
-    "disperse_initial": "batch",
-    "simulate_batch": "batch",
-    "Controller": "controller",
-    "ControllerParams": "controller",
+    "BatchResult": "run.batch",
+    "disperse_initial": "run.batch",
+    "simulate_batch": "run.batch",
+    "Controller": "run.controller",
+    "ControllerParams": "run.controller",
+    "Measurement": "run.controller",
+    "Plant": "run.controller",
 }
 
 __all__ = sorted(_LAZY)
@@ -42,18 +43,3 @@ def __getattr__(name):
 
 def __dir__():
     return sorted(set(globals()) | set(_LAZY))
-
-
-class _Package(_types.ModuleType):
-    """``stationbed.simulate`` stays the function when the submodule of the same name is
-    imported (the import system then sets the package attribute to the module)."""
-
-    def __setattr__(self, name, value):
-        if name in _LAZY and isinstance(value, _types.ModuleType):
-            return  # keep the lazily resolved function/class
-        super().__setattr__(name, value)
-
-
-import sys as _sys  # noqa: E402
-
-_sys.modules[__name__].__class__ = _Package

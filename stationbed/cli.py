@@ -104,9 +104,9 @@ def _cmd_run(args) -> int:
 
 def _run(args, recorder) -> int:
     from .scene import load_scene
-    from .simulate import SimulationError, simulate
-    from .simulate import trajectory_columns
-    from .trajectory import CsvSink
+    from .run.rows import trajectory_columns
+    from .run.simulation import SimulationError, simulate
+    from .output.csv import CsvSink
 
     scene = load_scene(args.scene)
     out = args.out or Path("out") / scene.name
@@ -180,7 +180,7 @@ def _start_recording(args):
     Called first thing for ``run --rrd``, before the simulation's modules are imported, so that
     the child's ``import rerun`` and set-up overlap the parent's start-up and run.
     """
-    from ._rrd_child import RecordingChild
+    from .output.rerun.child import RecordingChild
 
     return RecordingChild.start(args.scene, args.rrd)
 
@@ -207,21 +207,21 @@ def _with_recording(csv_sink, scene, path, duration=None, recorder=None):
     :class:`~stationbed.rerun_log.RrdSink`); ``close()`` finishes it and returns ``None`` or the
     reason it failed (one line)."""
     if recorder is None:  # no child (a caller without one): the same sink, in this process
-        from .rerun_log import RrdSink, TeeSink
+        from .output.rerun.sink import RrdSink, TeeSink
 
         return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=duration))
     return _RecordingTee(csv_sink, recorder.open(csv_sink.columns, duration, scene.name))
 
 
 def _cmd_check(args) -> int:
-    from .check import check_scene
+    from .studies.check import check_scene
     from .scene import load_scene
 
     scene = load_scene(args.scene)
     res = check_scene(scene, rtol=args.rtol, duration=args.duration)
     print(res.table())
     if args.rrd:
-        from .rerun_log import write_check_recording
+        from .output.rerun.sink import write_check_recording
 
         write_check_recording(res, scene, args.rrd)
     if not res.ok:
@@ -240,8 +240,8 @@ def _cmd_list(args) -> int:
     print("integrators:")
     for n, c in INTEGRATORS.items():
         print(f"  {n:<14} order {c.order}, {'adaptive' if c.adaptive else 'fixed step'}")
-    from .cmg import STEERING_LAWS
-    from .controller import controller_registry
+    from .model.cmg import STEERING_LAWS
+    from .run.controller import controller_registry
 
     print("controllers (or module:Class):")
     for n, c in sorted(controller_registry().items()):
@@ -349,7 +349,7 @@ def _cmd_replay(args) -> int:
 
 
 def _cmd_study(args) -> int:
-    from .study import StudyError, precision_study, stability_study
+    from .studies.study import StudyError, precision_study, stability_study
 
     try:
         if args.study == "precision":

@@ -16,7 +16,8 @@ from typing import Annotated, Any, ClassVar, Literal, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator, model_validator
 
-from .massprops import InvalidMassProperties, check_inertia
+from .core.beam import beam_mode, check_participation
+from .core.massprops import InvalidMassProperties, check_inertia
 
 __all__ = ["Scene", "SceneError", "load_scene", "scene_from_dict"]
 
@@ -188,8 +189,6 @@ class Mode(_Strict):
 
     def integrals(self, array_mass: float):
         """``(Φ̄, Ĥ, M)`` in P axes (Quinn Eq. 24a, 24b, 24e)."""
-        from .flex import beam_mode
-
         if self.beam is not None:
             b = self.beam
             return beam_mode(b.n, b.length, b.mass or array_mass, b.root, b.span, b.deflection)
@@ -220,8 +219,6 @@ class Appendage(Body):
     @model_validator(mode="after")
     def _participation(self):
         if self.mode:
-            from .flex import check_participation
-
             left = check_participation(self.mass, np.array(self.inertia), [m.integrals(self.mass) for m in self.mode])
             if left < -PARTICIPATION_TOL:
                 raise ValueError(

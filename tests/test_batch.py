@@ -17,8 +17,8 @@ from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
 import stationbed
-from stationbed.batch import disperse_initial, simulate_batch
-from stationbed.rotation import rotation_angle
+from stationbed.run.batch import disperse_initial, simulate_batch
+from stationbed.core.rotation import rotation_angle
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 GG = SCENARIOS / "iss_lvlh_gravity_gradient.toml"

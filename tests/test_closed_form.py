@@ -8,8 +8,8 @@ from scipy.integrate import simpson
 from scipy.spatial.transform import Rotation
 
 from stationbed import FORMULATIONS, load_scene, simulate
-from stationbed.environment import C_ON
-from stationbed.rotation import dcm, euler_321, rotation_angle
+from stationbed.model.environment import C_ON
+from stationbed.core.rotation import dcm, euler_321, rotation_angle
 from stationbed.scene import scene_from_dict
 from scenes import ROOT
 

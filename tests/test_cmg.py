@@ -24,7 +24,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
-from stationbed.cmg import CmgModel, cluster_functions
+from stationbed.model.cmg import CmgModel, cluster_functions
 from stationbed.scene import Cmg
 
 BETA_WIE_RAD = math.atan2(4.0, 3.0)  # 53.13 deg: cos β = 0.6, sin β = 0.8

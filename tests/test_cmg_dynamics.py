@@ -25,12 +25,12 @@ from numpy.testing import assert_allclose
 
 from scenes import ROOT
 from stationbed import FORMULATIONS, load_scene, simulate
-from stationbed.check import compare
-from stationbed.controller import Controller
-from stationbed.formulations import Structure
-from stationbed.rotation import dcm
+from stationbed.studies.check import compare
+from stationbed.run.controller import Controller
+from stationbed.model import Structure
+from stationbed.core.rotation import dcm
 from stationbed.scene import scene_from_dict
-from stationbed.simulate import build_system
+from stationbed.run.system import build_system
 from test_cmg import dgcmg_A, dgcmg_h, wie_pyramid_A, wie_pyramid_h
 
 FORMS = sorted(FORMULATIONS)

@@ -31,12 +31,12 @@ from numpy.testing import assert_allclose
 
 from scenes import ROOT
 from stationbed import Trajectory, load_scene, simulate
-from stationbed.check import compare
-from stationbed.controller import Controller, ControllerError
+from stationbed.studies.check import compare
+from stationbed.run.controller import Controller, ControllerError
 from stationbed.integrators import RK4
-from stationbed.rotation import rotation_angle
+from stationbed.core.rotation import rotation_angle
 from stationbed.scene import scene_from_dict
-from stationbed.simulate import SimulationError
+from stationbed.run.simulation import SimulationError
 
 PERIOD_S = 0.1  # s, 10 Hz as the shipped scenes
 J_SPHERE = 500.0  # kg m², spherical inertia: no gyroscopic coupling
@@ -351,7 +351,7 @@ period = 0.1
 """
 
 USER_MODULE = """
-from stationbed.controller import Controller
+from stationbed.run.controller import Controller
 
 class Boom(Controller):
     name = "boom"

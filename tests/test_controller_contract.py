@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from stationbed import simulate
-from stationbed.controller import Controller, ControllerError, controller_registry
+from stationbed.run.controller import Controller, ControllerError, controller_registry
 from stationbed.scene import scene_from_dict
 
 REGISTRY = controller_registry()

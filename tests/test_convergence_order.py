@@ -21,7 +21,7 @@ import pytest
 
 from scenes import RIGID
 from stationbed import INTEGRATORS, simulate
-from stationbed.rotation import rotation_angle
+from stationbed.core.rotation import rotation_angle
 from stationbed.scene import scene_from_dict
 
 FIXED_STEP = sorted(n for n, c in INTEGRATORS.items() if not c.adaptive)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from stationbed.environment import C_ON, gravity_gradient_torque, omega_ON_O, orbit_position_N
-from stationbed.rotation import skew
+from stationbed.model.environment import C_ON, gravity_gradient_torque, omega_ON_O, orbit_position_N
+from stationbed.core.rotation import skew
 
 
 @pytest.mark.parametrize("u, inc", [(0.0, 0.0), (0.7, 0.9006), (2.5, 1.7), (-1.0, 0.4974)])

@@ -8,9 +8,9 @@ import pytest
 
 from scenes import SCENARIOS, scenario_ids
 from stationbed import FORMULATIONS, load_scene
-from stationbed.check import check_scene, compare, compare_modes
+from stationbed.studies.check import check_scene, compare, compare_modes
 from stationbed.formulations.dalembert import DAlembertForm
-from stationbed.formulations.base import coriolis_matrix
+from stationbed.core.massprops import coriolis_matrix
 
 PAIRS = list(itertools.combinations(sorted(FORMULATIONS), 2))
 

@@ -37,9 +37,10 @@ from scipy.optimize import brentq, least_squares
 
 from scenes import C_PB
 from stationbed import FORMULATIONS, SceneError, simulate
-from stationbed.check import check_scene
-from stationbed.flex import beam_mode
-from stationbed.formulations import StationModel, Structure, get_formulation
+from stationbed.studies.check import check_scene
+from stationbed.core.beam import beam_mode
+from stationbed.formulations import get_formulation
+from stationbed.model import StationModel, Structure
 from stationbed.scene import scene_from_dict
 
 FORMS = sorted(FORMULATIONS)

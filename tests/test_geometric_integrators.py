@@ -18,10 +18,11 @@ import pytest
 
 from scenes import RIGID, ROOT, articulated_dict
 from stationbed import simulate
-from stationbed.formulations import Structure
+from stationbed.model import Structure
 from stationbed.integrators import LGVI, LieRK4
 from stationbed.scene import load_scene, scene_from_dict
-from stationbed.simulate import build_system, initial_state
+from stationbed.run.initial import initial_state
+from stationbed.run.system import build_system
 
 #: |q| - 1 for the geometric integrators (the issue's acceptance)
 NORM_TOL = 1e-14

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from stationbed._compile import sx_function
-from stationbed.environment import orbit_position_N
-from stationbed.formulations import FORMULATIONS, StationModel, Structure
+from stationbed.core.compile import sx_function
+from stationbed.model.environment import orbit_position_N
+from stationbed.formulations import FORMULATIONS
+from stationbed.model import StationModel, Structure
 from stationbed.formulations.hamel import HamelForm, orientation_gradient, perturbed
-from stationbed.rotation import dcm, skew
+from stationbed.core.rotation import dcm, skew
 from stationbed.scene import scene_from_dict
 from scenes import RIGID
 

@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from stationbed import INTEGRATORS, simulate
 from stationbed.integrators import DOP853, IntegrationError
-from stationbed.rotation import rotation_angle
+from stationbed.core.rotation import rotation_angle
 from stationbed.scene import scene_from_dict
 
 It, Ia, W1, W3 = 200.0, 350.0, 0.02, 0.05  # kg m², rad/s

@@ -65,7 +65,7 @@ ACCEPT_ATT_RAD = 1e-10
 
 @pytest.mark.parametrize("form", FORMS)
 def test_rtol_1e12_with_default_atol_is_accurate_for_every_form(orbit_articulated, form):
-    from stationbed.rotation import rotation_angle
+    from stationbed.core.rotation import rotation_angle
 
     scene, ref = orbit_articulated
     tr = simulate(scene, formulation=form, rtol=1e-12, atol=1e-12)

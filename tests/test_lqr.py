@@ -11,9 +11,9 @@ from numpy.testing import assert_allclose
 from controllers._linear import design_model, linearize, ss_zoh
 from controllers.lqr import LQR
 from stationbed import simulate
-from stationbed.controller import ControllerError, Plant
-from stationbed.environment import C_ON
-from stationbed.rotation import dcm, quat_from_dcm
+from stationbed.run.controller import ControllerError, Plant
+from stationbed.model.environment import C_ON
+from stationbed.core.rotation import dcm, quat_from_dcm
 from stationbed.scene import scene_from_dict
 
 #: JEOD ISS inertia, products of inertia included [kg m²] (scenarios/iss_lvlh_gravity_gradient.toml)

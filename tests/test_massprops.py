@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from stationbed.massprops import InvalidMassProperties, check_inertia, composite_cm, coriolis_matrix, parallel_axis
+from stationbed.core.massprops import InvalidMassProperties, check_inertia, composite_cm, coriolis_matrix, parallel_axis
 
 REL = 1e-12  # float64 sums over a few hundred points
 

@@ -13,8 +13,8 @@ from controllers._linear import design_model, linearize, torque_equilibrium_atti
 from controllers.momentum_manager import MomentumManager
 from scenes import ROOT
 from stationbed import load_scene, simulate
-from stationbed.controller import ControllerError, Plant
-from stationbed.rotation import Ap, dcm
+from stationbed.run.controller import ControllerError, Plant
+from stationbed.core.rotation import Ap, dcm
 
 SCENE = ROOT / "scenarios" / "iss_tea_momentum_management.toml"
 JEOD_I = [[1.02e8, -6.96e6, -5.48e6], [-6.96e6, 0.91e8, 5.9e5], [-5.48e6, 5.9e5, 1.64e8]]  # kg m²
@@ -91,7 +91,7 @@ def test_reported_poles_and_margins():
 @pytest.mark.parametrize("about", ["tea", "lvlh"])
 def test_command_is_minus_K_times_state(about):
     """The float-inlined _update equals -K (x - x_e) with x formed in numpy from the measurement."""
-    from stationbed.controller import Measurement, measurement_layout
+    from stationbed.run.controller import Measurement, measurement_layout
 
     from controllers._linear import lvlh_error
     from controllers._quat import qmul

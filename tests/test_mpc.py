@@ -18,9 +18,9 @@ import pytest
 from controllers.mpc import MPC
 from scenes import ROOT
 from stationbed import load_scene, simulate
-from stationbed.controller import ControllerError, Plant
-from stationbed.rotation import rotation_angle
-from stationbed.simulate import SimulationError
+from stationbed.run.controller import ControllerError, Plant
+from stationbed.core.rotation import rotation_angle
+from stationbed.run.simulation import SimulationError
 
 PD_SCENE = ROOT / "scenarios" / "eigenaxis_slew.toml"
 MPC_SCENE = ROOT / "scenarios" / "eigenaxis_slew_mpc.toml"

@@ -16,7 +16,7 @@ from numpy.testing import assert_allclose
 
 from scenes import ROOT, C_PB
 from stationbed import FORMULATIONS, load_scene, simulate
-from stationbed.check import CHECK_GAIN, check_scene, compare
+from stationbed.studies.check import CHECK_GAIN, check_scene, compare
 from stationbed.scene import scene_from_dict
 
 SCENE = load_scene(ROOT / "scenarios" / "array_rate_step.toml")

@@ -24,14 +24,16 @@ from scipy.spatial.transform import Rotation
 from scenes import RIGID, ROOT
 from stationbed import Trajectory, load_scene, simulate
 from stationbed.cli import main as cli_main
-from stationbed.cmg import cluster_functions
-from stationbed.environment import C_ON
-from stationbed.massprops import composite_cm
-from stationbed.rerun_log import RrdSink, TeeSink, box_half_sizes, write_recording
-from stationbed.rotation import Ap, dcm, euler_321
+from stationbed.model.cmg import cluster_functions
+from stationbed.model.environment import C_ON
+from stationbed.core.massprops import composite_cm
+from stationbed.output.rerun.sink import RrdSink, TeeSink, box_half_sizes, write_recording
+from stationbed.core.rotation import Ap, dcm, euler_321
 from stationbed.scene import scene_from_dict
-from stationbed.simulate import ROW_BATCH, trajectory_columns
-from stationbed.trajectory import CsvSink, base_columns
+from stationbed.run.closed_loop import ROW_BATCH
+from stationbed.run.rows import trajectory_columns
+from stationbed.output.csv import CsvSink
+from stationbed.run.trajectory import base_columns
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
 

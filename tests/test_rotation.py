@@ -5,7 +5,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
-from stationbed.rotation import (
+from stationbed.core.rotation import (
     Ap,
     Ax,
     Ay,

@@ -8,10 +8,10 @@ from numpy.testing import assert_allclose
 
 from scenes import RIGID, SCENARIOS, scenario_ids
 from stationbed import SceneError, load_scene
-from stationbed.environment import C_ON
-from stationbed.rotation import dcm
+from stationbed.model.environment import C_ON
+from stationbed.core.rotation import dcm
 from stationbed.scene import scene_from_dict
-from stationbed.simulate import initial_state
+from stationbed.run.initial import initial_state
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=scenario_ids())

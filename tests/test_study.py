@@ -22,7 +22,7 @@ from scenes import ROOT
 from stationbed import FORMULATIONS, INTEGRATORS, simulate
 from stationbed.cli import main
 from stationbed.scene import scene_from_dict
-from stationbed.study import (
+from stationbed.studies.study import (
     H_JUMP_REL,
     QUICK_DIVISIONS,
     QUICK_RTOLS,

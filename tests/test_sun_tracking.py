@@ -25,10 +25,10 @@ from numpy.testing import assert_allclose
 
 from scenes import ROOT
 from stationbed import load_scene, simulate
-from stationbed.appendages import sun_targets, tracking_error
-from stationbed.controller import Controller
-from stationbed.environment import orbit_position_N, sun_direction_N
-from stationbed.rotation import Ap, dcm
+from stationbed.model.appendages import sun_targets, tracking_error
+from stationbed.run.controller import Controller
+from stationbed.model.environment import orbit_position_N, sun_direction_N
+from stationbed.core.rotation import Ap, dcm
 from stationbed.scene import Sun, scene_from_dict
 
 #: float64 round-off of a few trigonometric evaluations [rad]

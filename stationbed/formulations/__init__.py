@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from .base import Formulation, StationModel, Structure
+from .base import Formulation
 from .dalembert import DAlembertForm
 from .hamel import HamelForm
 from .momentum import MomentumForm
@@ -29,4 +29,4 @@ def get_formulation(name_or_cls) -> type[Formulation]:
         ) from None
 
 
-__all__ = ["FORMULATIONS", "Formulation", "StationModel", "Structure", "get_formulation"]
+__all__ = ["FORMULATIONS", "Formulation", "get_formulation"]

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .base import OmegaStateForm, coriolis_matrix
+from ..core.massprops import coriolis_matrix
+from .base import OmegaStateForm
 
 
 class DAlembertForm(OmegaStateForm):

@@ -47,8 +47,10 @@ import dataclasses
 import casadi as ca
 import numpy as np
 
-from ..rotation import dcm, quat_kinematics, skew
-from .base import Formulation, StationModel, inv3
+from ..core.rotation import dcm, quat_kinematics, skew
+from ..core.linalg import inv3
+from ..model import StationModel
+from .base import Formulation
 
 
 def orientation_gradient(f, C, theta):

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..rotation import quat_kinematics
-from .base import Formulation, inv3
+from ..core.rotation import quat_kinematics
+from ..core.linalg import inv3
+from .base import Formulation
 
 
 class MomentumForm(Formulation):

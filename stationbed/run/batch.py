@@ -9,7 +9,7 @@ Design (why DOP853, not a fixed-step RK4 map)
 Every sample runs *exactly* the algorithm of ``simulate(..., integrator="dop853")``: the same
 compiled step function (12 stages + FSAL + Hairer's error norm, and the 3 extra stages of the
 7th-order dense output), the same per-sample step-size control (scipy's DOP853 rules, as the
-C driver ``_dop853_driver.c``), the same tolerances (the scene's ``rtol`` and its scaled
+C driver ``dop853_driver.c``), the same tolerances (the scene's ``rtol`` and its scaled
 ``atol``, computed per sample as ``simulate`` does) and the same output grid. The samples advance
 in *lockstep*: each iteration makes one step attempt for every unfinished sample in **one**
 call of ``dop853_dense.map(n, "thread" | "serial")``, and numpy applies the step control to all
@@ -41,20 +41,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._compile import FastCall
-from .formulations import Structure
-from .integrators import DOP853
-from .rotation import quat_mult
-from .scene import QUAT_NORM_TOL, Scene, load_scene
-from .simulate import (
-    _breakpoints,
-    _output_times,
-    build_system,
-    characteristic_scales,
-    from_lvlh,
-    initial_x,
-    segment_input,
-)
+from ..core.compile import FastCall
+from ..model import Structure
+from ..integrators import DOP853
+from ..core.rotation import quat_mult
+from ..scene import QUAT_NORM_TOL, Scene, load_scene
+from .initial import characteristic_scales, from_lvlh, initial_x
+from .segments import breakpoints, output_times, segment_input
+from .system import build_system
 
 __all__ = ["BatchResult", "disperse_initial", "simulate_batch"]
 
@@ -280,7 +274,7 @@ def simulate_batch(
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"{name} must be a positive finite number, got {v!r}")
     structure = Structure.of(scene)
-    bps, steps = _breakpoints(scene, duration)
+    bps, steps = breakpoints(scene, duration)
     if scenes is None:
         scenes = [scene] * n
     else:
@@ -290,7 +284,7 @@ def simulate_batch(
         for i, s in enumerate(scenes):
             if Structure.of(s) != structure:
                 raise ValueError(f"scenes[{i}] ({s.name!r}) has a different structure from {scene.name!r}")
-            if s.torque != scene.torque or _breakpoints(s, duration) != (bps, steps):
+            if s.torque != scene.torque or breakpoints(s, duration) != (bps, steps):
                 raise ValueError(f"scenes[{i}] ({s.name!r}) has different torques or rate steps from {scene.name!r}")
 
     system = build_system(structure, formulation or sim.formulation, DOP853)
@@ -319,7 +313,7 @@ def simulate_batch(
     max_step = math.inf if sim.max_step is None else float(sim.max_step)
 
     wall0 = time.perf_counter()
-    t_out = _output_times(duration, output_dt)
+    t_out = output_times(duration, output_dt)
     X = np.full((n, t_out.size, nx), np.nan)
     X[:, 0] = X0
     run = _Lockstep(funcs, n, nx, nu, P, TOL, max_step, threads)
@@ -389,7 +383,7 @@ def _outputs(funcs, t_out, X, P, threads, n_out):
 class _Lockstep:
     """Per-sample DOP853 step control, all samples advanced by one mapped call per attempt.
 
-    Same rules as ``_dop853_driver.c`` / ``DOP853._integrate_python`` (whose comments explain
+    Same rules as ``dop853_driver.c`` / ``DOP853._integrate_python`` (whose comments explain
     them), written on arrays of samples. The step size ``h`` persists across segments.
     """
 

@@ -19,8 +19,10 @@ import time
 import casadi as ca
 import numpy as np
 
-from ._compile import FastCall, compile_functions, sx_function
-from .integrators import IntegrationError
+from ..core.compile import FastCall, compile_functions, sx_function
+from ..integrators import IntegrationError
+from .rows import check_rows
+from .segments import held_torque
 
 __all__ = ["fused_ok", "run_fused"]
 
@@ -119,9 +121,7 @@ def run_fused(loop, K: int) -> None:
     cp = np.asarray(ctrl.symbolic_params(), dtype=float)
     nx = loop.system.formulation.nx
     p, period, duration = loop.p, loop.period, loop.duration
-    from .simulate import _held_torque
-
-    u_ext = _held_torque(loop.scene, 0.5 * duration)  # constant: no torque window inside a fused run
+    u_ext = held_torque(loop.scene, 0.5 * duration)  # constant: no torque window inside a fused run
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p
@@ -218,8 +218,6 @@ def run_fused(loop, K: int) -> None:
 
 def _flush(loop, rows_t, rows_x, rows_h) -> None:
     if rows_t:
-        from .simulate import _check_rows
-
         rows = loop.rows.make(rows_t, rows_x, rows_h)
         rows_t.clear(), rows_x.clear(), rows_h.clear()
-        _check_rows(rows[:, :12], lambda ok: loop.rows.emit(rows[: len(ok)]))
+        check_rows(rows[:, :12], lambda ok: loop.rows.emit(rows[: len(ok)]))

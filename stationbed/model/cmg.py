@@ -48,6 +48,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ..core.linalg import inv3
+
 __all__ = [
     "CmgModel",
     "dgcmg_triads",
@@ -116,12 +118,6 @@ def capacity(cfg) -> float:
     return cfg.h_rotor * min(2 + 2 * math.cos(cfg.skew), 4 * math.sin(cfg.skew))
 
 
-def _inv3(M):
-    from .formulations.base import inv3
-
-    return inv3(M)
-
-
 def singularity_measure(A_hat):
     """``sqrt(det(Â Âᵀ))`` for the normalised Jacobian (casadi)."""
     return ca.sqrt(ca.fmax(ca.det(ca.mtimes(A_hat, A_hat.T)), 0.0))
@@ -142,7 +138,7 @@ def steer(law: str, A_hat, hdot_hat, t, lambda0, mu, eps0, omega):
             reg = lam * E
         else:
             raise ValueError(f"unknown steering law {law!r}; valid: {', '.join(STEERING_LAWS)}")
-    return ca.mtimes(A_hat.T, ca.mtimes(_inv3(M + reg), hdot_hat))
+    return ca.mtimes(A_hat.T, ca.mtimes(inv3(M + reg), hdot_hat))
 
 
 def rate_limit(rates, max_rate):

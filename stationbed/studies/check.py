@@ -23,11 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .formulations import FORMULATIONS
-from .rotation import rotation_angle
-from .scene import Scene
-from .simulate import simulate
-from .trajectory import Trajectory
+from ..formulations import FORMULATIONS
+from ..core.rotation import rotation_angle
+from ..scene import Scene
+from ..run.simulation import simulate
+from ..run.trajectory import Trajectory
 
 __all__ = ["CheckResult", "check_scene", "compare", "CHECK_GAIN"]
 

@@ -30,13 +30,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .environment import C_ON
-from .formulations import FORMULATIONS, Structure
-from .integrators import INTEGRATORS
-from .rotation import dcm, rotation_angle
-from .scene import Scene, load_scene, scene_from_dict
-from .simulate import SimulationError, build_system, characteristic_scales, initial_state, initial_x, simulate
-from .trajectory import Trajectory
+from ..model.environment import C_ON
+from ..formulations import FORMULATIONS
+from ..model import Structure
+from ..integrators import INTEGRATORS
+from ..core.rotation import dcm, rotation_angle
+from ..scene import Cmg, Scene, load_scene, scene_from_dict
+from ..run.initial import characteristic_scales, initial_state, initial_x
+from ..run.simulation import SimulationError, simulate
+from ..run.system import build_system
+from ..core.beam import beam_mode
+from ..core.compile import FastCall
+from ..run.trajectory import Trajectory
 
 __all__ = ["StudyError", "precision_study", "stability_study", "STABILITY_CASES", "PrecisionResult", "Case"]
 
@@ -795,8 +800,6 @@ def raw_states(scene: Scene, formulation: str, integrator: str, ts: np.ndarray, 
     With ``project=True`` the run advances one step at a time (fixed-step integrators) and
     normalises q after every step; the rows then hold q *before* that projection.
     """
-    from ._compile import FastCall
-
     system = build_system(Structure.of(scene), formulation, integrator)
     form, funcs = system.formulation, system.funcs
     model = form.model
@@ -885,8 +888,6 @@ CMG_WINDOW_S = 3.0
 
 
 def _case_cmg(ctx: _Ctx) -> Case:
-    from .scene import Cmg
-
     scene = load_scene(_scenario("sgcmg_singularity.toml"))
     duration = scene.simulation.duration  # 30 s: SR and o-DSR need ~10 s to leave the singularity
     window = CMG_WINDOW_S
@@ -1024,8 +1025,6 @@ def stability_boundary(R, lam: complex, s_max: float = 20.0) -> float:
 
 
 def _stiff_scene(f_hi: float, duration: float, damping_hi: float = STIFF_DAMPING) -> Scene:
-    from .flex import beam_mode
-
     d = dict(_STIFF_SCENE, simulation={"duration": duration, "output_dt": STIFF_OUTPUT_DT_S})
     wing = dict(_STIFF_SCENE["appendage"][0])
     shapes = []
@@ -1044,8 +1043,6 @@ def rhs_eigenvalues(scene: Scene, formulation: str = "momentum") -> np.ndarray:
     """Eigenvalues [1/s] of the right-hand side's Jacobian at t = 0 (central differences on the
     compiled RHS). An elastic mode appears as ``-ζω ± iω√(1-ζ²)``, ω its frequency in the coupled
     system (above the clamped one: the station moves with the array)."""
-    from ._compile import FastCall
-
     system = build_system(Structure.of(scene), formulation, "dop853")
     p = system.formulation.model.params(scene)
     q0, w0 = initial_state(scene)
@@ -1081,8 +1078,6 @@ def newton_defects(scene: Scene, integrator: str, hs, *, formulation: str = "mom
     run (DOP853 at rtol 1e-10) with the scene's tolerances and u = 0: the compiled single step
     ``<name>_one`` of the :class:`~stationbed.integrators.FixedStep` driver, called directly.
     Smooth scenes only (no controller, no torque)."""
-    from ._compile import FastCall
-
     system = build_system(Structure.of(scene), formulation, integrator)
     form = system.formulation
     model = form.model

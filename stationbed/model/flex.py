@@ -22,97 +22,18 @@ elastic coordinates (the *linear hybrid-coordinate* model, see docs/design.md), 
 relative to B, in B; the ``Uᵀ U / m`` term is the hub's recoil, see :class:`Modes`). The strain
 energy is ``½ ηᵀ K η``.
 
-:func:`beam_mode` gives the integrals of a uniform Euler–Bernoulli cantilever (root, span and
-deflection directions in P), with the shape normalised to 1 at the tip: ``η_k`` is then the
-tip deflection of mode k in metres.
+The beam shapes (:func:`~stationbed.core.beam.beam_mode`) live in :mod:`stationbed.core.beam`.
 """
 
 from __future__ import annotations
 
-import functools
-import math
-
 import casadi as ca
 import numpy as np
 
-from .rotation import skew
+from ..core.linalg import inv3
+from ..core.rotation import skew
 
-__all__ = ["beam_mode", "BETA_L", "check_participation", "Modes"]
-
-#: roots of 1 + cos(βL) cosh(βL) = 0: clamped-free Euler–Bernoulli beam, modes 1..6
-BETA_L = (1.8751040687119611, 4.6940911329741745, 7.8547574382376126, 10.995540734875467, 14.137168391046471, 17.278759532088237)
-
-AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def _axis(name: str) -> np.ndarray:
-    sign = -1.0 if name.startswith("-") else 1.0
-    e = np.zeros(3)
-    e[AXES[name.lstrip("+-")]] = sign
-    return e
-
-
-def cantilever_shape(n: int, s: np.ndarray, length: float) -> np.ndarray:
-    """Mode ``n`` (1-based) of a uniform clamped-free beam at stations ``s`` in [0, L], tip = 1.
-
-    ``ψ = cosh x - cos x - σ (sinh x - sin x)``, ``x = β s``, evaluated without cancellation:
-    ``cosh x - σ sinh x = ((1 - σ) eˣ + (1 + σ) e⁻ˣ) / 2`` with
-    ``1 - σ = (sin βL - cos βL - e^(-βL)) / (sinh βL + sin βL)`` (σ → 1 as βL grows, and the
-    direct form loses ~cosh βL of precision: 1.6e7 at mode 6)."""
-    bl = BETA_L[n - 1]
-    den = math.sinh(bl) + math.sin(bl)
-    one_m = (math.sin(bl) - math.cos(bl) - math.exp(-bl)) / den  # 1 - σ
-    sigma = 1.0 - one_m
-
-    def psi(x):
-        return 0.5 * (one_m * np.exp(x) + (1.0 + sigma) * np.exp(-x)) - np.cos(x) + sigma * np.sin(x)
-
-    return psi(bl / length * np.asarray(s, float)) / psi(np.array(bl))
-
-
-@functools.lru_cache(maxsize=8)
-def _gauss_legendre(n: int):
-    """Nodes and weights on [-1, 1] (cached: numpy computes them by an eigenvalue problem)."""
-    return np.polynomial.legendre.leggauss(n)
-
-
-def beam_mode(n: int, length: float, mass: float, root, span: str, deflection: str, n_quad: int = 96):
-    """Quinn Eq. 24 integrals ``(Φ̄, Ĥ, M)`` of cantilever mode ``n``, P components about the
-    array's mass centre (the P origin). The beam runs from ``root`` along ``span`` and bends
-    along ``deflection`` (axis names like ``"y"`` or ``"-z"``); uniform mass per length.
-    Gauss–Legendre quadrature with ``n_quad`` points (exact to ~1e-15 for n <= 6)."""
-    e_s, e_d = _axis(span), _axis(deflection)
-    if abs(e_s @ e_d) > 0.5:
-        raise ValueError(f"span {span!r} and deflection {deflection!r} must be different axes")
-    xg, wg = _gauss_legendre(n_quad)
-    s = 0.5 * length * (xg + 1.0)
-    w = 0.5 * length * wg * (mass / length)  # dm at each station
-    psi = cantilever_shape(n, s, length)
-    a = np.asarray(root, float)[None, :] + s[:, None] * e_s[None, :]  # points relative to the P origin
-    phi_bar = float(np.sum(w * psi)) * e_d
-    H_hat = np.sum((w * psi)[:, None] * np.cross(a, e_d[None, :]), axis=0)
-    M = float(np.sum(w * psi * psi))
-    return phi_bar, H_hat, M
-
-
-def check_participation(mass: float, J: np.ndarray, modes) -> float:
-    """Fraction of the array's mass or inertia left, in its worst direction, after its modes'
-    effective masses: the smallest eigenvalue of ``S (diag(m E, J) - Σ_k v_k v_kᵀ / M_k) S``,
-    ``v_k = [Φ̄_k; Ĥ_k]``, ``S = diag(E/√m, J^-½)`` (1: no mode; 0: the modes take it all).
-
-    Modes of a real structure take at most all of its mass and inertia, so this is >= 0; a
-    negative value means the declared participations are not physical (the coupled mass matrix
-    would not be positive definite and the motion would be unstable)."""
-    evals, evecs = np.linalg.eigh(np.asarray(J, float))
-    S = np.zeros((6, 6))
-    S[:3, :3] = np.eye(3) / math.sqrt(mass)
-    S[3:, 3:] = evecs @ np.diag(evals**-0.5) @ evecs.T
-    R = np.eye(6)
-    for phi_bar, H_hat, M in modes:
-        v = S @ np.concatenate([phi_bar, H_hat])
-        R -= np.outer(v, v) / M
-    return float(np.linalg.eigvalsh(R).min())
-
+__all__ = ["Modes"]
 
 class Modes:
     """Symbolic modal matrices of all flexible arrays at one configuration (B components).
@@ -177,8 +98,6 @@ class Modes:
     def solve(self, X):
         """``M_eff⁻¹ X`` by the Woodbury identity: one 3x3 inverse,
         ``M_eff⁻¹ = M⁻¹ + M⁻¹Uᵀ (m E - U M⁻¹ Uᵀ)⁻¹ U M⁻¹`` (M diagonal)."""
-        from .formulations.base import inv3
-
         inv_m = ca.diag(1.0 / self.M)
         Y = ca.mtimes(inv_m, X)
         MU = ca.mtimes(inv_m, self.U.T)  # N x 3

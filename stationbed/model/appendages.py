@@ -17,7 +17,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .rotation import Ap, Ay, omega_PB_P, omega_PB_P_dot
+from ..core.rotation import Ap, Ay, omega_PB_P, omega_PB_P_dot
 
 __all__ = [
     "profile",

@@ -20,7 +20,7 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 3. Set ``self.q_ref_BN`` (4,) in ``_update`` when the law has a reference attitude: the run
    logs ``att_err_deg`` against it.
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
-5. Optionally, for the fused loop (stationbed/_fused.py: controller and dynamics in one
+5. Optionally, for the fused loop (stationbed/run/fused.py: controller and dynamics in one
    compiled loop), write ``symbolic_params()`` (the law's numbers as a flat array, set by
    ``_reset``) and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` with casadi ``t``, ``y`` (the
    measurement vector, offsets from :func:`measurement_layout`) and ``cp``; it must compute
@@ -30,6 +30,7 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -203,13 +204,24 @@ class Controller:
         raise NotImplementedError
 
 
+#: Entry-point group of controllers: the shipped laws (pyproject.toml) and any installed package's.
+ENTRY_POINT_GROUP = "stationbed.controllers"
+
+
+def _entry_points():
+    return {ep.name: ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def _load(ep) -> type[Controller]:
+    cls = ep.load()
+    if not (isinstance(cls, type) and issubclass(cls, Controller)):
+        raise ControllerError(f"controller entry point '{ep.name}' ({ep.value}) is not a Controller subclass")
+    return cls
+
+
 def controller_registry() -> dict[str, type[Controller]]:
-    """The shipped controllers (the ``controllers`` package beside stationbed)."""
-    try:
-        from controllers import CONTROLLERS
-    except ImportError:  # pragma: no cover - installed without the package
-        return {}
-    return dict(CONTROLLERS)
+    """Every registered controller by scene name (entry points of :data:`ENTRY_POINT_GROUP`)."""
+    return {name: _load(ep) for name, ep in sorted(_entry_points().items())}
 
 
 def get_controller(name: str) -> type[Controller]:
@@ -224,7 +236,7 @@ def get_controller(name: str) -> type[Controller]:
         if not (isinstance(cls, type) and issubclass(cls, Controller)):
             raise ControllerError(f"controller '{name}': '{cls_name}' is not a Controller subclass in '{mod_name}'")
         return cls
-    reg = controller_registry()
-    if name not in reg:
-        raise ControllerError(f"unknown controller '{name}'; valid: {', '.join(sorted(reg))} or module:Class")
-    return reg[name]
+    eps = _entry_points()
+    if name not in eps:
+        raise ControllerError(f"unknown controller '{name}'; valid: {', '.join(sorted(eps))} or module:Class")
+    return _load(eps[name])

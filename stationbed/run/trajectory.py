@@ -9,13 +9,12 @@ appendage [rad], then anything else a scene adds.
 from __future__ import annotations
 
 import csv
-import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Trajectory", "CsvSink", "base_columns"]
+__all__ = ["Trajectory", "base_columns", "CORE_COLUMNS"]
 
 CORE_COLUMNS = ["t", "qw", "qx", "qy", "qz", "wx", "wy", "wz", "HNx", "HNy", "HNz", "T"]
 
@@ -87,21 +86,3 @@ class Trajectory:
     def from_npz(cls, path) -> "Trajectory":
         with np.load(path) as z:
             return cls([str(c) for c in z["columns"]], z["data"])
-
-
-class CsvSink:
-    """Streams rows to a CSV file and flushes each batch (a failed run keeps its rows)."""
-
-    def __init__(self, fh: io.TextIOBase, columns: list[str]):
-        self.fh = fh
-        self.columns = columns
-        fh.write(",".join(columns) + "\n")
-        fh.flush()
-
-    def write(self, rows: np.ndarray) -> None:
-        rows = np.atleast_2d(rows)
-        if rows.size:
-            buf = io.StringIO()
-            np.savetxt(buf, rows, delimiter=",", fmt="%.17g")
-            self.fh.write(buf.getvalue())
-            self.fh.flush()

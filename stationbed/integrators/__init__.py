@@ -34,9 +34,9 @@ import numpy as np
 from scipy.integrate import DOP853 as _ScipyDOP853
 from scipy.integrate import solve_ivp
 
-from ._compile import FastCall, sx_function
-from .rotation import dcm, quat_conj, quat_mult
-from .rotation import skew as _skew
+from ..core.compile import FastCall, sx_function
+from ..core.rotation import dcm, quat_conj, quat_mult
+from ..core.rotation import skew as _skew
 
 __all__ = ["Integrator", "IntegrationError", "INTEGRATORS", "get_integrator"]
 
@@ -151,7 +151,7 @@ class DOP853(Integrator):
     name = "dop853"
     order = 8
     adaptive = True
-    extra_c = (Path(__file__).with_name("_dop853_driver.c")).read_text()
+    extra_c = (Path(__file__).with_name("dop853_driver.c")).read_text()
     SAFETY = 0.9
     MIN_FACTOR = 0.2
     MAX_FACTOR = 10.0

@@ -4,7 +4,7 @@ The command line starts the child first thing (:meth:`RecordingChild.start`, bef
 imports the simulation's modules), so that the child's ``import rerun`` (~0.3-0.5 s) and its set-up
 run on the second core while the parent imports, loads the scene and simulates. The child loads the
 same scene file and, once the parent has opened the run (:meth:`RecordingChild.open`: the row
-columns and the run's duration), builds the same :class:`~stationbed.rerun_log.RrdSink` as an
+columns and the run's duration), builds the same :class:`~stationbed.output.rerun.sink.RrdSink` as an
 in-process run would and feeds it every row the parent streams over its stdin.
 
 Protocol on the child's stdin: the line :data:`MAGIC`, one JSON line ``{"columns": [...],
@@ -25,7 +25,7 @@ Failure behaviour:
 
 The child skips ``stationbed/__init__.py`` (it imports the whole simulation stack, ~0.8 s, none of
 which a recording needs): it is started with a bootstrap that registers a bare ``stationbed``
-package and imports only :mod:`stationbed.rerun_log` and :mod:`stationbed.scene`.
+package and imports only :mod:`stationbed.output.rerun.sink` and :mod:`stationbed.scene`.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ CLOSE_TIMEOUT_S = 300.0
 #: Prefix of the child's one-line error on its stderr.
 CHILD_ERROR = "stationbed-rrd: "
 
-_PACKAGE_DIR = Path(__file__).resolve().parent
+_PACKAGE_DIR = Path(__file__).resolve().parents[2]  # stationbed/
 
 # Runs in the child's ``python -c``: a bare ``stationbed`` package (no __init__ imports), then
 # child_main(scene, rrd).
@@ -62,7 +62,7 @@ _BOOTSTRAP = (
     "pkg.__path__ = [sys.argv[1]]\n"
     "pkg.__package__ = 'stationbed'\n"
     "sys.modules['stationbed'] = pkg\n"
-    "from stationbed._rrd_child import child_main, _exit\n"
+    "from stationbed.output.rerun.child import child_main, _exit\n"
     "_exit(child_main(sys.argv[2], sys.argv[3]))\n"
 )
 
@@ -242,8 +242,8 @@ def child_main(scene_path: str, rrd_path: str) -> int:
     try:
         import numpy as np
 
-        from . import rerun_log
-        from .scene import load_scene
+        from ...scene import load_scene
+        from . import sink as rerun_log
 
         rerun_log._rr()  # the slow import, done while the parent is busy
         try:

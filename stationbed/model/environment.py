@@ -15,6 +15,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..core.rotation import quat_mult
+
 __all__ = [
     "orbit_position_N",
     "C_ON",
@@ -102,8 +104,6 @@ def q_ON(u, inclination):
     ``q_ON = q_x(i) ⊗ q_z(u) ⊗ Q_OR`` (``dcm(a ⊗ b) = dcm(b) dcm(a)``): node, then the argument of
     latitude, then the fixed LVLH axes.
     """
-    from .rotation import quat_mult
-
     ci, si = _trig(0.5 * inclination)
     cu, su = _trig(0.5 * u)
     q_i = _stack([ci, si, 0.0 * si, 0.0 * si], u)

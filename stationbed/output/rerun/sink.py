@@ -52,10 +52,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .massprops import composite_cm
-from .rotation import dcm, quat_from_dcm, rotation_angle
-from .scene import Scene
-from .trajectory import Trajectory, base_columns
+from ...core.massprops import composite_cm
+from ...core.rotation import dcm, quat_from_dcm, rotation_angle
+from ...scene import Scene
+from ...core.beam import cantilever_shape
+from ...model.cmg import dgcmg_triads, pyramid_axes
+from ...model.environment import sun_direction_N
+from ...run.trajectory import Trajectory, base_columns
 
 __all__ = [
     "APPLICATION_ID",
@@ -272,8 +275,6 @@ class _CmgDrawing:
     """
 
     def __init__(self, cfg, columns, geom: _Geometry):
-        from .cmg import dgcmg_triads, pyramid_axes
-
         j = {c: i for i, c in enumerate(columns)}
         self.kind = cfg.kind
         self.j_h = [j[c] for c in ("hx", "hy", "hz")]
@@ -356,8 +357,6 @@ class _ElasticLines:
     """
 
     def __init__(self, scene: Scene, columns):
-        from .flex import cantilever_shape  # the scene's modes imported .flex already
-
         j = {c: i for i, c in enumerate(columns)}
         self.arrays = []  # (name, base points (g, n, 3), eta index (m,), psi (g, m, n), e_defl (g, m, 3))
         amp_idx, amp_omega = [], []
@@ -733,8 +732,6 @@ class RrdSink:
 
 def _sun_vector_N(scene: Scene) -> np.ndarray:
     """Unit sun direction of ``scene``'s ``[sun]`` table, N components (as the model sees it)."""
-    from .environment import sun_direction_N
-
     incl = scene.orbit.inclination if scene.orbit is not None else 0.0
     return sun_direction_N(scene.sun, incl)
 

@@ -1,0 +1,369 @@
+"""The closed loop: sense -> control (integer ticks, zero-order hold) -> actuate -> integrate ->
+record, with the per-tick compiled path and the fused loop (:mod:`.fused`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core.compile import FastCall
+from ..core.rotation import rotation_angle
+from ..integrators import IntegrationError
+from ..model.cmg import capacity, cluster_functions
+from .controller import Measurement, Plant, get_controller, measurement_layout
+from .fused import fused_ok, run_fused
+from .rows import check_rows
+from .segments import held_torque, segment_input
+
+__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH"]
+
+
+class ControllerFailure(Exception):
+    def __init__(self, t: float, reason: str):
+        super().__init__(reason)
+        self.t = t
+        self.reason = reason
+
+
+#: rows collected before they are streamed to the sink in the closed loop
+ROW_BATCH = 64
+
+
+class ControlLoop:
+    """Sense -> control (integer ticks, zero-order hold) -> actuate -> integrate -> record.
+
+    One integrator call per period (split only at scene discontinuities inside it); the
+    integrator keeps its memory (step size) across periods, so nothing restarts per tick.
+    """
+
+    def __init__(self, scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused):
+        spec = scene.controller
+        self.system, self.fused, self.used_fused = system, fused, False
+        self.scene, self.integ, self.p, self.x, self.rows = scene, integ, p, x, rows
+        self.duration, self.bps, self.apply_jump = duration, bps, apply_jump
+        self.period = spec.period
+        self.n_per_out = int(round(output_dt / spec.period))
+        f = system.funcs
+        model = system.formulation.model
+        self.model = model
+        cmg = model.cmg
+        self.ng = 0 if cmg is None else cmg.n_gimbals
+        self.ctrl = controller if controller is not None else get_controller(spec.name)(period=spec.period, **spec.params)
+        if self.ctrl.command == "gimbal_rates" and self.ng == 0:
+            raise ValueError(
+                f"controller '{self.ctrl.name}' commands gimbal rates: the scene needs a gimballed [cmg]"
+            )
+        inertia = FastCall.of(f["inertia"])
+        inertia.args[0][0] = 0.0
+        inertia.args[1][:] = x
+        inertia.args[2][:] = p
+        inertia()
+        c = scene.cmg
+        plant = Plant(
+            scene=scene,
+            inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
+            mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
+            period=self.period,
+        )
+        if c is not None:
+            plant.cmg_kind = c.kind
+            plant.h_capacity = capacity(c)
+            plant.max_torque = c.max_torque or math.inf if c.kind == "ideal" else math.inf
+            plant.n_gimbals = self.ng
+            plant.max_gimbal_rate = c.max_gimbal_rate if self.ng else math.inf
+            plant.h_rotor = c.h_rotor if self.ng else 0.0
+            plant.cmg_functions = cluster_functions(c)
+        self.capacity = plant.h_capacity
+        self.ctrl.reset(plant)
+        # measurement: compiled, written into y; the controller sees views of y (or of a noisy,
+        # delayed copy)
+        self.meas = FastCall.of(f["meas"])
+        self.meas.args[2][:] = p
+        self.layout = measurement_layout(self.ng, len(scene.appendage))
+        sensor = spec.sensor
+        self.noisy = sensor.attitude_noise > 0 or sensor.rate_noise > 0 or sensor.delay > 0
+        if self.noisy:
+            self.delay = int(round(sensor.delay / self.period))
+            self.history = np.zeros((self.delay + 1, self.meas.res[0].size))
+            self.rng = np.random.default_rng(sensor.seed)
+            self.seen = np.zeros(self.meas.res[0].size)
+            self.M = Measurement(self.seen, self.layout)
+        else:
+            self.M = Measurement(self.meas.res[0], self.layout)
+        self.sensor = sensor
+        self.act = None
+        if cmg is not None:
+            name = "actuate_rates" if self.ctrl.command == "gimbal_rates" else "actuate"
+            self.act = FastCall.of(f[name])
+            self.act.args[3][:] = p
+        self.u = np.zeros(model.nu)
+        self.nu_cmg = model.nu_cmg
+        self.n_cmd = self.ng if self.ctrl.command == "gimbal_rates" else 3
+        self.last_cmd = (0.0, 0.0, 0.0)
+        self.meas_out = None  # where the fused tick writes y, when the controller reads it there
+        self.u_ext = None  # the fused tick's held-torque input, when the loop has a fused tick
+        self.n_slow = 0  # periods integrated by the generic path
+        self.ticks = 0
+        self.n_rate_limited = 0
+        self.n_momentum_saturated = 0
+
+    # -- one tick ------------------------------------------------------------------------
+    def _sense(self, k: int, t: float) -> None:
+        m = self.meas
+        m.args[0][0] = t
+        m.args[1][:] = self.x
+        m()
+        self.n_slow += 1 if k > 0 else 0
+        if self.meas_out is not None:
+            self.meas_out[:] = m.res[0]
+        self.M.t = t
+        if self.noisy:
+            self._corrupt(k)
+
+    def _corrupt(self, k: int) -> None:
+        y = self.meas.res[0]
+        slot = k % (self.delay + 1)
+        if k == 0:
+            self.history[:] = y
+        self.history[slot] = y
+        self.seen[:] = self.history[(k - self.delay) % (self.delay + 1)] if k >= self.delay else self.history[0]
+        s = self.sensor
+        if s.attitude_noise > 0:
+            o = self.layout["q_BN"][0]
+            q = self.seen[o : o + 4]
+            d = 0.5 * self.rng.normal(0.0, s.attitude_noise, 3)
+            qn = np.array(
+                [
+                    q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
+                    q[1] + q[0] * d[0] + q[2] * d[2] - q[3] * d[1],
+                    q[2] + q[0] * d[1] + q[3] * d[0] - q[1] * d[2],
+                    q[3] + q[0] * d[2] + q[1] * d[1] - q[2] * d[0],
+                ]
+            )
+            q[:] = qn / np.linalg.norm(qn)
+        if s.rate_noise > 0:
+            o = self.layout["omega_BN_B"][0]
+            self.seen[o : o + 3] += self.rng.normal(0.0, s.rate_noise, 3)
+
+    def _actuate(self, t: float, cmd, count: bool = True) -> int:
+        """Set the held input from the command; returns the saturation flag (0/1)."""
+        if self.act is None:  # no cluster: the torque request acts directly (ideal torquer)
+            return 0
+        a = self.act
+        a.args[0][0] = t
+        a.args[1][:] = self.x
+        a.args[2][: self.n_cmd] = cmd
+        a()
+        return self._flags(a.res[0], count)
+
+    def _advance(self, t0: float, t1: float, cmd) -> None:
+        """Generic path: one integrator call per period, split at discontinuities inside it."""
+        inner = [b for b in self.bps if t0 < b < t1]
+        edges = [t0] + inner + [t1]
+        for a, b in zip(edges[:-1], edges[1:]):
+            segment_input(self.scene, self.model, a, b, self.u)
+            if self.u_ext is not None:
+                self.u_ext[:] = self.u[0:3]  # the fused tick's copy of the held torque
+            u = self.u.copy()
+            if self.act is None:
+                u[0:3] += cmd
+            # an array rate step at b: continue from the state just after it
+            self.x[:] = self.apply_jump(b, self.integ.advance(a, b, self.x, u))
+
+    def _held_row(self, sat_flag: int):
+        vals = []
+        if self.model.cmg is not None:
+            vals += list(self.u[3 : 3 + self.ng]) if self.ng else []
+            vals.append(float(sat_flag))
+        q_ref = self.ctrl.q_ref_BN
+        if q_ref is None:
+            err = math.nan
+        else:
+            err = math.degrees(float(rotation_angle(np.asarray(q_ref, float)[None], self.x[None, 0:4])[0]))
+        tau = self.last_cmd if self.ctrl.command == "torque" else (math.nan,) * 3
+        vals += list(tau) + [err]
+        return vals
+
+    def run(self) -> None:
+        period, duration = self.period, self.duration
+        K = max(1, math.ceil(duration / period - 1e-9))
+        if self.fused:
+            if fused_ok(self):
+                return run_fused(self, K)
+        pending_t, pending_x, pending_h = [], [], []
+        sat_since_row = 0
+
+        def flush():
+            if pending_t:
+                rows = self.rows.make(pending_t, pending_x, pending_h)
+                pending_t.clear(), pending_x.clear(), pending_h.clear()
+                check_rows(rows[:, :12], lambda ok: self.rows.emit(rows[: len(ok)]))
+
+        tick = self._fast_tick()
+        bps = [b for b in self.bps if 0.0 < b < duration]
+        ib = 0  # next breakpoint
+        self.u[0:3] = held_torque(self.scene, 0.5 * period)
+        if tick is not None:
+            self.u_ext[:] = self.u[0:3]
+            fc, xin, res_x, res_y, res_act = tick
+            a_t, a_h, a_cmd = fc.args[0], fc.args[1], fc.args[3]
+        # the loop checks commands and counts updates itself (Controller.update's job) so the
+        # hot path makes one Python call per tick into the controller
+        update, ctrl, n_per_out = self.ctrl._update, self.ctrl, self.n_per_out
+        nu = self.nu_cmg
+        i_lim, i_sat = nu + 1, nu + 2
+        has_act = self.act is not None
+        ncmd = self.n_cmd
+        noisy = self.noisy
+        M = self.M
+        ticks = 0
+        h_set = -1.0
+        next_bp = bps[0] if bps else math.inf
+        fast = tick is not None
+        if fast:
+            trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
+        try:
+            self._sense(0, 0.0)
+            for k in range(K + 1):
+                t = k * period  # integer tick clock: no accumulated drift
+                if k == K:
+                    t = duration
+                M.t = t
+                try:
+                    cmd = update(t, M)
+                except Exception as e:  # the user's code: report it, keep the trajectory
+                    raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {e}") from None
+                t_next = (k + 1) * period
+                if t_next > duration:
+                    t_next = duration
+                smooth = fast and k < K and next_bp > t_next  # a step at t_next needs the jump
+                if smooth:  # fused: actuate + one RK4 step + measure, one compiled call
+                    a_t[0] = t
+                    if t_next - t != h_set:
+                        h_set = t_next - t
+                        a_h[0] = h_set
+                    if cmd is None or len(cmd) != ncmd:
+                        self._check_command(t, cmd)
+                    a_cmd[:] = cmd
+                    trigger()
+                    if has_act and (res_act[i_lim] or res_act[i_sat]):
+                        sat_since_row |= self._flags(res_act)
+                else:
+                    self._check_command(t, cmd)
+                    # the final tick's actuation is reported in its row but never integrated:
+                    # it is not counted in the summary
+                    sat_since_row |= self._actuate(t, cmd, count=k < K)
+                if k % n_per_out == 0 or k == K:
+                    if len(cmd) == 3:
+                        self.last_cmd = cmd
+                    if smooth and has_act:
+                        self.u[3 : 3 + nu] = res_act[:nu]  # the row's held rates (flags counted above)
+                    pending_t.append(t)
+                    pending_x.append(self.x.copy())
+                    pending_h.append(self._held_row(sat_since_row))
+                    sat_since_row = 0
+                    if len(pending_t) >= ROW_BATCH:
+                        flush()
+                if k == K:
+                    break
+                ticks += 1
+                if smooth:
+                    v = res_x[4]
+                    if not -1e300 < v < 1e300:
+                        self.ticks = ticks
+                        self._check_command(t, cmd)
+                        raise IntegrationError(t_next, "state is not finite (NaN or inf)")
+                    xin[:] = res_x
+                    if noisy:
+                        self.meas.res[0][:] = res_y
+                        self._corrupt(k + 1)
+                else:
+                    self.ticks = ticks
+                    while ib < len(bps) and bps[ib] <= t_next:
+                        ib += 1
+                    next_bp = bps[ib] if ib < len(bps) else math.inf
+                    self._advance(t, t_next, cmd)
+                    self._sense(k + 1, t_next)
+        finally:
+            self.ticks = ticks
+            ctrl.n_updates += ticks + 1
+            if tick is not None:
+                n_fast = self.ticks - self.n_slow
+                self.integ.n_rhs += 4 * n_fast
+                self.integ.n_steps += n_fast
+            flush()
+
+    def _check_command(self, t: float, cmd) -> None:
+        """A clear error for a command of the wrong size or with NaN/inf (generic path, or after
+        the fused path met a non-finite state)."""
+        name = self.ctrl.name
+        try:
+            n = len(cmd)
+            total = sum(float(c) for c in cmd)
+        except TypeError:
+            raise ControllerFailure(t, f"controller '{name}' returned {cmd!r}, not a sequence") from None
+        if n != self.n_cmd:
+            raise ControllerFailure(
+                t, f"controller '{name}' returned {n} values, expected {self.n_cmd} ({self.ctrl.command})"
+            )
+        if not math.isfinite(total):
+            raise ControllerFailure(t, f"controller '{name}' returned a non-finite command {list(cmd)}")
+
+    def _fast_tick(self):
+        """The fused tick when the integrator is RK4 with one step per period, else None."""
+        integ = self.integ
+        f = integ.funcs
+        name = "tick_rates" if self.ctrl.command == "gimbal_rates" else "tick_torque"
+        if getattr(integ, "name", "") != "rk4" or name not in f:
+            return None
+        if math.ceil(self.period / integ.h_nominal - 1e-9) != 1:
+            return None
+        fc = FastCall.of(f[name])
+        fc.args[5][:] = self.p
+        fc.args[2][:] = self.x
+        self.x = fc.args[2]  # the loop's state lives in the tick's input buffer
+        self.u_ext = fc.args[4]
+        if not self.noisy:  # the controller reads the tick's output directly (no copy)
+            self.meas_out = fc.res[1]
+            self.M = Measurement(self.meas_out, self.layout)
+        return fc, fc.args[2], fc.res[0], fc.res[1], fc.res[2]
+
+    def _flags(self, r, count: bool = True) -> int:
+        if self.act is None:
+            return 0
+        nu = self.nu_cmg
+        self.u[3 : 3 + nu] = r[:nu]
+        lim, sat = r[nu + 1] > 0.5, r[nu + 2] > 0.5
+        if count:
+            self.n_rate_limited += lim
+            self.n_momentum_saturated += sat
+        return int(lim or sat)
+
+    def summary(self) -> dict:
+        rows = self.rows
+        out = {
+            "controller": self.ctrl.name,
+            "fused": self.used_fused,
+            "period_s": self.period,
+            "ticks": self.ticks,
+            "controller_updates": self.ctrl.n_updates,
+        }
+        traj = rows.trajectory({}) if rows.rows else None
+        if self.model.cmg is not None:
+            out["rate_limited_ticks"] = int(self.n_rate_limited)
+            out["momentum_saturated_ticks"] = int(self.n_momentum_saturated)
+            if traj is not None:
+                h = np.linalg.norm(traj.cols("hx", "hy", "hz"), axis=1)
+                out["max_h_Nms"] = float(h.max())
+                if math.isfinite(self.capacity):
+                    out["max_h_fraction"] = float(h.max() / self.capacity)
+                if "cmg_singularity" in traj.columns:
+                    out["min_singularity"] = float(traj["cmg_singularity"].min())
+        if traj is not None:
+            err = traj["att_err_deg"]
+            if np.isfinite(err).any():
+                out["final_att_err_deg"] = float(err[-1])
+                out["max_att_err_deg"] = float(np.nanmax(err))
+        out.update(self.ctrl.summary())
+        return out

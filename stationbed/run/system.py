@@ -1,0 +1,157 @@
+"""The compiled system of one (formulation, integrator, structure): right-hand side, outputs,
+initial state, jump, measurement, actuation and the integrator's own step, generated as C once
+and cached (in this process and on disk)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+
+from ..core.compile import compile_functions, sx_function
+from ..formulations import Formulation, get_formulation
+from ..integrators import Integrator, get_integrator
+from ..model import StationModel, Structure
+from ..model.cmg import singularity_measure
+from ..model.environment import orbit_position_N, q_ON
+from .controller import measurement_layout
+
+__all__ = ["System", "build_system", "OUT_CHUNK"]
+
+OUT_CHUNK = 64  # output rows evaluated per compiled call
+
+
+@dataclass
+class System:
+    """Compiled functions of one (formulation, integrator, structure)."""
+
+    formulation: Formulation
+    integrator_cls: type[Integrator]
+    funcs: dict
+    build_s: float
+    n_out: int
+    sx: dict = None  # the SX Functions before compilation (the fused loop composes them)
+
+
+_SYSTEMS: dict[tuple, System] = {}
+
+
+def _track_errors(model: StationModel, t, x, p):
+    """Per array: angle between its normal (+z of P) and the sun [rad] (casadi)."""
+    s_B = model.sun_B(x[0:4], p)
+    errs = []
+    for a in model.arrays(t, x[0:4], x[7:], p):
+        n_B = a[4][2, :].T
+        errs.append(ca.atan2(ca.norm_2(ca.cross(n_B, s_B)), ca.dot(n_B, s_B)))
+    return errs
+
+
+def _tick_functions(model, rhs, fs, nx, nu, npar, ng) -> list[ca.Function]:
+    """One control period fused in one compiled call, for the fixed-step RK4 closed loop.
+
+    ``tick_<cmd>(t, h, x, cmd, u_ext, p) -> (x(t + h), y(t + h), act)``: the actuation at
+    ``(t, x)`` (steering law and limits; ``act = [u_cmg, m, rate_limited, saturated]``), one RK4
+    step of ``h`` with that input held, and the measurement at the end. Same functions as the
+    generic path (actuate, rk4 step, meas), composed, so both paths give the same numbers.
+    """
+    by_name = {f.name(): f for f in fs}
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    x, u_ext, p = ca.SX.sym("x", nx), ca.SX.sym("u_ext", 3), ca.SX.sym("p", npar)
+    out = []
+    kinds = [("torque", 3)] + ([("rates", ng)] if ng else [])
+    for kind, ncmd in kinds:
+        cmd = ca.SX.sym("cmd", ncmd)
+        if model.cmg is None:
+            act = ca.SX.zeros(0, 1)
+            u = u_ext + cmd
+        else:
+            f_act = by_name["actuate" if kind == "torque" else "actuate_rates"]
+            act = f_act(t, x, cmd if kind == "torque" else ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
+            u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
+        if model.has_steps:
+            u = ca.vertcat(u, t + h / 2)  # the segment's time for the side of a rate step
+        k1 = rhs(t, x, u, p)
+        k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
+        k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
+        k4 = rhs(t + h, x + h * k3, u, p)
+        x1 = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        y1 = by_name["meas"](t + h, x1, p)
+        out.append(sx_function(f"tick_{kind}", [t, h, x, cmd, u_ext, p], [x1, y1, act]))
+    return out
+
+
+def build_system(structure: Structure, formulation, integrator) -> System:
+    """Build (or fetch from the in-process cache) the compiled functions for a structure."""
+    form_cls = get_formulation(formulation)
+    integ_cls = get_integrator(integrator)
+    key = (form_cls, integ_cls, structure)
+    if key in _SYSTEMS:
+        return _SYSTEMS[key]
+    t0 = time.perf_counter()
+    model = StationModel(structure)
+    form = form_cls(model)
+    nx, npar, nu = form.nx, model.layout.size, model.nu
+    t = ca.SX.sym("t")
+    t2 = ca.SX.sym("t2")
+    x = ca.SX.sym("x", nx)
+    u = ca.SX.sym("u", nu)
+    p = ca.SX.sym("p", npar)
+    q = ca.SX.sym("q", 4)
+    w = ca.SX.sym("w", 3)
+    xe = ca.SX.sym("xe", model.n_extra + 2 * model.n_modes)
+    rhs = sx_function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)])
+    arrays = form.arrays(t, x, p)
+    outs = [form.omega(t, x, p), form.H_O_N(t, x, p), form.kinetic_energy(t, x, p)]
+    for a in arrays:
+        outs += list(a[3])
+    cmg = model.cmg
+    if cmg is not None:
+        outs.append(model.h(x[7:], p))
+        if cmg.kind != "ideal":
+            pc = p[model.layout["cmg"]]
+            outs.append(singularity_measure(cmg.A_hat(x[7 : 7 + cmg.nx], pc)))
+    if structure.sun:
+        outs += _track_errors(model, t, x, p)
+    if model.n_modes:
+        outs += [model.eta(x[7:]), form.modal_rates(t, x, p), form.strain_energy(t, x, p)]
+    out = sx_function("out", [t, x, p], [ca.vertcat(*outs)])
+    init = sx_function("init", [t, q, w, xe, p], [form.state(t, q, w, xe, p)])
+    fs = [rhs, out, out.map("out_map", "serial", OUT_CHUNK, [2], []), init]
+    if form.omega_is_state:
+        fs.append(sx_function("jump", [t, t2, x, p], [form.jump(t, t2, x, p)]))
+    # controller side: the measurement vector, and the actuation (steering law + limits)
+    ng = 0 if cmg is None else cmg.n_gimbals
+    lay = measurement_layout(ng, structure.n_app)
+    wv = form.omega(t, x, p)
+    meas = [x[0:4], wv, model.h(x[7:], p), x[7 : 7 + ng]]
+    meas += [a[3][0] for a in arrays] + [a[3][1] for a in arrays]
+    if structure.orbit:
+        radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))
+        meas += [orbit_position_N(u0 + n * t, radius, incl), ca.reshape(model.C_ON(t, p).T, 9, 1)]
+        meas.append(q_ON(u0 + n * t, incl))
+    else:
+        meas += [ca.DM.zeros(3), ca.reshape(ca.DM.eye(3), 9, 1), ca.DM([1.0, 0.0, 0.0, 0.0])]
+    meas.append(p[model.layout["sun"]] if structure.sun else ca.DM.zeros(3))
+    y = ca.vertcat(*meas)
+    assert y.numel() == sum(k for _, k in lay.values())
+    fs.append(sx_function("meas", [t, x, p], [y]))
+    if cmg is not None:
+        cmd = ca.SX.sym("cmd", 3)
+        rates = ca.SX.sym("rates", max(ng, 1))
+        pc = p[model.layout["cmg"]]
+        xc = x[7 : 7 + cmg.nx]
+        steered = cmg.actuate(t, xc, cmd, wv, pc)
+        fs.append(sx_function("actuate", [t, x, cmd, p], [ca.vertcat(*steered)]))
+        if ng:
+            direct = cmg.actuate(t, xc, cmd, wv, pc, direct_rates=rates[0:ng])
+            fs.append(sx_function("actuate_rates", [t, x, rates, p], [ca.vertcat(*direct)]))
+    fs.append(sx_function("inertia", [t, x, p], [model.inertia(t, p, arrays)]))
+    if integ_cls.name == "rk4":
+        fs += _tick_functions(model, rhs, fs, nx, nu, npar, ng)
+    fs += integ_cls.build(rhs, nx, nu, npar)
+    tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
+    funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)
+    system = System(form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0), {f.name(): f for f in fs})
+    _SYSTEMS[key] = system
+    return system

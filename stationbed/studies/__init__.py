@@ -1,0 +1,1 @@
+"""Studies on top of runs: the cross-formulation check, work-precision and stability."""
