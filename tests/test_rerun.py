@@ -378,7 +378,7 @@ def test_check_rrd_writes_formulations_and_diffs(tmp_path):
             assert d.shape == (21, 1) and np.all(d >= 0.0)
 
 
-# -- command line: the recording process (stationbed/_rrd_child.py) ----------------------------
+# -- command line: the recording process (stationbed/output/rerun/child.py) ----------------------------
 #: Long enough that the run is still going when it is killed (3 orbits take ~1 s; this ~60x).
 KILL_DURATION_S = 1.0e6
 #: Rows in the CSV before the parent is killed: a few batches, while the child may still import.
@@ -519,7 +519,7 @@ def test_recording_process_that_cannot_write_reports_why(tmp_path, capsys):
 def test_bad_scene_stops_the_recording_process_and_writes_nothing(tmp_path, monkeypatch, capsys):
     """A scene that does not load: exit 2 as without --rrd, the recording process (already
     started) is stopped and no file is made."""
-    from stationbed import _rrd_child
+    from stationbed.output.rerun import child as _rrd_child
 
     started = []
     start = _rrd_child.RecordingChild.start

@@ -45,7 +45,7 @@ from ..run.trajectory import Trajectory
 
 __all__ = ["StudyError", "precision_study", "stability_study", "STABILITY_CASES", "PrecisionResult", "Case"]
 
-SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
 # ---------------------------------------------------------------------------------------
 # precision study settings
