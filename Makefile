@@ -8,7 +8,7 @@ OUT    ?= out/power_tower_free_drift
 # pytest workers: both cores of the CI machine
 JOBS   ?= 2
 
-.PHONY: run test bench check install clean
+.PHONY: run test test-fast bench check install clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -n $(JOBS) -q
+
+# the fast subset: everything but whole-scenario, sweep and multi-orbit runs (marked slow)
+test-fast: $(STAMP)
+	$(PY) -m pytest -n $(JOBS) -q -m "not slow"
 
 check: $(STAMP)
 	@for s in scenarios/*.toml; do $(VENV)/bin/stationbed check $$s || exit 1; done

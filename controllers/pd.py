@@ -66,8 +66,9 @@ class PD(Controller):
         return qmul(tuple(meas.q_ON.tolist()), self.q_RO) if self.lvlh else self.q_RO
 
     def _update(self, t, meas):
-        # Written out on floats: this runs every tick (see controllers/_quat.py for the helpers
-        # it inlines; tests/test_controllers.py checks it against them).
+        # Written out on floats: this runs every tick (controllers/_quat.py has the helpers it
+        # inlines; tests/test_controller_contract.py::test_symbolic_form_gives_the_python_law
+        # checks it against its casadi form, written with stationbed.core.rotation).
         qw, qx, qy, qz = meas.q_BN.tolist()
         wx, wy, wz = meas.omega_BN_B.tolist()
         if self.lvlh:

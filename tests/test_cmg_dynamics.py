@@ -333,6 +333,7 @@ def test_exactly_symmetric_command_traps_sr_but_not_odsr(law, escapes):
 PAIRS = list(itertools.combinations(FORMS, 2))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pair", PAIRS, ids=[f"{a}-vs-{b}" for a, b in PAIRS])
 @pytest.mark.parametrize("kind", KINDS)
 def test_formulations_agree_with_a_cmg(kind, pair):

@@ -12,6 +12,9 @@ from stationbed.studies.check import check_scene, compare, compare_modes
 from stationbed.formulations.dalembert import DAlembertForm
 from stationbed.core.massprops import coriolis_matrix
 
+#: every shipped scenario through every formulation (~60 s warm)
+pytestmark = pytest.mark.slow
+
 PAIRS = list(itertools.combinations(sorted(FORMULATIONS), 2))
 
 

@@ -702,6 +702,7 @@ def step_runs():
     return {f: simulate(scene, formulation=f) for f in FORMS}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("form", FORMS)
 def test_H_continuous_through_rate_step_with_modes(form, step_runs):
     tr = step_runs[form]
@@ -820,6 +821,7 @@ def tower_dict():
     return tower
 
 
+@pytest.mark.slow
 def test_flexible_station_with_cmgs_passes_check():
     res = check_scene(scene_from_dict(tower_dict()))
     assert res.ok, res.table()

@@ -494,6 +494,7 @@ def test_deep_space_articulated_matches_point_masses(deep_space, deep_space_refe
     assert_allclose(tr["T"], T_ref, rtol=T_RTOL, atol=0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("formulation", FORMULATIONS, ids=FORMULATIONS)
 def test_gravity_gradient_matches_first_order_point_masses(in_orbit, in_orbit_references, formulation):
     """Same first-order gravity-gradient physics on both sides, one orbit: integration error only."""

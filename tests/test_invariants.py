@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose
 
 from stationbed import FORMULATIONS, simulate
 from stationbed.scene import scene_from_dict
+from stationbed.studies.study import raw_states
 from scenes import articulated_dict
 
 FORMS = sorted(FORMULATIONS)
@@ -44,10 +45,19 @@ def test_moving_arrays_do_work(form):
     assert np.ptp(tr["T"]) / tr["T"][0] > 1e-3
 
 
+#: the integrated Euler parameters drift off the unit sphere like any integration error: within
+#: the requested rtol (1e-12 here; measured <= 3e-14 over the 300 s run for every form)
+Q_NORM_TOL = 1e-12
+
+
 @pytest.mark.parametrize("form", FORMS)
-def test_quaternion_norm_stays_unit(form):
-    tr = simulate(scene_from_dict(articulated_dict()), formulation=form)
-    assert_allclose(np.linalg.norm(tr.q_BN, axis=1), 1.0, atol=1e-15)
+def test_integrated_quaternion_stays_unit(form):
+    """The integrator's own state, not the trajectory rows (which report q / |q|)."""
+    scene = scene_from_dict(articulated_dict())
+    assert scene.simulation.rtol <= Q_NORM_TOL
+    ts = np.linspace(0.0, scene.simulation.duration, 51)  # s
+    x = raw_states(scene, form, "dop853", ts)
+    assert np.abs(np.linalg.norm(x[:, 0:4], axis=1) - 1.0).max() < Q_NORM_TOL
 
 
 @pytest.fixture(scope="module")

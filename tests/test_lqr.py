@@ -102,6 +102,7 @@ def test_design_model_matches_textbook_lvlh_equations():
     assert_allclose(B, np.vstack([np.zeros((3, 3)), np.linalg.inv(Jd)]), rtol=JAC_RTOL)
 
 
+@pytest.mark.slow
 def test_feedforward_holds_lvlh_with_products_of_inertia():
     """With the JEOD products of inertia LVLH needs a steady torque (gravity gradient + ω × Iω,
     written here in numpy); the law's feedforward u0 is that torque, and the station started in
@@ -152,6 +153,7 @@ def simulated_poles():
     return c, s_sim
 
 
+@pytest.mark.slow
 def test_simulation_poles_equal_zoh_discretised_design(simulated_poles):
     """The closed loop as simulated (nonlinear plant, 10 Hz zero-order hold) has exactly the poles
     of the design model discretised with the hold: eig(e^{AT} - ∫e^{As}ds B K)."""

@@ -107,7 +107,7 @@ def test_command_is_minus_K_times_state(about):
         M.omega_BN_B[:] = rng.normal(size=3) * 1e-3
         M.h_B[:] = rng.normal(size=3) * 1e3
         z = np.array(c.z)
-        u = c._update(0.0, M)
+        u = c.update(0.0, M)
         x = np.r_[np.array(lvlh_error(M.q_BN, M.omega_BN_B, M.q_ON, (0.0, -N_400KM, 0.0))) - c.x_e[:6], M.h_B, z]
         assert_allclose(u, -c.K @ x, rtol=1e-9, atol=1e-9)
         assert_allclose(c.q_ref_BN, qmul(M.q_ON, c.q_TO), atol=1e-15)
@@ -129,6 +129,7 @@ def orbits(mm_run):
     return [k == i for i in range(int(k.max()))]  # whole orbits only
 
 
+@pytest.mark.slow
 def test_momentum_stays_below_60_percent_over_10_orbits(mm_run):
     scene, tr = mm_run
     s = tr.meta["summary"]

@@ -120,6 +120,7 @@ def test_pd_slew_rate_limit_is_respected_and_reported(pd_run):
 # -- mpc: the shipped slew -----------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_mpc_slew_reaches_the_target_before_pd(mpc_run, pd_run):
     scene, tr = mpc_run
     err = principal_angle_deg(tr.q_BN, scene.controller.params["q_ref"])
@@ -316,6 +317,7 @@ def test_period_other_than_the_scene_is_rejected():
         simulate(scene, controller=MPC(period=5.0, **scene.controller.params), duration=10.0)
 
 
+@pytest.mark.slow
 def test_mpc_slews_a_dgcmg_cluster_too():
     """Same slew with 4 double-gimbal CMGs (8 gimbal rates): on target by the same time, inside
     the rate and momentum bounds (capacity 4 x 4760 N m s)."""

@@ -38,6 +38,9 @@ from stationbed.studies.study import (
     stability_function,
 )
 
+#: the quick studies run whole scenarios and sweeps (~25 s warm)
+pytestmark = pytest.mark.slow
+
 PRECISION_SCENE = ROOT / "scenarios" / "articulated_stress.toml"
 PRECISION_FORMS = ["momentum"]  # one form keeps the cold-cache compile time down (one build per integrator)
 PRECISION_ARGS = ["--duration", "60", "--formulations", *PRECISION_FORMS, "--quick"]

@@ -208,9 +208,8 @@ class ControlLoop:
             self.u_ext[:] = self.u[0:3]
             fc, xin, res_x, res_y, res_act = tick
             a_t, a_h, a_cmd = fc.args[0], fc.args[1], fc.args[3]
-        # the loop checks commands and counts updates itself (Controller.update's job) so the
-        # hot path makes one Python call per tick into the controller
-        update, ctrl, n_per_out = self.ctrl._update, self.ctrl, self.n_per_out
+        # the loop checks commands itself; Controller.update counts the calls
+        update, ctrl, n_per_out = self.ctrl.update, self.ctrl, self.n_per_out
         nu = self.nu_cmg
         i_lim, i_sat = nu + 1, nu + 2
         has_act = self.act is not None
@@ -287,7 +286,6 @@ class ControlLoop:
                     self._sense(k + 1, t_next)
         finally:
             self.ticks = ticks
-            ctrl.n_updates += ticks + 1
             if tick is not None:
                 n_fast = self.ticks - self.n_slow
                 self.integ.n_rhs += 4 * n_fast

@@ -188,9 +188,24 @@ class Controller:
         self._reset(plant)
 
     def update(self, t: float, meas: Measurement):
-        """The command for the period starting at ``t`` [s] (counted)."""
+        """The command for the period starting at ``t`` [s] (counted in ``n_updates``).
+
+        Parameters
+        ----------
+        t : float  Time of the tick [s].
+        meas : Measurement  What the controller sees (views refreshed in place).
+
+        Returns
+        -------
+        sequence of float  ``tau_B`` (3,) [N m] or gimbal rates (n_gimbals,) [rad/s], per ``command``.
+        """
         self.n_updates += 1
         return self._update(t, meas)
+
+    def count_compiled_updates(self, n: int) -> None:
+        """Count ``n`` updates that the controller's :meth:`symbolic` form made inside a compiled
+        loop (the fused loop of :mod:`stationbed.run.fused`), where :meth:`update` is not called."""
+        self.n_updates += int(n)
 
     def summary(self) -> dict:
         """Design facts to report (poles, margins...); empty by default."""

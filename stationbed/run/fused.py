@@ -210,7 +210,7 @@ def run_fused(loop, K: int) -> None:
     finally:
         loop.ticks = ticks
         loop.x = x
-        ctrl.n_updates += ticks + 1
+        ctrl.count_compiled_updates(ticks + 1)
         loop.integ.n_rhs += 4 * ticks
         loop.integ.n_steps += ticks
         _flush(loop, rows_t, rows_x, rows_h)
