@@ -16,13 +16,12 @@ from typing import Annotated, Any, ClassVar, Literal, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator, model_validator
 
+from .core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from .core.beam import beam_mode, check_participation
 from .core.massprops import InvalidMassProperties, check_inertia
 
 __all__ = ["Scene", "SceneError", "load_scene", "scene_from_dict"]
 
-MU_EARTH_M3_S2 = 3.986004418e14  # IERS 2010 / WGS-84 GM
-R_EARTH_M = 6378137.0  # WGS-84 equatorial radius
 #: A quaternion typed in a file with ~8 digits is unit to ~1e-8; anything further off is a mistake.
 QUAT_NORM_TOL = 1e-6
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .symbolic import is_symbolic, matrix, vector
+
 __all__ = [
     "skew",
     "quat_mult",
@@ -35,48 +37,31 @@ __all__ = [
 ]
 
 
-def _is_sym(*xs) -> bool:
-    return any(isinstance(x, (ca.SX, ca.MX, ca.DM)) for x in xs)
-
-
-def _vec(items, like):
-    """Column vector from a list of scalars, numpy or casadi depending on ``like``."""
-    if _is_sym(like):
-        return ca.vertcat(*items)
-    return np.array(items, dtype=float)
-
-
-def _mat(rows, like):
-    if _is_sym(like):
-        return ca.vertcat(*[ca.horzcat(*r) for r in rows])
-    return np.array(rows, dtype=float)
-
-
 def skew(v):
     """Cross-product matrix: ``skew(a) @ b == a x b``.
 
     Quinn's tilde (seed 000, Eq. 8b) is the transpose of this matrix.
     """
-    return _mat([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]], v)
+    return matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]], v)
 
 
 def quat_mult(p, q):
     """Hamilton product ``p ⊗ q`` of scalar-first quaternions."""
     pw, px, py, pz = p[0], p[1], p[2], p[3]
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
-    return _vec(
+    return vector(
         [
             pw * qw - px * qx - py * qy - pz * qz,
             pw * qx + px * qw + py * qz - pz * qy,
             pw * qy - px * qz + py * qw + pz * qx,
             pw * qz + px * qy - py * qx + pz * qw,
         ],
-        p if _is_sym(p) else q,
+        p if is_symbolic(p) else q,
     )
 
 
 def quat_conj(q):
-    return _vec([q[0], -q[1], -q[2], -q[3]], q)
+    return vector([q[0], -q[1], -q[2], -q[3]], q)
 
 
 def dcm(q_BN):
@@ -89,7 +74,7 @@ def dcm(q_BN):
     n2 = w * w + x * x + y * y + z * z
     s = 2.0 / n2
     # C_NB (body -> inertial), the usual Hamilton rotation matrix; return its transpose.
-    return _mat(
+    return matrix(
         [
             [1 - s * (y * y + z * z), s * (x * y + w * z), s * (x * z - w * y)],
             [s * (x * y - w * z), 1 - s * (x * x + z * z), s * (y * z + w * x)],
@@ -126,32 +111,32 @@ def quat_kinematics(q_BN, omega_BN_B):
     """``q_dot = 0.5 * q ⊗ (0, omega)`` for scalar-first ``q_BN`` and body rates."""
     w, x, y, z = q_BN[0], q_BN[1], q_BN[2], q_BN[3]
     p, r, s = omega_BN_B[0], omega_BN_B[1], omega_BN_B[2]
-    return _vec(
+    return vector(
         [
             0.5 * (-x * p - y * r - z * s),
             0.5 * (w * p + y * s - z * r),
             0.5 * (w * r - x * s + z * p),
             0.5 * (w * s + x * r - y * p),
         ],
-        q_BN if _is_sym(q_BN) else omega_BN_B,
+        q_BN if is_symbolic(q_BN) else omega_BN_B,
     )
 
 
 def Ay(a):
     """TP-2511 frame rotation about y by ``a`` (Eq. 36): ``[[ca,0,-sa],[0,1,0],[sa,0,ca]]``."""
-    c, s = (ca.cos(a), ca.sin(a)) if _is_sym(a) else (np.cos(a), np.sin(a))
-    return _mat([[c, 0, -s], [0, 1, 0], [s, 0, c]], a)
+    c, s = (ca.cos(a), ca.sin(a)) if is_symbolic(a) else (np.cos(a), np.sin(a))
+    return matrix([[c, 0, -s], [0, 1, 0], [s, 0, c]], a)
 
 
 def Ax(b):
     """TP-2511 frame rotation about x by ``b`` (Eq. 37): ``[[1,0,0],[0,cb,sb],[0,-sb,cb]]``."""
-    c, s = (ca.cos(b), ca.sin(b)) if _is_sym(b) else (np.cos(b), np.sin(b))
-    return _mat([[1, 0, 0], [0, c, s], [0, -s, c]], b)
+    c, s = (ca.cos(b), ca.sin(b)) if is_symbolic(b) else (np.cos(b), np.sin(b))
+    return matrix([[1, 0, 0], [0, c, s], [0, -s, c]], b)
 
 
 def Ap(alpha, beta):
     """``C_PB = Ax(beta) @ Ay(alpha)`` (TP-2511 Eq. 35-38): alpha about B's y, then beta about x."""
-    if _is_sym(alpha, beta):
+    if is_symbolic(alpha, beta):
         return ca.mtimes(Ax(beta), Ay(alpha))
     return Ax(beta) @ Ay(alpha)
 
@@ -161,20 +146,20 @@ def omega_PB_P(alpha, beta, alpha_dot, beta_dot):
 
     (TP-2511 Eq. 40; the scan lost the minus sign. Proved against ``-Ċ_PB C_PBᵀ`` by a test.)
     """
-    if _is_sym(beta):
+    if is_symbolic(beta):
         cb, sb = ca.cos(beta), ca.sin(beta)
     else:
         cb, sb = np.cos(beta), np.sin(beta)
-    return _vec([beta_dot, alpha_dot * cb, -alpha_dot * sb], beta)
+    return vector([beta_dot, alpha_dot * cb, -alpha_dot * sb], beta)
 
 
 def omega_PB_P_dot(alpha, beta, alpha_dot, beta_dot, alpha_ddot, beta_ddot):
     """Time derivative (in P, hence also in B after rotation) of :func:`omega_PB_P`."""
-    if _is_sym(beta):
+    if is_symbolic(beta):
         cb, sb = ca.cos(beta), ca.sin(beta)
     else:
         cb, sb = np.cos(beta), np.sin(beta)
-    return _vec(
+    return vector(
         [
             beta_ddot,
             alpha_ddot * cb - alpha_dot * beta_dot * sb,
