@@ -18,7 +18,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .symbolic import is_symbolic, matrix, vector
+from .symbolic import is_symbolic, matrix, trig, vector
 
 __all__ = [
     "skew",
@@ -124,13 +124,13 @@ def quat_kinematics(q_BN, omega_BN_B):
 
 def Ay(a):
     """TP-2511 frame rotation about y by ``a`` (Eq. 36): ``[[ca,0,-sa],[0,1,0],[sa,0,ca]]``."""
-    c, s = (ca.cos(a), ca.sin(a)) if is_symbolic(a) else (np.cos(a), np.sin(a))
+    c, s = trig(a)
     return matrix([[c, 0, -s], [0, 1, 0], [s, 0, c]], a)
 
 
 def Ax(b):
     """TP-2511 frame rotation about x by ``b`` (Eq. 37): ``[[1,0,0],[0,cb,sb],[0,-sb,cb]]``."""
-    c, s = (ca.cos(b), ca.sin(b)) if is_symbolic(b) else (np.cos(b), np.sin(b))
+    c, s = trig(b)
     return matrix([[1, 0, 0], [0, c, s], [0, -s, c]], b)
 
 
