@@ -174,3 +174,49 @@ def test_every_package_folder_is_installed():
 def test_module_stays_small(name):
     n = len(SOURCES[name].read_text().splitlines())
     assert n <= MAX_LINES, f"{name} has {n} lines: split it by concept"
+
+
+# -- what an installation holds ---------------------------------------------------------------
+
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import zipfile  # noqa: E402
+
+from stationbed.run.controller import ENTRY_POINT_GROUP, controller_registry  # noqa: E402
+
+
+@pytest.mark.slow
+def test_wheel_installs_only_the_stationbed_package(tmp_path):
+    """``pip install .`` gets one top-level package: no ``controllers`` beside it; the shipped laws,
+    the DOP853 C driver and the controller entry points are inside."""
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", str(ROOT), "-w", str(tmp_path)],
+        check=True, capture_output=True, timeout=300,
+    )
+    (wheel,) = tmp_path.glob("stationbed-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert {n.split("/")[0] for n in names} == {"stationbed", wheel.name.split("-py3")[0] + ".dist-info"}
+    assert "stationbed/controllers/pd.py" in names
+    assert "stationbed/integrators/dop853_driver.c" in names
+    entry_points = next(n for n in names if n.endswith("entry_points.txt"))
+    assert f"[{ENTRY_POINT_GROUP}]" in zipfile.ZipFile(wheel).read(entry_points).decode()
+
+
+def test_users_controllers_package_does_not_shadow_the_shipped_laws(tmp_path):
+    """A user's own top-level ``controllers`` package (first on sys.path) is not what a scene's
+    ``name = "pd"`` finds."""
+    own = tmp_path / "controllers"
+    own.mkdir()
+    (own / "__init__.py").write_text("raise ImportError('the user package was imported')\n")
+    (own / "pd.py").write_text("raise ImportError('the user pd was imported')\n")
+    code = "from stationbed.run.controller import get_controller; print(get_controller('pd').__module__)"
+    res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(tmp_path), "PATH": "/usr/bin:/bin"}, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "stationbed.controllers.pd"
+
+
+def test_every_registered_controller_is_named_as_its_entry_point():
+    reg = controller_registry()
+    assert {"pd", "lqr", "momentum_manager", "mpc", "torque_command", "example_hold"} <= set(reg)
+    assert all(cls.name == name for name, cls in reg.items())
