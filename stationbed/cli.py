@@ -349,7 +349,7 @@ def _cmd_replay(args) -> int:
 
 
 def _cmd_study(args) -> int:
-    from .studies.study import StudyError, precision_study, stability_study
+    from .studies import StudyError, precision_study, stability_study
 
     try:
         if args.study == "precision":

@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 
 from stationbed import FORMULATIONS, simulate
 from stationbed.scene import scene_from_dict
-from stationbed.studies.study import raw_states
+from stationbed.studies.probes import raw_states
 from scenes import articulated_dict
 
 FORMS = sorted(FORMULATIONS)

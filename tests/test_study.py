@@ -1,4 +1,4 @@
-"""`stationbed study precision|stability` (stationbed/study.py) through the command line.
+"""`stationbed study precision|stability` (stationbed/studies/) through the command line.
 
 Each study runs once per test session in its ``--quick`` form (seconds) and the tests read the
 files it wrote: the CSV columns and rows, the PNG charts, and whether each stability verdict is
@@ -22,21 +22,12 @@ from scenes import ROOT
 from stationbed import FORMULATIONS, INTEGRATORS, simulate
 from stationbed.cli import main
 from stationbed.scene import scene_from_dict
-from stationbed.studies.study import (
-    H_JUMP_REL,
-    QUICK_DIVISIONS,
-    QUICK_RTOLS,
-    QUICK_STIFF_FREQS_HZ,
-    ROUNDOFF_REL,
-    STABILITY_CASES,
-    STIFF_TARGET_RAD,
-    TARGETS_RAD,
-    _FLIP_SCENE,
-    _RK4_TABLEAU,
-    flip_times,
-    stability_boundary,
-    stability_function,
-)
+from stationbed.studies import STABILITY_CASES
+from stationbed.studies.precision import QUICK_DIVISIONS, QUICK_RTOLS, TARGETS_RAD
+from stationbed.studies.probes import ROUNDOFF_REL, RK4_TABLEAU, flip_times, stability_boundary, stability_function
+from stationbed.studies.stability.dzhanibekov import FLIP_SCENE
+from stationbed.studies.stability.rate_step import H_JUMP_REL
+from stationbed.studies.stability.stiff_modes import QUICK_STIFF_FREQS_HZ, STIFF_TARGET_RAD
 
 #: the quick studies run whole scenarios and sweeps (~25 s warm)
 pytestmark = pytest.mark.slow
@@ -256,15 +247,15 @@ def test_flip_detector_matches_jacobi_elliptic_period():
     """The torque-free rigid body's intermediate-axis rate is ω_y ∝ sn(p t, k) (Landau & Lifshitz
     §37, H² > 2 E I_2): it changes sign every 2 K(k) / p. The study's flip detector on a tight
     reference run recovers that interval."""
-    I1, I2, I3 = (_FLIP_SCENE["body"]["inertia"][i][i] for i in range(3))  # kg m²
-    w = np.array(_FLIP_SCENE["initial"]["omega_BN_B"])  # rad/s
+    I1, I2, I3 = (FLIP_SCENE["body"]["inertia"][i][i] for i in range(3))  # kg m²
+    w = np.array(FLIP_SCENE["initial"]["omega_BN_B"])  # rad/s
     E2 = I1 * w[0] ** 2 + I2 * w[1] ** 2 + I3 * w[2] ** 2  # 2 E [J]
     H2 = (I1 * w[0]) ** 2 + (I2 * w[1]) ** 2 + (I3 * w[2]) ** 2  # |H|² [N² m² s²]
     assert H2 > E2 * I2
     p = math.sqrt((I3 - I2) * (H2 - E2 * I1) / (I1 * I2 * I3))  # 1/s
     m = (I2 - I1) * (E2 * I3 - H2) / ((I3 - I2) * (H2 - E2 * I1))  # k²
     interval = 2 * ellipk(m) / p  # s
-    scene = scene_from_dict(_FLIP_SCENE)
+    scene = scene_from_dict(FLIP_SCENE)
     tf = flip_times(simulate(scene, integrator="dop853", rtol=1e-12, atol=1e-14))
     assert tf.size >= 4
     # output every 0.5 s, cubic interpolation of ω_y: ~1e-4 s on an interval of ~290 s
@@ -290,7 +281,7 @@ def stiff(stability):
 def test_rk4_stability_boundary_on_the_imaginary_axis_is_two_root_two():
     """Classical RK4 on ẋ = iωx multiplies by R(iy) = 1 - y²/2 + y⁴/24 + i(y - y³/6) per step
     (y = ωh); |R(iy)|² = 1 - y⁶/72 + y⁸/576 equals 1 at y = 2√2 (Hairer & Wanner IV.2)."""
-    R = stability_function(*_RK4_TABLEAU)
+    R = stability_function(*RK4_TABLEAU)
     assert stability_boundary(R, 1j) == pytest.approx(2 * math.sqrt(2), rel=1e-9)
     assert abs(R(2j)) < 1.0 < abs(R(3j))
 

@@ -17,13 +17,11 @@ import numpy as np
 
 from ..core.compile import FastCall
 from ..integrators import IntegrationError
-from ..model import Structure
 from ..scene import Scene, load_scene
 from .closed_loop import ControlLoop, ControllerFailure
-from .initial import characteristic_scales, initial_state, initial_x
+from .prepare import prepare
 from .rows import Rows, check_rows
 from .segments import breakpoints, output_times, segment_input
-from .system import build_system
 from .trajectory import Trajectory
 
 __all__ = ["simulate", "SimulationError"]
@@ -90,17 +88,10 @@ def simulate(
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"duration must be a positive number of seconds, got {duration}")
 
-    structure = Structure.of(scene)
-    system = build_system(structure, formulation, integrator)
+    run = prepare(scene, formulation, integrator, rtol=rtol, atol=atol, step=step)
+    system, p, integ, x = run.system, run.p, run.integrator, run.x0
     form, funcs = system.formulation, system.funcs
     model = form.model
-    p = model.params(scene)
-    nx = form.nx
-    q0, w0 = initial_state(scene)
-    rate_scale, momentum_scale = characteristic_scales(scene, w0, model, p)
-    atol_vec = form.atol_vector(atol, rate_scale, momentum_scale)
-    integ = system.integrator_cls(funcs, p, nx, rtol=rtol, atol=atol_vec, step=step, max_step=sim.max_step)
-    x = initial_x(system, scene, q0, w0, p)
 
     rows = Rows(scene, system, p, sink)
     bps, steps = breakpoints(scene, duration)

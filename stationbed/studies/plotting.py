@@ -1,0 +1,56 @@
+"""The studies' charts: matplotlib (extra ``plot``) on the headless Agg backend, imported only
+when a chart is drawn, and the colours, markers and line styles the charts share."""
+
+from __future__ import annotations
+
+from .common import StudyError
+
+__all__ = ["pyplot", "colours", "MARKERS", "STYLES"]
+
+#: markers and line styles by position (per formulation or method; colours per integrator)
+MARKERS = ["o", "s", "^", "D", "v", "P", "X", "*"]
+STYLES = ["-", "--", ":", "-."]
+
+
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (files only).
+
+    Returns
+    -------
+    module
+        ``matplotlib.pyplot``.
+
+    Raises
+    ------
+    StudyError
+        matplotlib is not installed (the message says how to install it).
+    """
+    try:
+        import matplotlib
+    except ImportError:
+        raise StudyError(
+            "the studies draw their charts with matplotlib, which is not installed: "
+            "pip install 'stationbed[plot]' (or pip install matplotlib)"
+        ) from None
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def colours(plt, names) -> dict:
+    """One colour per name, in order, from ``tab10`` (``tab20`` above ten names).
+
+    Parameters
+    ----------
+    plt : module
+        ``matplotlib.pyplot`` (from :func:`pyplot`).
+    names : list of str
+
+    Returns
+    -------
+    dict
+        Name -> RGBA tuple.
+    """
+    cmap = plt.get_cmap("tab10" if len(names) <= 10 else "tab20")
+    return {n: cmap(i % cmap.N) for i, n in enumerate(names)}
