@@ -67,6 +67,7 @@ import casadi as ca
 import numpy as np
 from pydantic import Field
 
+from stationbed.integrators import RK4
 from stationbed.run.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 from stationbed.model.environment import gravity_gradient_torque, orbit_position_N
 from stationbed.core.rotation import dcm, quat_kinematics
@@ -113,13 +114,11 @@ def _error_vector(r, q):
 
 
 def _rk4(f, x, u, t, h, m):
+    """``m`` classical RK4 steps of ``h`` [s] from ``(t, x)`` of ``f(x, u, t)`` (the shared stage
+    builder, the model's signature adapted)."""
     for i in range(m):
         ti = t + i * h
-        k1 = f(x, u, ti)
-        k2 = f(x + h / 2 * k1, u, ti + h / 2)
-        k3 = f(x + h / 2 * k2, u, ti + h / 2)
-        k4 = f(x + h * k3, u, ti + h)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = RK4.explicit_step(lambda t_s, x_s, u_s, _p: f(x_s, u_s, t_s), ti, x, h, u, None)
     return x
 
 

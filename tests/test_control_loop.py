@@ -8,8 +8,8 @@ The loop can advance a period three ways, and all must give the same numbers:
 * the *per-tick fused tick*: a Python controller, RK4 with one step per period: actuation, one
   RK4 step and the next measurement in one compiled call per tick;
 * the *generic path*: any integrator, one ``Integrator.advance`` per period, split at the
-  scene's discontinuities inside it (forced here by an RK4 subclass with another name, which
-  ``simulate`` does not fuse, or by an adaptive integrator).
+  scene's discontinuities inside it (forced here by an RK4 subclass declared not ``fusable``,
+  or by an adaptive integrator).
 
 Closed forms: a body with a spherical inertia ``J E`` has no gyroscopic torque
 (``ω × Jω = 0``), so under a held body torque its rate is exactly
@@ -85,9 +85,9 @@ class Recorder(Controller):
 
 
 class RK4Generic(RK4):
-    """RK4, but not under the name the loop fuses: forces the generic per-period path."""
+    """RK4 declared not fusable: the loop takes the generic per-period path."""
 
-    name = "rk4_generic"
+    fusable = False
 
 
 # ---------------------------------------------------------------------------------------

@@ -8,13 +8,14 @@ Design (why DOP853, not a fixed-step RK4 map)
 ---------------------------------------------
 Every sample runs *exactly* the algorithm of ``simulate(..., integrator="dop853")``: the same
 compiled step function (12 stages + FSAL + Hairer's error norm, and the 3 extra stages of the
-7th-order dense output), the same per-sample step-size control (scipy's DOP853 rules, as the
-C driver ``dop853_driver.c``), the same tolerances (the scene's ``rtol`` and its scaled
-``atol``, computed per sample as ``simulate`` does) and the same output grid. The samples advance
-in *lockstep*: each iteration makes one step attempt for every unfinished sample in **one**
-call of ``dop853_dense.map(n, "thread" | "serial")``, and numpy applies the step control to all
-samples at once (each keeps its own ``t`` and ``h``; a finished sample is evaluated with
-``h = 0`` and ignored). So a batch costs about as many Python round trips as *one* run has
+7th-order dense output), the same per-sample step-size control (scipy's DOP853 rules:
+``StepControl`` of ``integrators/dop853.py``, as the C driver ``dop853_driver.c``), the same
+tolerances (the scene's ``rtol`` and its scaled ``atol``, computed per sample as ``simulate``
+does) and the same output grid. The samples advance in *lockstep*
+(``integrators/dop853_batch.py``): each iteration makes one step attempt for every unfinished
+sample in **one** call of ``dop853_dense.map(n, "thread" | "serial")``, and numpy applies the
+step control to all samples at once (each keeps its own ``t`` and ``h``; a finished sample is
+evaluated with ``h = 0`` and ignored). So a batch costs about as many Python round trips as *one* run has
 steps (~40 per orbit at rtol 1e-9), and each sample agrees with its individual ``simulate`` run
 to round-off (same step sequence; the batch always calls the dense variant of the step and
 evaluates the interpolant in numpy, so only the order of floating-point operations differs).
@@ -44,6 +45,7 @@ import numpy as np
 from ..core.compile import FastCall
 from ..model import Structure
 from ..integrators import DOP853
+from ..integrators.dop853_batch import OK, STATUS_TEXT, DOP853Lockstep, mapped
 from ..core.rotation import quat_mult
 from ..scene import QUAT_NORM_TOL, Scene, load_scene
 from .initial import characteristic_scales, from_lvlh, initial_x
@@ -51,10 +53,6 @@ from .segments import breakpoints, output_times, segment_input
 from .system import build_system
 
 __all__ = ["BatchResult", "disperse_initial", "simulate_batch"]
-
-#: per-sample status codes
-OK, UNDERFLOW, NONFINITE = 0, 1, 2
-_STATUS_TEXT = {OK: "ok", UNDERFLOW: "step size underflow", NONFINITE: "state is not finite (NaN or inf)"}
 
 
 @dataclass
@@ -184,19 +182,6 @@ def _check_quaternions(q: np.ndarray) -> np.ndarray:
 # the batch
 # ---------------------------------------------------------------------------------------
 
-_MAPS: dict = {}
-
-
-def _mapped(f, n: int, threads: int):
-    """``f`` mapped over ``n`` samples (all inputs mapped), as a reusable FastCall."""
-    key = (id(f), n, threads)
-    hit = _MAPS.get(key)
-    if hit is None or hit[0] is not f:
-        m = f.map(n, "thread", threads) if threads > 1 else f.map(n, "serial")
-        hit = _MAPS[key] = (f, FastCall(m))
-    return hit[1]
-
-
 #: serial by default: on this 2-core machine the "thread" map measured no faster (0.55 s serial vs
 #: 0.60 s with 2 threads for 1000 orbits, medians of 5 under load; the mapped step is only about
 #: half of the wall time, the rest is numpy step control and the output rows). Same numbers.
@@ -316,7 +301,7 @@ def simulate_batch(
     t_out = output_times(duration, output_dt)
     X = np.full((n, t_out.size, nx), np.nan)
     X[:, 0] = X0
-    run = _Lockstep(funcs, n, nx, nu, P, TOL, max_step, threads)
+    run = DOP853Lockstep(funcs, n, nx, nu, P, TOL, max_step, threads)
     jump = None
     if form.omega_is_state and steps and sim.impulse_jump:
         jump = FastCall.of(funcs["jump"])
@@ -359,7 +344,7 @@ def simulate_batch(
         n_steps=run.n_steps,
         n_rejected=run.n_rejected,
         n_rhs=int(run.n_rhs),
-        failures={int(i): _STATUS_TEXT[int(run.status[i])] + f" at t = {run.t_stop[i]:.6g} s"
+        failures={int(i): STATUS_TEXT[int(run.status[i])] + f" at t = {run.t_stop[i]:.6g} s"
                   for i in np.flatnonzero(run.status != OK)},
     )
     return BatchResult(t_out, X, qn, omega, H, T, run.status.copy(), QN, WN, meta)
@@ -368,7 +353,7 @@ def simulate_batch(
 def _outputs(funcs, t_out, X, P, threads, n_out):
     """ω, H_O_N, T for every sample and row: the compiled ``out`` mapped over the samples."""
     n, m, nx = X.shape
-    out = _mapped(funcs["out"], n, threads)
+    out = mapped(funcs["out"], n, threads)
     out.args[2][:] = P.reshape(-1)
     res = np.empty((n, m, n_out))
     for j in range(m):
@@ -378,168 +363,3 @@ def _outputs(funcs, t_out, X, P, threads, n_out):
         res[:, j] = out.res[0].reshape(n, n_out)
     res[~np.all(np.isfinite(X), axis=2)] = np.nan
     return res[:, :, 0:3], res[:, :, 3:6], res[:, :, 6]
-
-
-class _Lockstep:
-    """Per-sample DOP853 step control, all samples advanced by one mapped call per attempt.
-
-    Same rules as ``dop853_driver.c`` / ``DOP853._integrate_python`` (whose comments explain
-    them), written on arrays of samples. The step size ``h`` persists across segments.
-    """
-
-    SAFETY, MIN_FACTOR, MAX_FACTOR = DOP853.SAFETY, DOP853.MIN_FACTOR, DOP853.MAX_FACTOR
-    N_STAGES = DOP853.N_STAGES
-
-    def __init__(self, funcs, n, nx, nu, P, TOL, max_step, threads):
-        self.n, self.nx, self.nu = n, nx, nu
-        self.max_step = max_step
-        self.tol = TOL
-        self.dense = _mapped(funcs["dop853_dense"], n, threads)
-        self.rhs = _mapped(funcs["rhs"], n, threads)
-        self.dense.args[5][:] = P.reshape(-1)
-        self.dense.args[6][:] = TOL.reshape(-1)
-        self.rhs.args[3][:] = P.reshape(-1)
-        self.h = None
-        self.status = np.zeros(n, dtype=int)
-        self.t_stop = np.zeros(n)
-        self.iterations = 0
-        self.n_steps = np.zeros(n, dtype=int)
-        self.n_rejected = np.zeros(n, dtype=int)
-        self.n_rhs = 0
-        self.PT = DOP853.P  # (8, 7) power-basis matrix of the dense output
-
-    def f(self, t, x, u) -> np.ndarray:
-        r = self.rhs
-        r.args[0][:] = t
-        r.args[1][:] = x.reshape(-1)
-        r.args[2][:] = np.tile(u, self.n)
-        r()
-        self.n_rhs += self.n
-        return r.res[0].reshape(self.n, self.nx).copy()
-
-    def _initial_step(self, t, x, f0, u, t_end):
-        """``DOP853._initial_step`` (Hairer & Wanner II.4) for every sample."""
-        atol, rtol = self.tol[:, 1:], self.tol[:, :1]
-        order = DOP853.order
-        scale = atol + np.abs(x) * rtol
-        d0 = np.linalg.norm(x / scale, axis=1) / math.sqrt(self.nx)
-        d1 = np.linalg.norm(f0 / scale, axis=1) / math.sqrt(self.nx)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            h0 = np.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / d1)
-        h0 = np.minimum(h0, t_end - t)
-        f1 = self.f(t + h0, x + h0[:, None] * f0, u)
-        d2 = np.linalg.norm((f1 - f0) / scale, axis=1) / math.sqrt(self.nx) / h0
-        with np.errstate(divide="ignore"):
-            h1 = np.where(
-                (d1 <= 1e-15) & (d2 <= 1e-15),
-                np.maximum(1e-6, h0 * 1e-3),
-                (0.01 / np.maximum(d1, d2)) ** (1.0 / (order + 1)),
-            )
-        return np.minimum(np.minimum(100 * h0, h1), self.max_step)
-
-    def segment(self, ts: np.ndarray, x0: np.ndarray, u: np.ndarray, out=None) -> np.ndarray:
-        """States (n, len(ts), nx) at the times ``ts`` of one smooth segment (into ``out``, NaN
-        filled, when given). A diverging sample overflows quietly: ``status`` reports it."""
-        with np.errstate(all="ignore"):
-            return self._segment(ts, x0, u, out)
-
-    def _segment(self, ts, x0, u, out):
-        n, nx = self.n, self.nx
-        nts = ts.size
-        if out is None:
-            out = np.full((n, nts, nx), np.nan)
-        out[:, 0] = x0
-        live = self.status == OK
-        x = np.where(live[:, None], x0, 0.0)
-        t = np.full(n, ts[0])
-        t_end = ts[-1]
-        k1 = self.f(t, x, u)
-        if self.h is None:
-            self.h = self._initial_step(t, x, k1, u, t_end)
-        h_mem = self.h
-        i_next = np.ones(n, dtype=int)
-        rejected = np.zeros(n, dtype=bool)
-        d = self.dense
-        a_t, a_x, a_k, a_h = d.args[0], d.args[1], d.args[2], d.args[3]
-        d.args[4][:] = np.tile(u, n)
-        r_x, r_k, r_err, r_F = d.res
-        tiny = 1e-12
-        while True:
-            active = live & (t < t_end)
-            if not active.any():
-                break
-            self.iterations += 1
-            remaining = t_end - t
-            h = np.fmin(h_mem, self.max_step)  # fmin: a NaN step takes max_step, as C's fmin
-            clipped = h >= remaining * (1.0 - 1e-12)
-            h = np.where(clipped, remaining, np.where(h > 0.5 * remaining, 0.5 * remaining, h))
-            under = active & ~(h > tiny * np.maximum(1.0, np.abs(t)))
-            if under.any():
-                self._fail(under, UNDERFLOW, t)
-                live &= ~under
-                active &= ~under
-            h = np.where(active, h, 0.0)
-            a_t[:] = t
-            a_x[:] = x.reshape(-1)
-            a_k[:] = k1.reshape(-1)
-            a_h[:] = h
-            d()
-            self.n_rhs += (self.N_STAGES + 3) * int(active.sum())
-            err = r_err.copy()
-            bad_err = active & ~np.isfinite(err)
-            if bad_err.any():
-                bad_x = bad_err & ~np.all(np.isfinite(x), axis=1)
-                if bad_x.any():
-                    self._fail(bad_x, NONFINITE, t)
-                    live &= ~bad_x
-                    active &= ~bad_x
-                err[bad_err] = np.inf
-            acc = active & (err <= 1.0)
-            blown = acc & ~np.all(np.isfinite(r_x.reshape(n, nx)), axis=1)
-            if blown.any():  # an accepted step to a non-finite state (simulate: its rows check)
-                self._fail(blown, NONFINITE, t)
-                live &= ~blown
-                acc &= ~blown
-                active &= ~blown
-            rej = active & ~acc
-            with np.errstate(divide="ignore"):
-                grow = np.where(err == 0.0, self.MAX_FACTOR, np.minimum(self.MAX_FACTOR, self.SAFETY * err ** (-1.0 / 8.0)))
-                shrink = np.maximum(self.MIN_FACTOR, self.SAFETY * err ** (-1.0 / 8.0))
-            if acc.any():
-                ia = np.flatnonzero(acc)
-                t_new = np.where(clipped, t_end, t + h)
-                # dense output for requested interior times inside the accepted steps
-                j = np.minimum(np.searchsorted(ts, t_new[ia], side="left"), nts - 1)
-                cnt = np.maximum(j - i_next[ia], 0)
-                if cnt.sum():
-                    F = r_F.reshape(n, 7, nx)[ia]  # ca.horzcat(*F) of nx-vectors: column-major
-                    PF = np.einsum("mj,sjk->smk", self.PT, F)
-                    s = np.repeat(np.arange(ia.size), cnt)
-                    first = np.repeat(np.cumsum(cnt) - cnt, cnt)
-                    rows = i_next[ia][s] + (np.arange(s.size) - first)
-                    smp = ia[s]
-                    theta = (ts[rows] - t[smp]) / h[smp]
-                    V = np.vander(theta, 8, increasing=True)
-                    out[smp, rows] = x[smp] + np.einsum("tm,tmk->tk", V, PF[s])
-                    i_next[ia] = np.maximum(i_next[ia], j)
-                t[ia] = t_new[ia]
-                x[ia] = r_x.reshape(n, nx)[ia]
-                k1[ia] = r_k.reshape(n, nx)[ia]
-                land = ia[(i_next[ia] < nts) & (ts[np.minimum(i_next[ia], nts - 1)] == t[ia])]
-                out[land, i_next[land]] = x[land]
-                i_next[land] += 1
-                self.n_steps[ia] += 1
-                factor = np.where(rejected[ia], np.minimum(1.0, grow[ia]), grow[ia])
-                h_mem[ia] = np.where(clipped[ia], np.maximum(h_mem[ia], h[ia] * factor), h[ia] * factor)
-                rejected[ia] = False
-            if rej.any():
-                self.n_rejected[rej] += 1
-                h_mem[rej] = h[rej] * shrink[rej]
-                rejected[rej] = True
-        out[live, -1] = x[live]
-        self.h = h_mem
-        return out
-
-    def _fail(self, mask, code, t):
-        self.status[mask] = code
-        self.t_stop[mask] = t[mask]

@@ -288,8 +288,7 @@ class ControlLoop:
             self.ticks = ticks
             if tick is not None:
                 n_fast = self.ticks - self.n_slow
-                self.integ.n_rhs += 4 * n_fast
-                self.integ.n_steps += n_fast
+                self.integ.count_steps(n_fast)
             flush()
 
     def _check_command(self, t: float, cmd) -> None:
@@ -309,11 +308,11 @@ class ControlLoop:
             raise ControllerFailure(t, f"controller '{name}' returned a non-finite command {list(cmd)}")
 
     def _fast_tick(self):
-        """The fused tick when the integrator is RK4 with one step per period, else None."""
+        """The fused tick when the integrator is fusable (RK4) with one step per period, else None."""
         integ = self.integ
         f = integ.funcs
         name = "tick_rates" if self.ctrl.command == "gimbal_rates" else "tick_torque"
-        if getattr(integ, "name", "") != "rk4" or name not in f:
+        if not integ.fusable or name not in f:
             return None
         if math.ceil(self.period / integ.h_nominal - 1e-9) != 1:
             return None

@@ -2,13 +2,13 @@
 
 When a controller offers a symbolic form (``Controller.symbolic``), a whole stretch of ticks
 between two output rows runs in one compiled call: per tick, measure -> control -> actuate ->
-one RK4 step, composed from the same SX functions the per-tick path compiles (``meas``,
-``actuate``, ``rhs``), as a casadi ``mapaccum`` loop generated as C. Python then runs once per
-output row instead of once per tick.
+one step of the integrator's ``explicit_step`` (RK4), composed from the same SX functions the
+per-tick path compiles (``meas``, ``actuate``, ``rhs``), as a casadi ``mapaccum`` loop generated
+as C. Python then runs once per output row instead of once per tick.
 
-Conditions (otherwise the per-tick loop runs, with the same numbers): integrator ``rk4`` with one
-step per control period, no discontinuity inside the run (torque windows, rate steps), no sensor
-noise or delay, a controller with ``symbolic``.
+Conditions (otherwise the per-tick loop runs, with the same numbers): a ``fusable`` integrator
+(``rk4``) with one step per control period, no discontinuity inside the run (torque windows,
+rate steps), no sensor noise or delay, a controller with ``symbolic``.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def fused_ok(loop) -> bool:
     integ = loop.integ
     return (
         callable(getattr(ctrl, "symbolic", None))
-        and integ.name == "rk4"
+        and integ.fusable
         and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
         and not [b for b in loop.bps if 0.0 < b < loop.duration]
         and not loop.noisy
@@ -76,11 +76,7 @@ def _build(loop, n: int) -> dict:
         u = ca.vertcat(u, t + h / 2)  # (steps lie outside a fused run; keeps u's layout)
     info = sx_function("fused_info", [t, x, cp, u_ext, p], [ca.vertcat(cmd, act, q_ref)])
     rhs = sx["rhs"]
-    k1 = rhs(t, x, u, p)
-    k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
-    k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
-    k4 = rhs(t + h, x + h * k3, u, p)
-    x1 = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    x1 = system.integrator_cls.explicit_step(rhs, t, x, h, u, p)
     # carry: tick index i (exact integer in a double: t = t0 + i h, no accumulation), state,
     # counts of rate-limited and saturated ticks; n_act masks the unused tail of the chunk
     i = ca.SX.sym("i")
@@ -211,8 +207,7 @@ def run_fused(loop, K: int) -> None:
         loop.ticks = ticks
         loop.x = x
         ctrl.count_compiled_updates(ticks + 1)
-        loop.integ.n_rhs += 4 * ticks
-        loop.integ.n_steps += ticks
+        loop.integ.count_steps(ticks)
         _flush(loop, rows_t, rows_x, rows_h)
 
 

@@ -47,13 +47,14 @@ def _track_errors(model: StationModel, t, x, p):
     return errs
 
 
-def _tick_functions(model, rhs, fs, nx, nu, npar, ng) -> list[ca.Function]:
-    """One control period fused in one compiled call, for the fixed-step RK4 closed loop.
+def _tick_functions(model, rhs, fs, nx, nu, npar, ng, step) -> list[ca.Function]:
+    """One control period fused in one compiled call, for a fusable integrator (RK4).
 
     ``tick_<cmd>(t, h, x, cmd, u_ext, p) -> (x(t + h), y(t + h), act)``: the actuation at
-    ``(t, x)`` (steering law and limits; ``act = [u_cmg, m, rate_limited, saturated]``), one RK4
-    step of ``h`` with that input held, and the measurement at the end. Same functions as the
-    generic path (actuate, rk4 step, meas), composed, so both paths give the same numbers.
+    ``(t, x)`` (steering law and limits; ``act = [u_cmg, m, rate_limited, saturated]``), one step
+    ``step(rhs, t, x, h, u, p)`` (the integrator's ``explicit_step``) of ``h`` with that input
+    held, and the measurement at the end. Same functions as the generic path (actuate, the
+    integrator's step, meas), composed, so both paths give the same numbers.
     """
     by_name = {f.name(): f for f in fs}
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -71,11 +72,7 @@ def _tick_functions(model, rhs, fs, nx, nu, npar, ng) -> list[ca.Function]:
             u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
         if model.has_steps:
             u = ca.vertcat(u, t + h / 2)  # the segment's time for the side of a rate step
-        k1 = rhs(t, x, u, p)
-        k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
-        k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
-        k4 = rhs(t + h, x + h * k3, u, p)
-        x1 = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x1 = step(rhs, t, x, h, u, p)
         y1 = by_name["meas"](t + h, x1, p)
         out.append(sx_function(f"tick_{kind}", [t, h, x, cmd, u_ext, p], [x1, y1, act]))
     return out
@@ -147,8 +144,8 @@ def build_system(structure: Structure, formulation, integrator) -> System:
             direct = cmg.actuate(t, xc, cmd, wv, pc, direct_rates=rates[0:ng])
             fs.append(sx_function("actuate_rates", [t, x, rates, p], [ca.vertcat(*direct)]))
     fs.append(sx_function("inertia", [t, x, p], [model.inertia(t, p, arrays)]))
-    if integ_cls.name == "rk4":
-        fs += _tick_functions(model, rhs, fs, nx, nu, npar, ng)
+    if integ_cls.fusable:
+        fs += _tick_functions(model, rhs, fs, nx, nu, npar, ng, integ_cls.explicit_step)
     fs += integ_cls.build(rhs, nx, nu, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
     funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)
