@@ -1,12 +1,22 @@
 """Integrator contract: every registered integrator meets a closed form; C and Python DOP853
-loops agree; RK4 converges at order 4."""
+loops agree and the C driver's step-control constants are the Python ones; RK4 converges at
+order 4; every Butcher table meets its order conditions (exact rationals) and the one stage
+builder applies it as the hand-written step; a fusable integrator's tick step is its generic
+step, and its counters book one step per tick on every closed-loop path."""
 
+import math
+import re
+from fractions import Fraction
+
+import casadi as ca
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from stationbed import INTEGRATORS, simulate
-from stationbed.integrators import DOP853, IntegrationError
+from stationbed.integrators import DOP853, RK4, TABLEAUS, ButcherTableau, FixedStep, IntegrationError, StepControl
+from stationbed.integrators.rk import explicit_rk_step
+from stationbed.integrators.tableau import CLASSICAL_RK4
 from stationbed.core.rotation import rotation_angle
 from stationbed.scene import scene_from_dict
 
@@ -77,3 +87,236 @@ def test_rk4_order_four(rigid_scene_dict):
 def test_unknown_integrator_lists_valid_names(rigid_scene_dict):
     with pytest.raises(ValueError, match="valid: dop853, lgvi, lie_rk4, radau, rk4"):
         simulate(scene_from_dict(rigid_scene_dict), integrator="euler")
+
+
+# ---------------------------------------------------------------------------------------
+# Butcher tables as data: the invariants of every table, the stage builder against them
+# ---------------------------------------------------------------------------------------
+
+
+def rooted_trees(max_order: int) -> dict[int, list[tuple]]:
+    """All rooted trees of each order up to ``max_order`` (a tree is the sorted tuple of the
+    subtrees at its root; the single node is ``()``), Butcher's order-condition index."""
+    by_order = {1: [()]}
+    for n in range(2, max_order + 1):
+        pool = [(o, t) for o in range(1, n) for t in by_order[o]]
+
+        def forests(rem, i):
+            if rem == 0:
+                yield ()
+                return
+            for j in range(i, len(pool)):
+                o, t = pool[j]
+                if o <= rem:
+                    for rest in forests(rem - o, j):
+                        yield (t,) + rest
+
+        by_order[n] = sorted({tuple(sorted(f)) for f in forests(n - 1, 0)})
+    return by_order
+
+
+#: number of rooted trees of order 1..6 (OEIS A000081): checks the generator itself
+N_TREES = [1, 1, 2, 4, 9, 20]
+
+
+def test_rooted_tree_counts():
+    trees = rooted_trees(len(N_TREES))
+    assert [len(trees[n]) for n in range(1, len(N_TREES) + 1)] == N_TREES
+
+
+def _order(tree) -> int:
+    return 1 + sum(_order(c) for c in tree)
+
+
+def _gamma(tree) -> int:
+    return _order(tree) * math.prod(_gamma(c) for c in tree)
+
+
+def _stage_weights(tab: ButcherTableau, tree) -> list[Fraction]:
+    """g_i(tree) = Π over the root's subtrees of Σ_j a_ij g_j(subtree) (1 for the single node)."""
+    s = tab.stages
+    g = [Fraction(1)] * s
+    for child in tree:
+        gc = _stage_weights(tab, child)
+        g = [g[i] * sum((tab.a[i][j] * gc[j] for j in range(i)), Fraction(0)) for i in range(s)]
+    return g
+
+
+def _elementary_weight(tab: ButcherTableau, tree) -> Fraction:
+    return sum((b * g for b, g in zip(tab.b, _stage_weights(tab, tree))), Fraction(0))
+
+
+TABLE_IDS = [t.name for t in TABLEAUS]
+
+
+@pytest.mark.parametrize("tab", TABLEAUS, ids=TABLE_IDS)
+def test_table_is_explicit_and_rows_sum_to_c(tab):
+    assert len(tab.a) == len(tab.c) == tab.stages
+    assert all(len(row) == i for i, row in enumerate(tab.a))  # strictly lower triangular
+    assert [sum(row, Fraction(0)) for row in tab.a] == list(tab.c)
+
+
+@pytest.mark.parametrize("tab", TABLEAUS, ids=TABLE_IDS)
+def test_table_weights_sum_to_one(tab):
+    assert sum(tab.b, Fraction(0)) == 1
+
+
+@pytest.mark.parametrize("tab", TABLEAUS, ids=TABLE_IDS)
+def test_table_meets_order_conditions_up_to_its_order(tab):
+    """Φ(τ) = 1/γ(τ) for every rooted tree τ with |τ| <= order (exact rationals)."""
+    for n, trees in rooted_trees(tab.order).items():
+        for tree in trees:
+            assert _elementary_weight(tab, tree) == Fraction(1, _gamma(tree)), (n, tree)
+
+
+@pytest.mark.parametrize("tab", TABLEAUS, ids=TABLE_IDS)
+def test_table_order_is_not_higher_than_declared(tab):
+    trees = rooted_trees(tab.order + 1)[tab.order + 1]
+    assert any(_elementary_weight(tab, tree) != Fraction(1, _gamma(tree)) for tree in trees)
+
+
+WITH_TABLE = sorted(n for n, c in INTEGRATORS.items() if hasattr(c, "TABLEAU"))
+
+
+@pytest.mark.parametrize("name", WITH_TABLE)
+def test_integrator_declares_its_tables_order_and_stages(name):
+    cls = INTEGRATORS[name]
+    assert (cls.order, cls.RHS_PER_STEP) == (cls.TABLEAU.order, cls.TABLEAU.stages)
+
+
+@pytest.mark.parametrize("tab", TABLEAUS, ids=TABLE_IDS)
+def test_builder_step_on_linear_ode_is_the_taylor_polynomial(tab):
+    """On ẋ = λx an explicit s-stage method of order p = s multiplies by Σ_k≤p (hλ)^k / k!
+    (exact in rationals: the builder applies the table as written)."""
+    lam, h = Fraction(-3, 7), Fraction(5, 4)
+    x1 = explicit_rk_step(tab, lambda t, x, u, p: lam * x, Fraction(0), Fraction(1), h, None, None)
+    assert tab.order == tab.stages
+    assert x1 == sum(Fraction((h * lam) ** k, math.factorial(k)) for k in range(tab.order + 1))
+
+
+@pytest.mark.parametrize("tab", TABLEAUS, ids=TABLE_IDS)
+def test_builder_step_integrates_polynomials_in_time_exactly(tab):
+    """ẋ = t^k: the step is the quadrature Σ b_i (t0 + c_i h)^k, exact for k < order."""
+    t0, h = Fraction(2, 3), Fraction(1, 5)
+    for k in range(tab.order):
+        x1 = explicit_rk_step(tab, lambda t, x, u, p: t**k, t0, Fraction(0), h, None, None)
+        assert x1 == ((t0 + h) ** (k + 1) - t0 ** (k + 1)) / (k + 1), k
+
+
+def _c_source(f: ca.Function) -> str:
+    cg = ca.CodeGenerator("f.c", {"with_header": False})
+    cg.add(f)
+    return cg.dump()
+
+
+def test_rk4_builder_is_the_hand_written_step():
+    """The builder makes the graph of the hand-written classical step, so the generated C of
+    every step, tick and fused loop (and the hash naming its cached library) is unchanged."""
+    t, h, x, u, p = ca.SX.sym("t"), ca.SX.sym("h"), ca.SX.sym("x", 3), ca.SX.sym("u", 2), ca.SX.sym("p")
+    rhs = ca.Function("rhs", [t, x, u, p], [ca.vertcat(x[1] * ca.sin(t), p * x[0] * u[0], x[2] * u[1] - t)])
+    k1 = rhs(t, x, u, p)
+    k2 = rhs(t + h / 2, x + h / 2 * k1, u, p)
+    k3 = rhs(t + h / 2, x + h / 2 * k2, u, p)
+    k4 = rhs(t + h, x + h * k3, u, p)
+    hand = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    built = explicit_rk_step(CLASSICAL_RK4, rhs, t, x, h, u, p)
+    args = [t, x, h, u, p]
+    assert _c_source(ca.Function("step", args, [built])) == _c_source(ca.Function("step", args, [hand]))
+
+
+# ---------------------------------------------------------------------------------------
+# fusable: a declared capability; the counters stay the integrator's own
+# ---------------------------------------------------------------------------------------
+
+FUSABLE = sorted(n for n, c in INTEGRATORS.items() if c.fusable)
+
+
+@pytest.mark.parametrize("name", FUSABLE)
+def test_fusable_tick_step_is_the_generic_step(name):
+    """What the fused tick composes (``explicit_step``) is the step the generic path compiles
+    (``_step``), and the class has the fixed step and RHS count the loop books with."""
+    cls = INTEGRATORS[name]
+    assert issubclass(cls, FixedStep) and cls.RHS_PER_STEP > 0
+    nx, nu, npar = 3, 2, 1
+    t, h, x, u, p = ca.SX.sym("t"), ca.SX.sym("h"), ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("p", npar)
+    tol = ca.SX.sym("tol", 1 + nx)
+    rhs = ca.Function("rhs", [t, x, u, p], [ca.vertcat(x[1] * ca.cos(t), -p * x[0] + u[0], x[2] * u[1])])
+    tick = cls.explicit_step(rhs, t, x, h, u, p)
+    generic, _ = cls._step(rhs, t, x, h, u, p, tol)
+    args = [t, x, h, u, p]
+    assert _c_source(ca.Function("s", args, [tick])) == _c_source(ca.Function("s", args, [generic]))
+
+
+class RK4NotFusable(RK4):
+    """RK4 declared not fusable: the closed loop integrates each period by ``advance``."""
+
+    fusable = False
+
+
+PERIOD_S = 0.1  # s, controller period = RK4 step
+LOOP_DURATION_S = 2.0  # s: 20 ticks
+#: (simulate keywords, whether the fused loop runs) per path
+PATHS = {
+    "fused_loop": ({}, True),
+    "fused_tick": ({"fused": False}, False),
+    "generic": ({"integrator": RK4NotFusable}, False),
+}
+
+
+@pytest.mark.parametrize("path", list(PATHS))
+def test_counters_book_one_rk4_step_per_tick_on_every_path(rigid_scene_dict, path):
+    """One control period is one RK4 step of 4 RHS evaluations, whichever path took it (the
+    fused paths book their steps with ``Integrator.count_steps``)."""
+    d = rigid_scene_dict
+    d["initial"]["omega_BN_B"] = [0.01, -0.02, 0.005]  # rad/s
+    d["simulation"].update(duration=LOOP_DURATION_S, integrator="rk4", step=PERIOD_S, output_dt=0.5)
+    d["controller"] = {"name": "pd", "period": PERIOD_S, "params": {"reference": "inertial"}}
+    kw, fused = PATHS[path]
+    tr = simulate(scene_from_dict(d), **kw)
+    ticks = round(LOOP_DURATION_S / PERIOD_S)
+    assert tr.meta["summary"]["fused"] is fused
+    assert (tr.meta["n_steps"], tr.meta["n_rhs"]) == (ticks, RK4.RHS_PER_STEP * ticks)
+
+
+# ---------------------------------------------------------------------------------------
+# DOP853 step control: one set of rules, the C driver's copy of its constants
+# ---------------------------------------------------------------------------------------
+
+NUM = r"([-+0-9.eE]+)"
+#: (C statement as a regex with the constants as groups, the StepControl / DOP853 values)
+C_RULES = {
+    "grow": (
+        rf"factor = \(err == 0\.0\) \? {NUM} : fmin\({NUM}, {NUM} \* pow\(err, {NUM} / {NUM}\)\);",
+        lambda g: (g[0], g[1], g[2], g[3] / g[4]),
+        (StepControl.MAX_FACTOR, StepControl.MAX_FACTOR, StepControl.SAFETY, StepControl.ERROR_EXPONENT),
+    ),
+    "shrink": (
+        rf"\*h_io = h \* fmax\({NUM}, {NUM} \* pow\(err, {NUM} / {NUM}\)\);",
+        lambda g: (g[0], g[1], g[2] / g[3]),
+        (StepControl.MIN_FACTOR, StepControl.SAFETY, StepControl.ERROR_EXPONENT),
+    ),
+    "land": (rf"clipped = h >= remaining \* \(1\.0 - {NUM}\);", lambda g: g, (StepControl.LAND_RTOL,)),
+    "split": (
+        rf"else if \(h > {NUM} \* remaining\) h = {NUM} \* remaining;",
+        lambda g: g,
+        (StepControl.SPLIT, StepControl.SPLIT),
+    ),
+    "underflow": (rf"if \(h <= {NUM} \* fmax\(1\.0, fabs\(t\)\)\)", lambda g: g, (StepControl.UNDERFLOW_RTOL,)),
+    "accept": (rf"if \(err <= {NUM}\) \{{", lambda g: g, (StepControl.ACCEPT_ERR,)),
+    "rhs_count": (
+        rf"info\[0\] \+= {NUM} \+ \(dense \? {NUM} : 0\);",
+        lambda g: g,
+        (DOP853.N_STAGES, DOP853.N_DENSE_STAGES),
+    ),
+}
+
+
+@pytest.mark.parametrize("rule", list(C_RULES))
+def test_c_driver_constants_are_the_python_ones(rule):
+    """``dop853_driver.c`` keeps its own copy of the step-control constants (its bytes are part
+    of the cached library's hash): each must equal StepControl's (read from the C text)."""
+    pattern, values, expected = C_RULES[rule]
+    found = re.findall(pattern, DOP853.extra_c)
+    assert len(found) == 1, f"{rule}: the C statement changed shape"
+    groups = found[0] if isinstance(found[0], tuple) else (found[0],)
+    assert tuple(values([float(g) for g in groups])) == expected
