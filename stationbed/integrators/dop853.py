@@ -5,6 +5,9 @@ Three loops apply the same rules: the C driver ``dop853_driver.c`` (one call per
 segment; it keeps its own copy of the constants, checked against :class:`StepControl` by a
 test that reads the C source), :meth:`DOP853._integrate_python` (the no-compiler fallback)
 and the batch lockstep (:mod:`.dop853_batch`), the last two by calling :class:`StepControl`.
+
+(The C file's header still names ``stationbed/integrators.py``, the module's old path: its bytes
+are part of the cached libraries' hash, so it is left as it is.)
 """
 
 from __future__ import annotations

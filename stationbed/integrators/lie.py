@@ -48,6 +48,11 @@ class LieRK4(FixedStep):
     of unit quaternions. In floating point each product rounds (a random walk of ~1e-16 per
     step); ``NORMALISE`` (default on) divides by ``|q|`` after each step to remove that walk,
     a change at round-off level, never a correction of truncation error.
+
+    Parameters
+    ----------
+    funcs, p, nx, **kw
+        As :class:`~.fixed_step.FixedStep` (``step`` [s] is the fixed step).
     """
 
     name = "lie_rk4"
@@ -97,6 +102,11 @@ class LGVI(FixedStep):
     :meth:`build` refuses (``ValueError``) a system where ``ω`` is not ``J⁻¹ H`` with a
     constant ``J`` (articulated arrays, CMG momentum), that has extra states (CMG, driven
     joints), or whose moment depends on the rate state (an ω-state formulation).
+
+    Parameters
+    ----------
+    funcs, p, nx, **kw
+        As :class:`~.fixed_step.FixedStep` (``step`` [s] is the fixed step).
     """
 
     name = "lgvi"
@@ -132,6 +142,8 @@ class LGVI(FixedStep):
 
     @classmethod
     def build(cls, rhs, nx, nu, npar):
+        """The :class:`~.fixed_step.FixedStep` functions; ``ValueError`` (with the reason) for a
+        system that is not a rigid body in the momentum form."""
         cls._rigid_parts(rhs, nx, nu, npar)  # refuse early with the reason
         return super().build(rhs, nx, nu, npar)
 

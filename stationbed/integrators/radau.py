@@ -31,6 +31,7 @@ def _lu(M):
 
 
 def _lu_solve(a, b):
+    """``M⁻¹ b`` from the packed factor ``a`` of :func:`_lu` (forward, then back substitution)."""
     n = len(a)
     y = [b[i] for i in range(n)]
     for i in range(n):
@@ -60,6 +61,11 @@ class RadauIIA(FixedStep):
 
     The quaternion is normalised after each step (a documented projection: the method itself
     does not keep |q| = 1; the projection removes the norm part of the step's truncation error).
+
+    Parameters
+    ----------
+    funcs, p, nx, **kw
+        As :class:`~.fixed_step.FixedStep` (``step`` [s] is the fixed step; ``rtol``/``atol`` weight the defect).
     """
 
     name = "radau"
