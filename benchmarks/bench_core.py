@@ -162,8 +162,13 @@ def _time_library(scene, form: str, duration: float, repeats: int, output_dt=Non
     return traj, statistics.median(walls), statistics.median(inner)
 
 
+def _fixed_step(integ: str) -> bool:
+    """The integrator takes ``--rk4-step`` (a fixed-step method), by its declared capability."""
+    return not stationbed.INTEGRATORS[integ].adaptive
+
+
 def _integ_label(r) -> str:
-    return f"rk4, h = {r['step_s']:g} s" if r["integrator"] == "rk4" else r["integrator"]
+    return f"{r['integrator']}, h = {r['step_s']:g} s" if r["step_s"] is not None else r["integrator"]
 
 
 def _time_scipy(scene, duration: float, t_eval: np.ndarray, repeats: int, rtol=RTOL, atol=ATOL):
@@ -213,7 +218,7 @@ def main(argv=None) -> int:
     runs = {}
 
     def add(tag, sc, form, integ):
-        step = args.rk4_step if integ == "rk4" else None
+        step = args.rk4_step if _fixed_step(integ) else None
         runs[(tag, form, integ)] = lambda: stationbed.simulate(
             sc, formulation=form, integrator=integ, rtol=RTOL, atol=ATOL, duration=T, step=step
         )
@@ -235,7 +240,7 @@ def main(argv=None) -> int:
             scene=tag,
             formulation=form,
             integrator=integ,
-            step_s=args.rk4_step if integ == "rk4" else None,
+            step_s=args.rk4_step if _fixed_step(integ) else None,
             nx=_state_size(flex if tag == "flex" else scene, form, integ),
             median_wall_ms=1e3 * wall,
             median_integrate_ms=1e3 * inner,
