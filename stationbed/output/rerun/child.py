@@ -25,7 +25,8 @@ Failure behaviour:
 
 The child skips ``stationbed/__init__.py`` (it imports the whole simulation stack, ~0.8 s, none of
 which a recording needs): it is started with a bootstrap that registers a bare ``stationbed``
-package and imports only :mod:`stationbed.output.rerun.sink` and :mod:`stationbed.scene`.
+package and imports only :mod:`stationbed.output.rerun.sink` (with the modules it draws with) and
+:mod:`stationbed.scene`.
 """
 
 from __future__ import annotations
@@ -243,9 +244,10 @@ def child_main(scene_path: str, rrd_path: str) -> int:
         import numpy as np
 
         from ...scene import load_scene
-        from . import sink as rerun_log
+        from .sdk import import_rerun
+        from .sink import RrdSink
 
-        rerun_log._rr()  # the slow import, done while the parent is busy
+        import_rerun()  # the slow import, done while the parent is busy
         try:
             scene = load_scene(scene_path)
         except Exception as e:  # the parent reports a bad scene itself and never opens the run
@@ -263,7 +265,7 @@ def child_main(scene_path: str, rrd_path: str) -> int:
             raise ValueError(f"scene {scene_path} is {scene.name!r} here, {header['scene']!r} in the run")
         columns = header["columns"]
         row_bytes = 8 * len(columns)
-        sink = rerun_log.RrdSink(scene, rrd_path, columns, duration=header["duration"])
+        sink = RrdSink(scene, rrd_path, columns, duration=header["duration"])
         try:
             buf = bytearray()
             while True:
