@@ -380,7 +380,7 @@ def test_check_rrd_writes_formulations_and_diffs(tmp_path):
             assert d.shape == (21, 1) and np.all(d >= 0.0)
 
 
-# -- command line: the recording process (stationbed/_rrd_child.py) ----------------------------
+# -- command line: the recording process (stationbed/output/rerun/child.py) -------------------
 #: Long enough that the run is still going when it is killed (3 orbits take ~1 s; this ~60x).
 KILL_DURATION_S = 1.0e6
 #: Rows in the CSV before the parent is killed: a few batches, while the child may still import.

@@ -12,6 +12,7 @@ import numpy as np
 from ...model.cmg import dgcmg_triads, pyramid_axes
 from ...run.trajectory import Trajectory
 from .geometry import StationGeometry
+from .sdk import import_rerun
 
 __all__ = ["CmgArrows", "CMG_ARROW_FRACTION", "CMG_ORIGIN_FRACTION"]
 
@@ -128,8 +129,14 @@ class CmgArrows:
             self.h_ref = float(n[np.argmax(n > 0)])
         return self.length / self.h_ref
 
-    def log_static(self, rr, rec) -> None:
-        """Log the arrows' origins, colours and labels (static) to the recording stream ``rec``."""
+    def log_static(self, rec) -> None:
+        """Log the arrows' origins, colours and labels (static).
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+        """
+        rr = import_rerun()
         if self.n_units:
             rec.log(
                 "world/station/cmg/units",
@@ -146,8 +153,17 @@ class CmgArrows:
             static=True,
         )
 
-    def send(self, rr, send, rows: Trajectory) -> None:
-        """Send the arrows of ``rows`` (k rows) with ``send(entity, columns)`` on their times."""
+    def send(self, send, rows: Trajectory) -> None:
+        """Send the arrows of ``rows``, B components, scaled to [m].
+
+        Parameters
+        ----------
+        send : callable
+            ``send(entity, columns)``: one ``send_columns`` call on the times of ``rows``.
+        rows : Trajectory
+            k rows with ``hx, hy, hz`` [N m s] and the gimbal angles [rad].
+        """
+        rr = import_rerun()
         h = rows.cols(*H_COLUMNS)
         s = self.scale(h)
         k = len(rows)

@@ -20,8 +20,9 @@ import numpy as np
 from ...run.trajectory import Trajectory
 from .cmg_arrows import CmgArrows
 from .elastic import ElasticLines
-from .frames import argument_of_latitude, unit_R_N, sun_vector_N, xyzw, xyzw_C_BP, xyzw_C_NO, xyzw_of_dcm
+from .frames import argument_of_latitude, sun_vector_N, unit_R_N, xyzw, xyzw_C_BP, xyzw_C_NO, xyzw_of_dcm
 from .geometry import StationGeometry
+from .sdk import import_rerun
 
 __all__ = ["StationDrawing"]
 
@@ -66,15 +67,21 @@ class StationDrawing:
         self.elastic = ElasticLines.of(scene, columns, self.geom.extent)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
 
-    def log_static(self, rr, rec) -> None:
-        """Log the parts that do not move relative to their entity (static) to ``rec``: boxes,
-        axes, the orbit ring, the sun, colours and labels."""
+    def log_static(self, rec) -> None:
+        """Log the parts that do not move relative to their entity (static): boxes, axes, the
+        orbit ring, the sun, colours and labels.
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+        """
+        rr = import_rerun()
         g, scene = self.geom, self.scene
         L = g.extent
-        rec.log("world/station/body", _boxes(rr, [(g.body_center, g.body_half, g.body_C)], RGB_BODY), static=True)
+        rec.log("world/station/body", _boxes([(g.body_center, g.body_half, g.body_C)], RGB_BODY), static=True)
         if g.truss is not None:
             boxes = [(g.truss[0], g.truss[1], np.eye(3))] + ([g.mast] if g.mast is not None else [])
-            rec.log("world/station/truss", _boxes(rr, boxes, RGB_TRUSS), static=True)
+            rec.log("world/station/truss", _boxes(boxes, RGB_TRUSS), static=True)
         rec.log(
             "world/station/axes_B",
             rr.Arrows3D(
@@ -85,9 +92,9 @@ class StationDrawing:
             static=True,
         )
         for name, _, half, C_PA in g.arrays:  # centred on the entity's origin, the array's mass centre
-            rec.log(f"world/station/{name}", _boxes(rr, [(None, half, C_PA)], RGB_ARRAY, labels=[name]), static=True)
+            rec.log(f"world/station/{name}", _boxes([(None, half, C_PA)], RGB_ARRAY, labels=[name]), static=True)
         if self.elastic is not None:
-            self.elastic.log_static(rr, rec)
+            self.elastic.log_static(rec)
         if scene.orbit is not None:
             rec.log(
                 "world/lvlh/axes",
@@ -120,12 +127,22 @@ class StationDrawing:
             )
         rec.log("world/H_O_N", rr.Arrows3D.from_fields(colors=[RGB_H], labels=["H_O_N"]), static=True)
         if self.cmg is not None:
-            self.cmg.log_static(rr, rec)
+            self.cmg.log_static(rec)
 
-    def send(self, rr, rec, send, rows: Trajectory) -> None:
-        """Send the moving parts of ``rows`` (k rows) with ``send(entity, columns)`` on their
-        times: ``C_NB``, each array's ``C_BP``, the elastic lines, ``H_O_N``, ``C_NO``, the
-        orbit dot and the CMG arrows. ``rec`` takes the static labels fixed on the way."""
+    def send(self, rec, send, rows: Trajectory) -> None:
+        """Send the moving parts of ``rows``: ``C_NB``, each array's ``C_BP``, the elastic lines,
+        ``H_O_N``, ``C_NO``, the orbit dot and the CMG arrows.
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+            Takes the labels fixed on the way (static).
+        send : callable
+            ``send(entity, columns)``: one ``send_columns`` call on the times of ``rows``.
+        rows : Trajectory
+            k rows with at least the base columns (:func:`~stationbed.run.trajectory.base_columns`).
+        """
+        rr = import_rerun()
         g, scene = self.geom, self.scene
         k = len(rows)
         send("world/station", rr.Transform3D.columns(quaternion=xyzw(rows.q_BN)))
@@ -133,7 +150,7 @@ class StationDrawing:
             q = xyzw_C_BP(rows[f"alpha_{name}"], rows[f"beta_{name}"])
             send(f"world/station/{name}", rr.Transform3D.columns(translation=np.tile(r, (k, 1)), quaternion=q))
         if self.elastic is not None:
-            self.elastic.send(rr, rec, send, rows)
+            self.elastic.send(rec, send, rows)
         H = rows.H_O_N
         if self._H_scale is None:
             H_norm = np.linalg.norm(H, axis=1)
@@ -144,18 +161,17 @@ class StationDrawing:
             o = scene.orbit
             u = argument_of_latitude(o, rows.t)
             send("world/lvlh", rr.Transform3D.columns(quaternion=xyzw_C_NO(u, o.inclination)))
-            send("world/orbit/station", rr.Points3D.columns(positions=ORBIT_RING_FRACTION * g.extent * unit_R_N(u, o.inclination)))
+            R_hat_N = unit_R_N(u, o.inclination)
+            send("world/orbit/station", rr.Points3D.columns(positions=ORBIT_RING_FRACTION * g.extent * R_hat_N))
         if self.cmg is not None:
-            self.cmg.send(rr, send, rows)
+            self.cmg.send(send, rows)
 
 
-def _boxes(rr, boxes, color, labels=None):
+def _boxes(boxes, color, labels=None):
     """Solid boxes of one colour.
 
     Parameters
     ----------
-    rr : module
-        ``rerun``.
     boxes : list of tuple
         ``(center, half_sizes, C)`` per box: centre in the entity's frame [m] (None: all at its
         origin), half sizes along the box's axes [m] and the rotation box -> entity, (3, 3).
@@ -167,6 +183,7 @@ def _boxes(rr, boxes, color, labels=None):
     -------
     rerun.Boxes3D
     """
+    rr = import_rerun()
     kw = {} if labels is None else {"labels": labels}
     if boxes[0][0] is not None:
         kw["centers"] = [b[0] for b in boxes]

@@ -7,13 +7,15 @@ P (so ``C_BP`` turns it with the array's box); its label carries the exaggeratio
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from ...core.beam import axis_vector, cantilever_shape
 from ...run.trajectory import Trajectory
+from .sdk import import_rerun
 
-__all__ = ["ElasticLines", "ELASTIC_POINTS", "ELASTIC_FRACTION"]
+__all__ = ["ElasticLines", "ArrayBeams", "ELASTIC_POINTS", "ELASTIC_FRACTION"]
 
 #: A flexible array's beam is drawn as a line of this many stations, root to tip; its largest
 #: tip amplitude at the first row with elastic motion is drawn this fraction of the longest beam.
@@ -22,6 +24,16 @@ ELASTIC_FRACTION = 0.2
 #: Line width as a fraction of the station's extent.
 ELASTIC_RADIUS_FRACTION = 0.003
 RGB_ELASTIC = (250, 120, 40)
+
+
+class ArrayBeams(NamedTuple):
+    """The beams of one flexible array, g of them, and its m modes."""
+
+    name: str
+    base: np.ndarray  # (g, n, 3): the beams' rigid centre lines, P components [m]
+    eta_columns: tuple[str, ...]  # the array's m modal coordinates, eta_<array>_<k>
+    psi: np.ndarray  # (g, m, n): tip-normalised shape of each mode along each beam (0: not that beam's)
+    e_defl: np.ndarray  # (g, m, 3): deflection direction of each mode, P components
 
 
 class ElasticLines:
@@ -47,10 +59,8 @@ class ElasticLines:
 
     Attributes
     ----------
-    arrays : list of tuple
-        Per array with beam modes ``(name, base, eta_columns, psi, e_defl)``: the g beams' rigid
-        points (g, n, 3) in P [m], the names of its m modal coordinates, the shapes (g, m, n) and
-        deflection directions (g, m, 3) (zero for the modes not of that beam).
+    arrays : list of ArrayBeams
+        One per array with beam modes.
     scale : float or None
         Drawn metres per metre of deflection; None until the first row with motion.
     """
@@ -81,7 +91,7 @@ class ElasticLines:
                     amp_omega.append(2.0 * math.pi * mode.frequency_hz)
                 self.longest = max(self.longest, float(length))
             eta_cols = tuple(f"eta_{a.name}_{k}" for k in range(1, m_all + 1))
-            self.arrays.append((a.name, np.array(base), eta_cols, psi, e_d))
+            self.arrays.append(ArrayBeams(a.name, np.array(base), eta_cols, psi, e_d))
         self._amp_cols = amp_cols
         self._amp_omega = np.array(amp_omega)
         self.scale = None  # drawn metres per metre of deflection, fixed at the first motion
@@ -114,7 +124,7 @@ class ElasticLines:
         if self.scale is not None:
             return False
         k = len(rows)
-        amp = np.zeros((k, len(self.arrays), max(len(x[1]) for x in self.arrays)))
+        amp = np.zeros((k, len(self.arrays), max(len(x.base) for x in self.arrays)))
         for (eta, etadot, i, g), w in zip(self._amp_cols, self._amp_omega):
             amp[:, i, g] += np.hypot(rows[eta], rows[etadot] / w)
         peak = amp.reshape(k, -1).max(axis=1)
@@ -125,7 +135,12 @@ class ElasticLines:
         return True
 
     def strips(self, rows: Trajectory):
-        """The drawn lines of ``rows`` (k rows).
+        """The drawn lines of ``rows``.
+
+        Parameters
+        ----------
+        rows : Trajectory
+            k rows with the modal columns ``eta_<array>_<k>`` [m].
 
         Yields
         ------
@@ -135,25 +150,41 @@ class ElasticLines:
             One strip of n points per beam (g of them) and row, P components [m].
         """
         k = self.scale or 0.0
-        for name, base, eta_cols, psi, e_d in self.arrays:
-            eta = rows.cols(*eta_cols)  # (rows, m)
-            u = np.einsum("rm,gmn,gmi->rgni", eta, psi, e_d)  # deflection (rows, g, n, 3)
-            yield name, (base[None] + k * u).reshape(-1, *base.shape[1:])
+        for a in self.arrays:
+            eta = rows.cols(*a.eta_columns)  # (rows, m)
+            u = np.einsum("rm,gmn,gmi->rgni", eta, a.psi, a.e_defl)  # deflection (rows, g, n, 3)
+            yield a.name, (a.base[None] + k * u).reshape(-1, *a.base.shape[1:])
 
-    def log_static(self, rr, rec) -> None:
-        """Log the lines' colour and width (static) to the recording stream ``rec``."""
-        for name, *_ in self.arrays:
-            rec.log(f"world/station/{name}/elastic_line",
+    def log_static(self, rec) -> None:
+        """Log the lines' colour and width (static).
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+        """
+        rr = import_rerun()
+        for a in self.arrays:
+            rec.log(f"world/station/{a.name}/elastic_line",
                     rr.LineStrips3D.from_fields(colors=[RGB_ELASTIC], radii=ELASTIC_RADIUS_FRACTION * self.extent),
                     static=True)
 
-    def send(self, rr, rec, send, rows: Trajectory) -> None:
-        """Send the lines of ``rows`` with ``send(entity, columns)``; label the exaggeration
-        (static, on ``rec``) once it is fixed."""
+    def send(self, rec, send, rows: Trajectory) -> None:
+        """Send the lines of ``rows``; label the exaggeration once it is fixed.
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+            Takes the label (static).
+        send : callable
+            ``send(entity, columns)``: one ``send_columns`` call on the times of ``rows``.
+        rows : Trajectory
+            k rows with the modal columns.
+        """
+        rr = import_rerun()
         if self.fix_scale(rows):
-            for name, *_ in self.arrays:
-                rec.log(f"world/station/{name}/elastic_line",
-                        rr.LineStrips3D.from_fields(labels=[f"{name} deflection x{self.scale:.3g}"]), static=True)
+            for a in self.arrays:
+                rec.log(f"world/station/{a.name}/elastic_line",
+                        rr.LineStrips3D.from_fields(labels=[f"{a.name} deflection x{self.scale:.3g}"]), static=True)
         k = len(rows)
         for name, pts in self.strips(rows):
             n_beams = pts.shape[0] // k

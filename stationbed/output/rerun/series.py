@@ -18,6 +18,7 @@ import numpy as np
 
 from ...run.trajectory import Trajectory
 from .frames import argument_of_latitude, euler_321_lvlh
+from .sdk import import_rerun
 
 __all__ = ["Series", "telemetry_series", "mode_counts", "Telemetry", "EULER_LVLH"]
 
@@ -147,16 +148,31 @@ class Telemetry:
         self.orbit = scene.orbit
         self.series, self.extra = telemetry_series(list(columns), scene.appendage_names, mode_counts(scene))
 
-    def log_static(self, rr, rec) -> None:
-        """Log every entity's series names (static) to the recording stream ``rec``."""
+    def log_static(self, rec) -> None:
+        """Log every entity's series names (static).
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+        """
+        rr = import_rerun()
         names = {s.entity: list(s.names) for s in self.series}
         if self.orbit is not None:
             names[EULER_LVLH] = ["roll", "pitch", "yaw"]
         for path, n in names.items():
             rec.log(path, rr.SeriesLines(names=n), static=True)
 
-    def send(self, rr, send, rows: Trajectory) -> None:
-        """Send the series of ``rows`` with ``send(entity, columns)`` on their times."""
+    def send(self, send, rows: Trajectory) -> None:
+        """Send every series of ``rows``.
+
+        Parameters
+        ----------
+        send : callable
+            ``send(entity, columns)``: one ``send_columns`` call on the times of ``rows``.
+        rows : Trajectory
+            k rows with the columns of :attr:`series` (and ``t``, ``q_BN`` with an orbit).
+        """
+        rr = import_rerun()
 
         def scalars(path, values):
             send(path, rr.Scalars.columns(scalars=values))

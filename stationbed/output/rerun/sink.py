@@ -54,7 +54,12 @@ class TeeSink:
         self.columns = getattr(sinks[0], "columns", None) if sinks else None
 
     def write(self, rows: np.ndarray) -> None:
-        """Hand ``rows`` (shape (k, len(columns))) to every sink, in order."""
+        """Hand ``rows`` to every sink, in order.
+
+        Parameters
+        ----------
+        rows : ndarray, shape (k, len(columns))
+        """
         for s in self.sinks:
             s.write(rows)
 
@@ -139,8 +144,8 @@ class RrdSink:
         self.rec.send_property("scene", rr.AnyValues(name=scene.name, description=scene.description))
         extra = [c for c in self.columns if c not in base]
         self.rec.send_blueprint(run_blueprint(scene, extra, duration), make_active=True, make_default=True)
-        self.drawing.log_static(rr, self.rec)
-        self.telemetry.log_static(rr, self.rec)
+        self.drawing.log_static(self.rec)
+        self.telemetry.log_static(self.rec)
         self.rec.flush(timeout_sec=0.0)  # start writing the static parts, do not wait
         self._t_sent = time.monotonic()
 
@@ -153,8 +158,19 @@ class RrdSink:
 
     # -- streaming
     def write(self, rows: np.ndarray) -> None:
-        """Take a batch of rows (shape (k, len(columns))); send it once ``flush_interval_s`` has
-        passed since the last send."""
+        """Take a batch of rows; send what is collected once ``flush_interval_s`` has passed
+        since the last send.
+
+        Parameters
+        ----------
+        rows : ndarray, shape (k, len(columns)) or (len(columns),)
+            Values in the units of their columns (DESIGN §6).
+
+        Raises
+        ------
+        ValueError
+            The sink is closed.
+        """
         if self._closed:
             raise ValueError("RrdSink is closed")
         rows = np.atleast_2d(np.asarray(rows, dtype=float))
@@ -187,8 +203,8 @@ class RrdSink:
         def send(path, columns):
             rec.send_columns(path, indexes=index, columns=columns)
 
-        self.drawing.send(rr, rec, send, rows)
-        self.telemetry.send(rr, send, rows)
+        self.drawing.send(rec, send, rows)
+        self.telemetry.send(send, rows)
         self.n_rows += len(rows)
         self.t_last = float(rows.t[-1])
 
