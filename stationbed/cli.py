@@ -221,7 +221,7 @@ def _cmd_check(args) -> int:
     res = check_scene(scene, rtol=args.rtol, duration=args.duration)
     print(res.table())
     if args.rrd:
-        from .output.rerun.sink import write_check_recording
+        from .output.rerun.recording import write_check_recording
 
         write_check_recording(res, scene, args.rrd)
     if not res.ok:

@@ -27,7 +27,9 @@ from stationbed.cli import main as cli_main
 from stationbed.model.cmg import cluster_functions
 from stationbed.model.environment import C_ON
 from stationbed.core.massprops import composite_cm
-from stationbed.output.rerun.sink import RrdSink, TeeSink, box_half_sizes, write_recording
+from stationbed.output.rerun.geometry import box_half_sizes
+from stationbed.output.rerun.recording import write_recording
+from stationbed.output.rerun.sink import RrdSink, TeeSink
 from stationbed.core.rotation import Ap, dcm, euler_321
 from stationbed.scene import scene_from_dict
 from stationbed.run.closed_loop import ROW_BATCH
@@ -378,7 +380,7 @@ def test_check_rrd_writes_formulations_and_diffs(tmp_path):
             assert d.shape == (21, 1) and np.all(d >= 0.0)
 
 
-# -- command line: the recording process (stationbed/output/rerun/child.py) ----------------------------
+# -- command line: the recording process (stationbed/output/rerun/child.py) -------------------
 #: Long enough that the run is still going when it is killed (3 orbits take ~1 s; this ~60x).
 KILL_DURATION_S = 1.0e6
 #: Rows in the CSV before the parent is killed: a few batches, while the child may still import.
@@ -519,11 +521,11 @@ def test_recording_process_that_cannot_write_reports_why(tmp_path, capsys):
 def test_bad_scene_stops_the_recording_process_and_writes_nothing(tmp_path, monkeypatch, capsys):
     """A scene that does not load: exit 2 as without --rrd, the recording process (already
     started) is stopped and no file is made."""
-    from stationbed.output.rerun import child as _rrd_child
+    from stationbed.output.rerun import child
 
     started = []
-    start = _rrd_child.RecordingChild.start
-    monkeypatch.setattr(_rrd_child.RecordingChild, "start", classmethod(lambda cls, *a: started.append(start(*a)) or started[-1]))
+    start = child.RecordingChild.start
+    monkeypatch.setattr(child.RecordingChild, "start", classmethod(lambda cls, *a: started.append(start(*a)) or started[-1]))
     scene = tmp_path / "bad.toml"
     scene.write_text("name = 'bad'\n[body]\nmass = -1.0\n")
     rrd = tmp_path / "o" / "recording.rrd"

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-__all__ = ["beam_mode", "BETA_L", "cantilever_shape", "check_participation"]
+__all__ = ["beam_mode", "BETA_L", "cantilever_shape", "check_participation", "axis_vector"]
 
 #: roots of 1 + cos(βL) cosh(βL) = 0: clamped-free Euler–Bernoulli beam, modes 1..6
 BETA_L = (1.8751040687119611, 4.6940911329741745, 7.8547574382376126, 10.995540734875467, 14.137168391046471, 17.278759532088237)
@@ -21,7 +21,8 @@ BETA_L = (1.8751040687119611, 4.6940911329741745, 7.8547574382376126, 10.9955407
 AXES = {"x": 0, "y": 1, "z": 2}
 
 
-def _axis(name: str) -> np.ndarray:
+def axis_vector(name: str) -> np.ndarray:
+    """Unit vector, P components, of an axis name like ``"y"`` or ``"-z"`` (the scene's ``Beam``)."""
     sign = -1.0 if name.startswith("-") else 1.0
     e = np.zeros(3)
     e[AXES[name.lstrip("+-")]] = sign
@@ -57,7 +58,7 @@ def beam_mode(n: int, length: float, mass: float, root, span: str, deflection: s
     array's mass centre (the P origin). The beam runs from ``root`` along ``span`` and bends
     along ``deflection`` (axis names like ``"y"`` or ``"-z"``); uniform mass per length.
     Gauss–Legendre quadrature with ``n_quad`` points (exact to ~1e-15 for n <= 6)."""
-    e_s, e_d = _axis(span), _axis(deflection)
+    e_s, e_d = axis_vector(span), axis_vector(deflection)
     if abs(e_s @ e_d) > 0.5:
         raise ValueError(f"span {span!r} and deflection {deflection!r} must be different axes")
     xg, wg = _gauss_legendre(n_quad)

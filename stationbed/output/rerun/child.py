@@ -25,7 +25,8 @@ Failure behaviour:
 
 The child skips ``stationbed/__init__.py`` (it imports the whole simulation stack, ~0.8 s, none of
 which a recording needs): it is started with a bootstrap that registers a bare ``stationbed``
-package and imports only :mod:`stationbed.output.rerun.sink` and :mod:`stationbed.scene`.
+package and imports only :mod:`stationbed.output.rerun.sink` (with the modules it draws with) and
+:mod:`stationbed.scene`.
 """
 
 from __future__ import annotations
@@ -85,6 +86,17 @@ class RecordingChild:
     :meth:`write` per batch, and :meth:`close`, which returns ``None`` when the recording is
     complete, else the reason it failed (one line). Neither ``write`` nor ``close`` raises on a
     failed child: the run goes on without it.
+
+    Parameters
+    ----------
+    proc : subprocess.Popen or None
+        The child (None: it could not start).
+    stderr : file or None
+        Temporary file holding the child's stderr (its one-line reason on failure).
+    rrd_path : str or Path
+        The recording the child writes.
+    error : str, optional
+        Why the child is not there (when ``proc`` is None).
     """
 
     def __init__(self, proc: subprocess.Popen | None, stderr, rrd_path, error: str | None = None):
@@ -101,7 +113,19 @@ class RecordingChild:
     @classmethod
     def start(cls, scene_path, rrd_path) -> RecordingChild:
         """Start the child on ``scene_path`` writing ``rrd_path``; never raises (a child that
-        cannot start is reported by :meth:`close`)."""
+        cannot start is reported by :meth:`close`).
+
+        Parameters
+        ----------
+        scene_path : str or Path
+            The scene file (the child loads it itself).
+        rrd_path : str or Path
+            The ``.rrd`` file to write.
+
+        Returns
+        -------
+        RecordingChild
+        """
         stderr = None
         try:
             stderr = tempfile.TemporaryFile()
@@ -133,7 +157,22 @@ class RecordingChild:
     # -- sink
     def open(self, columns, duration: float | None, scene_name: str) -> RecordingChild:
         """Tell the child the run's row columns (and duration, for the blueprint); the child then
-        creates the recording. Returns ``self``, the sink."""
+        creates the recording.
+
+        Parameters
+        ----------
+        columns : list of str
+            Column names of the rows :meth:`write` will hand over.
+        duration : float or None
+            Run length [s] (None: the scene's ``simulation.duration``).
+        scene_name : str
+            The run's scene name (the child checks it against the scene it loaded).
+
+        Returns
+        -------
+        RecordingChild
+            ``self``, the sink.
+        """
         self.columns = list(columns)
         self._opened = True
         header = json.dumps({"columns": self.columns, "duration": duration, "scene": scene_name})
@@ -141,7 +180,12 @@ class RecordingChild:
         return self
 
     def write(self, rows) -> None:
-        """Hand a batch of rows (shape (k, len(columns))) to the child without blocking."""
+        """Hand a batch of rows to the child without blocking.
+
+        Parameters
+        ----------
+        rows : ndarray, shape (k, len(columns)) or (len(columns),)
+        """
         import numpy as np
 
         if self.proc is None or self.error is not None:
@@ -233,8 +277,18 @@ class RecordingChild:
 def child_main(scene_path: str, rrd_path: str) -> int:
     """The child: import rerun and load the scene while the parent starts up, then record.
 
-    Exit 0: the recording is complete (or the parent never opened the run: no file). Exit 1: a
-    failure, one line ``stationbed-rrd: ...`` on stderr.
+    Parameters
+    ----------
+    scene_path : str
+        The scene file.
+    rrd_path : str
+        The ``.rrd`` file to write.
+
+    Returns
+    -------
+    int
+        Exit status. 0: the recording is complete (or the parent never opened the run: no file).
+        1: a failure, one line ``stationbed-rrd: ...`` on stderr.
     """
     import signal
 
@@ -243,9 +297,10 @@ def child_main(scene_path: str, rrd_path: str) -> int:
         import numpy as np
 
         from ...scene import load_scene
-        from . import sink as rerun_log
+        from .sdk import import_rerun
+        from .sink import RrdSink
 
-        rerun_log._rr()  # the slow import, done while the parent is busy
+        import_rerun()  # the slow import, done while the parent is busy
         try:
             scene = load_scene(scene_path)
         except Exception as e:  # the parent reports a bad scene itself and never opens the run
@@ -263,7 +318,7 @@ def child_main(scene_path: str, rrd_path: str) -> int:
             raise ValueError(f"scene {scene_path} is {scene.name!r} here, {header['scene']!r} in the run")
         columns = header["columns"]
         row_bytes = 8 * len(columns)
-        sink = rerun_log.RrdSink(scene, rrd_path, columns, duration=header["duration"])
+        sink = RrdSink(scene, rrd_path, columns, duration=header["duration"])
         try:
             buf = bytearray()
             while True:

@@ -1,0 +1,187 @@
+"""Telemetry: the rows' columns as time series under ``telemetry/`` (one entity per quantity).
+
+Each entity holds its columns as named series (:class:`Series`), sent with one ``send_columns``
+call per quantity per send. Base columns (DESIGN §6) and those of issue 3 (CMG, controller, sun
+tracking) have entities of their own (``telemetry/cmg``, ``telemetry/control``,
+``telemetry/arrays/<name>/track_err_deg``), as do the modal columns of flexible arrays (issue 6:
+``telemetry/modes/<array>/{eta, etadot}``, ``telemetry/modes/U_strain``); any other column goes
+under ``telemetry/extra/<column>``. With an orbit the attitude relative to LVLH is added as
+``telemetry/euler_lvlh_deg`` (3-2-1 roll, pitch, yaw [deg]).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...run.trajectory import Trajectory
+from .frames import argument_of_latitude, euler_321_lvlh
+from .sdk import import_rerun
+
+__all__ = ["Series", "telemetry_series", "mode_counts", "Telemetry", "EULER_LVLH"]
+
+_GIMBAL_COLUMN = re.compile(r"gimbal_\d+(_outer|_inner)?")
+#: Entity of the attitude relative to LVLH (orbiting scenes only).
+EULER_LVLH = "telemetry/euler_lvlh_deg"
+
+
+@dataclass(frozen=True)
+class Series:
+    """One telemetry entity: ``columns`` of the rows as named series (plus their norm).
+
+    Attributes
+    ----------
+    entity : str
+        Entity path, ``telemetry/...``.
+    columns : tuple of str
+        Row columns, in series order.
+    names : tuple of str
+        Series names shown in the plot legend (one more than ``columns`` when ``norm``).
+    norm : bool
+        Append the Euclidean norm of the columns as the last series.
+    """
+
+    entity: str
+    columns: tuple[str, ...]
+    names: tuple[str, ...]
+    norm: bool = False
+
+
+def mode_counts(scene) -> dict[str, int]:
+    """Number of elastic modes per array (issue 6), for the arrays that have any.
+
+    Parameters
+    ----------
+    scene : stationbed.scene.Scene
+
+    Returns
+    -------
+    dict of str to int
+        Array name -> number of its ``[[appendage.mode]]`` tables.
+    """
+    return {a.name: len(a.mode) for a in scene.appendage if a.mode}
+
+
+def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series], list[str]]:
+    """The telemetry entities of rows with ``columns``, and the columns left for ``extra/``.
+
+    Base columns (DESIGN §6) and those of issue 3 (CMG, controller, sun tracking) get their own
+    entity; a group is taken only when all its columns are present. ``modes`` maps an array's
+    name to its number of elastic modes (issue 6): its ``eta_<array>_<k>`` and
+    ``etadot_<array>_<k>`` are one entity each under ``telemetry/modes/<array>/``, ``U_strain``
+    is ``telemetry/modes/U_strain``.
+
+    Parameters
+    ----------
+    columns : list of str
+        Column names of the rows.
+    appendage_names : list of str
+        The scene's arrays.
+    modes : dict of str to int, optional
+        :func:`mode_counts` of the scene.
+
+    Returns
+    -------
+    series : list of Series
+        Every entity, ``telemetry/extra/<column>`` ones last.
+    extra : list of str
+        The columns no named entity took (each is one ``telemetry/extra`` entity).
+    """
+    present, used = set(columns), set()
+    out: list[Series] = []
+
+    def take(entity, cols, names=None, norm=False):
+        cols = tuple(cols)
+        if cols and all(c in present and c not in used for c in cols):
+            out.append(Series(entity, cols, tuple(names or cols), norm))
+            used.update(cols)
+
+    take("telemetry/omega_BN_B", ["wx", "wy", "wz"], ["x", "y", "z"])
+    take("telemetry/H_O_N", ["HNx", "HNy", "HNz"], ["x", "y", "z", "|H|"], norm=True)
+    take("telemetry/T", ["T"])
+    for n in appendage_names:
+        take(f"telemetry/arrays/{n}", [f"alpha_{n}", f"beta_{n}"], [f"{n} alpha", f"{n} beta"])
+    used.update(c for c in ("t", "qw", "qx", "qy", "qz") if c in present)
+    take("telemetry/cmg/h_B", ["hx", "hy", "hz"], ["x", "y", "z", "|h|"], norm=True)
+    gimbals = [c for c in columns if _GIMBAL_COLUMN.fullmatch(c)]
+    take("telemetry/cmg/gimbal/angle", gimbals)
+    take("telemetry/cmg/gimbal/rate", [f"{g}_rate" for g in gimbals])
+    take("telemetry/cmg/singularity", ["cmg_singularity"], ["singularity measure"])
+    take("telemetry/cmg/saturated", ["cmg_saturated"], ["saturated (0/1)"])
+    take("telemetry/control/tau_cmd_B", ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z"], ["x", "y", "z"])
+    take("telemetry/control/att_err_deg", ["att_err_deg"])
+    for n in appendage_names:
+        take(f"telemetry/arrays/{n}/track_err_deg", [f"track_err_deg_{n}"], [n])
+    modes = {n: m for n, m in (modes or {}).items() if m}
+    for n, m in modes.items():
+        ks = range(1, m + 1)
+        take(f"telemetry/modes/{n}/eta", [f"eta_{n}_{k}" for k in ks], [f"{n} eta_{k}" for k in ks])
+        take(f"telemetry/modes/{n}/etadot", [f"etadot_{n}_{k}" for k in ks], [f"{n} etadot_{k}" for k in ks])
+    if modes:
+        take("telemetry/modes/U_strain", ["U_strain"])
+    extra = [c for c in columns if c not in used]
+    for c in extra:
+        out.append(Series(f"telemetry/extra/{c}", (c,), (c,)))
+    return out, extra
+
+
+class Telemetry:
+    """The time series of a run's rows: their names once (static), their values per batch.
+
+    Parameters
+    ----------
+    scene : stationbed.scene.Scene
+    columns : list of str
+        Column names of the rows.
+
+    Attributes
+    ----------
+    series : list of Series
+        The entities of :func:`telemetry_series`.
+    extra : list of str
+        The columns logged under ``telemetry/extra``.
+    """
+
+    def __init__(self, scene, columns):
+        self.orbit = scene.orbit
+        self.series, self.extra = telemetry_series(list(columns), scene.appendage_names, mode_counts(scene))
+
+    def log_static(self, rec) -> None:
+        """Log every entity's series names (static).
+
+        Parameters
+        ----------
+        rec : rerun.RecordingStream
+        """
+        rr = import_rerun()
+        names = {s.entity: list(s.names) for s in self.series}
+        if self.orbit is not None:
+            names[EULER_LVLH] = ["roll", "pitch", "yaw"]
+        for path, n in names.items():
+            rec.log(path, rr.SeriesLines(names=n), static=True)
+
+    def send(self, send, rows: Trajectory) -> None:
+        """Send every series of ``rows``.
+
+        Parameters
+        ----------
+        send : callable
+            ``send(entity, columns)``: one ``send_columns`` call on the times of ``rows``.
+        rows : Trajectory
+            k rows with the columns of :attr:`series` (and ``t``, ``q_BN`` with an orbit).
+        """
+        rr = import_rerun()
+
+        def scalars(path, values):
+            send(path, rr.Scalars.columns(scalars=values))
+
+        if self.orbit is not None:
+            u = argument_of_latitude(self.orbit, rows.t)
+            scalars(EULER_LVLH, np.degrees(euler_321_lvlh(rows.q_BN, u, self.orbit.inclination)))
+        for s in self.series:
+            v = rows.cols(*s.columns)
+            if s.norm:
+                v = np.column_stack([v, np.linalg.norm(v, axis=1)])
+            scalars(s.entity, v)
