@@ -6,7 +6,7 @@
 Batch: ``--n`` samples (default 1000) of one orbit (T = 2 pi / n) of
 ``scenarios/iss_lvlh_gravity_gradient.toml``, open loop, momentum form, initial attitude dispersed
 1 deg (1-sigma per axis) about LVLH and rate 1e-5 rad/s (1-sigma per axis), seed 1, outputs every
-10 s (557 rows per sample). ``stationbed.batch.simulate_batch``: the compiled DOP853 step mapped
+10 s (557 rows per sample). ``stationbed.run.batch.simulate_batch``: the compiled DOP853 step mapped
 over the samples with casadi ``map`` ("serial" for 1 thread, "thread" otherwise), per-sample step
 control in numpy. Each thread count is timed ``--repeats`` times, interleaved, after a warm-up
 (median wall of the whole call: per-sample set-up, integration and output evaluation).

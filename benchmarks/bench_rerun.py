@@ -23,7 +23,7 @@ writer thread included; robust to other jobs) and the wall time spent inside the
 ``--parts`` adds the RrdSink's parts (open: stream + blueprint + static geometry; one send of all
 rows; close: footer) and ``--cli-repeats N`` the wall time of whole ``stationbed run`` processes
 without and with ``--rrd``, as a user sees it (start-up, imports, run, recording; the command line
-writes the recording in a child process, stationbed/_rrd_child.py), the two interleaved, medians of
+writes the recording in a child process, stationbed/output/rerun/child.py), the two interleaved, medians of
 N (>= 5). ``--cli-only`` measures only that.
 """
 

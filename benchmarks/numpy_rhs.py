@@ -1,7 +1,7 @@
 """Plain-numpy right-hand side of the MSFC momentum form (NASA TP-2511 Eq. 17-19).
 
 The "same physics" as stationbed's compiled ``momentum`` formulation, written independently of
-the library (only ``stationbed.load_scene`` and ``stationbed.simulate.initial_state`` are used,
+the library (only ``stationbed.load_scene`` and ``stationbed.run.initial.initial_state`` are used,
 to read the scene and the attitude/rate at t = 0). It is the baseline of
 ``benchmarks/bench_core.py``: scipy ``solve_ivp`` + this RHS is the "plain Python" way.
 

@@ -122,7 +122,7 @@ class LQR(Controller):
             u2 - (c0 * t0 + c1 * t1 + c2 * t2 + c3 * w0 + c4 * w1 + c5 * w2),
         )
 
-    # -- fused form (stationbed/_fused.py): the same law in casadi --------------------------
+    # -- fused form (stationbed/run/fused.py): the same law in casadi --------------------------
     def symbolic_params(self):
         return [v for row in self._k for v in row] + [*self._u0, *self.q_RO, *self.w_RN_R]
 

@@ -109,7 +109,7 @@ class PD(Controller):
             t2 += wx * Hy - wy * Hx
         return (t0, t1, t2)
 
-    # -- fused form (stationbed/_fused.py): the same law in casadi --------------------------
+    # -- fused form (stationbed/run/fused.py): the same law in casadi --------------------------
     def symbolic_params(self):
         return [v for row in self.J for v in row] + [self.kc, self.c, self.lim, *self.w_RN_R, *self.q_RO,
                                                      float(self.lvlh), float(self.gyro)]

@@ -175,7 +175,7 @@ def _summary_line(s: dict) -> str:
 
 
 def _start_recording(args):
-    """Start the process that writes ``run --rrd``'s recording (stationbed/_rrd_child.py).
+    """Start the process that writes ``run --rrd``'s recording (stationbed/output/rerun/child.py).
 
     Called first thing for ``run --rrd``, before the simulation's modules are imported, so that
     the child's ``import rerun`` and set-up overlap the parent's start-up and run.
@@ -203,8 +203,8 @@ class _RecordingTee:
 
 def _with_recording(csv_sink, scene, path, duration=None, recorder=None):
     """``csv_sink`` teed with a rerun recording at ``path``, written by ``recorder`` (a started
-    :class:`~stationbed._rrd_child.RecordingChild`, which builds the same
-    :class:`~stationbed.rerun_log.RrdSink`); ``close()`` finishes it and returns ``None`` or the
+    :class:`~stationbed.output.rerun.child.RecordingChild`, which builds the same
+    :class:`~stationbed.output.rerun.sink.RrdSink`); ``close()`` finishes it and returns ``None`` or the
     reason it failed (one line)."""
     if recorder is None:  # no child (a caller without one): the same sink, in this process
         from .output.rerun.sink import RrdSink, TeeSink

@@ -1,4 +1,4 @@
-"""Monte Carlo batches (stationbed.batch): a mapped batch is the same physics as single runs.
+"""Monte Carlo batches (stationbed.run.batch): a mapped batch is the same physics as single runs.
 
 Truths: each batch sample against an individual ``stationbed.simulate`` run of the same initial
 conditions and settings (the single-run path has its own C step driver, so this checks the
