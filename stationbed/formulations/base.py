@@ -117,8 +117,20 @@ class Formulation:
         return self._omega(t, x, p)
 
     def state(self, t, q_BN, omega_BN_B, xe, p):
-        """The state with attitude ``q_BN``, rate ``omega_BN_B`` [rad/s] and extra states ``xe`` at
-        time ``t`` (``xe``: the model's extra states, then ``η`` and ``η̇`` of flexible arrays)."""
+        """The state with a given attitude, rate and extra states at time ``t``.
+
+        Parameters
+        ----------
+        t : casadi SX  Time [s].
+        q_BN : casadi SX, shape (4, 1)  Euler parameters of B relative to N (scalar first).
+        omega_BN_B : casadi SX, shape (3, 1)  Body rate, B components [rad/s].
+        xe : casadi SX  The model's extra states, then ``η`` and ``η̇`` of flexible arrays.
+        p : casadi SX  The parameter vector.
+
+        Returns
+        -------
+        casadi SX, shape (nx, 1)
+        """
         m = self.model
         parts = [q_BN, self._core(t, q_BN, omega_BN_B, xe, p), xe[0 : m.n_extra]]
         if m.n_modes:
@@ -129,8 +141,21 @@ class Formulation:
         return self.model.modal_state(xe)
 
     def jump(self, t_minus, t_plus, x, p):
-        """State just after an impulsive change of the array rates at ``t``: H is continuous.
+        """State just after an impulsive change of the array rates: H is continuous.
 
+        Parameters
+        ----------
+        t_minus, t_plus : casadi SX  Times [s] just before and after the step (the side each
+            array's rate is taken on).
+        x : casadi SX, shape (nx, 1)  State just before.
+        p : casadi SX  The parameter vector.
+
+        Returns
+        -------
+        casadi SX, shape (nx, 1)  State just after.
+
+        Notes
+        -----
         The total momentum (and the modal momenta ``p_η``, whose rate ``-Kη - Cη̇`` is bounded)
         are taken with the arrays at ``t_minus`` and the rates recovered with the arrays at
         ``t_plus``. For the momentum form this is the identity (H and p_η are its states).
@@ -151,6 +176,18 @@ class Formulation:
     def atol_vector(self, atol: float, rate_scale: float, momentum_scale: float) -> np.ndarray:
         """Absolute tolerance per state component.
 
+        Parameters
+        ----------
+        atol : float  The scene's dimensionless atol.
+        rate_scale : float  Characteristic rate [rad/s].
+        momentum_scale : float  Characteristic momentum [N m s].
+
+        Returns
+        -------
+        ndarray, shape (nx,)
+
+        Notes
+        -----
         A scene's ``atol`` is dimensionless: it applies as given to the Euler parameters and,
         for rate or momentum states, in units of the scene's characteristic rate [rad/s] or
         momentum [N m s]. So every formulation controls the same physical accuracy: without this,
@@ -161,8 +198,16 @@ class Formulation:
         return np.array([atol * unit[k] for k in self.state_kinds])
 
     def momentum_of(self, t, q_BN, omega_BN_B, xe, p):
-        """Total angular momentum about O, B components [N m s], at rate ``omega_BN_B``:
-        ``I ω + Σ I_p ω_p + h + Σ Δ η̇`` (``xe`` with ``η̇``, as for :meth:`state`)."""
+        """Total angular momentum about O, ``I ω + Σ I_p ω_p + h + Σ Δ η̇``.
+
+        Parameters
+        ----------
+        t, q_BN, omega_BN_B, xe, p : as for :meth:`state` (``xe`` with ``η̇``).
+
+        Returns
+        -------
+        casadi SX, shape (3, 1)  ``H_O_B``, B components [N m s].
+        """
         m = self.model
         arrays = m.arrays(t, q_BN, xe, p)
         H_O_B = ca.mtimes(m.inertia(t, p, arrays), omega_BN_B) + m.h(xe, p)
@@ -215,7 +260,7 @@ class OmegaStateForm(Formulation):
     ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H), and Lagrange's
     equation of the modes ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
     two are solved together by the Schur complement on the modal block (``M_eff⁻¹`` by the
-    Woodbury identity, :meth:`stationbed.flex.Modes.solve`).
+    Woodbury identity, :meth:`stationbed.model.flex.Modes.solve`).
     """
 
     core_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")

@@ -54,14 +54,31 @@ from .base import Formulation
 def orientation_gradient(f, C, theta):
     """``∂f/∂C`` (DESIGN §4) of ``f`` built on ``(E - skew(θ)) C``: AD in θ, at θ = 0.
 
-    ``f`` must be a casadi expression of ``theta`` (an SX symbol, 3); returns the 3-vector
-    expression still containing ``theta`` (substitute 0 by the caller).
+    Parameters
+    ----------
+    f : casadi SX scalar  An expression of ``theta`` (built on :func:`perturbed`).
+    C : casadi SX, shape (3, 3)  The unperturbed attitude (documents the argument; unused).
+    theta : casadi SX symbol, shape (3, 1)  Small rotation [rad], B components.
+
+    Returns
+    -------
+    casadi SX, shape (3, 1)  The gradient, still containing ``theta`` (the caller substitutes 0).
     """
     return ca.gradient(f, theta)
 
 
 def perturbed(C, theta):
-    """``(E - skew(θ)) C``: the attitude matrix after a small rotation ``θ`` (B components)."""
+    """``(E - skew(θ)) C``: the attitude matrix after a small rotation ``θ``.
+
+    Parameters
+    ----------
+    C : casadi SX, shape (3, 3)  Attitude ``C_BN``.
+    theta : casadi SX, shape (3, 1)  Small rotation [rad], B components.
+
+    Returns
+    -------
+    casadi SX, shape (3, 3)
+    """
     return ca.mtimes(ca.SX.eye(3) - skew(theta), C)
 
 
@@ -148,8 +165,21 @@ class HamelForm(Formulation):
         return f
 
     def terms(self, t, q_BN, omega_BN_B, xe, p, u):
-        """``(P, ∂P/∂v, ∂P/∂t, ∂P/∂xe, ∂P/∂θ, ∂P/∂η, ∂T/∂C, ∂V/∂C, ∂(T-V)/∂η, ∂R/∂η̇)`` at the
-        state, θ = 0 (``xe`` the extra states with ``η, η̇``)."""
+        """The partials of T, V and R at the state, θ = 0.
+
+        Parameters
+        ----------
+        t : Time [s].
+        q_BN : shape (4,)  Euler parameters of B relative to N.
+        omega_BN_B : shape (3,)  Body rate [rad/s].
+        xe : The extra states with ``η, η̇``.
+        p : The parameter vector.
+        u : shape (nu,) or None  The held input (None: zeros).
+
+        Returns
+        -------
+        tuple ``(P, ∂P/∂v, ∂P/∂t, ∂P/∂xe, ∂P/∂θ, ∂P/∂η, ∂T/∂C, ∂V/∂C, ∂(T-V)/∂η, ∂R/∂η̇)``
+        """
         m = self.model
         u = np.zeros(m.nu) if u is None else u
         return self._terms(

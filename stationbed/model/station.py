@@ -223,8 +223,19 @@ class StationModel:
         return u[self.nu - 1] if (self.has_steps and u is not None) else None
 
     def joint_states(self, t, q_BN, xe, p, omega_BN_B=None, u=None):
-        """Per array ``[(angle, rate, accel) or None for alpha, ... for beta]`` of its driven joints
-        [rad, rad/s, rad/s²] (None: a profile joint); accel needs ``omega_BN_B``."""
+        """The driven (sun-tracking) joints' states.
+
+        Parameters
+        ----------
+        t, q_BN, xe, p, u : see the module docstring.
+        omega_BN_B : casadi SX, shape (3, 1), optional  Body rate [rad/s]; needed for the
+            accelerations (the target moves with the body).
+
+        Returns
+        -------
+        list  Per array ``[alpha, beta]``, each ``[angle [rad], rate [rad/s], accel [rad/s²] or
+        None]`` for a driven joint, None for a profile joint.
+        """
         out = [[None, None] for _ in range(self.structure.n_app)]
         for k, j, off in self.driven:
             out[k][JOINTS.index(j)] = [xe[off], xe[off + 1], None]
@@ -245,6 +256,17 @@ class StationModel:
     def arrays(self, t, q_BN, xe, p, omega_BN_B=None, u=None) -> list[ArrayState]:
         """Per array its :class:`ArrayState` at time t.
 
+        Parameters
+        ----------
+        t, q_BN, xe, p, u : see the module docstring.
+        omega_BN_B : casadi SX, shape (3, 1), optional  Body rate [rad/s].
+
+        Returns
+        -------
+        list of ArrayState  One per appendage, in scene order.
+
+        Notes
+        -----
         ``omega_p_dot_B`` of a sun-tracking array needs ``omega_BN_B`` (its drive follows a target
         that moves with the body); without it that entry is None. ``u`` (the held input) places
         rate steps by the segment time (see :meth:`t_switch`); without it a step is
@@ -265,8 +287,16 @@ class StationModel:
         return out
 
     def kinetic_energy(self, t, q_BN, omega_BN_B, xe, p, u=None, h_coupling=False):
-        """Kinetic energy of the structure about O [J] at body rate ``omega_BN_B``.
+        """Kinetic energy of the structure about O [J] at body rate ``omega_BN_B`` [rad/s], (3, 1).
 
+        Parameters
+        ----------
+        t, q_BN, xe, p, u : see the module docstring (``xe`` with ``η̇``).
+        omega_BN_B : casadi SX, shape (3, 1)  Body rate [rad/s].
+        h_coupling : bool  Add ``ωᵀh`` (see below).
+
+        Notes
+        -----
         ``T = ½ωᵀIω + Σ (ωᵀI_pω_p + ½ω_pᵀI_pω_p) + T_e``; ``xe`` with ``η̇`` (as for
         :meth:`Formulation.state`); ``T_e`` the arrays' elastic kinetic energy
         (:meth:`stationbed.model.flex.Modes.kinetic`). ``h_coupling`` adds ``ωᵀh``, the only part
@@ -304,8 +334,24 @@ class StationModel:
         return modes.done()
 
     def velocities(self, H_O_B, p_eta, arrays, modal, I_O_B, xe, p):
-        """``(omega_BN_B, η̇)`` from the total momentum ``H_O_B`` about O and the modal momenta ``p_η``.
+        """``(omega_BN_B, η̇)`` from the total momentum about O and the modal momenta.
 
+        Parameters
+        ----------
+        H_O_B : casadi SX, shape (3, 1)  Total angular momentum about O, B components [N m s].
+        p_eta : casadi SX, shape (n_modes, 1)  Modal momenta ``p_η``.
+        arrays : list of ArrayState  :meth:`arrays` at the same time.
+        modal : Modes or None  :meth:`modal` of ``arrays``.
+        I_O_B : casadi SX, shape (3, 3)  :meth:`inertia` [kg m²].
+        xe, p : see the module docstring.
+
+        Returns
+        -------
+        omega_BN_B : casadi SX, shape (3, 1)  [rad/s]
+        eta_dot : casadi SX, shape (n_modes, 1)
+
+        Notes
+        -----
         Solves ``[I Δ; Δᵀ M_eff] [ω; η̇] = [H - Σ I_p ω_p - h; p_η - Dᵀ ω_p]`` by the Schur
         complement on the modal block: ``(I - Δ M_eff⁻¹ Δᵀ) ω = ...`` (``M_eff⁻¹`` by
         :meth:`~stationbed.model.flex.Modes.solve`).
@@ -321,7 +367,13 @@ class StationModel:
         return omega_BN_B, b - ca.mtimes(MD, omega_BN_B)
 
     def inertia(self, t, p, arrays):
-        """Total inertia about O, B axes, at time t [kg m²], (3, 3)."""
+        """Total inertia about O, B axes, at time t: ``I0 + Σ I_p_B`` [kg m²], (3, 3).
+
+        Parameters
+        ----------
+        t, p : see the module docstring.
+        arrays : list of ArrayState  :meth:`arrays` at time t.
+        """
         I_O_B = self._mat(p, "I0")
         for a in arrays:
             I_O_B = I_O_B + a.I_p_B
@@ -332,13 +384,15 @@ class StationModel:
         return xe[0 : self.cmg.nx]
 
     def h(self, xe, p):
-        """CMG momentum relative to the body, B components [N m s] (0 without a cluster)."""
+        """CMG momentum relative to the body, ``h_B``, B components [N m s], (3, 1) (0 without a
+        cluster), from the extra states ``xe`` and ``p``."""
         if self.cmg is None:
             return ca.SX.zeros(3)
         return self.cmg.h(self._cmg_x(xe), p[self.layout["cmg"]])
 
     def h_dot(self, xe, u, omega_BN_B, p):
-        """Body-frame derivative of the CMG momentum [N m] (0 without a cluster)."""
+        """Body-frame derivative of the CMG momentum [N m], (3, 1) (0 without a cluster), with the
+        held input ``u`` at body rate ``omega_BN_B`` [rad/s]."""
         if self.cmg is None:
             return ca.SX.zeros(3)
         return self.cmg.h_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], omega_BN_B, p[self.layout["cmg"]])
@@ -362,7 +416,17 @@ class StationModel:
         return u0 + n * t
 
     def orbit_state(self, t, p) -> OrbitState:
-        """The orbit at time t as the torque kinds use it (cos u, sin u computed once)."""
+        """The orbit at time t as the torque kinds use it (cos u, sin u computed once).
+
+        Parameters
+        ----------
+        t : casadi SX  Time [s].
+        p : casadi SX  The parameter vector (its ``orbit`` slice).
+
+        Returns
+        -------
+        OrbitState
+        """
         radius, incl, u0, n, ci, si = (p[self.layout["orbit"]][i] for i in range(6))
         arg = u0 + n * t
         return OrbitState(n, ci, si, ca.cos(arg), ca.sin(arg))
@@ -370,6 +434,14 @@ class StationModel:
     def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True):
         """Sum of the scene's external torques, B components [N m], (3, 1).
 
+        Parameters
+        ----------
+        t, q_BN, u, p : see the module docstring.
+        I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²] (gravity gradient).
+        with_potential : bool  Include the conservative kinds.
+
+        Notes
+        -----
         ``u[0:3]`` is the held torque; then each symbolic kind's terms are added in registry order
         (:mod:`stationbed.model.torques`). ``with_potential=False`` leaves out the conservative
         kinds (the energy-based form takes them from their potential).
@@ -384,7 +456,14 @@ class StationModel:
         return L_B
 
     def potential(self, t, C_BN, I_O_B, p):
-        """Potential energy of the conservative torque kinds [J] (0 when none), at attitude ``C_BN``."""
+        """Potential energy of the conservative torque kinds [J] (0 when none).
+
+        Parameters
+        ----------
+        t, p : see the module docstring.
+        C_BN : casadi SX, shape (3, 3)  Attitude, DCM from N to B.
+        I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
+        """
         V = ca.SX(0)
         orbit = self.orbit_state(t, p) if self.structure.orbit else None
         for kind in self.torques:

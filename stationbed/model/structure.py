@@ -88,6 +88,15 @@ class ParamLayout:
     In order: ``I0`` (9), per appendage ``J<k>`` (9), its joints ``alpha<k>``, ``beta<k>`` and,
     when flexible, ``rho<k>`` (3) and ``modes<k>``; ``mtot`` (flexible scenes); ``orbit`` (6);
     one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``cmg``.
+
+    Parameters
+    ----------
+    structure : Structure
+
+    Attributes
+    ----------
+    slices : dict of str to slice  Where each named block lies in ``p``.
+    size : int  Length of ``p``.
     """
 
     def __init__(self, structure: Structure):

@@ -122,8 +122,18 @@ class TorqueKind:
     # -- held part ---------------------------------------------------------------------
     @classmethod
     def held_B(cls, entry, t: float) -> np.ndarray | None:
-        """Torque of one scene entry at time ``t`` [s], B components [N m], shape (3,); None while
-        inactive (or for a kind without a held part)."""
+        """Held torque of one scene entry.
+
+        Parameters
+        ----------
+        entry : pydantic model  One ``[[torque]]`` table of this kind.
+        t : float  Time [s] (the segment's mid time).
+
+        Returns
+        -------
+        ndarray, shape (3,) or None  B components [N m]; None while inactive (or for a kind
+        without a held part).
+        """
         if not cls.held:
             return None
         out = cls._held_B(entry, t)
@@ -139,7 +149,16 @@ class TorqueKind:
     # -- numbers -----------------------------------------------------------------------
     @classmethod
     def params(cls, scene) -> np.ndarray:
-        """This kind's numbers in ``p``, shape (n_par,)."""
+        """This kind's numbers in ``p``.
+
+        Parameters
+        ----------
+        scene : stationbed.scene.Scene
+
+        Returns
+        -------
+        ndarray, shape (n_par,)
+        """
         out = np.asarray(cls._params(scene), dtype=float) if cls.n_par else np.zeros(0)
         if out.shape != (cls.n_par,):
             raise ValueError(f"torque kind {cls.kind!r}: _params returned shape {out.shape}, expected ({cls.n_par},)")
@@ -312,8 +331,17 @@ def get_torque(kind: str) -> type[TorqueKind]:
 
 
 def held_torque_B(scene, t: float) -> np.ndarray:
-    """Sum of the scene's held torques at time ``t`` [s], B components [N m], shape (3,)
-    (summed in the scene's ``[[torque]]`` order)."""
+    """Sum of the scene's held torques (in its ``[[torque]]`` order).
+
+    Parameters
+    ----------
+    scene : stationbed.scene.Scene
+    t : float  Time [s].
+
+    Returns
+    -------
+    ndarray, shape (3,)  B components [N m].
+    """
     u = np.zeros(3)
     for entry in scene.torque:
         held = get_torque(entry.kind).held_B(entry, t)

@@ -43,6 +43,10 @@ class CmgGeometry:
        steering, direct_rates)`` (see :meth:`actuate`).
     4. Drawing: write ``_unit_momenta_B(cfg, gimbal_angles)`` (each unit's rotor momentum) and
        ``_mount_axes_B(cfg)`` (the axis each unit is drawn along).
+
+    Parameters
+    ----------
+    n_units : int  Number of units (0 for a momentum store).
     """
 
     kind: ClassVar[str] = ""
@@ -63,6 +67,7 @@ class CmgGeometry:
 
     @property
     def n_gimbals(self) -> int:
+        """Number of gimbals (state and input size of a gimballed cluster)."""
         return self.n_units * self.gimbals_per_unit
 
     @property
@@ -84,6 +89,7 @@ class CmgGeometry:
 
     @property
     def state_names(self) -> tuple[str, ...]:
+        """Names of the cluster's states (here: the gimbal names)."""
         return tuple(self.gimbal_names)
 
     @property
@@ -264,9 +270,11 @@ class GimballedGeometry(CmgGeometry):
         return cfg.gimbal0 if cfg.gimbal0 is not None else np.zeros(self.n_gimbals)
 
     def max_gimbal_rate(self, cfg) -> float:
+        """``max_gimbal_rate`` [rad/s]."""
         return cfg.max_gimbal_rate
 
     def rotor_momentum(self, cfg) -> float:
+        """``h_rotor`` [N m s]."""
         return cfg.h_rotor
 
     def _unit_momenta_B(self, cfg, gimbal_angles):

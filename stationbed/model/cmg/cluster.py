@@ -49,6 +49,12 @@ class CmgModel:
     vector (``n_par``: :data:`~stationbed.model.cmg.base.HEAD_PAR` numbers, then the geometry;
     :meth:`params`). The geometry (:attr:`geometry`, from :data:`CMG_GEOMETRIES`) writes the
     kind-specific parts; the methods here check sizes and delegate.
+
+    Parameters
+    ----------
+    kind : str  A :data:`CMG_GEOMETRIES` name.
+    n_units : int  Number of units.
+    steering : str  Steering law (``"none"`` for a cluster without gimbals).
     """
 
     kind: str
@@ -74,6 +80,7 @@ class CmgModel:
 
     @property
     def n_gimbals(self) -> int:
+        """Number of gimbals (0 for a momentum store)."""
         return self.geometry.n_gimbals
 
     @property
@@ -88,6 +95,7 @@ class CmgModel:
 
     @property
     def state_names(self) -> tuple[str, ...]:
+        """Names of the cluster's states (``hx, hy, hz`` or the gimbal names)."""
         return self.geometry.state_names
 
     @property
@@ -97,10 +105,12 @@ class CmgModel:
 
     @property
     def gimbal_names(self) -> list[str]:
+        """Gimbal names in state order (the run's columns)."""
         return self.geometry.gimbal_names
 
     @property
     def n_par(self) -> int:
+        """Size of the cluster's slice of p."""
         return self.geometry.n_par
 
     # -- numbers -----------------------------------------------------------------------

@@ -34,6 +34,7 @@ class IdealCluster(CmgGeometry):
 
     @property
     def state_names(self) -> tuple[str, ...]:
+        """The state is ``h_B`` itself [N m s]."""
         return ("hx", "hy", "hz")
 
     # -- numbers -----------------------------------------------------------------------
@@ -47,6 +48,7 @@ class IdealCluster(CmgGeometry):
         return np.array(cfg.h0_B, float)
 
     def max_torque(self, cfg) -> float:
+        """``max_torque`` [N m] (inf when unlimited)."""
         return cfg.max_torque or math.inf
 
     # -- symbols -----------------------------------------------------------------------
