@@ -216,3 +216,11 @@ def test_structure_key_names_the_same_libraries_as_before_the_registry(kinds, ke
 def test_structure_refuses_kinds_out_of_registry_order():
     with pytest.raises(ValueError, match="registry order"):
         Structure(n_app=0, orbit=True, torques=("orbital_harmonic", "gravity_gradient"))
+
+
+def test_symbolic_kinds_have_distinct_key_tags():
+    """Each symbolic kind's flag in Structure.key is its own letter (two structures never share
+    a key, hence a cached library), distinct from the key's other fields (a, o, j, s, c, f)."""
+    tags = [cls.key_tag for cls in TORQUES.values() if cls.symbolic]
+    assert all(tags) and len(set(tags)) == len(tags)
+    assert not set(tags) & set("aojscf")
