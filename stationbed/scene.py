@@ -11,7 +11,7 @@ import difflib
 import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, NamedTuple, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator, model_validator
@@ -20,7 +20,7 @@ from .core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from .core.beam import beam_mode, check_participation
 from .core.massprops import InvalidMassProperties, check_inertia
 
-__all__ = ["Scene", "SceneError", "load_scene", "scene_from_dict"]
+__all__ = ["Scene", "SceneError", "load_scene", "scene_from_dict", "CMG_KINDS"]
 
 #: A quaternion typed in a file with ~8 digits is unit to ~1e-8; anything further off is a mistake.
 QUAT_NORM_TOL = 1e-6
@@ -252,12 +252,16 @@ class Orbit(_Strict):
 
 
 class ConstantTorque(_Strict):
+    """``torque_B`` [N m] (B components) held on ``start <= t < stop`` [s]."""
+
     kind: Literal["constant"]
     torque_B: Vec3
     start: float = -math.inf
     stop: float = math.inf
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=True)
+    #: whether the kind needs an [orbit] table (stationbed.model.torques has its physics)
+    needs_orbit: ClassVar[bool] = False
 
     @field_validator("torque_B")
     @classmethod
@@ -290,6 +294,8 @@ class HarmonicTorque(_Strict):
     cos2_B: Vec3 = [0.0, 0.0, 0.0]
     sin2_B: Vec3 = [0.0, 0.0, 0.0]
 
+    needs_orbit: ClassVar[bool] = True
+
 
 Torque = Annotated[Union[ConstantTorque, HarmonicTorque], Field(discriminator="kind")]
 
@@ -319,10 +325,31 @@ class Sun(_Strict):
 PYRAMID_SKEW_RAD = math.atan2(4.0, 3.0)
 
 
-class Cmg(_Strict):
-    """The CMG cluster (issue 3). See stationbed/cmg.py for the models and steering laws."""
+class CmgKind(NamedTuple):
+    """What the schema knows of one ``[cmg] kind`` (its physics: ``stationbed.model.cmg``, one
+    module per kind, whose registry must list the same kinds)."""
 
-    kind: Literal["ideal", "dgcmg", "sgcmg_pyramid"]
+    #: fixed number of units (0: a momentum store without units); None: ``count``, default 4
+    units: int | None
+    #: gimbals per unit
+    gimbals: int
+    #: which of the unit keys (``UNIT_KEYS``) apply to the kind
+    keys: tuple[str, ...]
+
+
+#: the optional keys that describe a cluster's units; each kind says which apply to it
+UNIT_KEYS = ("count", "outer_axes_B", "gimbal0")
+CMG_KINDS = {
+    "ideal": CmgKind(units=0, gimbals=0, keys=()),
+    "dgcmg": CmgKind(units=None, gimbals=2, keys=("count", "outer_axes_B", "gimbal0")),
+    "sgcmg_pyramid": CmgKind(units=4, gimbals=1, keys=("count", "gimbal0")),
+}
+
+
+class Cmg(_Strict):
+    """The CMG cluster (issue 3). See stationbed/model/cmg/ for the models and steering laws."""
+
+    kind: Literal[tuple(CMG_KINDS)]
     # ideal: a momentum store h driven by the torque command
     max_torque: float | None = Field(default=None, gt=0.0)  # N m, |tau| limit (ideal)
     max_momentum: float | None = Field(default=None, gt=0.0)  # N m s, |h| limit (ideal)
@@ -343,34 +370,33 @@ class Cmg(_Strict):
 
     @model_validator(mode="after")
     def _consistent(self):
-        if self.kind == "ideal":
-            bad = [k for k in ("count", "outer_axes_B", "gimbal0") if getattr(self, k) is not None]
-            if bad:
-                raise ValueError(f"'{bad[0]}' applies to gimballed CMGs, not kind = 'ideal'")
-        else:
-            n_units = 4 if self.kind == "sgcmg_pyramid" else (self.count or 4)
-            if self.kind == "sgcmg_pyramid" and self.count not in (None, 4):
-                raise ValueError("sgcmg_pyramid has exactly 4 units")
-            if self.kind == "sgcmg_pyramid" and self.outer_axes_B is not None:
-                raise ValueError("outer_axes_B applies to kind = 'dgcmg'")
-            if self.outer_axes_B is not None:
-                if len(self.outer_axes_B) != n_units:
-                    raise ValueError(f"outer_axes_B needs {n_units} axes, got {len(self.outer_axes_B)}")
-                for a in self.outer_axes_B:
-                    if math.sqrt(sum(x * x for x in a)) < 1e-9:
-                        raise ValueError("outer_axes_B contains a zero vector")
-            n_g = n_units * (2 if self.kind == "dgcmg" else 1)
-            if self.gimbal0 is not None and len(self.gimbal0) != n_g:
-                raise ValueError(f"gimbal0 needs {n_g} angles for {self.kind} x {n_units}, got {len(self.gimbal0)}")
+        spec = CMG_KINDS[self.kind]
+        if spec.units and self.count not in (None, spec.units):
+            raise ValueError(f"{self.kind} has exactly {spec.units} units")
+        for key in UNIT_KEYS:
+            if getattr(self, key) is not None and key not in spec.keys:
+                where = " or ".join(f"'{k}'" for k, other in CMG_KINDS.items() if key in other.keys)
+                raise ValueError(f"'{key}' applies to kind = {where}, not kind = '{self.kind}'")
+        if self.outer_axes_B is not None:
+            if len(self.outer_axes_B) != self.n_units:
+                raise ValueError(f"outer_axes_B needs {self.n_units} axes, got {len(self.outer_axes_B)}")
+            for a in self.outer_axes_B:
+                if math.sqrt(sum(x * x for x in a)) < 1e-9:
+                    raise ValueError("outer_axes_B contains a zero vector")
+        if self.gimbal0 is not None and len(self.gimbal0) != self.n_gimbals:
+            raise ValueError(
+                f"gimbal0 needs {self.n_gimbals} angles for {self.kind} x {self.n_units}, got {len(self.gimbal0)}"
+            )
         return self
 
     @property
     def n_units(self) -> int:
-        return 0 if self.kind == "ideal" else (4 if self.kind == "sgcmg_pyramid" else (self.count or 4))
+        units = CMG_KINDS[self.kind].units
+        return units if units is not None else (self.count or 4)
 
     @property
     def n_gimbals(self) -> int:
-        return self.n_units * (2 if self.kind == "dgcmg" else 1)
+        return self.n_units * CMG_KINDS[self.kind].gimbals
 
 
 class Sensor(_Strict):
@@ -415,8 +441,9 @@ class Scene(_Strict):
         if self.orbit is None:
             if self.initial.frame == "lvlh":
                 raise ValueError("initial.frame = 'lvlh' needs an [orbit] table")
-            if any(isinstance(t, HarmonicTorque) for t in self.torque):
-                raise ValueError("torque kind 'orbital_harmonic' needs an [orbit] table")
+            for t in self.torque:
+                if t.needs_orbit:
+                    raise ValueError(f"torque kind '{t.kind}' needs an [orbit] table")
             if self.sun is not None and self.sun.beta is not None:
                 raise ValueError("sun.beta needs an [orbit] table (or give sun.direction_N)")
         tracking = [a.name for a in self.appendage if a.tracks_sun]

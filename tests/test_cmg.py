@@ -1,4 +1,4 @@
-"""CMG cluster model (stationbed/cmg.py) against independent truths, at the unit level.
+"""CMG cluster model (stationbed/model/cmg/) against independent truths, at the unit level.
 
 Truths used (none of them calls the library's own geometry or steering code):
 
@@ -34,7 +34,7 @@ H0 = 1000.0  # N m s, rotor momentum used throughout
 DELTA_2H_SING = np.deg2rad([-90.0, 0.0, 90.0, 0.0])
 #: External (saturation) singularity of the pyramid: h = 4 sin β h0 ẑ.
 DELTA_Z_SAT = np.deg2rad([90.0, 90.0, 90.0, 90.0])
-#: Default DGCMG layout (stationbed/cmg.py docstring): outer axes and zero-angle spins.
+#: Default DGCMG layout (stationbed/model/cmg/dgcmg.py, dgcmg_triads): outer axes and zero-angle spins.
 DG_OUTER = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
 DG_SPIN0 = np.array([[0, 0, 1], [1, 0, 0], [0, 0, -1], [-1, 0, 0]], float)
 #: Default DGCMG angles (outer, inner per unit) that align every spin with +z: saturation, h = 4 h0 ẑ.

@@ -18,7 +18,20 @@ FORMULATIONS: dict[str, type[Formulation]] = {
 
 
 def get_formulation(name_or_cls) -> type[Formulation]:
-    """The formulation class for a registry name or a :class:`Formulation` subclass."""
+    """The formulation class for a registry name or a :class:`Formulation` subclass.
+
+    Parameters
+    ----------
+    name_or_cls : str or type  A :data:`FORMULATIONS` name or any :class:`Formulation` subclass.
+
+    Returns
+    -------
+    type[Formulation]
+
+    Raises
+    ------
+    ValueError  For an unknown name (the message lists the valid ones).
+    """
     if isinstance(name_or_cls, type) and issubclass(name_or_cls, Formulation):
         return name_or_cls
     try:

@@ -3,6 +3,10 @@
 A :class:`Formulation` adds the state layout and the equations of motion to a
 :class:`~stationbed.model.StationModel`. Energy and angular momentum are generic: they need only
 the formulation's ``omega(t, x, p)``.
+
+Conventions (every method, casadi SX): ``t`` time [s]; ``x`` the state, shape (nx, 1):
+``q_BN`` (4), the form's 3-vector, then ``x[7:]`` the model's extra states and modal states;
+``u`` the held input (nu, 1); ``p`` the parameter vector (layout.size, 1).
 """
 
 from __future__ import annotations
@@ -34,8 +38,8 @@ class Formulation:
        ``h`` / ``ḣ`` and external torque. ``u`` is held constant by the caller over each
        integration segment: ``u[0:3]`` a body torque [N m], then the CMG input. A form that
        models elastic modes returns a third item, the derivative of the modal states.
-    3. Write ``_omega(t, x, p)`` (omega_BN_B from the state) and ``_core(t, q, omega, xe, p)``
-       (the 3-vector core state that has rate ``omega`` at time t with extra states ``xe``,
+    3. Write ``_omega(t, x, p)`` (omega_BN_B from the state) and ``_core(t, q_BN, omega_BN_B, xe, p)``
+       (the 3-vector core state that has rate ``omega_BN_B`` at time t with extra states ``xe``,
        whose modal part is ``η, η̇``). A form whose second modal state is not ``η̇`` also writes
        ``modal_rates`` and ``_modal_state``.
     4. Do not report energy or momentum yourself: :meth:`H_O_B` and :meth:`kinetic_energy`
@@ -55,6 +59,11 @@ class Formulation:
     modal_state_prefix: ClassVar[str] = "etadot"
 
     def __init__(self, model: StationModel):
+        """
+        Parameters
+        ----------
+        model : StationModel  The symbolic station the equations are written for.
+        """
         self.model = model
         second = tuple(n.replace("eta", self.modal_state_prefix, 1) for n in model.eta_names)
         self.state_names = tuple(self.core_names) + model.extra_names + model.eta_names + second
@@ -62,11 +71,14 @@ class Formulation:
 
     @property
     def nx(self) -> int:
+        """Size of the state."""
         return len(self.state_names)
 
     # -- helpers for implementers --------------------------------------------------------
-    def arrays(self, t, x, p, w=None, u=None):
-        return self.model.arrays(t, x[0:4], x[7:], p, w, u)
+    def arrays(self, t, x, p, omega_BN_B=None, u=None):
+        """The arrays' :class:`~stationbed.model.ArrayState` at state ``x`` (see
+        :meth:`StationModel.arrays`)."""
+        return self.model.arrays(t, x[0:4], x[7:], p, omega_BN_B, u)
 
     def modal_rates(self, t, x, p):
         """``η̇`` from the state (here: the second modal state itself)."""
@@ -81,17 +93,19 @@ class Formulation:
         return ca.vertcat(xe[0 : m.n_extra + m.n_modes], self.modal_rates(t, x, p))
 
     @staticmethod
-    def modal_momenta(modal, w, eta_dot):
+    def modal_momenta(modal, omega_BN_B, eta_dot):
         """``p_η`` of the flexible arrays (none for a rigid scene)."""
-        return ca.SX(0, 1) if modal is None else modal.momentum(w, eta_dot)
+        return ca.SX(0, 1) if modal is None else modal.momentum(omega_BN_B, eta_dot)
 
     # -- public, checked -----------------------------------------------------------------
     def rhs(self, t, x, u, p):
+        """``dx/dt`` (nx, 1): the form's seven core states, then the model's extra states and the
+        modal states."""
         out = self._rhs(t, x, u, p)
-        core_dot, w = out[0], out[1]
+        core_dot, omega_BN_B = out[0], out[1]
         if core_dot.shape != (7, 1):
             raise ValueError(f"{self.name}: _rhs returned shape {core_dot.shape}, expected (7, 1)")
-        parts = [core_dot, self.model.extra_dot(t, x[0:4], x[7:], u, w, p)]
+        parts = [core_dot, self.model.extra_dot(t, x[0:4], x[7:], u, omega_BN_B, p)]
         if self.model.n_modes:
             if len(out) < 3:
                 raise ValueError(f"formulation {self.name!r} does not model flexible arrays (elastic modes)")
@@ -99,41 +113,81 @@ class Formulation:
         return ca.vertcat(*parts)
 
     def omega(self, t, x, p):
+        """omega_BN_B, the body rate relative to N, B components [rad/s], (3, 1)."""
         return self._omega(t, x, p)
 
-    def state(self, t, q, omega, xe, p):
-        """The state with attitude ``q``, rate ``omega`` and extra states ``xe`` at time ``t``
-        (``xe``: the model's extra states, then ``η`` and ``η̇`` of flexible arrays)."""
+    def state(self, t, q_BN, omega_BN_B, xe, p):
+        """The state with a given attitude, rate and extra states at time ``t``.
+
+        Parameters
+        ----------
+        t : casadi SX  Time [s].
+        q_BN : casadi SX, shape (4, 1)  Euler parameters of B relative to N (scalar first).
+        omega_BN_B : casadi SX, shape (3, 1)  Body rate, B components [rad/s].
+        xe : casadi SX  The model's extra states, then ``η`` and ``η̇`` of flexible arrays.
+        p : casadi SX  The parameter vector.
+
+        Returns
+        -------
+        casadi SX, shape (nx, 1)
+        """
         m = self.model
-        parts = [q, self._core(t, q, omega, xe, p), xe[0 : m.n_extra]]
+        parts = [q_BN, self._core(t, q_BN, omega_BN_B, xe, p), xe[0 : m.n_extra]]
         if m.n_modes:
-            parts += [m.eta(xe), self._modal_state(t, q, omega, xe, p)]
+            parts += [m.eta(xe), self._modal_state(t, q_BN, omega_BN_B, xe, p)]
         return ca.vertcat(*parts)
 
-    def _modal_state(self, t, q, omega, xe, p):
+    def _modal_state(self, t, q_BN, omega_BN_B, xe, p):
         return self.model.modal_state(xe)
 
     def jump(self, t_minus, t_plus, x, p):
-        """State just after an impulsive change of the array rates at ``t``: H is continuous.
+        """State just after an impulsive change of the array rates: H is continuous.
 
+        Parameters
+        ----------
+        t_minus, t_plus : casadi SX  Times [s] just before and after the step (the side each
+            array's rate is taken on).
+        x : casadi SX, shape (nx, 1)  State just before.
+        p : casadi SX  The parameter vector.
+
+        Returns
+        -------
+        casadi SX, shape (nx, 1)  State just after.
+
+        Notes
+        -----
         The total momentum (and the modal momenta ``p_η``, whose rate ``-Kη - Cη̇`` is bounded)
         are taken with the arrays at ``t_minus`` and the rates recovered with the arrays at
         ``t_plus``. For the momentum form this is the identity (H and p_η are its states).
         """
         m = self.model
-        q, xe = x[0:4], x[7:]
+        q_BN, xe = x[0:4], x[7:]
         xp = self.physical_extra(t_minus, x, p)
-        w = self._omega(t_minus, x, p)
-        H = self.momentum_of(t_minus, q, w, xp, p)
-        p_eta = self.modal_momenta(m.modal(m.arrays(t_minus, q, xe, p), p), w, m.modal_state(xp))
-        arrays = m.arrays(t_plus, q, xe, p)
-        w_plus, eta_dot = m.velocities(H, p_eta, arrays, m.modal(arrays, p), m.inertia(t_plus, p, arrays), xe, p)
+        omega_BN_B = self._omega(t_minus, x, p)
+        H_O_B = self.momentum_of(t_minus, q_BN, omega_BN_B, xp, p)
+        p_eta = self.modal_momenta(m.modal(m.arrays(t_minus, q_BN, xe, p), p), omega_BN_B, m.modal_state(xp))
+        arrays = m.arrays(t_plus, q_BN, xe, p)
+        omega_plus_B, eta_dot = m.velocities(
+            H_O_B, p_eta, arrays, m.modal(arrays, p), m.inertia(t_plus, p, arrays), xe, p
+        )
         xe_plus = ca.vertcat(xe[0 : m.n_extra + m.n_modes], eta_dot) if m.n_modes else xe
-        return self.state(t_plus, q, w_plus, xe_plus, p)
+        return self.state(t_plus, q_BN, omega_plus_B, xe_plus, p)
 
     def atol_vector(self, atol: float, rate_scale: float, momentum_scale: float) -> np.ndarray:
         """Absolute tolerance per state component.
 
+        Parameters
+        ----------
+        atol : float  The scene's dimensionless atol.
+        rate_scale : float  Characteristic rate [rad/s].
+        momentum_scale : float  Characteristic momentum [N m s].
+
+        Returns
+        -------
+        ndarray, shape (nx,)
+
+        Notes
+        -----
         A scene's ``atol`` is dimensionless: it applies as given to the Euler parameters and,
         for rate or momentum states, in units of the scene's characteristic rate [rad/s] or
         momentum [N m s]. So every formulation controls the same physical accuracy: without this,
@@ -143,24 +197,33 @@ class Formulation:
         unit = {"attitude": 1.0, "rate": rate_scale, "momentum": momentum_scale}
         return np.array([atol * unit[k] for k in self.state_kinds])
 
-    def momentum_of(self, t, q, omega, xe, p):
-        """Total angular momentum about O, B components, at rate ``omega``:
-        ``I ω + Σ I_p ω_p + h + Σ Δ η̇`` (``xe`` with ``η̇``, as for :meth:`state`)."""
+    def momentum_of(self, t, q_BN, omega_BN_B, xe, p):
+        """Total angular momentum about O, ``I ω + Σ I_p ω_p + h + Σ Δ η̇``.
+
+        Parameters
+        ----------
+        t, q_BN, omega_BN_B, xe, p : as for :meth:`state` (``xe`` with ``η̇``).
+
+        Returns
+        -------
+        casadi SX, shape (3, 1)  ``H_O_B``, B components [N m s].
+        """
         m = self.model
-        arrays = m.arrays(t, q, xe, p)
-        H = ca.mtimes(m.inertia(t, p, arrays), omega) + m.h(xe, p)
-        for I_p, w_p, *_ in arrays:
-            H = H + ca.mtimes(I_p, w_p)
+        arrays = m.arrays(t, q_BN, xe, p)
+        H_O_B = ca.mtimes(m.inertia(t, p, arrays), omega_BN_B) + m.h(xe, p)
+        for I_p_B, omega_p_B, *_ in arrays:
+            H_O_B = H_O_B + ca.mtimes(I_p_B, omega_p_B)
         modal = m.modal(arrays, p)
         if modal is not None:
-            H = H + ca.mtimes(modal.Delta, m.modal_state(xe))
-        return H
+            H_O_B = H_O_B + ca.mtimes(modal.Delta, m.modal_state(xe))
+        return H_O_B
 
     def H_O_B(self, t, x, p):
         """Total angular momentum about O (CMG momentum included), B components [N m s]."""
         return self.momentum_of(t, x[0:4], self._omega(t, x, p), self.physical_extra(t, x, p), p)
 
     def H_O_N(self, t, x, p):
+        """Total angular momentum about O (CMG momentum included), N components [N m s]."""
         return ca.mtimes(dcm(x[0:4]).T, self.H_O_B(t, x, p))
 
     def kinetic_energy(self, t, x, p):
@@ -182,7 +245,7 @@ class Formulation:
     def _omega(self, t, x, p):  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _core(self, t, q, omega, xe, p):  # pragma: no cover - abstract
+    def _core(self, t, q_BN, omega_BN_B, xe, p):  # pragma: no cover - abstract
         raise NotImplementedError
 
 
@@ -190,14 +253,14 @@ class OmegaStateForm(Formulation):
     """Base of the forms whose core state is ``[q_BN, omega_BN_B]`` (TP Eq. 16 and Eq. 27).
 
     Both read ``I ω̇ = L - ω × (I ω + h) - ḣ - Σ_p a_p``; a subclass writes only the array term
-    ``a_p = _array_term(ω, I_p, ω_p, ω̇_p)`` (everything an array adds to the left-hand side
+    ``a_p = _array_term(omega_BN_B, I_p_B, omega_p_B, omega_p_dot_B)`` (everything an array adds to the left-hand side
     besides its share of ``I ω̇`` and ``ω × I ω``).
 
     Flexible arrays (the same for both forms: the modal terms are not where they differ) add
     ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H), and Lagrange's
     equation of the modes ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
     two are solved together by the Schur complement on the modal block (``M_eff⁻¹`` by the
-    Woodbury identity, :meth:`stationbed.flex.Modes.solve`).
+    Woodbury identity, :meth:`stationbed.model.flex.Modes.solve`).
     """
 
     core_names = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
@@ -207,29 +270,34 @@ class OmegaStateForm(Formulation):
     def _omega(self, t, x, p):
         return x[4:7]
 
-    def _core(self, t, q, omega, xe, p):
-        return omega
+    def _core(self, t, q_BN, omega_BN_B, xe, p):
+        return omega_BN_B
 
     def _rhs(self, t, x, u, p):
         m = self.model
-        w = x[4:7]
+        q_BN, omega_BN_B = x[0:4], x[4:7]
         xe = x[7:]
-        arrays = self.arrays(t, x, p, w, u)
-        I = m.inertia(t, p, arrays)
-        h = m.h(xe, p)
-        rhs = m.external_torque(t, x[0:4], u, p, I) - ca.cross(w, ca.mtimes(I, w) + h) - m.h_dot(xe, u, w, p)
-        for I_p, w_p, wd_p, *_ in arrays:
-            rhs = rhs - self._array_term(w, I_p, w_p, wd_p)
+        arrays = self.arrays(t, x, p, omega_BN_B, u)
+        I_O_B = m.inertia(t, p, arrays)
+        h_B = m.h(xe, p)
+        rhs = (
+            m.external_torque(t, q_BN, u, p, I_O_B)
+            - ca.cross(omega_BN_B, ca.mtimes(I_O_B, omega_BN_B) + h_B)
+            - m.h_dot(xe, u, omega_BN_B, p)
+        )
+        for I_p_B, omega_p_B, omega_p_dot_B, *_ in arrays:
+            rhs = rhs - self._array_term(omega_BN_B, I_p_B, omega_p_B, omega_p_dot_B)
         if not m.n_modes:
-            return ca.vertcat(quat_kinematics(x[0:4], w), ca.mtimes(inv3(I), rhs)), w
+            return ca.vertcat(quat_kinematics(q_BN, omega_BN_B), ca.mtimes(inv3(I_O_B), rhs)), omega_BN_B
         eta, eta_dot = m.eta(xe), m.modal_state(xe)
         f = m.modal(arrays, p)
-        rhs = rhs - ca.mtimes(f.Delta_dot, eta_dot) - ca.cross(w, ca.mtimes(f.Delta, eta_dot))
-        r_eta = f.momentum_rate(eta, eta_dot) - ca.mtimes(f.Delta_dot.T, w) - f.D_wdp - f.mass_rate_times(eta_dot)
+        rhs = rhs - ca.mtimes(f.Delta_dot, eta_dot) - ca.cross(omega_BN_B, ca.mtimes(f.Delta, eta_dot))
+        r_eta = f.momentum_rate(eta, eta_dot) - ca.mtimes(f.Delta_dot.T, omega_BN_B) - f.D_wdp - f.mass_rate_times(eta_dot)
         sol = f.solve(ca.horzcat(r_eta, f.Delta.T))  # M_eff⁻¹ [r_η, Δᵀ]
-        w_dot = ca.mtimes(inv3(I - ca.mtimes(f.Delta, sol[:, 1:4])), rhs - ca.mtimes(f.Delta, sol[:, 0]))
-        eta_ddot = sol[:, 0] - ca.mtimes(sol[:, 1:4], w_dot)
-        return ca.vertcat(quat_kinematics(x[0:4], w), w_dot), w, ca.vertcat(eta_dot, eta_ddot)
+        omega_dot_B = ca.mtimes(inv3(I_O_B - ca.mtimes(f.Delta, sol[:, 1:4])), rhs - ca.mtimes(f.Delta, sol[:, 0]))
+        eta_ddot = sol[:, 0] - ca.mtimes(sol[:, 1:4], omega_dot_B)
+        return ca.vertcat(quat_kinematics(q_BN, omega_BN_B), omega_dot_B), omega_BN_B, ca.vertcat(eta_dot, eta_ddot)
 
-    def _array_term(self, w, I_p, w_p, wd_p):  # pragma: no cover - abstract
+    def _array_term(self, omega_BN_B, I_p_B, omega_p_B, omega_p_dot_B):  # pragma: no cover - abstract
+        """What one array adds to the left-hand side [N m], (3, 1)."""
         raise NotImplementedError

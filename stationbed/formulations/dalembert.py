@@ -15,9 +15,11 @@ from .base import OmegaStateForm
 
 
 class DAlembertForm(OmegaStateForm):
+    """TP-2511 Eq. 16/42 with ``omega_BN_B`` as state (see the module docstring)."""
+
     name = "dalembert"
     description = "TP-2511 Eq. 16/42: D'Alembert form with the Coriolis matrix Cp*"
 
-    def _array_term(self, w, I_p, w_p, wd_p):
-        coriolis = ca.cross(ca.mtimes(coriolis_matrix(I_p), w), w_p)
-        return coriolis + ca.mtimes(I_p, wd_p) + ca.cross(w_p, ca.mtimes(I_p, w_p))
+    def _array_term(self, omega_BN_B, I_p_B, omega_p_B, omega_p_dot_B):
+        coriolis = ca.cross(ca.mtimes(coriolis_matrix(I_p_B), omega_BN_B), omega_p_B)
+        return coriolis + ca.mtimes(I_p_B, omega_p_dot_B) + ca.cross(omega_p_B, ca.mtimes(I_p_B, omega_p_B))

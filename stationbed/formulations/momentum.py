@@ -21,6 +21,8 @@ from .base import Formulation
 
 
 class MomentumForm(Formulation):
+    """State ``[q_BN (4), H_O_B (3)]``; ω (and η̇) recovered from the momenta."""
+
     name = "momentum"
     core_names = ("qw", "qx", "qy", "qz", "HBx", "HBy", "HBz")
     core_kinds = ("attitude",) * 4 + ("momentum",) * 3
@@ -29,34 +31,36 @@ class MomentumForm(Formulation):
     modal_state_prefix = "peta"
 
     def _velocities(self, t, x, p, u=None):
+        """``(omega_BN_B, η̇, I_O_B, modal)`` at state ``x``."""
         m = self.model
         arrays = self.arrays(t, x, p, u=u)
-        I = m.inertia(t, p, arrays)
+        I_O_B = m.inertia(t, p, arrays)
         modal = m.modal(arrays, p)
-        w, eta_dot = m.velocities(x[4:7], m.modal_state(x[7:]), arrays, modal, I, x[7:], p)
-        return w, eta_dot, I, modal
+        omega_BN_B, eta_dot = m.velocities(x[4:7], m.modal_state(x[7:]), arrays, modal, I_O_B, x[7:], p)
+        return omega_BN_B, eta_dot, I_O_B, modal
 
     def _omega(self, t, x, p):
         return self._velocities(t, x, p)[0]
 
     def modal_rates(self, t, x, p):
+        """``η̇`` recovered from the state (its second modal state is ``p_η``)."""
         return self._velocities(t, x, p)[1]
 
     def _rhs(self, t, x, u, p):
         m = self.model
-        H = x[4:7]
-        w, eta_dot, I, modal = self._velocities(t, x, p, u)
-        L = m.external_torque(t, x[0:4], u, p, I)
-        core_dot = ca.vertcat(quat_kinematics(x[0:4], w), L - ca.cross(w, H))
+        q_BN, H_O_B = x[0:4], x[4:7]
+        omega_BN_B, eta_dot, I_O_B, modal = self._velocities(t, x, p, u)
+        L_B = m.external_torque(t, q_BN, u, p, I_O_B)
+        core_dot = ca.vertcat(quat_kinematics(q_BN, omega_BN_B), L_B - ca.cross(omega_BN_B, H_O_B))
         if not m.n_modes:
-            return core_dot, w
+            return core_dot, omega_BN_B
         eta = m.eta(x[7:])
         p_dot = modal.momentum_rate(eta, eta_dot)
-        return core_dot, w, ca.vertcat(eta_dot, p_dot)
+        return core_dot, omega_BN_B, ca.vertcat(eta_dot, p_dot)
 
-    def _core(self, t, q, omega, xe, p):
-        return self.momentum_of(t, q, omega, xe, p)
+    def _core(self, t, q_BN, omega_BN_B, xe, p):
+        return self.momentum_of(t, q_BN, omega_BN_B, xe, p)
 
-    def _modal_state(self, t, q, omega, xe, p):
+    def _modal_state(self, t, q_BN, omega_BN_B, xe, p):
         m = self.model
-        return self.modal_momenta(m.modal(m.arrays(t, q, xe, p), p), omega, m.modal_state(xe))
+        return self.modal_momenta(m.modal(m.arrays(t, q_BN, xe, p), p), omega_BN_B, m.modal_state(xe))

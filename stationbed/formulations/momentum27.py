@@ -15,9 +15,15 @@ from .base import OmegaStateForm
 
 
 class Momentum27Form(OmegaStateForm):
+    """TP-2511 Eq. 27 with ``omega_BN_B`` as state (see the module docstring)."""
+
     name = "momentum27"
     description = "TP-2511 Eq. 27: expanded momentum equation, omega as state"
 
-    def _array_term(self, w, I_p, w_p, wd_p):
-        bracket = ca.cross(w_p, ca.mtimes(I_p, w)) - ca.mtimes(I_p, ca.cross(w_p, w)) + ca.cross(w, ca.mtimes(I_p, w_p))
-        return ca.mtimes(I_p, wd_p) + ca.cross(w_p, ca.mtimes(I_p, w_p)) + bracket
+    def _array_term(self, omega_BN_B, I_p_B, omega_p_B, omega_p_dot_B):
+        bracket = (
+            ca.cross(omega_p_B, ca.mtimes(I_p_B, omega_BN_B))
+            - ca.mtimes(I_p_B, ca.cross(omega_p_B, omega_BN_B))
+            + ca.cross(omega_BN_B, ca.mtimes(I_p_B, omega_p_B))
+        )
+        return ca.mtimes(I_p_B, omega_p_dot_B) + ca.cross(omega_p_B, ca.mtimes(I_p_B, omega_p_B)) + bracket

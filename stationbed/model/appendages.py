@@ -34,12 +34,24 @@ def _sym(*xs) -> bool:
 
 
 def profile(t, c, n_steps: int = 0, t_switch=None):
-    """Angle, rate and acceleration of ``c = (a0, rate, amp, freq, phase, t_1, d_1, ...)`` at ``t``.
+    """Angle, rate and acceleration of a joint-angle profile at ``t``.
 
     ``n_steps`` rate steps ``(t_k, d_k)`` follow the five profile coefficients. The new rate
     holds where ``t_switch >= t_k`` (``t_switch`` defaults to ``t``: right-continuous). The
     integrators pass the time of the segment being integrated, so every stage of a step that
     ends (or starts) on ``t_k`` sees one side only.
+
+    Parameters
+    ----------
+    t : float, ndarray or casadi SX  Time [s].
+    c : sequence or casadi SX, shape (5 + 2 n_steps,)  ``(a0 [rad], rate [rad/s], amp [rad],
+        freq [rad/s], phase [rad], t_1 [s], d_1 [rad/s], ...)``.
+    n_steps : int  Number of rate steps.
+    t_switch : float or casadi SX, optional  The time that decides the side of each step [s].
+
+    Returns
+    -------
+    angle, rate, acceleration : [rad], [rad/s], [rad/s²] (same type as ``t``)
     """
     a0, rate, amp, freq, phase = c[0], c[1], c[2], c[3], c[4]
     arg = freq * t + phase
@@ -66,16 +78,34 @@ def profile(t, c, n_steps: int = 0, t_switch=None):
 
 
 def wrap_angle(a):
-    """Angle wrapped to (-π, π] (casadi or numpy)."""
+    """Angle wrapped to (-π, π].
+
+    Parameters
+    ----------
+    a : float, ndarray or casadi SX  Angle [rad].
+
+    Returns
+    -------
+    Same type as ``a`` [rad].
+    """
     if _sym(a):
         return ca.atan2(ca.sin(a), ca.cos(a))
     return np.arctan2(np.sin(a), np.cos(a))
 
 
 def sun_targets(s_B, alpha):
-    """Target angles ``(α*, β*)`` pointing the array normal (+z of P) at the sun ``s_B`` [rad].
+    """Target angles pointing the array normal (+z of P) at the sun.
 
     ``β*`` is computed for the actual ``alpha`` (best normal for the SARJ where it is).
+
+    Parameters
+    ----------
+    s_B : ndarray or casadi SX, shape (3,)  Unit vector to the sun, B components.
+    alpha : float or casadi SX  The SARJ angle α [rad].
+
+    Returns
+    -------
+    a_star, b_star : targets α*, β* [rad]
     """
     atan2 = ca.atan2 if _sym(s_B, alpha) else np.arctan2
     a_star = atan2(s_B[0], s_B[2])
@@ -86,6 +116,15 @@ def sun_targets(s_B, alpha):
 def drive_acceleration(theta, theta_dot, target, target_rate, drive):
     """SARJ/BGA drive law: joint acceleration [rad/s²] (casadi).
 
+    Parameters
+    ----------
+    theta, theta_dot : casadi SX  Joint angle [rad] and rate [rad/s].
+    target : casadi SX or tuple (Y, X)  Target angle θ* [rad] (see below).
+    target_rate : casadi SX  θ̇* [rad/s].
+    drive : casadi SX, shape (4,)  ``(max_rate [rad/s], max_acc [rad/s²], gain [1/s], rate_tau [s])``.
+
+    Notes
+    -----
     ``rate_cmd = clip(gain wrap(θ* - θ) + θ̇*, ±max_rate)``;
     ``θ̈ = clip((rate_cmd - θ̇) / rate_tau, ±max_acc)``. ``drive = (max_rate, max_acc, gain,
     rate_tau)``. ``target`` is the target angle θ*, or the pair ``(Y, X)`` with θ* = atan2(Y, X):
@@ -105,7 +144,17 @@ def drive_acceleration(theta, theta_dot, target, target_rate, drive):
 
 
 def tracking_error(C_PB, s_B):
-    """Angle between the array normal (+z of P) and the sun [rad] (numpy, rows or single)."""
+    """Angle between the array normal (+z of P) and the sun (numpy).
+
+    Parameters
+    ----------
+    C_PB : ndarray, shape (..., 3, 3)  DCM from B to the array frame P.
+    s_B : ndarray, shape (..., 3)  Unit vector to the sun, B components.
+
+    Returns
+    -------
+    ndarray, shape (...)  [rad].
+    """
     n_B = np.asarray(C_PB)[..., 2, :]  # third row of C_PB: P's z axis in B components
     c = np.sum(n_B * s_B, axis=-1)
     s = np.linalg.norm(np.cross(n_B, s_B), axis=-1)
@@ -119,11 +168,19 @@ def joint_kinematics(t, c_alpha, c_beta, n_steps=(0, 0), states=(None, None), t_
     steps), unless ``states`` gives it an ``(angle, rate, acceleration)`` triple (a driven joint;
     the acceleration may be None when not needed, then ``omega_PB_P_dot`` is None).
 
+    Parameters
+    ----------
+    t : float or casadi SX  Time [s].
+    c_alpha, c_beta : casadi SX  Profile coefficients of each joint (see :func:`profile`).
+    n_steps : tuple of int  Rate steps of each profile.
+    states : tuple  Per joint None (profile) or ``(angle [rad], rate [rad/s], accel [rad/s²] or None)``.
+    t_switch : casadi SX, optional  The time that decides the side of a rate step [s].
+
     Returns
     -------
-    C_PB : (3,3)  DCM from B to the array frame P.
+    C_PB : (3, 3)  DCM from B to the array frame P.
     omega_PB_P : (3,)  Rate of P relative to B, P components [rad/s].
-    omega_PB_P_dot : (3,)  Its time derivative [rad/s²] (same in P or, rotated, in B).
+    omega_PB_P_dot : (3,) or None  Its time derivative [rad/s²] (same in P or, rotated, in B).
     angles : tuple (alpha, beta) [rad]
     """
     a, ad, add = states[0] if states[0] is not None else profile(t, c_alpha, n_steps[0], t_switch)

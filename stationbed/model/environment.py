@@ -45,14 +45,35 @@ def _stack(items, like):
 
 
 def orbit_position_N(u, radius, inclination):
-    """Position of the station's mass centre, N components [m], at argument of latitude ``u``."""
+    """Position of the station's mass centre on its circular orbit.
+
+    Parameters
+    ----------
+    u : float, ndarray or casadi SX  Argument of latitude [rad].
+    radius : float  Orbit radius [m].
+    inclination : float or casadi SX  Orbit inclination [rad].
+
+    Returns
+    -------
+    ndarray or casadi SX, shape (3,)  ``R_N``, N components [m].
+    """
     cu, su = _trig(u)
     ci, si = _trig(inclination)
     return _stack([radius * cu, radius * su * ci, radius * su * si], u)
 
 
 def C_ON(u, inclination):
-    """DCM from N to LVLH at argument of latitude ``u`` (rows: x_O, y_O, z_O in N)."""
+    """DCM from N to LVLH (rows: x_O, y_O, z_O in N components).
+
+    Parameters
+    ----------
+    u : float or casadi SX  Argument of latitude [rad].
+    inclination : float or casadi SX  Orbit inclination [rad].
+
+    Returns
+    -------
+    ndarray or casadi SX, shape (3, 3)  ``C_ON``.
+    """
     cu, su = _trig(u)
     ci, si = _trig(inclination)
     rows = [
@@ -66,15 +87,32 @@ def C_ON(u, inclination):
 
 
 def omega_ON_O(mean_motion: float) -> np.ndarray:
-    """Angular velocity of LVLH relative to N, O components [rad/s]: ``(0, -n, 0)``."""
+    """Angular velocity of LVLH relative to N: ``omega_ON_O = (0, -n, 0)``.
+
+    Parameters
+    ----------
+    mean_motion : float  Orbital rate n [rad/s].
+
+    Returns
+    -------
+    ndarray, shape (3,)  O components [rad/s].
+    """
     return np.array([0.0, -mean_motion, 0.0])
 
 
 def gravity_gradient_torque(R_hat_B, I_O_B, mean_motion_sq):
-    """``L_gg = 3 n² R̂_B × (I R̂_B)`` with ``n² = mu/|R|³`` (point-mass Earth) [N m].
+    """Gravity-gradient torque of a point-mass Earth, ``L_gg = 3 n² R̂_B × (I R̂_B)``.
 
-    ``R_hat_B`` is the unit vector from the Earth's centre to the station, B components; the
-    sign of R̂ does not matter (the torque is quadratic in it).
+    Parameters
+    ----------
+    R_hat_B : ndarray or casadi SX, shape (3,)  Unit vector from the Earth's centre to the
+        station, B components (its sign does not matter: the torque is quadratic in it).
+    I_O_B : ndarray or casadi SX, shape (3, 3)  Inertia about the mass centre O, B axes [kg m²].
+    mean_motion_sq : float or casadi SX  ``n² = mu/|R|³`` [rad²/s²].
+
+    Returns
+    -------
+    ndarray or casadi SX, shape (3,)  Torque about O, B components [N m].
     """
     if isinstance(R_hat_B, (ca.SX, ca.MX)) or isinstance(I_O_B, (ca.SX, ca.MX)):
         return 3.0 * mean_motion_sq * ca.cross(R_hat_B, ca.mtimes(I_O_B, R_hat_B))
@@ -84,6 +122,17 @@ def gravity_gradient_torque(R_hat_B, I_O_B, mean_motion_sq):
 def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
     """Unit vector to the sun, N components, from a scene's ``[sun]`` table.
 
+    Parameters
+    ----------
+    sun : stationbed.scene.Sun  ``direction_N``, or ``beta`` [rad] and ``u_noon`` [rad].
+    inclination : float  Orbit inclination [rad] (0 without an orbit).
+
+    Returns
+    -------
+    ndarray, shape (3,)  ``s_N`` (unit vector).
+
+    Notes
+    -----
     With a solar beta angle ``β`` and the argument of latitude of orbit noon ``u_noon``:
     ``s_N = cos β (cos u_noon x̂_node + sin u_noon ŷ_90) + sin β n̂``, where ``x̂_node = (1,0,0)``,
     ``ŷ_90 = (0, cos i, sin i)`` span the orbit plane and ``n̂ = (0, -sin i, cos i)`` is the
@@ -101,6 +150,17 @@ def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
 def q_ON(u, inclination):
     """Quaternion (scalar first) of LVLH relative to N, continuous in ``u``: ``dcm(q_ON) = C_ON``.
 
+    Parameters
+    ----------
+    u : float or casadi SX  Argument of latitude [rad].
+    inclination : float or casadi SX  Orbit inclination [rad].
+
+    Returns
+    -------
+    ndarray or casadi SX, shape (4,)  ``q_ON``.
+
+    Notes
+    -----
     ``q_ON = q_x(i) ⊗ q_z(u) ⊗ Q_OR`` (``dcm(a ⊗ b) = dcm(b) dcm(a)``): node, then the argument of
     latitude, then the fixed LVLH axes.
     """

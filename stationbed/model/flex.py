@@ -50,6 +50,10 @@ class Modes:
     centre and T loses ``½ |U η̇|² / m`` (König): the modal mass matrix is
     ``M_eff = diag(M) - Uᵀ U / m``, which couples the arrays. (``d/dt(Dᵀ ω_p) = Dᵀ ω̇_p``: the
     ``Ḋ`` part, ``(ω̃_p D)ᵀ ω_p``, vanishes.)
+
+    Parameters
+    ----------
+    m_total : casadi SX  The station's total mass [kg].
     """
 
     def __init__(self, m_total):
@@ -57,8 +61,18 @@ class Modes:
         self._parts = {k: [] for k in ("Delta", "D", "Delta_dot", "U", "U_dot", "D_wp", "D_wdp", "M", "K", "C")}
 
     def add(self, C_PB, w_p, rho, modes, wd_p=None):
-        """Append one array: ``modes`` holds per mode Φ̄ (3), Ĥ (3), M, K, C (P axes); ``wd_p``
-        its relative rate's B-frame derivative, when known."""
+        """Append one array.
+
+        Parameters
+        ----------
+        C_PB : casadi SX, shape (3, 3)  DCM from B to the array frame P.
+        w_p : casadi SX, shape (3, 1)  ``omega_p_B``, the array's rate relative to B, B components [rad/s].
+        rho : casadi SX, shape (3, 1)  Its mass centre from O, B components [m].
+        modes : casadi SX, shape (9 n, 1)  Per mode Φ̄ (3) [kg], Ĥ (3) [kg m] (P axes), M [kg],
+            K [N/m], C [N s/m].
+        wd_p : casadi SX, shape (3, 1), optional  ``omega_p_dot_B``, the B-frame derivative of
+            ``w_p`` [rad/s²], when known.
+        """
         n = modes.numel() // 9
         cols = [modes[9 * j : 9 * j + 9] for j in range(n)]
         C_BP = C_PB.T
@@ -79,6 +93,7 @@ class Modes:
             P[name].append(ca.vertcat(*[c[j] for c in cols]))
 
     def done(self):
+        """Stack the arrays' pieces into the attributes listed in the class docstring; returns self."""
         n_arrays = len(self._parts["D"])
         for k, v in self._parts.items():
             if k == "D_wdp" and len(v) < n_arrays:
@@ -89,6 +104,7 @@ class Modes:
 
     # -- the modal mass matrix M_eff = diag(M) - UᵀU/m ---------------------------------
     def mass_times(self, v):
+        """``M_eff v`` (N-vector; ``M_eff = diag(M) - Uᵀ U / m`` [kg])."""
         return self.M * v - ca.mtimes(self.U.T, ca.mtimes(self.U, v)) / self.m
 
     def mass_rate_times(self, v):
@@ -106,7 +122,8 @@ class Modes:
 
     # -- energies and momenta -------------------------------------------------------------
     def momentum(self, w, eta_dot):
-        """``p_η = M_eff η̇ + Δᵀ ω + Dᵀ ω_p`` (= ∂T/∂η̇)."""
+        """``p_η = M_eff η̇ + Δᵀ ω + Dᵀ ω_p`` (= ∂T/∂η̇) at body rate ``w`` (omega_BN_B [rad/s])
+        and modal rates ``eta_dot`` (N, 1)."""
         return self.mass_times(eta_dot) + ca.mtimes(self.Delta.T, w) + self.D_wp
 
     def momentum_rate(self, eta, eta_dot):
@@ -114,9 +131,9 @@ class Modes:
         return -self.K * eta - self.C * eta_dot
 
     def kinetic(self, w, eta_dot):
-        """``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` [J]."""
+        """``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` [J] at body rate ``w`` (omega_BN_B [rad/s])."""
         return ca.dot(eta_dot, self.momentum(w, eta_dot) - 0.5 * self.mass_times(eta_dot))
 
     def strain(self, eta):
-        """``½ ηᵀ K η`` [J]."""
+        """``½ ηᵀ K η`` [J] of the modal coordinates ``eta`` (N, 1)."""
         return 0.5 * ca.dot(eta, self.K * eta)

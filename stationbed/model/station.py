@@ -2,16 +2,23 @@
 
 :class:`StationModel` turns a scene's *structure* (how many arrays, orbit or not, which torques)
 into symbolic quantities at time ``t``: the total inertia about the composite mass centre O,
-each array's ``I_p``, ``omega_p``, ``omega_p_dot`` in B, and the external torque. Numbers
-(mass properties, profiles, orbit) enter through one parameter vector ``p`` whose layout is
-declared once in :class:`~stationbed.model.structure.ParamLayout`, so one compiled function
-serves every scene of the same structure. Only the effects a scene names are built ("model no
-more than a scene needs").
+each array's ``I_p_B``, ``omega_p_B``, ``omega_p_dot_B`` (:class:`ArrayState`), the CMG
+cluster's momentum and the external torque. Numbers (mass properties, profiles, orbit) enter
+through one parameter vector ``p`` whose layout is declared once in
+:class:`~stationbed.model.structure.ParamLayout`, so one compiled function serves every scene of
+the same structure. Only the effects a scene names are built ("model no more than a scene
+needs").
+
+Conventions of the symbolic methods: ``t`` time [s]; ``q_BN`` (4, 1) Euler parameters of B
+relative to N, scalar first; ``omega_BN_B`` (3, 1) body rate [rad/s]; ``xe`` the extra states
+(``x[7:]``: CMG state, driven joints, then the modal states); ``u`` (nu, 1) the held input;
+``p`` (layout.size, 1) the parameter vector. All return casadi SX.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -21,31 +28,61 @@ from ..core.massprops import composite_cm, parallel_axis
 from ..core.rotation import dcm
 from .appendages import drive_acceleration, joint_kinematics, profile, sun_targets
 from .cmg import CmgModel
-from .environment import C_ON, gravity_gradient_torque, sun_direction_N
+from .environment import C_ON, sun_direction_N
 from .flex import Modes
-from ..scene import HarmonicTorque
 from .structure import JOINTS, ParamLayout, Structure
+from .torques import TORQUES, OrbitState
 
-__all__ = ["StationModel"]
+__all__ = ["StationModel", "ArrayState"]
+
+
+class ArrayState(NamedTuple):
+    """One articulated array at time t (casadi SX).
+
+    Unpacks as a tuple: ``for I_p_B, omega_p_B, *_ in arrays``.
+    """
+
+    #: inertia about its own mass centre, B axes [kg m²], (3, 3)
+    I_p_B: Any
+    #: rate of the array relative to B, B components [rad/s], (3, 1)
+    omega_p_B: Any
+    #: B-frame derivative of omega_p_B [rad/s²], (3, 1); None when not computed
+    omega_p_dot_B: Any
+    #: joint angles (alpha, beta) [rad]
+    angles: tuple
+    #: DCM from B to the array frame P, (3, 3)
+    C_PB: Any
+    #: inertia about its own mass centre, P axes [kg m²], (3, 3)
+    J_p_P: Any
+    #: rate of P relative to B, P components [rad/s], (3, 1)
+    omega_PB_P: Any
 
 
 class StationModel:
-    """Symbolic station quantities for one :class:`Structure`.
+    """Symbolic station quantities for one :class:`~stationbed.model.structure.Structure`.
 
     Besides the formulation's own seven states (q_BN and one 3-vector), a scene may add
     *extra states*, owned here and appended after them: the CMG cluster's (``h`` or the gimbal
-    angles) and, per sun-tracking joint, its angle and rate. The held input ``u`` is the
-    external body torque (3) followed by the CMG input (torque command or gimbal rates).
+    angles) and, per sun-tracking joint, its angle and rate; flexible arrays add the modal
+    states after those. The held input ``u`` is the held external body torque (3) followed by
+    the CMG input (torque command or gimbal rates) and, with array rate steps, the segment's
+    mid time.
+
+    Parameters
+    ----------
+    structure : Structure  What the equations contain.
     """
 
     def __init__(self, structure: Structure):
         self.structure = structure
         self.cmg = None if structure.cmg is None else CmgModel(*structure.cmg)
-        self.layout = ParamLayout(structure, 0 if self.cmg is None else self.cmg.n_par)
+        #: the symbolic external-torque kinds, in registry (= equation) order
+        self.torques = tuple(TORQUES[k] for k in structure.torques)
+        self.layout = ParamLayout(structure)
         names, kinds = [], []
         if self.cmg is not None:
             names += list(self.cmg.state_names)
-            kinds += ["momentum" if self.cmg.kind == "ideal" else "attitude"] * self.cmg.nx
+            kinds += list(self.cmg.state_kinds)
         self.driven = []  # (appendage index, joint name, offset of its angle in the extra states)
         for k in range(structure.n_app):
             for j, (kind, _) in zip(JOINTS, structure.joints[k]):
@@ -74,7 +111,8 @@ class StationModel:
 
     # -- numbers ------------------------------------------------------------------------
     def params(self, scene) -> np.ndarray:
-        """The numeric parameter vector of ``scene`` (composite mass centre computed here)."""
+        """The numeric parameter vector of ``scene``, shape (layout.size,) (composite mass centre
+        computed here)."""
 
         L = self.layout
         p = np.zeros(L.size)
@@ -97,12 +135,9 @@ class StationModel:
             o = scene.orbit
             i = o.inclination  # cos/sin of a parameter: computed once here, not per RHS stage
             p[L["orbit"]] = [o.radius_m, i, o.u0, o.mean_motion, math.cos(i), math.sin(i)]
-        if self.structure.harmonic:
-            h = np.zeros(15)
-            for t in scene.torque:
-                if isinstance(t, HarmonicTorque):
-                    h += np.concatenate([t.bias_B, t.cos1_B, t.sin1_B, t.cos2_B, t.sin2_B])
-            p[L["harm"]] = h
+        for kind in self.torques:
+            if kind.n_par:
+                p[L[kind.kind]] = kind.params(scene)
         if self.structure.sun:
             incl = scene.orbit.inclination if scene.orbit is not None else 0.0
             p[L["sun"]] = sun_direction_N(scene.sun, incl)
@@ -123,7 +158,18 @@ class StationModel:
 
     def initial_extra(self, scene, q_BN, p) -> np.ndarray:
         """Extra states at t = 0 (CMG state; driven joints start on target unless ``a0`` is given),
-        then the modal coordinates and rates ``η, η̇`` (the formulation converts η̇ to its state)."""
+        then the modal coordinates and rates ``η, η̇`` (the formulation converts η̇ to its state).
+
+        Parameters
+        ----------
+        scene : Scene
+        q_BN : array_like, shape (4,)  Initial attitude (Euler parameters, scalar first).
+        p : ndarray, shape (layout.size,)  :meth:`params` of the scene.
+
+        Returns
+        -------
+        ndarray, shape (n_extra + 2 n_modes,)
+        """
         xe = np.zeros(self.n_extra + 2 * self.n_modes)
         for k, sl in self.flexible:
             modes = scene.appendage[k].mode
@@ -151,21 +197,22 @@ class StationModel:
     def _mat(self, p, name):
         return ca.reshape(p[self.layout[name]], 3, 3).T  # row-major in p
 
-    def sun_B(self, q, p):
-        return ca.mtimes(dcm(q), p[self.layout["sun"]])
+    def sun_B(self, q_BN, p):
+        """Unit vector to the sun, B components, (3, 1)."""
+        return ca.mtimes(dcm(q_BN), p[self.layout["sun"]])
 
-    def _driven_targets(self, k, q, xe, p, w, alpha, alpha_rate):
+    def _driven_targets(self, k, q_BN, xe, p, omega_BN_B, alpha, alpha_rate):
         """Sun-tracking targets of array k and their rates (analytic, ṡ_B = -ω × s_B)."""
-        s_B = self.sun_B(q, p)
-        sd = -ca.cross(w, s_B)
+        s_B = self.sun_B(q_BN, p)
+        s_dot_B = -ca.cross(omega_BN_B, s_B)
         den_a = ca.fmax(s_B[0] ** 2 + s_B[2] ** 2, 1e-12)
-        a_star_rate = (s_B[2] * sd[0] - s_B[0] * sd[2]) / den_a
+        a_star_rate = (s_B[2] * s_dot_B[0] - s_B[0] * s_dot_B[2]) / den_a
         ca_, sa_ = ca.cos(alpha), ca.sin(alpha)
         v = ca.vertcat(ca_ * s_B[0] - sa_ * s_B[2], s_B[1], sa_ * s_B[0] + ca_ * s_B[2])
         vd = ca.vertcat(
-            (-sa_ * s_B[0] - ca_ * s_B[2]) * alpha_rate + ca_ * sd[0] - sa_ * sd[2],
-            sd[1],
-            (ca_ * s_B[0] - sa_ * s_B[2]) * alpha_rate + sa_ * sd[0] + ca_ * sd[2],
+            (-sa_ * s_B[0] - ca_ * s_B[2]) * alpha_rate + ca_ * s_dot_B[0] - sa_ * s_dot_B[2],
+            s_dot_B[1],
+            (ca_ * s_B[0] - sa_ * s_B[2]) * alpha_rate + sa_ * s_dot_B[0] + ca_ * s_dot_B[2],
         )
         b_star_rate = (-v[2] * vd[1] + v[1] * vd[2]) / ca.fmax(v[1] ** 2 + v[2] ** 2, 1e-12)
         # targets as (Y, X) with θ* = atan2(Y, X): the drive wraps the error with one atan2
@@ -175,12 +222,24 @@ class StationModel:
         """The time that decides which side of a rate step a stage is on (None: t itself)."""
         return u[self.nu - 1] if (self.has_steps and u is not None) else None
 
-    def joint_states(self, t, q, xe, p, w=None, u=None):
-        """Per array ``[(angle, rate, accel) or None for alpha, ... for beta]``; accel needs ``w``."""
+    def joint_states(self, t, q_BN, xe, p, omega_BN_B=None, u=None):
+        """The driven (sun-tracking) joints' states.
+
+        Parameters
+        ----------
+        t, q_BN, xe, p, u : see the module docstring.
+        omega_BN_B : casadi SX, shape (3, 1), optional  Body rate [rad/s]; needed for the
+            accelerations (the target moves with the body).
+
+        Returns
+        -------
+        list  Per array ``[alpha, beta]``, each ``[angle [rad], rate [rad/s], accel [rad/s²] or
+        None]`` for a driven joint, None for a profile joint.
+        """
         out = [[None, None] for _ in range(self.structure.n_app)]
         for k, j, off in self.driven:
             out[k][JOINTS.index(j)] = [xe[off], xe[off + 1], None]
-        if w is not None:
+        if omega_BN_B is not None:
             for k in {k for k, _, _ in self.driven}:
                 ja, jb = out[k]
                 if ja is None:
@@ -188,53 +247,75 @@ class StationModel:
                     alpha, alpha_rate, _ = profile(t, c, self.structure.joints[k][0][1], self.t_switch(u))
                 else:
                     alpha, alpha_rate = ja[0], ja[1]
-                targets = self._driven_targets(k, q, xe, p, w, alpha, alpha_rate)
+                targets = self._driven_targets(k, q_BN, xe, p, omega_BN_B, alpha, alpha_rate)
                 for i, js in enumerate(out[k]):
                     if js is not None:
                         js[2] = drive_acceleration(js[0], js[1], *targets[i], p[self.layout[f"{JOINTS[i]}{k}"]])
         return out
 
-    def arrays(self, t, q, xe, p, w=None, u=None):
-        """Per array: ``(I_p, omega_p, omega_p_dot, (alpha, beta), C_PB, J_p, omega_PB_P)`` in B.
+    def arrays(self, t, q_BN, xe, p, omega_BN_B=None, u=None) -> list[ArrayState]:
+        """Per array its :class:`ArrayState` at time t.
 
-        ``omega_p_dot`` of a sun-tracking array needs ``w`` (its drive follows a target that
-        moves with the body); without it that entry is None. ``u`` (the held input) places
+        Parameters
+        ----------
+        t, q_BN, xe, p, u : see the module docstring.
+        omega_BN_B : casadi SX, shape (3, 1), optional  Body rate [rad/s].
+
+        Returns
+        -------
+        list of ArrayState  One per appendage, in scene order.
+
+        Notes
+        -----
+        ``omega_p_dot_B`` of a sun-tracking array needs ``omega_BN_B`` (its drive follows a target
+        that moves with the body); without it that entry is None. ``u`` (the held input) places
         rate steps by the segment time (see :meth:`t_switch`); without it a step is
         right-continuous in t.
         """
-        states = self.joint_states(t, q, xe, p, w, u)
+        states = self.joint_states(t, q_BN, xe, p, omega_BN_B, u)
         out = []
         for k in range(self.structure.n_app):
-            J = self._mat(p, f"J{k}")
+            J_p_P = self._mat(p, f"J{k}")
             (_, na), (_, nb) = self.structure.joints[k]
-            C_PB, w_P, wd_P, ang = joint_kinematics(
+            C_PB, omega_PB_P, omega_PB_P_dot, angles = joint_kinematics(
                 t, p[self.layout[f"alpha{k}"]], p[self.layout[f"beta{k}"]], (na, nb), tuple(states[k]), self.t_switch(u)
             )
             C_BP = C_PB.T
-            I_p = ca.mtimes([C_BP, J, C_PB])
-            wd_p = None if wd_P is None else ca.mtimes(C_BP, wd_P)
-            out.append((I_p, ca.mtimes(C_BP, w_P), wd_p, ang, C_PB, J, w_P))
+            I_p_B = ca.mtimes([C_BP, J_p_P, C_PB])
+            omega_p_dot_B = None if omega_PB_P_dot is None else ca.mtimes(C_BP, omega_PB_P_dot)
+            out.append(ArrayState(I_p_B, ca.mtimes(C_BP, omega_PB_P), omega_p_dot_B, angles, C_PB, J_p_P, omega_PB_P))
         return out
 
-    def kinetic_energy(self, t, q, w, xe, p, u=None, h_coupling=False):
-        """``T = ½ωᵀIω + Σ (ωᵀI_pω_p + ½ω_pᵀI_pω_p) + T_e`` [J] at rate ``w`` (``xe`` with ``η̇``,
-        as for :meth:`Formulation.state`); ``T_e`` the arrays' elastic kinetic energy
-        (:meth:`stationbed.flex.Modes.kinetic`). ``h_coupling`` adds ``ωᵀh``, the only part of
-        the CMG rotors' energy that depends on ω (what the ``hamel`` form differentiates)."""
-        arrays = self.arrays(t, q, xe, p, u=u)
-        T = 0.5 * ca.dot(w, ca.mtimes(self.inertia(t, p, arrays), w))
+    def kinetic_energy(self, t, q_BN, omega_BN_B, xe, p, u=None, h_coupling=False):
+        """Kinetic energy of the structure about O [J] at body rate ``omega_BN_B`` [rad/s], (3, 1).
+
+        Parameters
+        ----------
+        t, q_BN, xe, p, u : see the module docstring (``xe`` with ``η̇``).
+        omega_BN_B : casadi SX, shape (3, 1)  Body rate [rad/s].
+        h_coupling : bool  Add ``ωᵀh`` (see below).
+
+        Notes
+        -----
+        ``T = ½ωᵀIω + Σ (ωᵀI_pω_p + ½ω_pᵀI_pω_p) + T_e``; ``xe`` with ``η̇`` (as for
+        :meth:`Formulation.state`); ``T_e`` the arrays' elastic kinetic energy
+        (:meth:`stationbed.model.flex.Modes.kinetic`). ``h_coupling`` adds ``ωᵀh``, the only part
+        of the CMG rotors' energy that depends on ω (what the ``hamel`` form differentiates).
+        """
+        arrays = self.arrays(t, q_BN, xe, p, u=u)
+        T = 0.5 * ca.dot(omega_BN_B, ca.mtimes(self.inertia(t, p, arrays), omega_BN_B))
         if h_coupling:
-            T = T + ca.dot(w, self.h(xe, p))
-        for I_p, w_p, *_ in arrays:
-            T = T + ca.dot(w, ca.mtimes(I_p, w_p)) + 0.5 * ca.dot(w_p, ca.mtimes(I_p, w_p))
+            T = T + ca.dot(omega_BN_B, self.h(xe, p))
+        for I_p_B, omega_p_B, *_ in arrays:
+            T = T + ca.dot(omega_BN_B, ca.mtimes(I_p_B, omega_p_B)) + 0.5 * ca.dot(omega_p_B, ca.mtimes(I_p_B, omega_p_B))
         modal = self.modal(arrays, p)
         if modal is not None:
-            T = T + modal.kinetic(w, self.modal_state(xe))
+            T = T + modal.kinetic(omega_BN_B, self.modal_state(xe))
         return T
 
     # -- flexible arrays ----------------------------------------------------------------
     def eta(self, xe):
-        """The modal coordinates ``η`` from the extra states ``xe`` (= x[7:])."""
+        """The modal coordinates ``η`` (n_modes, 1) from the extra states ``xe`` (= x[7:])."""
         return xe[self.n_extra : self.n_extra + self.n_modes]
 
     def modal_state(self, xe):
@@ -242,95 +323,155 @@ class StationModel:
         return xe[self.n_extra + self.n_modes : self.n_extra + 2 * self.n_modes]
 
     def modal(self, arrays, p):
-        """The :class:`~stationbed.flex.Modes` of the flexible arrays (None for a rigid scene)."""
+        """The :class:`~stationbed.model.flex.Modes` of the flexible arrays (None for a rigid scene)."""
         if not self.flexible:
             return None
         L = self.layout
         modes = Modes(p[L["mtot"]][0])
         for k, _ in self.flexible:
-            modes.add(arrays[k][4], arrays[k][1], p[L[f"rho{k}"]], p[L[f"modes{k}"]], wd_p=arrays[k][2])
+            a = arrays[k]
+            modes.add(a.C_PB, a.omega_p_B, p[L[f"rho{k}"]], p[L[f"modes{k}"]], wd_p=a.omega_p_dot_B)
         return modes.done()
 
-    def velocities(self, H, p_eta, arrays, modal, I, xe, p):
-        """``(ω, η̇)`` from the total momentum ``H`` about O and the modal momenta ``p_η``.
+    def velocities(self, H_O_B, p_eta, arrays, modal, I_O_B, xe, p):
+        """``(omega_BN_B, η̇)`` from the total momentum about O and the modal momenta.
 
+        Parameters
+        ----------
+        H_O_B : casadi SX, shape (3, 1)  Total angular momentum about O, B components [N m s].
+        p_eta : casadi SX, shape (n_modes, 1)  Modal momenta ``p_η``.
+        arrays : list of ArrayState  :meth:`arrays` at the same time.
+        modal : Modes or None  :meth:`modal` of ``arrays``.
+        I_O_B : casadi SX, shape (3, 3)  :meth:`inertia` [kg m²].
+        xe, p : see the module docstring.
+
+        Returns
+        -------
+        omega_BN_B : casadi SX, shape (3, 1)  [rad/s]
+        eta_dot : casadi SX, shape (n_modes, 1)
+
+        Notes
+        -----
         Solves ``[I Δ; Δᵀ M_eff] [ω; η̇] = [H - Σ I_p ω_p - h; p_η - Dᵀ ω_p]`` by the Schur
         complement on the modal block: ``(I - Δ M_eff⁻¹ Δᵀ) ω = ...`` (``M_eff⁻¹`` by
-        :meth:`~stationbed.flex.Modes.solve`).
+        :meth:`~stationbed.model.flex.Modes.solve`).
         """
-        rest = H - self.h(xe, p)
-        for I_p, w_p, *_ in arrays:
-            rest = rest - ca.mtimes(I_p, w_p)
+        rest = H_O_B - self.h(xe, p)
+        for I_p_B, omega_p_B, *_ in arrays:
+            rest = rest - ca.mtimes(I_p_B, omega_p_B)
         if modal is None:
-            return ca.mtimes(inv3(I), rest), ca.SX(0, 1)
+            return ca.mtimes(inv3(I_O_B), rest), ca.SX(0, 1)
         sol = modal.solve(ca.horzcat(p_eta - modal.D_wp, modal.Delta.T))  # M_eff⁻¹ [b, Δᵀ]
         b, MD = sol[:, 0], sol[:, 1:4]
-        w = ca.mtimes(inv3(I - ca.mtimes(modal.Delta, MD)), rest - ca.mtimes(modal.Delta, b))
-        return w, b - ca.mtimes(MD, w)
+        omega_BN_B = ca.mtimes(inv3(I_O_B - ca.mtimes(modal.Delta, MD)), rest - ca.mtimes(modal.Delta, b))
+        return omega_BN_B, b - ca.mtimes(MD, omega_BN_B)
 
     def inertia(self, t, p, arrays):
-        """Total inertia about O, B axes, at time t [kg m²]."""
-        I = self._mat(p, "I0")
+        """Total inertia about O, B axes, at time t: ``I0 + Σ I_p_B`` [kg m²], (3, 3).
+
+        Parameters
+        ----------
+        t, p : see the module docstring.
+        arrays : list of ArrayState  :meth:`arrays` at time t.
+        """
+        I_O_B = self._mat(p, "I0")
         for a in arrays:
-            I = I + a[0]
-        return I
+            I_O_B = I_O_B + a.I_p_B
+        return I_O_B
 
     # -- CMG cluster --------------------------------------------------------------------
     def _cmg_x(self, xe):
         return xe[0 : self.cmg.nx]
 
     def h(self, xe, p):
-        """CMG momentum relative to the body, B components [N m s] (0 without a cluster)."""
+        """CMG momentum relative to the body, ``h_B``, B components [N m s], (3, 1) (0 without a
+        cluster), from the extra states ``xe`` and ``p``."""
         if self.cmg is None:
             return ca.SX.zeros(3)
         return self.cmg.h(self._cmg_x(xe), p[self.layout["cmg"]])
 
-    def h_dot(self, xe, u, w, p):
-        """Body-frame derivative of the CMG momentum [N m]."""
+    def h_dot(self, xe, u, omega_BN_B, p):
+        """Body-frame derivative of the CMG momentum [N m], (3, 1) (0 without a cluster), with the
+        held input ``u`` at body rate ``omega_BN_B`` [rad/s]."""
         if self.cmg is None:
             return ca.SX.zeros(3)
-        return self.cmg.h_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], w, p[self.layout["cmg"]])
+        return self.cmg.h_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], omega_BN_B, p[self.layout["cmg"]])
 
-    def extra_dot(self, t, q, xe, u, w, p):
-        """Derivative of the extra states (CMG state, driven joint angles and rates)."""
+    def extra_dot(self, t, q_BN, xe, u, omega_BN_B, p):
+        """Derivative of the extra states (CMG state, driven joint angles and rates), (n_extra, 1)."""
         parts = []
         if self.cmg is not None:
-            parts.append(self.cmg.state_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], w, p[self.layout["cmg"]]))
+            parts.append(self.cmg.state_dot(self._cmg_x(xe), u[3 : 3 + self.nu_cmg], omega_BN_B, p[self.layout["cmg"]]))
         if self.driven:
-            states = self.joint_states(t, q, xe, p, w, u)
+            states = self.joint_states(t, q_BN, xe, p, omega_BN_B, u)
             for k, j, off in self.driven:
                 _, rate, acc = states[k][JOINTS.index(j)]
                 parts += [rate, acc]
         return ca.vertcat(*parts) if parts else ca.SX(0, 1)
 
+    # -- orbit and external torque ------------------------------------------------------
     def orbit_u(self, t, p):
+        """Argument of latitude ``u = u0 + n t`` [rad]."""
         radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
         return u0 + n * t
 
-    def external_torque(self, t, q, u, p, I):
-        """Sum of the scene's external torques, B components [N m]; ``u[0:3]`` is the held torque."""
-        L = u[0:3]
-        s = self.structure
-        if s.orbit:
-            radius, incl, u0, n, ci, si = (p[self.layout["orbit"]][i] for i in range(6))
-            arg = u0 + n * t
-            cu, su = ca.cos(arg), ca.sin(arg)
-            if s.gravity_gradient:
-                R_hat_N = ca.vertcat(cu, su * ci, su * si)  # orbit_position_N(arg, 1, incl)
-                R_hat_B = ca.mtimes(dcm(q), R_hat_N)
-                L = L + gravity_gradient_torque(R_hat_B, I, n * n)
-            if s.harmonic:
-                h = p[self.layout["harm"]]
-                L = (
-                    L
-                    + h[0:3]
-                    + h[3:6] * cu
-                    + h[6:9] * su
-                    + h[9:12] * (cu * cu - su * su)  # cos 2u
-                    + h[12:15] * (2 * su * cu)  # sin 2u
-                )
-        return L
+    def orbit_state(self, t, p) -> OrbitState:
+        """The orbit at time t as the torque kinds use it (cos u, sin u computed once).
+
+        Parameters
+        ----------
+        t : casadi SX  Time [s].
+        p : casadi SX  The parameter vector (its ``orbit`` slice).
+
+        Returns
+        -------
+        OrbitState
+        """
+        radius, incl, u0, n, ci, si = (p[self.layout["orbit"]][i] for i in range(6))
+        arg = u0 + n * t
+        return OrbitState(n, ci, si, ca.cos(arg), ca.sin(arg))
+
+    def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True):
+        """Sum of the scene's external torques, B components [N m], (3, 1).
+
+        Parameters
+        ----------
+        t, q_BN, u, p : see the module docstring.
+        I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²] (gravity gradient).
+        with_potential : bool  Include the conservative kinds.
+
+        Notes
+        -----
+        ``u[0:3]`` is the held torque; then each symbolic kind's terms are added in registry order
+        (:mod:`stationbed.model.torques`). ``with_potential=False`` leaves out the conservative
+        kinds (the energy-based form takes them from their potential).
+        """
+        L_B = u[0:3]
+        orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        for kind in self.torques:
+            if with_potential or not kind.conservative:
+                p_k = p[self.layout[kind.kind]] if kind.n_par else None
+                for term in kind.terms_B(t, q_BN, I_O_B, p_k, orbit):
+                    L_B = L_B + term
+        return L_B
+
+    def potential(self, t, C_BN, I_O_B, p):
+        """Potential energy of the conservative torque kinds [J] (0 when none).
+
+        Parameters
+        ----------
+        t, p : see the module docstring.
+        C_BN : casadi SX, shape (3, 3)  Attitude, DCM from N to B.
+        I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
+        """
+        V = ca.SX(0)
+        orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        for kind in self.torques:
+            if kind.conservative:
+                V = V + kind.potential_J(C_BN, I_O_B, orbit)
+        return V
 
     def C_ON(self, t, p):
+        """DCM from N to LVLH at time t, (3, 3)."""
         radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
         return C_ON(u0 + n * t, incl)

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..scene import HarmonicTorque
+from .cmg import CmgModel, get_geometry
+from .torques import TORQUES
 
 __all__ = ["Structure", "ParamLayout", "JOINTS"]
 
@@ -17,23 +18,39 @@ __all__ = ["Structure", "ParamLayout", "JOINTS"]
 class Structure:
     """What a scene's equations contain; two scenes with equal structure share compiled code.
 
-    ``joints`` has per appendage ``((kind, n_steps) for alpha, (kind, n_steps) for beta)`` with
-    kind ``"p"`` (profile with ``n_steps`` rate steps) or ``"s"`` (sun-tracking drive, a state).
-    ``cmg`` is ``(kind, n_units, steering)`` or None.
+    Attributes
+    ----------
+    n_app : int  Number of articulated arrays.
+    orbit : bool  Whether the scene has an orbit (its numbers are in ``p``).
+    torques : tuple of str  The symbolic external-torque kinds in the equations
+        (:data:`~stationbed.model.torques.TORQUES` names, in registry order); the held kinds
+        (``constant``) enter through the held input and are not part of the structure.
+    joints : tuple  Per appendage ``((kind, n_steps) for alpha, (kind, n_steps) for beta)`` with
+        kind ``"p"`` (profile with ``n_steps`` rate steps) or ``"s"`` (sun-tracking drive, a state).
+    sun : bool  Whether the scene has a sun direction (in ``p``).
+    cmg : tuple or None  ``(kind, n_units, steering)`` of the CMG cluster (steering ``"none"``
+        for a cluster without gimbals).
+    modes : tuple of int  Elastic modes per appendage (all 0: a rigid scene, whose equations and
+        key do not change).
     """
 
     n_app: int
     orbit: bool
-    gravity_gradient: bool
-    harmonic: bool
+    torques: tuple = ()
     joints: tuple = ()
     sun: bool = False
     cmg: tuple | None = None
-    #: elastic modes per appendage (all 0: a rigid scene, whose equations and key do not change)
     modes: tuple = ()
+
+    def __post_init__(self):
+        order = [k for k in TORQUES if k in self.torques]
+        if list(self.torques) != order or any(not TORQUES[k].symbolic for k in self.torques):
+            raise ValueError(f"torques must be symbolic kinds in registry order {tuple(TORQUES)}, got {self.torques}")
 
     @classmethod
     def of(cls, scene) -> "Structure":
+        """The structure of ``scene`` (a :class:`stationbed.scene.Scene`)."""
+
         def joint(j):
             return ("s", 0) if j.tracked else ("p", len(j.rate_step))
 
@@ -41,25 +58,24 @@ class Structure:
         return cls(
             n_app=len(scene.appendage),
             orbit=scene.orbit is not None,
-            gravity_gradient=scene.orbit is not None and scene.orbit.gravity_gradient,
-            harmonic=any(isinstance(t, HarmonicTorque) for t in scene.torque),
+            torques=tuple(k for k, kind in TORQUES.items() if kind.symbolic and kind.present(scene)),
             joints=tuple((joint(a.alpha), joint(a.beta)) for a in scene.appendage),
             sun=scene.sun is not None,
-            cmg=None if c is None else (c.kind, c.n_units, c.steering if c.kind != "ideal" else "none"),
+            cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none"),
             modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
         )
 
     @property
     def key(self) -> str:
+        """A name of the structure (it names the cached library), e.g. ``a2o1g1h0jp0p0s0``."""
         j = "".join(f"{k}{n}" for a in self.joints for k, n in a)
         c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}"
         f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
-        return (
-            f"a{self.n_app}o{int(self.orbit)}g{int(self.gravity_gradient)}h{int(self.harmonic)}"
-            f"j{j}s{int(self.sun)}{c}{f}"
-        )
+        trq = "".join(kind.key(k in self.torques) for k, kind in TORQUES.items() if kind.symbolic)
+        return f"a{self.n_app}o{int(self.orbit)}{trq}j{j}s{int(self.sun)}{c}{f}"
 
     def n_modes(self, k: int) -> int:
+        """Number of elastic modes of appendage ``k``."""
         return self.modes[k] if self.modes else 0
 
 
@@ -67,9 +83,23 @@ JOINTS = ("alpha", "beta")
 
 
 class ParamLayout:
-    """Names and slices of the parameter vector ``p`` (declared once, owns the indices)."""
+    """Names and slices of the parameter vector ``p`` (declared once, owns the indices).
 
-    def __init__(self, structure: Structure, cmg_n_par: int = 0):
+    In order: ``I0`` (9), per appendage ``J<k>`` (9), its joints ``alpha<k>``, ``beta<k>`` and,
+    when flexible, ``rho<k>`` (3) and ``modes<k>``; ``mtot`` (flexible scenes); ``orbit`` (6);
+    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``cmg``.
+
+    Parameters
+    ----------
+    structure : Structure
+
+    Attributes
+    ----------
+    slices : dict of str to slice  Where each named block lies in ``p``.
+    size : int  Length of ``p``.
+    """
+
+    def __init__(self, structure: Structure):
         self.slices: dict[str, slice] = {}
         n = 0
 
@@ -91,12 +121,13 @@ class ParamLayout:
             add("mtot", 1)  # total mass [kg]: the hub's recoil when the arrays bend
         if structure.orbit:
             add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
-        if structure.harmonic:
-            add("harm", 15)  # bias, cos1, sin1, cos2, sin2 (B, N m), summed over torques
+        for name in structure.torques:
+            if TORQUES[name].n_par:
+                add(name, TORQUES[name].n_par)  # the kind's own numbers (TorqueKind.params)
         if structure.sun:
             add("sun", 3)  # unit vector to the sun, N components
         if structure.cmg is not None:
-            add("cmg", cmg_n_par)
+            add("cmg", CmgModel(*structure.cmg).n_par)  # head (limits, steering), then geometry
         self.size = n
 
     def __getitem__(self, name) -> slice:

@@ -10,7 +10,7 @@ import numpy as np
 from ..core.compile import FastCall
 from ..core.rotation import rotation_angle
 from ..integrators import IntegrationError
-from ..model.cmg import capacity, cluster_functions
+from ..model.cmg import cluster_functions
 from .controller import Measurement, Plant, get_controller, measurement_layout
 from .fused import fused_ok, run_fused
 from .rows import check_rows
@@ -67,12 +67,13 @@ class ControlLoop:
             period=self.period,
         )
         if c is not None:
+            geometry = cmg.geometry
             plant.cmg_kind = c.kind
-            plant.h_capacity = capacity(c)
-            plant.max_torque = c.max_torque or math.inf if c.kind == "ideal" else math.inf
+            plant.h_capacity = geometry.capacity(c)
+            plant.max_torque = geometry.max_torque(c)
             plant.n_gimbals = self.ng
-            plant.max_gimbal_rate = c.max_gimbal_rate if self.ng else math.inf
-            plant.h_rotor = c.h_rotor if self.ng else 0.0
+            plant.max_gimbal_rate = geometry.max_gimbal_rate(c)
+            plant.h_rotor = geometry.rotor_momentum(c)
             plant.cmg_functions = cluster_functions(c)
         self.capacity = plant.h_capacity
         self.ctrl.reset(plant)

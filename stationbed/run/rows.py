@@ -18,12 +18,12 @@ __all__ = ["trajectory_columns", "Rows", "check_rows"]
 def trajectory_columns(scene: Scene) -> list[str]:
     """The CSV columns of a run of ``scene`` (DESIGN §6 core, then CMG, controller, sun)."""
     cols = base_columns(scene.appendage_names)
-    c = scene.cmg
-    if c is not None:
+    if scene.cmg is not None:
+        cmg = CmgModel.of(scene.cmg)
         cols += ["hx", "hy", "hz"]
-        names = CmgModel(c.kind, c.n_units, c.steering).gimbal_names
+        names = cmg.gimbal_names
         cols += names + [f"{n}_rate" for n in names]
-        if c.kind != "ideal":
+        if cmg.gimballed:
             cols.append("cmg_singularity")
         cols.append("cmg_saturated")
     if scene.controller is not None:
@@ -57,7 +57,7 @@ class Rows:
         # compiled output layout: w(3) HN(3) T(1) angles(2 n_app) [h(3) [m]] [track errs]
         self.k_h = 7 + 2 * n_app
         self.k_m = self.k_h + 3
-        self.gimbaled = cmg is not None and cmg.kind != "ideal"
+        self.gimbaled = cmg is not None and cmg.gimballed
         self.k_track = self.k_m + (1 if self.gimbaled else 0) if cmg is not None else 7 + 2 * n_app
         self.has_sun = scene.sun is not None
         self.has_ctrl = scene.controller is not None

@@ -1,5 +1,5 @@
-"""Where a run is cut: output times, the scene's discontinuities (torque-window edges, array rate
-steps), and the input held over each smooth segment."""
+"""Where a run is cut: output times, the scene's discontinuities (where a torque kind's held part
+jumps, array rate steps), and the input held over each smooth segment."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from ..model import StationModel
-from ..scene import ConstantTorque, Scene
+from ..model.torques import held_torque_B, torque_breakpoints
+from ..scene import Scene
 
 __all__ = ["output_times", "breakpoints", "held_torque", "segment_input"]
 
@@ -26,11 +27,9 @@ def output_times(duration: float, dt: float) -> np.ndarray:
 def breakpoints(scene: Scene, duration: float) -> tuple[list[float], set[float]]:
     """Times where the scene is discontinuous, and the subset where array rates step (impulses)."""
     bps, steps = set(), set()
-    for trq in scene.torque:
-        if isinstance(trq, ConstantTorque):
-            for b in (trq.start, trq.stop):
-                if 0.0 < b < duration:
-                    bps.add(float(b))
+    for b in torque_breakpoints(scene):
+        if 0.0 < b < duration:
+            bps.add(float(b))
     for a in scene.appendage:
         for j in (a.alpha, a.beta):
             if not j.tracked:
@@ -42,11 +41,9 @@ def breakpoints(scene: Scene, duration: float) -> tuple[list[float], set[float]]
 
 
 def held_torque(scene: Scene, t_mid: float) -> np.ndarray:
-    u = np.zeros(3)
-    for trq in scene.torque:
-        if isinstance(trq, ConstantTorque) and trq.start <= t_mid < trq.stop:
-            u += np.array(trq.torque_B)
-    return u
+    """The external torque held over the segment whose mid time is ``t_mid`` [s], B components
+    [N m], shape (3,): every torque kind's held part (:func:`~stationbed.model.torques.held_torque_B`)."""
+    return held_torque_B(scene, t_mid)
 
 
 def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.ndarray) -> None:

@@ -13,7 +13,6 @@ from ..core.compile import compile_functions, sx_function
 from ..formulations import Formulation, get_formulation
 from ..integrators import Integrator, get_integrator
 from ..model import StationModel, Structure
-from ..model.cmg import singularity_measure
 from ..model.environment import orbit_position_N, q_ON
 from .controller import measurement_layout
 
@@ -42,7 +41,7 @@ def _track_errors(model: StationModel, t, x, p):
     s_B = model.sun_B(x[0:4], p)
     errs = []
     for a in model.arrays(t, x[0:4], x[7:], p):
-        n_B = a[4][2, :].T
+        n_B = a.C_PB[2, :].T  # P's z axis (the array normal), B components
         errs.append(ca.atan2(ca.norm_2(ca.cross(n_B, s_B)), ca.dot(n_B, s_B)))
     return errs
 
@@ -101,13 +100,13 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     arrays = form.arrays(t, x, p)
     outs = [form.omega(t, x, p), form.H_O_N(t, x, p), form.kinetic_energy(t, x, p)]
     for a in arrays:
-        outs += list(a[3])
+        outs += list(a.angles)
     cmg = model.cmg
     if cmg is not None:
         outs.append(model.h(x[7:], p))
-        if cmg.kind != "ideal":
+        if cmg.gimballed:
             pc = p[model.layout["cmg"]]
-            outs.append(singularity_measure(cmg.A_hat(x[7 : 7 + cmg.nx], pc)))
+            outs.append(cmg.singularity(x[7 : 7 + cmg.nx], pc))
     if structure.sun:
         outs += _track_errors(model, t, x, p)
     if model.n_modes:
@@ -122,7 +121,7 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     lay = measurement_layout(ng, structure.n_app)
     wv = form.omega(t, x, p)
     meas = [x[0:4], wv, model.h(x[7:], p), x[7 : 7 + ng]]
-    meas += [a[3][0] for a in arrays] + [a[3][1] for a in arrays]
+    meas += [a.angles[0] for a in arrays] + [a.angles[1] for a in arrays]
     if structure.orbit:
         radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))
         meas += [orbit_position_N(u0 + n * t, radius, incl), ca.reshape(model.C_ON(t, p).T, 9, 1)]

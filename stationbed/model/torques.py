@@ -1,0 +1,355 @@
+"""External torques on the station: one class per kind, one registry (:data:`TORQUES`).
+
+A scene's external torque on the body, B components [N m], is
+
+``L_B(t) = u[0:3] + Σ_kinds torque_B(t, q_BN, I_O_B, p)``
+
+* the *held* part ``u[0:3]``, piecewise constant: the run loop sets it for each smooth segment
+  (:func:`held_torque_B` at the segment's mid time) and cuts the run at the kinds'
+  :func:`torque_breakpoints` (the edges of the ``constant`` windows), so no integrator step
+  straddles a jump;
+* the *symbolic* part, casadi expressions built into the compiled equations for every kind the
+  scene's :class:`~stationbed.model.structure.Structure` names (gravity gradient, orbital
+  harmonics). Their numbers enter through the parameter vector ``p``: each kind's own slice,
+  named by the kind (:class:`~stationbed.model.structure.ParamLayout`), plus the orbit's.
+
+A kind is found by the name the scene gives it: ``[[torque]] kind = "..."``, or, for gravity
+gradient, ``[orbit] gravity_gradient = true``. Adding a kind is one :class:`TorqueKind` subclass
+here, added to :data:`TORQUES`, and (for a ``[[torque]]`` kind) its scene model in
+:mod:`stationbed.scene` (a member of ``Torque``). The registry's order is the order of the terms
+in the equations, of the kinds' slices in ``p`` and of their flags in ``Structure.key``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, NamedTuple
+
+import casadi as ca
+import numpy as np
+
+from ..core.rotation import dcm
+from ..scene import ConstantTorque, HarmonicTorque
+from .environment import gravity_gradient_torque
+
+__all__ = [
+    "TorqueKind",
+    "ConstantWindow",
+    "GravityGradient",
+    "OrbitalHarmonic",
+    "OrbitState",
+    "TORQUES",
+    "get_torque",
+    "held_torque_B",
+    "torque_breakpoints",
+]
+
+
+class OrbitState(NamedTuple):
+    """The circular orbit at time ``t`` as the torque kinds use it (casadi scalars).
+
+    ``u = u0 + n t`` is the argument of latitude; its cosine and sine are computed once per
+    expression and shared by every kind.
+    """
+
+    #: mean motion n [rad/s]
+    n: Any
+    #: cos and sin of the inclination (numbers of ``p``, computed once per scene)
+    cos_i: Any
+    sin_i: Any
+    #: cos u, sin u of the argument of latitude at t
+    cos_u: Any
+    sin_u: Any
+
+
+class TorqueKind:
+    """Base class of an external-torque kind (stateless: class data and class methods).
+
+    The public methods check and call the private ones a kind writes. Rules for implementers:
+
+    1. Set ``kind``, the scene's name for it (the :data:`TORQUES` key). A kind written in the
+       scene's ``[[torque]]`` list finds its tables there by that name (:meth:`entries`) and sets
+       ``scene_model`` to their pydantic model; a kind named elsewhere writes ``_present(scene)``.
+    2. Held part (``held = True``): write ``_held_B(entry, t)``, the torque of one scene entry at
+       time ``t`` (ndarray shape (3,), B components [N m]) or None while it is inactive, and
+       ``_breakpoints(entry)``, the times where it may jump. It must be constant between them.
+    3. Symbolic part (``symbolic = True``): write ``_terms_B(t, q_BN, I_O_B, p_k, orbit)``, the
+       torque as a list of casadi 3-vectors (B components [N m]) that the model adds one by one
+       to the running sum, in order (the order is part of the generated code). Set
+       ``needs_orbit`` when it reads ``orbit`` (an :class:`OrbitState`); set ``key_tag`` (one
+       letter of ``Structure.key``). With ``n_par > 0`` numbers in ``p``, write
+       ``_params(scene)`` (shape (n_par,)); the kind reads them back as ``p_k``.
+    4. A conservative kind (the torque is minus the attitude gradient of a potential) sets
+       ``conservative = True`` and writes ``_potential_J(C_BN, I_O_B, orbit)``: the energy-based
+       form (``hamel``) takes it from the potential V and leaves it out of the torque.
+    5. Set ``key_always`` only for the kinds the key has always named (``g``, ``h``): their flag
+       is written present or not, which keeps the cached libraries' names; a newer kind writes
+       its tag only when present.
+    """
+
+    kind: ClassVar[str] = ""
+    #: the scene's pydantic model of one ``[[torque]]`` entry of this kind (None: not a list entry)
+    scene_model: ClassVar[type | None] = None
+    held: ClassVar[bool] = False
+    symbolic: ClassVar[bool] = False
+    needs_orbit: ClassVar[bool] = False
+    conservative: ClassVar[bool] = False
+    n_par: ClassVar[int] = 0
+    key_tag: ClassVar[str] = ""
+    key_always: ClassVar[bool] = False
+
+    # -- the scene ---------------------------------------------------------------------
+    @classmethod
+    def entries(cls, scene) -> list:
+        """The scene's ``[[torque]]`` tables of this kind, in file order."""
+        return [t for t in scene.torque if t.kind == cls.kind]
+
+    @classmethod
+    def present(cls, scene) -> bool:
+        """Whether ``scene`` has this kind."""
+        return bool(cls._present(scene))
+
+    @classmethod
+    def _present(cls, scene) -> bool:
+        return bool(cls.entries(scene))
+
+    @classmethod
+    def key(cls, present: bool) -> str:
+        """This kind's part of ``Structure.key`` (see rule 5)."""
+        if cls.key_always:
+            return f"{cls.key_tag}{int(present)}"
+        return cls.key_tag if present else ""
+
+    # -- held part ---------------------------------------------------------------------
+    @classmethod
+    def held_B(cls, entry, t: float) -> np.ndarray | None:
+        """Held torque of one scene entry.
+
+        Parameters
+        ----------
+        entry : pydantic model  One ``[[torque]]`` table of this kind.
+        t : float  Time [s] (the segment's mid time).
+
+        Returns
+        -------
+        ndarray, shape (3,) or None  B components [N m]; None while inactive (or for a kind
+        without a held part).
+        """
+        if not cls.held:
+            return None
+        out = cls._held_B(entry, t)
+        if out is not None and np.shape(out) != (3,):
+            raise ValueError(f"torque kind {cls.kind!r}: _held_B returned shape {np.shape(out)}, expected (3,)")
+        return out
+
+    @classmethod
+    def breakpoints(cls, entry) -> list[float]:
+        """Times [s] where the held torque of ``entry`` may jump (empty for a symbolic kind)."""
+        return [float(b) for b in cls._breakpoints(entry)] if cls.held else []
+
+    # -- numbers -----------------------------------------------------------------------
+    @classmethod
+    def params(cls, scene) -> np.ndarray:
+        """This kind's numbers in ``p``.
+
+        Parameters
+        ----------
+        scene : stationbed.scene.Scene
+
+        Returns
+        -------
+        ndarray, shape (n_par,)
+        """
+        out = np.asarray(cls._params(scene), dtype=float) if cls.n_par else np.zeros(0)
+        if out.shape != (cls.n_par,):
+            raise ValueError(f"torque kind {cls.kind!r}: _params returned shape {out.shape}, expected ({cls.n_par},)")
+        return out
+
+    # -- symbols -----------------------------------------------------------------------
+    @classmethod
+    def terms_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None) -> list:
+        """The symbolic torque as terms to add in order, each B components [N m] (casadi (3, 1)).
+
+        Parameters
+        ----------
+        t : casadi SX  Time [s].
+        q_BN : casadi SX, shape (4, 1)  Euler parameters of B relative to N (scalar first).
+        I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
+        p_k : casadi SX, shape (n_par, 1) or None  This kind's slice of ``p``.
+        orbit : OrbitState or None  The orbit at t (None without an orbit).
+        """
+        if not cls.symbolic:
+            return []
+        if cls.needs_orbit and orbit is None:
+            raise ValueError(f"torque kind {cls.kind!r} needs an orbit")
+        return list(cls._terms_B(t, q_BN, I_O_B, p_k, orbit))
+
+    @classmethod
+    def torque_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None):
+        """The symbolic torque, B components [N m]: the sum of :meth:`terms_B` (casadi (3, 1))."""
+        total = ca.SX.zeros(3)
+        for term in cls.terms_B(t, q_BN, I_O_B, p_k, orbit):
+            total = total + term
+        return total
+
+    @classmethod
+    def potential_J(cls, C_BN, I_O_B, orbit: OrbitState | None):
+        """Potential energy of a conservative kind [J] (casadi scalar).
+
+        Parameters
+        ----------
+        C_BN : casadi SX, shape (3, 3)  DCM from N to B.
+        I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
+        orbit : OrbitState or None  The orbit at t.
+        """
+        if not cls.conservative:
+            raise ValueError(f"torque kind {cls.kind!r} has no potential")
+        return cls._potential_J(C_BN, I_O_B, orbit)
+
+    # -- plug-in -----------------------------------------------------------------------
+    @classmethod
+    def _held_B(cls, entry, t):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def _breakpoints(cls, entry):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def _params(cls, scene):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def _potential_J(cls, C_BN, I_O_B, orbit):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class ConstantWindow(TorqueKind):
+    """``kind = "constant"``: ``torque_B`` [N m] (B components) on ``start <= t < stop`` [s].
+
+    Held: the run is cut at ``start`` and ``stop``, the torque is constant in between.
+    """
+
+    kind = "constant"
+    scene_model = ConstantTorque
+    held = True
+
+    @classmethod
+    def _held_B(cls, entry, t):
+        return np.array(entry.torque_B) if entry.start <= t < entry.stop else None
+
+    @classmethod
+    def _breakpoints(cls, entry):
+        return [entry.start, entry.stop]
+
+
+class GravityGradient(TorqueKind):
+    """``[orbit] gravity_gradient = true``: a point-mass Earth's gravity gradient,
+    ``L_gg = 3 n² R̂_B × (I_O_B R̂_B)`` (:func:`~stationbed.model.environment.gravity_gradient_torque`),
+    ``R̂_B = C_BN R̂_N``, ``R̂_N = (cos u, sin u cos i, sin u sin i)``.
+
+    Conservative: ``V = (3/2) n² R̂_Bᵀ I_O_B R̂_B`` (Quinn Eq. 27-28, constants dropped).
+    """
+
+    kind = "gravity_gradient"
+    symbolic = True
+    needs_orbit = True
+    conservative = True
+    key_tag = "g"
+    key_always = True
+
+    @classmethod
+    def _present(cls, scene) -> bool:
+        return scene.orbit is not None and scene.orbit.gravity_gradient
+
+    @staticmethod
+    def _R_hat_N(orbit: OrbitState):
+        """Unit vector from the Earth's centre to the station, N components (``orbit_position_N / radius``)."""
+        return ca.vertcat(orbit.cos_u, orbit.sin_u * orbit.cos_i, orbit.sin_u * orbit.sin_i)
+
+    @classmethod
+    def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit):
+        R_hat_N = cls._R_hat_N(orbit)
+        R_hat_B = ca.mtimes(dcm(q_BN), R_hat_N)
+        return [gravity_gradient_torque(R_hat_B, I_O_B, orbit.n * orbit.n)]
+
+    @classmethod
+    def _potential_J(cls, C_BN, I_O_B, orbit):
+        R_hat_N = cls._R_hat_N(orbit)
+        R_hat_B = ca.mtimes(C_BN, R_hat_N)
+        return 1.5 * orbit.n * orbit.n * ca.dot(R_hat_B, ca.mtimes(I_O_B, R_hat_B))
+
+
+class OrbitalHarmonic(TorqueKind):
+    """``kind = "orbital_harmonic"``: ``bias + Σ_k cos_k cos(k u) + sin_k sin(k u)`` (k = 1, 2),
+    ``u`` the argument of latitude, B components [N m]; the entries' coefficients are summed.
+
+    ``p_k`` (15): bias, cos1, sin1, cos2, sin2, each B components [N m];
+    ``cos 2u = cos²u - sin²u``, ``sin 2u = 2 sin u cos u`` (no further trigonometry).
+    """
+
+    kind = "orbital_harmonic"
+    scene_model = HarmonicTorque
+    symbolic = True
+    needs_orbit = True
+    n_par = 15
+    key_tag = "h"
+    key_always = True
+
+    @classmethod
+    def _params(cls, scene):
+        h = np.zeros(15)
+        for t in cls.entries(scene):
+            h += np.concatenate([t.bias_B, t.cos1_B, t.sin1_B, t.cos2_B, t.sin2_B])
+        return h
+
+    @classmethod
+    def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit):
+        cu, su = orbit.cos_u, orbit.sin_u
+        return [
+            p_k[0:3],
+            p_k[3:6] * cu,
+            p_k[6:9] * su,
+            p_k[9:12] * (cu * cu - su * su),  # cos 2u
+            p_k[12:15] * (2 * su * cu),  # sin 2u
+        ]
+
+
+#: kind name -> class; the order is the order of the terms, of the slices in p and of the key
+TORQUES: dict[str, type[TorqueKind]] = {cls.kind: cls for cls in (ConstantWindow, GravityGradient, OrbitalHarmonic)}
+
+
+def get_torque(kind: str) -> type[TorqueKind]:
+    """The :class:`TorqueKind` registered as ``kind``; ValueError listing the valid names."""
+    try:
+        return TORQUES[kind]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown torque kind {kind!r}; valid: {', '.join(TORQUES)}") from None
+
+
+def held_torque_B(scene, t: float) -> np.ndarray:
+    """Sum of the scene's held torques (in its ``[[torque]]`` order).
+
+    Parameters
+    ----------
+    scene : stationbed.scene.Scene
+    t : float  Time [s].
+
+    Returns
+    -------
+    ndarray, shape (3,)  B components [N m].
+    """
+    u = np.zeros(3)
+    for entry in scene.torque:
+        held = get_torque(entry.kind).held_B(entry, t)
+        if held is not None:
+            u += held
+    return u
+
+
+def torque_breakpoints(scene) -> list[float]:
+    """Times [s] where the scene's held torque may jump (unsorted, may repeat, may be ±inf)."""
+    return [b for entry in scene.torque for b in get_torque(entry.kind).breakpoints(entry)]
