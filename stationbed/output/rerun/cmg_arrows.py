@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model.cmg import dgcmg_triads, pyramid_axes
+from ...model.cmg import cmg_geometry
 from ...run.trajectory import Trajectory
 from .geometry import StationGeometry
 from .sdk import import_rerun
@@ -32,11 +32,11 @@ H_COLUMNS = ("hx", "hy", "hz")
 class CmgArrows:
     """Arrows of the CMG cluster in B: one per unit (its rotor momentum) and the total ``h``.
 
-    Per unit, from the gimbal angles with the geometry of :mod:`stationbed.model.cmg`:
-    dgcmg ``h_i = h_rotor (sin δi e1 + cos δi (cos δo e3 - sin δo e2))`` (:func:`dgcmg_triads`),
-    pyramid ``h_i = h_rotor (cos δ s0 + sin δ (g × s0))`` (:func:`pyramid_axes`); the ideal
-    cluster has no units, only ``h``. Build it with :meth:`of`, which returns None when the rows
-    lack the columns it needs.
+    Per unit, from the gimbal angles with the geometry the cluster's kind registers in
+    :mod:`stationbed.model.cmg` (``unit_momenta_B``, ``mount_axes_B``): e.g. dgcmg
+    ``h_i = h_rotor (sin δi e1 + cos δi (cos δo e3 - sin δo e2))``, pyramid
+    ``h_i = h_rotor (cos δ s0 + sin δ (g × s0))``; a cluster without units (ideal) draws only
+    ``h``. Build it with :meth:`of`, which returns None when the rows lack the columns it needs.
 
     Parameters
     ----------
@@ -47,27 +47,16 @@ class CmgArrows:
     """
 
     def __init__(self, cfg, geom: StationGeometry):
-        self.kind = cfg.kind
+        self.cfg = cfg
+        self.geometry = cmg_geometry(cfg)
+        self.gimbals = self.geometry.gimbal_names
         L = geom.extent
         center = geom.body_center
-        if cfg.kind == "ideal":
-            self.n_units = 0
-            self.h_ref = cfg.max_momentum  # None: the first non-zero |h| (fixed when seen)
-            self.origins = np.zeros((0, 3))
-        else:
-            self.n_units = cfg.n_units
-            self.h_ref = cfg.h_rotor
-            if cfg.kind == "dgcmg":
-                self.triads = dgcmg_triads(cfg.outer_axes_B)  # (n, 3, 3): e1, e2, e3
-                self.outer = [f"gimbal_{i + 1}_outer" for i in range(self.n_units)]
-                self.inner = [f"gimbal_{i + 1}_inner" for i in range(self.n_units)]
-                axes = self.triads[:, 0]
-            else:
-                self.g, self.s0 = pyramid_axes(cfg.skew)
-                self.gxs0 = np.cross(self.g, self.s0)
-                self.gimbals = [f"gimbal_{i + 1}" for i in range(self.n_units)]
-                axes = self.g
-            self.origins = center + CMG_ORIGIN_FRACTION * L * axes
+        self.n_units = self.geometry.n_units if self.geometry.gimballed else 0
+        # one rotor's momentum; an ideal cluster: its limit (None: the first non-zero |h|, fixed when seen)
+        self.h_ref = self.geometry.rotor_momentum(cfg) if self.geometry.gimballed else cfg.max_momentum
+        axes = self.geometry.mount_axes_B(cfg) if self.n_units else np.zeros((0, 3))
+        self.origins = center + CMG_ORIGIN_FRACTION * L * axes
         self.center = center
         self.length = CMG_ARROW_FRACTION * L  # drawn length of h_ref
 
@@ -85,12 +74,7 @@ class CmgArrows:
         c = scene.cmg
         if c is None or not set(H_COLUMNS) <= set(columns):
             return None
-        if c.kind == "dgcmg":
-            need = {f"gimbal_{i + 1}_{w}" for i in range(c.n_units) for w in ("outer", "inner")}
-        elif c.kind == "sgcmg_pyramid":
-            need = {f"gimbal_{i + 1}" for i in range(c.n_units)}
-        else:
-            need = set()
+        need = set(cmg_geometry(c).gimbal_names)
         return cls(c, geom) if need <= set(columns) else None
 
     def unit_momenta(self, rows: Trajectory) -> np.ndarray:
@@ -105,14 +89,7 @@ class CmgArrows:
         -------
         ndarray, shape (k, n_units, 3)
         """
-        if self.kind == "dgcmg":
-            do, di = rows.cols(*self.outer)[..., None], rows.cols(*self.inner)[..., None]
-            e1, e2, e3 = (self.triads[None, :, m] for m in range(3))
-            spin = np.sin(di) * e1 + np.cos(di) * (np.cos(do) * e3 - np.sin(do) * e2)
-        else:
-            d = rows.cols(*self.gimbals)[..., None]
-            spin = np.cos(d) * self.s0[None] + np.sin(d) * self.gxs0[None]
-        return self.h_ref * spin
+        return self.geometry.unit_momenta_B(self.cfg, rows.cols(*self.gimbals))
 
     def scale(self, h: np.ndarray) -> float:
         """Drawing scale [m per N m s] (fixes an unlimited ideal cluster's at its first |h| > 0).
