@@ -13,7 +13,7 @@ exact:
   (the zenith; LVLH z is nadir);
 * optionally (``cmg=True``) the CMG momentum ``h`` (3,) [N m s] relative to the body with
   ``ḣ = -u - ω × h`` (body-frame derivative; the steering law delivers the body torque ``u``:
-  stationbed.cmg), and its integral ``z = ∫ h dt`` (3,) [N m s²].
+  stationbed.model.cmg), and its integral ``z = ∫ h dt`` (3,) [N m s²].
 
 Kinematics: ``θ̇ = q_w δω + (θ/2) × δω`` (from ``q̇_BR = ½ q_BR ⊗ (0, δω)``);
 ``δω̇ = ω̇ + δω × (C_BR ω_RN_R)`` (from ``Ċ_BR = -[δω×] C_BR``).

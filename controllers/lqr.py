@@ -12,7 +12,7 @@ Law (every tick): ``τ = u0 - K x``, with ``u0`` the torque that makes R an equi
 model (gravity gradient and ``ω × Iω`` at rest in R; zero when R is a principal-axis LVLH
 attitude; ``feedforward = false`` drops it). The gyroscopic terms are in ``A`` (exact Jacobian),
 so there is no separate gyroscopic compensation; the ``ω × h`` of the CMG momentum is
-cancelled by the steering law (stationbed.cmg: ``ḣ = -τ - ω × h``), as in the model.
+cancelled by the steering law (stationbed.model.cmg: ``ḣ = -τ - ω × h``), as in the model.
 
 Reported (attributes and ``summary()``): the closed-loop poles ``eig(A - B K)``, per input
 channel the gain and phase margins of the loop broken at that input (the other two closed),

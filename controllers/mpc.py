@@ -59,7 +59,6 @@ Design choices (and why):
 
 from __future__ import annotations
 
-import math
 import time
 from typing import ClassVar
 
@@ -250,10 +249,10 @@ class MPC(Controller):
     CACHE: ClassVar[int] = 4
 
     def _reset(self, plant):
-        if plant.cmg_kind not in ("sgcmg_pyramid", "dgcmg"):
+        if plant.n_gimbals == 0:
             raise ControllerError(
-                f"controller 'mpc' commands gimbal rates: the scene needs [cmg] kind = 'sgcmg_pyramid' or "
-                f"'dgcmg', got {plant.cmg_kind!r}"
+                f"controller 'mpc' commands gimbal rates: the scene needs a gimballed [cmg] "
+                f"(e.g. kind = 'sgcmg_pyramid' or 'dgcmg'), got {plant.cmg_kind!r}"
             )
         if plant.period != self.period:
             raise ControllerError(

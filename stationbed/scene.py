@@ -201,7 +201,7 @@ class Mode(_Strict):
 
 
 #: the modes may take all of an array's mass or inertia in some direction, not more (see
-#: :func:`stationbed.flex.check_participation`; rounding of typed numbers allowed)
+#: :func:`stationbed.core.beam.check_participation`; rounding of typed numbers allowed)
 PARTICIPATION_TOL = 1e-9
 
 

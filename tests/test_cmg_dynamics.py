@@ -99,7 +99,7 @@ def cmg_scene_dict(kind: str, duration: float = 60.0) -> dict:
 def casadi_vm():
     """Build the (a), (b), (d) systems without generating C (casadi's virtual machine).
 
-    Same SX expressions, same numbers (stationbed/_compile.py); these runs are 600 ticks of a
+    Same SX expressions, same numbers (stationbed/core/compile.py); these runs are 600 ticks of a
     small model, ~0.2 s each in the VM, while generating and compiling C for their 9 structures
     took ~60 s of a cold-cache run of this file on 2 cores (measured). The compiled path is
     exercised by (c) here and by tests/test_equivalence.py on the CMG scenarios.

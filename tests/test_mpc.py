@@ -4,7 +4,7 @@ Scenes: scenarios/eigenaxis_slew.toml (pd) and scenarios/eigenaxis_slew_mpc.toml
 1e6 kg m² station, 4 x 4760 N m s SGCMG pyramid, 1 deg/s gimbal-rate limit, deep space.
 Independent truths used here: the principal angle to the target computed from the logged
 quaternions and the scene's own q_ref (not the loop's att_err_deg), Wie's closed-form pyramid
-momentum (not stationbed.cmg), and the simulation itself (integrated to rtol 1e-12) as the truth
+momentum (not stationbed.model.cmg), and the simulation itself (integrated to rtol 1e-12) as the truth
 for the controller's internal prediction.
 """
 
@@ -58,7 +58,7 @@ def principal_angle_deg(q_BN: np.ndarray, q_ref) -> np.ndarray:
 def pyramid_h_wie(delta: np.ndarray, h_rotor: float, skew: float) -> np.ndarray:
     """The closed-form momentum of Wie's 4-CMG pyramid (columns: the spin axes
     (-cβ sin δ1, cos δ1, sβ sin δ1), (-cos δ2, -cβ sin δ2, sβ sin δ2), ...), shape (..., 3),
-    written here independently of stationbed.cmg."""
+    written here independently of stationbed.model.cmg."""
     s, c = np.sin(delta), np.cos(delta)
     cb, sb = math.cos(skew), math.sin(skew)
     return h_rotor * np.stack(

@@ -17,6 +17,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..core.symbolic import is_symbolic
 from ..core.rotation import Ap, Ay, omega_PB_P, omega_PB_P_dot
 
 __all__ = [
@@ -27,10 +28,6 @@ __all__ = [
     "wrap_angle",
     "tracking_error",
 ]
-
-
-def _sym(*xs) -> bool:
-    return any(isinstance(x, (ca.SX, ca.MX)) for x in xs)
 
 
 def profile(t, c, n_steps: int = 0, t_switch=None):
@@ -55,7 +52,7 @@ def profile(t, c, n_steps: int = 0, t_switch=None):
     """
     a0, rate, amp, freq, phase = c[0], c[1], c[2], c[3], c[4]
     arg = freq * t + phase
-    sym = _sym(t, c)
+    sym = is_symbolic(t, c)
     if sym:
         s, co = ca.sin(arg), ca.cos(arg)
     else:
@@ -65,7 +62,7 @@ def profile(t, c, n_steps: int = 0, t_switch=None):
     ts = t if t_switch is None else t_switch
     for k in range(n_steps):
         tk, dk = c[5 + 2 * k], c[6 + 2 * k]
-        if sym or _sym(ts):
+        if sym or is_symbolic(ts):
             after = ca.if_else(ts >= tk, 1.0, 0.0)
             # angle continuous; its slope is the side's rate (so d(angle)/dt = rate in a segment)
             angle = angle + dk * ca.if_else(ts >= tk, t - tk, 0.0)
@@ -88,7 +85,7 @@ def wrap_angle(a):
     -------
     Same type as ``a`` [rad].
     """
-    if _sym(a):
+    if is_symbolic(a):
         return ca.atan2(ca.sin(a), ca.cos(a))
     return np.arctan2(np.sin(a), np.cos(a))
 
@@ -107,9 +104,9 @@ def sun_targets(s_B, alpha):
     -------
     a_star, b_star : targets α*, β* [rad]
     """
-    atan2 = ca.atan2 if _sym(s_B, alpha) else np.arctan2
+    atan2 = ca.atan2 if is_symbolic(s_B, alpha) else np.arctan2
     a_star = atan2(s_B[0], s_B[2])
-    v = Ay(alpha) @ s_B if not _sym(s_B, alpha) else ca.mtimes(Ay(alpha), s_B)
+    v = Ay(alpha) @ s_B if not is_symbolic(s_B, alpha) else ca.mtimes(Ay(alpha), s_B)
     return a_star, atan2(-v[1], v[2])
 
 

@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.rotation import quat_mult
+from ..core.symbolic import is_symbolic, trig, vector
 
 __all__ = [
     "orbit_position_N",
@@ -32,18 +33,6 @@ __all__ = [
 Q_OR = (0.5, -0.5, -0.5, 0.5)
 
 
-def _trig(u):
-    if isinstance(u, (ca.SX, ca.MX, ca.DM)):
-        return ca.cos(u), ca.sin(u)
-    return np.cos(u), np.sin(u)
-
-
-def _stack(items, like):
-    if isinstance(like, (ca.SX, ca.MX, ca.DM)):
-        return ca.vertcat(*items)
-    return np.array(items, dtype=float)
-
-
 def orbit_position_N(u, radius, inclination):
     """Position of the station's mass centre on its circular orbit.
 
@@ -57,9 +46,9 @@ def orbit_position_N(u, radius, inclination):
     -------
     ndarray or casadi SX, shape (3,)  ``R_N``, N components [m].
     """
-    cu, su = _trig(u)
-    ci, si = _trig(inclination)
-    return _stack([radius * cu, radius * su * ci, radius * su * si], u)
+    cu, su = trig(u)
+    ci, si = trig(inclination)
+    return vector([radius * cu, radius * su * ci, radius * su * si], u)
 
 
 def C_ON(u, inclination):
@@ -74,14 +63,14 @@ def C_ON(u, inclination):
     -------
     ndarray or casadi SX, shape (3, 3)  ``C_ON``.
     """
-    cu, su = _trig(u)
-    ci, si = _trig(inclination)
+    cu, su = trig(u)
+    ci, si = trig(inclination)
     rows = [
         [-su, cu * ci, cu * si],  # x_O: along velocity
         [0.0, si, -ci],  # y_O: minus the orbit normal (0, -si, ci)
         [-cu, -su * ci, -su * si],  # z_O: nadir
     ]
-    if isinstance(u, (ca.SX, ca.MX)) or isinstance(inclination, (ca.SX, ca.MX)):
+    if is_symbolic(u, inclination):
         return ca.vertcat(*[ca.horzcat(*r) for r in rows])
     return np.array(rows, dtype=float)
 
@@ -164,8 +153,8 @@ def q_ON(u, inclination):
     ``q_ON = q_x(i) ⊗ q_z(u) ⊗ Q_OR`` (``dcm(a ⊗ b) = dcm(b) dcm(a)``): node, then the argument of
     latitude, then the fixed LVLH axes.
     """
-    ci, si = _trig(0.5 * inclination)
-    cu, su = _trig(0.5 * u)
-    q_i = _stack([ci, si, 0.0 * si, 0.0 * si], u)
-    q_u = _stack([cu, 0.0 * su, 0.0 * su, su], u)
-    return quat_mult(quat_mult(q_i, q_u), _stack(list(Q_OR), u))
+    ci, si = trig(0.5 * inclination)
+    cu, su = trig(0.5 * u)
+    q_i = vector([ci, si, 0.0 * si, 0.0 * si], u)
+    q_u = vector([cu, 0.0 * su, 0.0 * su, su], u)
+    return quat_mult(quat_mult(q_i, q_u), vector(list(Q_OR), u))

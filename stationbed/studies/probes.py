@@ -16,6 +16,8 @@ import numpy as np
 
 from ..core.compile import FastCall
 from ..core.rotation import dcm, rotation_angle
+from ..integrators import INTEGRATORS
+from ..integrators.tableau import CLASSICAL_RK4, ButcherTableau
 from ..model.environment import C_ON
 from ..run.prepare import prepare
 from ..run.trajectory import Trajectory
@@ -339,9 +341,14 @@ def newton_defects(scene: Scene, integrator: str, hs, *, formulation: str = "mom
 # linear stability of Runge-Kutta methods
 # ---------------------------------------------------------------------------------------
 
-#: classical RK4's Butcher table ``(A, b)``
-RK4_TABLEAU = ([[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
-               [1 / 6, 1 / 3, 1 / 3, 1 / 6])
+def square_tableau(tab: ButcherTableau) -> tuple[list[list[float]], list[float]]:
+    """An explicit table as the square ``(A, b)`` of floats the linear analysis takes."""
+    s = tab.stages
+    return [row + [0.0] * (s - len(row)) for row in tab.a_float()], tab.b_float()
+
+
+#: classical RK4's Butcher table ``(A, b)`` (the integrators' own table)
+RK4_TABLEAU = square_tableau(CLASSICAL_RK4)
 
 
 def explicit_tableaus() -> dict:
@@ -355,7 +362,9 @@ def explicit_tableaus() -> dict:
     """
     from scipy.integrate import DOP853 as _D
 
-    return {"rk4": RK4_TABLEAU, "lie_rk4": RK4_TABLEAU, "dop853": (_D.A[: _D.n_stages, : _D.n_stages], _D.B)}
+    tables = {name: square_tableau(cls.TABLEAU) for name, cls in INTEGRATORS.items() if getattr(cls, "TABLEAU", None) is not None}
+    tables["dop853"] = (_D.A[: _D.n_stages, : _D.n_stages], _D.B)
+    return tables
 
 
 def stability_function(A, b):
