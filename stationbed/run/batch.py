@@ -329,7 +329,7 @@ def simulate_batch(
             keep = np.isin(ts[1:], t_out)
             idx = np.searchsorted(t_out, ts[1:][keep])
             X[:, idx] = xs[:, 1:][:, keep]
-    omega, H, T = _outputs(funcs, t_out, X, P, threads, system.n_out)
+    omega, H, T = _outputs(funcs, t_out, X, P, threads, system)
     wall = time.perf_counter() - wall0
     qn = X[:, :, 0:4] / np.linalg.norm(X[:, :, 0:4], axis=2, keepdims=True)
     meta = dict(
@@ -350,9 +350,10 @@ def simulate_batch(
     return BatchResult(t_out, X, qn, omega, H, T, run.status.copy(), QN, WN, meta)
 
 
-def _outputs(funcs, t_out, X, P, threads, n_out):
+def _outputs(funcs, t_out, X, P, threads, system):
     """ω, H_O_N, T for every sample and row: the compiled ``out`` mapped over the samples."""
     n, m, nx = X.shape
+    n_out, lay = system.n_out, system.out_layout
     out = mapped(funcs["out"], n, threads)
     out.args[2][:] = P.reshape(-1)
     res = np.empty((n, m, n_out))
@@ -362,4 +363,4 @@ def _outputs(funcs, t_out, X, P, threads, n_out):
         out()
         res[:, j] = out.res[0].reshape(n, n_out)
     res[~np.all(np.isfinite(X), axis=2)] = np.nan
-    return res[:, :, 0:3], res[:, :, 3:6], res[:, :, 6]
+    return res[:, :, lay["omega_BN_B"]], res[:, :, lay["H_O_N"]], res[:, :, lay["T"].start]

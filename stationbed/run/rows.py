@@ -37,36 +37,72 @@ def trajectory_columns(scene: Scene) -> list[str]:
 
 
 class Rows:
-    """Turns states into output rows (compiled outputs + the loop's held values) and streams them."""
+    """Turns states into output rows (compiled outputs + the loop's held values) and streams them.
+
+    Every value is placed in its CSV column by name: the compiled outputs by the system's
+    ``out_layout``, the state's gimbal angles by the cluster's gimbal names, and the loop's held
+    values by :attr:`held_columns` (the order in which the closed loop hands them over).
+
+    Parameters
+    ----------
+    scene : Scene
+    system : System  The compiled system of the run.
+    p : ndarray  The parameter vector of the scene.
+    sink : object with ``write(rows)`` or None  Receives every batch of rows as it is made.
+    """
 
     def __init__(self, scene, system, p, sink):
-        f = system.funcs
         self.form = system.formulation
         self.nx = self.form.nx
         self.n_out = system.n_out
-        self.out = FastCall.of(f["out_map"])
+        self.out = FastCall.of(system.funcs["out_map"])
         self.out.args[2][:] = p
         self.columns = trajectory_columns(scene)
         self.scene = scene
         self.sink = sink
         self.rows: list[np.ndarray] = []
-        n_app = len(scene.appendage)
+        col = {c: i for i, c in enumerate(self.columns)}
+        names = scene.appendage_names
         cmg = self.form.model.cmg
-        self.ng = 0 if cmg is None else cmg.n_gimbals
-        self.has_cmg = cmg is not None
-        # compiled output layout: w(3) HN(3) T(1) angles(2 n_app) [h(3) [m]] [track errs]
-        self.k_h = 7 + 2 * n_app
-        self.k_m = self.k_h + 3
-        self.gimbaled = cmg is not None and cmg.gimballed
-        self.k_track = self.k_m + (1 if self.gimbaled else 0) if cmg is not None else 7 + 2 * n_app
-        self.has_sun = scene.sun is not None
-        self.has_ctrl = scene.controller is not None
-        # modal outputs (eta, etadot, U_strain) close the compiled row
-        self.n_flex = 2 * self.form.model.n_modes + 1 if self.form.model.n_modes else 0
+        gimbals = [] if cmg is None else cmg.gimbal_names
+        # compiled output group -> its columns (the track errors are reported in degrees)
+        targets = {"omega_BN_B": ["wx", "wy", "wz"], "H_O_N": ["HNx", "HNy", "HNz"], "T": ["T"],
+                   "h_B": ["hx", "hy", "hz"], "cmg_singularity": ["cmg_singularity"], "U_strain": ["U_strain"]}
+        for k, n in enumerate(names):
+            targets[f"alpha{k}"], targets[f"beta{k}"] = [f"alpha_{n}"], [f"beta_{n}"]
+            targets[f"track_err{k}"] = [f"track_err_deg_{n}"]
+        modes = [f"{a.name}_{m + 1}" for a in scene.appendage for m in range(len(a.mode))]
+        targets["eta"] = [f"eta_{m}" for m in modes]
+        targets["etadot"] = [f"etadot_{m}" for m in modes]
+        #: (column indices, slice of the compiled output, in degrees?) per compiled group
+        self.plan = [
+            (np.array([col[c] for c in targets[name]]), sl, name.startswith("track_err"))
+            for name, sl in system.out_layout.items()
+        ]
+        self.q_cols = np.array([col[c] for c in ("qw", "qx", "qy", "qz")])
+        self.gimbal_cols = np.array([col[g] for g in gimbals], dtype=int)
+        #: the loop's held values per row, in the order the closed loop hands them over
+        self.held_columns = []
+        if cmg is not None:
+            self.held_columns += [f"{g}_rate" for g in gimbals] + ["cmg_saturated"]
+        if scene.controller is not None:
+            self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
+        self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
 
     def make(self, ts, xs, held=None) -> np.ndarray:
-        """Rows for times ``ts`` and states ``xs``; ``held`` (k, m) are the loop's values per row:
-        gimbal rates, cmg_saturated, tau_cmd(3), att_err_deg (those that apply)."""
+        """Rows for times ``ts`` and states ``xs``.
+
+        Parameters
+        ----------
+        ts : array_like, shape (k,)  Times [s].
+        xs : array_like, shape (k, nx)  States of the formulation.
+        held : array_like, shape (k, len(held_columns)), optional
+            The loop's values per row (:attr:`held_columns`); zeros when None (open loop).
+
+        Returns
+        -------
+        ndarray, shape (k, len(columns))
+        """
         ts = np.asarray(ts, dtype=float)
         xs = np.asarray(xs, dtype=float).reshape(len(ts), self.nx)
         comp = np.empty((len(ts), self.n_out))
@@ -77,26 +113,15 @@ class Rows:
             o.args[1].reshape(OUT_CHUNK, self.nx)[:n] = xs[k : k + n]
             o()
             comp[k : k + n] = o.res[0].reshape(OUT_CHUNK, self.n_out)[:n]
-        parts = [ts[:, None], xs[:, :4] / np.linalg.norm(xs[:, :4], axis=1, keepdims=True), comp[:, : self.k_h]]
-        held = np.zeros((len(ts), 0)) if held is None else np.asarray(held, dtype=float).reshape(len(ts), -1)
-        j = 0
-        if self.has_cmg:
-            parts.append(comp[:, self.k_h : self.k_h + 3])
-            parts.append(xs[:, 7 : 7 + self.ng])
-            rates = held[:, j : j + self.ng] if held.shape[1] else np.zeros((len(ts), self.ng))
-            parts.append(rates)
-            if self.gimbaled:
-                parts.append(comp[:, self.k_m : self.k_m + 1])
-            parts.append(held[:, j + self.ng : j + self.ng + 1] if held.shape[1] else np.zeros((len(ts), 1)))
-            j += self.ng + 1
-        if self.has_ctrl:
-            parts.append(held[:, j : j + 4])
-            j += 4
-        if self.has_sun:
-            parts.append(np.rad2deg(comp[:, self.k_track : self.n_out - self.n_flex]))
-        if self.n_flex:
-            parts.append(comp[:, self.n_out - self.n_flex :])
-        return np.hstack(parts)
+        rows = np.zeros((len(ts), len(self.columns)))
+        rows[:, 0] = ts
+        rows[:, self.q_cols] = xs[:, :4] / np.linalg.norm(xs[:, :4], axis=1, keepdims=True)
+        for cols, sl, degrees in self.plan:
+            rows[:, cols] = np.rad2deg(comp[:, sl]) if degrees else comp[:, sl]
+        rows[:, self.gimbal_cols] = xs[:, 7 : 7 + len(self.gimbal_cols)]
+        if held is not None and len(self.held_cols):
+            rows[:, self.held_cols] = np.asarray(held, dtype=float).reshape(len(ts), -1)
+        return rows
 
     def emit(self, rows: np.ndarray) -> None:
         if len(rows):

@@ -31,6 +31,9 @@ class System:
     build_s: float
     n_out: int
     sx: dict = None  # the SX Functions before compilation (the fused loop composes them)
+    #: name -> slice of the compiled output ``out``: omega_BN_B, H_O_N, T, alpha<k>, beta<k>,
+    #: h_B, cmg_singularity, track_err<k>, eta, etadot, U_strain (those the scene has)
+    out_layout: dict = None
 
 
 _SYSTEMS: dict[tuple, System] = {}
@@ -98,20 +101,25 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     xe = ca.SX.sym("xe", model.n_extra + 2 * model.n_modes)
     rhs = sx_function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)])
     arrays = form.arrays(t, x, p)
-    outs = [form.omega(t, x, p), form.H_O_N(t, x, p), form.kinetic_energy(t, x, p)]
-    for a in arrays:
-        outs += list(a.angles)
+    # the compiled outputs by name (rows.py places them in the CSV columns by these names)
+    outs = [("omega_BN_B", form.omega(t, x, p)), ("H_O_N", form.H_O_N(t, x, p)), ("T", form.kinetic_energy(t, x, p))]
+    for k, a in enumerate(arrays):
+        outs += [(f"alpha{k}", a.angles[0]), (f"beta{k}", a.angles[1])]
     cmg = model.cmg
     if cmg is not None:
-        outs.append(model.h(x[7:], p))
+        outs.append(("h_B", model.h(x[7:], p)))
         if cmg.gimballed:
             pc = p[model.layout["cmg"]]
-            outs.append(cmg.singularity(x[7 : 7 + cmg.nx], pc))
+            outs.append(("cmg_singularity", cmg.singularity(x[7 : 7 + cmg.nx], pc)))
     if structure.sun:
-        outs += _track_errors(model, t, x, p)
+        outs += [(f"track_err{k}", e) for k, e in enumerate(_track_errors(model, t, x, p))]
     if model.n_modes:
-        outs += [model.eta(x[7:]), form.modal_rates(t, x, p), form.strain_energy(t, x, p)]
-    out = sx_function("out", [t, x, p], [ca.vertcat(*outs)])
+        outs += [("eta", model.eta(x[7:])), ("etadot", form.modal_rates(t, x, p)), ("U_strain", form.strain_energy(t, x, p))]
+    out_layout, n = {}, 0
+    for name, e in outs:
+        out_layout[name] = slice(n, n + e.numel())
+        n += e.numel()
+    out = sx_function("out", [t, x, p], [ca.vertcat(*(e for _, e in outs))])
     init = sx_function("init", [t, q, w, xe, p], [form.state(t, q, w, xe, p)])
     fs = [rhs, out, out.map("out_map", "serial", OUT_CHUNK, [2], []), init]
     if form.omega_is_state:
@@ -148,6 +156,6 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     fs += integ_cls.build(rhs, nx, nu, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
     funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)
-    system = System(form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0), {f.name(): f for f in fs})
+    system = System(form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0), {f.name(): f for f in fs}, out_layout)
     _SYSTEMS[key] = system
     return system
