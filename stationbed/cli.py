@@ -368,6 +368,8 @@ def _cmd_study(args) -> int:
 
 
 def main(argv=None) -> int:
+    """The command line: ``stationbed run|check|list|replay|study ...``; returns the exit status
+    (0 ok, 1 failed run, 2 bad input)."""
     args = _parser().parse_args(argv)
     if args.cmd == "run" and args.rrd:  # first, so the recorder's start-up overlaps the run's
         args.recorder = _start_recording(args)

@@ -3,7 +3,6 @@
 import itertools
 
 import casadi as ca
-import numpy as np
 import pytest
 
 from scenes import SCENARIOS, scenario_ids

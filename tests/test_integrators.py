@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from stationbed import INTEGRATORS, simulate
-from stationbed.integrators import DOP853, RK4, TABLEAUS, ButcherTableau, FixedStep, IntegrationError, StepControl
+from stationbed.integrators import DOP853, RK4, TABLEAUS, ButcherTableau, FixedStep, StepControl
 from stationbed.integrators.rk import explicit_rk_step
 from stationbed.integrators.tableau import CLASSICAL_RK4
 from stationbed.core.rotation import rotation_angle

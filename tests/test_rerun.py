@@ -958,3 +958,13 @@ def test_replay_failing_viewer_prints_the_commands_exit_1(tmp_path, small_rrd, m
     out, err = capsys.readouterr()
     assert "exited with status 3" in out and f"{exe} --web-viewer {small_rrd}" in out
     assert err.count("\n") == 1 and "status 3" in err
+
+
+def test_trajectory_csv_round_trip_is_exact(tmp_path):
+    """Trajectory.to_csv writes 17 significant digits: from_csv reads every float64 back bit for bit."""
+    scene = load_scene(ROOT / "scenarios" / "torque_window.toml")
+    traj = simulate(scene, duration=50.0)
+    traj.to_csv(tmp_path / "t.csv")
+    back = Trajectory.from_csv(tmp_path / "t.csv")
+    assert back.columns == traj.columns
+    np.testing.assert_array_equal(back.data, traj.data)

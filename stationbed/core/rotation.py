@@ -61,6 +61,8 @@ def quat_mult(p, q):
 
 
 def quat_conj(q):
+    """Conjugate ``(w, -x, -y, -z)`` of a scalar-first quaternion (numpy or casadi); for a unit
+    quaternion its inverse."""
     return vector([q[0], -q[1], -q[2], -q[3]], q)
 
 

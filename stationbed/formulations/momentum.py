@@ -16,7 +16,6 @@ from __future__ import annotations
 import casadi as ca
 
 from ..core.rotation import quat_kinematics
-from ..core.linalg import inv3
 from .base import Formulation
 
 

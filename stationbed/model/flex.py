@@ -28,7 +28,6 @@ The beam shapes (:func:`~stationbed.core.beam.beam_mode`) live in :mod:`stationb
 from __future__ import annotations
 
 import casadi as ca
-import numpy as np
 
 from ..core.linalg import inv3
 from ..core.rotation import skew

@@ -6,6 +6,8 @@ import io
 
 import numpy as np
 
+from ..run.trajectory import CSV_FORMAT
+
 __all__ = ["CsvSink"]
 
 
@@ -40,6 +42,6 @@ class CsvSink:
         rows = np.atleast_2d(rows)
         if rows.size:
             buf = io.StringIO()
-            np.savetxt(buf, rows, delimiter=",", fmt="%.17g")
+            np.savetxt(buf, rows, delimiter=",", fmt=CSV_FORMAT)
             self.fh.write(buf.getvalue())
             self.fh.flush()

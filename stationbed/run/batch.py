@@ -95,10 +95,12 @@ class BatchResult:
 
     @property
     def n(self) -> int:
+        """Number of samples."""
         return self.x.shape[0]
 
     @property
     def ok(self) -> np.ndarray:
+        """Per sample: whether it ran to the end (bool array, shape (n,))."""
         return self.status == OK
 
 

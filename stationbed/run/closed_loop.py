@@ -20,6 +20,7 @@ __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH"]
 
 
 class ControllerFailure(Exception):
+    """The controller raised or returned a bad command at time ``t`` [s]; ``reason`` is one line."""
     def __init__(self, t: float, reason: str):
         super().__init__(reason)
         self.t = t
@@ -187,6 +188,8 @@ class ControlLoop:
         return vals
 
     def run(self) -> None:
+        """Run ticks 0..K (the fused loop when :func:`~stationbed.run.fused.fused_ok`, else per
+        tick), streaming the rows; raises IntegrationError or ControllerFailure with the time."""
         period, duration = self.period, self.duration
         K = max(1, math.ceil(duration / period - 1e-9))
         if self.fused:
@@ -339,6 +342,8 @@ class ControlLoop:
         return int(lim or sat)
 
     def summary(self) -> dict:
+        """The run's summary: ticks, controller updates, saturation counts, max |h| and its fraction
+        of capacity, min singularity measure, attitude error (what ``summary.json`` holds)."""
         rows = self.rows
         out = {
             "controller": self.ctrl.name,

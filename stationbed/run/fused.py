@@ -30,6 +30,8 @@ _CHUNKS: dict[tuple, dict] = {}
 
 
 def fused_ok(loop) -> bool:
+    """Whether ``loop`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
+    integrator at one step per period, no discontinuity inside the run, no sensor errors."""
     ctrl = loop.ctrl
     integ = loop.integ
     return (
@@ -48,7 +50,7 @@ def _build(loop, n: int) -> dict:
     sx = system.sx
     form = system.formulation
     model = form.model
-    nx, nu, npar = form.nx, model.nu, model.layout.size
+    nx, npar = form.nx, model.layout.size
     ncp = len(ctrl.symbolic_params())
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng

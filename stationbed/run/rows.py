@@ -124,12 +124,14 @@ class Rows:
         return rows
 
     def emit(self, rows: np.ndarray) -> None:
+        """Keep ``rows`` (k, len(columns)) and hand them to the sink."""
         if len(rows):
             self.rows.append(rows)
             if self.sink is not None:
                 self.sink.write(rows)
 
     def trajectory(self, meta) -> Trajectory:
+        """The rows kept so far as a :class:`Trajectory` with ``meta``."""
         data = np.vstack(self.rows) if self.rows else np.zeros((0, len(self.columns)))
         return Trajectory(self.columns, data, meta)
 

@@ -15,6 +15,7 @@ __all__ = ["output_times", "breakpoints", "held_torque", "segment_input"]
 
 
 def output_times(duration: float, dt: float) -> np.ndarray:
+    """Output times [s]: 0, every ``dt``, and ``duration`` (appended when it is not a multiple)."""
     n = int(math.floor(duration / dt + 1e-9))
     ts = np.arange(n + 1) * dt
     if duration - ts[-1] > 1e-9 * max(1.0, duration):

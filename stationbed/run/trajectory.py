@@ -10,16 +10,20 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Trajectory", "base_columns", "CORE_COLUMNS"]
+__all__ = ["Trajectory", "base_columns", "CORE_COLUMNS", "CSV_FORMAT"]
+
+#: CSV number format: 17 significant digits, so a float64 reads back bit for bit
+CSV_FORMAT = "%.17g"
 
 CORE_COLUMNS = ["t", "qw", "qx", "qy", "qz", "wx", "wy", "wz", "HNx", "HNy", "HNz", "T"]
 
 
 def base_columns(appendage_names) -> list[str]:
+    """The contract columns (DESIGN §6): ``t, q_BN, omega_BN_B, H_O_N, T``, then
+    ``alpha_<name>, beta_<name>`` per appendage."""
     cols = list(CORE_COLUMNS)
     for n in appendage_names:
         cols += [f"alpha_{n}", f"beta_{n}"]
@@ -48,41 +52,50 @@ class Trajectory:
             raise KeyError(f"no column {name!r}; columns: {', '.join(self.columns)}") from None
 
     def cols(self, *names) -> np.ndarray:
+        """The named columns side by side, shape (N, len(names))."""
         return self.data[:, [self._index[n] for n in names]]
 
     @property
     def t(self) -> np.ndarray:
+        """Times [s], shape (N,)."""
         return self["t"]
 
     @property
     def q_BN(self) -> np.ndarray:
+        """Attitude quaternions of B relative to N, scalar first, shape (N, 4)."""
         return self.cols("qw", "qx", "qy", "qz")
 
     @property
     def omega_BN_B(self) -> np.ndarray:
+        """Body rates, B components [rad/s], shape (N, 3)."""
         return self.cols("wx", "wy", "wz")
 
     @property
     def H_O_N(self) -> np.ndarray:
+        """Total angular momentum about the composite mass centre, N components [N m s], shape (N, 3)."""
         return self.cols("HNx", "HNy", "HNz")
 
     # -- files -------------------------------------------------------------------------
     def to_csv(self, path) -> None:
+        """Write the trajectory as CSV (a header row, then one row per time, full precision)."""
         with open(path, "w", newline="") as fh:
-            sink = CsvSink(fh, self.columns)
-            sink.write(self.data)
+            fh.write(",".join(self.columns) + "\n")
+            np.savetxt(fh, np.atleast_2d(self.data), delimiter=",", fmt=CSV_FORMAT)
 
     @classmethod
     def from_csv(cls, path) -> "Trajectory":
+        """Read a trajectory CSV written by :meth:`to_csv` or ``stationbed run``."""
         with open(path, newline="") as fh:
             header = next(csv.reader(fh))
             data = np.loadtxt(fh, delimiter=",", ndmin=2)
         return cls(header, data.reshape(-1, len(header)))
 
     def to_npz(self, path) -> None:
+        """Write the columns and data to a numpy ``.npz`` file."""
         np.savez_compressed(path, columns=np.array(self.columns), data=self.data)
 
     @classmethod
     def from_npz(cls, path) -> "Trajectory":
+        """Read a trajectory written by :meth:`to_npz`."""
         with np.load(path) as z:
             return cls([str(c) for c in z["columns"]], z["data"])

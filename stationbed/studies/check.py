@@ -39,6 +39,8 @@ FLOOR = 1e-12
 
 @dataclass
 class PairDiff:
+    """Largest differences of two formulations over a run: attitude angle [rad], rate [rad/s],
+    H_O_N [N m s], modal coordinates (flexible scenes)."""
     a: str
     b: str
     att_rad: float
@@ -49,6 +51,7 @@ class PairDiff:
 
 @dataclass
 class CheckResult:
+    """Pairwise differences of every formulation on one scene, with the tolerances they are held to."""
     scene: str
     rtol: float
     tol_att_rad: float
@@ -59,14 +62,17 @@ class CheckResult:
     tol_eta: float | None = None
 
     def pair_ok(self, p: PairDiff) -> bool:
+        """Whether one pair agrees within every tolerance."""
         ok = p.att_rad <= self.tol_att_rad and p.rate <= self.tol_rate and p.H <= self.tol_H
         return ok and (p.eta is None or p.eta <= self.tol_eta)
 
     @property
     def ok(self) -> bool:
+        """Whether every pair agrees."""
         return all(self.pair_ok(p) for p in self.pairs)
 
     def table(self) -> str:
+        """The differences and tolerances as a text table (what ``stationbed check`` prints)."""
         flex = self.tol_eta is not None
         lines = [
             f"scene {self.scene}: {len(self.trajectories)} formulations at rtol {self.rtol:g}",
@@ -98,6 +104,7 @@ def compare(a: Trajectory, b: Trajectory) -> tuple[float, float, float]:
 
 
 def eta_columns(tr: Trajectory) -> list[str]:
+    """The modal-coordinate columns ``eta_*`` of a trajectory (none for a rigid scene)."""
     return [c for c in tr.columns if c.startswith("eta_")]
 
 

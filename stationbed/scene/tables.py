@@ -1,51 +1,33 @@
-"""Scene files (TOML, SI, radians) -> validated, frozen :class:`Scene` objects.
-
-The schema is DESIGN §5. Parsing is ``tomllib``; validation is pydantic (``extra="forbid"``,
-no NaN/inf). Every failure becomes a :class:`SceneError` whose message is one line naming the
-file, the field path and the reason, with the nearest valid key suggested for typos.
-"""
+"""The tables of a scene file (DESIGN §5): simulation, initial state, body, appendages and their
+joints and modes, orbit, torques, sun, CMG cluster, controller and sensor."""
 
 from __future__ import annotations
 
-import difflib
 import math
-import tomllib
-from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, NamedTuple, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator, model_validator
+from pydantic import ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
-from .core.constants import MU_EARTH_M3_S2, R_EARTH_M
-from .core.beam import beam_mode, check_participation
-from .core.massprops import InvalidMassProperties, check_inertia
+from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
+from ..core.beam import beam_mode, check_participation
+from ..core.massprops import InvalidMassProperties, check_inertia
+from .base import QUAT_NORM_TOL, Mat3, Strict, Vec3
 
-__all__ = ["Scene", "SceneError", "load_scene", "scene_from_dict", "CMG_KINDS"]
+__all__ = [
+    "RateStep", "Profile", "SunTrack", "Joint", "Simulation", "Initial", "Body", "Beam", "Mode", "Appendage",
+    "Orbit", "ConstantTorque", "HarmonicTorque", "Torque", "Sun", "CmgKind", "CMG_KINDS", "UNIT_KEYS", "Cmg",
+    "Sensor", "ControllerSpec", "PYRAMID_SKEW_RAD", "PARTICIPATION_TOL", "MU_EARTH_M3_S2", "R_EARTH_M", "TAGS",
+]
 
-#: A quaternion typed in a file with ~8 digits is unit to ~1e-8; anything further off is a mistake.
-QUAT_NORM_TOL = 1e-6
-
-
-class SceneError(ValueError):
-    """A scene that cannot be run; ``str(err)`` is a one-line reason naming the field."""
-
-
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
-Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class RateStep(_Strict):
+class RateStep(Strict):
     """An instantaneous change of a joint rate by ``delta`` [rad/s] at time ``t`` [s] (an impulse)."""
 
     t: float = Field(gt=0.0)
     delta: float
 
 
-class Profile(_Strict):
+class Profile(Strict):
     """Joint-angle profile ``a0 + rate t + amp sin(freq t + phase) + Σ delta_k max(0, t - t_k)``.
 
     Units: rad, rad/s, rad, rad/s, rad; ``rate_step`` lists instantaneous rate changes.
@@ -61,10 +43,11 @@ class Profile(_Strict):
     tracked: ClassVar[bool] = False
 
     def coeffs(self) -> list[float]:
+        """``[a0, rate, amp, freq, phase]`` as the model's parameter vector takes them."""
         return [self.a0, self.rate, self.amp, self.freq, self.phase]
 
 
-class SunTrack(_Strict):
+class SunTrack(Strict):
     """Closed-loop sun tracking of one joint (SARJ ``alpha`` or BGA ``beta``).
 
     Drive law: ``rate_cmd = clip(gain * wrap(θ* - θ) + θ̇*, ±max_rate)``,
@@ -92,10 +75,12 @@ Joint = Annotated[
     Union[Annotated[SunTrack, Tag("track")], Annotated[Profile, Tag("profile")]], Discriminator(_joint_tag)
 ]
 #: pydantic's union tags -> the model they select (tags are not user keys)
-_TAGS = {}
+TAGS = {}
 
 
-class Simulation(_Strict):
+class Simulation(Strict):
+    """``[simulation]``: duration [s], formulation, integrator, rtol, atol (dimensionless), output_dt [s],
+    step [s] for fixed-step integrators."""
     duration: float = Field(gt=0.0)
     formulation: str = "momentum"
     integrator: str = "dop853"
@@ -109,7 +94,9 @@ class Simulation(_Strict):
     impulse_jump: bool = True
 
 
-class Initial(_Strict):
+class Initial(Strict):
+    """``[initial]``: ``q_BN`` (scalar first) and ``omega_BN_B`` [rad/s], relative to N or to LVLH
+    (``frame = "lvlh"``)."""
     q_BN: Annotated[list[float], Field(min_length=4, max_length=4)] = [1.0, 0.0, 0.0, 0.0]
     omega_BN_B: Vec3 = [0.0, 0.0, 0.0]
     frame: Literal["inertial", "lvlh"] = "inertial"
@@ -123,7 +110,8 @@ class Initial(_Strict):
         return [x / n for x in q]
 
 
-class Body(_Strict):
+class Body(Strict):
+    """``[body]``: mass [kg], inertia about its own mass centre [kg m²] (B axes), mass centre ``cm`` in B [m]."""
     mass: float = Field(gt=0.0)
     inertia: Mat3
     cm: Vec3 = [0.0, 0.0, 0.0]
@@ -140,7 +128,7 @@ class Body(_Strict):
 AxisName = Literal["x", "y", "z", "+x", "+y", "+z", "-x", "-y", "-z"]
 
 
-class Beam(_Strict):
+class Beam(Strict):
     """A uniform Euler–Bernoulli cantilever standing for the array in one mode (P axes).
 
     It runs from ``root`` (m, relative to the array's mass centre) a ``length`` along ``span``
@@ -162,7 +150,7 @@ class Beam(_Strict):
         return self
 
 
-class Mode(_Strict):
+class Mode(Strict):
     """One elastic mode of an array (Quinn Eq. 22–24): its clamped frequency, damping ratio and
     shape, given either by a ``beam`` or by the participation integrals directly:
     ``translation`` = ∫Φ dm [kg], ``rotation`` = ∫ a × Φ dm about the array's mass centre
@@ -206,6 +194,8 @@ PARTICIPATION_TOL = 1e-9
 
 
 class Appendage(Body):
+    """``[[appendage]]``: an articulated array (mass, inertia about its mass centre in P, ``cm`` in B,
+    ``alpha``/``beta`` joint profiles or sun tracking, optional elastic modes)."""
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
     alpha: Joint = Profile()
     beta: Joint = Profile()
@@ -213,6 +203,7 @@ class Appendage(Body):
 
     @property
     def tracks_sun(self) -> bool:
+        """Whether either joint tracks the sun."""
         return self.alpha.tracked or self.beta.tracked
 
     @model_validator(mode="after")
@@ -227,7 +218,9 @@ class Appendage(Body):
         return self
 
 
-class Orbit(_Strict):
+class Orbit(Strict):
+    """``[orbit]``: circular orbit (radius or altitude [m], inclination and u0 [rad], mu [m³/s²]),
+    gravity gradient on or off."""
     radius: float | None = Field(default=None, gt=0.0)
     altitude: float | None = Field(default=None, gt=0.0)
     inclination: float = 0.0
@@ -243,6 +236,7 @@ class Orbit(_Strict):
 
     @property
     def radius_m(self) -> float:
+        """Orbit radius [m] (from ``altitude`` over the WGS-84 equatorial radius when given)."""
         return self.radius if self.radius is not None else R_EARTH_M + self.altitude
 
     @property
@@ -251,7 +245,7 @@ class Orbit(_Strict):
         return math.sqrt(self.mu / self.radius_m**3)
 
 
-class ConstantTorque(_Strict):
+class ConstantTorque(Strict):
     """``torque_B`` [N m] (B components) held on ``start <= t < stop`` [s]."""
 
     kind: Literal["constant"]
@@ -284,7 +278,7 @@ class ConstantTorque(_Strict):
         return self
 
 
-class HarmonicTorque(_Strict):
+class HarmonicTorque(Strict):
     """``bias + Σ_k cos_k cos(k u) + sin_k sin(k u)``, u the argument of latitude (k = 1, 2)."""
 
     kind: Literal["orbital_harmonic"]
@@ -300,7 +294,7 @@ class HarmonicTorque(_Strict):
 Torque = Annotated[Union[ConstantTorque, HarmonicTorque], Field(discriminator="kind")]
 
 
-class Sun(_Strict):
+class Sun(Strict):
     """Sun direction, fixed in N over a run (it moves ~1 deg/day; no eclipse model).
 
     Either ``beta`` (solar beta angle: sun elevation above the orbit plane [rad]) and ``u_noon``
@@ -346,7 +340,7 @@ CMG_KINDS = {
 }
 
 
-class Cmg(_Strict):
+class Cmg(Strict):
     """The CMG cluster (issue 3). See stationbed/model/cmg/ for the models and steering laws."""
 
     kind: Literal[tuple(CMG_KINDS)]
@@ -391,15 +385,17 @@ class Cmg(_Strict):
 
     @property
     def n_units(self) -> int:
+        """Number of CMG units of the cluster (0 for an ideal momentum store)."""
         units = CMG_KINDS[self.kind].units
         return units if units is not None else (self.count or 4)
 
     @property
     def n_gimbals(self) -> int:
+        """Number of gimbals of the cluster."""
         return self.n_units * CMG_KINDS[self.kind].gimbals
 
 
-class Sensor(_Strict):
+class Sensor(Strict):
     """Measurement errors seen by the controller (truth is logged unchanged)."""
 
     attitude_noise: float = Field(default=0.0, ge=0.0)  # rad, 1 sigma per axis (small rotation)
@@ -408,7 +404,7 @@ class Sensor(_Strict):
     seed: int = 0
 
 
-class ControllerSpec(_Strict):
+class ControllerSpec(Strict):
     """``[controller]``: a registry name (controllers/) or ``module:Class``, its period and parameters."""
 
     name: str
@@ -417,171 +413,5 @@ class ControllerSpec(_Strict):
     sensor: Sensor = Sensor()
 
 
-class Scene(_Strict):
-    """A validated scene. Build it with :func:`load_scene` or :func:`scene_from_dict`."""
-
-    name: str
-    description: str = ""
-    simulation: Simulation
-    initial: Initial = Initial()
-    body: Body
-    appendage: list[Appendage] = []
-    orbit: Orbit | None = None
-    torque: list[Torque] = []
-    sun: Sun | None = None
-    cmg: Cmg | None = None
-    controller: ControllerSpec | None = None
-
-    @model_validator(mode="after")
-    def _consistent(self):
-        names = [a.name for a in self.appendage]
-        dup = {n for n in names if names.count(n) > 1}
-        if dup:
-            raise ValueError(f"appendage names must be unique, repeated: {sorted(dup)}")
-        if self.orbit is None:
-            if self.initial.frame == "lvlh":
-                raise ValueError("initial.frame = 'lvlh' needs an [orbit] table")
-            for t in self.torque:
-                if t.needs_orbit:
-                    raise ValueError(f"torque kind '{t.kind}' needs an [orbit] table")
-            if self.sun is not None and self.sun.beta is not None:
-                raise ValueError("sun.beta needs an [orbit] table (or give sun.direction_N)")
-        tracking = [a.name for a in self.appendage if a.tracks_sun]
-        if tracking and self.sun is None:
-            raise ValueError(f"appendage '{tracking[0]}' tracks the sun: add a [sun] table")
-        if self.controller is not None:
-            c = self.controller
-            ticks = self.simulation.output_dt / c.period
-            if abs(ticks - round(ticks)) > 1e-9 * ticks or round(ticks) < 1:
-                raise ValueError(
-                    f"simulation.output_dt ({self.simulation.output_dt} s) must be a whole number of "
-                    f"controller periods ({c.period} s)"
-                )
-            d = c.sensor.delay / c.period
-            if abs(d - round(d)) > 1e-9 * max(d, 1.0):
-                raise ValueError(f"controller.sensor.delay ({c.sensor.delay} s) must be a whole number of periods")
-        return self
-
-    # -- convenience -------------------------------------------------------------------
-    @property
-    def appendage_names(self) -> list[str]:
-        return [a.name for a in self.appendage]
-
-    def replace(self, **changes) -> "Scene":
-        """A copy with dotted-path changes, e.g. ``replace(**{"simulation.rtol": 1e-12})``.
-
-        The copy is re-validated, so a bad value raises :class:`SceneError`.
-        """
-        data = self.model_dump()
-        for path, value in changes.items():
-            node = data
-            keys = path.split(".")
-            for k in keys[:-1]:
-                node = node[k]
-            node[keys[-1]] = value
-        return scene_from_dict(data, source=f"scene {self.name!r}")
-
-
-# ---------------------------------------------------------------------------------------
-# error formatting
-# ---------------------------------------------------------------------------------------
-
-
-_TAGS.update(constant=ConstantTorque, orbital_harmonic=HarmonicTorque, track=SunTrack, profile=Profile)
-
-
-def _valid_keys(model: type[BaseModel]) -> list[str]:
-    return list(model.model_fields)
-
-
-def _model_at(loc: tuple) -> type[BaseModel] | None:
-    """The pydantic model class that owns the field at ``loc[:-1]`` (for key suggestions)."""
-    model: type[BaseModel] | None = Scene
-    for part in loc[:-1]:
-        if model is None:
-            return None
-        if isinstance(part, int):
-            continue
-        if part in _TAGS:
-            model = _TAGS[part]
-            continue
-        field = model.model_fields.get(part)
-        if field is None:
-            return None
-        model = _inner_model(field.annotation)
-    return model
-
-
-def _inner_model(annotation) -> type[BaseModel] | None:
-    import typing
-
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-        return annotation
-    for arg in typing.get_args(annotation):
-        m = _inner_model(arg)
-        if m is not None:
-            return m
-    return None
-
-
-def _path(loc: tuple) -> str:
-    out = ""
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        elif part in _TAGS:
-            continue  # pydantic's discriminator tag, not a user key
-        else:
-            out += ("." if out else "") + str(part)
-    return out or "(top level)"
-
-
-def _one_line(err: ValidationError) -> str:
-    errors = err.errors()
-    # a typo'd key also makes the intended key "missing": name the typo, it is the cause
-    e = next((x for x in errors if x["type"] == "extra_forbidden"), errors[0])
-    loc = tuple(e["loc"])
-    path = _path(loc)
-    etype = e["type"]
-    if etype == "extra_forbidden":
-        model = _model_at(loc)
-        hint = ""
-        if model is not None:
-            close = difflib.get_close_matches(str(loc[-1]), _valid_keys(model), n=1, cutoff=0.5)
-            hint = f"; did you mean '{close[0]}'?" if close else f"; valid keys: {', '.join(_valid_keys(model))}"
-        return f"{path}: unknown key{hint}"
-    if etype == "missing":
-        return f"{path}: missing required key"
-    if etype == "finite_number":
-        return f"{path}: must be a finite number, not NaN or inf"
-    if etype in ("too_short", "too_long"):
-        return f"{path}: wrong length ({e['msg'].lower()})"
-    msg = e["msg"].removeprefix("Value error, ")
-    more = f" (and {len(err.errors()) - 1} more problem(s))" if len(err.errors()) > 1 else ""
-    return f"{path}: {msg}{more}"
-
-
-def scene_from_dict(data: dict, source: str = "scene") -> Scene:
-    """Validate a scene given as a dict (the parsed TOML)."""
-    try:
-        return Scene.model_validate(data)
-    except ValidationError as err:
-        raise SceneError(f"{source}: {_one_line(err)}") from None
-
-
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a TOML scene file; raises :class:`SceneError` with a one-line reason."""
-    path = Path(path)
-    try:
-        text = path.read_bytes()
-    except FileNotFoundError:
-        raise SceneError(f"{path}: no such file") from None
-    except OSError as e:
-        raise SceneError(f"{path}: cannot read ({e.strerror})") from None
-    try:
-        data = tomllib.loads(text.decode("utf-8"))
-    except UnicodeDecodeError:
-        raise SceneError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: malformed TOML ({e})") from None
-    return scene_from_dict(data, source=str(path))
+#: discriminator tags -> tables (the error messages name the right table's keys)
+TAGS.update(constant=ConstantTorque, orbital_harmonic=HarmonicTorque, track=SunTrack, profile=Profile)
