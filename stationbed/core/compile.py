@@ -173,7 +173,7 @@ def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "")
     sig = lib.with_name(lib.name + ".sha256")
     for attempt in range(2):
         if not _verified(lib, sig):
-            if lib.exists() and attempt == 0:
+            if sig.exists() and lib.exists() and attempt == 0:  # (no digest yet: another process is building it)
                 _say_once(f"cached library {lib} does not match its digest: rebuilding it")
             reason = _build(cc, src, lib, sig, tag)
             if reason is not None:
