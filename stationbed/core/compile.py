@@ -14,8 +14,10 @@ outputs: a call is then ~0.1 µs of overhead instead of ~35 µs for ``f(numpy...
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 import shutil
+import stat
 import subprocess
 import tempfile
 from pathlib import Path
@@ -23,7 +25,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["compile_functions", "FastCall", "cache_dir", "compiler", "sx_function"]
+__all__ = ["compile_functions", "FastCall", "cache_dir", "compiler", "sx_function", "EVALUATOR_C", "EVALUATOR_VM"]
 
 
 def sx_function(name: str, inputs: list, outputs: list) -> ca.Function:
@@ -38,15 +40,64 @@ def sx_function(name: str, inputs: list, outputs: list) -> ca.Function:
 
 CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno"]
 
+#: environment variables: the cache folder, and a switch that forces casadi's evaluator
+CACHE_ENV = "STATIONBED_CACHE"
+NO_COMPILE_ENV = "STATIONBED_NO_COMPILE"
+#: library names keep at most this much of the tag (a structure key grows with the arrays; 255
+#: bytes is the usual file-name limit); a longer tag is cut and a hash of the whole added
+MAX_TAG_CHARS = 64
+#: what runs the equations: generated C, or casadi's virtual machine (same numbers, ~10x slower)
+EVALUATOR_C = "compiled C"
+EVALUATOR_VM = "casadi virtual machine"
 
-def cache_dir() -> Path:
-    d = Path(os.environ.get("STATIONBED_CACHE", Path.home() / ".cache" / "stationbed"))
-    d.mkdir(parents=True, exist_ok=True)
+log = logging.getLogger("stationbed")
+_SAID: set[str] = set()
+
+
+def _say_once(msg: str) -> None:
+    """A warning that the user sees once per process (not once per compiled function)."""
+    if msg not in _SAID:
+        _SAID.add(msg)
+        log.warning(msg)
+
+
+def cache_dir() -> Path | None:
+    """The compile cache folder (``$STATIONBED_CACHE``, default ``~/.cache/stationbed``), or None
+    when it cannot be used safely: not a folder, cannot be created or written, or writable by
+    other users (a library planted there would be loaded into this process: refused, as ssh
+    refuses key files others can write). The reason is said once; the run falls back to
+    casadi's evaluator."""
+    env = os.environ.get(CACHE_ENV)
+    d = Path(env) if env else Path.home() / ".cache" / "stationbed"
+    where = f"{CACHE_ENV}={d}" if env else f"the compile cache {d}"
+    fallback = f"running without compiled code ({EVALUATOR_VM}: same numbers, slower)"
+    try:
+        if d.exists() and not d.is_dir():
+            _say_once(f"{where} is not a folder; {fallback}")
+            return None
+        d.parent.mkdir(parents=True, exist_ok=True)
+        d.mkdir(mode=0o700, exist_ok=True)
+        st = d.stat()
+    except OSError as e:
+        _say_once(f"{where} cannot be created ({e.strerror}); {fallback}")
+        return None
+    if st.st_mode & (stat.S_IWGRP | stat.S_IWOTH) or st.st_uid != os.geteuid():
+        _say_once(
+            f"{where} is writable by other users (mode {stat.S_IMODE(st.st_mode):o}, owner uid {st.st_uid}): "
+            f"refused, a library planted there would run in this process; `chmod go-w {d}` or point "
+            f"{CACHE_ENV} at a folder of your own; {fallback}"
+        )
+        return None
+    if not os.access(d, os.W_OK | os.X_OK):
+        _say_once(f"{where} is not writable; {fallback}")
+        return None
     return d
 
 
 def compiler() -> str | None:
-    if os.environ.get("STATIONBED_NO_COMPILE"):
+    """The C compiler to use (``$CC``, ``cc``, ``gcc`` or ``clang``), or None (also when
+    ``$STATIONBED_NO_COMPILE`` is set)."""
+    if os.environ.get(NO_COMPILE_ENV):
         return None
     for cc in (os.environ.get("CC"), "cc", "gcc", "clang"):
         if cc and shutil.which(cc):
@@ -54,33 +105,92 @@ def compiler() -> str | None:
     return None
 
 
+def _file_tag(tag: str) -> str:
+    if len(tag) <= MAX_TAG_CHARS:
+        return tag
+    return f"{tag[: MAX_TAG_CHARS - 13]}_{hashlib.sha256(tag.encode()).hexdigest()[:12]}"
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _verified(lib: Path, sig: Path) -> bool:
+    """The library exists and its bytes match the digest written when it was built (a file cut
+    short or overwritten would crash or fail inside dlopen: it is rebuilt instead)."""
+    try:
+        return lib.is_file() and sig.is_file() and sig.read_text().strip() == _sha256(lib)
+    except OSError:
+        return False
+
+
+def _build(cc: str, src: str, lib: Path, sig: Path, tag: str) -> str | None:
+    """Compile ``src`` into ``lib`` and write its digest; returns the reason on failure."""
+    log.info(f"compiling {tag} ...")
+    try:
+        with tempfile.TemporaryDirectory(dir=lib.parent) as tmp:
+            c_file = Path(tmp) / "gen.c"
+            c_file.write_text(src)
+            tmp_lib = Path(tmp) / "gen.so"
+            res = subprocess.run([cc, *CFLAGS, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
+            if res.returncode != 0:
+                first = (res.stderr.strip().splitlines() or ["no message"])[0]
+                return f"the C compiler {cc} failed ({first})"
+            tmp_sig = Path(tmp) / "gen.sha256"
+            tmp_sig.write_text(_sha256(tmp_lib) + "\n")
+            os.replace(tmp_lib, lib)  # atomic: concurrent workers never see half a file
+            os.replace(tmp_sig, sig)
+    except OSError as e:
+        return f"cannot write the compiled library to {lib.parent} ({e.strerror})"
+    return None
+
+
 def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "") -> dict:
     """Compile ``functions`` into one library; return name -> callable casadi Function.
 
     ``extra_c`` is appended to the generated source (a driver that calls the generated
-    functions by name); when a library was built, its path is under the key ``"__lib__"``.
+    functions by name). The result also holds ``"__evaluator__"`` (:data:`EVALUATOR_C` or
+    :data:`EVALUATOR_VM`) and, when a library was loaded, its path under ``"__lib__"``. A
+    library whose digest does not match is rebuilt; a missing compiler, an unusable cache or a
+    failed build fall back to casadi's evaluator (said once, never an error).
     """
+    vm = {f.name(): f for f in functions}
+    vm["__evaluator__"] = EVALUATOR_VM
     cc = compiler()
     if cc is None:
-        return {f.name(): f for f in functions}
+        why = f"{NO_COMPILE_ENV} is set" if os.environ.get(NO_COMPILE_ENV) else "no C compiler (cc, gcc or clang) found"
+        _say_once(f"{why}: running without compiled code ({EVALUATOR_VM}: same numbers, ~10x slower)")
+        return vm
+    d = cache_dir()
+    if d is None:
+        return vm
     cg = ca.CodeGenerator(f"sb_{tag}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
     src = cg.dump() + extra_c
     digest = hashlib.sha256((src + " ".join(CFLAGS)).encode()).hexdigest()[:20]
-    lib = cache_dir() / f"sb_{tag}_{digest}.so"
-    if not lib.exists():
-        with tempfile.TemporaryDirectory(dir=cache_dir()) as tmp:
-            c_file = Path(tmp) / "gen.c"
-            c_file.write_text(src)
-            tmp_lib = Path(tmp) / "gen.so"
-            res = subprocess.run([cc, *CFLAGS, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
-            if res.returncode != 0:  # compiler broken: fall back, never fail the run
-                return {f.name(): f for f in functions}
-            os.replace(tmp_lib, lib)  # atomic: concurrent test workers never see half a file
-    funcs = {f.name(): ca.external(f.name(), str(lib)) for f in functions}
-    funcs["__lib__"] = str(lib)
-    return funcs
+    lib = d / f"sb_{_file_tag(tag)}_{digest}.so"
+    sig = lib.with_name(lib.name + ".sha256")
+    for attempt in range(2):
+        if not _verified(lib, sig):
+            if sig.exists() and lib.exists() and attempt == 0:  # (no digest yet: another process is building it)
+                _say_once(f"cached library {lib} does not match its digest: rebuilding it")
+            reason = _build(cc, src, lib, sig, tag)
+            if reason is not None:
+                _say_once(f"{reason}; running without compiled code ({EVALUATOR_VM}: same numbers, slower)")
+                return vm
+        try:
+            funcs = {f.name(): ca.external(f.name(), str(lib)) for f in functions}
+        except RuntimeError as e:  # a verified file that still does not load: rebuild once
+            sig.unlink(missing_ok=True)
+            if attempt == 1:
+                _say_once(f"cannot load {lib} ({str(e).splitlines()[0]}); running with {EVALUATOR_VM}")
+                return vm
+            continue
+        funcs["__lib__"] = str(lib)
+        funcs["__evaluator__"] = EVALUATOR_C
+        return funcs
+    return vm  # pragma: no cover - the loop returns
 
 
 class FastCall:
