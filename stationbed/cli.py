@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -102,6 +103,80 @@ def _cmd_run(args) -> int:
             recorder.abort()
 
 
+#: a failed or interrupted run leaves its rows under these names, never over a finished result
+PARTIAL_CSV = "trajectory.partial.csv"
+CSV_NAME = "trajectory.csv"
+SUMMARY_NAME = "summary.json"
+
+
+def _partial(path: Path) -> Path:
+    """``rec.rrd`` -> ``rec.partial.rrd``: where an output is written until its run ends."""
+    return path.with_name(f"{path.stem}.partial{path.suffix}")
+
+
+def _safe_name(name: str) -> str:
+    """A scene name as one folder name under ``out/`` (no separators, no ``..``, not absolute)."""
+    clean = re.sub(r"[^A-Za-z0-9_-]+", "_", name).strip("_")
+    return clean or "scene"
+
+
+def _output_paths(args, scene_name: str | None) -> dict[str, Path]:
+    """The run's output files, checked against its inputs and each other (BadOutput)."""
+    out = args.out if args.out is not None else Path("out") / _safe_name(scene_name or "")
+    paths = {"csv": out / CSV_NAME, "partial_csv": out / PARTIAL_CSV, "summary": out / SUMMARY_NAME}
+    if args.rrd is not None:
+        paths.update(rrd=args.rrd, partial_rrd=_partial(args.rrd))
+    inputs = {"the scene file": args.scene}
+    seen: dict[str, str] = {}
+    for what, p in [*inputs.items(), *paths.items()]:
+        key = os.path.realpath(p)
+        if key in seen:
+            raise BadOutput(f"{p} is both {seen[key]} and {what.replace('_', ' ')}: choose another --rrd or --out")
+        seen[key] = what.replace("_", " ") if what not in inputs else what
+        if Path(key).is_dir() and what not in inputs:
+            raise BadOutput(f"{p} ({what.replace('_', ' ')}) is a folder")
+    return {"out": out, **paths}
+
+
+class _Counted:
+    """A sink that counts the rows it passed on and remembers the last time [s]."""
+
+    def __init__(self, sink):
+        self.sink, self.columns, self.n_rows, self.last_t = sink, sink.columns, 0, math.nan
+
+    def write(self, rows) -> None:
+        self.sink.write(rows)
+        if len(rows):
+            self.n_rows += len(rows)
+            self.last_t = float(rows[-1][0])
+
+    def close(self):
+        return getattr(self.sink, "close", lambda: None)()
+
+
+class BadOutput(ValueError):
+    """An output path that is an input, another output, or a folder (exit 2, nothing written)."""
+
+
+def _write_json(path: Path, data: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=str))
+    os.replace(tmp, path)
+
+
+def _validate(scene, args) -> None:
+    """Everything that can be refused before an output is opened: the formulation and integrator
+    names, the step, the controller and its parameters (the compiled system is built here and
+    reused by the run)."""
+    from .run.controller import get_controller
+    from .run.prepare import prepare
+
+    prepare(scene, args.formulation, args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
+    spec = scene.controller
+    if spec is not None:
+        get_controller(spec.name)(period=spec.period, **spec.params)
+
+
 def _run(args, recorder) -> int:
     from .scene import load_scene
     from .run.rows import trajectory_columns
@@ -109,15 +184,16 @@ def _run(args, recorder) -> int:
     from .output.csv import CsvSink
 
     scene = load_scene(args.scene)
-    out = args.out or Path("out") / scene.name
+    paths = _output_paths(args, scene.name)
+    _validate(scene, args)
+    out, csv_path, partial = paths["out"], paths["csv"], paths["partial_csv"]
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = out / "trajectory.csv"
     status = {"scene": str(args.scene)}
     rrd_error = None
-    with open(csv_path, "w", newline="") as fh:
-        sink = CsvSink(fh, trajectory_columns(scene))
+    with open(partial, "w", newline="") as fh:
+        sink = counted = _Counted(CsvSink(fh, trajectory_columns(scene)))
         if args.rrd:  # stream the rows into the recording too, as they are computed
-            sink = _with_recording(sink, scene, args.rrd, args.duration, recorder)
+            sink = _with_recording(sink, scene, paths["partial_rrd"], args.duration, recorder)
         try:
             traj = simulate(
                 scene,
@@ -129,19 +205,29 @@ def _run(args, recorder) -> int:
                 step=args.step,
                 sink=sink,
             )
+        except KeyboardInterrupt:
+            if args.rrd:
+                rrd_error = sink.close()
+            status.update(status="interrupted", rows=counted.n_rows, last_t=counted.last_t, rows_file=partial.name)
+            _write_json(paths["summary"], status)
+            where = f"up to t = {counted.last_t:g} s " if counted.n_rows else ""
+            return _fail(f"interrupted; {counted.n_rows} rows {where}kept in {partial}", EXIT_FAILED)
         except SimulationError as e:
             if args.rrd:  # finish the recording first: the message says whether it is complete
                 rrd_error = sink.close()
-            status.update(e.trajectory.meta)
-            (out / "summary.json").write_text(json.dumps(status, indent=2, default=str))
-            kept = f"{csv_path} and {args.rrd}" if args.rrd and not rrd_error else str(csv_path)
-            failed = f"; recording {args.rrd} failed: {rrd_error}" if rrd_error else ""
+            status.update(e.trajectory.meta, rows_file=partial.name)
+            _write_json(paths["summary"], status)
+            kept = f"{partial} and {paths['partial_rrd']}" if args.rrd and not rrd_error else str(partial)
+            failed = f"; recording {paths['partial_rrd']} failed: {rrd_error}" if rrd_error else ""
             return _fail(f"{e}; {len(e.trajectory)} rows kept in {kept}{failed}", EXIT_FAILED)
         finally:
             if args.rrd:  # flush and finish the recording whatever happened
                 rrd_error = sink.close()
-    status.update(traj.meta)
-    (out / "summary.json").write_text(json.dumps(status, indent=2, default=str))
+    os.replace(partial, csv_path)  # the run ended: its rows take the result's name
+    if args.rrd and not rrd_error:
+        os.replace(paths["partial_rrd"], args.rrd)
+    status.update(traj.meta, rows_file=csv_path.name)
+    _write_json(paths["summary"], status)
     msg = (
         f"{scene.name}: {len(traj)} rows, t = 0..{traj.t[-1]:g} s, {traj.meta['formulation']}/"
         f"{traj.meta['integrator']}, {traj.meta['n_rhs']} RHS evaluations, "
@@ -153,7 +239,7 @@ def _run(args, recorder) -> int:
     if "summary" in traj.meta:
         print(_summary_line(traj.meta["summary"]))
     if rrd_error:  # the run and its CSV are fine; the recording is not
-        return _fail(f"recording {args.rrd} failed: {rrd_error}; {csv_path} is complete", EXIT_FAILED)
+        return _fail(f"recording {paths['partial_rrd']} failed: {rrd_error}; {csv_path} is complete", EXIT_FAILED)
     return 0
 
 
@@ -182,7 +268,9 @@ def _start_recording(args):
     """
     from .output.rerun.child import RecordingChild
 
-    return RecordingChild.start(args.scene, args.rrd)
+    if os.path.realpath(args.rrd) == os.path.realpath(args.scene):
+        raise BadOutput(f"--rrd {args.rrd} is the scene file: choose another recording path")
+    return RecordingChild.start(args.scene, _partial(args.rrd))
 
 
 class _RecordingTee:
@@ -372,7 +460,10 @@ def main(argv=None) -> int:
     (0 ok, 1 failed run, 2 bad input)."""
     args = _parser().parse_args(argv)
     if args.cmd == "run" and args.rrd:  # first, so the recorder's start-up overlaps the run's
-        args.recorder = _start_recording(args)
+        try:
+            args.recorder = _start_recording(args)
+        except BadOutput as e:
+            return _fail(str(e), EXIT_BAD_INPUT)
     from .scene import SceneError
 
     try:
@@ -381,8 +472,8 @@ def main(argv=None) -> int:
         return _fail(str(e), EXIT_BAD_INPUT)
     except ValueError as e:  # unknown formulation/integrator names and other bad arguments
         return _fail(str(e), EXIT_BAD_INPUT)
-    except KeyboardInterrupt:
-        return _fail("interrupted; rows computed so far are on disk", EXIT_FAILED)
+    except KeyboardInterrupt:  # before a run opened its outputs (a run reports its own rows)
+        return _fail("interrupted", EXIT_FAILED)
     except Exception as e:  # never a traceback for a user; keep it one line
         if os.environ.get("STATIONBED_DEBUG"):
             raise

@@ -91,12 +91,15 @@ def test_missing_file_and_bad_names(tmp_path):
 
 
 def test_failed_run_keeps_partial_output(tmp_path):
-    """An absurd torque from t = 50 s blows the state up; rows up to the failure stay on disk."""
+    """An absurd torque from t = 50 s blows the state up; rows up to the failure stay on disk, under
+    the partial name the message gives (a failed run never takes the result's name)."""
     text = GOOD + '\n[[torque]]\nkind = "constant"\ntorque_B = [1e300, 1e300, 0.0]\nstart = 50.0\n'
     res = run_cli("run", _write(tmp_path, text), "--out", tmp_path / "o")
     assert res.returncode == 1
     assert res.stderr.startswith("stationbed: error: run stopped at t = 5") and res.stderr.count("\n") == 1
-    tr = Trajectory.from_csv(tmp_path / "o" / "trajectory.csv")
+    assert str(tmp_path / "o" / "trajectory.partial.csv") in res.stderr
+    assert not (tmp_path / "o" / "trajectory.csv").exists()
+    tr = Trajectory.from_csv(tmp_path / "o" / "trajectory.partial.csv")
     assert tr.t[0] == 0.0 and tr.t[-1] >= 50.0 and tr.t[-1] < 100.0
     assert np.all(np.isfinite(tr.data))
     assert "failed" in (tmp_path / "o" / "summary.json").read_text()

@@ -378,7 +378,7 @@ def test_cli_raising_controller(tmp_path):
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr
     assert "'boom'" in lines[0] and "RuntimeError: sensor bus timeout" in lines[0] and "t = 5 s" in lines[0]
-    tr = Trajectory.from_csv(tmp_path / "out" / "trajectory.csv")
+    tr = Trajectory.from_csv(tmp_path / "out" / "trajectory.partial.csv")
     assert np.array_equal(tr.t, np.arange(0.0, 5.0))
 
 

@@ -351,9 +351,10 @@ def test_failed_run_leaves_partial_verifiable_recording(tmp_path):
     scene.write_text(FAILING)
     rrd = tmp_path / "o" / "recording.rrd"
     res = subprocess.run([str(STATIONBED), "run", str(scene), "--out", str(tmp_path / "o"), "--rrd", str(rrd)], capture_output=True, text=True)
+    rrd = tmp_path / "o" / "recording.partial.rrd"  # a failed run's recording keeps the partial name
     assert res.returncode == 1 and str(rrd) in res.stderr and res.stderr.count("\n") == 1
     assert verify(rrd).returncode == 0
-    csv = Trajectory.from_csv(tmp_path / "o" / "trajectory.csv")
+    csv = Trajectory.from_csv(tmp_path / "o" / "trajectory.partial.csv")
     w = read_temporal(rrd)["telemetry/omega_BN_B"]
     assert 50.0 <= w["t"][-1] < 100.0
     assert_allclose(w["t"], csv.t, rtol=0, atol=TIME_TOL_S)
@@ -437,9 +438,9 @@ def test_killed_run_leaves_the_child_to_finish_the_recording(tmp_path):
     try:
         _wait_for(lambda: _children(proc.pid), "the recording process")
         (child,) = _children(proc.pid)
-        _wait_for(lambda: _csv_rows(out / "trajectory.csv") >= KILL_AFTER_ROWS or proc.poll() is not None, "rows")
+        _wait_for(lambda: _csv_rows(out / "trajectory.partial.csv") >= KILL_AFTER_ROWS or proc.poll() is not None, "rows")
         assert proc.poll() is None, "the run ended before it was killed"
-        n_seen = _csv_rows(out / "trajectory.csv")
+        n_seen = _csv_rows(out / "trajectory.partial.csv")
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         _wait_for(lambda: not _alive(child), "the recording process to finish")
@@ -449,9 +450,10 @@ def test_killed_run_leaves_the_child_to_finish_the_recording(tmp_path):
             proc.wait()
         if child is not None and _alive(child):
             os.kill(child, signal.SIGKILL)
+    rrd = out / "recording.partial.rrd"  # killed: the run never ended, its outputs keep the partial names
     res = verify(rrd)
     assert res.returncode == 0, res.stderr
-    csv = Trajectory.from_csv(out / "trajectory.csv")
+    csv = Trajectory.from_csv(out / "trajectory.partial.csv")
     w = read_temporal(rrd)["telemetry/omega_BN_B"]
     n = len(w["t"])
     assert n_seen - ROW_BATCH <= n <= len(csv)
@@ -474,7 +476,7 @@ def test_recording_process_killed_mid_run_keeps_the_run_and_its_csv(tmp_path):
     try:
         _wait_for(lambda: _children(proc.pid), "the recording process")
         (child,) = _children(proc.pid)
-        _wait_for(lambda: _csv_rows(out / "trajectory.csv") > 0 or proc.poll() is not None, "the first rows")
+        _wait_for(lambda: _csv_rows(out / "trajectory.partial.csv") > 0 or proc.poll() is not None, "the first rows")
         os.kill(child, signal.SIGKILL)
         stdout, stderr = proc.communicate(timeout=WAIT_S)
     finally:
@@ -482,7 +484,8 @@ def test_recording_process_killed_mid_run_keeps_the_run_and_its_csv(tmp_path):
             proc.kill()
             proc.communicate()
     assert proc.returncode == 1
-    assert stderr.count("\n") == 1 and f"recording {rrd} failed" in stderr and "killed by signal 9" in stderr
+    partial_rrd = out / "recording.partial.rrd"
+    assert stderr.count("\n") == 1 and f"recording {partial_rrd} failed" in stderr and "killed by signal 9" in stderr
     csv = Trajectory.from_csv(out / "trajectory.csv")
     sim = scene.simulation
     assert len(csv) == math.floor(sim.duration / sim.output_dt) + 1 + (sim.duration % sim.output_dt > 0)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..integrators import Integrator
+from ..integrators import Integrator, get_integrator
 from ..model import Structure
 from ..scene import Scene
 from .initial import characteristic_scales, initial_state, initial_x
@@ -79,7 +79,9 @@ def prepare(
         Dimensionless absolute tolerance, in units of the scene's characteristic rate and
         momentum (:func:`~stationbed.run.initial.characteristic_scales`); default the scene's.
     step : float, optional
-        Fixed step [s] of fixed-step integrators; default the scene's.
+        Fixed step [s] of fixed-step integrators; default the scene's. Refused (ValueError) with
+        an adaptive integrator, as is a scene whose own integrator is adaptive and which sets
+        ``simulation.step``: a step is never silently ignored.
 
     Returns
     -------
@@ -87,10 +89,25 @@ def prepare(
     """
     sim = scene.simulation
     formulation = formulation or sim.formulation
+    own = integrator is None or integrator == sim.integrator
     integrator = integrator or sim.integrator
     rtol = sim.rtol if rtol is None else rtol
     atol = sim.atol if atol is None else atol
-    step = sim.step if step is None else step
+    # a step is never ignored: it is refused where it cannot apply (the scene's step is the fixed
+    # step of fixed-step integrators; a caller who overrides with an adaptive one leaves it behind)
+    integ_cls = get_integrator(integrator)
+    if integ_cls.adaptive and step is not None:
+        raise ValueError(
+            f"step = {step:g} s applies to fixed-step integrators; '{integ_cls.name}' is adaptive "
+            f"(its accuracy is set by rtol and atol; simulation.max_step caps its step)"
+        )
+    if own and integ_cls.adaptive and sim.step is not None:  # the scene contradicts itself
+        raise ValueError(
+            f"simulation.step = {sim.step:g} s applies to fixed-step integrators; the scene's integrator "
+            f"'{integ_cls.name}' is adaptive (remove step, or choose a fixed-step integrator)"
+        )
+    if step is None and not integ_cls.adaptive:
+        step = sim.step  # the scene's fixed step, for any fixed-step integrator
     system = build_system(Structure.of(scene), formulation, integrator)
     form = system.formulation
     model = form.model

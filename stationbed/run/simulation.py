@@ -84,7 +84,6 @@ def simulate(
     atol = sim.atol if atol is None else atol
     duration = sim.duration if duration is None else duration
     output_dt = sim.output_dt if output_dt is None else output_dt
-    step = sim.step if step is None else step
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"duration must be a positive number of seconds, got {duration}")
 

@@ -55,7 +55,9 @@ CHILD_ERROR = "stationbed-rrd: "
 
 _PACKAGE_DIR = Path(__file__).resolve().parents[2]  # stationbed/
 
-# Runs in the child's ``python -c``: a bare ``stationbed`` package (no __init__ imports), then
+# Runs in the child's ``python -I -c`` (isolated: neither the working folder nor PYTHONPATH comes first
+# on sys.path, so a numpy.py beside the user cannot run): a bare ``stationbed`` package (no
+# __init__ imports), then
 # child_main(scene, rrd).
 _BOOTSTRAP = (
     "import sys, types\n"
@@ -130,7 +132,7 @@ class RecordingChild:
         try:
             stderr = tempfile.TemporaryFile()
             proc = subprocess.Popen(
-                [sys.executable, "-c", _BOOTSTRAP, str(_PACKAGE_DIR), str(scene_path), str(rrd_path)],
+                [sys.executable, "-I", "-c", _BOOTSTRAP, str(_PACKAGE_DIR), str(scene_path), str(rrd_path)],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.DEVNULL,
                 stderr=stderr,
