@@ -54,9 +54,11 @@ import importlib.metadata
 import importlib.util
 import math
 import os
+import struct
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Any, ClassVar
 
@@ -282,6 +284,12 @@ def _real(c) -> float | None:
         return None
 
 
+@lru_cache(maxsize=None)
+def _doubles(n: int) -> struct.Struct:
+    """``n`` native doubles: packing one refuses anything but real numbers (strings, None...)."""
+    return struct.Struct(f"={n}d")
+
+
 def command_values(value, n: int, kind: str = "torque", finite: bool = True) -> np.ndarray:
     """What a controller returned (or set as ``q_ref_BN``), checked: ``n`` finite floats.
 
@@ -311,6 +319,18 @@ def command_values(value, n: int, kind: str = "torque", finite: bool = True) -> 
         real number (a string, None, a complex number), NaN or inf (when ``finite``). A tuple, list or 1-D numpy
         array of Python or numpy ints and floats is accepted.
     """
+    cls = value.__class__
+    if (cls is tuple or cls is list) and len(value) == n:  # the usual case, quickly
+        try:
+            values = _doubles(n).unpack(_doubles(n).pack(*value))  # numbers only: no strings, None
+        except struct.error:
+            pass  # the checks below say what is wrong
+        else:
+            if not finite or all(map(math.isfinite, values)):
+                return np.array(values)
+    elif cls is np.ndarray and value.dtype == np.float64 and value.shape == (n,):
+        if not finite or np.isfinite(value).all():
+            return value.copy()
     expected = f"{n} real numbers ({kind})"
     if isinstance(value, np.ndarray):
         if value.shape != (n,):
