@@ -2,8 +2,17 @@
 
 A plain PD that holds LVLH (or an inertial attitude), written for reading rather than speed:
 numpy and the library's rotation helpers, no tricks. Copy this file, rename the class, change
-``_update``, and name it in a scene as ``name = "my_module:MyHold"`` (any importable module) or
-register it as an entry point of the group ``stationbed.controllers`` (see pyproject.toml).
+``_update``, and name it in a scene as
+
+* ``name = "my_hold.py:MyHold"``: a file, relative to the scene file's folder (a path such as
+  ``"laws/my_hold.py:MyHold"`` works too; no ``PYTHONPATH`` needed);
+* ``name = "my_module:MyHold"``: an importable module (installed, or on ``PYTHONPATH``);
+* or register it as an entry point of the group ``stationbed.controllers`` (see pyproject.toml).
+
+The file's top-level code runs when a scene naming it is run: keep it to imports and
+definitions. ``_update`` returns a tuple, list or (3,) numpy array of finite floats; anything
+else (a (3, 1) array, strings, None, NaN) stops the run with an error naming the controller and
+the time, as an exception raised in ``_update`` does (``STATIONBED_DEBUG=1`` shows its traceback).
 
     τ = -J (kp e + kd (ω - ω_ref))        e = 2 sign(q_e,w) q_e,vec ≈ attitude error angle [rad]
 
@@ -52,4 +61,4 @@ class ExampleHold(Controller):
         w_ref_B = dcm(q_e) @ self.w_RN_R  # the reference's rate, in B
         p = self.params
         tau = -self.J @ (p.kp * e + p.kd * (meas.omega_BN_B - w_ref_B))
-        return tau  # any sequence of 3 floats
+        return tau  # a (3,) array; a tuple or list of 3 floats does as well

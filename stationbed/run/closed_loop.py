@@ -4,6 +4,7 @@ record, with the per-tick compiled path and the fused loop (:mod:`.fused`)."""
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 
@@ -11,7 +12,15 @@ from ..core.compile import FastCall
 from ..core.rotation import rotation_angle
 from ..integrators import IntegrationError
 from ..model.cmg import cluster_functions
-from .controller import Measurement, Plant, get_controller, measurement_layout
+from .controller import (
+    ControllerError,
+    Measurement,
+    Plant,
+    command_values,
+    get_controller,
+    measurement_layout,
+    one_line,
+)
 from .fused import fused_ok, run_fused
 from .rows import check_rows
 from .segments import held_torque, segment_input
@@ -20,7 +29,9 @@ __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH"]
 
 
 class ControllerFailure(Exception):
-    """The controller raised or returned a bad command at time ``t`` [s]; ``reason`` is one line."""
+    """The controller raised or returned a bad command at time ``t`` [s]; ``reason`` is one line.
+
+    When it raised, that exception is this one's ``__cause__`` (with its traceback)."""
     def __init__(self, t: float, reason: str):
         super().__init__(reason)
         self.t = t
@@ -50,7 +61,9 @@ class ControlLoop:
         self.model = model
         cmg = model.cmg
         self.ng = 0 if cmg is None else cmg.n_gimbals
-        self.ctrl = controller if controller is not None else get_controller(spec.name)(period=spec.period, **spec.params)
+        if controller is None:
+            controller = get_controller(spec.name, base_dir=scene.folder)(period=spec.period, **spec.params)
+        self.ctrl = controller
         if self.ctrl.command == "gimbal_rates" and self.ng == 0:
             raise ValueError(
                 f"controller '{self.ctrl.name}' commands gimbal rates: the scene needs a gimballed [cmg]"
@@ -77,7 +90,12 @@ class ControlLoop:
             plant.h_rotor = geometry.rotor_momentum(c)
             plant.cmg_functions = cluster_functions(c)
         self.capacity = plant.h_capacity
-        self.ctrl.reset(plant)
+        try:
+            self.ctrl.reset(plant)
+        except ValueError:  # the law's own refusal of this plant (e.g. "needs an [orbit]"): bad input
+            raise
+        except Exception as e:  # a bug in the user's _reset: name the controller, keep the traceback
+            raise ControllerError(f"controller '{self.ctrl.name}' raised {type(e).__name__} in reset: {one_line(e)}") from e
         # measurement: compiled, written into y; the controller sees views of y (or of a noisy,
         # delayed copy)
         self.meas = FastCall.of(f["meas"])
@@ -182,7 +200,9 @@ class ControlLoop:
         if q_ref is None:
             err = math.nan
         else:
-            err = math.degrees(float(rotation_angle(np.asarray(q_ref, float)[None], self.x[None, 0:4])[0]))
+            if q_ref.__class__ is not np.ndarray or q_ref.dtype != np.float64 or q_ref.shape != (4,):
+                q_ref = self._check_q_ref(q_ref)
+            err = math.degrees(float(rotation_angle(q_ref[None], self.x[None, 0:4])[0]))
         tau = self.last_cmd if self.ctrl.command == "torque" else (math.nan,) * 3
         vals += list(tau) + [err]
         return vals
@@ -226,6 +246,8 @@ class ControlLoop:
         fast = tick is not None
         if fast:
             trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
+            pack_cmd = struct.Struct(f"={ncmd}d").pack_into
+            ndarray, f64 = np.ndarray, np.dtype(np.float64)
         try:
             self._sense(0, 0.0)
             for k in range(K + 1):
@@ -235,8 +257,8 @@ class ControlLoop:
                 M.t = t
                 try:
                     cmd = update(t, M)
-                except Exception as e:  # the user's code: report it, keep the trajectory
-                    raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {e}") from None
+                except Exception as e:  # the user's code: report it (chained), keep the trajectory
+                    raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {one_line(e)}") from e
                 t_next = (k + 1) * period
                 if t_next > duration:
                     t_next = duration
@@ -246,14 +268,25 @@ class ControlLoop:
                     if t_next - t != h_set:
                         h_set = t_next - t
                         a_h[0] = h_set
-                    if cmd is None or len(cmd) != ncmd:
-                        self._check_command(t, cmd)
-                    a_cmd[:] = cmd
+                    # a tuple or list of ncmd real numbers, or a float64 array of ncmd values, is
+                    # written as is; anything else, or a failed write (wrong size, strings...),
+                    # goes to the checker, which raises or returns the values as floats
+                    cls = cmd.__class__
+                    try:
+                        if cls is tuple or cls is list:
+                            pack_cmd(a_cmd, 0, *cmd)  # exactly ncmd numbers; no strings, no None
+                        elif cls is ndarray and cmd.dtype is f64 and len(cmd) == ncmd:
+                            a_cmd[:] = cmd  # (a (ncmd, 1) array raises ValueError)
+                        else:
+                            raise TypeError
+                    except (TypeError, ValueError, struct.error):
+                        cmd = self._check_command(t, cmd)
+                        a_cmd[:] = cmd
                     trigger()
                     if has_act and (res_act[i_lim] or res_act[i_sat]):
                         sat_since_row |= self._flags(res_act)
                 else:
-                    self._check_command(t, cmd)
+                    cmd = self._check_command(t, cmd)
                     # the final tick's actuation is reported in its row but never integrated:
                     # it is not counted in the summary
                     sat_since_row |= self._actuate(t, cmd, count=k < K)
@@ -262,9 +295,10 @@ class ControlLoop:
                         self.last_cmd = cmd
                     if smooth and has_act:
                         self.u[3 : 3 + nu] = res_act[:nu]  # the row's held rates (flags counted above)
+                    held = self._held_row(sat_since_row)  # first: a bad q_ref_BN raises here
                     pending_t.append(t)
                     pending_x.append(self.x.copy())
-                    pending_h.append(self._held_row(sat_since_row))
+                    pending_h.append(held)
                     sat_since_row = 0
                     if len(pending_t) >= ROW_BATCH:
                         flush()
@@ -295,21 +329,22 @@ class ControlLoop:
                 self.integ.count_steps(n_fast)
             flush()
 
-    def _check_command(self, t: float, cmd) -> None:
-        """A clear error for a command of the wrong size or with NaN/inf (generic path, or after
-        the fused path met a non-finite state)."""
-        name = self.ctrl.name
+    def _check_command(self, t: float, cmd) -> np.ndarray:
+        """The command as floats (:func:`~.controller.command_values`), or ControllerFailure at
+        ``t`` naming the controller and what it returned (generic path; the fast path when its
+        plain write failed, or after it met a non-finite state)."""
         try:
-            n = len(cmd)
-            total = sum(float(c) for c in cmd)
-        except TypeError:
-            raise ControllerFailure(t, f"controller '{name}' returned {cmd!r}, not a sequence") from None
-        if n != self.n_cmd:
-            raise ControllerFailure(
-                t, f"controller '{name}' returned {n} values, expected {self.n_cmd} ({self.ctrl.command})"
-            )
-        if not math.isfinite(total):
-            raise ControllerFailure(t, f"controller '{name}' returned a non-finite command {list(cmd)}")
+            return command_values(cmd, self.n_cmd, self.ctrl.command)
+        except ValueError as e:
+            raise ControllerFailure(t, f"controller '{self.ctrl.name}' returned {e}") from None
+
+    def _check_q_ref(self, q_ref) -> np.ndarray:
+        """The controller's ``q_ref_BN`` as 4 floats, or ControllerFailure at the tick's time
+        naming the controller and what it set (a string, a (4, 1) array...)."""
+        try:
+            return command_values(q_ref, 4, "q_ref_BN, scalar first", finite=False)
+        except ValueError as e:
+            raise ControllerFailure(self.M.t, f"controller '{self.ctrl.name}' set q_ref_BN to {e}") from None
 
     def _fast_tick(self):
         """The fused tick when the integrator is fusable (RK4) with one step per period, else None."""

@@ -25,18 +25,44 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
    ``_reset``) and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` with casadi ``t``, ``y`` (the
    measurement vector, offsets from :func:`measurement_layout`) and ``cp``; it must compute
    what ``_update`` computes (a test runs both) and keep no state between ticks.
+
+What ``_update`` may return (:func:`command_values` checks it, the same on every path of the
+loop): a tuple, list or 1-D numpy array of ``n`` real numbers, finite. Anything else (a (3, 1)
+array, strings, None, a dict, a generator, NaN) stops the run with a
+:class:`~stationbed.run.simulation.SimulationError` naming the controller, what it returned and
+the time, as an exception raised in ``_update`` does (that exception is the error's
+``__cause__``, with its traceback).
+
+Where a scene's ``controller.name`` is looked up (:func:`get_controller`):
+
+* a registry name (``pd``): the entry points of :data:`ENTRY_POINT_GROUP`;
+* ``module:Class``: ``importlib.import_module(module)``, so the module must be importable
+  (installed, or on ``PYTHONPATH``);
+* ``path/to/file.py:Class`` (the part before the last ``:`` ends in ``.py`` or contains a path
+  separator): that file, relative to the scene file's folder (absolute paths and ``~`` work
+  too), loaded with :func:`importlib.util.spec_from_file_location`; no ``PYTHONPATH`` needed.
+
+Either way the module's top-level code runs when the scene's controller is loaded (at the start
+of a run, once per process and file version): a controller file is a program, trust it as one.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import importlib.metadata
+import importlib.util
 import math
+import os
+import struct
+import sys
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
-from typing import Annotated
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
@@ -47,6 +73,8 @@ __all__ = [
     "Plant",
     "ControllerError",
     "get_controller",
+    "command_values",
+    "one_line",
     "controller_registry",
     "measurement_layout",
     "UnitQuaternion",
@@ -197,7 +225,9 @@ class Controller:
 
         Returns
         -------
-        sequence of float  ``tau_B`` (3,) [N m] or gimbal rates (n_gimbals,) [rad/s], per ``command``.
+        sequence of float  ``tau_B`` (3,) [N m] or gimbal rates (n_gimbals,) [rad/s], per ``command``
+            (a tuple, list or 1-D array of finite floats: :func:`command_values` says what else
+            the loop refuses).
         """
         self.n_updates += 1
         return self._update(t, meas)
@@ -217,6 +247,114 @@ class Controller:
 
     def _update(self, t: float, meas: Measurement):  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+def one_line(e: BaseException | str) -> str:
+    """An exception's message (or any text) on one line: its lines stripped, joined by " | "."""
+    return " | ".join(line.strip() for line in str(e).splitlines() if line.strip())
+
+
+#: The longest quotation of a bad command in an error message [characters].
+SHOWN_CHARS = 80
+
+
+def _shown(obj) -> str:
+    """A one-line, bounded ``repr`` of what a controller returned (never raises)."""
+    try:
+        r = " ".join(repr(obj).split())
+    except Exception:  # a user's object with a broken __repr__
+        r = f"<{type(obj).__name__}>"
+    return r if len(r) <= SHOWN_CHARS else r[: SHOWN_CHARS - 3] + "..."
+
+
+def _what(obj) -> str:
+    """What a controller returned, for a message: ``None``, or the value and its type."""
+    return "None" if obj is None else f"{_shown(obj)} ({type(obj).__name__})"
+
+
+def _real(c) -> float | None:
+    """``c`` as a float when it is one real number (Python or numpy), else None."""
+    if isinstance(c, (str, bytes, bytearray, complex, np.complexfloating)):
+        return None
+    if isinstance(c, np.ndarray) and c.ndim > 0:
+        return None
+    try:
+        return float(c)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
+@lru_cache(maxsize=None)
+def _doubles(n: int) -> struct.Struct:
+    """``n`` native doubles: packing one refuses anything but real numbers (strings, None...)."""
+    return struct.Struct(f"={n}d")
+
+
+def command_values(value, n: int, kind: str = "torque", finite: bool = True) -> np.ndarray:
+    """What a controller returned (or set as ``q_ref_BN``), checked: ``n`` finite floats.
+
+    The one definition of a valid command, used on every path of the loop (the per-tick fast
+    path writes plain tuples, lists and float64 arrays itself and asks this function about
+    anything else).
+
+    Parameters
+    ----------
+    value : object  What ``Controller.update`` returned.
+    n : int  Values expected: 3 for a torque [N m], ``n_gimbals`` for gimbal rates [rad/s].
+    kind : str  What the value is, for the message: the controller's ``command``
+        ("torque" or "gimbal_rates"), or "q_ref_BN".
+    finite : bool  Refuse NaN and inf (False for ``q_ref_BN``: a NaN reference only logs a NaN
+        ``att_err_deg``).
+
+    Returns
+    -------
+    ndarray, shape (n,)  The values as float64.
+
+    Raises
+    ------
+    ValueError
+        One line, to follow "returned" (or "set q_ref_BN to"): what came back and what was
+        expected. Refused: anything not a sequence (None, a number, a string, a dict, a set, a
+        generator...), the wrong length or shape (a (3, 1) array), an element that is not a
+        real number (a string, None, a complex number), NaN or inf (when ``finite``). A tuple, list or 1-D numpy
+        array of Python or numpy ints and floats is accepted.
+    """
+    cls = value.__class__
+    if (cls is tuple or cls is list) and len(value) == n:  # the usual case, quickly
+        try:
+            values = _doubles(n).unpack(_doubles(n).pack(*value))  # numbers only: no strings, None
+        except struct.error:
+            pass  # the checks below say what is wrong
+        else:
+            if not finite or all(map(math.isfinite, values)):
+                return np.array(values)
+    elif cls is np.ndarray and value.dtype == np.float64 and value.shape == (n,):
+        if not finite or np.isfinite(value).all():
+            return value.copy()
+    expected = f"{n} real numbers ({kind})"
+    if isinstance(value, np.ndarray):
+        if value.shape != (n,):
+            raise ValueError(f"a numpy array of shape {value.shape}, expected shape ({n},): {expected}")
+        if value.dtype.kind not in "biufO":
+            raise ValueError(f"a numpy array of dtype {value.dtype}, expected {expected}")
+        items = value.tolist()
+    elif value is None or isinstance(value, (str, bytes, bytearray, Mapping, set, frozenset)):
+        raise ValueError(f"{_what(value)}, not a sequence of {expected}")
+    else:
+        try:
+            size = len(value)
+            items = list(value)
+        except Exception:  # no len() (a number, a generator, ...) or a sequence that fails
+            raise ValueError(f"{_what(value)}, not a sequence of {expected}") from None
+        if size != n or len(items) != n:
+            raise ValueError(f"{size} values, expected {expected}")
+    values = [_real(c) for c in items]
+    for i, v in enumerate(values):
+        if v is None:
+            raise ValueError(f"{_shown(value)}: element {i} is {_what(items[i])}, not a real number; expected {expected}")
+    if finite and not all(math.isfinite(v) for v in values):
+        raise ValueError(f"non-finite values {values} ({kind})")
+    return np.array(values)
 
 
 #: Entry-point group of controllers: the shipped laws (pyproject.toml) and any installed package's.
@@ -239,19 +377,102 @@ def controller_registry() -> dict[str, type[Controller]]:
     return {name: _load(ep) for name, ep in sorted(_entry_points().items())}
 
 
-def get_controller(name: str) -> type[Controller]:
-    """A controller class from a registry name or ``module:Class``."""
+def _is_file_name(module: str) -> bool:
+    """Whether the module part of ``module:Class`` names a file (``.py``, or a path)."""
+    return module.endswith(".py") or any(sep in module for sep in ("/", os.sep, os.altsep) if sep)
+
+
+#: Controller files loaded in this process: resolved path -> (mtime_ns, size, module).
+_FILE_MODULES: dict[Path, tuple[int, int, Any]] = {}
+
+
+def _load_file(name: str, file: str, base_dir: str | Path | None):
+    """The module of a controller file (loaded once per file version); ControllerError naming it."""
+    path = Path(file).expanduser()
+    if not path.is_absolute():
+        path = Path(base_dir if base_dir is not None else ".") / path
+    path = path.resolve()
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        where = "the scene file's folder" if base_dir is not None else "the current folder"
+        raise ControllerError(f"controller '{name}': no file {path} ({file} is relative to {where})") from None
+    except OSError as e:
+        raise ControllerError(f"controller '{name}': cannot read {path} ({e.strerror})") from None
+    if not path.is_file():
+        raise ControllerError(f"controller '{name}': {path} is not a file")
+    cached = _FILE_MODULES.get(path)
+    if cached is not None and cached[:2] == (st.st_mtime_ns, st.st_size):
+        return cached[2]
+    # a unique module name per file, stable across loads (classes pickle, dataclasses work)
+    digest = hashlib.sha256(str(path).encode()).hexdigest()[:12]
+    stem = "".join(ch if ch.isalnum() else "_" for ch in path.stem)
+    mod_name = f"stationbed_controller_file_{stem}_{digest}"
+    spec = importlib.util.spec_from_file_location(mod_name, path)
+    if spec is None or spec.loader is None:
+        raise ControllerError(f"controller '{name}': {path} is not a Python file")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = mod
+    try:
+        spec.loader.exec_module(mod)  # the file's top-level code runs here
+    except SyntaxError as e:
+        del sys.modules[mod_name]
+        raise ControllerError(f"controller '{name}': {path}:{e.lineno}: syntax error ({e.msg})") from e
+    except Exception as e:
+        del sys.modules[mod_name]
+        raise ControllerError(f"controller '{name}': loading {path} raised {type(e).__name__}: {one_line(e)}") from e
+    _FILE_MODULES[path] = (st.st_mtime_ns, st.st_size, mod)
+    return mod
+
+
+def get_controller(name: str, base_dir: str | Path | None = None) -> type[Controller]:
+    """A controller class from a registry name, ``module:Class`` or ``path/file.py:Class``.
+
+    Parameters
+    ----------
+    name : str
+        The scene's ``controller.name``. The part before the last ``:`` is a file when it ends
+        in ``.py`` or contains a path separator, else a module name.
+    base_dir : str or Path, optional
+        The folder a relative controller file is found in: the scene file's folder
+        (``Scene.folder``); the current folder when None.
+
+    Raises
+    ------
+    ControllerError
+        One line naming the controller (and the file): unknown name, module that cannot be
+        imported, missing file, syntax error or exception while loading it, no such class, not
+        a :class:`Controller` subclass.
+    """
     if ":" in name:
-        mod_name, _, cls_name = name.partition(":")
-        try:
-            mod = importlib.import_module(mod_name)
-        except ImportError as e:
-            raise ControllerError(f"controller '{name}': cannot import module '{mod_name}' ({e})") from None
+        mod_name, _, cls_name = name.rpartition(":")
+        if _is_file_name(mod_name):
+            mod = _load_file(name, mod_name, base_dir)
+            where = str(Path(mod.__file__))
+        else:
+            try:
+                mod = importlib.import_module(mod_name)
+            except ImportError as e:
+                hint = ""
+                near = Path(base_dir if base_dir is not None else ".") / (mod_name.replace(".", "/") + ".py")
+                if near.is_file():
+                    hint = f"; to load {near} without PYTHONPATH, name it '{mod_name.replace('.', '/')}.py:{cls_name}'"
+                raise ControllerError(f"controller '{name}': cannot import module '{mod_name}' ({e}){hint}") from None
+            except Exception as e:  # the module's top-level code raised, or has a syntax error
+                raise ControllerError(
+                    f"controller '{name}': importing module '{mod_name}' raised {type(e).__name__}: {one_line(e)}"
+                ) from e
+            where = f"'{mod_name}'"
         cls = getattr(mod, cls_name, None)
+        if cls is None:
+            raise ControllerError(f"controller '{name}': no class '{cls_name}' in {where}")
         if not (isinstance(cls, type) and issubclass(cls, Controller)):
-            raise ControllerError(f"controller '{name}': '{cls_name}' is not a Controller subclass in '{mod_name}'")
+            raise ControllerError(f"controller '{name}': '{cls_name}' is not a Controller subclass in {where}")
         return cls
     eps = _entry_points()
     if name not in eps:
-        raise ControllerError(f"unknown controller '{name}'; valid: {', '.join(sorted(eps))} or module:Class")
+        hint = f"; to load a file, name its class: '{name}:ClassName'" if _is_file_name(name) else ""
+        raise ControllerError(
+            f"unknown controller '{name}'; valid: {', '.join(sorted(eps))}, module:Class or path/file.py:Class{hint}"
+        )
     return _load(eps[name])

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
+from .controller import ControllerError, one_line
 from .rows import check_rows
 from .segments import held_torque
 
@@ -51,7 +52,7 @@ def _build(loop, n: int) -> dict:
     form = system.formulation
     model = form.model
     nx, npar = form.nx, model.layout.size
-    ncp = len(ctrl.symbolic_params())
+    ncp = len(_symbolic_params(ctrl))
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng
     t, t0, h = ca.SX.sym("t"), ca.SX.sym("t0"), ca.SX.sym("h")
@@ -60,8 +61,16 @@ def _build(loop, n: int) -> dict:
     cp = ca.SX.sym("cp", ncp)
     u_ext = ca.SX.sym("u_ext", 3)
     y = sx["meas"](t, x, p)
-    cmd, q_ref = ctrl.symbolic(t, y, cp)
-    cmd = ca.vertcat(cmd)
+    try:
+        cmd, q_ref = ctrl.symbolic(t, y, cp)
+        cmd = ca.vertcat(cmd)
+    except Exception as e:  # the user's casadi code: name the controller, keep the traceback
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
+    if cmd.numel() != loop.n_cmd:
+        raise ControllerError(
+            f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected "
+            f"{loop.n_cmd} ({ctrl.command})"
+        )
     if model.cmg is None:
         act = ca.SX.zeros(0, 1)
         u = u_ext + cmd
@@ -116,7 +125,7 @@ def run_fused(loop, K: int) -> None:
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
-    cp = np.asarray(ctrl.symbolic_params(), dtype=float)
+    cp = np.asarray(_symbolic_params(ctrl), dtype=float)
     nx = loop.system.formulation.nx
     p, period, duration = loop.p, loop.period, loop.duration
     u_ext = held_torque(loop.scene, 0.5 * duration)  # constant: no torque window inside a fused run
@@ -211,6 +220,14 @@ def run_fused(loop, K: int) -> None:
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
         _flush(loop, rows_t, rows_x, rows_h)
+
+
+def _symbolic_params(ctrl):
+    """``ctrl.symbolic_params()``; ControllerError naming the controller if the user's code raises."""
+    try:
+        return ctrl.symbolic_params()
+    except Exception as e:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e
 
 
 def _flush(loop, rows_t, rows_x, rows_h) -> None:

@@ -19,6 +19,7 @@ from ..core.compile import FastCall
 from ..integrators import IntegrationError
 from ..scene import Scene, load_scene
 from .closed_loop import ControlLoop, ControllerFailure
+from .controller import Controller
 from .prepare import prepare
 from .rows import Rows, check_rows
 from .segments import breakpoints, output_times, segment_input
@@ -28,7 +29,10 @@ __all__ = ["simulate", "SimulationError"]
 
 
 class SimulationError(RuntimeError):
-    """A run that failed part-way; ``trajectory`` holds the rows computed before ``t``."""
+    """A run that failed part-way; ``trajectory`` holds the rows computed before ``t``.
+
+    When a controller raised, its exception is ``__cause__`` (with the controller's frames in
+    its ``__traceback__``): ``traceback.print_exception(err)`` shows both."""
 
     def __init__(self, t: float, reason: str, trajectory: Trajectory):
         super().__init__(f"run stopped at t = {t:.6g} s: {reason}")
@@ -63,8 +67,9 @@ def simulate(
     sink : object with ``write(rows)``, optional
         Receives each batch of output rows as soon as it is computed.
     controller : Controller, optional
-        A controller instance to use instead of the scene's ``[controller]`` (which the scene
-        must still have, for its period and sensor).
+        A controller instance to use instead of the law named in the scene's ``[controller]``
+        table; the scene must still have that table, for the period and the sensor (a scene
+        without one is refused, never run open loop).
     fused : bool
         Run controller and dynamics in one compiled loop when the controller offers a symbolic
         form and the scene allows it (RK4 at one step per period, no discontinuity, no sensor
@@ -73,10 +78,17 @@ def simulate(
     Raises
     ------
     SimulationError
-        The run failed part-way; ``.trajectory`` has the rows up to ``.t``.
+        The run failed part-way; ``.trajectory`` has the rows up to ``.t``. A controller that
+        raised or returned a bad command is one (its exception is the ``__cause__``).
+    TypeError
+        ``controller`` is not a :class:`Controller` instance.
+    ValueError
+        ``controller`` given for a scene without a ``[controller]`` table; bad overrides.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
+    if controller is not None:
+        _check_controller_argument(scene, controller)
     sim = scene.simulation
     formulation = formulation or sim.formulation
     integrator = integrator or sim.integrator
@@ -122,7 +134,9 @@ def simulate(
             loop.run()
         except (IntegrationError, ControllerFailure) as e:
             meta.update(status="failed", stopped_at=e.t, summary=loop.summary())
-            raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from None
+            # the controller's own exception, if it raised, stays chained for the API user and
+            # the CLI's STATIONBED_DEBUG traceback; the loop's internals are not
+            raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from e.__cause__
         meta.update(status="ok", wall_s=time.perf_counter() - wall0, n_rhs=integ.n_rhs, n_steps=integ.n_steps)
         meta["summary"] = loop.summary()
         return rows.trajectory(meta)
@@ -158,3 +172,24 @@ def simulate(
         n_steps=integ.n_steps,
     )
     return rows.trajectory(meta)
+
+
+def _check_controller_argument(scene: Scene, controller) -> None:
+    """Refuse a ``controller=`` that would be ignored or misused: not an instance, or a scene
+    without a ``[controller]`` table (which gives the period and the sensor)."""
+    if not isinstance(controller, Controller):
+        if isinstance(controller, type) and issubclass(controller, Controller):
+            raise TypeError(
+                f"simulate(controller=...) takes a Controller instance, got the class {controller.__name__}: "
+                f"pass {controller.__name__}(...)"
+            )
+        raise TypeError(
+            f"simulate(controller=...) takes a Controller instance, got {type(controller).__name__}; "
+            "to choose a law by name, set the scene's controller.name"
+        )
+    if scene.controller is None:
+        raise ValueError(
+            f"simulate(controller={controller.name or type(controller).__name__!r}): scene {scene.name!r} has no "
+            "[controller] table; add one (name, period, optional sensor): the object replaces the law it "
+            "names, the table gives the period and the sensor"
+        )

@@ -6,7 +6,7 @@ import difflib
 import tomllib
 from pathlib import Path
 
-from pydantic import BaseModel, ValidationError, model_validator
+from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .base import SceneError, Strict
 from .tables import TAGS, Appendage, Body, Cmg, ControllerSpec, Initial, Orbit, Simulation, Sun, Torque
@@ -28,6 +28,7 @@ class Scene(Strict):
     sun: Sun | None = None
     cmg: Cmg | None = None
     controller: ControllerSpec | None = None
+    _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -61,6 +62,12 @@ class Scene(Strict):
 
     # -- convenience -------------------------------------------------------------------
     @property
+    def folder(self) -> Path | None:
+        """The folder of the file the scene was loaded from (relative file names in the scene,
+        e.g. ``controller.name = "laws/x.py:X"``, are found there); None when built from a dict."""
+        return self._folder
+
+    @property
     def appendage_names(self) -> list[str]:
         """The appendages' names, in the file's order."""
         return [a.name for a in self.appendage]
@@ -77,7 +84,9 @@ class Scene(Strict):
             for k in keys[:-1]:
                 node = node[k]
             node[keys[-1]] = value
-        return scene_from_dict(data, source=f"scene {self.name!r}")
+        new = scene_from_dict(data, source=f"scene {self.name!r}")
+        new._folder = self._folder
+        return new
 
 
 # ---------------------------------------------------------------------------------------
@@ -180,4 +189,6 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(f"{path}: not a UTF-8 text file") from None
     except tomllib.TOMLDecodeError as e:
         raise SceneError(f"{path}: malformed TOML ({e})") from None
-    return scene_from_dict(data, source=str(path))
+    scene = scene_from_dict(data, source=str(path))
+    scene._folder = path.resolve().parent
+    return scene
