@@ -8,7 +8,8 @@
 
 Any bad input or failed run: one line on stderr (``stationbed: error: ...``), non-zero exit
 (2 = bad input, 1 = the run or the check failed), and whatever was computed kept on disk.
-Set ``STATIONBED_DEBUG=1`` to see the Python traceback instead.
+Set ``STATIONBED_DEBUG=1`` to see the Python traceback (with its chained cause, e.g. the
+frames of a controller that raised) before that line.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import math
 import os
 import re
 import sys
+import traceback
 from pathlib import Path
 
 EXIT_FAILED = 1
@@ -84,6 +86,16 @@ def _parser() -> argparse.ArgumentParser:
     sb.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="default: all cases")
     sb.add_argument("--quick", action="store_true", help="shrink every case to seconds (tests, CI)")
     return p
+
+
+#: set to print the Python traceback (with the chained cause, e.g. a controller's own frames)
+#: before the one-line error
+DEBUG_ENV = "STATIONBED_DEBUG"
+
+
+def _debug_traceback(e: BaseException) -> None:
+    if os.environ.get(DEBUG_ENV):
+        traceback.print_exception(e)
 
 
 def _fail(msg: str, code: int) -> int:
@@ -174,7 +186,7 @@ def _validate(scene, args) -> None:
     prepare(scene, args.formulation, args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
     spec = scene.controller
     if spec is not None:
-        get_controller(spec.name)(period=spec.period, **spec.params)
+        get_controller(spec.name, base_dir=scene.folder)(period=spec.period, **spec.params)
 
 
 def _run(args, recorder) -> int:
@@ -213,6 +225,7 @@ def _run(args, recorder) -> int:
             where = f"up to t = {counted.last_t:g} s " if counted.n_rows else ""
             return _fail(f"interrupted; {counted.n_rows} rows {where}kept in {partial}", EXIT_FAILED)
         except SimulationError as e:
+            _debug_traceback(e)
             if args.rrd:  # finish the recording first: the message says whether it is complete
                 rrd_error = sink.close()
             status.update(e.trajectory.meta, rows_file=partial.name)
@@ -331,7 +344,7 @@ def _cmd_list(args) -> int:
     from .model.cmg import STEERING_LAWS
     from .run.controller import controller_registry
 
-    print("controllers (or module:Class):")
+    print("controllers (or module:Class, or path/file.py:Class relative to the scene):")
     for n, c in sorted(controller_registry().items()):
         doc = (sys.modules[c.__module__].__doc__ or "").strip().splitlines()
         line = doc[0].split(":", 1)[-1].strip() if doc else ""
@@ -469,13 +482,15 @@ def main(argv=None) -> int:
     try:
         return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study}[args.cmd](args)
     except SceneError as e:
+        _debug_traceback(e)
         return _fail(str(e), EXIT_BAD_INPUT)
     except ValueError as e:  # unknown formulation/integrator names and other bad arguments
+        _debug_traceback(e)
         return _fail(str(e), EXIT_BAD_INPUT)
     except KeyboardInterrupt:  # before a run opened its outputs (a run reports its own rows)
         return _fail("interrupted", EXIT_FAILED)
     except Exception as e:  # never a traceback for a user; keep it one line
-        if os.environ.get("STATIONBED_DEBUG"):
+        if os.environ.get(DEBUG_ENV):
             raise
         return _fail(f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}", EXIT_FAILED)
 

@@ -589,3 +589,13 @@ def test_module_name_of_a_file_beside_the_scene_suggests_the_file_form(tmp_path)
     (tmp_path / "user_laws.py").write_text(USER_MODULE.format(message="x"))
     with pytest.raises(ControllerError, match=r"cannot import module 'user_laws'.*name it 'user_laws\.py:Boom'"):
         get_controller("user_laws:Boom", base_dir=tmp_path)
+
+
+def test_cli_debug_flag_prints_the_controllers_traceback(tmp_path, monkeypatch):
+    """STATIONBED_DEBUG=1: the controller's own frame is printed (chained cause), then the one
+    error line; exit 1 as without the flag."""
+    monkeypatch.setenv("STATIONBED_DEBUG", "1")
+    res = _cli_case(tmp_path, "user_laws:Boom")
+    assert res.returncode == 1
+    assert "user_laws.py" in res.stderr and "in _update" in res.stderr
+    assert res.stderr.strip().splitlines()[-1].startswith("stationbed: error: run stopped at t = 5 s")
