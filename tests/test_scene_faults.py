@@ -341,3 +341,7 @@ def test_numpy_and_tuples_from_python_are_arrays_and_numbers():
     scene = scene_from_dict(d)
     assert (scene.initial.omega_BN_B, scene.body.cm, scene.controller.sensor.seed, scene.simulation.impulse_jump) == (
         [0.0, 1e-3, 0.0], [0.0, 0.0, 0.1], 5, False)
+
+
+def test_replace_takes_the_mapping_as_keywords_too(scene):
+    assert scene.replace(**{"simulation.rtol": 1e-10}) == scene.replace({"simulation.rtol": 1e-10})

@@ -73,8 +73,11 @@ class Scene(Strict):
         """The appendages' names, in the file's order."""
         return [a.name for a in self.appendage]
 
-    def replace(self, changes: Mapping[str, object], *, source: str | None = None) -> "Scene":
+    def replace(self, changes: Mapping[str, object] | None = None, /, *, source: str | None = None, **more) -> "Scene":
         """A copy with values changed at key paths, validated as a whole like a file.
+
+        ``scene.replace({"simulation.rtol": 1e-10, "appendage.stbd.mass": 3e3})``; the same
+        mapping may be spelled as keywords, ``scene.replace(**{"simulation.rtol": 1e-10})``.
 
         Parameters
         ----------
@@ -84,7 +87,10 @@ class Scene(Strict):
             values as TOML gives them (a table as a dict). A table missing from the scene is
             created, as a dotted key in TOML does; an assigned table replaces the old one.
         source : str, optional
-            Starts the error message (default: ``scene '<name>'``).
+            Starts the error message (default: ``scene '<name>'``); the command line gives
+            ``"<file> with --set"``.
+        **more
+            More changes (key paths that are not Python names need ``**{...}``).
 
         Raises
         ------
@@ -94,7 +100,7 @@ class Scene(Strict):
         """
         source = source or f"scene {self.name!r}"
         data, defaults = self.model_dump(exclude_unset=True), self.model_dump()
-        for path, value in changes.items():
+        for path, value in {**(changes or {}), **more}.items():
             try:
                 _assign(data, defaults, path, value)
             except KeyPathError as e:

@@ -38,7 +38,7 @@ def cmg_singularity(ctx: Context) -> Case:
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(15, 5.5), constrained_layout=True)
     rows = []
     for law in typing.get_args(Cmg.model_fields["steering"].annotation):
-        sc = scene.replace({"cmg.steering": law})
+        sc = scene.replace(**{"cmg.steering": law})
         tr, status = try_simulate(sc, None, None, duration=duration)
         if tr is None or status != "ok":
             case.add(law, math.nan, "N m", status)

@@ -37,7 +37,7 @@ def rate_step(ctx: Context) -> Case:
     fig, ax = plt.subplots(figsize=(10, 5.5), constrained_layout=True)
     rows = []
     for f, jump in variants:
-        sc = scene if jump is None else scene.replace({"simulation.impulse_jump": jump})
+        sc = scene if jump is None else scene.replace(**{"simulation.impulse_jump": jump})
         label = f if jump is None else f"{f} ({'jump applied' if jump else 'no jump handling'})"
         tr, status = try_simulate(sc, f, None, duration=duration)
         if tr is None or status != "ok":
