@@ -1,13 +1,20 @@
 """Scene files (TOML, SI, radians) -> validated, frozen :class:`Scene` objects.
 
-The schema is DESIGN §5. Parsing is ``tomllib``; validation is pydantic (``extra="forbid"``,
-no NaN/inf). Every failure becomes a :class:`SceneError` whose message is one line naming the
-file, the field path and the reason, with the nearest valid key suggested for typos.
+The schema is DESIGN §5. Parsing is ``tomllib``; validation is pydantic in strict mode
+(``extra="forbid"``, no NaN/inf, no ``true`` or ``"100"`` for a number). Every failure becomes a
+:class:`SceneError` whose message is one line naming the file, the field path and the reason
+(with what was given, and the nearest valid key for typos). :meth:`Scene.replace` changes
+values at key paths (the command line's ``--set``, read by :func:`parse_assignment`) and
+validates the result the same way.
 """
 
-from .base import QUAT_NORM_TOL, SceneError
+from .assign import parse_assignment, parse_assignments
+from .base import ATOL_MIN, MIN_TIME_S, QUAT_NORM_TOL, RTOL_MIN, TIME_RESOLUTION, SceneError
 from .load import Scene, load_scene, scene_from_dict
 from .tables import *  # noqa: F401,F403  (every table class, for callers and tests)
 from .tables import __all__ as _tables
 
-__all__ = ["Scene", "SceneError", "load_scene", "scene_from_dict", "QUAT_NORM_TOL", *_tables]
+__all__ = [
+    "Scene", "SceneError", "load_scene", "scene_from_dict", "parse_assignment", "parse_assignments",
+    "QUAT_NORM_TOL", "RTOL_MIN", "ATOL_MIN", "MIN_TIME_S", "TIME_RESOLUTION", *_tables,
+]

@@ -1,21 +1,27 @@
-"""The whole scene (:class:`Scene`), and loading it from TOML or a dict with one-line errors."""
+"""The whole scene (:class:`Scene`), loading it from TOML or a dict, and changing it by key path,
+with one-line errors."""
 
 from __future__ import annotations
 
+import copy
 import difflib
 import tomllib
+import typing
+from collections.abc import Mapping
 from pathlib import Path
 
 from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
-from .base import SceneError, Strict
+from .assign import KeyPathError, split_path
+from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
 from .tables import TAGS, Appendage, Body, Cmg, ControllerSpec, Initial, Orbit, Simulation, Sun, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict"]
 
 
 class Scene(Strict):
-    """A validated scene. Build it with :func:`load_scene` or :func:`scene_from_dict`."""
+    """A validated scene. Build it with :func:`load_scene` or :func:`scene_from_dict`; change it
+    with :meth:`replace`."""
 
     name: str
     description: str = ""
@@ -35,29 +41,31 @@ class Scene(Strict):
         names = [a.name for a in self.appendage]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
-            raise ValueError(f"appendage names must be unique, repeated: {sorted(dup)}")
+            raise FieldError("appendage", f"names must be unique, repeated: {sorted(dup)}")
         if self.orbit is None:
             if self.initial.frame == "lvlh":
-                raise ValueError("initial.frame = 'lvlh' needs an [orbit] table")
-            for t in self.torque:
+                raise FieldError("initial.frame", "'lvlh' needs an [orbit] table")
+            for i, t in enumerate(self.torque):
                 if t.needs_orbit:
-                    raise ValueError(f"torque kind '{t.kind}' needs an [orbit] table")
+                    raise FieldError(f"torque[{i}].kind", f"'{t.kind}' needs an [orbit] table")
             if self.sun is not None and self.sun.beta is not None:
-                raise ValueError("sun.beta needs an [orbit] table (or give sun.direction_N)")
-        tracking = [a.name for a in self.appendage if a.tracks_sun]
-        if tracking and self.sun is None:
-            raise ValueError(f"appendage '{tracking[0]}' tracks the sun: add a [sun] table")
+                raise FieldError("sun.beta", "needs an [orbit] table (or give sun.direction_N)")
+        for i, a in enumerate(self.appendage):
+            if a.tracks_sun and self.sun is None:
+                raise FieldError(f"appendage[{i}]", f"'{a.name}' tracks the sun: add a [sun] table")
         if self.controller is not None:
-            c = self.controller
-            ticks = self.simulation.output_dt / c.period
+            c, sim = self.controller, self.simulation
+            if c.period < TIME_RESOLUTION * sim.duration:
+                raise FieldError("controller.period", f"{c.period:g} s is below {TIME_RESOLUTION:g} of the duration "
+                                                      f"({sim.duration:g} s), finer than the time grid resolves")
+            ticks = sim.output_dt / c.period
             if abs(ticks - round(ticks)) > 1e-9 * ticks or round(ticks) < 1:
-                raise ValueError(
-                    f"simulation.output_dt ({self.simulation.output_dt} s) must be a whole number of "
-                    f"controller periods ({c.period} s)"
-                )
+                raise FieldError("simulation.output_dt", f"{sim.output_dt:g} s is not a whole number of controller "
+                                                         f"periods ({c.period:g} s)")
             d = c.sensor.delay / c.period
             if abs(d - round(d)) > 1e-9 * max(d, 1.0):
-                raise ValueError(f"controller.sensor.delay ({c.sensor.delay} s) must be a whole number of periods")
+                raise FieldError("controller.sensor.delay", f"{c.sensor.delay:g} s is not a whole number of "
+                                                            f"controller periods ({c.period:g} s)")
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -72,43 +80,147 @@ class Scene(Strict):
         """The appendages' names, in the file's order."""
         return [a.name for a in self.appendage]
 
-    def replace(self, **changes) -> "Scene":
-        """A copy with dotted-path changes, e.g. ``replace(**{"simulation.rtol": 1e-12})``.
+    def replace(self, changes: Mapping[str, object] | None = None, /, *, source: str | None = None, **more) -> "Scene":
+        """A copy with values changed at key paths, validated as a whole like a file.
 
-        The copy is re-validated, so a bad value raises :class:`SceneError`.
+        ``scene.replace({"simulation.rtol": 1e-10, "appendage.stbd.mass": 3e3})``; the same
+        mapping may be spelled as keywords, ``scene.replace(**{"simulation.rtol": 1e-10})``.
+
+        Parameters
+        ----------
+        changes : mapping of str to object
+            ``{key path: value}`` (see :mod:`stationbed.scene.assign` for the paths:
+            ``"simulation.rtol"``, ``"appendage[0].alpha.rate"``, ``"appendage.stbd.mass"``),
+            values as TOML gives them (a table as a dict). A table missing from the scene is
+            created, as a dotted key in TOML does; an assigned table replaces the old one.
+        source : str, optional
+            Starts the error message (default: ``scene '<name>'``); the command line gives
+            ``"<file> with --set"``.
+        **more
+            More changes (key paths that are not Python names need ``**{...}``).
+
+        Raises
+        ------
+        SceneError
+            One line naming the field: an unknown key (with the nearest valid one), an entry
+            that does not exist, or a value the file would refuse, with the file's message.
         """
-        data = self.model_dump()
-        for path, value in changes.items():
-            node = data
-            keys = path.split(".")
-            for k in keys[:-1]:
-                node = node[k]
-            node[keys[-1]] = value
-        new = scene_from_dict(data, source=f"scene {self.name!r}")
+        source = source or f"scene {self.name!r}"
+        data, defaults = self.model_dump(exclude_unset=True), self.model_dump()
+        for path, value in {**(changes or {}), **more}.items():
+            try:
+                _assign(data, defaults, path, value)
+            except KeyPathError as e:
+                raise SceneError(f"{source}: {e}") from None
+        new = scene_from_dict(data, source=source)
         new._folder = self._folder
         return new
+
+
+# ---------------------------------------------------------------------------------------
+# changing a scene's data by key path
+# ---------------------------------------------------------------------------------------
+
+
+def _assign(data: dict, defaults: dict, path: str, value) -> None:
+    """Put ``value`` at ``path`` in ``data`` (a scene's own keys; ``defaults`` has every key).
+
+    Keys are checked against the tables (an unknown one gets the nearest valid key, as in a
+    file); below a free-form table (``controller.params``) or a choice of tables (a joint, a
+    torque) the final validation checks them. A missing table is created, a missing array is
+    taken from ``defaults``."""
+    if not isinstance(path, str):
+        raise KeyPathError(f"{path!r} is not a key path")
+    keys = split_path(path)
+    model: type[BaseModel] | None = Scene  # the table class at ``node``, when there is exactly one
+    node, full, where = data, defaults, ""
+    for n, key in enumerate(keys):
+        here = f"{where}[{key}]" if isinstance(key, int) else (f"{where}.{key}" if where else key)
+        if isinstance(node, list):
+            if isinstance(key, str):
+                key = _index_by_name(node, key, where, here)
+            if not 0 <= key < len(node):
+                raise KeyPathError(f"{here}: no such entry ({where} has {len(node)})")
+        elif isinstance(node, dict):
+            if isinstance(key, int):
+                raise KeyPathError(f"{here}: {where} is a table, not an array")
+            if model is not None and key not in model.model_fields:
+                raise KeyPathError(f"{here}: {_unknown_key(model, key)}")
+        else:
+            raise KeyPathError(f"{here}: {where} is a value, not {'an array' if isinstance(key, int) else 'a table'}")
+        if n == len(keys) - 1:
+            node[key] = value
+            return
+        if isinstance(key, str) and model is not None:
+            model = _inner_model(model.model_fields[key].annotation)
+        full = _child(full, key)
+        child = _child(node, key)
+        if child is None:  # not in the file: a table is created, an array starts as its default
+            child = copy.deepcopy(full) if isinstance(full, list) else {}
+            node[key] = child
+        node, where = child, here
+
+
+def _child(node, key):
+    if isinstance(node, dict):
+        return node.get(key)
+    if isinstance(node, list) and isinstance(key, int) and 0 <= key < len(node):
+        return node[key]
+    return None
+
+
+def _index_by_name(entries: list, name: str, where: str, here: str) -> int:
+    names = [e.get("name") if isinstance(e, dict) else None for e in entries]
+    if not any(isinstance(x, str) for x in names):
+        raise KeyPathError(f"{here}: {where} entries have no names; use {where}[i]")
+    if name in names:
+        return names.index(name)
+    close = difflib.get_close_matches(name, [x for x in names if isinstance(x, str)], n=1, cutoff=0.5)
+    hint = f"; did you mean '{close[0]}'?" if close else f"; names: {', '.join(x for x in names if isinstance(x, str))}"
+    raise KeyPathError(f"{here}: no {where} named '{name}'{hint}")
 
 
 # ---------------------------------------------------------------------------------------
 # error formatting
 # ---------------------------------------------------------------------------------------
 
+#: what a field of each strict type takes, for "must be ..., got ..." messages
+_EXPECTED = {
+    "float_type": "a number", "int_type": "an integer", "bool_type": "true or false", "string_type": "a string",
+    "list_type": "an array", "dict_type": "a table", "model_type": "a table", "model_attributes_type": "a table",
+}
+#: pydantic's bound checks -> (words, ctx key), the bound printed with %g ("1e-06", not "0.000001")
+_BOUNDS = {
+    "greater_than": ("greater than", "gt"), "greater_than_equal": ("greater than or equal to", "ge"),
+    "less_than": ("less than", "lt"), "less_than_equal": ("less than or equal to", "le"),
+}
+#: longest rendering of a given value in a message [characters]
+_GIVEN_CHARS = 40
 
 
-def _valid_keys(model: type[BaseModel]) -> list[str]:
-    return list(model.model_fields)
+def _models_in(annotation) -> list[type[BaseModel]]:
+    """The table classes an annotation holds (``list[Appendage]``, ``Orbit | None``, a union ...)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in typing.get_args(annotation) for m in _models_in(arg) if m]
+
+
+def _inner_model(annotation) -> type[BaseModel] | None:
+    """The one table class an annotation holds, or None (none, or a choice of several)."""
+    models = set(_models_in(annotation))
+    return models.pop() if len(models) == 1 else None
 
 
 def _model_at(loc: tuple) -> type[BaseModel] | None:
     """The pydantic model class that owns the field at ``loc[:-1]`` (for key suggestions)."""
     model: type[BaseModel] | None = Scene
     for part in loc[:-1]:
+        if part in TAGS:  # pydantic's tag of the table chosen in a union
+            model = TAGS[part]
+            continue
         if model is None:
             return None
         if isinstance(part, int):
-            continue
-        if part in TAGS:
-            model = TAGS[part]
             continue
         field = model.model_fields.get(part)
         if field is None:
@@ -117,16 +229,11 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
     return model
 
 
-def _inner_model(annotation) -> type[BaseModel] | None:
-    import typing
-
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-        return annotation
-    for arg in typing.get_args(annotation):
-        m = _inner_model(arg)
-        if m is not None:
-            return m
-    return None
+def _unknown_key(model: type[BaseModel], key: str) -> str:
+    """``unknown key; did you mean '<nearest>'?`` (or the valid keys) for ``key`` in ``model``."""
+    valid = list(model.model_fields)
+    close = difflib.get_close_matches(str(key), valid, n=1, cutoff=0.5)
+    return f"unknown key; did you mean '{close[0]}'?" if close else f"unknown key; valid keys: {', '.join(valid)}"
 
 
 def _path(loc: tuple) -> str:
@@ -138,7 +245,33 @@ def _path(loc: tuple) -> str:
             continue  # pydantic's discriminator tag, not a user key
         else:
             out += ("." if out else "") + str(part)
-    return out or "(top level)"
+    return out
+
+
+def _given(value) -> str:
+    """``value`` as a TOML file writes it, shortened for a one-line message."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        try:
+            text = str(value)
+        except ValueError:  # past Python's digit limit for int -> str
+            return "an integer of over 4300 digits"
+        return text if len(text) <= 20 else f"an integer of {len(text.lstrip('-'))} digits"
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        text = repr(value)[1:-1].replace('"', '\\"')
+        return f'"{text}"' if len(text) <= _GIVEN_CHARS else f'"{text[:_GIVEN_CHARS - 3]}..."'
+    if isinstance(value, (dict, BaseModel)):
+        return "a table"
+    if isinstance(value, list):
+        inner = ", ".join(_given(v) if not isinstance(v, (list, dict)) else "[...]" for v in value[:4])
+        text = f"[{inner}{', ...' if len(value) > 4 else ''}]"
+        return text if len(text) <= _GIVEN_CHARS else f"an array of {len(value)}"
+    if hasattr(value, "isoformat"):  # TOML dates and times
+        return value.isoformat()
+    return type(value).__name__
 
 
 def _one_line(err: ValidationError) -> str:
@@ -148,30 +281,56 @@ def _one_line(err: ValidationError) -> str:
     loc = tuple(e["loc"])
     path = _path(loc)
     etype = e["type"]
+    more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
     if etype == "extra_forbidden":
         model = _model_at(loc)
-        hint = ""
-        if model is not None:
-            close = difflib.get_close_matches(str(loc[-1]), _valid_keys(model), n=1, cutoff=0.5)
-            hint = f"; did you mean '{close[0]}'?" if close else f"; valid keys: {', '.join(_valid_keys(model))}"
-        return f"{path}: unknown key{hint}"
+        return f"{path}: {_unknown_key(model, loc[-1]) if model is not None else 'unknown key'}"
     if etype == "missing":
         return f"{path}: missing required key"
     if etype == "finite_number":
         return f"{path}: must be a finite number, not NaN or inf"
     if etype in ("too_short", "too_long"):
         return f"{path}: wrong length ({e['msg'].lower()})"
+    given = e.get("input")
+    if etype == "float_type" and isinstance(given, int) and not isinstance(given, bool):
+        return f"{path}: must be a finite number, got {_given(given)}"  # an integer too large for a double
+    if etype in _EXPECTED:
+        return f"{path}: must be {_EXPECTED[etype]}, got {_given(given)}{more}"
+    if etype in _BOUNDS:
+        words, key = _BOUNDS[etype]
+        return f"{path}: must be {words} {e['ctx'][key]:g}, got {_given(given)}{more}"
+    cause = e.get("ctx", {}).get("error")
+    if isinstance(cause, FieldError):  # a table's cross-field check naming its field
+        return f"{path + '.' if path else ''}{cause.field}: {cause.reason}{more}"
     msg = e["msg"].removeprefix("Value error, ")
-    more = f" (and {len(err.errors()) - 1} more problem(s))" if len(err.errors()) > 1 else ""
-    return f"{path}: {msg}{more}"
+    if etype == "value_error":  # the scene's own checks say what they found
+        return f"{path or '(top level)'}: {msg}{more}"
+    msg = msg.replace("Input should be", "must be", 1)
+    return f"{path or '(top level)'}: {msg}, got {_given(given)}{more}"
+
+
+def _plain(value):
+    """``value`` as TOML would give it: tuples and numpy arrays as lists, numpy scalars as Python
+    numbers (a scene built in Python); everything else unchanged, for the strict types to judge."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):
+        return _plain(value.tolist())
+    return value
 
 
 def scene_from_dict(data: dict, source: str = "scene") -> Scene:
-    """Validate a scene given as a dict (the parsed TOML)."""
+    """Validate a scene given as a dict (the parsed TOML, or built in Python: tuples and numpy
+    values are taken as TOML arrays and numbers); raises :class:`SceneError` with a one-line
+    reason starting with ``source``."""
     try:
-        return Scene.model_validate(data)
+        return Scene.model_validate(_plain(data))
     except ValidationError as err:
         raise SceneError(f"{source}: {_one_line(err)}") from None
+    except RecursionError:
+        raise SceneError(f"{source}: values nested too deeply") from None
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -187,8 +346,11 @@ def load_scene(path: str | Path) -> Scene:
         data = tomllib.loads(text.decode("utf-8"))
     except UnicodeDecodeError:
         raise SceneError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: malformed TOML ({e})") from None
+    except RecursionError:
+        raise SceneError(f"{path}: malformed TOML (arrays or tables nested too deeply)") from None
+    except ValueError as e:  # TOMLDecodeError, or an integer past Python's digit limit
+        reason = str(e).split(";")[0].splitlines()[0]
+        raise SceneError(f"{path}: malformed TOML ({reason})") from None
     scene = scene_from_dict(data, source=str(path))
     scene._folder = path.resolve().parent
     return scene

@@ -12,7 +12,7 @@ from pydantic import ConfigDict, Discriminator, Field, Tag, field_validator, mod
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.beam import beam_mode, check_participation
 from ..core.massprops import InvalidMassProperties, check_inertia
-from .base import QUAT_NORM_TOL, Mat3, Strict, Vec3
+from .base import QUAT_NORM_TOL, TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3
 
 __all__ = [
     "RateStep", "Profile", "SunTrack", "Joint", "Simulation", "Initial", "Body", "Beam", "Mode", "Appendage",
@@ -80,18 +80,31 @@ TAGS = {}
 
 class Simulation(Strict):
     """``[simulation]``: duration [s], formulation, integrator, rtol, atol (dimensionless), output_dt [s],
-    step [s] for fixed-step integrators."""
-    duration: float = Field(gt=0.0)
+    step [s] for fixed-step integrators.
+
+    Times are at least ``MIN_TIME_S`` and the intervals at least ``TIME_RESOLUTION`` of the
+    duration; ``rtol`` lies in [``RTOL_MIN``, 1), ``atol`` is at least ``ATOL_MIN`` (see base.py
+    for the reasons)."""
+    duration: TimeS
     formulation: str = "momentum"
     integrator: str = "dop853"
-    rtol: float = Field(default=1e-9, gt=0.0, lt=1.0)
-    atol: float = Field(default=1e-12, gt=0.0)
-    output_dt: float = Field(default=10.0, gt=0.0)
-    step: float | None = Field(default=None, gt=0.0)  # fixed-step integrators [s]
-    max_step: float | None = Field(default=None, gt=0.0)  # adaptive integrators [s]
+    rtol: Rtol = 1e-9
+    atol: Atol = 1e-12
+    output_dt: TimeS = 10.0
+    step: TimeS | None = None  # fixed-step integrators [s]
+    max_step: TimeS | None = None  # adaptive integrators [s]
     # at an array-rate step (impulse), re-initialise omega-state formulations so that H is
     # continuous (omega jumps); false integrates through it (the stability study's failure case)
     impulse_jump: bool = True
+
+    @model_validator(mode="after")
+    def _resolved(self):
+        for key in ("output_dt", "step", "max_step"):
+            dt = getattr(self, key)
+            if dt is not None and dt < TIME_RESOLUTION * self.duration:
+                raise FieldError(key, f"{dt:g} s is below {TIME_RESOLUTION:g} of the duration ({self.duration:g} s), "
+                                      "finer than the time grid resolves")
+        return self
 
 
 class Initial(Strict):
@@ -218,20 +231,35 @@ class Appendage(Body):
         return self
 
 
+def _angle_within(angle: float, low: float, high: float, text: str) -> float:
+    """``angle`` [rad] if it lies in [low, high]; else a ValueError that suspects degrees."""
+    if not low <= angle <= high:
+        raise ValueError(f"must be within {text} rad, got {angle:g} (an angle in degrees?)")
+    return angle
+
+
 class Orbit(Strict):
     """``[orbit]``: circular orbit (radius or altitude [m], inclination and u0 [rad], mu [m³/s²]),
     gravity gradient on or off."""
     radius: float | None = Field(default=None, gt=0.0)
     altitude: float | None = Field(default=None, gt=0.0)
-    inclination: float = 0.0
+    inclination: float = 0.0  # in [0, pi]
     u0: float = 0.0
     mu: float = Field(default=MU_EARTH_M3_S2, gt=0.0)
     gravity_gradient: bool = True
+
+    @field_validator("inclination")
+    @classmethod
+    def _inclination(cls, i):
+        return _angle_within(i, 0.0, math.pi, "[0, pi]")
 
     @model_validator(mode="after")
     def _one_size(self):
         if (self.radius is None) == (self.altitude is None):
             raise ValueError("give exactly one of 'radius' or 'altitude'")
+        if self.radius is not None and self.radius <= R_EARTH_M:
+            raise FieldError("radius", f"{self.radius:.10g} m is inside the Earth (equatorial radius {R_EARTH_M:.10g} m): "
+                                       "give the distance from the Earth's centre, or 'altitude'")
         return self
 
     @property
@@ -302,9 +330,14 @@ class Sun(Strict):
     need an [orbit]; or ``direction_N`` (any non-zero vector, normalised).
     """
 
-    beta: float | None = None
+    beta: float | None = None  # in [-pi/2, pi/2]
     u_noon: float = 0.0
     direction_N: Vec3 | None = None
+
+    @field_validator("beta")
+    @classmethod
+    def _elevation(cls, beta):
+        return beta if beta is None else _angle_within(beta, -math.pi / 2, math.pi / 2, "[-pi/2, pi/2]")
 
     @model_validator(mode="after")
     def _one(self):
@@ -401,14 +434,14 @@ class Sensor(Strict):
     attitude_noise: float = Field(default=0.0, ge=0.0)  # rad, 1 sigma per axis (small rotation)
     rate_noise: float = Field(default=0.0, ge=0.0)  # rad/s, 1 sigma per axis
     delay: float = Field(default=0.0, ge=0.0)  # s, whole controller periods
-    seed: int = 0
+    seed: int = Field(default=0, ge=0)  # numpy's random generator takes a non-negative integer
 
 
 class ControllerSpec(Strict):
     """``[controller]``: a registry name (controllers/) or ``module:Class``, its period and parameters."""
 
     name: str
-    period: float = Field(default=0.1, gt=0.0)  # s
+    period: TimeS = 0.1  # s
     params: dict[str, Any] = {}
     sensor: Sensor = Sensor()
 
