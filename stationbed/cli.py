@@ -45,6 +45,47 @@ def _positive(name):
     return conv
 
 
+#: run options that are scene values: each is validated by the scene, like the file's own value
+SCENE_OPTIONS = {
+    "formulation": "simulation.formulation",
+    "integrator": "simulation.integrator",
+    "rtol": "simulation.rtol",
+    "atol": "simulation.atol",
+    "duration": "simulation.duration",
+    "step": "simulation.step",
+    "output_dt": "simulation.output_dt",
+}
+
+
+def _scene_options(p, formulation: bool = True) -> None:
+    if formulation:  # (check runs every formulation)
+        p.add_argument("--formulation", default=None, help="simulation.formulation")
+    p.add_argument("--integrator", default=None, help="simulation.integrator")
+    p.add_argument("--rtol", type=float, default=None, help="simulation.rtol")
+    p.add_argument("--atol", type=float, default=None, help="simulation.atol (dimensionless)")
+    p.add_argument("--duration", type=float, default=None, help="simulation.duration [s]")
+    p.add_argument("--output-dt", type=float, default=None, help="simulation.output_dt [s]")
+    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="change one scene value, read as TOML (repeatable): --set simulation.rtol=1e-10, "
+                        "--set appendage.stbd.mass=3e3, --set 'simulation.integrator=\"rk4\"'")
+
+
+def _scene_with_options(args):
+    """The scene file with ``--set`` and the run options applied, validated like the file
+    (``--rtol 2`` fails as ``rtol = 2`` in the file would); returns ``(scene, changes)``."""
+    from .scene import load_scene, parse_assignments
+
+    changes = parse_assignments(args.set)
+    for flag, key in SCENE_OPTIONS.items():
+        value = getattr(args, flag, None)
+        if value is not None:
+            changes[key] = value
+    scene = load_scene(args.scene)
+    if changes:
+        scene = scene.replace(changes, source=f"{args.scene} with the command-line options")
+    return scene, changes
+
+
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="stationbed", description="Space-station attitude control test bed")
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
@@ -52,18 +93,13 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="simulate a scene, write trajectory.csv (and a rerun recording)")
     r.add_argument("scene", type=Path)
     r.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene name>)")
-    r.add_argument("--formulation", default=None)
-    r.add_argument("--integrator", default=None)
-    r.add_argument("--rtol", type=_positive("--rtol"), default=None)
-    r.add_argument("--atol", type=_positive("--atol"), default=None)
-    r.add_argument("--duration", type=_positive("--duration"), default=None, help="[s]")
-    r.add_argument("--step", type=_positive("--step"), default=None, help="fixed step [s]")
+    _scene_options(r)
+    r.add_argument("--step", type=float, default=None, help="fixed step [s] (simulation.step)")
     r.add_argument("--rrd", type=Path, default=None, help="also write a rerun recording")
 
     c = sub.add_parser("check", help="run every formulation and compare them")
     c.add_argument("scene", type=Path)
-    c.add_argument("--rtol", type=_positive("--rtol"), default=None)
-    c.add_argument("--duration", type=_positive("--duration"), default=None, help="[s]")
+    _scene_options(c, formulation=False)
     c.add_argument("--rrd", type=Path, default=None, help="all formulations in one recording")
 
     sub.add_parser("list", help="registered formulations and integrators")
@@ -176,28 +212,27 @@ def _write_json(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
-def _validate(scene, args) -> None:
+def _validate(scene) -> None:
     """Everything that can be refused before an output is opened: the formulation and integrator
     names, the step, the controller and its parameters (the compiled system is built here and
     reused by the run)."""
     from .run.controller import get_controller
     from .run.prepare import prepare
 
-    prepare(scene, args.formulation, args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
+    prepare(scene)
     spec = scene.controller
     if spec is not None:
         get_controller(spec.name, base_dir=scene.folder)(period=spec.period, **spec.params)
 
 
 def _run(args, recorder) -> int:
-    from .scene import load_scene
     from .run.rows import trajectory_columns
     from .run.simulation import SimulationError, simulate
     from .output.csv import CsvSink
 
-    scene = load_scene(args.scene)
+    scene, changes = _scene_with_options(args)
     paths = _output_paths(args, scene.name)
-    _validate(scene, args)
+    _validate(scene)
     out, csv_path, partial = paths["out"], paths["csv"], paths["partial_csv"]
     out.mkdir(parents=True, exist_ok=True)
     status = {"scene": str(args.scene)}
@@ -205,18 +240,9 @@ def _run(args, recorder) -> int:
     with open(partial, "w", newline="") as fh:
         sink = counted = _Counted(CsvSink(fh, trajectory_columns(scene)))
         if args.rrd:  # stream the rows into the recording too, as they are computed
-            sink = _with_recording(sink, scene, paths["partial_rrd"], args.duration, recorder)
+            sink = _with_recording(sink, scene, paths["partial_rrd"], recorder, changes)
         try:
-            traj = simulate(
-                scene,
-                formulation=args.formulation,
-                integrator=args.integrator,
-                rtol=args.rtol,
-                atol=args.atol,
-                duration=args.duration,
-                step=args.step,
-                sink=sink,
-            )
+            traj = simulate(scene, sink=sink)
         except KeyboardInterrupt:
             if args.rrd:
                 rrd_error = sink.close()
@@ -302,7 +328,7 @@ class _RecordingTee:
         return self.recorder.close()
 
 
-def _with_recording(csv_sink, scene, path, duration=None, recorder=None):
+def _with_recording(csv_sink, scene, path, recorder=None, changes=None):
     """``csv_sink`` teed with a rerun recording at ``path``, written by ``recorder`` (a started
     :class:`~stationbed.output.rerun.child.RecordingChild`, which builds the same
     :class:`~stationbed.output.rerun.sink.RrdSink`); ``close()`` finishes it and returns ``None`` or the
@@ -310,16 +336,15 @@ def _with_recording(csv_sink, scene, path, duration=None, recorder=None):
     if recorder is None:  # no child (a caller without one): the same sink, in this process
         from .output.rerun.sink import RrdSink, TeeSink
 
-        return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=duration))
-    return _RecordingTee(csv_sink, recorder.open(csv_sink.columns, duration, scene.name))
+        return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=scene.simulation.duration))
+    return _RecordingTee(csv_sink, recorder.open(csv_sink.columns, scene.simulation.duration, scene.name, changes))
 
 
 def _cmd_check(args) -> int:
     from .studies.check import check_scene
-    from .scene import load_scene
 
-    scene = load_scene(args.scene)
-    res = check_scene(scene, rtol=args.rtol, duration=args.duration)
+    scene, _ = _scene_with_options(args)
+    res = check_scene(scene)
     print(res.table())
     if args.rrd:
         from .output.rerun.recording import write_check_recording

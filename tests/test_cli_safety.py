@@ -163,3 +163,41 @@ def test_step_with_a_fixed_step_integrator_is_honoured():
     tr = simulate(scene, integrator="rk4", step=0.5, duration=10.0)
     assert tr.meta["n_steps"] == 20
     assert np.all(np.isfinite(tr.data))
+
+
+# -- item 19: scene values from the command line ------------------------------------------------
+
+
+def test_set_changes_a_scene_value_validated_like_the_file(tmp_path):
+    """--set KEY.PATH=VALUE (TOML value) and --output-dt change the run; the rows show it."""
+    scene = _scene(tmp_path)
+    res = _cli("run", scene, "--out", tmp_path / "o", "--set", "simulation.duration=4.0", "--output-dt", "0.5",
+               "--set", "initial.omega_BN_B=[0.0, 0.0, 0.03]")
+    assert res.returncode == 0, res.stderr
+    tr = Trajectory.from_csv(tmp_path / "o" / "trajectory.csv")
+    np.testing.assert_array_equal(tr.t, np.arange(0.0, 4.01, 0.5))
+    np.testing.assert_allclose(tr["wz"], 0.03, rtol=1e-12)  # a torque-free spin about a principal axis
+
+
+@pytest.mark.parametrize(
+    "option, words",
+    [(["--rtol", "2"], "simulation.rtol"), (["--set", "body.mass=true"], "body.mass"),
+     (["--set", "simulation.rtoll=1e-9"], "did you mean 'rtol'"), (["--set", "body.mass"], "--set"),
+     (["--output-dt", "-1"], "simulation.output_dt")],
+    ids=["rtol_2", "bool_mass", "typo", "no_value", "negative_output_dt"],
+)
+def test_command_line_values_are_refused_like_the_file(tmp_path, option, words):
+    scene = _scene(tmp_path)
+    res = _cli("run", scene, "--out", tmp_path / "o", *option)
+    assert res.returncode == 2
+    assert words in _error_line(res)
+    assert not (tmp_path / "o").exists()
+
+
+def test_recording_draws_the_scene_with_the_set_values(tmp_path):
+    """The recording child applies the same --set values (its own scene must match the run's)."""
+    scene = _scene(tmp_path)
+    res = _cli("run", scene, "--out", tmp_path / "o", "--rrd", tmp_path / "o" / "r.rrd",
+               "--set", 'name="renamed"', "--set", "simulation.duration=3.0")
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "o" / "r.rrd").is_file()

@@ -157,7 +157,7 @@ class RecordingChild:
         return cls(proc, stderr, rrd_path)
 
     # -- sink
-    def open(self, columns, duration: float | None, scene_name: str) -> RecordingChild:
+    def open(self, columns, duration: float | None, scene_name: str, changes: dict | None = None) -> RecordingChild:
         """Tell the child the run's row columns (and duration, for the blueprint); the child then
         creates the recording.
 
@@ -169,6 +169,9 @@ class RecordingChild:
             Run length [s] (None: the scene's ``simulation.duration``).
         scene_name : str
             The run's scene name (the child checks it against the scene it loaded).
+        changes : dict, optional
+            Key-path assignments the run applied to the scene file (``--set`` and the run
+            options); the child applies the same ones, so it draws the scene that ran.
 
         Returns
         -------
@@ -177,7 +180,9 @@ class RecordingChild:
         """
         self.columns = list(columns)
         self._opened = True
-        header = json.dumps({"columns": self.columns, "duration": duration, "scene": scene_name})
+        header = json.dumps(
+            {"columns": self.columns, "duration": duration, "scene": scene_name, "changes": changes or {}}, default=str
+        )
         self._send(MAGIC + header.encode() + b"\n")
         return self
 
@@ -316,6 +321,8 @@ def child_main(scene_path: str, rrd_path: str) -> int:
         header = json.loads(stdin.readline())
         if scene is None:
             raise scene_error
+        if header.get("changes"):
+            scene = scene.replace(header["changes"], source=f"{scene_path} with the run's options")
         if header["scene"] != scene.name:
             raise ValueError(f"scene {scene_path} is {scene.name!r} here, {header['scene']!r} in the run")
         columns = header["columns"]
