@@ -155,6 +155,13 @@ def test_quiet_keeps_warnings():
     assert buf.getvalue() == "stationbed: warning: no C compiler found\n"
 
 
+def test_a_warning_of_several_lines_stays_one_prefixed_line():
+    buf = io.StringIO()
+    progress.configure("plain", stream=buf, heartbeat=False)
+    logging.getLogger(progress.LOGGER).warning("cannot load x\n  casadi: assertion failed")
+    assert buf.getvalue() == "stationbed: warning: cannot load x | casadi: assertion failed\n"
+
+
 @pytest.mark.parametrize("stream, expected", [(FakeTTY(), "tty"), (io.StringIO(), "plain")], ids=["terminal", "pipe"])
 def test_default_mode_follows_whether_the_stream_is_a_terminal(stream, expected):
     assert progress.configure(stream=stream) == expected
@@ -192,6 +199,20 @@ def test_heartbeat_speaks_while_the_work_is_silent(monkeypatch):
     lines = buf.getvalue().splitlines()
     assert len(lines) >= 3 and lines[0].startswith("stationbed: compiling x: ") and lines[-1].startswith(
         "stationbed: compiling x: done"), lines
+
+
+def test_heartbeat_speaks_for_an_outer_task_while_short_inner_ones_churn(monkeypatch):
+    """A study whose runs each end within the delay: the study's own line is repeated."""
+    monkeypatch.setattr(progress, "TICK_S", 0.01)
+    buf = io.StringIO()
+    progress.configure("plain", stream=buf, delay_s=0.05, interval_s=0.1)
+    with progress.task("study stability", total=7, unit="cases"):
+        end = time.monotonic() + 0.6
+        while time.monotonic() < end:
+            with progress.task("run short"):
+                time.sleep(0.005)
+    lines = buf.getvalue().splitlines()
+    assert sum(line.startswith("stationbed: study stability: 0/7 cases") for line in lines) >= 2, lines
 
 
 def test_close_all_silences_the_heartbeat(monkeypatch):

@@ -104,12 +104,14 @@ def _write(line: str, stream: TextIO | None = None) -> None:
 
 
 class _Handler(logging.Handler):
-    """The ``"stationbed"`` logger on the progress stream, prefixed like every CLI line."""
+    """The ``"stationbed"`` logger on the progress stream, one prefixed line per record (as
+    every CLI line)."""
 
     def emit(self, record: logging.LogRecord) -> None:
         try:
             kind = "warning: " if record.levelno >= logging.WARNING else ""
-            _write(f"{PREFIX}{kind}{record.getMessage()}")
+            msg = " | ".join(part.strip() for part in record.getMessage().splitlines() if part.strip())  # one line
+            _write(f"{PREFIX}{kind}{msg}")
         except Exception:  # noqa: BLE001 - logging's contract: a handler never raises
             self.handleError(record)
 
@@ -365,14 +367,19 @@ def task(desc: str, total: float | None = None, unit: str = "it", *, transient: 
 
 
 def _tick() -> None:
-    """One heartbeat: redraw the bars (their elapsed time), or repeat the innermost plain task's
-    line when nothing was printed for ``interval_s``."""
+    """One heartbeat: redraw the bars (their elapsed time), or repeat the line of the innermost
+    plain task past its delay when nothing was printed for ``interval_s`` (an outer task speaks
+    while short inner ones come and go)."""
     with _LOCK:
         if _S.mode == "tty":
             for t in _S.open_tasks:
                 t._show()
-        elif _S.open_tasks:
-            _S.open_tasks[-1]._show()
+            return
+        now = _S.clock()
+        for t in reversed(_S.open_tasks):
+            if now - t.start >= _S.delay_s:
+                t._show()
+                return
 
 
 def _heartbeat(stop: threading.Event) -> None:
