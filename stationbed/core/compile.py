@@ -25,6 +25,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from . import progress
+
 __all__ = ["compile_functions", "FastCall", "cache_dir", "compiler", "sx_function", "EVALUATOR_C", "EVALUATOR_VM"]
 
 
@@ -125,14 +127,19 @@ def _verified(lib: Path, sig: Path) -> bool:
 
 
 def _build(cc: str, src: str, lib: Path, sig: Path, tag: str) -> str | None:
-    """Compile ``src`` into ``lib`` and write its digest; returns the reason on failure."""
-    log.info(f"compiling {tag} ...")
+    """Compile ``src`` into ``lib`` and write its digest; returns the reason on failure.
+
+    The user sees ``stationbed: compiling <tag> ...`` once per build (INFO on the
+    ``"stationbed"`` logger, which :func:`stationbed.core.progress.configure` shows), then the
+    compile as a transient progress task (a bar or heartbeat lines while ``cc`` runs)."""
+    log.info(f"compiling {_file_tag(tag)} ...")
     try:
         with tempfile.TemporaryDirectory(dir=lib.parent) as tmp:
             c_file = Path(tmp) / "gen.c"
             c_file.write_text(src)
             tmp_lib = Path(tmp) / "gen.so"
-            res = subprocess.run([cc, *CFLAGS, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
+            with progress.task(f"compiling {_file_tag(tag)}", transient=True):
+                res = subprocess.run([cc, *CFLAGS, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
             if res.returncode != 0:
                 first = (res.stderr.strip().splitlines() or ["no message"])[0]
                 return f"the C compiler {cc} failed ({first})"

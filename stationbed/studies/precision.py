@@ -16,6 +16,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..core import progress
 from ..formulations import FORMULATIONS
 from ..run.simulation import simulate
 from ..scene import Scene, load_scene
@@ -106,8 +107,14 @@ class PrecisionResult:
         return "\n".join(lines)
 
 
+def _setting(adaptive: bool, value: float) -> str:
+    """A sweep point in words: ``rtol 1e-06`` or ``step 0.5 s``."""
+    return f"rtol {value:.0e}" if adaptive else f"step {value:.4g} s"
+
+
 def _setting_label(row) -> str:
-    return f"rtol {row['rtol']:.0e}" if row["kind"] == "adaptive" else f"step {row['step_s']:.4g} s"
+    adaptive = row["kind"] == "adaptive"
+    return _setting(adaptive, row["rtol"] if adaptive else row["step_s"])
 
 
 def precision_study(
@@ -119,7 +126,7 @@ def precision_study(
     integrators=None,
     quick: bool = False,
     repeats: int | None = None,
-    log=print,
+    log=progress.echo,
 ) -> PrecisionResult:
     """Work-precision diagram of one scene.
 
@@ -143,7 +150,8 @@ def precision_study(
     repeats : int, optional
         Timed runs per point (default ``REPEATS``, quick 1).
     log : callable
-        Receives one progress line per run.
+        Receives one result line per run (default: stdout, above any progress bar). Progress
+        itself (per method and setting) goes to :mod:`stationbed.core.progress`.
 
     Returns
     -------
@@ -164,6 +172,12 @@ def precision_study(
     duration = float(duration or scene.simulation.duration)
     forms = registered_formulations(formulations)
     integs = registered_integrators(integrators)
+    with progress.task("study precision", total=len(integs) * len(forms), unit="methods") as bar:
+        return _precision(scene, out, duration, forms, integs, quick, repeats, log, plt, bar)
+
+
+def _precision(scene, out, duration, forms, integs, quick, repeats, log, plt, bar) -> PrecisionResult:
+    """:func:`precision_study` once its arguments are checked; ``bar`` is its progress task."""
     n_out = QUICK_N_OUTPUT if quick else N_OUTPUT
     output_dt = duration / n_out
     repeats = repeats or (1 if quick else REPEATS)
@@ -173,8 +187,10 @@ def precision_study(
     # reference, and its cross-check by a second method (another formulation when there is one)
     ref_rtol = QUICK_REF_RTOL if quick else REF_RTOL
     ref_form = "momentum" if "momentum" in FORMULATIONS else forms[0]
+    bar.update(0, f"reference dop853/{ref_form} rtol {ref_rtol:.0e}")
     ref = simulate(scene, formulation=ref_form, integrator="dop853", rtol=ref_rtol, atol=ref_rtol / 100, **common)
     cross_form = next((f for f in FORMULATIONS if f != ref_form), ref_form)
+    bar.update(0, f"cross-check {CROSS_INTEGRATOR}/{cross_form} rtol {ref_rtol:.0e}")
     cross = simulate(scene, formulation=cross_form, integrator=CROSS_INTEGRATOR, rtol=ref_rtol, atol=ref_rtol / 100, **common)
     cross_att, cross_rate = max_errors(cross, ref)
     reference = {
@@ -188,14 +204,17 @@ def precision_study(
     floor = max(cross_att, 1e-14)
 
     rows: list[dict] = []
+    n_methods, k = len(integs) * len(forms), 0
     for integ, cls in integs.items():
         kind = "adaptive" if cls.adaptive else "fixed"
         values = (QUICK_RTOLS if quick else ADAPTIVE_RTOLS) if cls.adaptive else [
             output_dt / m for m in (QUICK_DIVISIONS if quick else FIXED_DIVISIONS)
         ]
         for form in forms:
+            k += 1
             for v in values:
                 kw = sweep_setting(cls, v)
+                bar.update(k - 1, f"method {k}/{n_methods} {integ}/{form} {_setting(cls.adaptive, v)}")
                 walls, tr, status = [], None, "ok"
                 # at least `repeats` runs; short runs repeat until they add up to MIN_TIMED_S
                 while len(walls) < repeats or (not quick and sum(walls) < MIN_TIMED_S and len(walls) < MAX_REPEATS):
@@ -220,6 +239,7 @@ def precision_study(
                     break  # the method refuses this scene: no point sweeping further
                 if status == "ok" and (row["att_err_rad"] < floor or row["wall_s"] > budget):
                     break
+    bar.update(n_methods, "charts")
 
     csv_path = out / "precision.csv"
     write_csv(csv_path, COLUMNS, [[r[c] for c in COLUMNS] for r in rows])

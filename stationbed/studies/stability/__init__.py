@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ...core import progress
 from ..common import fmt, write_csv
 from ..plotting import pyplot
 from .base import STABILITY_CASES, Case, Context, stability_case
@@ -23,7 +24,7 @@ from . import rate_step, long_horizon, dzhanibekov, max_step, quat_norm, cmg_sin
 __all__ = ["STABILITY_CASES", "Case", "Context", "stability_case", "stability_study"]
 
 
-def stability_study(*, out: Path | str, quick: bool = False, cases=None, log=print) -> list[Case]:
+def stability_study(*, out: Path | str, quick: bool = False, cases=None, log=progress.echo) -> list[Case]:
     """Run the stability cases and write their files and a summary of every verdict.
 
     Parameters
@@ -36,7 +37,9 @@ def stability_study(*, out: Path | str, quick: bool = False, cases=None, log=pri
     cases : list of str, optional
         Names in :data:`STABILITY_CASES` to run, in that order; default all.
     log : callable
-        Receives each case's title, detector and verdicts.
+        Receives each case's title, detector and verdicts (default: stdout, above any progress
+        bar). Progress (per case, and per run inside a case) goes to
+        :mod:`stationbed.core.progress`.
 
     Returns
     -------
@@ -57,15 +60,23 @@ def stability_study(*, out: Path | str, quick: bool = False, cases=None, log=pri
     if unknown:
         raise ValueError(f"unknown stability case {unknown[0]!r}; valid: {', '.join(STABILITY_CASES)}")
     results = []
-    for name in names:
-        t0 = time.perf_counter()
-        case = STABILITY_CASES[name](Context(name, out, quick, plt, log))
-        log(f"{case.title} ({time.perf_counter() - t0:.1f} s)")
-        log(f"  detector: {case.detector}")
-        for v in case.verdicts:
-            log(f"  {v['method']:<48} {fmt(v['value']) if isinstance(v['value'], float) else v['value']:>10} "
-                f"{v['unit']:<9} {v['verdict']}")
-        results.append(case)
+    with progress.task("study stability", total=len(names), unit="cases") as bar:
+        for i, name in enumerate(names):
+            where = f"case {i + 1}/{len(names)} {name}"
+            bar.update(i, where)
+            t0 = time.perf_counter()
+
+            def note(text: str, i=i, where=where) -> None:
+                bar.update(i, f"{where}: {text}")
+
+            case = STABILITY_CASES[name](Context(name, out, quick, plt, log, note))
+            log(f"{case.title} ({time.perf_counter() - t0:.1f} s)")
+            log(f"  detector: {case.detector}")
+            for v in case.verdicts:
+                log(f"  {v['method']:<48} {fmt(v['value']) if isinstance(v['value'], float) else v['value']:>10} "
+                    f"{v['unit']:<9} {v['verdict']}")
+            results.append(case)
+        bar.update(len(names), "")
     rows = [[c.name, v["method"], c.detector, v["value"], v["unit"], v["verdict"]] for c in results for v in c.verdicts]
     write_csv(out / "stability_summary.csv", ["case", "method", "detector", "value", "unit", "verdict"], rows)
     md = ["| case | method | value | verdict |", "|---|---|---:|---|"]

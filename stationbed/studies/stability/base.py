@@ -11,6 +11,9 @@ A case is a function ``run(ctx) -> Case`` registered under its name with
 3. It draws one figure and writes it with its rows through :meth:`Context.save`
    (``stability_<name>.png`` / ``.csv`` in ``ctx.out``).
 4. ``ctx.quick`` shrinks it to seconds (tests, CI) without changing what it detects.
+5. Before each run (or other work of more than a second) it says what it starts with
+   :meth:`Context.note` (``"rk4/momentum h 4 s"``): the study's progress shows it, so a long
+   case is never silent.
 """
 
 from __future__ import annotations
@@ -67,7 +70,9 @@ class Context:
     plt : module
         ``matplotlib.pyplot`` (headless).
     log : callable
-        Progress lines.
+        Result lines.
+    note : callable
+        ``note(text)``: what the case starts now, for the progress display (default: ignored).
     """
 
     name: str
@@ -75,6 +80,7 @@ class Context:
     quick: bool
     plt: object
     log: object
+    note: Callable[[str], None] = field(default=lambda text: None)
 
     def save(self, case: Case, fig, rows, header) -> None:
         """Write the case's figure and rows (``stability_<name>.png`` / ``.csv``), close the

@@ -39,6 +39,7 @@ def cmg_singularity(ctx: Context) -> Case:
     rows = []
     for law in typing.get_args(Cmg.model_fields["steering"].annotation):
         sc = scene.replace(**{"cmg.steering": law})
+        ctx.note(f"steering {law}")
         tr, status = try_simulate(sc, None, None, duration=duration)
         if tr is None or status != "ok":
             case.add(law, math.nan, "N m", status)

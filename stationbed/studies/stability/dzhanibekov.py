@@ -39,6 +39,7 @@ def dzhanibekov(ctx: Context) -> Case:
     if ctx.quick:
         d["simulation"]["duration"] = 500.0
     scene = scene_from_dict(d, source="study Dzhanibekov scene")
+    ctx.note("reference dop853 rtol 1e-12")
     ref = simulate(scene, integrator="dop853", rtol=1e-12, atol=1e-14)
     t_ref = flip_times(ref)
     gap = float(np.mean(np.diff(t_ref))) if t_ref.size > 1 else scene.simulation.duration
@@ -56,6 +57,7 @@ def dzhanibekov(ctx: Context) -> Case:
     for name in fixed:
         errs, lose, shown, skipped = [], None, False, None
         for h in steps:
+            ctx.note(f"{name} h {h:g} s")
             tr, status = try_simulate(scene, "momentum", name, step=h, output_dt=h)
             if status.startswith("skipped"):
                 skipped = status

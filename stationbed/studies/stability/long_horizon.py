@@ -56,6 +56,7 @@ def long_horizon(ctx: Context) -> Case:
     for name, cls in integs.items():
         label = long_label(name, cls)
         for sc, panels in ((tumble, ("T", "H")), (gg, ("J",))):
+            ctx.note(f"{label} on {sc.name}")
             tr, status = try_simulate(sc, "momentum", name, **long_setting(cls))
             if tr is None or status != "ok":
                 for pn in panels:

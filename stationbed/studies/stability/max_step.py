@@ -46,11 +46,13 @@ def max_step(ctx: Context) -> Case:
 
     def run(form, name, h):
         dt = h * max(1, round(MAX_STEP_OUTPUT_DT_S / h))  # rows every ~5 s, a whole number of steps
+        ctx.note(f"{name}/{form} h {h:.3g} s")
         tr, status = try_simulate(scene, form, name, step=h, output_dt=dt, duration=duration)
         if status.startswith("skipped"):
             return None, math.nan, status
         if tr is None or status != "ok" or len(tr) < 2:
             return False, math.inf, status
+        ctx.note(f"{name}/{form} h {h:.3g} s: reference dop853")
         ref = simulate(scene, formulation=form, integrator="dop853", rtol=1e-11, atol=1e-13, output_dt=dt, duration=duration)
         att, _ = max_errors(tr, ref)
         H = tr.H_O_N

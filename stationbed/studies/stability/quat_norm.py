@@ -41,6 +41,7 @@ def quat_norm(ctx: Context) -> Case:
         if not cls.adaptive:
             variants.append((True, f"{name} + projection every step (h {LONG_STEP_S:g} s)"))
         for project, label in variants:
+            ctx.note(label)
             try:
                 xs = raw_states(scene, "momentum", name, ts, project=project, **long_setting(cls))
             except (ValueError, NotImplementedError) as e:

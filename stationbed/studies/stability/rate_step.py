@@ -39,6 +39,7 @@ def rate_step(ctx: Context) -> Case:
     for f, jump in variants:
         sc = scene if jump is None else scene.replace(**{"simulation.impulse_jump": jump})
         label = f if jump is None else f"{f} ({'jump applied' if jump else 'no jump handling'})"
+        ctx.note(label)
         tr, status = try_simulate(sc, f, None, duration=duration)
         if tr is None or status != "ok":
             case.add(label, math.nan, "", status)

@@ -146,13 +146,19 @@ def stiff_modes(ctx: Context) -> Case:
     tableaus = explicit_tableaus()
     R4 = stability_function(*RK4_TABLEAU)
     scenes = {f: stiff_scene(f, duration) for f in freqs}
+    ctx.note("eigenvalues of the linearised RHS")
     lams = {f: rhs_eigenvalues(sc) for f, sc in scenes.items()}
     w_max = {f: float(np.max(np.abs(lam))) for f, lam in lams.items()}
     rk4_pred = {f: predicted_step(R4, lam) for f, lam in lams.items()}
     refs: dict = {}
 
+    def mode_label(key) -> str:
+        """A scene of the sweep in words: ``"20 Hz"``, or ``"20 Hz damped 0.3"``."""
+        return f"{freqs[-1]:g} Hz damped {STIFF_DAMPED:g}" if key == "damped" else f"{key:g} Hz"
+
     def ref(f, dt):
         if (f, dt) not in refs:
+            ctx.note(f"reference dop853 at {mode_label(f)}")
             refs[(f, dt)] = simulate(scenes[f], formulation="momentum", output_dt=dt, duration=duration, **STIFF_REF)
         return refs[(f, dt)]
 
@@ -171,6 +177,7 @@ def stiff_modes(ctx: Context) -> Case:
     # (a) fixed step: largest stable step
     def run_fixed(f, name, h):
         dt = h * max(1, round(STIFF_OUTPUT_DT_S / h))  # rows every ~0.5 s, a whole number of steps
+        ctx.note(f"{name} at {f:g} Hz, h {h:.3g} s")
         with np.errstate(all="ignore"):
             tr, status = try_simulate(scenes[f], "momentum", name, step=h, output_dt=dt, duration=duration)
         if status.startswith("skipped"):
@@ -223,8 +230,10 @@ def stiff_modes(ctx: Context) -> Case:
     for name in implicit:
         for f in freqs:
             hs = [r["step_s"] for r in fixed_res[name][f][3]]
+            ctx.note(f"{name} Newton defects at {f:g} Hz")
             newton[(name, f)] = (hs, newton_defects(scenes[f], name, hs))
         hs = [2.0**k for k in range(0, 11)]  # 1 ... 1024 s
+        ctx.note(f"{name} Newton defects on the rigid tumble")
         newton[(name, "tumble")] = (hs, newton_defects(tumble, name, hs))
     for (name, f), (hs, ds) in newton.items():
         for h, dd in zip(hs, ds):
@@ -244,6 +253,7 @@ def stiff_modes(ctx: Context) -> Case:
     def cheapest(key, name):
         """The loosest rtol's run reaching the target (None: none did), or "skipped: ..."."""
         for rtol in STIFF_RTOLS:
+            ctx.note(f"{name} at {mode_label(key)}, rtol {rtol:.2g}")
             tr, status = try_simulate(scenes[key], "momentum", name, rtol=rtol, atol=rtol, output_dt=STIFF_OUTPUT_DT_S,
                               duration=duration)
             if status.startswith("skipped"):
