@@ -86,11 +86,19 @@ def _scene_with_options(args):
     return scene, changes
 
 
+def _quiet(p, top: bool = False) -> None:
+    # before or after the command; a subcommand's default must not undo the top-level flag
+    p.add_argument("-q", "--quiet", action="store_true", default=False if top else argparse.SUPPRESS,
+                   help="no progress or notices (warnings and errors still show)")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="stationbed", description="Space-station attitude control test bed")
+    _quiet(p, top=True)
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="simulate a scene, write trajectory.csv (and a rerun recording)")
+    _quiet(r)
     r.add_argument("scene", type=Path)
     r.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene name>)")
     _scene_options(r)
@@ -98,6 +106,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--rrd", type=Path, default=None, help="also write a rerun recording")
 
     c = sub.add_parser("check", help="run every formulation and compare them")
+    _quiet(c)
     c.add_argument("scene", type=Path)
     _scene_options(c, formulation=False)
     c.add_argument("--rrd", type=Path, default=None, help="all formulations in one recording")
@@ -111,6 +120,7 @@ def _parser() -> argparse.ArgumentParser:
     st = sub.add_parser("study", help="work-precision and stability studies (CSV + PNG charts)")
     ss = st.add_subparsers(dest="study", required=True, parser_class=_Parser)
     sp = ss.add_parser("precision", help="work-precision diagram of one scene: error vs wall time and RHS evaluations")
+    _quiet(sp)
     sp.add_argument("scene", type=Path)
     sp.add_argument("--out", type=Path, default=Path("out") / "study", help="output folder (default: out/study)")
     sp.add_argument("--duration", type=_positive("--duration"), default=None, help="[s] (default: the scene's)")
@@ -118,6 +128,7 @@ def _parser() -> argparse.ArgumentParser:
     sp.add_argument("--integrators", nargs="+", default=None, metavar="NAME", help="default: all registered")
     sp.add_argument("--quick", action="store_true", help="a small sweep, one repeat (tests, CI)")
     sb = ss.add_parser("stability", help="cases where methods fail: detector, verdict and chart per case")
+    _quiet(sb)
     sb.add_argument("--out", type=Path, default=Path("out") / "study", help="output folder (default: out/study)")
     sb.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="default: all cases")
     sb.add_argument("--quick", action="store_true", help="shrink every case to seconds (tests, CI)")
@@ -135,6 +146,9 @@ def _debug_traceback(e: BaseException) -> None:
 
 
 def _fail(msg: str, code: int) -> int:
+    from .core import progress
+
+    progress.close_all()  # nothing may follow the error line
     msg = " | ".join(line.strip() for line in str(msg).splitlines() if line.strip())  # one line
     print(f"stationbed: error: {msg}", file=sys.stderr)
     return code
@@ -497,6 +511,16 @@ def main(argv=None) -> int:
     """The command line: ``stationbed run|check|list|replay|study ...``; returns the exit status
     (0 ok, 1 failed run, 2 bad input)."""
     args = _parser().parse_args(argv)
+    from .core import progress
+
+    progress.configure("quiet" if args.quiet else None)
+    try:
+        return _main(args)
+    finally:
+        progress.reset()  # a caller in Python (tests, notebooks) gets the library default back
+
+
+def _main(args) -> int:
     if args.cmd == "run" and args.rrd:  # first, so the recorder's start-up overlaps the run's
         try:
             args.recorder = _start_recording(args)

@@ -63,3 +63,14 @@ def articulated_dict(duration=300.0, rtol=1e-12, atol=1e-14, alpha_rate=0.01):
         ],
     }
 
+
+
+def one_error_line(stderr: str) -> str:
+    """The CLI's one-line error: exactly one ``stationbed: error:`` line, the last one, no
+    traceback; any line before it is a ``stationbed: `` notice (progress, compiling, warning).
+    Returns the error line."""
+    lines = stderr.strip().splitlines()
+    errors = [ln for ln in lines if ln.startswith("stationbed: error:")]
+    assert len(errors) == 1 and lines[-1] == errors[0], stderr
+    assert all(ln.startswith("stationbed: ") for ln in lines) and "Traceback" not in stderr, stderr
+    return errors[0]

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes import ROOT
+from scenes import ROOT, one_error_line
 from stationbed import simulate
 from stationbed.run.trajectory import Trajectory
 from stationbed.scene import load_scene
@@ -60,9 +60,7 @@ def _cli(*args, cwd=None) -> subprocess.CompletedProcess:
 
 
 def _error_line(res) -> str:
-    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("stationbed: error:")]
-    assert len(errors) == 1 and "Traceback" not in res.stderr, res.stderr
-    return errors[0]
+    return one_error_line(res.stderr)
 
 
 def test_recording_process_ignores_modules_in_the_working_folder(tmp_path):

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+import scenes
 from numpy.testing import assert_allclose
 
 from test_control_loop import J_SPHERE, W0, ZOH_TOL_RAD_S, Recorder, loop_scene
@@ -49,10 +51,8 @@ def run_cli(*args, env_path=None, cwd=None):
 
 
 def one_error_line(res) -> str:
-    """The CLI's only stderr line, checked to be the one-line error format."""
-    lines = res.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("stationbed: error:"), res.stderr
-    return lines[0]
+    """The CLI's one-line error (tests/scenes.py), from a finished process."""
+    return scenes.one_error_line(res.stderr)
 
 
 # ---------------------------------------------------------------------------------------

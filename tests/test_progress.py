@@ -269,8 +269,8 @@ def test_compile_fallback_warning_is_prefixed(plain, tmp_path, monkeypatch):
 def _cli_plain(*argv):
     """The command line with progress in plain mode and no delay (every update is due), as a
     pipe sees it."""
-    code = ("import sys\nfrom stationbed.core import progress\nfrom stationbed.cli import main\n"
-            "progress.configure('plain', delay_s=0.0, interval_s=0.0)\nsys.exit(main(sys.argv[1:]))\n")
+    code = ("import sys\nfrom stationbed.core import progress\nfrom stationbed.cli import _main, _parser\n"
+            "progress.configure('plain', delay_s=0.0, interval_s=0.0)\nsys.exit(_main(_parser().parse_args(sys.argv[1:])))\n")
     return subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=ROOT)
 
 
