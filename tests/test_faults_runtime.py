@@ -33,11 +33,6 @@ TUMBLING = copy.deepcopy(RIGID)
 TUMBLING["initial"]["omega_BN_B"] = [0.1, 0.02, -0.05]
 TUMBLING["simulation"].update(duration=30.0, output_dt=0.05, rtol=1e-10, atol=1e-12, step=0.01)
 TUMBLING["torque"] = [{"kind": "constant", "torque_B": [0.5, -0.2, 0.1], "start": 10.0, "stop": 20.0}]
-#: Integrators whose own arithmetic gives the states: windows leave every bit in place.
-EXACT = ["dop853", "rk4", "lie_rk4", "lgvi", "radau", "scipy_dop853", "scipy_rk45"]
-#: scipy methods whose interpolant is a BLAS matrix product: a step's output times evaluated in
-#: two calls (a window cut inside the step) may round differently in the last bits.
-BLAS_INTERPOLANT_RTOL = 1e-13
 
 #: Long enough that a run is still going when it is killed, and that its billion output times
 #: never fit in memory at once.
@@ -126,21 +121,15 @@ def test_open_loop_hands_rows_over_in_bounded_batches(tumbling, integrator):
     assert max(len(b) for b in sink.batches) <= ROW_BATCH
 
 
-@pytest.mark.parametrize("integrator", EXACT)
+@pytest.mark.parametrize("integrator", sorted(INTEGRATORS))
 def test_windows_do_not_change_the_numbers(tumbling, monkeypatch, integrator):
     """The run cut into windows of ROW_BATCH output times equals, bit for bit, each segment in one
-    integrator call (the adaptive steps run on across windows, never landing on a window's end)."""
+    integrator call (the adaptive steps run on across windows, never landing on a window's end;
+    the scipy interpolants are read one time at a time)."""
     whole = _one_window_per_segment(monkeypatch, tumbling, integrator)
     windowed = simulate(tumbling, integrator=integrator)
     assert np.array_equal(windowed.data, whole.data)
     assert (windowed.meta["n_rhs"], windowed.meta["n_steps"]) == (whole.meta["n_rhs"], whole.meta["n_steps"])
-
-
-@pytest.mark.parametrize("integrator", sorted(set(INTEGRATORS) - set(EXACT)))
-def test_windows_change_blas_interpolants_in_the_last_bits_only(tumbling, monkeypatch, integrator):
-    whole = _one_window_per_segment(monkeypatch, tumbling, integrator)
-    windowed = simulate(tumbling, integrator=integrator)
-    np.testing.assert_allclose(windowed.data, whole.data, rtol=BLAS_INTERPOLANT_RTOL, atol=0)
 
 
 def test_dop853_c_driver_matches_its_python_loop_across_windows(tumbling, monkeypatch):
@@ -199,6 +188,7 @@ def test_killed_open_loop_run_keeps_all_rows_but_the_last_batch(tmp_path, integr
 
 # -- item 12: bounded memory, the summary without the rows -------------------------------------
 @pytest.mark.slow
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the peak memory in /proc (Linux)")
 def test_long_run_streams_with_bounded_memory():
     """A run of 1.5 million rows handed to a sink with keep=False peaks under PEAK_RSS_MIB (before:
     every row and the segment's states in memory, 598 MiB)."""
@@ -207,7 +197,7 @@ def test_long_run_streams_with_bounded_memory():
     scene["simulation"].update(duration=LONG_RUN_S, output_dt=LONG_RUN_DT)
     code = _RUN.format(scene=scene) + textwrap.dedent(
         """
-        import json, resource
+        import json
         class Count:
             n, last = 0, None
             def write(self, rows):
@@ -215,7 +205,10 @@ def test_long_run_streams_with_bounded_memory():
                 self.last = rows[-1].tolist()
         sink = Count()
         traj = simulate(scene, sink=sink, keep=False)
-        print(json.dumps({"rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "n": sink.n,
+        # VmHWM: this process's peak (ru_maxrss would include the parent's, inherited at exec)
+        with open("/proc/self/status") as fh:
+            peak_kib = next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:"))
+        print(json.dumps({"rss_mib": peak_kib / 1024, "n": sink.n,
                           "n_rows": traj.meta["n_rows"], "kept": traj.data.tolist(), "last": sink.last}))
         """
     )

@@ -21,11 +21,11 @@ class ScipyIVP(Integrator):
     segment end, each step's requested times read from its dense output. The loop is written
     out (:meth:`begin_segment`, :meth:`continue_segment`) so that a segment can be advanced
     window by window with the numbers of one call: a step that spans past a window keeps its
-    interpolant for the next (the interpolants of ``RK45`` and ``DOP853`` are evaluated element
-    by element: the same bits; those of ``Radau``, ``BDF`` and ``LSODA`` are matrix products,
-    which a window cut inside a step can round differently in the last bit or two). ``n_rhs``
-    counts the RHS calls made through :meth:`~.base.Integrator.f`, ``n_steps`` the output
-    intervals.
+    interpolant for the next. The interpolant is read one requested time at a time (a matrix
+    product over a batch of times, as ``solve_ivp`` does, may round a time's row differently
+    with the batch: ``RK45``, ``Radau``, ``BDF``, ``LSODA`` differ from ``solve_ivp``'s rows in
+    the last bit or two, ``DOP853`` not at all). ``n_rhs`` counts the RHS calls made through
+    :meth:`~.base.Integrator.f`, ``n_steps`` the output intervals.
 
     Parameters
     ----------
@@ -60,19 +60,24 @@ class ScipyIVP(Integrator):
         solver = self._solver
         # requested times inside the last step (it ended past the previous window)
         i = int(np.searchsorted(ts, solver.t, side="right")) if self._sol is not None else 0
-        if i:
-            out[:i] = self._sol(ts[:i]).T
+        self._read(ts[:i], out[:i])
         while i < ts.size and solver.status == "running":
             message = solver.step()
             if solver.status == "failed":
                 raise IntegrationError(float(solver.t), f"solve_ivp({self.method}): {message}", out[:i])
             self._sol = solver.dense_output()
             j = int(np.searchsorted(ts, solver.t, side="right"))
-            if j > i:
-                out[i:j] = self._sol(ts[i:j]).T
-                i = j
+            self._read(ts[i:j], out[i:j])
+            i = max(i, j)
         self.n_steps += int(np.count_nonzero(ts > self._t0))
         return out
+
+    def _read(self, ts, out):
+        """The last step's interpolant at ``ts``, one time per call: a matrix-product interpolant
+        (RK45, Radau, BDF, LSODA) rounds a column the same way whatever the others, so the rows
+        do not depend on how the requested times are cut into windows."""
+        for k, t in enumerate(ts):
+            out[k] = self._sol(t)
 
     def _integrate(self, ts, x0, u):
         self.begin_segment(ts[0], ts[-1], x0, u)
