@@ -67,9 +67,11 @@ def simulate(
         Override the scene's values.
     sink : object with ``write(rows)``, optional
         Receives each batch of output rows (ndarray (k, columns), k <= ``ROW_BATCH``) as soon
-        as it is computed: every row computed more than one batch (or ``FLUSH_S`` of work)
-        before a failure, Ctrl-C or kill has been handed to it; after a
-        :class:`SimulationError` or ``KeyboardInterrupt``, every row computed has.
+        as it is made. Open loop: a window's rows when its integrator call returns, so a
+        failure, Ctrl-C or kill loses at most the window in progress (``ROW_BATCH`` rows, or
+        about ``FLUSH_S`` of work). Closed loop: batches of ``ROW_BATCH`` rows or ``FLUSH_S``;
+        a :class:`SimulationError` or ``KeyboardInterrupt`` hands over the rest first, a kill
+        loses at most one batch.
     controller : Controller, optional
         A controller instance to use instead of the scene's ``[controller]`` (which the scene
         must still have, for its period and sensor).
