@@ -58,6 +58,12 @@ class Integrator:
        class then provides ``explicit_step(rhs, t, x, h, u, p)`` (casadi, no inner
        iteration), a fixed step ``h_nominal`` [s] and ``RHS_PER_STEP``; steps taken inside
        such a tick are booked with :meth:`count_steps`.
+    6. A long segment is advanced in windows of requested times (:meth:`begin_segment`, then
+       :meth:`continue_segment` per window), so that its rows reach the sink as they come and
+       memory stays bounded. The windows must not change the numbers: the default (restart
+       ``_integrate`` at each window) is exact for methods that step each requested interval on
+       its own; a method whose steps span requested times overrides both and steps on across
+       windows (``dop853``, the scipy paths).
 
     Parameters
     ----------
@@ -242,6 +248,66 @@ class Integrator:
         if not np.all(np.isfinite(x0)):
             raise IntegrationError(t0, "state is not finite (NaN or inf)")
         return self._integrate(np.array([t0, t1]), x0, u)[-1]
+
+    # -- a segment in windows ---------------------------------------------------------------
+    def begin_segment(self, t0: float, t_end: float, x0: np.ndarray, u: np.ndarray) -> None:
+        """Start a smooth segment ``[t0, t_end]`` that :meth:`continue_segment` advances window by
+        window, so that a long segment's states can be handed on (and forgotten) as they come.
+
+        Cutting the segment's requested times into windows never changes the numbers: the
+        states are those of one :meth:`integrate` call over all the times (``t0`` first). This
+        default restarts :meth:`_integrate` from the last state at each window, which is exact
+        for methods that treat each requested interval on its own (the fixed-step ones); a method
+        whose steps span requested times (adaptive step control) overrides both methods and keeps
+        stepping across windows.
+
+        Parameters
+        ----------
+        t0, t_end : float
+            Start and end of the segment [s], ``t_end > t0``.
+        x0 : array_like, shape (nx,)
+            State at ``t0``.
+        u : array_like, shape (nu,)
+            Input held over the segment.
+
+        Raises
+        ------
+        IntegrationError
+            ``x0`` is not finite.
+        """
+        x0 = np.array(x0, dtype=float)
+        if not np.all(np.isfinite(x0)):
+            raise IntegrationError(t0, "state is not finite (NaN or inf)")
+        self._seg = [float(t0), float(t_end), x0, np.array(u, dtype=float)]
+
+    def continue_segment(self, ts) -> np.ndarray:
+        """The states at the next requested times of the segment begun by :meth:`begin_segment`.
+
+        Parameters
+        ----------
+        ts : array_like, shape (m,)
+            Increasing times [s], m >= 1, after the previous window's last time (or ``t0``) and
+            at most ``t_end``; the segment's last window ends with ``t_end``.
+
+        Returns
+        -------
+        ndarray, shape (m, nx)
+            States at ``ts``.
+
+        Raises
+        ------
+        IntegrationError
+            As :meth:`integrate`; ``partial`` holds the states at this window's first times.
+        """
+        t, _, x, u = self._seg
+        ts = np.asarray(ts, dtype=float)
+        try:
+            xs = self._integrate(np.concatenate([[t], ts]), x, u)
+        except IntegrationError as e:
+            e.partial = None if e.partial is None else e.partial[1:]
+            raise
+        self._seg[0], self._seg[2] = float(ts[-1]), xs[-1].copy()
+        return xs[1:]
 
     def _integrate(self, ts, x0, u):  # pragma: no cover - abstract
         raise NotImplementedError

@@ -1,13 +1,11 @@
 """Dormand-Prince 8(5,3): the compiled step, the C segment driver and its Python fallback, and
 the one statement of the step-size control rules (:class:`StepControl`).
 
-Three loops apply the same rules: the C driver ``dop853_driver.c`` (one call per smooth
-segment; it keeps its own copy of the constants, checked against :class:`StepControl` by a
-test that reads the C source), :meth:`DOP853._integrate_python` (the no-compiler fallback)
-and the batch lockstep (:mod:`.dop853_batch`), the last two by calling :class:`StepControl`.
-
-(The C file's header still names ``stationbed/integrators.py``, the module's old path: its bytes
-are part of the cached libraries' hash, so it is left as it is.)
+Three loops apply the same rules: the C driver ``dop853_driver.c`` (one call per window of
+requested times, the steps continuing across windows; it keeps its own copy of the constants,
+checked against :class:`StepControl` by a test that reads the C source),
+:meth:`DOP853._window_python` (the no-compiler fallback) and the batch lockstep
+(:mod:`.dop853_batch`), the last two by calling :class:`StepControl`.
 """
 
 from __future__ import annotations
@@ -39,7 +37,7 @@ def _c_driver(lib_path: str):
     """The C step-control driver of a compiled library (loaded once per process)."""
     f = _DRIVERS.get(lib_path)
     if f is None:
-        f = ctypes.CDLL(lib_path).sb_dop853_segment
+        f = ctypes.CDLL(lib_path).sb_dop853_window
         f.restype = ctypes.c_int
         _DRIVERS[lib_path] = f
     return f
@@ -212,9 +210,11 @@ class DOP853(Integrator):
 
     The Butcher table is scipy's (``scipy.integrate.DOP853.A/B/C/E3/E5``): data, not code. The
     step (12 stages + FSAL + error norm) and the step with the 7th-order dense output are
-    generated C; the C driver (``dop853_driver.c``) runs the step control of a whole segment
-    in one call, or, without a compiler, :meth:`_integrate_python` does step by step. Both
-    follow :class:`StepControl`. The step size is remembered across segments.
+    generated C; the C driver (``dop853_driver.c``) runs the step control over a window of
+    requested times in one call (a whole segment, or the windows of
+    :meth:`begin_segment`/:meth:`continue_segment`, the steps running on across them), or,
+    without a compiler, :meth:`_window_python` does step by step. Both follow
+    :class:`StepControl`. The step size is remembered across segments.
 
     Parameters
     ----------
@@ -296,6 +296,7 @@ class DOP853(Integrator):
         if "__lib__" in funcs and not self.force_python:
             self._c = _c_driver(funcs["__lib__"])
             self._P = np.ascontiguousarray(self.P)
+            self._P_ptr = _ptr(self._P)
 
     #: use the Python step loop even when the C driver is available (tests compare the two)
     force_python = False
@@ -322,54 +323,92 @@ class DOP853(Integrator):
         """The 7th-order dense output at fractions ``theta`` (k,) of the step: (k, nx)."""
         return x0 + np.vander(theta, 8, increasing=True) @ (cls.P @ F)
 
-    def _integrate(self, ts, x0, u):
-        if self._c is None:
-            return self._integrate_python(ts, x0, u)
+    # -- a segment, window by window (the C driver, or the same loop in Python) ---------------
+    def begin_segment(self, t0, t_end, x0, u):
+        """Start the segment ``[t0, t_end]`` (see :meth:`~.base.Integrator.begin_segment`): the
+        step control then runs across :meth:`continue_segment` windows, never landing on a
+        window's end, so the numbers are those of one call over all the times."""
+        super().begin_segment(t0, t_end, x0, u)
+        self._t_end = float(t_end)
+        self._u = np.array(u, dtype=float)  # (the caller's u changes at the next segment)
+        self._x = np.array(x0, dtype=float)
+        self._k1 = self.f(t0, self._x, self._u)
+        if self.h is None:
+            self.h = self._initial_step(t0, self._x, self._k1, self._u, self._t_end)
+        #: [t, t_prev, h_prev]: the time reached, start and size of the last accepted step
+        self._st = np.array([float(t0), float(t0), 0.0])
+        self._xp = np.zeros(self.nx)  # the last accepted step's start state ...
+        self._F = np.zeros(7 * self.nx)  # ... and dense-output coefficients (7, nx)
+        for fc in (self._step, self._dense):
+            fc.args[4][:] = self._u
+        self._c_state = None  # ctypes pointers to these buffers, made at the first C window
+
+    def continue_segment(self, ts):
         ts = np.ascontiguousarray(ts, dtype=float)
         out = np.empty((ts.size, self.nx))
-        x = np.array(x0, dtype=float)
-        k1 = self.f(ts[0], x, u)
-        if self.h is None:
-            self.h = self._initial_step(ts[0], x, k1, u, ts[-1])
-        u = np.ascontiguousarray(u, dtype=float)
+        self._fill(ts, out)
+        return out
+
+    def _integrate(self, ts, x0, u):
+        out = np.empty((ts.size, self.nx))
+        out[0] = x0
+        self.begin_segment(ts[0], ts[-1], x0, u)
+        try:
+            self._fill(np.ascontiguousarray(ts[1:]), out[1:])
+        except IntegrationError as e:
+            e.partial = out[: 1 + len(e.partial)]
+            raise
+        return out
+
+    def _fill(self, ts, out):
+        """Fill ``out`` (len(ts), nx) with the states at ``ts``, the next window of the segment."""
+        status, n, reason = self._window_python(ts, out) if self._c is None else self._window_c(ts, out)
+        if status != 0:
+            raise IntegrationError(self._st[0], reason, out[:n])
+
+    def _window_c(self, ts, out):
+        if self._c_state is None:  # the segment's buffers, the same for all its windows
+            self._c_state = (
+                [_ptr(a) for a in (self._st, self._x, self._k1, self._xp, self._F, self._u, self.p, self._tol)],
+                np.zeros(4, dtype=np.int64),
+            )
+        (st, x, k1, xp, F, u, p, tol), info = self._c_state
+        info[:] = 0
         h = ctypes.c_double(self.h)
-        t_stop = ctypes.c_double(0.0)
-        info = np.zeros(4, dtype=np.int64)
         status = self._c(
-            ctypes.c_int(self.nx), ctypes.c_int(ts.size), _ptr(ts), _ptr(x), _ptr(k1), _ptr(u), _ptr(self.p),
-            _ptr(self._tol), ctypes.byref(h), ctypes.c_double(self.max_step), _ptr(self._P), _ptr(out),
-            info.ctypes.data_as(ctypes.POINTER(ctypes.c_longlong)), ctypes.byref(t_stop),
+            ctypes.c_int(self.nx), ctypes.c_int(ts.size), _ptr(ts), ctypes.c_double(self._t_end), st,
+            x, k1, xp, F, u, p, tol, ctypes.byref(h), ctypes.c_double(self.max_step), self._P_ptr, _ptr(out),
+            info.ctypes.data_as(ctypes.POINTER(ctypes.c_longlong)),
         )
         self.h = h.value
         self.n_rhs += int(info[0])
         self.n_steps += int(info[1])
         self.n_rejected += int(info[2])
-        if status != 0:
-            reason = "step size underflow" if status == 1 else "state is not finite (NaN or inf)"
-            raise IntegrationError(t_stop.value, reason, out[: int(info[3])])
-        return out
+        reason = "step size underflow" if status == 1 else "state is not finite (NaN or inf)"
+        return status, int(info[3]), reason
 
-    def _integrate_python(self, ts, x0, u):
-        """The same algorithm as the C driver, step by step in Python (no-compiler fallback)."""
+    def _window_python(self, ts, out):
+        """The C driver's loop step by step in Python (the no-compiler fallback): returns
+        (status, rows filled, reason) as the C driver."""
         ctl = StepControl
-        out = np.empty((ts.size, self.nx))
-        out[0] = x0
-        x = x0.copy()
-        t = ts[0]
-        t_end = ts[-1]
-        k1 = self.f(t, x, u)
-        if self.h is None:
-            self.h = self._initial_step(t, x, k1, u, t_end)
-        for fc in (self._step, self._dense):
-            fc.args[4][:] = u
-        i = 1  # next requested time
+        st, x, k1, t_end, nx = self._st, self._x, self._k1, self._t_end, self.nx
+        t = st[0]
+        n = ts.size
+        # requested times inside the last accepted step (it ended past the previous window)
+        i = int(np.searchsorted(ts, t, side="left"))
+        if i:
+            out[:i] = self._interpolate(self._xp, self._F.reshape(7, nx), (ts[:i] - st[1]) / st[2])
+        if i < n and ts[i] == t:
+            out[i] = x
+            i += 1
         rejected = False
-        while t < t_end:
+        while i < n and t < t_end:
             h, clipped = ctl.propose(self.h, self.max_step, t_end - t)
             if ctl.underflow(h, t):
-                raise IntegrationError(t, f"step size underflow (h = {h:.3g} s)", out[:i])
-            # interior requested times inside this step need the interpolant
-            dense = (i < ts.size - 1) and ts[i] < t + h
+                st[0] = t
+                return 1, i, f"step size underflow (h = {h:.3g} s)"
+            # requested times inside this step need the interpolant
+            dense = ts[i] < t_end and ts[i] < t + h
             s = self._dense if dense else self._step
             a = s.args
             a[0][0] = t
@@ -381,19 +420,22 @@ class DOP853(Integrator):
             err = s.res[2][0]
             if not math.isfinite(err):
                 if not np.all(np.isfinite(x)):
-                    raise IntegrationError(t, "state is not finite (NaN or inf)", out[:i])
+                    st[0] = t
+                    return 2, i, "state is not finite (NaN or inf)"
                 err = math.inf
             if ctl.accepted(err):
                 t_new = t_end if clipped else t + h
                 if dense:
-                    j = min(int(np.searchsorted(ts, t_new, side="left")), ts.size - 1)
-                    F = s.res[3].reshape(7, self.nx)
-                    out[i:j] = self._interpolate(x, F, (ts[i:j] - t) / h)
+                    self._xp[:] = x
+                    self._F[:] = s.res[3].reshape(-1)
+                    st[1], st[2] = t, h
+                    j = int(np.searchsorted(ts, t_new, side="left"))
+                    out[i:j] = self._interpolate(x, self._F.reshape(7, nx), (ts[i:j] - t) / h)
                     i = j
                 t = t_new
                 x[:] = s.res[0]
                 k1[:] = s.res[1]
-                if i < ts.size and ts[i] == t:
+                if i < n and ts[i] == t:
                     out[i] = x
                     i += 1
                 self.n_steps += 1
@@ -403,5 +445,8 @@ class DOP853(Integrator):
                 self.n_rejected += 1
                 self.h = ctl.after_reject(h, err)
                 rejected = True
-        out[-1] = x
-        return out
+        if t >= t_end:  # the segment end's state (also for a time within rounding of it)
+            out[i:] = x
+            i = n
+        st[0] = t
+        return 0, i, ""

@@ -1,22 +1,49 @@
 /* stationbed: DOP853 segment driver, compiled together with the casadi-generated
- * `dop853_step` and `dop853_dense` functions (stationbed/integrators.py builds them).
+ * `dop853_step` and `dop853_dense` functions (stationbed/integrators/dop853.py builds them).
  *
- * It is the same algorithm as DOP853._integrate_python (Hairer's step-size control as in
+ * It is the same algorithm as DOP853._window_python (Hairer's step-size control as in
  * scipy's DOP853, dense output for requested times inside a step, exact landing on the
- * segment end), moved to C so that one call advances a whole smooth segment without a
- * Python round trip per step. Keep the two in step: a test runs both and compares.
+ * segment end), moved to C so that one call advances many steps without a Python round trip
+ * per step. Keep the two in step: a test runs both and compares.
+ *
+ * sb_dop853_window advances a smooth segment, ending at t_end, one window of requested times at
+ * a time: it fills `out` with the states at the nw increasing times `ts` (after the previous
+ * window's, the segment's last window ending with t_end) and returns as soon as the window is
+ * full, keeping what the next window needs: st = [t, t_prev, h_prev], x and k1 (state and
+ * derivative at t), xp and F (start state and dense-output coefficients of the last accepted
+ * step, for requested times it spanned past the window), *h_io (the step-size memory). A
+ * window never forces a step to end: cutting the times into windows leaves the steps, and so
+ * every number, as one window holding them all.
  *
  * Returns 0 on success, 1 on step-size underflow, 2 on a non-finite state; `info` gets
- * [n_rhs, n_steps, n_rejected, rows_filled] and *t_stop the time reached.
+ * [n_rhs, n_steps, n_rejected] added and info[3] = the rows of the window filled; st[0] is the
+ * time reached.
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, double* x, double* k1,
-                                           const double* u, const double* p, const double* tol,
-                                           double* h_io, double max_step, const double* P,
-                                           double* out, long long* info, double* t_stop) {
+/* the 7th-order dense output at fraction th of a step from x0 with coefficients F (7 x nx) */
+static void sb_dop853_interp(int nx, double th, const double* x0, const double* F, const double* P, double* y_out) {
+  double pw[8];
+  int m, j, k;
+  pw[0] = 1.0;
+  for (m = 1; m < 8; ++m) pw[m] = pw[m - 1] * th;
+  for (k = 0; k < nx; ++k) {
+    double y = x0[k];
+    for (m = 0; m < 8; ++m) {
+      double c = 0.0;
+      for (j = 0; j < 7; ++j) c += P[m * 7 + j] * F[j * nx + k];
+      y += pw[m] * c;
+    }
+    y_out[k] = y;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int sb_dop853_window(int nx, int nw, const double* ts, double t_end, double* st,
+                                          double* x, double* k1, double* xp, double* F, const double* u,
+                                          const double* p, const double* tol, double* h_io, double max_step,
+                                          const double* P, double* out, long long* info) {
   casadi_int sa, sr, si, sw, sa2, sr2, si2, sw2;
   dop853_step_work(&sa, &sr, &si, &sw);
   dop853_dense_work(&sa2, &sr2, &si2, &sw2);
@@ -30,13 +57,15 @@ CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, do
   casadi_real* w = (casadi_real*)calloc((size_t)sw + 1, sizeof(casadi_real));
   double* x_new = (double*)calloc((size_t)nx, sizeof(double));
   double* k_new = (double*)calloc((size_t)nx, sizeof(double));
-  double* F = (double*)calloc((size_t)(7 * nx), sizeof(double));
-  double t = ts[0], t_end = ts[nts - 1], h = 0.0, err = 0.0;
-  int i = 1, rejected = 0, status = 0, k;
-  memcpy(out, x, sizeof(double) * (size_t)nx);
-  arg[0] = &t; arg[1] = x; arg[2] = k1; arg[3] = &h; arg[4] = u; arg[5] = p; arg[6] = tol;
-  res[0] = x_new; res[1] = k_new; res[2] = &err; res[3] = F;
-  while (t < t_end) {
+  double t = st[0], h = 0.0, err = 0.0;
+  int i = 0, rejected = 0, status = 0, k;
+  /* requested times inside the last accepted step (it ended past the previous window) */
+  while (i < nw && ts[i] < t) {
+    sb_dop853_interp(nx, (ts[i] - st[1]) / st[2], xp, F, P, out + (size_t)i * nx);
+    ++i;
+  }
+  if (i < nw && ts[i] == t) { memcpy(out + (size_t)i * nx, x, sizeof(double) * (size_t)nx); ++i; }
+  while (i < nw && t < t_end) {
     double remaining = t_end - t;
     int clipped;
     h = fmin(*h_io, max_step);
@@ -44,7 +73,11 @@ CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, do
     if (clipped) h = remaining;
     else if (h > 0.5 * remaining) h = 0.5 * remaining;
     if (h <= 1e-12 * fmax(1.0, fabs(t))) { status = 1; break; }
-    int dense = (i < nts - 1) && ts[i] < t + h;
+    int dense = ts[i] < t_end && ts[i] < t + h;
+    /* set at every call: a generated function may use arg[] and res[] past its own inputs and
+       outputs as scratch (a call to another generated function, such as the RHS) */
+    arg[0] = &t; arg[1] = x; arg[2] = k1; arg[3] = &h; arg[4] = u; arg[5] = p; arg[6] = tol;
+    res[0] = x_new; res[1] = k_new; res[2] = &err; res[3] = F;
     if (dense) dop853_dense(arg, res, iw, w, 0);
     else dop853_step(arg, res, iw, w, 0);
     info[0] += 12 + (dense ? 3 : 0);
@@ -56,27 +89,18 @@ CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, do
     if (err <= 1.0) {
       double t_new = clipped ? t_end : t + h, factor;
       if (dense) {
-        while (i < nts - 1 && ts[i] < t_new) {
-          double th = (ts[i] - t) / h, pw[8];
-          int m, j;
-          pw[0] = 1.0;
-          for (m = 1; m < 8; ++m) pw[m] = pw[m - 1] * th;
-          for (k = 0; k < nx; ++k) {
-            double y = x[k];
-            for (m = 0; m < 8; ++m) {
-              double c = 0.0;
-              for (j = 0; j < 7; ++j) c += P[m * 7 + j] * F[j * nx + k];
-              y += pw[m] * c;
-            }
-            out[(size_t)i * nx + k] = y;
-          }
+        memcpy(xp, x, sizeof(double) * (size_t)nx);
+        st[1] = t;
+        st[2] = h;
+        while (i < nw && ts[i] < t_new) {
+          sb_dop853_interp(nx, (ts[i] - t) / h, x, F, P, out + (size_t)i * nx);
           ++i;
         }
       }
       t = t_new;
       memcpy(x, x_new, sizeof(double) * (size_t)nx);
       memcpy(k1, k_new, sizeof(double) * (size_t)nx);
-      if (i < nts && ts[i] == t) { memcpy(out + (size_t)i * nx, x, sizeof(double) * (size_t)nx); ++i; }
+      if (i < nw && ts[i] == t) { memcpy(out + (size_t)i * nx, x, sizeof(double) * (size_t)nx); ++i; }
       info[1] += 1;
       factor = (err == 0.0) ? 10.0 : fmin(10.0, 0.9 * pow(err, -1.0 / 8.0));
       if (rejected) factor = fmin(1.0, factor);
@@ -88,9 +112,12 @@ CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, do
       rejected = 1;
     }
   }
-  if (status == 0) { memcpy(out + (size_t)(nts - 1) * nx, x, sizeof(double) * (size_t)nx); i = nts; }
+  /* at the segment end: its state (a time within rounding of it, never stepped to, gets it too) */
+  if (status == 0 && t >= t_end) {
+    for (; i < nw; ++i) memcpy(out + (size_t)i * nx, x, sizeof(double) * (size_t)nx);
+  }
   info[3] = i;
-  *t_stop = t;
-  free(arg); free(res); free(iw); free(w); free(x_new); free(k_new); free(F);
+  st[0] = t;
+  free(arg); free(res); free(iw); free(w); free(x_new); free(k_new);
   return status;
 }

@@ -22,7 +22,7 @@ from .controller import (
     one_line,
 )
 from .fused import fused_ok, run_fused
-from .rows import check_rows
+from .rows import ROW_BATCH
 from .segments import held_torque, segment_input
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH"]
@@ -36,10 +36,6 @@ class ControllerFailure(Exception):
         super().__init__(reason)
         self.t = t
         self.reason = reason
-
-
-#: rows collected before they are streamed to the sink in the closed loop
-ROW_BATCH = 64
 
 
 class ControlLoop:
@@ -215,14 +211,8 @@ class ControlLoop:
         if self.fused:
             if fused_ok(self):
                 return run_fused(self, K)
-        pending_t, pending_x, pending_h = [], [], []
         sat_since_row = 0
-
-        def flush():
-            if pending_t:
-                rows = self.rows.make(pending_t, pending_x, pending_h)
-                pending_t.clear(), pending_x.clear(), pending_h.clear()
-                check_rows(rows[:, :12], lambda ok: self.rows.emit(rows[: len(ok)]))
+        flush = self.rows.flush  # rows are held and streamed in batches (ROW_BATCH, FLUSH_S)
 
         tick = self._fast_tick()
         bps = [b for b in self.bps if 0.0 < b < duration]
@@ -295,13 +285,8 @@ class ControlLoop:
                         self.last_cmd = cmd
                     if smooth and has_act:
                         self.u[3 : 3 + nu] = res_act[:nu]  # the row's held rates (flags counted above)
-                    held = self._held_row(sat_since_row)  # first: a bad q_ref_BN raises here
-                    pending_t.append(t)
-                    pending_x.append(self.x.copy())
-                    pending_h.append(held)
+                    self.rows.hold(t, self.x, self._held_row(sat_since_row))
                     sat_since_row = 0
-                    if len(pending_t) >= ROW_BATCH:
-                        flush()
                 if k == K:
                     break
                 ticks += 1
@@ -378,8 +363,10 @@ class ControlLoop:
 
     def summary(self) -> dict:
         """The run's summary: ticks, controller updates, saturation counts, max |h| and its fraction
-        of capacity, min singularity measure, attitude error (what ``summary.json`` holds)."""
-        rows = self.rows
+        of capacity, min singularity measure, attitude error (what ``summary.json`` holds), from
+        reductions kept as the rows are emitted (:class:`~.rows.RowSummary`: the rows need not be
+        kept)."""
+        rs = self.rows.summary
         out = {
             "controller": self.ctrl.name,
             "fused": self.used_fused,
@@ -387,21 +374,17 @@ class ControlLoop:
             "ticks": self.ticks,
             "controller_updates": self.ctrl.n_updates,
         }
-        traj = rows.trajectory({}) if rows.rows else None
         if self.model.cmg is not None:
             out["rate_limited_ticks"] = int(self.n_rate_limited)
             out["momentum_saturated_ticks"] = int(self.n_momentum_saturated)
-            if traj is not None:
-                h = np.linalg.norm(traj.cols("hx", "hy", "hz"), axis=1)
-                out["max_h_Nms"] = float(h.max())
+            if rs.max_h is not None:
+                out["max_h_Nms"] = rs.max_h
                 if math.isfinite(self.capacity):
-                    out["max_h_fraction"] = float(h.max() / self.capacity)
-                if "cmg_singularity" in traj.columns:
-                    out["min_singularity"] = float(traj["cmg_singularity"].min())
-        if traj is not None:
-            err = traj["att_err_deg"]
-            if np.isfinite(err).any():
-                out["final_att_err_deg"] = float(err[-1])
-                out["max_att_err_deg"] = float(np.nanmax(err))
+                    out["max_h_fraction"] = float(rs.max_h / self.capacity)
+            if rs.min_singularity is not None:
+                out["min_singularity"] = rs.min_singularity
+        if rs.max_att_err is not None:
+            out["final_att_err_deg"] = float(rs.last[self.rows.columns.index("att_err_deg")])
+            out["max_att_err_deg"] = rs.max_att_err
         out.update(self.ctrl.summary())
         return out

@@ -22,7 +22,6 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
-from .rows import check_rows
 from .segments import held_torque
 
 __all__ = ["fused_ok", "run_fused"]
@@ -141,7 +140,6 @@ def run_fused(loop, K: int) -> None:
     nu_cmg = loop.nu_cmg
     ncmd = loop.n_cmd
     x = np.array(loop.x, dtype=float)
-    rows_t, rows_x, rows_h = [], [], []
     tail_flag = 0
     ticks = 0
     loop.used_fused = True
@@ -165,12 +163,8 @@ def run_fused(loop, K: int) -> None:
             if ncmd == 3:
                 loop.last_cmd = tuple(cmd)
             ctrl.q_ref_BN = tuple(q_ref)
-            rows_t.append(t)
-            rows_x.append(x.copy())
             loop.x = x
-            rows_h.append(loop._held_row(flag | tail_flag))
-            if len(rows_t) >= 64:
-                _flush(loop, rows_t, rows_x, rows_h)
+            loop.rows.hold(t, x, loop._held_row(flag | tail_flag))  # streamed in batches
             if k == K:
                 break
             n_act = row_ks[j + 1] - k
@@ -219,7 +213,7 @@ def run_fused(loop, K: int) -> None:
         loop.x = x
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
-        _flush(loop, rows_t, rows_x, rows_h)
+        loop.rows.flush()
 
 
 def _symbolic_params(ctrl):
@@ -228,10 +222,3 @@ def _symbolic_params(ctrl):
         return ctrl.symbolic_params()
     except Exception as e:
         raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e
-
-
-def _flush(loop, rows_t, rows_x, rows_h) -> None:
-    if rows_t:
-        rows = loop.rows.make(rows_t, rows_x, rows_h)
-        rows_t.clear(), rows_x.clear(), rows_h.clear()
-        check_rows(rows[:, :12], lambda ok: loop.rows.emit(rows[: len(ok)]))

@@ -1,7 +1,15 @@
 """Output rows: the CSV columns of a scene, states turned into rows (compiled outputs plus the
-loop's held values), streamed to a sink as they are computed."""
+loop's held values), streamed to a sink in batches as they are computed, kept or not.
+
+Batches are bounded (:data:`ROW_BATCH` rows, :data:`FLUSH_S` seconds of work), so a run that
+is killed has handed every row to its sink but the last batch, and a run that does not keep
+its rows (``keep=False``) holds one batch in memory whatever its length.
+"""
 
 from __future__ import annotations
+
+import math
+import time
 
 import numpy as np
 
@@ -12,7 +20,49 @@ from ..scene import Scene
 from .system import OUT_CHUNK
 from .trajectory import Trajectory, base_columns
 
-__all__ = ["trajectory_columns", "Rows", "check_rows"]
+__all__ = ["trajectory_columns", "Rows", "RowSummary", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S"]
+
+#: most rows in one batch handed to the sink (and in one integrator call of the open loop)
+ROW_BATCH = 64
+#: a batch is handed on once this much wall time [s] has passed since the last one, even short
+FLUSH_S = 1.0
+
+
+class SinkError(OSError):
+    """A sink could not take a batch of rows (disk full, file too large, ...).
+
+    Its message is one line naming the file, the reason and what the file holds.
+
+    Parameters
+    ----------
+    path : str
+        The file.
+    last_t : float or None
+        Time [s] of the last complete row in the file (None: no row).
+    cause : OSError
+        The error of the write.
+    held : str, optional
+        What the file holds, when not "the rows up to t = last_t" (e.g. "only the header").
+    """
+
+    def __init__(self, path, last_t, cause: OSError, held: str | None = None):
+        super().__init__(cause.errno, cause.strerror)
+        self.path = str(path)
+        self.last_t = last_t
+        if held is None:
+            held = "no row" if last_t is None else f"the rows up to t = {last_t:.10g} s"
+        self.held = held
+        self.message = f"cannot write {self.path}: {cause.strerror or cause}; it holds {held}"
+
+    def __str__(self) -> str:
+        return self.message
+
+    def __reduce__(self):
+        return (_sink_error, (self.path, self.last_t, self.errno, self.strerror, self.held))
+
+
+def _sink_error(path, last_t, errno, strerror, held):
+    return SinkError(path, last_t, OSError(errno, strerror), held)
 
 
 def trajectory_columns(scene: Scene) -> list[str]:
@@ -36,6 +86,58 @@ def trajectory_columns(scene: Scene) -> list[str]:
     return cols
 
 
+class RowSummary:
+    """Reductions over every row of a run, updated batch by batch (the rows need not be kept):
+    the last row, max |h| [N m s], min singularity measure, max attitude error [deg].
+
+    Parameters
+    ----------
+    columns : list of str
+        The run's columns (:func:`trajectory_columns`).
+
+    Attributes
+    ----------
+    n_rows : int
+        Rows seen.
+    last : ndarray or None
+        The last row.
+    max_h : float or None
+        Largest ``|(hx, hy, hz)|`` (None: no such columns, or no row).
+    min_singularity : float or None
+        Smallest ``cmg_singularity``.
+    max_att_err : float or None
+        Largest finite-or-inf ``att_err_deg`` (NaN ignored; None: none was a number).
+    """
+
+    def __init__(self, columns):
+        col = {c: i for i, c in enumerate(columns)}
+        self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
+        self._sing = col.get("cmg_singularity")
+        self._err = col.get("att_err_deg")
+        self.n_rows = 0
+        self.last = None
+        self.max_h = self.min_singularity = self.max_att_err = None
+        self._err_max = math.nan  # NaN-ignoring running max (np.fmax), kept once a value is finite
+        self._err_finite = False
+
+    def update(self, rows: np.ndarray) -> None:
+        """Account for a batch ``rows`` (k, len(columns)), k >= 1."""
+        self.n_rows += len(rows)
+        self.last = rows[-1].copy()
+        if self._h is not None:
+            h = float(np.linalg.norm(rows[:, self._h], axis=1).max())
+            self.max_h = h if self.max_h is None else float(np.maximum(self.max_h, h))
+        if self._sing is not None:
+            m = float(rows[:, self._sing].min())
+            self.min_singularity = m if self.min_singularity is None else float(np.minimum(self.min_singularity, m))
+        if self._err is not None:
+            err = rows[:, self._err]
+            self._err_finite |= bool(np.isfinite(err).any())
+            self._err_max = float(np.fmax(self._err_max, np.fmax.reduce(err)))
+            if self._err_finite:
+                self.max_att_err = self._err_max
+
+
 class Rows:
     """Turns states into output rows (compiled outputs + the loop's held values) and streams them.
 
@@ -43,15 +145,21 @@ class Rows:
     ``out_layout``, the state's gimbal angles by the cluster's gimbal names, and the loop's held
     values by :attr:`held_columns` (the order in which the closed loop hands them over).
 
+    Rows reach the sink in batches of at most :data:`ROW_BATCH` rows: :meth:`emit` hands one on
+    at once; :meth:`hold` collects rows one by one and hands them on when the batch is full or
+    :data:`FLUSH_S` has passed (and :meth:`flush` at the end).
+
     Parameters
     ----------
     scene : Scene
     system : System  The compiled system of the run.
     p : ndarray  The parameter vector of the scene.
     sink : object with ``write(rows)`` or None  Receives every batch of rows as it is made.
+    keep : bool  Keep every row for :meth:`trajectory`; ``False``: only the last one (the sink
+        has them all; :attr:`summary` has the reductions over them).
     """
 
-    def __init__(self, scene, system, p, sink):
+    def __init__(self, scene, system, p, sink, keep: bool = True):
         self.form = system.formulation
         self.nx = self.form.nx
         self.n_out = system.n_out
@@ -60,7 +168,11 @@ class Rows:
         self.columns = trajectory_columns(scene)
         self.scene = scene
         self.sink = sink
+        self.keep = keep
         self.rows: list[np.ndarray] = []
+        self.summary = RowSummary(self.columns)
+        self._pending = ([], [], [])  # times, states, held values of rows not yet made
+        self._flushed_at = time.perf_counter()
         col = {c: i for i, c in enumerate(self.columns)}
         names = scene.appendage_names
         cmg = self.form.model.cmg
@@ -124,15 +236,49 @@ class Rows:
         return rows
 
     def emit(self, rows: np.ndarray) -> None:
-        """Keep ``rows`` (k, len(columns)) and hand them to the sink."""
+        """Hand ``rows`` (k, len(columns)) to the sink, then count and (``keep``) keep them.
+
+        Raises
+        ------
+        SinkError
+            From the sink: the rows are not counted.
+        """
         if len(rows):
-            self.rows.append(rows)
             if self.sink is not None:
                 self.sink.write(rows)
+            self._flushed_at = time.perf_counter()
+            self.summary.update(rows)
+            if self.keep:
+                self.rows.append(rows)
+
+    def hold(self, t: float, x, held) -> None:
+        """Add the row at ``t`` (state ``x``, the loop's ``held`` values) to the pending batch;
+        the batch is made and emitted when full or :data:`FLUSH_S` after the last one."""
+        ts, xs, hs = self._pending
+        ts.append(t)
+        xs.append(np.array(x, dtype=float))
+        hs.append(held)
+        if len(ts) >= ROW_BATCH or time.perf_counter() - self._flushed_at >= FLUSH_S:
+            self.flush()
+
+    def flush(self) -> None:
+        """Make and emit the pending rows; raises IntegrationError at a non-finite core value
+        (the rows before it are emitted)."""
+        ts, xs, hs = self._pending
+        if ts:
+            rows = self.make(ts, xs, hs)
+            ts.clear(), xs.clear(), hs.clear()
+            check_rows(rows[:, :12], lambda ok: self.emit(rows[: len(ok)]))
 
     def trajectory(self, meta) -> Trajectory:
-        """The rows kept so far as a :class:`Trajectory` with ``meta``."""
-        data = np.vstack(self.rows) if self.rows else np.zeros((0, len(self.columns)))
+        """The rows kept so far as a :class:`Trajectory` with ``meta`` (to which ``n_rows``, the
+        rows emitted, is added); without ``keep``, the last row only."""
+        meta["n_rows"] = self.summary.n_rows
+        if self.keep:
+            data = np.vstack(self.rows) if self.rows else np.zeros((0, len(self.columns)))
+        else:
+            last = self.summary.last
+            data = np.zeros((0, len(self.columns))) if last is None else last[None]
         return Trajectory(self.columns, data, meta)
 
 

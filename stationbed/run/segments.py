@@ -11,18 +11,56 @@ from ..model import StationModel
 from ..model.torques import held_torque_B, torque_breakpoints
 from ..scene import Scene
 
-__all__ = ["output_times", "breakpoints", "held_torque", "segment_input"]
+__all__ = ["output_times", "OutputTimes", "breakpoints", "held_torque", "segment_input"]
 
 
 def output_times(duration: float, dt: float) -> np.ndarray:
     """Output times [s]: 0, every ``dt``, and ``duration`` (appended when it is not a multiple)."""
-    n = int(math.floor(duration / dt + 1e-9))
-    ts = np.arange(n + 1) * dt
-    if duration - ts[-1] > 1e-9 * max(1.0, duration):
-        ts = np.append(ts, duration)
-    else:
-        ts[-1] = min(ts[-1], duration)
-    return ts
+    clock = OutputTimes(duration, dt)
+    return clock.times(0, len(clock))
+
+
+class OutputTimes:
+    """The times of :func:`output_times` without holding them (a run of millions of rows):
+    time ``k`` is ``k * dt``, the last one ``duration`` (or the multiple within rounding of it).
+
+    Parameters
+    ----------
+    duration, dt : float
+        Run length and output step [s].
+    """
+
+    def __init__(self, duration: float, dt: float):
+        n = int(math.floor(duration / dt + 1e-9))
+        self.dt = dt
+        last = n * dt
+        if duration - last > 1e-9 * max(1.0, duration):
+            self.count, self.last = n + 2, duration
+        else:
+            self.count, self.last = n + 1, min(last, duration)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def time(self, k: int) -> float:
+        """Output time ``k`` [s]; ``inf`` past the last."""
+        if k >= self.count:
+            return math.inf
+        return self.last if k == self.count - 1 else k * self.dt
+
+    def times(self, k0: int, k1: int) -> np.ndarray:
+        """Output times ``k0 .. k1 - 1`` [s], as :func:`output_times` gives them."""
+        ts = np.arange(k0, k1) * self.dt
+        if k1 == self.count and k1 > k0:
+            ts[-1] = self.last
+        return ts
+
+    def first_after(self, t: float, strict: bool = True) -> int:
+        """Index of the first output time after ``t`` (``>= t`` when not ``strict``); ``len`` if none."""
+        k = min(max(0, int(t // self.dt) - 1), self.count)
+        while k < self.count and (self.time(k) <= t if strict else self.time(k) < t):
+            k += 1
+        return k
 
 
 def breakpoints(scene: Scene, duration: float) -> tuple[list[float], set[float]]:

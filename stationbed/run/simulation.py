@@ -2,9 +2,13 @@
 
 The run is cut into *segments* at every discontinuity of the scene (torque-window edges); the
 integrator advances each segment with the held input constant and lands exactly on every
-output time. Rows stream to an optional sink as they are computed, so a run that fails keeps
-everything up to the failure (:class:`SimulationError` carries the partial trajectory and
-the time it stopped). A scene with a ``[controller]`` runs the closed loop (:mod:`.closed_loop`).
+output time, one window of at most :data:`~.rows.ROW_BATCH` output times per call (fewer when
+a call takes longer than :data:`~.rows.FLUSH_S`), the steps running on across windows, so the
+numbers do not depend on the windows. Rows stream to an optional sink a window at a time, so a
+run that fails or is killed keeps everything up to the window in progress
+(:class:`SimulationError` carries the partial trajectory and the time it stopped), and a run
+that does not keep its rows (``keep=False``) holds one window in memory. A scene with a
+``[controller]`` runs the closed loop (:mod:`.closed_loop`).
 """
 
 from __future__ import annotations
@@ -21,11 +25,11 @@ from ..scene import Scene, load_scene
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import Controller
 from .prepare import prepare
-from .rows import Rows, check_rows
-from .segments import breakpoints, output_times, segment_input
+from .rows import FLUSH_S, ROW_BATCH, Rows, SinkError, check_rows
+from .segments import OutputTimes, breakpoints, segment_input
 from .trajectory import Trajectory
 
-__all__ = ["simulate", "SimulationError"]
+__all__ = ["simulate", "SimulationError", "SinkError"]
 
 
 class SimulationError(RuntimeError):
@@ -54,6 +58,7 @@ def simulate(
     sink=None,
     controller=None,
     fused: bool = True,
+    keep: bool = True,
 ) -> Trajectory:
     """Run a scene and return its :class:`Trajectory`.
 
@@ -65,7 +70,12 @@ def simulate(
     rtol, atol, duration [s], step [s], output_dt [s] : float, optional
         Override the scene's values.
     sink : object with ``write(rows)``, optional
-        Receives each batch of output rows as soon as it is computed.
+        Receives each batch of output rows (ndarray (k, columns), k <= ``ROW_BATCH``) as soon
+        as it is made. Open loop: a window's rows when its integrator call returns, so a
+        failure, Ctrl-C or kill loses at most the window in progress (``ROW_BATCH`` rows, or
+        about ``FLUSH_S`` of work). Closed loop: batches of ``ROW_BATCH`` rows or ``FLUSH_S``;
+        a :class:`SimulationError` or ``KeyboardInterrupt`` hands over the rest first, a kill
+        loses at most one batch.
     controller : Controller, optional
         A controller instance to use instead of the law named in the scene's ``[controller]``
         table; the scene must still have that table, for the period and the sensor (a scene
@@ -74,6 +84,11 @@ def simulate(
         Run controller and dynamics in one compiled loop when the controller offers a symbolic
         form and the scene allows it (RK4 at one step per period, no discontinuity, no sensor
         errors); ``False`` always calls the Python ``_update`` every tick. Same numbers.
+    keep : bool
+        Keep every row in the returned trajectory (and the failed run's). ``False`` (for a
+        sink that takes them, e.g. a run of millions of rows): memory stays bounded, the
+        trajectory holds the last row only; ``meta["n_rows"]`` counts the rows either way and
+        the closed loop's ``meta["summary"]`` is computed over all of them.
 
     Raises
     ------
@@ -84,6 +99,9 @@ def simulate(
         ``controller`` is not a :class:`Controller` instance.
     ValueError
         ``controller`` given for a scene without a ``[controller]`` table; bad overrides.
+    SinkError
+        The sink could not take a batch (e.g. the disk is full); an ``OSError`` whose message
+        names the file and the time of the last complete row in it.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -104,7 +122,7 @@ def simulate(
     form, funcs = system.formulation, system.funcs
     model = form.model
 
-    rows = Rows(scene, system, p, sink)
+    rows = Rows(scene, system, p, sink, keep)
     bps, steps = breakpoints(scene, duration)
     jump = FastCall.of(funcs["jump"]) if (form.omega_is_state and steps and sim.impulse_jump) else None
     meta = {
@@ -141,27 +159,43 @@ def simulate(
         meta["summary"] = loop.summary()
         return rows.trajectory(meta)
 
-    t_out = output_times(duration, output_dt)
+    clock = OutputTimes(duration, output_dt)
     edges = sorted(set([0.0, duration] + bps))
     u = np.zeros(model.nu)
     rows.emit(rows.make([0.0], [x]))
+    n_win = 1  # output times per integrator call: up to ROW_BATCH, fewer when calls take long
     try:
         for a, b in zip(edges[:-1], edges[1:]):
-            inner = t_out[(t_out > a) & (t_out < b)]
-            ts = np.concatenate([[a], inner, [b]])
             segment_input(scene, model, a, b, u)
-            try:
-                xs = integ.integrate(ts, x, u)
-            except IntegrationError as e:
-                if e.partial is not None and len(e.partial) > 1:
-                    ts_done = ts[1 : len(e.partial)]
-                    keep = np.isin(ts_done, t_out)
-                    rows.emit(rows.make(ts_done[keep], e.partial[1:][keep]))
-                raise
-            x = apply_jump(b, xs[-1].copy())  # an array rate step at b: the state just after it
-            xs[-1] = x
-            keep = np.isin(ts[1:], t_out)
-            check_rows(rows.make(ts[1:][keep], xs[1:][keep]), rows.emit)
+            k, k_end = clock.first_after(a), clock.first_after(b, strict=False)  # times inside (a, b)
+            b_is_output = clock.time(k_end) == b
+            integ.begin_segment(a, b, x, u)
+            while True:  # windows of the output times inside, the last one closed by b
+                k1 = min(k + n_win, k_end)
+                ts = clock.times(k, k1)
+                last = k1 == k_end
+                if last:
+                    ts = np.append(ts, b)
+                wall = time.perf_counter()
+                try:
+                    xs = integ.continue_segment(ts)
+                except IntegrationError as e:
+                    n_done = 0 if e.partial is None else len(e.partial)
+                    n_out = min(n_done, k1 - k) + (n_done > k1 - k and b_is_output)
+                    if n_out:
+                        rows.emit(rows.make(ts[:n_out], e.partial[:n_out]))
+                    raise
+                n_win = max(1, min(ROW_BATCH, int(FLUSH_S * len(ts) / max(time.perf_counter() - wall, 1e-9))))
+                if last:
+                    x = apply_jump(b, xs[-1].copy())  # an array rate step at b: the state just after it
+                    xs[-1] = x
+                    if not b_is_output:
+                        ts, xs = ts[:-1], xs[:-1]
+                if len(ts):
+                    check_rows(rows.make(ts, xs), rows.emit)
+                k = k1
+                if last:
+                    break
     except IntegrationError as e:
         meta.update(status="failed", stopped_at=e.t)
         raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from None
