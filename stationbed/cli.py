@@ -200,22 +200,6 @@ def _output_paths(args, scene_name: str | None) -> dict[str, Path]:
     return {"out": out, **paths}
 
 
-class _Counted:
-    """A sink that counts the rows it passed on and remembers the last time [s]."""
-
-    def __init__(self, sink):
-        self.sink, self.columns, self.n_rows, self.last_t = sink, sink.columns, 0, math.nan
-
-    def write(self, rows) -> None:
-        self.sink.write(rows)
-        if len(rows):
-            self.n_rows += len(rows)
-            self.last_t = float(rows[-1][0])
-
-    def close(self):
-        return getattr(self.sink, "close", lambda: None)()
-
-
 class BadOutput(ValueError):
     """An output path that is an input, another output, or a folder (exit 2, nothing written)."""
 
@@ -241,7 +225,7 @@ def _validate(scene) -> None:
 
 def _run(args, recorder) -> int:
     from .run.rows import trajectory_columns
-    from .run.simulation import SimulationError, simulate
+    from .run.simulation import SimulationError, SinkError, simulate
     from .output.csv import CsvSink
 
     scene, changes = _scene_with_options(args)
@@ -251,19 +235,28 @@ def _run(args, recorder) -> int:
     out.mkdir(parents=True, exist_ok=True)
     status = {"scene": str(args.scene)}
     rrd_error = None
-    with open(partial, "w", newline="") as fh:
-        sink = counted = _Counted(CsvSink(fh, trajectory_columns(scene)))
+    with CsvSink(partial, trajectory_columns(scene)) as csv:
+        sink = csv
         if args.rrd:  # stream the rows into the recording too, as they are computed
-            sink = _with_recording(sink, scene, paths["partial_rrd"], recorder, changes)
+            sink = _with_recording(csv, scene, paths["partial_rrd"], recorder, changes)
         try:
-            traj = simulate(scene, sink=sink)
+            traj = simulate(scene, sink=sink, keep=False)  # rows go to disk, memory stays bounded
         except KeyboardInterrupt:
             if args.rrd:
                 rrd_error = sink.close()
-            status.update(status="interrupted", rows=counted.n_rows, last_t=counted.last_t, rows_file=partial.name)
+            status.update(status="interrupted", rows=csv.rows_written, last_t=csv.last_t, rows_file=partial.name)
             _write_json(paths["summary"], status)
-            where = f"up to t = {counted.last_t:g} s " if counted.n_rows else ""
-            return _fail(f"interrupted; {counted.n_rows} rows {where}kept in {partial}", EXIT_FAILED)
+            where = f"up to t = {csv.last_t:g} s " if csv.last_t is not None else ""
+            return _fail(f"interrupted; {csv.rows_written} rows {where}kept in {partial}", EXIT_FAILED)
+        except SinkError as e:  # the disk is full, say: the file holds whole rows, the message says to when
+            if args.rrd:
+                rrd_error = sink.close()
+            status.update(status="failed", reason=str(e), rows_file=partial.name)
+            try:
+                _write_json(paths["summary"], status)
+            except OSError:
+                pass  # the same full disk: the one-line error says it all
+            return _fail(str(e), EXIT_FAILED)
         except SimulationError as e:
             _debug_traceback(e)
             if args.rrd:  # finish the recording first: the message says whether it is complete
@@ -272,7 +265,7 @@ def _run(args, recorder) -> int:
             _write_json(paths["summary"], status)
             kept = f"{partial} and {paths['partial_rrd']}" if args.rrd and not rrd_error else str(partial)
             failed = f"; recording {paths['partial_rrd']} failed: {rrd_error}" if rrd_error else ""
-            return _fail(f"{e}; {len(e.trajectory)} rows kept in {kept}{failed}", EXIT_FAILED)
+            return _fail(f"{e}; {e.trajectory.meta['n_rows']} rows kept in {kept}{failed}", EXIT_FAILED)
         finally:
             if args.rrd:  # flush and finish the recording whatever happened
                 rrd_error = sink.close()
@@ -282,7 +275,7 @@ def _run(args, recorder) -> int:
     status.update(traj.meta, rows_file=csv_path.name)
     _write_json(paths["summary"], status)
     msg = (
-        f"{scene.name}: {len(traj)} rows, t = 0..{traj.t[-1]:g} s, {traj.meta['formulation']}/"
+        f"{scene.name}: {traj.meta['n_rows']} rows, t = 0..{traj.t[-1]:g} s, {traj.meta['formulation']}/"
         f"{traj.meta['integrator']}, {traj.meta['n_rhs']} RHS evaluations, "
         f"{traj.meta['wall_s'] * 1e3:.1f} ms -> {csv_path}"
     )

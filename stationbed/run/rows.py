@@ -168,6 +168,8 @@ class Rows:
         self.columns = trajectory_columns(scene)
         self.scene = scene
         self.sink = sink
+        #: a :func:`stationbed.core.progress.task` told the time of every batch (or None)
+        self.progress = None
         self.keep = keep
         self.rows: list[np.ndarray] = []
         self.summary = RowSummary(self.columns)
@@ -248,6 +250,8 @@ class Rows:
                 self.sink.write(rows)
             self._flushed_at = time.perf_counter()
             self.summary.update(rows)
+            if self.progress is not None:
+                self.progress.update(float(rows[-1, 0]))
             if self.keep:
                 self.rows.append(rows)
 

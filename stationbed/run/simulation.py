@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import progress
 from ..core.compile import FastCall
 from ..integrators import IntegrationError
 from ..scene import Scene, load_scene
@@ -123,89 +124,91 @@ def simulate(
     model = form.model
 
     rows = Rows(scene, system, p, sink, keep)
-    bps, steps = breakpoints(scene, duration)
-    jump = FastCall.of(funcs["jump"]) if (form.omega_is_state and steps and sim.impulse_jump) else None
-    meta = {
-        "scene": scene.name,
-        "formulation": form.name,
-        "integrator": system.integrator_cls.name,
-        "rtol": rtol,
-        "atol": atol,
-        "build_s": system.build_s,
-    }
+    with progress.task(f"run {scene.name}", total=duration, unit="s") as bar:
+        rows.progress = bar  # updated with the time of every batch of rows handed over
+        bps, steps = breakpoints(scene, duration)
+        jump = FastCall.of(funcs["jump"]) if (form.omega_is_state and steps and sim.impulse_jump) else None
+        meta = {
+            "scene": scene.name,
+            "formulation": form.name,
+            "integrator": system.integrator_cls.name,
+            "rtol": rtol,
+            "atol": atol,
+            "build_s": system.build_s,
+        }
 
-    def apply_jump(t, x):
-        if jump is None or t not in steps:
-            return x
-        a = jump.args
-        a[0][0] = t * (1.0 - 1e-15) - 1e-300  # just before the step
-        a[1][0] = t
-        a[2][:] = x
-        a[3][:] = p
-        jump()
-        return jump.res[0].copy()
+        def apply_jump(t, x):
+            if jump is None or t not in steps:
+                return x
+            a = jump.args
+            a[0][0] = t * (1.0 - 1e-15) - 1e-300  # just before the step
+            a[1][0] = t
+            a[2][:] = x
+            a[3][:] = p
+            jump()
+            return jump.res[0].copy()
 
-    wall0 = time.perf_counter()
-    if scene.controller is not None:
-        loop = ControlLoop(scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused)
+        wall0 = time.perf_counter()
+        if scene.controller is not None:
+            loop = ControlLoop(scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused)
+            try:
+                loop.run()
+            except (IntegrationError, ControllerFailure) as e:
+                meta.update(status="failed", stopped_at=e.t, summary=loop.summary())
+                # the controller's own exception, if it raised, stays chained for the API user and
+                # the CLI's STATIONBED_DEBUG traceback; the loop's internals are not
+                raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from e.__cause__
+            meta.update(status="ok", wall_s=time.perf_counter() - wall0, n_rhs=integ.n_rhs, n_steps=integ.n_steps)
+            meta["summary"] = loop.summary()
+            return rows.trajectory(meta)
+
+        clock = OutputTimes(duration, output_dt)
+        edges = sorted(set([0.0, duration] + bps))
+        u = np.zeros(model.nu)
+        rows.emit(rows.make([0.0], [x]))
+        n_win = 1  # output times per integrator call: up to ROW_BATCH, fewer when calls take long
         try:
-            loop.run()
-        except (IntegrationError, ControllerFailure) as e:
-            meta.update(status="failed", stopped_at=e.t, summary=loop.summary())
-            # the controller's own exception, if it raised, stays chained for the API user and
-            # the CLI's STATIONBED_DEBUG traceback; the loop's internals are not
-            raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from e.__cause__
-        meta.update(status="ok", wall_s=time.perf_counter() - wall0, n_rhs=integ.n_rhs, n_steps=integ.n_steps)
-        meta["summary"] = loop.summary()
+            for a, b in zip(edges[:-1], edges[1:]):
+                segment_input(scene, model, a, b, u)
+                k, k_end = clock.first_after(a), clock.first_after(b, strict=False)  # times inside (a, b)
+                b_is_output = clock.time(k_end) == b
+                integ.begin_segment(a, b, x, u)
+                while True:  # windows of the output times inside, the last one closed by b
+                    k1 = min(k + n_win, k_end)
+                    ts = clock.times(k, k1)
+                    last = k1 == k_end
+                    if last:
+                        ts = np.append(ts, b)
+                    wall = time.perf_counter()
+                    try:
+                        xs = integ.continue_segment(ts)
+                    except IntegrationError as e:
+                        n_done = 0 if e.partial is None else len(e.partial)
+                        n_out = min(n_done, k1 - k) + (n_done > k1 - k and b_is_output)
+                        if n_out:
+                            rows.emit(rows.make(ts[:n_out], e.partial[:n_out]))
+                        raise
+                    n_win = max(1, min(ROW_BATCH, int(FLUSH_S * len(ts) / max(time.perf_counter() - wall, 1e-9))))
+                    if last:
+                        x = apply_jump(b, xs[-1].copy())  # an array rate step at b: the state just after it
+                        xs[-1] = x
+                        if not b_is_output:
+                            ts, xs = ts[:-1], xs[:-1]
+                    if len(ts):
+                        check_rows(rows.make(ts, xs), rows.emit)
+                    k = k1
+                    if last:
+                        break
+        except IntegrationError as e:
+            meta.update(status="failed", stopped_at=e.t)
+            raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from None
+        meta.update(
+            status="ok",
+            wall_s=time.perf_counter() - wall0,
+            n_rhs=integ.n_rhs,
+            n_steps=integ.n_steps,
+        )
         return rows.trajectory(meta)
-
-    clock = OutputTimes(duration, output_dt)
-    edges = sorted(set([0.0, duration] + bps))
-    u = np.zeros(model.nu)
-    rows.emit(rows.make([0.0], [x]))
-    n_win = 1  # output times per integrator call: up to ROW_BATCH, fewer when calls take long
-    try:
-        for a, b in zip(edges[:-1], edges[1:]):
-            segment_input(scene, model, a, b, u)
-            k, k_end = clock.first_after(a), clock.first_after(b, strict=False)  # times inside (a, b)
-            b_is_output = clock.time(k_end) == b
-            integ.begin_segment(a, b, x, u)
-            while True:  # windows of the output times inside, the last one closed by b
-                k1 = min(k + n_win, k_end)
-                ts = clock.times(k, k1)
-                last = k1 == k_end
-                if last:
-                    ts = np.append(ts, b)
-                wall = time.perf_counter()
-                try:
-                    xs = integ.continue_segment(ts)
-                except IntegrationError as e:
-                    n_done = 0 if e.partial is None else len(e.partial)
-                    n_out = min(n_done, k1 - k) + (n_done > k1 - k and b_is_output)
-                    if n_out:
-                        rows.emit(rows.make(ts[:n_out], e.partial[:n_out]))
-                    raise
-                n_win = max(1, min(ROW_BATCH, int(FLUSH_S * len(ts) / max(time.perf_counter() - wall, 1e-9))))
-                if last:
-                    x = apply_jump(b, xs[-1].copy())  # an array rate step at b: the state just after it
-                    xs[-1] = x
-                    if not b_is_output:
-                        ts, xs = ts[:-1], xs[:-1]
-                if len(ts):
-                    check_rows(rows.make(ts, xs), rows.emit)
-                k = k1
-                if last:
-                    break
-    except IntegrationError as e:
-        meta.update(status="failed", stopped_at=e.t)
-        raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from None
-    meta.update(
-        status="ok",
-        wall_s=time.perf_counter() - wall0,
-        n_rhs=integ.n_rhs,
-        n_steps=integ.n_steps,
-    )
-    return rows.trajectory(meta)
 
 
 def _check_controller_argument(scene: Scene, controller) -> None:
