@@ -58,6 +58,10 @@ class Integrator:
        class then provides ``explicit_step(rhs, t, x, h, u, p)`` (casadi, no inner
        iteration), a fixed step ``h_nominal`` [s] and ``RHS_PER_STEP``; steps taken inside
        such a tick are booked with :meth:`count_steps`.
+    6. ``rhs_called = True`` declares that the built functions only evaluate ``rhs`` (never
+       differentiate or inspect its expression): ``rhs`` is then a Function that stays a call
+       in their graphs (:func:`~stationbed.core.compile.sx_function` ``called=True``), one
+       compiled copy of the RHS instead of one per stage. Without it ``rhs`` is inlined.
 
     Parameters
     ----------
@@ -91,6 +95,8 @@ class Integrator:
     adaptive: ClassVar[bool] = False
     #: one explicit step per control period composes with the controller into one compiled tick
     fusable: ClassVar[bool] = False
+    #: the built functions only evaluate the RHS: it stays a call, not inlined (see rule 6)
+    rhs_called: ClassVar[bool] = False
     #: RHS evaluations one step makes (fixed-step methods; :meth:`count_steps` books this many)
     RHS_PER_STEP: ClassVar[int] = 0
     #: C source appended to the generated code (a driver calling the built functions by name)

@@ -230,6 +230,7 @@ class DOP853(Integrator):
     name = "dop853"
     order = 8
     adaptive = True
+    rhs_called = True
     extra_c = (Path(__file__).with_name("dop853_driver.c")).read_text()
     #: RHS evaluations of a step (12 stages, the 13th is the next step's first: FSAL)
     N_STAGES = 12

@@ -34,8 +34,6 @@ CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, do
   double t = ts[0], t_end = ts[nts - 1], h = 0.0, err = 0.0;
   int i = 1, rejected = 0, status = 0, k;
   memcpy(out, x, sizeof(double) * (size_t)nx);
-  arg[0] = &t; arg[1] = x; arg[2] = k1; arg[3] = &h; arg[4] = u; arg[5] = p; arg[6] = tol;
-  res[0] = x_new; res[1] = k_new; res[2] = &err; res[3] = F;
   while (t < t_end) {
     double remaining = t_end - t;
     int clipped;
@@ -45,6 +43,10 @@ CASADI_SYMBOL_EXPORT int sb_dop853_segment(int nx, int nts, const double* ts, do
     else if (h > 0.5 * remaining) h = 0.5 * remaining;
     if (h <= 1e-12 * fmax(1.0, fabs(t))) { status = 1; break; }
     int dense = (i < nts - 1) && ts[i] < t + h;
+    /* set at every call: a generated function may use arg[] and res[] past its own inputs and
+       outputs as scratch (a call to another generated function, such as the RHS) */
+    arg[0] = &t; arg[1] = x; arg[2] = k1; arg[3] = &h; arg[4] = u; arg[5] = p; arg[6] = tol;
+    res[0] = x_new; res[1] = k_new; res[2] = &err; res[3] = F;
     if (dense) dop853_dense(arg, res, iw, w, 0);
     else dop853_step(arg, res, iw, w, 0);
     info[0] += 12 + (dense ? 3 : 0);

@@ -195,6 +195,7 @@ class RK4(FixedStep):
     order = TABLEAU.order
     RHS_PER_STEP = TABLEAU.stages
     fusable = True
+    rhs_called = True
 
     @classmethod
     def explicit_step(cls, rhs, t, x, h, u, p):

@@ -59,6 +59,7 @@ class LieRK4(FixedStep):
     TABLEAU: ClassVar[ButcherTableau] = CLASSICAL_RK4
     order = TABLEAU.order
     RHS_PER_STEP = TABLEAU.stages
+    rhs_called = True
     NORMALISE: ClassVar[bool] = True
 
     @classmethod
