@@ -76,7 +76,7 @@ def cache_dir() -> Path | None:
     casadi's evaluator."""
     env = os.environ.get(CACHE_ENV)
     d = Path(env) if env else Path.home() / ".cache" / "stationbed"
-    where = f"{CACHE_ENV}={d}" if env else f"the compile cache {d}"
+    where = f"{CACHE_ENV}={d}" if env else f"the compile cache {d} (the default when {CACHE_ENV} is unset)"
     fallback = f"running without compiled code ({EVALUATOR_VM}: same numbers, slower)"
     try:
         if d.exists() and not d.is_dir():
@@ -148,7 +148,7 @@ def _build(cc: str, src: str, lib: Path, sig: Path, tag: str) -> str | None:
             os.replace(tmp_lib, lib)  # atomic: concurrent workers never see half a file
             os.replace(tmp_sig, sig)
     except OSError as e:
-        return f"cannot write the compiled library to {lib.parent} ({e.strerror})"
+        return f"cannot write the compiled library to {lib.parent} ({e.strerror}; {CACHE_ENV} names the cache folder)"
     return None
 
 
