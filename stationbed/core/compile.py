@@ -40,8 +40,8 @@ def sx_function(name: str, inputs: list, outputs: list, *, called: bool = False)
     ``never_inline``): the caller's graph and generated C hold a call to it, not a copy of its
     operations. A DOP853 step evaluates the RHS 13 times (16 with dense output): inlined, the
     generated C grows with 29 copies of an RHS that grows with the arrays, and the C compiler's
-    time faster still (16 arrays: 1.7 MB, 52 s; called: 0.5 MB, 4 s). Same operations in the
-    same order: bit-identical results.
+    time faster still (16 arrays: 1.7 MB of C, 51 s; called: 0.43 MB, 6 s; 48 arrays: 185 s ->
+    22 s, ``benchmarks/bench_compile.py``). Same operations in the same order: bit-identical.
     """
     return ca.Function(name, inputs, outputs, {"cse": True, "never_inline": called})
 

@@ -102,9 +102,10 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     q = ca.SX.sym("q", 4)
     w = ca.SX.sym("w", 3)
     xe = ca.SX.sym("xe", model.n_extra + 2 * model.n_modes)
-    # one compiled RHS that the steps call, for integrators that only evaluate it (rule 6 of
-    # Integrator): inlined, a DOP853 step and its dense output hold 29 copies of it
-    rhs = sx_function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)], called=integ_cls.rhs_called)
+    xdot = form.rhs(t, x, u, p)
+    rhs = sx_function("rhs", [t, x, u, p], [xdot])
+    if rhs.n_instructions() > integ_cls.RHS_INLINE_MAX_OPS:  # the steps call one compiled RHS (rule 6 of Integrator)
+        rhs = sx_function("rhs", [t, x, u, p], [xdot], called=True)
     arrays = form.arrays(t, x, p)
     # the compiled outputs by name (rows.py places them in the CSV columns by these names)
     outs = [("omega_BN_B", form.omega(t, x, p)), ("H_O_N", form.H_O_N(t, x, p)), ("T", form.kinetic_energy(t, x, p))]
