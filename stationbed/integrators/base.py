@@ -64,6 +64,12 @@ class Integrator:
        ``_integrate`` at each window) is exact for methods that step each requested interval on
        its own; a method whose steps span requested times overrides both and steps on across
        windows (``dop853``, the scipy paths).
+    7. ``RHS_INLINE_MAX_OPS``: the built functions get an ``rhs`` they inline when it has at
+       most this many operations (casadi instructions), else one that stays a call in their
+       graphs (:func:`~stationbed.core.compile.sx_function` ``called=True``): one compiled
+       copy of the RHS instead of one per stage, so the C compiler's time grows gently with
+       the arrays. Lower it from the default (``inf``: always inlined) only when the built
+       functions just evaluate ``rhs`` (never differentiate or inspect its expression).
 
     Parameters
     ----------
@@ -97,6 +103,8 @@ class Integrator:
     adaptive: ClassVar[bool] = False
     #: one explicit step per control period composes with the controller into one compiled tick
     fusable: ClassVar[bool] = False
+    #: the largest RHS (casadi instructions) the built functions inline; larger: a call (rule 6)
+    RHS_INLINE_MAX_OPS: ClassVar[float] = math.inf
     #: RHS evaluations one step makes (fixed-step methods; :meth:`count_steps` books this many)
     RHS_PER_STEP: ClassVar[int] = 0
     #: C source appended to the generated code (a driver calling the built functions by name)

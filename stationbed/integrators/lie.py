@@ -9,7 +9,7 @@ import casadi as ca
 
 from ..core.rotation import dcm, quat_conj, quat_mult
 from ..core.rotation import skew as _skew
-from .fixed_step import FixedStep
+from .fixed_step import RK4, FixedStep
 from .tableau import CLASSICAL_RK4, ButcherTableau
 
 __all__ = ["LieRK4", "LGVI"]
@@ -59,6 +59,7 @@ class LieRK4(FixedStep):
     TABLEAU: ClassVar[ButcherTableau] = CLASSICAL_RK4
     order = TABLEAU.order
     RHS_PER_STEP = TABLEAU.stages
+    RHS_INLINE_MAX_OPS = RK4.RHS_INLINE_MAX_OPS  # (the same stages: see RK4)
     NORMALISE: ClassVar[bool] = True
 
     @classmethod

@@ -135,6 +135,7 @@ def simulate(
             "rtol": rtol,
             "atol": atol,
             "build_s": system.build_s,
+            "evaluator": system.evaluator,
         }
 
         def apply_jump(t, x):

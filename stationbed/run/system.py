@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from ..core.compile import compile_functions, sx_function
+from ..core.compile import EVALUATOR_C, compile_functions, sx_function
 from ..formulations import Formulation, get_formulation
 from ..integrators import Integrator, get_integrator
 from ..model import StationModel, Structure
@@ -34,6 +34,9 @@ class System:
     #: name -> slice of the compiled output ``out``: omega_BN_B, H_O_N, T, alpha<k>, beta<k>,
     #: h_B, cmg_singularity, track_err<k>, eta, etadot, U_strain (those the scene has)
     out_layout: dict = None
+    #: what runs the equations: ``compile.EVALUATOR_C`` (generated C) or ``EVALUATOR_VM``
+    #: (casadi's virtual machine: no compiler, or no usable cache; same numbers, slower)
+    evaluator: str = EVALUATOR_C
 
 
 _SYSTEMS: dict[tuple, System] = {}
@@ -99,7 +102,10 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     q = ca.SX.sym("q", 4)
     w = ca.SX.sym("w", 3)
     xe = ca.SX.sym("xe", model.n_extra + 2 * model.n_modes)
-    rhs = sx_function("rhs", [t, x, u, p], [form.rhs(t, x, u, p)])
+    xdot = form.rhs(t, x, u, p)
+    rhs = sx_function("rhs", [t, x, u, p], [xdot])
+    if rhs.n_instructions() > integ_cls.RHS_INLINE_MAX_OPS:  # the steps call one compiled RHS (rule 6 of Integrator)
+        rhs = sx_function("rhs", [t, x, u, p], [xdot], called=True)
     arrays = form.arrays(t, x, p)
     # the compiled outputs by name (rows.py places them in the CSV columns by these names)
     outs = [("omega_BN_B", form.omega(t, x, p)), ("H_O_N", form.H_O_N(t, x, p)), ("T", form.kinetic_energy(t, x, p))]
@@ -156,6 +162,9 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     fs += integ_cls.build(rhs, nx, nu, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
     funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)
-    system = System(form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0), {f.name(): f for f in fs}, out_layout)
+    system = System(
+        form, integ_cls, funcs, time.perf_counter() - t0, out.numel_out(0), {f.name(): f for f in fs}, out_layout,
+        funcs["__evaluator__"],
+    )
     _SYSTEMS[key] = system
     return system
