@@ -599,3 +599,22 @@ def test_cli_debug_flag_prints_the_controllers_traceback(tmp_path, monkeypatch):
     assert res.returncode == 1
     assert "user_laws.py" in res.stderr and "in _update" in res.stderr
     assert res.stderr.strip().splitlines()[-1].startswith("stationbed: error: run stopped at t = 5 s")
+
+
+class BadSummary(Controller):
+    """A law whose summary() raises (a bug in reporting, not in control)."""
+
+    name = "bad_summary"
+
+    def _update(self, t, meas):
+        return (0.0, 0.0, 0.0)
+
+    def summary(self):
+        raise KeyError("gain_table")
+
+
+def test_raising_summary_does_not_hide_the_run():
+    """The run finishes and reports the summary's failure in one field instead of raising."""
+    tr = simulate(scene_from_dict(loop_scene()), controller=BadSummary(), duration=1.0)
+    assert tr.meta["status"] == "ok"
+    assert tr.meta["summary"]["controller_summary_error"] == "KeyError: 'gain_table'"

@@ -386,5 +386,8 @@ class ControlLoop:
         if rs.max_att_err is not None:
             out["final_att_err_deg"] = float(rs.last[self.rows.columns.index("att_err_deg")])
             out["max_att_err_deg"] = rs.max_att_err
-        out.update(self.ctrl.summary())
+        try:  # the user's code: a raising summary() must not hide the run's own result or failure
+            out.update(self.ctrl.summary())
+        except Exception as e:
+            out["controller_summary_error"] = f"{type(e).__name__}: {one_line(e)}"
         return out
