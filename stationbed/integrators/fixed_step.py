@@ -123,20 +123,26 @@ class FixedStep(Integrator):
         n = max(1, math.ceil((t1 - t0) / self.h_nominal - 1e-9))
         if n > self.ONE_STEP_CALLS:
             return super().advance(t0, t1, x0, u)
-        m = self._one
-        txd, hup = m.args
+        hup = self._one.args[1]
         hup[0] = (t1 - t0) / n
         hup[1 : 1 + u.size] = u
-        txd[0] = t0
-        txd[1:-1] = x0
-        txd[-1] = 0.0
-        res = m.res[0]
-        for _ in range(n):
-            m()
-            txd[:] = res
+        res = self._single_steps(t0, x0, n)
         self.count_steps(n)
         self._check(t1, res)
         return res[1:-1].copy()
+
+    def _single_steps(self, t0, x0, n):
+        """``n`` steps from ``x0`` at ``t0`` through the one-step function (its ``hup`` already
+        holds the step, the input, the parameters and the tolerances); its result buffer."""
+        txd = self._one.args[0]
+        txd[0] = t0
+        txd[1:-1] = x0
+        txd[-1] = 0.0
+        res = self._one.res[0]
+        for _ in range(n):
+            self._one()
+            txd[:] = res
+        return res
 
     def _integrate(self, ts, x0, u):
         out = np.empty((ts.size, self.nx))
@@ -163,16 +169,8 @@ class FixedStep(Integrator):
                 n -= k
                 self.count_steps(k)
             if n:  # the rest one step per call (the block call would run all 64, masked)
-                one = self._one
-                o_txd, o_hup = one.args
-                o_hup[:] = hup
-                o_txd[0] = t
-                o_txd[1:-1] = x
-                o_txd[-1] = 0.0
-                res = one.res[0]
-                for _ in range(n):
-                    one()
-                    o_txd[:] = res
+                self._one.args[1][:] = hup
+                res = self._single_steps(t, x, n)
                 self._check(t + n * hup[0], res, out[:i])
                 x = res[1:-1].copy()
                 self.count_steps(n)
