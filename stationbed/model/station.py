@@ -429,7 +429,10 @@ class StationModel:
         """
         radius, incl, u0, n, ci, si = (p[self.layout["orbit"]][i] for i in range(6))
         arg = u0 + n * t
-        return OrbitState(n, ci, si, ca.cos(arg), ca.sin(arg))
+        cu, su = ca.cos(arg), ca.sin(arg)
+        r_N = radius * ca.vertcat(cu, su * ci, su * si)
+        v_N = (radius * n) * ca.vertcat(-su, cu * ci, cu * si)
+        return OrbitState(n, ci, si, cu, su, r_N, v_N)
 
     def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True):
         """Sum of the scene's external torques, B components [N m], (3, 1).

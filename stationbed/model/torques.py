@@ -45,10 +45,13 @@ __all__ = [
 
 
 class OrbitState(NamedTuple):
-    """The circular orbit at time ``t`` as the torque kinds use it (casadi scalars).
+    """The orbit at time ``t`` as the torque kinds use it (casadi expressions).
 
     ``u = u0 + n t`` is the argument of latitude; its cosine and sine are computed once per
-    expression and shared by every kind.
+    expression and shared by every kind. ``r_N`` and ``v_N`` are the station's inertial position
+    and velocity: a kind that needs the station's place (density, flow, shadow) reads these, so
+    it works on any orbit the model provides. Unused fields cost nothing (casadi keeps only what
+    an output depends on).
     """
 
     #: mean motion n [rad/s]
@@ -59,6 +62,10 @@ class OrbitState(NamedTuple):
     #: cos u, sin u of the argument of latitude at t
     cos_u: Any
     sin_u: Any
+    #: position of the mass centre relative to the Earth's centre, N components [m] (3-vector)
+    r_N: Any
+    #: inertial velocity of the mass centre, N components [m/s] (3-vector)
+    v_N: Any
 
 
 class TorqueKind:
