@@ -108,13 +108,15 @@ def gravity_gradient_torque(R_hat_B, I_O_B, mean_motion_sq):
     return 3.0 * mean_motion_sq * np.cross(R_hat_B, I_O_B @ R_hat_B)
 
 
-def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
+def sun_direction_N(sun, inclination: float = 0.0, raan: float = 0.0) -> np.ndarray:
     """Unit vector to the sun, N components, from a scene's ``[sun]`` table.
 
     Parameters
     ----------
     sun : stationbed.scene.Sun  ``direction_N``, or ``beta`` [rad] and ``u_noon`` [rad].
     inclination : float  Orbit inclination [rad] (0 without an orbit).
+    raan : float  Right ascension of the orbit's ascending node at t = 0 [rad] (0: on N's x axis,
+        as on the circular orbit).
 
     Returns
     -------
@@ -132,6 +134,10 @@ def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
         return v / np.linalg.norm(v)
     b, u = sun.beta, sun.u_noon
     ci, si = np.cos(inclination), np.sin(inclination)
+    if raan != 0.0:  # the node turned by raan about z_N
+        cO, sO = np.cos(raan), np.sin(raan)
+        in_plane = np.cos(u) * np.array([cO, sO, 0.0]) + np.sin(u) * np.array([-sO * ci, cO * ci, si])
+        return np.cos(b) * in_plane + np.sin(b) * np.array([sO * si, -cO * si, ci])
     in_plane = np.cos(u) * np.array([1.0, 0.0, 0.0]) + np.sin(u) * np.array([0.0, ci, si])
     return np.cos(b) * in_plane + np.sin(b) * np.array([0.0, -si, ci])
 

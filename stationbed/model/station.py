@@ -28,8 +28,9 @@ from ..core.massprops import composite_cm, parallel_axis
 from ..core.rotation import dcm
 from .appendages import drive_acceleration, joint_kinematics, profile, sun_targets
 from .cmg import CmgModel
-from .environment import C_ON, sun_direction_N
+from .environment import sun_direction_N
 from .flex import Modes
+from .orbit import OrbitAt, orbit_at, orbit_params, orbit_plane
 from .structure import JOINTS, ParamLayout, Structure
 from .torques import TORQUES, OrbitState
 
@@ -132,15 +133,12 @@ class StationModel:
                     p[L[f"{j}{k}"]] = jt.coeffs() + steps
         p[L["I0"]] = I0.ravel()
         if self.structure.orbit:
-            o = scene.orbit
-            i = o.inclination  # cos/sin of a parameter: computed once here, not per RHS stage
-            p[L["orbit"]] = [o.radius_m, i, o.u0, o.mean_motion, math.cos(i), math.sin(i)]
+            p[L["orbit"]] = orbit_params(scene.orbit)
         for kind in self.torques:
             if kind.n_par:
                 p[L[kind.kind]] = kind.params(scene)
         if self.structure.sun:
-            incl = scene.orbit.inclination if scene.orbit is not None else 0.0
-            p[L["sun"]] = sun_direction_N(scene.sun, incl)
+            p[L["sun"]] = sun_direction_N(scene.sun, *orbit_plane(scene.orbit))
         if self.cmg is not None:
             p[L["cmg"]] = self.cmg.params(scene.cmg)
         if self.flexible:
@@ -410,10 +408,9 @@ class StationModel:
         return ca.vertcat(*parts) if parts else ca.SX(0, 1)
 
     # -- orbit and external torque ------------------------------------------------------
-    def orbit_u(self, t, p):
-        """Argument of latitude ``u = u0 + n t`` [rad]."""
-        radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
-        return u0 + n * t
+    def orbit_at(self, t, p) -> OrbitAt:
+        """The orbit at time t (:func:`stationbed.model.orbit.orbit_at`: position, velocity, LVLH)."""
+        return orbit_at(t, p[self.layout["orbit"]], self.structure.orbit_kind)
 
     def orbit_state(self, t, p) -> OrbitState:
         """The orbit at time t as the torque kinds use it (cos u, sin u computed once).
@@ -427,12 +424,8 @@ class StationModel:
         -------
         OrbitState
         """
-        radius, incl, u0, n, ci, si = (p[self.layout["orbit"]][i] for i in range(6))
-        arg = u0 + n * t
-        cu, su = ca.cos(arg), ca.sin(arg)
-        r_N = radius * ca.vertcat(cu, su * ci, su * si)
-        v_N = (radius * n) * ca.vertcat(-su, cu * ci, cu * si)
-        return OrbitState(n, ci, si, cu, su, r_N, v_N)
+        o = self.orbit_at(t, p)
+        return OrbitState(o.n, o.cos_i, o.sin_i, o.cos_u, o.sin_u, o.r_N, o.v_N, o.r_hat_N, o.mu_r3)
 
     def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True):
         """Sum of the scene's external torques, B components [N m], (3, 1).
@@ -476,5 +469,4 @@ class StationModel:
 
     def C_ON(self, t, p):
         """DCM from N to LVLH at time t, (3, 3)."""
-        radius, incl, u0, n = (p[self.layout["orbit"]][i] for i in range(4))
-        return C_ON(u0 + n * t, incl)
+        return self.orbit_at(t, p).C_ON

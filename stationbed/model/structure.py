@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .cmg import CmgModel, get_geometry
+from .orbit import orbit_kind, orbit_size
 from .torques import TORQUES
 
 __all__ = ["Structure", "ParamLayout", "JOINTS"]
@@ -32,6 +33,8 @@ class Structure:
         for a cluster without gimbals).
     modes : tuple of int  Elastic modes per appendage (all 0: a rigid scene, whose equations and
         key do not change).
+    orbit_kind : tuple  ``()`` for a circular orbit (or none), ``(newton_steps, j2)`` for a
+        two-body orbit (:func:`~stationbed.model.orbit.orbit_kind`).
     """
 
     n_app: int
@@ -41,6 +44,7 @@ class Structure:
     sun: bool = False
     cmg: tuple | None = None
     modes: tuple = ()
+    orbit_kind: tuple = ()
 
     def __post_init__(self):
         order = [k for k in TORQUES if k in self.torques]
@@ -63,6 +67,7 @@ class Structure:
             sun=scene.sun is not None,
             cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none"),
             modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
+            orbit_kind=orbit_kind(scene.orbit) if scene.orbit is not None else (),
         )
 
     @property
@@ -72,7 +77,8 @@ class Structure:
         c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}"
         f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
         trq = "".join(kind.key(k in self.torques) for k, kind in TORQUES.items() if kind.symbolic)
-        return f"a{self.n_app}o{int(self.orbit)}{trq}j{j}s{int(self.sun)}{c}{f}"
+        k = "" if not self.orbit_kind else f"k{self.orbit_kind[0]}{'j' if self.orbit_kind[1] else ''}"
+        return f"a{self.n_app}o{int(self.orbit)}{k}{trq}j{j}s{int(self.sun)}{c}{f}"
 
     def n_modes(self, k: int) -> int:
         """Number of elastic modes of appendage ``k``."""
@@ -120,7 +126,7 @@ class ParamLayout:
         if structure.modes:
             add("mtot", 1)  # total mass [kg]: the hub's recoil when the arrays bend
         if structure.orbit:
-            add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
+            add("orbit", orbit_size(structure.orbit_kind))  # model.orbit.orbit_params
         for name in structure.torques:
             if TORQUES[name].n_par:
                 add(name, TORQUES[name].n_par)  # the kind's own numbers (TorqueKind.params)

@@ -47,8 +47,8 @@ __all__ = [
 class OrbitState(NamedTuple):
     """The orbit at time ``t`` as the torque kinds use it (casadi expressions).
 
-    ``u = u0 + n t`` is the argument of latitude; its cosine and sine are computed once per
-    expression and shared by every kind. ``r_N`` and ``v_N`` are the station's inertial position
+    ``u`` is the argument of latitude (``u0 + n t`` on a circular orbit); its cosine and sine are
+    computed once per expression and shared by every kind (:mod:`stationbed.model.orbit`). ``r_N`` and ``v_N`` are the station's inertial position
     and velocity: a kind that needs the station's place (density, flow, shadow) reads these, so
     it works on any orbit the model provides. Unused fields cost nothing (casadi keeps only what
     an output depends on).
@@ -66,6 +66,10 @@ class OrbitState(NamedTuple):
     r_N: Any
     #: inertial velocity of the mass centre, N components [m/s] (3-vector)
     v_N: Any
+    #: unit vector from the Earth's centre to the station, N components (3-vector)
+    r_hat_N: Any = None
+    #: mu / |r|³ [1/s²] (n² on a circular orbit): the gravity gradient's factor
+    mu_r3: Any = None
 
 
 class TorqueKind:
@@ -255,10 +259,13 @@ class ConstantWindow(TorqueKind):
 
 class GravityGradient(TorqueKind):
     """``[orbit] gravity_gradient = true``: a point-mass Earth's gravity gradient,
-    ``L_gg = 3 n² R̂_B × (I_O_B R̂_B)`` (:func:`~stationbed.model.environment.gravity_gradient_torque`),
-    ``R̂_B = C_BN R̂_N``, ``R̂_N = (cos u, sin u cos i, sin u sin i)``.
+    ``L_gg = 3 μ/r³ R̂_B × (I_O_B R̂_B)`` (:func:`~stationbed.model.environment.gravity_gradient_torque`),
+    ``R̂_B = C_BN R̂_N`` with the orbit's actual position (``R̂_N = (cos u, sin u cos i, sin u sin i)``
+    and ``μ/r³ = n²`` on a circular orbit).
 
-    Conservative: ``V = (3/2) n² R̂_Bᵀ I_O_B R̂_B`` (Quinn Eq. 27-28, constants dropped).
+    Conservative: ``V = (3/2) μ/r³ R̂_Bᵀ I_O_B R̂_B`` (Quinn Eq. 27-28, constants dropped). On a
+    non-circular orbit V depends on t as well; the Hamel form only takes its attitude gradient at
+    fixed t, which is the torque, so the forms still agree (the energy T + V is then not conserved).
     """
 
     kind = "gravity_gradient"
@@ -272,22 +279,15 @@ class GravityGradient(TorqueKind):
     def _present(cls, scene) -> bool:
         return scene.orbit is not None and scene.orbit.gravity_gradient
 
-    @staticmethod
-    def _R_hat_N(orbit: OrbitState):
-        """Unit vector from the Earth's centre to the station, N components (``orbit_position_N / radius``)."""
-        return ca.vertcat(orbit.cos_u, orbit.sin_u * orbit.cos_i, orbit.sin_u * orbit.sin_i)
-
     @classmethod
     def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit):
-        R_hat_N = cls._R_hat_N(orbit)
-        R_hat_B = ca.mtimes(dcm(q_BN), R_hat_N)
-        return [gravity_gradient_torque(R_hat_B, I_O_B, orbit.n * orbit.n)]
+        R_hat_B = ca.mtimes(dcm(q_BN), orbit.r_hat_N)
+        return [gravity_gradient_torque(R_hat_B, I_O_B, orbit.mu_r3)]
 
     @classmethod
     def _potential_J(cls, C_BN, I_O_B, orbit):
-        R_hat_N = cls._R_hat_N(orbit)
-        R_hat_B = ca.mtimes(C_BN, R_hat_N)
-        return 1.5 * orbit.n * orbit.n * ca.dot(R_hat_B, ca.mtimes(I_O_B, R_hat_B))
+        R_hat_B = ca.mtimes(C_BN, orbit.r_hat_N)
+        return 1.5 * orbit.mu_r3 * ca.dot(R_hat_B, ca.mtimes(I_O_B, R_hat_B))
 
 
 class OrbitalHarmonic(TorqueKind):

@@ -117,6 +117,7 @@ def measurement_layout(n_gimbals: int, n_app: int) -> dict[str, tuple[int, int]]
         ("r_N", 3),
         ("C_ON", 9),
         ("q_ON", 4),
+        ("omega_ON_O", 3),
         ("sun_N", 3),
     ]
     out, n = {}, 0
@@ -140,10 +141,12 @@ class Measurement:
     r_N : (3,)  Station position, N components [m] (zeros without an orbit).
     C_ON : (3, 3)  DCM from N to LVLH (identity without an orbit).
     q_ON : (4,)  The same as a quaternion, continuous in time (``dcm(q_ON) = C_ON``).
+    omega_ON_O : (3,)  Angular velocity of LVLH relative to N, O components [rad/s]
+        (``(0, -n, 0)`` on a circular orbit, ``(0, -h/r², 0)`` on a two-body one; zeros without an orbit).
     sun_N : (3,)  Unit vector to the sun, N components (zeros without a [sun] table).
     """
 
-    __slots__ = ("t", "y", "q_BN", "omega_BN_B", "h_B", "gimbal", "alpha", "beta", "r_N", "C_ON", "q_ON", "sun_N")
+    __slots__ = ("t", "y", "q_BN", "omega_BN_B", "h_B", "gimbal", "alpha", "beta", "r_N", "C_ON", "q_ON", "omega_ON_O", "sun_N")
 
     def __init__(self, y: np.ndarray, layout: dict[str, tuple[int, int]]):
         self.t = 0.0

@@ -8,6 +8,7 @@ import numpy as np
 from ..core.compile import FastCall
 from ..core.rotation import dcm, quat_from_dcm
 from ..model.environment import C_ON, omega_ON_O
+from ..model.orbit import orbit_numeric
 from ..scene import Scene
 from .system import System
 
@@ -15,10 +16,17 @@ __all__ = ["from_lvlh", "initial_state", "initial_x", "characteristic_scales", "
 
 
 def from_lvlh(orbit, q_BO, omega_BO_B) -> tuple[np.ndarray, np.ndarray]:
-    """``(q_BN, omega_BN_B)`` at t = 0 from an attitude and rate relative to LVLH."""
+    """``(q_BN, omega_BN_B)`` at t = 0 from an attitude and rate relative to LVLH.
+
+    The LVLH frame and its rate are the orbit's at t = 0 (:mod:`stationbed.model.orbit`); on a
+    two-body orbit ``omega_ON_O = (0, -h/r², 0)``.
+    """
     C_BO = dcm(np.asarray(q_BO, dtype=float))
-    q = quat_from_dcm(C_BO @ C_ON(orbit.u0, orbit.inclination))
-    return q, np.asarray(omega_BO_B, dtype=float) + C_BO @ omega_ON_O(orbit.mean_motion)
+    if not orbit.kepler:  # circular: the numbers it has always had
+        q = quat_from_dcm(C_BO @ C_ON(orbit.u0, orbit.inclination))
+        return q, np.asarray(omega_BO_B, dtype=float) + C_BO @ omega_ON_O(orbit.mean_motion)
+    o = orbit_numeric(orbit, 0.0)
+    return quat_from_dcm(C_BO @ o.C_ON), np.asarray(omega_BO_B, dtype=float) + C_BO @ o.omega_ON_O
 
 
 def initial_state(scene: Scene) -> tuple[np.ndarray, np.ndarray]:

@@ -136,12 +136,15 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     wv = form.omega(t, x, p)
     meas = [x[0:4], wv, model.h(x[7:], p), x[7 : 7 + ng]]
     meas += [a.angles[0] for a in arrays] + [a.angles[1] for a in arrays]
-    if structure.orbit:
+    if structure.orbit and not structure.orbit_kind:  # circular: the expressions it has always had
         radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))
         meas += [orbit_position_N(u0 + n * t, radius, incl), ca.reshape(model.C_ON(t, p).T, 9, 1)]
-        meas.append(q_ON(u0 + n * t, incl))
+        meas += [q_ON(u0 + n * t, incl), model.orbit_at(t, p).omega_ON_O]
+    elif structure.orbit:
+        o = model.orbit_at(t, p)
+        meas += [o.r_N, ca.reshape(o.C_ON.T, 9, 1), o.q_ON, o.omega_ON_O]
     else:
-        meas += [ca.DM.zeros(3), ca.reshape(ca.DM.eye(3), 9, 1), ca.DM([1.0, 0.0, 0.0, 0.0])]
+        meas += [ca.DM.zeros(3), ca.reshape(ca.DM.eye(3), 9, 1), ca.DM([1.0, 0.0, 0.0, 0.0]), ca.DM.zeros(3)]
     meas.append(p[model.layout["sun"]] if structure.sun else ca.DM.zeros(3))
     y = ca.vertcat(*meas)
     assert y.numel() == sum(k for _, k in lay.values())

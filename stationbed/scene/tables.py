@@ -10,13 +10,14 @@ import numpy as np
 from pydantic import ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
+from ..core.kepler import KEPLER_MAX_E, elements_from_rv
 from ..core.beam import beam_mode, check_participation
 from ..core.massprops import InvalidMassProperties, check_inertia
 from .base import QUAT_NORM_TOL, TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3
 
 __all__ = [
     "RateStep", "Profile", "SunTrack", "Joint", "Simulation", "Initial", "Body", "Beam", "Mode", "Appendage",
-    "Orbit", "ConstantTorque", "HarmonicTorque", "Torque", "Sun", "CmgKind", "CMG_KINDS", "UNIT_KEYS", "Cmg",
+    "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "Torque", "Sun", "CmgKind", "CMG_KINDS", "UNIT_KEYS", "Cmg",
     "Sensor", "ControllerSpec", "PYRAMID_SKEW_RAD", "PARTICIPATION_TOL", "MU_EARTH_M3_S2", "R_EARTH_M", "TAGS",
 ]
 
@@ -238,15 +239,36 @@ def _angle_within(angle: float, low: float, high: float, text: str) -> float:
     return angle
 
 
+class Elements(Strict):
+    """``[orbit] elements``: classical elements (semi-major axis [m], eccentricity, inclination,
+    RAAN, argument of perigee, true anomaly at t = 0 [rad])."""
+    a: float = Field(gt=0.0)
+    e: float = Field(ge=0.0, lt=1.0)
+    i: float
+    raan: float
+    argp: float
+    nu: float
+
+    @field_validator("i")
+    @classmethod
+    def _inclination(cls, i):
+        return _angle_within(i, 0.0, math.pi, "[0, pi]")
+
+
 class Orbit(Strict):
     """``[orbit]``: circular orbit (radius or altitude [m], inclination and u0 [rad], mu [m³/s²]),
-    gravity gradient on or off."""
+    or a two-body orbit from its inertial state at t = 0 (``r_N`` [m], ``v_N`` [m/s]) or its
+    classical ``elements``, optionally with J2 secular drift (``j2``); gravity gradient on or off."""
     radius: float | None = Field(default=None, gt=0.0)
     altitude: float | None = Field(default=None, gt=0.0)
     inclination: float = 0.0  # in [0, pi]
     u0: float = 0.0
     mu: float = Field(default=MU_EARTH_M3_S2, gt=0.0)
     gravity_gradient: bool = True
+    r_N: Vec3 | None = None
+    v_N: Vec3 | None = None
+    elements: Elements | None = None
+    j2: bool = False
 
     @field_validator("inclination")
     @classmethod
@@ -255,21 +277,64 @@ class Orbit(Strict):
 
     @model_validator(mode="after")
     def _one_size(self):
-        if (self.radius is None) == (self.altitude is None):
-            raise ValueError("give exactly one of 'radius' or 'altitude'")
-        if self.radius is not None and self.radius <= R_EARTH_M:
-            raise FieldError("radius", f"{self.radius:.10g} m is inside the Earth (equatorial radius {R_EARTH_M:.10g} m): "
-                                       "give the distance from the Earth's centre, or 'altitude'")
+        forms = [self.radius is not None or self.altitude is not None,
+                 self.r_N is not None or self.v_N is not None, self.elements is not None]
+        if sum(forms) != 1:
+            raise ValueError("give exactly one of 'radius'/'altitude' (circular), 'r_N' and 'v_N', or 'elements'")
+        if forms[0]:
+            if self.radius is not None and self.altitude is not None:
+                raise ValueError("give exactly one of 'radius' or 'altitude'")
+            if self.radius is not None and self.radius <= R_EARTH_M:
+                raise FieldError("radius", f"{self.radius:.10g} m is inside the Earth (equatorial radius {R_EARTH_M:.10g} m): "
+                                           "give the distance from the Earth's centre, or 'altitude'")
+            if self.j2:
+                raise FieldError("j2", "needs a two-body orbit ('r_N' and 'v_N', or 'elements'), not the circular form")
+            return self
+        for name in ("inclination", "u0"):
+            if name in self.model_fields_set:
+                raise FieldError(name, "belongs to the circular form; a two-body orbit takes it from 'r_N'/'v_N' or 'elements'")
+        if forms[1]:
+            if self.r_N is None or self.v_N is None:
+                raise FieldError("v_N" if self.v_N is None else "r_N", "give both 'r_N' and 'v_N'")
+            try:
+                a, e, *_ = elements_from_rv(self.r_N, self.v_N, self.mu)
+            except ValueError as err:
+                raise FieldError("v_N", str(err)) from None
+            where = "v_N"
+        else:
+            a, e = self.elements.a, self.elements.e
+            where = "elements.e"
+        if a * (1.0 - e) <= R_EARTH_M:
+            raise FieldError(where, f"perigee radius {a * (1.0 - e):.10g} m is inside the Earth (equatorial radius "
+                                    f"{R_EARTH_M:.10g} m)")
+        if e > KEPLER_MAX_E:
+            raise FieldError(where, f"eccentricity {e:.6g} above {KEPLER_MAX_E}, where the Kepler solver is proven")
         return self
 
     @property
+    def kepler(self) -> bool:
+        """Whether this is a two-body (Kepler) orbit rather than the circular form."""
+        return self.radius is None and self.altitude is None
+
+    @property
+    def elements_rad(self) -> tuple[float, float, float, float, float, float]:
+        """``(a, e, i, raan, argp, nu)`` at t = 0 ([m], -, [rad] x 4) of a two-body orbit."""
+        if self.elements is not None:
+            el = self.elements
+            return el.a, el.e, el.i, el.raan, el.argp, el.nu
+        return elements_from_rv(self.r_N, self.v_N, self.mu)
+
+    @property
     def radius_m(self) -> float:
-        """Orbit radius [m] (from ``altitude`` over the WGS-84 equatorial radius when given)."""
+        """Orbit radius [m] (from ``altitude`` over the WGS-84 equatorial radius when given); the
+        semi-major axis of a two-body orbit."""
+        if self.kepler:
+            return self.elements_rad[0]
         return self.radius if self.radius is not None else R_EARTH_M + self.altitude
 
     @property
     def mean_motion(self) -> float:
-        """Orbital rate n = sqrt(mu / R³) [rad/s]."""
+        """Orbital rate n = sqrt(mu / R³) [rad/s] (R: the radius, or the semi-major axis)."""
         return math.sqrt(self.mu / self.radius_m**3)
 
 
