@@ -80,6 +80,8 @@ def jacobi_integral(scene: Scene, tr: Trajectory) -> np.ndarray:
         J at every row [J].
     """
     o = scene.orbit
+    if o is None or o.kepler:
+        raise ValueError("the Jacobi integral needs a circular orbit (on a two-body orbit LVLH turns at a varying rate)")
     n = o.mean_motion
     I = np.array(scene.body.inertia)
     J = np.empty(len(tr))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...model.environment import C_ON
+from ...model.orbit import orbit_numeric
 from ...run.trajectory import base_columns
 from .geometry import StationGeometry
 from .sdk import TIMELINE
@@ -40,8 +40,7 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
 
     L = StationGeometry(scene).extent
     if scene.orbit is not None:  # camera: behind along-track, above the orbit plane and zenith, zenith up
-        o = scene.orbit
-        x_O, y_O, z_O = C_ON(o.u0, o.inclination)  # rows: the LVLH axes in N
+        x_O, y_O, z_O = orbit_numeric(scene.orbit, 0.0).C_ON  # rows: the LVLH axes in N at t = 0
         eye = rrb.EyeControls3D(position=L * (2.0 * x_O - 1.4 * y_O - 1.4 * z_O), look_target=[0, 0, 0], eye_up=-z_O)
     else:
         eye = rrb.EyeControls3D(position=L * np.array([2.0, -2.0, 1.4]), look_target=[0, 0, 0], eye_up=[0, 0, 1])

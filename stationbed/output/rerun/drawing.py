@@ -20,7 +20,7 @@ import numpy as np
 from ...run.trajectory import Trajectory
 from .cmg_arrows import CmgArrows
 from .elastic import ElasticLines
-from .frames import argument_of_latitude, sun_vector_N, unit_R_N, xyzw, xyzw_C_BP, xyzw_C_NO, xyzw_of_dcm
+from .frames import R_N_over_a, sun_vector_N, xyzw, xyzw_C_BP, xyzw_C_NO, xyzw_of_dcm
 from .geometry import StationGeometry
 from .sdk import import_rerun
 
@@ -111,10 +111,10 @@ class StationDrawing:
                 rr.Arrows3D(vectors=[[0.0, 0.0, EARTH_ARROW_FRACTION * L]], colors=[RGB_EARTH], labels=["Earth"]),
                 static=True,
             )
-            u = np.linspace(0.0, 2.0 * math.pi, ORBIT_RING_POINTS)
+            t_ring = np.linspace(0.0, 2.0 * math.pi / scene.orbit.mean_motion, ORBIT_RING_POINTS)  # one revolution
             rec.log(
                 "world/orbit/track",
-                rr.LineStrips3D([ORBIT_RING_FRACTION * L * unit_R_N(u, scene.orbit.inclination)], colors=[RGB_ORBIT]),
+                rr.LineStrips3D([ORBIT_RING_FRACTION * L * R_N_over_a(scene.orbit, t_ring)], colors=[RGB_ORBIT]),
                 static=True,
             )
             rec.log("world/orbit/station", rr.Points3D.from_fields(colors=[RGB_ORBIT], radii=0.02 * L), static=True)
@@ -159,10 +159,8 @@ class StationDrawing:
         send("world/H_O_N", rr.Arrows3D.columns(vectors=H * (self._H_scale or 0.0)))
         if scene.orbit is not None:
             o = scene.orbit
-            u = argument_of_latitude(o, rows.t)
-            send("world/lvlh", rr.Transform3D.columns(quaternion=xyzw_C_NO(u, o.inclination)))
-            R_hat_N = unit_R_N(u, o.inclination)
-            send("world/orbit/station", rr.Points3D.columns(positions=ORBIT_RING_FRACTION * g.extent * R_hat_N))
+            send("world/lvlh", rr.Transform3D.columns(quaternion=xyzw_C_NO(o, rows.t)))
+            send("world/orbit/station", rr.Points3D.columns(positions=ORBIT_RING_FRACTION * g.extent * R_N_over_a(o, rows.t)))
         if self.cmg is not None:
             self.cmg.send(send, rows)
 

@@ -13,15 +13,15 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.rotation import dcm, euler_321, quat_from_dcm, quat_mult
-from ...model.environment import orbit_position_N, q_ON, sun_direction_N
+from ...model.environment import sun_direction_N
+from ...model.orbit import orbit_numeric, orbit_plane
 
 __all__ = [
     "xyzw",
     "xyzw_of_dcm",
     "xyzw_C_BP",
     "xyzw_C_NO",
-    "argument_of_latitude",
-    "unit_R_N",
+    "R_N_over_a",
     "euler_321_lvlh",
     "sun_vector_N",
 ]
@@ -87,28 +87,11 @@ def xyzw_C_BP(alpha, beta) -> np.ndarray:
     return xyzw(quat_mult(q_y, q_x).T)
 
 
-def xyzw_C_NO(u, inclination: float) -> np.ndarray:
-    """Quaternions ``(x, y, z, w)`` of ``C_NO = C_ON.T``: ``q_ON`` of the environment model.
+def xyzw_C_NO(orbit, t) -> np.ndarray:
+    """Quaternions ``(x, y, z, w)`` of ``C_NO = C_ON.T``: ``q_ON`` of the orbit model.
 
-    ``dcm(q_ON) = C_ON`` (:func:`stationbed.model.environment.q_ON`), so ``q_ON`` is the
-    quaternion whose active rotation is ``C_NO``, the matrix rerun wants for ``world/lvlh``.
-
-    Parameters
-    ----------
-    u : ndarray, shape (n,)
-        Arguments of latitude [rad].
-    inclination : float
-        Orbit inclination [rad].
-
-    Returns
-    -------
-    ndarray, shape (n, 4)
-    """
-    return xyzw(q_ON(np.asarray(u, dtype=float), inclination).T)
-
-
-def argument_of_latitude(orbit, t) -> np.ndarray:
-    """``u = u0 + n t`` [rad] of a scene's circular ``orbit`` at times ``t`` [s] (DESIGN §5).
+    ``dcm(q_ON) = C_ON`` (:mod:`stationbed.model.orbit`), so ``q_ON`` is the quaternion whose
+    active rotation is ``C_NO``, the matrix rerun wants for ``world/lvlh``.
 
     Parameters
     ----------
@@ -118,50 +101,48 @@ def argument_of_latitude(orbit, t) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (n,)
+    ndarray, shape (n, 4)
     """
-    return orbit.u0 + orbit.mean_motion * t
+    return xyzw(orbit_numeric(orbit, np.asarray(t, dtype=float)).q_ON.T)
 
 
-def unit_R_N(u, inclination: float) -> np.ndarray:
-    """Unit orbit position ``R_N / radius``, N components, at arguments of latitude ``u``.
+def R_N_over_a(orbit, t) -> np.ndarray:
+    """Orbit position over the radius (circular) or semi-major axis (two-body), N components.
 
     Parameters
     ----------
-    u : ndarray, shape (n,)
-        Arguments of latitude [rad].
-    inclination : float
-        Orbit inclination [rad].
+    orbit : stationbed.scene.Orbit
+    t : ndarray, shape (n,)
+        Times since the start of the run [s].
 
     Returns
     -------
     ndarray, shape (n, 3)
-        :func:`stationbed.model.environment.orbit_position_N` at unit radius.
+        ``r_N / a`` of :func:`stationbed.model.orbit.orbit_numeric` (unit length on a circle).
     """
-    return orbit_position_N(np.asarray(u, dtype=float), 1.0, inclination).T
+    return orbit_numeric(orbit, np.asarray(t, dtype=float)).r_N.T / orbit.radius_m
 
 
-def euler_321_lvlh(q_BN, u, inclination: float) -> np.ndarray:
+def euler_321_lvlh(q_BN, orbit, t) -> np.ndarray:
     """3-2-1 angles ``(roll, pitch, yaw)`` [rad] of the attitude relative to LVLH.
 
-    ``C_BO = C_BN C_ON.T`` with ``C_BN = dcm(q_BN)`` and ``C_ON = dcm(q_ON)`` (the environment's
-    LVLH), angles as :func:`stationbed.core.rotation.euler_321`; all rows at once.
+    ``C_BO = C_BN C_ON.T`` with ``C_BN = dcm(q_BN)`` and ``C_ON`` the orbit model's LVLH, angles
+    as :func:`stationbed.core.rotation.euler_321`; all rows at once.
 
     Parameters
     ----------
     q_BN : ndarray, shape (n, 4)
         Attitude of B relative to N, scalar first.
-    u : ndarray, shape (n,)
-        Arguments of latitude [rad].
-    inclination : float
-        Orbit inclination [rad].
+    orbit : stationbed.scene.Orbit
+    t : ndarray, shape (n,)
+        Times since the start of the run [s].
 
     Returns
     -------
     ndarray, shape (n, 3)
     """
     C_BN = dcm(np.asarray(q_BN, dtype=float).T)  # (3, 3, n)
-    C_ON = dcm(q_ON(np.asarray(u, dtype=float), inclination))  # (3, 3, n)
+    C_ON = dcm(orbit_numeric(orbit, np.asarray(t, dtype=float)).q_ON)  # (3, 3, n)
     C_BO = np.einsum("ijn,kjn->ikn", C_BN, C_ON)
     return euler_321(C_BO).T
 
@@ -180,5 +161,4 @@ def sun_vector_N(scene) -> np.ndarray:
         :func:`stationbed.model.environment.sun_direction_N` at the scene's inclination (0 without
         an orbit).
     """
-    incl = scene.orbit.inclination if scene.orbit is not None else 0.0
-    return sun_direction_N(scene.sun, incl)
+    return sun_direction_N(scene.sun, *orbit_plane(scene.orbit))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...run.trajectory import Trajectory
-from .frames import argument_of_latitude, euler_321_lvlh
+from .frames import euler_321_lvlh
 from .sdk import import_rerun
 
 __all__ = ["Series", "telemetry_series", "mode_counts", "Telemetry", "EULER_LVLH"]
@@ -178,8 +178,7 @@ class Telemetry:
             send(path, rr.Scalars.columns(scalars=values))
 
         if self.orbit is not None:
-            u = argument_of_latitude(self.orbit, rows.t)
-            scalars(EULER_LVLH, np.degrees(euler_321_lvlh(rows.q_BN, u, self.orbit.inclination)))
+            scalars(EULER_LVLH, np.degrees(euler_321_lvlh(rows.q_BN, self.orbit, rows.t)))
         for s in self.series:
             v = rows.cols(*s.columns)
             if s.norm:
