@@ -23,6 +23,17 @@ def qmul(p, q):
     )
 
 
+def lvlh_rate_varies(plant) -> bool:
+    """Whether the LVLH frame turns at a varying rate (a two-body orbit, ``[orbit] r_N``/``elements``).
+
+    On a circular orbit LVLH turns at the constant ``(0, -n, 0)``, which a law may compute once;
+    on any other orbit it reads the measured ``meas.omega_ON_O`` every tick (``(0, -h/r², 0)``,
+    plus the node's drift with J2).
+    """
+    orbit = getattr(plant.scene, "orbit", None)
+    return bool(orbit is not None and getattr(orbit, "kepler", False))
+
+
 def qconj(q):
     return (q[0], -q[1], -q[2], -q[3])
 

@@ -49,8 +49,7 @@ class ExampleHold(Controller):
         if self.params.reference == "lvlh" and plant.mean_motion is None:
             raise ValueError("example_hold: reference = 'lvlh' needs an [orbit]")
         self.J = np.array(plant.inertia_O_B)
-        n = plant.mean_motion or 0.0
-        self.w_RN_R = np.array([0.0, -n, 0.0]) if self.params.reference == "lvlh" else np.zeros(3)
+        self.w_RN_R = np.zeros(3)  # the inertial reference is at rest in N
 
     def _update(self, t, meas):
         # the reference attitude R relative to N: LVLH now, or N itself
@@ -58,7 +57,8 @@ class ExampleHold(Controller):
         self.q_ref_BN = q_RN  # the run logs att_err_deg against this
         q_e = quat_mult(q_RN * [1, -1, -1, -1], meas.q_BN)  # B relative to R
         e = 2.0 * np.sign(q_e[0] or 1.0) * q_e[1:]
-        w_ref_B = dcm(q_e) @ self.w_RN_R  # the reference's rate, in B
+        w_RN_R = meas.omega_ON_O if self.params.reference == "lvlh" else self.w_RN_R  # LVLH's rate, measured
+        w_ref_B = dcm(q_e) @ w_RN_R  # the reference's rate, in B
         p = self.params
         tau = -self.J @ (p.kp * e + p.kd * (meas.omega_BN_B - w_ref_B))
         return tau  # a (3,) array; a tuple or list of 3 floats does as well

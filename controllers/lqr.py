@@ -29,7 +29,7 @@ from pydantic import Field
 from stationbed.run.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 
 from ._linear import design_model, equilibrium_torque, linearize, loop_margins, lvlh_error, settling_time
-from ._quat import qmul, rotate
+from ._quat import lvlh_rate_varies, qmul, rotate
 
 #: Largest |pole| x period for which the continuous design is used with a zero-order hold:
 #: the hold's half-period delay costs |s| T / 2 rad of phase (0.25 rad = 14 deg of the >= 60 deg
@@ -83,6 +83,7 @@ class LQR(Controller):
         gg = bool(getattr(getattr(plant.scene, "orbit", None), "gravity_gradient", True))
         self.q_RO = tuple(P.q_ref)
         self.w_RN_R = rotate(self.q_RO, (0.0, -n, 0.0))
+        self.varying = lvlh_rate_varies(plant)  # two-body orbit: R's rate measured every tick
         f = design_model(plant.inertia_O_B, n, q_RO=self.q_RO, gravity_gradient=gg)
         x0 = np.zeros(6)
         self.u0 = equilibrium_torque(f, x0) if P.feedforward else np.zeros(3)
@@ -112,7 +113,8 @@ class LQR(Controller):
     def _update(self, t, meas):
         q_RN = qmul(meas.q_ON.tolist(), self.q_RO)
         self.q_ref_BN = q_RN
-        x = lvlh_error(meas.q_BN.tolist(), meas.omega_BN_B.tolist(), q_RN, self.w_RN_R)
+        w_RN_R = rotate(self.q_RO, meas.omega_ON_O.tolist()) if self.varying else self.w_RN_R
+        x = lvlh_error(meas.q_BN.tolist(), meas.omega_BN_B.tolist(), q_RN, w_RN_R)
         t0, t1, t2, w0, w1, w2 = x
         (a0, a1, a2, a3, a4, a5), (b0, b1, b2, b3, b4, b5), (c0, c1, c2, c3, c4, c5) = self._k
         u0, u1, u2 = self._u0
@@ -124,13 +126,13 @@ class LQR(Controller):
 
     # -- fused form (stationbed/run/fused.py): the same law in casadi --------------------------
     def symbolic_params(self):
-        return [v for row in self._k for v in row] + [*self._u0, *self.q_RO, *self.w_RN_R]
+        return [v for row in self._k for v in row] + [*self._u0, *self.q_RO, *self.w_RN_R, float(self.varying)]
 
     def symbolic(self, t, y, cp):
         import casadi as ca
 
         from stationbed.run.controller import measurement_layout
-        from stationbed.core.rotation import quat_mult
+        from stationbed.core.rotation import dcm, quat_mult
 
         lay = measurement_layout(self.plant.n_gimbals, len(self.plant.scene.appendage))
 
@@ -141,6 +143,7 @@ class LQR(Controller):
         q, w, q_ON = part("q_BN"), part("omega_BN_B"), part("q_ON")
         K = ca.reshape(cp[0:18], 6, 3).T
         u0, q_RO, w_R = cp[18:21], cp[21:25], cp[25:28]
+        w_R = ca.if_else(cp[28] > 0.5, ca.mtimes(dcm(q_RO), part("omega_ON_O")), w_R)  # two-body orbit: measured
         q_RN = quat_mult(q_ON, q_RO)
         qe = quat_mult(ca.vertcat(q_RN[0], -q_RN[1:4]), q)
         qe = ca.if_else(qe[0] >= 0, qe, -qe)

@@ -44,6 +44,7 @@ from pydantic import Field
 from stationbed.run.controller import Controller, ControllerError, ControllerParams
 
 from ._linear import design_model, linearize, loop_margins, settling_time, torque_equilibrium_attitude
+from ._quat import lvlh_rate_varies, rotate
 from .lqr import MAX_POLE_PERIOD, _finite_or_none, bryson, design_lqr, pole_report
 
 
@@ -74,6 +75,7 @@ class MomentumManager(Controller):
         gg = bool(getattr(getattr(plant.scene, "orbit", None), "gravity_gradient", True))
         self.w_ON_O = (0.0, -n, 0.0)
         self._vy = -n
+        self.varying = lvlh_rate_varies(plant)  # two-body orbit: LVLH's rate measured every tick
         try:
             self.tea_design = torque_equilibrium_attitude(plant.inertia_O_B, n, gravity_gradient=gg)
         except ControllerError as e:
@@ -138,9 +140,13 @@ class MomentumManager(Controller):
         tx = -2.0 * ez * vy
         tz = 2.0 * ex * vy
         wx, wy, wz = meas.omega_BN_B.tolist()
-        w0 = wx - (-ew * tx + ey * tz)
-        w1 = wy - (vy + (ez * tx - ex * tz))
-        w2 = wz - (-ew * tz - ey * tx)
+        if self.varying:  # domega = omega_BN_B - C_BO omega_ON_O, the measured LVLH rate
+            r0, r1, r2 = rotate((ew, ex, ey, ez), meas.omega_ON_O.tolist())
+            w0, w1, w2 = wx - r0, wy - r1, wz - r2
+        else:
+            w0 = wx - (-ew * tx + ey * tz)
+            w1 = wy - (vy + (ez * tx - ex * tz))
+            w2 = wz - (-ew * tz - ey * tx)
         h0, h1, h2 = meas.h_B.tolist()
         z = self.z
         e0, e1, e2 = self._xe

@@ -69,6 +69,7 @@ from pydantic import Field
 from stationbed.integrators import RK4
 from stationbed.run.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 from stationbed.model.environment import gravity_gradient_torque, orbit_position_N
+from stationbed.model.orbit import orbit_at, orbit_kind, orbit_params
 from stationbed.core.rotation import dcm, quat_kinematics
 
 __all__ = ["MPC", "MPCParams", "MPCFailure"]
@@ -143,7 +144,10 @@ class _Problem:
         u = v * self.u_max
         h = f_h(d)
         torque = -ca.mtimes(f_A(d), u) - ca.cross(w, ca.mtimes(J, w) + h)
-        if gg:
+        if gg and orbit.kepler:  # the orbit model's position at the predicted time
+            o = orbit_at(t, ca.DM(orbit_params(orbit)), orbit_kind(orbit))
+            torque += gravity_gradient_torque(ca.mtimes(dcm(q), o.r_hat_N), ca.DM(J), o.mu_r3)
+        elif gg:
             n = orbit.mean_motion
             r_N = orbit_position_N(orbit.u0 + n * t, 1.0, orbit.inclination)
             torque += gravity_gradient_torque(ca.mtimes(dcm(q), r_N), ca.DM(J), n * n)

@@ -26,7 +26,7 @@ from pydantic import Field
 
 from stationbed.run.controller import Controller, ControllerParams, UnitQuaternion
 
-from ._quat import qmul, rotate
+from ._quat import lvlh_rate_varies, qmul, rotate
 
 
 class PDParams(ControllerParams):
@@ -56,6 +56,7 @@ class PD(Controller):
         # rate of R relative to N in R components: R is fixed in LVLH, which turns at (0, -n, 0)
         self.w_RN_R = rotate(self.q_RO, (0.0, -n, 0.0)) if P.reference == "lvlh" else (0.0, 0.0, 0.0)
         self.lvlh = P.reference == "lvlh"
+        self.varying = self.lvlh and lvlh_rate_varies(plant)  # then R's rate is measured every tick
         self.kc = self.k / self.c
         self.lim = P.max_slew_rate
         self.lim2 = P.max_slew_rate**2
@@ -88,7 +89,7 @@ class PD(Controller):
             f = self.lim / math.sqrt(rn2)
             r0, r1, r2 = r0 * f, r1 * f, r2 * f
         # C_BR ω_RN_R (rotate(), inlined)
-        vx, vy, vz = self.w_RN_R
+        vx, vy, vz = rotate(self.q_RO, meas.omega_ON_O.tolist()) if self.varying else self.w_RN_R
         tx = 2.0 * (ey * vz - ez * vy)
         ty = 2.0 * (ez * vx - ex * vz)
         tz = 2.0 * (ex * vy - ey * vx)
@@ -112,13 +113,13 @@ class PD(Controller):
     # -- fused form (stationbed/run/fused.py): the same law in casadi --------------------------
     def symbolic_params(self):
         return [v for row in self.J for v in row] + [self.kc, self.c, self.lim, *self.w_RN_R, *self.q_RO,
-                                                     float(self.lvlh), float(self.gyro)]
+                                                     float(self.lvlh), float(self.gyro), float(self.varying)]
 
     def symbolic(self, t, y, cp):
         import casadi as ca
 
         from stationbed.run.controller import measurement_layout
-        from stationbed.core.rotation import quat_mult
+        from stationbed.core.rotation import dcm, quat_mult
 
         plant = self.plant
         lay = measurement_layout(plant.n_gimbals, len(plant.scene.appendage))
@@ -131,6 +132,7 @@ class PD(Controller):
         J = ca.reshape(cp[0:9], 3, 3).T
         kc, c, lim = cp[9], cp[10], cp[11]
         w_RN_R, q_RO, lvlh, gyro = cp[12:15], cp[15:19], cp[19], cp[20]
+        w_RN_R = ca.if_else(cp[21] > 0.5, ca.mtimes(dcm(q_RO), part("omega_ON_O")), w_RN_R)  # two-body orbit: measured
         q_RN = ca.if_else(lvlh > 0.5, quat_mult(q_ON, q_RO), q_RO)
         conj = ca.vertcat(q_RN[0], -q_RN[1:4])
         qe = quat_mult(conj, q)
