@@ -33,6 +33,7 @@ check: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
+	$(PY) benchmarks/bench_orbit.py
 	$(PY) benchmarks/bench_control.py
 	$(PY) benchmarks/bench_batch.py
 	$(PY) benchmarks/bench_basilisk.py  # optional: says so when bsk is not installed
