@@ -8,6 +8,9 @@ O axes, in N components, as its rows. The LVLH frame turns relative to N at
 ``omega_ON_O = (0, -n, 0)``.
 
 All functions accept numpy or casadi arguments (``t`` may be symbolic).
+
+These are the circular form's expressions; :mod:`stationbed.model.orbit` is the one orbit model
+every caller uses (circular through these, two-body and J2 orbits on top).
 """
 
 from __future__ import annotations
