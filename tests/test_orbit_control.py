@@ -101,3 +101,38 @@ def test_fused_law_equals_python_law_on_an_eccentric_orbit(name, params):
     assert (np.abs(fused.data - per_tick.data) / scale).max() <= FUSED_RTOL
     C_ON, _ = lvlh_truth(per_tick.t)
     assert error_to_lvlh(per_tick, C_ON).max() < 3e-3  # rad: held near LVLH (~|ν̈|/k of either law's gain)
+
+
+def test_momentum_manager_uses_the_measured_lvlh_rate():
+    """On a two-body orbit the float-inlined manager forms its rate error from the measured
+    ``omega_ON_O`` (any direction: with J2 it has x and z parts): ``u = -K (x - x_e)`` with
+    ``x = (2 vec(q_BO), ω_BN_B - C_BO ω_ON_O, h, z)`` formed here in numpy."""
+    from types import SimpleNamespace
+
+    from controllers.momentum_manager import MomentumManager
+    from stationbed.run.controller import Measurement, Plant, measurement_layout
+
+    inertia = np.array([[1.02e8, -6.96e6, -5.48e6], [-6.96e6, 0.91e8, 5.9e5], [-5.48e6, 5.9e5, 1.64e8]])  # kg m²
+    scene = SimpleNamespace(orbit=SimpleNamespace(kepler=True, gravity_gradient=True))
+    c = MomentumManager(period=0.1)
+    c.reset(Plant(scene=scene, inertia_O_B=inertia, mean_motion=N_RAD_S, period=0.1))
+    lay = measurement_layout(8, 2)
+    M = Measurement(np.zeros(sum(k for _, k in lay.values())), lay)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q, o = rng.normal(size=4), rng.normal(size=4)
+        M.q_BN[:] = q / np.linalg.norm(q)
+        M.q_ON[:] = o / np.linalg.norm(o)
+        M.omega_BN_B[:] = rng.normal(size=3) * 1e-3
+        M.omega_ON_O[:] = [2e-6, -1.1e-3, -3e-6] * (1 + 0.1 * rng.normal(size=3))
+        M.h_B[:] = rng.normal(size=3) * 1e3
+        z = np.array(c.z)
+        u = c.update(0.0, M)
+        # q_BO = conj(q_ON) ⊗ q_BN, the short way round; C_BO from scipy
+        C_NB = Rotation.from_quat(np.r_[M.q_BN[1:], M.q_BN[0]]).as_matrix()
+        C_NO = Rotation.from_quat(np.r_[M.q_ON[1:], M.q_ON[0]]).as_matrix()
+        C_BO = C_NB.T @ C_NO
+        q_BO = Rotation.from_matrix(C_BO.T).as_quat()  # (x, y, z, w)
+        theta = 2 * np.sign(q_BO[3]) * q_BO[:3]
+        x = np.r_[theta - c.x_e[0:3], M.omega_BN_B - C_BO @ M.omega_ON_O, M.h_B, z]
+        assert_allclose(u, -c.K @ x, rtol=1e-9, atol=1e-9)
