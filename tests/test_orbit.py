@@ -28,7 +28,7 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 import stationbed
-from stationbed.core.kepler import elements_from_rv, rv_from_elements
+from stationbed.core.kepler import elements_from_rv, newton_steps, rv_from_elements, solve_kepler
 from stationbed.model.orbit import orbit_numeric
 from stationbed.run.initial import initial_state
 from stationbed.scene import SceneError, load_scene, scene_from_dict
@@ -128,6 +128,17 @@ def period_s(r0, v0, mu=MU_M3_S2):
 
 
 # -- the orbit model ------------------------------------------------------------------------
+@pytest.mark.parametrize("e", [0.0, 0.0078, 0.1, 0.3, 0.6, 0.7], ids=lambda e: f"e{e}")
+def test_proven_newton_steps_solve_keplers_equation(e):
+    """After ``newton_steps(e)`` steps, E - e sin E = M to round-off, on a dense grid of M over
+    two revolutions (the residual's slope is 1 - e cos E >= 1 - e, so E errs by at most 1/(1-e)
+    times it); E increases with M (a continuous anomaly)."""
+    M = np.linspace(-2 * math.pi, 2 * math.pi, 20001)
+    E = solve_kepler(M, e, newton_steps(e))
+    assert np.abs(E - e * np.sin(E) - M).max() <= 8 * np.finfo(float).eps * 2 * math.pi
+    assert np.all(np.diff(E) > 0)
+
+
 @pytest.mark.parametrize("name", ORBITS, ids=list(ORBITS))
 def test_kepler_matches_two_body_integration(name):
     orbit = ORBITS[name]
@@ -351,6 +362,7 @@ BAD = {
     "hyperbolic": ({"r_N": R0_N_M.tolist(), "v_N": (2 * V0_N_M_S).tolist()}, r"orbit\.v_N: .*not a bound orbit"),
     "perigee_inside": ({"elements": {**ELEMENTS_E03, "a": 7.0e6}}, r"orbit\.elements\.e: perigee radius"),
     "e_one": ({"elements": {**ELEMENTS_E03, "e": 1.0}}, r"orbit\.elements\.e"),
+    "e_unproven": ({"elements": {**ELEMENTS_E03, "a": 3.0e7, "e": 0.75}}, r"orbit\.elements\.e: eccentricity 0\.75 above 0\.7"),
     "j2_circular": ({"radius": 7e6, "j2": True}, r"orbit\.j2: needs a two-body orbit"),
     "u0_with_elements": ({"elements": ELEMENTS_E03, "u0": 0.3}, r"orbit\.u0: belongs to the circular form"),
     "elements_typo": ({"elements": {**ELEMENTS_E03, "argp_typo": 1.0}}, r"orbit\.elements\.argp_typo"),

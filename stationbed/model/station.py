@@ -17,7 +17,6 @@ relative to N, scalar first; ``omega_BN_B`` (3, 1) body rate [rad/s]; ``xe`` the
 
 from __future__ import annotations
 
-import math
 from typing import Any, NamedTuple
 
 import casadi as ca
