@@ -54,7 +54,7 @@ class MomentumForm(Formulation):
         if not m.n_modes:
             return core_dot, omega_BN_B
         eta = m.eta(x[7:])
-        p_dot = modal.momentum_rate(eta, eta_dot)
+        p_dot = modal.momentum_rate(eta, eta_dot, omega_BN_B)
         return core_dot, omega_BN_B, ca.vertcat(eta_dot, p_dot)
 
     def _core(self, t, q_BN, omega_BN_B, xe, p):
