@@ -258,8 +258,10 @@ class OmegaStateForm(Formulation):
     besides its share of ``I ω̇`` and ``ω × I ω``).
 
     Flexible arrays (the same for both forms: the modal terms are not where they differ) add
-    ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H), and Lagrange's
-    equation of the modes ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
+    ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H) and, for the
+    first-order deformation-dependent inertia's ``H₁ = δI ω + …``, ``δI ω̇ + ω × H₁`` plus the rest
+    of its rate (:meth:`~stationbed.model.flex.Modes.first_order_rate`); Lagrange's equation of
+    the modes reads ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = ∂T₁/∂η``. The
     two are solved together by the Schur complement on the modal block (``M_eff⁻¹`` by the
     Woodbury identity, :meth:`stationbed.model.flex.Modes.solve`).
     """
