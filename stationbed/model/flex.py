@@ -166,8 +166,10 @@ class Modes:
 
     # -- the first-order (deformation-dependent) inertia ----------------------------------
     def _deformed(self, eta):
-        """Per array ``(array, δJ, u)``: ``δJ = C_BP (Σ η_k ∂J/∂η_k) C_PB`` [kg m²] and
-        ``u = C_BP Φ̄ η`` [kg m] (linear in ``eta``, so this also gives their η-rates)."""
+        """Per array ``(array, J_η, u)``: ``J_η = Σ η_k ∂J/∂η_k`` [kg m²] in P axes (so
+        ``δJ = C_BP J_η C_PB``) and ``u = C_BP Φ̄ η`` [kg m] (linear in ``eta``, so this also
+        gives their η-rates). Products with δJ are taken in P (three matrix-vector products
+        instead of two matrix products)."""
         out, i = [], 0
         for a in self._arrays:
             e = eta[i : i + a.n]
@@ -175,14 +177,15 @@ class Modes:
             J_P = e[0] * a.dJ_P[0]
             for k in range(1, a.n):
                 J_P = J_P + e[k] * a.dJ_P[k]
-            out.append((a, ca.mtimes([a.C_BP, J_P, a.C_PB]), ca.mtimes(a.U, e)))
+            out.append((a, J_P, ca.mtimes(a.U, e)))
         return out
 
     def inertia_delta(self, eta):
         """``δI = Σ [δJ + 2(ρ·u)E - ρuᵀ - uρᵀ]``: the first-order change of the inertia about O
         (each array's own, and its mass centre's parallel-axis term) [kg m²], (3, 3)."""
         dI = ca.SX.zeros(3, 3)
-        for a, dJ, u in self._deformed(eta):
+        for a, J_P, u in self._deformed(eta):
+            dJ = ca.mtimes([a.C_BP, J_P, a.C_PB])
             dI = dI + dJ + 2.0 * ca.dot(a.rho, u) * ca.SX.eye(3) - ca.mtimes(a.rho, u.T) - ca.mtimes(u, a.rho.T)
         return dI
 
@@ -190,8 +193,9 @@ class Modes:
         """``Σ [δJ ω_p + ρ × (ω_p × u)]``: the first-order momentum of the deflected arrays' own turning
         [N m s], (3, 1) (their mass centres leave the joint axes)."""
         h = ca.SX.zeros(3)
-        for a, dJ, u in self._deformed(eta):
-            h = h + ca.mtimes(dJ, a.w_p) + ca.cross(a.rho, ca.cross(a.w_p, u))
+        for a, J_P, u in self._deformed(eta):
+            # the matrix δJ (not three products in P): the forms build it for δI anyway
+            h = h + ca.mtimes(ca.mtimes([a.C_BP, J_P, a.C_PB]), a.w_p) + ca.cross(a.rho, ca.cross(a.w_p, u))
         return h
 
     def first_order_momentum(self, eta, w):
@@ -202,9 +206,10 @@ class Modes:
         """``T₁ = Σ [½ Wᵀ δJ W + (ω × ρ)·(W × u)]``, ``W = ω + ω_p`` [J] at body rate ``w``: the
         kinetic energy linear in η (velocity field ``W × (a + Φη)`` of the deflected array)."""
         T = ca.SX(0)
-        for a, dJ, u in self._deformed(eta):
+        for a, J_P, u in self._deformed(eta):
             W = w + a.w_p
-            T = T + 0.5 * ca.dot(W, ca.mtimes(dJ, W)) + ca.dot(ca.cross(w, a.rho), ca.cross(W, u))
+            W_P = ca.mtimes(a.C_PB, W)
+            T = T + 0.5 * ca.dot(W_P, ca.mtimes(J_P, W_P)) + ca.dot(ca.cross(w, a.rho), ca.cross(W, u))
         return T
 
     def centrifugal(self, w):
@@ -222,16 +227,17 @@ class Modes:
     def first_order_rate(self, eta, eta_dot, w):
         """The B-frame rate of ``H₁`` less ``δI ω̇`` [N m], (3, 1): per array
         ``δJ̇ W + δJ ω̇_p + ρ × (ω̇_p × u + W × u̇) + u̇ × (ω × ρ)`` with
-        ``δJ̇ = δJ(η̇) + ω̃_p δJ - δJ ω̃_p`` and ``u̇ = u(η̇) + ω_p × u`` (``Ċ_BP = ω̃_p C_BP``).
+        ``δJ̇ = δJ(η̇) + ω̃_p δJ - δJ ω̃_p`` and ``u̇ = u(η̇) + ω_p × u`` (``Ċ_BP = ω̃_p C_BP``),
+        so ``δJ̇ W + δJ ω̇_p = C_BP [J_η̇ W_P + J_η C_PB (ω̇_p - ω_p × W)] + ω_p × δJ W``.
         Needs every array's ``ω̇_p``."""
         r = ca.SX.zeros(3)
-        for (a, dJ, u), (_, dJ_r, u_r) in zip(self._deformed(eta), self._deformed(eta_dot)):
+        for (a, J_P, u), (_, J_P_rate, u_rate) in zip(self._deformed(eta), self._deformed(eta_dot)):
             if a.wd_p is None:
                 raise ValueError("first_order_rate needs every array's omega_p_dot_B")
             W = w + a.w_p
-            wx = skew(a.w_p)
-            dJ_dot = dJ_r + ca.mtimes(wx, dJ) - ca.mtimes(dJ, wx)
-            u_dot = u_r + ca.cross(a.w_p, u)
-            r = (r + ca.mtimes(dJ_dot, W) + ca.mtimes(dJ, a.wd_p)
+            W_P = ca.mtimes(a.C_PB, W)
+            u_dot = u_rate + ca.cross(a.w_p, u)
+            inner = ca.mtimes(J_P_rate, W_P) + ca.mtimes(J_P, ca.mtimes(a.C_PB, a.wd_p - ca.cross(a.w_p, W)))
+            r = (r + ca.mtimes(a.C_BP, inner) + ca.cross(a.w_p, ca.mtimes(a.C_BP, ca.mtimes(J_P, W_P)))
                  + ca.cross(a.rho, ca.cross(a.wd_p, u) + ca.cross(W, u_dot)) + ca.cross(u_dot, ca.cross(w, a.rho)))
         return r
