@@ -168,8 +168,9 @@ class Mode(Strict):
     shape, given either by a ``beam`` or by the participation integrals directly:
     ``translation`` = ∫Φ dm [kg], ``rotation`` = ∫ a × Φ dm about the array's mass centre
     [kg m] (P axes), ``modal_mass`` = ∫ΦᵀΦ dm [kg] and, optionally, ``inertia_derivative`` =
-    ∂J/∂η = ∫(2 a·Φ E - aΦᵀ - Φaᵀ) dm [kg m] (symmetric, P axes; default 0, which leaves the
-    first-order change of the array's inertia with its deflection out)."""
+    ∂J/∂η = ∫(2 a·Φ E - aΦᵀ - Φaᵀ) dm [kg m] (symmetric, P axes; default 0: the array's own
+    inertia then does not change with η, while its mass centre's shift by ``translation`` η / m
+    still counts)."""
 
     frequency_hz: float = Field(gt=0.0)
     damping: float = Field(default=0.0, ge=0.0, lt=1.0)
