@@ -199,7 +199,8 @@ class Formulation:
 
     def momentum_of(self, t, q_BN, omega_BN_B, xe, p):
         """Total angular momentum about O, ``I ω + Σ I_p ω_p + h + Σ Δ η̇ + H₁`` (``H₁`` the
-        first-order deformation-dependent inertia's, :meth:`~stationbed.model.flex.Modes.first_order_momentum`).
+        first-order deformation-dependent inertia's,
+        :meth:`~stationbed.model.flex.Modes.first_order_momentum`).
 
         Parameters
         ----------

@@ -302,8 +302,9 @@ class StationModel:
         ``T = ½ωᵀIω + Σ (ωᵀI_pω_p + ½ω_pᵀI_pω_p) + T_e``; ``xe`` with ``η̇`` (as for
         :meth:`Formulation.state`); ``T_e`` the arrays' elastic kinetic energy
         (:meth:`stationbed.model.flex.Modes.kinetic`) plus the first-order deformation-dependent
-        inertia's ``T₁`` (:meth:`~stationbed.model.flex.Modes.first_order_kinetic`). ``h_coupling`` adds ``ωᵀh``, the only part
-        of the CMG rotors' energy that depends on ω (what the ``hamel`` form differentiates).
+        inertia's ``T₁`` (:meth:`~stationbed.model.flex.Modes.first_order_kinetic`).
+        ``h_coupling`` adds ``ωᵀh``, the only part of the CMG rotors' energy that depends on ω
+        (what the ``hamel`` form differentiates).
         """
         arrays = self.arrays(t, q_BN, xe, p, u=u)
         T = 0.5 * ca.dot(omega_BN_B, ca.mtimes(self.inertia(t, p, arrays), omega_BN_B))
