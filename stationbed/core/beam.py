@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-__all__ = ["beam_mode", "BETA_L", "cantilever_shape", "check_participation", "axis_vector"]
+__all__ = ["beam_mode", "beam_inertia_derivative", "BETA_L", "cantilever_shape", "check_participation", "axis_vector"]
 
 #: roots of 1 + cos(βL) cosh(βL) = 0: clamped-free Euler–Bernoulli beam, modes 1..6
 BETA_L = (1.8751040687119611, 4.6940911329741745, 7.8547574382376126, 10.995540734875467, 14.137168391046471, 17.278759532088237)
@@ -53,23 +53,39 @@ def _gauss_legendre(n: int):
     return np.polynomial.legendre.leggauss(n)
 
 
-def beam_mode(n: int, length: float, mass: float, root, span: str, deflection: str, n_quad: int = 96):
-    """Quinn Eq. 24 integrals ``(Φ̄, Ĥ, M)`` of cantilever mode ``n``, P components about the
-    array's mass centre (the P origin). The beam runs from ``root`` along ``span`` and bends
-    along ``deflection`` (axis names like ``"y"`` or ``"-z"``); uniform mass per length.
-    Gauss–Legendre quadrature with ``n_quad`` points (exact to ~1e-15 for n <= 6)."""
+def _beam_stations(n: int, length: float, mass: float, root, span: str, deflection: str, n_quad: int):
+    """Quadrature of cantilever mode ``n``: ``(dm, ψ, a, e_d)`` at ``n_quad`` Gauss–Legendre stations
+    (``a`` the points from the P origin, ``e_d`` the deflection direction; uniform mass per length)."""
     e_s, e_d = axis_vector(span), axis_vector(deflection)
     if abs(e_s @ e_d) > 0.5:
         raise ValueError(f"span {span!r} and deflection {deflection!r} must be different axes")
     xg, wg = _gauss_legendre(n_quad)
     s = 0.5 * length * (xg + 1.0)
     w = 0.5 * length * wg * (mass / length)  # dm at each station
-    psi = cantilever_shape(n, s, length)
     a = np.asarray(root, float)[None, :] + s[:, None] * e_s[None, :]  # points relative to the P origin
+    return w, cantilever_shape(n, s, length), a, e_d
+
+
+def beam_mode(n: int, length: float, mass: float, root, span: str, deflection: str, n_quad: int = 96):
+    """Quinn Eq. 24 integrals ``(Φ̄, Ĥ, M)`` of cantilever mode ``n``, P components about the
+    array's mass centre (the P origin). The beam runs from ``root`` along ``span`` and bends
+    along ``deflection`` (axis names like ``"y"`` or ``"-z"``); uniform mass per length.
+    Gauss–Legendre quadrature with ``n_quad`` points (exact to ~1e-15 for n <= 6)."""
+    w, psi, a, e_d = _beam_stations(n, length, mass, root, span, deflection, n_quad)
     phi_bar = float(np.sum(w * psi)) * e_d
     H_hat = np.sum((w * psi)[:, None] * np.cross(a, e_d[None, :]), axis=0)
     M = float(np.sum(w * psi * psi))
     return phi_bar, H_hat, M
+
+
+def beam_inertia_derivative(n: int, length: float, mass: float, root, span: str, deflection: str, n_quad: int = 96):
+    """``∂J/∂η = ∫ (2 a·Φ E - a Φᵀ - Φ aᵀ) dm`` of cantilever mode ``n`` [kg m], shape (3, 3), P
+    axes: the first-order change of the array's inertia about its (undeformed) mass centre per unit
+    of the modal coordinate. With ``Φ = ψ e_d`` and ``f = ∫ ψ a dm`` it is
+    ``2 (f·e_d) E - f e_dᵀ - e_d fᵀ``. Arguments as for :func:`beam_mode`."""
+    w, psi, a, e_d = _beam_stations(n, length, mass, root, span, deflection, n_quad)
+    f = np.sum((w * psi)[:, None] * a, axis=0)
+    return 2.0 * (f @ e_d) * np.eye(3) - np.outer(f, e_d) - np.outer(e_d, f)
 
 
 def check_participation(mass: float, J: np.ndarray, modes) -> float:

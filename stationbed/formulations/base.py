@@ -198,7 +198,9 @@ class Formulation:
         return np.array([atol * unit[k] for k in self.state_kinds])
 
     def momentum_of(self, t, q_BN, omega_BN_B, xe, p):
-        """Total angular momentum about O, ``I ω + Σ I_p ω_p + h + Σ Δ η̇``.
+        """Total angular momentum about O, ``I ω + Σ I_p ω_p + h + Σ Δ η̇ + H₁`` (``H₁`` the
+        first-order deformation-dependent inertia's,
+        :meth:`~stationbed.model.flex.Modes.first_order_momentum`).
 
         Parameters
         ----------
@@ -215,7 +217,7 @@ class Formulation:
             H_O_B = H_O_B + ca.mtimes(I_p_B, omega_p_B)
         modal = m.modal(arrays, p)
         if modal is not None:
-            H_O_B = H_O_B + ca.mtimes(modal.Delta, m.modal_state(xe))
+            H_O_B = H_O_B + ca.mtimes(modal.Delta, m.modal_state(xe)) + modal.first_order_momentum(m.eta(xe), omega_BN_B)
         return H_O_B
 
     def H_O_B(self, t, x, p):
@@ -257,8 +259,10 @@ class OmegaStateForm(Formulation):
     besides its share of ``I ω̇`` and ``ω × I ω``).
 
     Flexible arrays (the same for both forms: the modal terms are not where they differ) add
-    ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H), and Lagrange's
-    equation of the modes ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = 0``; the
+    ``Δ η̈ + Δ̇ η̇ + ω × Δ η̇`` to the left-hand side (the rate of ``Δ η̇`` in H) and, for the
+    first-order deformation-dependent inertia's ``H₁ = δI ω + …``, ``δI ω̇ + ω × H₁`` plus the rest
+    of its rate (:meth:`~stationbed.model.flex.Modes.first_order_rate`); Lagrange's equation of
+    the modes reads ``M_eff η̈ + Ṁ_eff η̇ + Δᵀ ω̇ + Δ̇ᵀ ω + Dᵀ ω̇_p + C η̇ + K η = ∂T₁/∂η``. The
     two are solved together by the Schur complement on the modal block (``M_eff⁻¹`` by the
     Woodbury identity, :meth:`stationbed.model.flex.Modes.solve`).
     """
@@ -291,10 +295,13 @@ class OmegaStateForm(Formulation):
             return ca.vertcat(quat_kinematics(q_BN, omega_BN_B), ca.mtimes(inv3(I_O_B), rhs)), omega_BN_B
         eta, eta_dot = m.eta(xe), m.modal_state(xe)
         f = m.modal(arrays, p)
-        rhs = rhs - ca.mtimes(f.Delta_dot, eta_dot) - ca.cross(omega_BN_B, ca.mtimes(f.Delta, eta_dot))
-        r_eta = f.momentum_rate(eta, eta_dot) - ca.mtimes(f.Delta_dot.T, omega_BN_B) - f.D_wdp - f.mass_rate_times(eta_dot)
+        H_1 = f.first_order_momentum(eta, omega_BN_B)
+        rhs = (rhs - ca.mtimes(f.Delta_dot, eta_dot) - ca.cross(omega_BN_B, ca.mtimes(f.Delta, eta_dot) + H_1)
+               - f.first_order_rate(eta, eta_dot, omega_BN_B))
+        r_eta = f.momentum_rate(eta, eta_dot, omega_BN_B) - ca.mtimes(f.Delta_dot.T, omega_BN_B) - f.D_wdp - f.mass_rate_times(eta_dot)
         sol = f.solve(ca.horzcat(r_eta, f.Delta.T))  # M_eff⁻¹ [r_η, Δᵀ]
-        omega_dot_B = ca.mtimes(inv3(I_O_B - ca.mtimes(f.Delta, sol[:, 1:4])), rhs - ca.mtimes(f.Delta, sol[:, 0]))
+        I_eff = I_O_B + f.inertia_delta(eta) - ca.mtimes(f.Delta, sol[:, 1:4])
+        omega_dot_B = ca.mtimes(inv3(I_eff), rhs - ca.mtimes(f.Delta, sol[:, 0]))
         eta_ddot = sol[:, 0] - ca.mtimes(sol[:, 1:4], omega_dot_B)
         return ca.vertcat(quat_kinematics(q_BN, omega_BN_B), omega_dot_B), omega_BN_B, ca.vertcat(eta_dot, eta_ddot)
 

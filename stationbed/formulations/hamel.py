@@ -32,7 +32,8 @@ which enter only through ``V`` (:meth:`StationModel.external_torque` with ``with
 and :meth:`StationModel.potential`). State ``[q_BN (4), omega_BN_B (3)]``.
 
 Flexible arrays (stationbed/model/flex.py) add the elastic kinetic energy
-``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` to T, the strain energy ``½ ηᵀ K η`` to V and a
+``T_e = ½ η̇ᵀ M_eff η̇ + η̇ᵀ (Δᵀ ω + Dᵀ ω_p)`` and the first-order deformation-dependent inertia's
+``T₁ = ½ Wᵀ δJ W + (ω × ρ)·(W × u)`` (linear in η) to T, the strain energy ``½ ηᵀ K η`` to V and a
 Rayleigh dissipation ``R = ½ η̇ᵀ C η̇``; the modal coordinates obey Lagrange's equation (Quinn
 Eq. 31b) ``d/dt(∂T/∂η̇) - ∂T/∂η + ∂V/∂η + ∂R/∂η̇ = 0``. With velocities ``v = [ω; η̇]`` and
 ``P = ∂T/∂v`` everything above holds with p → P (plus ``(∂P/∂η) η̇`` in Ṗ), and the mass matrix

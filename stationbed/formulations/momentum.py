@@ -6,8 +6,9 @@ State ``[q_BN (4), H_O_B (3)]``: the total angular momentum about O in B compone
 leaves H continuous (ω jumps) without any special handling.
 
 Flexible arrays keep that character: their second modal state is the modal momentum
-``p_η = ∂T/∂η̇ = M_eff η̇ + Δᵀ ω + Dᵀ ω_p``, whose rate is ``-K η - C η̇`` (Lagrange Eq. 31b,
-no acceleration), and ``(ω, η̇)`` are recovered together from ``(H, p_η)``
+``p_η = ∂T/∂η̇ = M_eff η̇ + Δᵀ ω + Dᵀ ω_p``, whose rate is ``∂T₁/∂η - K η - C η̇`` (Lagrange
+Eq. 31b, no acceleration; ``T₁`` the first-order deformation-dependent inertia's energy), and
+``(ω, η̇)`` are recovered together from ``(H, p_η)``
 (:meth:`StationModel.velocities`).
 """
 
@@ -54,7 +55,7 @@ class MomentumForm(Formulation):
         if not m.n_modes:
             return core_dot, omega_BN_B
         eta = m.eta(x[7:])
-        p_dot = modal.momentum_rate(eta, eta_dot)
+        p_dot = modal.momentum_rate(eta, eta_dot, omega_BN_B)
         return core_dot, omega_BN_B, ca.vertcat(eta_dot, p_dot)
 
     def _core(self, t, q_BN, omega_BN_B, xe, p):

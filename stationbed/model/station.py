@@ -149,7 +149,9 @@ class StationModel:
             for mode in a.mode:
                 phi_bar, H_hat, M = mode.integrals(a.mass)
                 w = mode.omega
+                dJ = mode.inertia_derivative_P(a.mass)
                 vals += list(phi_bar) + list(H_hat) + [M, w * w * M, 2.0 * mode.damping * w * M]
+                vals += [dJ[0, 0], dJ[1, 1], dJ[2, 2], dJ[0, 1], dJ[0, 2], dJ[1, 2]]
             p[L[f"modes{k}"]] = vals
         return p
 
@@ -296,8 +298,10 @@ class StationModel:
         -----
         ``T = ½ωᵀIω + Σ (ωᵀI_pω_p + ½ω_pᵀI_pω_p) + T_e``; ``xe`` with ``η̇`` (as for
         :meth:`Formulation.state`); ``T_e`` the arrays' elastic kinetic energy
-        (:meth:`stationbed.model.flex.Modes.kinetic`). ``h_coupling`` adds ``ωᵀh``, the only part
-        of the CMG rotors' energy that depends on ω (what the ``hamel`` form differentiates).
+        (:meth:`stationbed.model.flex.Modes.kinetic`) plus the first-order deformation-dependent
+        inertia's ``T₁`` (:meth:`~stationbed.model.flex.Modes.first_order_kinetic`).
+        ``h_coupling`` adds ``ωᵀh``, the only part of the CMG rotors' energy that depends on ω
+        (what the ``hamel`` form differentiates).
         """
         arrays = self.arrays(t, q_BN, xe, p, u=u)
         T = 0.5 * ca.dot(omega_BN_B, ca.mtimes(self.inertia(t, p, arrays), omega_BN_B))
@@ -307,7 +311,7 @@ class StationModel:
             T = T + ca.dot(omega_BN_B, ca.mtimes(I_p_B, omega_p_B)) + 0.5 * ca.dot(omega_p_B, ca.mtimes(I_p_B, omega_p_B))
         modal = self.modal(arrays, p)
         if modal is not None:
-            T = T + modal.kinetic(omega_BN_B, self.modal_state(xe))
+            T = T + modal.kinetic(omega_BN_B, self.modal_state(xe)) + modal.first_order_kinetic(self.eta(xe), omega_BN_B)
         return T
 
     # -- flexible arrays ----------------------------------------------------------------
@@ -349,18 +353,22 @@ class StationModel:
 
         Notes
         -----
-        Solves ``[I Δ; Δᵀ M_eff] [ω; η̇] = [H - Σ I_p ω_p - h; p_η - Dᵀ ω_p]`` by the Schur
-        complement on the modal block: ``(I - Δ M_eff⁻¹ Δᵀ) ω = ...`` (``M_eff⁻¹`` by
-        :meth:`~stationbed.model.flex.Modes.solve`).
+        Solves ``[I + δI Δ; Δᵀ M_eff] [ω; η̇] = [H - Σ I_p ω_p - h - h₁; p_η - Dᵀ ω_p]`` by the
+        Schur complement on the modal block: ``(I + δI - Δ M_eff⁻¹ Δᵀ) ω = ...`` (``M_eff⁻¹`` by
+        :meth:`~stationbed.model.flex.Modes.solve`; ``δI``, ``h₁`` the first-order inertia terms at
+        ``η``: :meth:`~stationbed.model.flex.Modes.inertia_delta`, ``joint_momentum``).
         """
         rest = H_O_B - self.h(xe, p)
         for I_p_B, omega_p_B, *_ in arrays:
             rest = rest - ca.mtimes(I_p_B, omega_p_B)
         if modal is None:
             return ca.mtimes(inv3(I_O_B), rest), ca.SX(0, 1)
+        eta = self.eta(xe)
+        rest = rest - modal.joint_momentum(eta)
         sol = modal.solve(ca.horzcat(p_eta - modal.D_wp, modal.Delta.T))  # M_eff⁻¹ [b, Δᵀ]
         b, MD = sol[:, 0], sol[:, 1:4]
-        omega_BN_B = ca.mtimes(inv3(I_O_B - ca.mtimes(modal.Delta, MD)), rest - ca.mtimes(modal.Delta, b))
+        I_eff = I_O_B + modal.inertia_delta(eta) - ca.mtimes(modal.Delta, MD)
+        omega_BN_B = ca.mtimes(inv3(I_eff), rest - ca.mtimes(modal.Delta, b))
         return omega_BN_B, b - ca.mtimes(MD, omega_BN_B)
 
     def inertia(self, t, p, arrays):

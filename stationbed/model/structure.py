@@ -122,7 +122,8 @@ class ParamLayout:
                 add(f"{j}{k}", 5 + 2 * n_steps if kind == "p" else 4)
             if structure.n_modes(k):
                 add(f"rho{k}", 3)  # array mass centre from O, B axes [m]
-                add(f"modes{k}", 9 * structure.n_modes(k))  # per mode: Φ̄ (3), Ĥ (3), M, K, C (P axes)
+                # per mode: Φ̄ (3), Ĥ (3), M, K, C, ∂J/∂η (xx, yy, zz, xy, xz, yz) (P axes)
+                add(f"modes{k}", 15 * structure.n_modes(k))
         if structure.modes:
             add("mtot", 1)  # total mass [kg]: the hub's recoil when the arrays bend
         if structure.orbit:

@@ -11,7 +11,7 @@ from pydantic import ConfigDict, Discriminator, Field, Tag, field_validator, mod
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.kepler import KEPLER_MAX_E, elements_from_rv
-from ..core.beam import beam_mode, check_participation
+from ..core.beam import beam_inertia_derivative, beam_mode, check_participation
 from ..core.massprops import InvalidMassProperties, check_inertia
 from .base import QUAT_NORM_TOL, TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3
 
@@ -168,7 +168,10 @@ class Mode(Strict):
     """One elastic mode of an array (Quinn Eq. 22–24): its clamped frequency, damping ratio and
     shape, given either by a ``beam`` or by the participation integrals directly:
     ``translation`` = ∫Φ dm [kg], ``rotation`` = ∫ a × Φ dm about the array's mass centre
-    [kg m] (P axes), ``modal_mass`` = ∫ΦᵀΦ dm [kg]."""
+    [kg m] (P axes), ``modal_mass`` = ∫ΦᵀΦ dm [kg] and, optionally, ``inertia_derivative`` =
+    ∂J/∂η = ∫(2 a·Φ E - aΦᵀ - Φaᵀ) dm [kg m] (symmetric, P axes; default 0: the array's own
+    inertia then does not change with η, while its mass centre's shift by ``translation`` η / m
+    still counts)."""
 
     frequency_hz: float = Field(gt=0.0)
     damping: float = Field(default=0.0, ge=0.0, lt=1.0)
@@ -176,6 +179,7 @@ class Mode(Strict):
     translation: Vec3 | None = None
     rotation: Vec3 | None = None
     modal_mass: float | None = Field(default=None, gt=0.0)
+    inertia_derivative: Mat3 | None = None  # ∂J/∂η [kg m], P axes, symmetric
     eta0: float = 0.0  # initial modal coordinate
     eta_rate0: float = 0.0  # initial modal rate [1/s x coordinate]
 
@@ -186,6 +190,12 @@ class Mode(Strict):
             raise ValueError("give a mode either 'beam' or 'translation'/'rotation' (with 'modal_mass')")
         if direct and self.modal_mass is None:
             raise ValueError("a mode given by 'translation'/'rotation' needs 'modal_mass' [kg]")
+        if self.inertia_derivative is not None:
+            if self.beam is not None:
+                raise ValueError("'inertia_derivative' is computed from 'beam'; give it only with 'translation'/'rotation'")
+            D = np.array(self.inertia_derivative)
+            if np.abs(D - D.T).max() > 1e-9 * max(np.abs(D).max(), 1e-300):
+                raise ValueError("inertia_derivative: must be symmetric")
         return self
 
     def integrals(self, array_mass: float):
@@ -195,6 +205,14 @@ class Mode(Strict):
             return beam_mode(b.n, b.length, b.mass or array_mass, b.root, b.span, b.deflection)
         zero = [0.0, 0.0, 0.0]
         return np.array(self.translation or zero), np.array(self.rotation or zero), float(self.modal_mass)
+
+    def inertia_derivative_P(self, array_mass: float) -> np.ndarray:
+        """``∂J/∂η`` [kg m], (3, 3), P axes: the first-order change of the array's inertia about its
+        mass centre per unit of η (from the beam, or as given; zero when not given)."""
+        if self.beam is not None:
+            b = self.beam
+            return beam_inertia_derivative(b.n, b.length, b.mass or array_mass, b.root, b.span, b.deflection)
+        return np.zeros((3, 3)) if self.inertia_derivative is None else np.array(self.inertia_derivative)
 
     @property
     def omega(self) -> float:
