@@ -17,6 +17,7 @@ import numpy as np
 
 from ..core.rotation import quat_mult
 from ..core.symbolic import is_symbolic, trig, vector
+from .sun import julian_date, sun_position
 
 __all__ = [
     "orbit_position_N",
@@ -113,7 +114,8 @@ def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
 
     Parameters
     ----------
-    sun : stationbed.scene.Sun  ``direction_N``, or ``beta`` [rad] and ``u_noon`` [rad].
+    sun : stationbed.scene.Sun  ``direction_N``, or ``beta`` [rad] and ``u_noon`` [rad], or
+        ``epoch`` (the low-precision ephemeris of :mod:`stationbed.model.sun`, held at the epoch).
     inclination : float  Orbit inclination [rad] (0 without an orbit).
 
     Returns
@@ -130,6 +132,8 @@ def sun_direction_N(sun, inclination: float = 0.0) -> np.ndarray:
     if sun.direction_N is not None:
         v = np.array(sun.direction_N, dtype=float)
         return v / np.linalg.norm(v)
+    if sun.epoch is not None:
+        return sun_position(julian_date(sun.epoch))[0]
     b, u = sun.beta, sun.u_noon
     ci, si = np.cos(inclination), np.sin(inclination)
     in_plane = np.cos(u) * np.array([1.0, 0.0, 0.0]) + np.sin(u) * np.array([0.0, ci, si])

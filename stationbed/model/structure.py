@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .cmg import CmgModel, get_geometry
+from .surfaces import scene_plates
 from .torques import TORQUES
 
 __all__ = ["Structure", "ParamLayout", "JOINTS"]
@@ -32,6 +33,11 @@ class Structure:
         for a cluster without gimbals).
     modes : tuple of int  Elastic modes per appendage (all 0: a rigid scene, whose equations and
         key do not change).
+    surfaces : tuple of int  Per plate of the aero/SRP surfaces its attachment (-1 body, k
+        appendage); empty without those kinds.
+    eclipse : str  The shadow model (``"cylindrical"``, ``"conical"``; ``""``: always lit).
+
+    A sun-tracking joint whose night mode is the glider has kind ``"g"``.
     """
 
     n_app: int
@@ -41,6 +47,8 @@ class Structure:
     sun: bool = False
     cmg: tuple | None = None
     modes: tuple = ()
+    surfaces: tuple = ()
+    eclipse: str = ""
 
     def __post_init__(self):
         order = [k for k in TORQUES if k in self.torques]
@@ -52,9 +60,12 @@ class Structure:
         """The structure of ``scene`` (a :class:`stationbed.scene.Scene`)."""
 
         def joint(j):
-            return ("s", 0) if j.tracked else ("p", len(j.rate_step))
+            if j.tracked:
+                return ("g", 0) if j.night == "glider" else ("s", 0)
+            return ("p", len(j.rate_step))
 
         c = scene.cmg
+        plated = any(TORQUES[t.kind].needs_env for t in scene.torque)
         return cls(
             n_app=len(scene.appendage),
             orbit=scene.orbit is not None,
@@ -63,6 +74,8 @@ class Structure:
             sun=scene.sun is not None,
             cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none"),
             modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
+            surfaces=scene_plates(scene)[0] if plated else (),
+            eclipse="" if scene.sun is None or scene.sun.eclipse == "none" else scene.sun.eclipse,
         )
 
     @property
@@ -72,7 +85,10 @@ class Structure:
         c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}"
         f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
         trq = "".join(kind.key(k in self.torques) for k, kind in TORQUES.items() if kind.symbolic)
-        return f"a{self.n_app}o{int(self.orbit)}{trq}j{j}s{int(self.sun)}{c}{f}"
+        env = "" if not self.eclipse else f"E{self.eclipse[:3]}"
+        if self.surfaces:
+            env += "S" + "_".join("b" if k < 0 else str(k) for k in self.surfaces)
+        return f"a{self.n_app}o{int(self.orbit)}{trq}j{j}s{int(self.sun)}{c}{f}{env}"
 
     def n_modes(self, k: int) -> int:
         """Number of elastic modes of appendage ``k``."""
@@ -87,7 +103,8 @@ class ParamLayout:
 
     In order: ``I0`` (9), per appendage ``J<k>`` (9), its joints ``alpha<k>``, ``beta<k>`` and,
     when flexible, ``rho<k>`` (3) and ``modes<k>``; ``mtot`` (flexible scenes); ``orbit`` (6);
-    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``cmg``.
+    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``shadow``
+    (1, with an eclipse model); ``cmg``.
 
     Parameters
     ----------
@@ -122,10 +139,12 @@ class ParamLayout:
         if structure.orbit:
             add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
         for name in structure.torques:
-            if TORQUES[name].n_par:
-                add(name, TORQUES[name].n_par)  # the kind's own numbers (TorqueKind.params)
+            if TORQUES[name].n_params(structure):
+                add(name, TORQUES[name].n_params(structure))  # the kind's own numbers (TorqueKind.params)
         if structure.sun:
             add("sun", 3)  # unit vector to the sun, N components
+        if structure.eclipse:
+            add("shadow", 1)  # Earth-sun distance [m] (the conical shadow's sun disc)
         if structure.cmg is not None:
             add("cmg", CmgModel(*structure.cmg).n_par)  # head (limits, steering), then geometry
         self.size = n
