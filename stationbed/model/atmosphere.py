@@ -41,11 +41,16 @@ N_BANDS = len(EXPONENTIAL_TABLE)
 
 
 def band_table(table=EXPONENTIAL_TABLE) -> np.ndarray:
-    """The table as the compiled code reads it: per band ``(h0 [m], ln ρ0 + h0/H, -1/H [1/m])``,
-    so that ``ln ρ = c0 + c1 h`` in the band (one exp per evaluation), flattened, shape (3 N,)."""
+    """The table as the compiled code reads it, flattened, shape (3 N,).
+
+    In band k, ``ln ρ = c0_k + c1_k h`` with ``c0_k = ln ρ0 + h0/H``, ``c1_k = -1/H``; stored as
+    ``(h0_k [m], c0_k - c0_{k-1}, c1_k - c1_{k-1})`` (the first band absolute), so that the code
+    sums one step per band crossed (``h >= h0_k``): 5 operations a band, one exp in all.
+    """
     h0 = table[:, 0] * 1e3
     H = table[:, 2] * 1e3
-    return np.column_stack([h0, np.log(table[:, 1]) + h0 / H, -1.0 / H]).ravel()
+    c0, c1 = np.log(table[:, 1]) + h0 / H, -1.0 / H
+    return np.column_stack([h0, np.diff(c0, prepend=0.0), np.diff(c1, prepend=0.0)]).ravel()
 
 
 def density(h_m, table=EXPONENTIAL_TABLE):
@@ -69,8 +74,8 @@ def density_symbolic(r_N, bands, scale):
     c0, c1 = bands[1], bands[2]
     for k in range(1, bands.numel() // 3):
         above = h >= bands[3 * k]
-        c0 = ca.if_else(above, bands[3 * k + 1], c0)
-        c1 = ca.if_else(above, bands[3 * k + 2], c1)
+        c0 = c0 + above * bands[3 * k + 1]
+        c1 = c1 + above * bands[3 * k + 2]
     return scale * ca.exp(c0 + c1 * h)
 
 

@@ -32,6 +32,7 @@ from .environment import C_ON, sun_direction_N
 from .flex import Modes
 from .structure import JOINTS, ParamLayout, Structure
 from .sun import SHADOW_MODELS, sun_distance_m
+from .surfaces import plates_B
 from .torques import TORQUES, Environment, OrbitState, v_rel_B
 
 __all__ = ["StationModel", "ArrayState"]
@@ -139,7 +140,7 @@ class StationModel:
             i = o.inclination  # cos/sin of a parameter: computed once here, not per RHS stage
             p[L["orbit"]] = [o.radius_m, i, o.u0, o.mean_motion, math.cos(i), math.sin(i)]
         for kind in self.torques:
-            if kind.n_params(self.structure):
+            if kind.n_par:
                 p[L[kind.kind]] = kind.params(scene)
         if self.structure.sun:
             incl = scene.orbit.inclination if scene.orbit is not None else 0.0
@@ -268,7 +269,7 @@ class StationModel:
         flow in eclipse (array normal perpendicular to the air-relative velocity, the nearer of
         the two such angles, no rate feed-forward: the flow is fixed in an LVLH-holding body)."""
         orbit = self.orbit_state(t, p)
-        v_B = v_rel_B(q_BN, orbit)
+        v_B = v_rel_B(dcm(q_BN), orbit)
         if i == 1:  # BGA: the flow in the frame turned by the SARJ, Ay(alpha) v_B
             ca_, sa_ = ca.cos(alpha), ca.sin(alpha)
             v_B = ca.vertcat(ca_ * v_B[0] - sa_ * v_B[2], v_B[1], sa_ * v_B[0] + ca_ * v_B[2])
@@ -466,11 +467,11 @@ class StationModel:
             return ca.SX(1.0)
         return SHADOW_MODELS[self.structure.eclipse](orbit.r_N, p[self.layout["sun"]], p[self.layout["shadow"]][0])
 
-    def environment(self, orbit, p, arrays) -> Environment:
+    def environment(self, q_BN, orbit, p, arrays) -> Environment:
         """The :class:`~stationbed.model.torques.Environment` of the kinds with ``needs_env``."""
         sun_N = p[self.layout["sun"]] if self.structure.sun else None
         nu = self.shadow(orbit, p) if orbit is not None else ca.SX(1.0)
-        return Environment(arrays, sun_N, nu, self.structure.surfaces)
+        return Environment(arrays, sun_N, nu, dcm(q_BN), plates_B(self.structure.surfaces, arrays))
 
     def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True, arrays=None):
         """Sum of the scene's external torques, B components [N m], (3, 1).
@@ -495,10 +496,10 @@ class StationModel:
         if self.needs_arrays:
             if arrays is None:
                 raise ValueError("external_torque: the scene's surfaces need the arrays at t")
-            env = self.environment(orbit, p, arrays)
+            env = self.environment(q_BN, orbit, p, arrays)
         for kind in self.torques:
             if with_potential or not kind.conservative:
-                p_k = p[self.layout[kind.kind]] if kind.n_params(self.structure) else None
+                p_k = p[self.layout[kind.kind]] if kind.n_par else None
                 for term in kind.terms_B(t, q_BN, I_O_B, p_k, orbit, env):
                     L_B = L_B + term
         return L_B
@@ -509,10 +510,10 @@ class StationModel:
         outs = []
         orbit = self.orbit_state(t, p) if self.structure.orbit else None
         if self.needs_arrays:
-            env = self.environment(orbit, p, self.arrays(t, q_BN, xe, p))
+            env = self.environment(q_BN, orbit, p, self.arrays(t, q_BN, xe, p))
             for kind in self.torques:
                 if kind.output:
-                    p_k = p[self.layout[kind.kind]] if kind.n_params(self.structure) else None
+                    p_k = p[self.layout[kind.kind]] if kind.n_par else None
                     outs.append((kind.output, kind.torque_B(t, q_BN, None, p_k, orbit, env)))
         if self.structure.eclipse:
             outs.append(("eclipse", self.shadow(orbit, p)))

@@ -6,6 +6,7 @@ vector ``p``, whose names and slices :class:`ParamLayout` declares once.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 from .cmg import CmgModel, get_geometry
@@ -33,8 +34,8 @@ class Structure:
         for a cluster without gimbals).
     modes : tuple of int  Elastic modes per appendage (all 0: a rigid scene, whose equations and
         key do not change).
-    surfaces : tuple of int  Per plate of the aero/SRP surfaces its attachment (-1 body, k
-        appendage); empty without those kinds.
+    surfaces : tuple  The plates of the aero/SRP surfaces (:func:`~stationbed.model.surfaces.scene_plates`:
+        attachment and numbers, folded into the generated code); empty without those kinds.
     eclipse : str  The shadow model (``"cylindrical"``, ``"conical"``; ``""``: always lit).
 
     A sun-tracking joint whose night mode is the glider has kind ``"g"``.
@@ -74,7 +75,7 @@ class Structure:
             sun=scene.sun is not None,
             cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none"),
             modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
-            surfaces=scene_plates(scene)[0] if plated else (),
+            surfaces=scene_plates(scene) if plated else (),
             eclipse="" if scene.sun is None or scene.sun.eclipse == "none" else scene.sun.eclipse,
         )
 
@@ -86,8 +87,8 @@ class Structure:
         f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
         trq = "".join(kind.key(k in self.torques) for k, kind in TORQUES.items() if kind.symbolic)
         env = "" if not self.eclipse else f"E{self.eclipse[:3]}"
-        if self.surfaces:
-            env += "S" + "_".join("b" if k < 0 else str(k) for k in self.surfaces)
+        if self.surfaces:  # the plates' numbers are in the code: a digest of them names it
+            env += f"S{len(self.surfaces)}_" + hashlib.sha1(repr(self.surfaces).encode()).hexdigest()[:10]
         return f"a{self.n_app}o{int(self.orbit)}{trq}j{j}s{int(self.sun)}{c}{f}{env}"
 
     def n_modes(self, k: int) -> int:
@@ -139,8 +140,8 @@ class ParamLayout:
         if structure.orbit:
             add("orbit", 6)  # radius [m], inclination [rad], u0 [rad], n [rad/s], cos i, sin i
         for name in structure.torques:
-            if TORQUES[name].n_params(structure):
-                add(name, TORQUES[name].n_params(structure))  # the kind's own numbers (TorqueKind.params)
+            if TORQUES[name].n_par:
+                add(name, TORQUES[name].n_par)  # the kind's own numbers (TorqueKind.params)
         if structure.sun:
             add("sun", 3)  # unit vector to the sun, N components
         if structure.eclipse:

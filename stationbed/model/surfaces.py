@@ -1,9 +1,10 @@
 """Flat plates for the aerodynamic and solar-radiation torques (issue 14).
 
 A scene's ``[[surface]]`` tables become *plates*: a box is its six one-sided outward faces.
-Each plate is attached to the body (index -1) or to appendage k; the attachment is part of the
-model's structure (it decides which ``C_PB`` turns the plate), its numbers go in ``p``
-(:data:`PLATE_FIELDS`, 14 per plate):
+Each plate is attached to the body (index -1) or to appendage k. The plates are part of the
+model's structure (``Structure.surfaces``, one tuple per plate, :data:`PLATE_FIELDS`): their
+numbers are folded into the generated code as constants, so an axis-aligned normal or a centre
+on an axis costs nothing, and a scene with other surfaces compiles its own code.
 
 * ``area`` [m²]; ``n`` the unit normal and ``c`` the centre, in the attachment's axes (B for
   the body, P for an appendage); ``rho`` the appendage's mass centre from the composite mass
@@ -38,7 +39,7 @@ from ..scene import Surface
 
 __all__ = ["PLATE_FIELDS", "N_PLATE", "Plate", "scene_plates", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
 
-#: the numbers of one plate in p, in order
+#: the numbers of one plate (after its attachment), in order
 PLATE_FIELDS = ("area", "n_x", "n_y", "n_z", "c_x", "c_y", "c_z", "rho_x", "rho_y", "rho_z",
                 "two_sided", "cd", "specular", "diffuse")
 N_PLATE = len(PLATE_FIELDS)
@@ -50,7 +51,7 @@ class Plate(NamedTuple):
     area: Any
     n_B: Any
     r_B: Any
-    two_sided: Any
+    two_sided: bool
     cd: Any
     specular: Any
     diffuse: Any
@@ -87,23 +88,19 @@ def _faces(size, centre):
     return out
 
 
-def scene_plates(scene) -> tuple[tuple[int, ...], np.ndarray]:
-    """The scene's plates: their attachments (-1 body, k appendage) and numbers.
+def scene_plates(scene) -> tuple[tuple[float, ...], ...]:
+    """The scene's plates, one tuple per plate: its attachment (-1 body, k appendage), then
+    :data:`PLATE_FIELDS` (plain floats, hashable: they are part of the model's structure).
 
     Parameters
     ----------
     scene : stationbed.scene.Scene
-
-    Returns
-    -------
-    attach : tuple of int  One per plate.
-    values : ndarray, shape (N_PLATE * n_plates,)  :data:`PLATE_FIELDS` per plate.
     """
     masses = [scene.body.mass] + [a.mass for a in scene.appendage]
     r_O = composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
     surfaces = scene.surface or [Surface(**d) for d in default_surfaces(scene)]
     names = scene.appendage_names
-    attach, values = [], []
+    out = []
     for s in surfaces:
         k = -1 if s.on == "body" else names.index(s.on)
         rho = np.zeros(3) if k < 0 else np.asarray(scene.appendage[k].cm, float) - r_O
@@ -115,28 +112,37 @@ def scene_plates(scene) -> tuple[tuple[int, ...], np.ndarray]:
             faces, two = [(s.area, n / np.linalg.norm(n), np.asarray(s.centre, float))], float(s.two_sided)
         _, spec, diff = s.fractions
         for area, n, c in faces:
-            attach.append(k)
-            values += [area, *n, *(c - shift), *rho, two, s.cd, spec, diff]
-    return tuple(attach), np.array(values, dtype=float)
+            out.append(tuple(float(v) for v in (k, area, *n, *(c - shift), *rho, two, s.cd, spec, diff)))
+    return tuple(out)
 
 
-def plates_B(attach, values, arrays) -> list[Plate]:
-    """The plates in B at time t (casadi).
+def plates_B(specs, arrays) -> list[Plate]:
+    """The plates in B at time t (casadi, the plates' numbers as constants).
 
     Parameters
     ----------
-    attach : tuple of int  Per plate -1 (body) or the appendage index.
-    values : casadi SX, shape (N_PLATE * n,)  Their numbers (:data:`PLATE_FIELDS`).
+    specs : tuple of tuple  :func:`scene_plates`.
     arrays : list of ArrayState  The arrays at t (their ``C_PB``).
     """
     out = []
-    for i, k in enumerate(attach):
-        q = values[N_PLATE * i : N_PLATE * (i + 1)]
-        n, c = q[1:4], q[4:7]
+    for q in specs:
+        k = int(q[0])
+        n, c, rho = ca.SX(ca.DM(q[2:5])), ca.SX(ca.DM(q[5:8])), ca.SX(ca.DM(q[8:11]))
         if k >= 0:
             C_BP = arrays[k].C_PB.T
-            n, c = ca.mtimes(C_BP, n), q[7:10] + ca.mtimes(C_BP, c)
-        out.append(Plate(q[0], n, c, q[10], q[11], q[12], q[13]))
+            n, c = _times(C_BP, q[2:5]), rho + _times(C_BP, q[5:8])
+        out.append(Plate(q[1], n, c, bool(q[11]), q[12], q[13], q[14]))
+    return out
+
+
+def _times(M, v):
+    """``M v`` for a casadi 3x3 ``M`` and a constant 3-vector ``v``, skipping its zeros."""
+    terms = [M[:, j] * v[j] for j in range(3) if v[j] != 0.0]
+    if not terms:
+        return ca.SX.zeros(3)
+    out = terms[0]
+    for t in terms[1:]:
+        out = out + t
     return out
 
 
@@ -156,7 +162,7 @@ def aero_torque_B(plates, v_rel_B, density):
     k_sum, kr_sum = 0, ca.SX.zeros(3)
     for pl in plates:
         vn = ca.dot(pl.n_B, v_rel_B)
-        k = pl.cd * pl.area * ca.fmax(vn, -pl.two_sided * vn)  # cd A |v| cos θ on the windward side
+        k = (pl.cd * pl.area) * (ca.fabs(vn) if pl.two_sided else ca.fmax(vn, 0))  # cd A |v| cos θ, windward side
         k_sum = k_sum + k
         kr_sum = kr_sum + k * pl.r_B
     half_rho_v = -0.5 * density * v_rel_B
@@ -179,9 +185,10 @@ def srp_torque_B(plates, s_B, pressure):
     F_sum, L_sum = ca.SX.zeros(3), ca.SX.zeros(3)
     for pl in plates:
         cos = ca.dot(pl.n_B, s_B)
-        lit = ca.fmax(cos, -pl.two_sided * cos)
-        g = pl.two_sided * cos + (1 - pl.two_sided) * lit
-        F = -pressure * pl.area * (lit * (1 - pl.specular) * s_B + (2 * pl.specular * lit + (2.0 / 3.0) * pl.diffuse) * g * pl.n_B)
+        lit = ca.fabs(cos) if pl.two_sided else ca.fmax(cos, 0)
+        g = cos if pl.two_sided else lit
+        pa = -pressure * pl.area
+        F = (pa * lit * (1 - pl.specular)) * s_B + (pa * g * (2 * pl.specular * lit + (2.0 / 3.0) * pl.diffuse)) * pl.n_B
         F_sum = F_sum + F
         L_sum = L_sum + ca.cross(pl.r_B, F)
     return F_sum, L_sum

@@ -32,7 +32,7 @@ from ..scene import AeroTorque, ConstantTorque, HarmonicTorque, SrpTorque
 from .atmosphere import EXPONENTIAL_TABLE, OMEGA_EARTH_RAD_S, band_table, density_symbolic, msis_table
 from .environment import gravity_gradient_torque
 from .sun import P_SUN_1AU_N_M2, AU_M, sun_distance_m
-from .surfaces import N_PLATE, aero_torque_B, plates_B, scene_plates, srp_torque_B
+from .surfaces import aero_torque_B, srp_torque_B
 
 __all__ = [
     "TorqueKind",
@@ -83,8 +83,10 @@ class Environment(NamedTuple):
     sun_N: Any
     #: fraction of the sun's disc seen, ν in [0, 1] (1 without an eclipse model)
     shadow: Any
-    #: the plates' attachments (-1 body, k appendage), from ``Structure.surfaces``
-    surfaces: tuple
+    #: DCM from N to B at t (3, 3), shared by the kinds
+    C_BN: Any
+    #: the plates at t, B axes (:class:`~stationbed.model.surfaces.Plate`), from ``Structure.surfaces``
+    plates: Any
 
 
 class TorqueKind:
@@ -115,8 +117,8 @@ class TorqueKind:
        (the arrays at t, the sun, the shadow fraction, the plates' attachments). Torques are
        about the composite mass centre O, which is fixed in B (arrays are balanced about their
        joint axes): a point of the body or of an array lies at ``r - r_O`` in B, computed once
-       in ``_params``. A kind whose number of parameters depends on the scene (one block per
-       plate) sets ``n_par = None`` and writes ``n_params(structure)``.
+       in the model's structure (``Structure.surfaces``: the plates' geometry is folded into the
+       generated code as constants, so zero components cost nothing).
     7. Set ``output`` (a CSV column stem, e.g. ``"tau_aero"``) to report the kind's torque per
        row as ``<output>_x, _y, _z``.
     """
@@ -133,11 +135,6 @@ class TorqueKind:
     key_always: ClassVar[bool] = False
     needs_env: ClassVar[bool] = False
     output: ClassVar[str] = ""
-
-    @classmethod
-    def n_params(cls, structure) -> int:
-        """Length of this kind's slice of ``p`` for a :class:`~stationbed.model.structure.Structure`."""
-        return cls.n_par
 
     # -- the scene ---------------------------------------------------------------------
     @classmethod
@@ -201,8 +198,8 @@ class TorqueKind:
         -------
         ndarray, shape (n_par,)
         """
-        out = np.asarray(cls._params(scene), dtype=float) if cls.n_par != 0 else np.zeros(0)
-        if cls.n_par is not None and out.shape != (cls.n_par,):
+        out = np.asarray(cls._params(scene), dtype=float) if cls.n_par else np.zeros(0)
+        if out.shape != (cls.n_par,):
             raise ValueError(f"torque kind {cls.kind!r}: _params returned shape {out.shape}, expected ({cls.n_par},)")
         return out
 
@@ -365,12 +362,12 @@ class OrbitalHarmonic(TorqueKind):
         ]
 
 
-def v_rel_B(q_BN, orbit: OrbitState):
+def v_rel_B(C_BN, orbit: OrbitState):
     """Velocity of the station relative to an atmosphere co-rotating with the Earth,
     ``C_BN (v_N - ω_E × r_N)``, ω_E along N's z (the Earth's pole), B components [m/s]."""
     r, v = orbit.r_N, orbit.v_N
     v_rel_N = ca.vertcat(v[0] + OMEGA_EARTH_RAD_S * r[1], v[1] - OMEGA_EARTH_RAD_S * r[0], v[2])
-    return ca.mtimes(dcm(q_BN), v_rel_N)
+    return ca.mtimes(C_BN, v_rel_N)
 
 
 class Aero(TorqueKind):
@@ -378,7 +375,7 @@ class Aero(TorqueKind):
     (:func:`~stationbed.model.surfaces.aero_torque_B`), air co-rotating with the Earth
     (:func:`v_rel_B`), density of ``[atmosphere]`` (:mod:`~stationbed.model.atmosphere`).
 
-    ``p_k``: ``density_scale``, the density bands (3 per band), the plates (14 each).
+    ``p_k``: ``density_scale``, then the density bands (3 per band).
     """
 
     kind = "aero"
@@ -386,13 +383,9 @@ class Aero(TorqueKind):
     symbolic = True
     needs_orbit = True
     needs_env = True
-    n_par = None
+    n_par = 1 + band_table().size
     key_tag = "a"
     output = "tau_aero"
-
-    @classmethod
-    def n_params(cls, structure) -> int:
-        return 1 + band_table().size + N_PLATE * len(structure.surfaces)
 
     @classmethod
     def _params(cls, scene):
@@ -401,14 +394,12 @@ class Aero(TorqueKind):
         table = EXPONENTIAL_TABLE
         if atm is not None and atm.model == "msis":
             table = msis_table(scene.sun.epoch, atm.f107, atm.f107a, atm.ap)
-        return np.concatenate([[scale], band_table(table), scene_plates(scene)[1]])
+        return np.concatenate([[scale], band_table(table)])
 
     @classmethod
     def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit, env):
-        nb = band_table().size
-        rho = density_symbolic(orbit.r_N, p_k[1 : 1 + nb], p_k[0])
-        plates = plates_B(env.surfaces, p_k[1 + nb :], env.arrays)
-        return [aero_torque_B(plates, v_rel_B(q_BN, orbit), rho)[1]]
+        rho = density_symbolic(orbit.r_N, p_k[1:], p_k[0])
+        return [aero_torque_B(env.plates, v_rel_B(env.C_BN, orbit), rho)[1]]
 
 
 class Srp(TorqueKind):
@@ -416,31 +407,26 @@ class Srp(TorqueKind):
     (:func:`~stationbed.model.surfaces.srp_torque_B`), ``P = 4.56e-6 N/m² (AU/d)²`` with the
     epoch's sun distance d (1 AU without an epoch), times the shadow fraction ν.
 
-    ``p_k``: the pressure P [N/m²], the plates (14 each).
+    ``p_k``: the pressure P [N/m²] at the sun's distance.
     """
 
     kind = "srp"
     scene_model = SrpTorque
     symbolic = True
     needs_env = True
-    n_par = None
+    n_par = 1
     key_tag = "r"
     output = "tau_srp"
 
     @classmethod
-    def n_params(cls, structure) -> int:
-        return 1 + N_PLATE * len(structure.surfaces)
-
-    @classmethod
     def _params(cls, scene):
         pressure = P_SUN_1AU_N_M2 * (AU_M / sun_distance_m(scene.sun)) ** 2
-        return np.concatenate([[pressure], scene_plates(scene)[1]])
+        return np.array([pressure])
 
     @classmethod
     def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit, env):
-        plates = plates_B(env.surfaces, p_k[1:], env.arrays)
-        s_B = ca.mtimes(dcm(q_BN), env.sun_N)
-        return [srp_torque_B(plates, s_B, p_k[0] * env.shadow)[1]]
+        s_B = ca.mtimes(env.C_BN, env.sun_N)
+        return [srp_torque_B(env.plates, s_B, p_k[0] * env.shadow)[1]]
 
 
 #: kind name -> class; the order is the order of the terms, of the slices in p and of the key
