@@ -67,9 +67,12 @@ def v_rel_N(r, v):
 
 
 def vallado_density(h_m):
-    """Vallado (2013) Table 8-4, typed here for the bands a low-orbit test uses (350-500 km)."""
-    bands = [(350e3, 9.518e-12, 53.298e3), (400e3, 3.725e-12, 58.515e3), (450e3, 1.585e-12, 60.828e3)]
-    h0, rho0, H = [b for b in bands if b[0] <= h_m][-1]
+    """Vallado (2013) Table 8-4 base densities, typed here for 350-500 km, with the scale height
+    of each band the log-slope to the next base (the table's H to its rounding, and continuous)."""
+    bases = [(350e3, 9.518e-12), (400e3, 3.725e-12), (450e3, 1.585e-12), (500e3, 6.967e-13)]
+    k = max(i for i, b in enumerate(bases[:-1]) if b[0] <= h_m)
+    (h0, rho0), (h1, rho1) = bases[k], bases[k + 1]
+    H = (h1 - h0) / np.log(rho0 / rho1)
     return rho0 * np.exp(-(h_m - h0) / H)
 
 

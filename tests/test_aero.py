@@ -22,6 +22,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
+from stationbed.model.atmosphere import EXPONENTIAL_TABLE, density
 from stationbed.scene import scene_from_dict
 
 from env_helpers import base_scene, circular_state, outputs, quat_of_dcm, v_rel_N, vallado_density, R_E
@@ -149,3 +150,30 @@ def test_lvlh_hold_torque_has_orbit_and_twice_orbit_harmonics():
     assert_allclose(coef[:, 0], roll, rtol=FIT_REL, atol=FIT_REL * abs(roll[1]))
     assert_allclose(coef[:, 1], pitch, rtol=FIT_REL, atol=FIT_REL * abs(pitch[0]))
     assert_allclose(coef[:, 2], 0.0, atol=ZERO_NM)
+
+
+# -- density ----------------------------------------------------------------------------------
+#: Vallado's Table 8-4 (h0 [km], ρ0 [kg/m³], H [km]) rows typed here for the check below
+VALLADO_ROWS = [(0, 1.225, 7.249, 25), (100, 5.297e-7, 5.877, 10), (150, 2.070e-9, 22.523, 30),
+                (300, 2.418e-11, 53.628, 50), (400, 3.725e-12, 58.515, 50), (700, 3.614e-14, 88.667, 100),
+                (1000, 3.019e-15, 268.00, 100)]  # with the band's width [km]
+#: the model's scale heights are the table's log-slopes; the table rounds H to 4-5 digits, which
+#: moves the density at a band's top by up to 0.14 % (0-25 km band) and 0.002 % above 25 km
+VALLADO_BAND_REL = 1.5e-3
+
+
+@pytest.mark.parametrize("h0_km, rho0, H_km, width_km", VALLADO_ROWS, ids=[f"{r[0]}km" for r in VALLADO_ROWS])
+def test_density_is_vallados_table(h0_km, rho0, H_km, width_km):
+
+
+    assert_allclose(density(h0_km * 1e3), rho0, rtol=1e-12)  # the base densities exactly
+    h = (h0_km + width_km * np.array([0.2, 0.5, 0.95])) * 1e3  # inside the band
+    assert_allclose(density(h), rho0 * np.exp(-(h - h0_km * 1e3) / (H_km * 1e3)), rtol=VALLADO_BAND_REL)
+
+
+def test_density_is_continuous_across_band_edges():
+
+
+    for h0 in EXPONENTIAL_TABLE[1:, 0] * 1e3:
+        below, above = density(h0 - 1e-6), density(h0)
+        assert abs(above / below - 1) < 1e-9  # 1 µm below the edge: continuity, not a jump
