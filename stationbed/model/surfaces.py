@@ -37,12 +37,11 @@ import numpy as np
 from ..core.massprops import composite_cm
 from ..scene import Surface
 
-__all__ = ["PLATE_FIELDS", "N_PLATE", "Plate", "scene_plates", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
+__all__ = ["PLATE_FIELDS", "Plate", "scene_plates", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
 
 #: the numbers of one plate (after its attachment), in order
 PLATE_FIELDS = ("area", "n_x", "n_y", "n_z", "c_x", "c_y", "c_z", "rho_x", "rho_y", "rho_z",
                 "two_sided", "cd", "specular", "diffuse")
-N_PLATE = len(PLATE_FIELDS)
 
 
 class Plate(NamedTuple):

@@ -384,7 +384,7 @@ class Aero(TorqueKind):
     needs_orbit = True
     needs_env = True
     n_par = 1 + band_table().size
-    key_tag = "a"
+    key_tag = "d"
     output = "tau_aero"
 
     @classmethod
