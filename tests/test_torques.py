@@ -50,7 +50,14 @@ EXAMPLES = {
             {"kind": "orbital_harmonic", "sin1_B": [0.3, 0.3, 0.0], "cos2_B": [-0.4, 0.0, 0.9], "bias_B": [0.05, 0.0, 0.0]},
         ]
     ),
+    "aero": lambda d: d.update(torque=[{"kind": "aero"}], surface=PLATES),
+    "srp": lambda d: d.update(torque=[{"kind": "srp"}], surface=PLATES, sun={"direction_N": [0.2, -0.6, 0.77]}),
 }
+#: two plates on the hub (mass centre at the origin): one two-sided, one one-sided [m², m]
+PLATES = [
+    {"area": 30.0, "normal": [0.6, 0.0, 0.8], "centre": [1.0, 4.0, -2.0], "two_sided": True, "specular": 0.3, "diffuse": 0.2},
+    {"area": 12.0, "normal": [0.0, 1.0, 0.0], "centre": [-3.0, 0.5, 1.0]},
+]
 
 
 def _u(scene, t):
@@ -75,8 +82,44 @@ def gravity_gradient_reference(scene, t, C_BN, I_O_B):
     return 3.0 * o.mu / np.linalg.norm(R_B) ** 5 * np.cross(R_B, I_O_B @ R_B)
 
 
+def _plates(scene):
+    for pl in scene.surface:
+        n = np.array(pl.normal) / np.linalg.norm(pl.normal)
+        yield n, np.array(pl.centre), pl.area, pl.two_sided, pl.fractions
+
+
+def aero_reference(scene, t, C_BN, I_O_B):
+    """``Σ c × (-½ ρ |v|² A cd cos θ v̂)``, windward faces, air co-rotating with the Earth [N m]."""
+    o = scene.orbit
+    u, n = _u(scene, t), o.mean_motion
+    r_N = orbit_position_N(u, o.radius_m, o.inclination)
+    v_N = o.radius_m * n * np.array([-math.sin(u), math.cos(u) * math.cos(o.inclination), math.cos(u) * math.sin(o.inclination)])
+    v = C_BN @ (v_N - np.cross([0.0, 0.0, 7.292115e-5], r_N))
+    rho = 3.725e-12  # kg/m³, Vallado Table 8-4 at the 400 km base
+    out = np.zeros(3)
+    for nrm, c, A, two, _ in _plates(scene):
+        cos = nrm @ v / np.linalg.norm(v)
+        cos = abs(cos) if two else max(cos, 0.0)
+        out += np.cross(c, -0.5 * rho * (v @ v) * A * 2.2 * cos * v / np.linalg.norm(v))
+    return out
+
+
+def srp_reference(scene, t, C_BN, I_O_B):
+    """``Σ c × (-P A cos θ [(1 - ε_s) ŝ + 2 (ε_s cos θ + ε_d / 3) n̂])``, lit faces, P at 1 AU [N m]."""
+    s = C_BN @ (np.array(scene.sun.direction_N) / np.linalg.norm(scene.sun.direction_N))
+    out = np.zeros(3)
+    for nrm, c, A, two, (_, spec, diff) in _plates(scene):
+        if two and nrm @ s < 0:
+            nrm = -nrm
+        cos = nrm @ s
+        if cos > 0:
+            out += np.cross(c, -4.56e-6 * A * cos * ((1 - spec) * s + 2 * (spec * cos + diff / 3) * nrm))
+    return out
+
+
 #: independent torque of each symbolic kind, B components [N m]
-REFERENCE_TORQUE_B = {"orbital_harmonic": harmonic_reference, "gravity_gradient": gravity_gradient_reference}
+REFERENCE_TORQUE_B = {"orbital_harmonic": harmonic_reference, "gravity_gradient": gravity_gradient_reference,
+                      "aero": aero_reference, "srp": srp_reference}
 
 # -- tolerances -------------------------------------------------------------------------------
 #: float64 round-off of a few dozen operations, relative to the torque's scale
@@ -108,7 +151,9 @@ def symbolic_torque(scene, kind, t, q_BN):
     ts, qs, ps = ca.SX.sym("t"), ca.SX.sym("q", 4), ca.SX.sym("p", model.layout.size)
     I_O_B = ca.reshape(ps[model.layout["I0"]], 3, 3).T
     p_k = ps[model.layout[kind]] if cls.n_par else None
-    f = ca.Function("L", [ts, qs, ps], [cls.torque_B(ts, qs, I_O_B, p_k, model.orbit_state(ts, ps))])
+    orbit = model.orbit_state(ts, ps)
+    env = model.environment(qs, orbit, ps, model.arrays(ts, qs, ca.SX(0, 1), ps)) if cls.needs_env else None
+    f = ca.Function("L", [ts, qs, ps], [cls.torque_B(ts, qs, I_O_B, p_k, orbit, env)])
     return np.array(f(t, q_BN, p)).ravel(), np.array(p[model.layout["I0"]]).reshape(3, 3)
 
 

@@ -285,7 +285,7 @@ class OmegaStateForm(Formulation):
         I_O_B = m.inertia(t, p, arrays)
         h_B = m.h(xe, p)
         rhs = (
-            m.external_torque(t, q_BN, u, p, I_O_B)
+            m.external_torque(t, q_BN, u, p, I_O_B, arrays=arrays)
             - ca.cross(omega_BN_B, ca.mtimes(I_O_B, omega_BN_B) + h_B)
             - m.h_dot(xe, u, omega_BN_B, p)
         )

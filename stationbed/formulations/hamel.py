@@ -198,7 +198,8 @@ class HamelForm(Formulation):
         xe_dot = m.extra_dot(t, q_BN, xe, u, omega_BN_B, p)
         eta_dot = m.modal_state(xe)
         I_O_B = Mvv[0:3, 0:3]
-        M_B = m.external_torque(t, q_BN, u, p, I_O_B, with_potential=False)
+        arrays = m.arrays(t, q_BN, xe, p, u=u) if m.needs_arrays else None
+        M_B = m.external_torque(t, q_BN, u, p, I_O_B, with_potential=False, arrays=arrays)
         # the rate of P with v̇ = 0: explicit time, extra states, attitude (δθ = ω dt), modes
         Pdot0 = dp_dt + ca.mtimes(dp_dxe, xe_dot) + ca.mtimes(dp_dth, omega_BN_B) + ca.mtimes(dp_deta, eta_dot)
         rhs = M_B - ca.cross(omega_BN_B, mom[0:3]) + gT - gV - Pdot0[0:3]

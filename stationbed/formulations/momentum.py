@@ -31,13 +31,13 @@ class MomentumForm(Formulation):
     modal_state_prefix = "peta"
 
     def _velocities(self, t, x, p, u=None):
-        """``(omega_BN_B, η̇, I_O_B, modal)`` at state ``x``."""
+        """``(omega_BN_B, η̇, I_O_B, modal, arrays)`` at state ``x``."""
         m = self.model
         arrays = self.arrays(t, x, p, u=u)
         I_O_B = m.inertia(t, p, arrays)
         modal = m.modal(arrays, p)
         omega_BN_B, eta_dot = m.velocities(x[4:7], m.modal_state(x[7:]), arrays, modal, I_O_B, x[7:], p)
-        return omega_BN_B, eta_dot, I_O_B, modal
+        return omega_BN_B, eta_dot, I_O_B, modal, arrays
 
     def _omega(self, t, x, p):
         return self._velocities(t, x, p)[0]
@@ -49,8 +49,8 @@ class MomentumForm(Formulation):
     def _rhs(self, t, x, u, p):
         m = self.model
         q_BN, H_O_B = x[0:4], x[4:7]
-        omega_BN_B, eta_dot, I_O_B, modal = self._velocities(t, x, p, u)
-        L_B = m.external_torque(t, q_BN, u, p, I_O_B)
+        omega_BN_B, eta_dot, I_O_B, modal, arrays = self._velocities(t, x, p, u)
+        L_B = m.external_torque(t, q_BN, u, p, I_O_B, arrays=arrays)
         core_dot = ca.vertcat(quat_kinematics(q_BN, omega_BN_B), L_B - ca.cross(omega_BN_B, H_O_B))
         if not m.n_modes:
             return core_dot, omega_BN_B

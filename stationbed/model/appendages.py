@@ -27,6 +27,8 @@ __all__ = [
     "drive_acceleration",
     "wrap_angle",
     "tracking_error",
+    "drive_from_error",
+    "glider_error",
 ]
 
 
@@ -129,15 +131,44 @@ def drive_acceleration(theta, theta_dot, target, target_rate, drive):
     are shared with C_PB), instead of atan2, sin, cos and atan2 again - the drives' trigonometry
     is a large part of a right-hand side's cost.
     """
-    max_rate, max_acc, gain, tau = drive[0], drive[1], drive[2], drive[3]
     if isinstance(target, tuple):
         Y, X = target
         c, s = ca.cos(theta), ca.sin(theta)
         err = ca.atan2(Y * c - X * s, X * c + Y * s)
     else:
         err = wrap_angle(target - theta)
+    return drive_from_error(err, theta_dot, target_rate, drive)
+
+
+def drive_from_error(err, theta_dot, target_rate, drive):
+    """The drive law of :func:`drive_acceleration` from the wrapped angle error ``err`` [rad]."""
+    max_rate, max_acc, gain, tau = drive[0], drive[1], drive[2], drive[3]
     rate_cmd = ca.fmin(ca.fmax(gain * err + target_rate, -max_rate), max_rate)
     return ca.fmin(ca.fmax((rate_cmd - theta_dot) / tau, -max_acc), max_acc)
+
+
+def glider_error(theta, v, joint: int):
+    """Angle error [rad] to the nearer edge-on angle of a joint (night glider), in (-π/2, π/2].
+
+    Parameters
+    ----------
+    theta : casadi SX  The joint angle [rad].
+    v : casadi SX, shape (3, 1)  The air-relative velocity in the joint's base frame: B for the
+        SARJ (``joint = 0``, turning about y), ``Ay(alpha) v_B`` for the BGA (``joint = 1``,
+        turning about x).
+    joint : int  0 (alpha) or 1 (beta).
+
+    Notes
+    -----
+    The array normal (+z of P) is perpendicular to the flow at ``θ* = atan2(Y, X)`` with
+    ``(Y, X) = (v_z, -v_x)`` (alpha) or ``(v_z, v_y)`` (beta): the sun targets' formulas turned by
+    90 deg. Either side of the plate is edge-on, so the error is taken modulo π:
+    ``½ atan2(2 S C, C² - S²)`` with ``(S, C)`` the (unnormalised) sine and cosine of the error.
+    """
+    Y, X = (v[2], -v[0]) if joint == 0 else (v[2], v[1])
+    c, s = ca.cos(theta), ca.sin(theta)
+    S, C = Y * c - X * s, X * c + Y * s
+    return 0.5 * ca.atan2(2 * S * C, C * C - S * S)
 
 
 def tracking_error(C_PB, s_B):

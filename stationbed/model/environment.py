@@ -20,6 +20,7 @@ import numpy as np
 
 from ..core.rotation import quat_mult
 from ..core.symbolic import is_symbolic, trig, vector
+from .sun import julian_date, sun_position
 
 __all__ = [
     "orbit_position_N",
@@ -116,7 +117,8 @@ def sun_direction_N(sun, inclination: float = 0.0, raan: float = 0.0) -> np.ndar
 
     Parameters
     ----------
-    sun : stationbed.scene.Sun  ``direction_N``, or ``beta`` [rad] and ``u_noon`` [rad].
+    sun : stationbed.scene.Sun  ``direction_N``, or ``beta`` [rad] and ``u_noon`` [rad], or
+        ``epoch`` (the low-precision ephemeris of :mod:`stationbed.model.sun`, held at the epoch).
     inclination : float  Orbit inclination [rad] (0 without an orbit).
     raan : float  Right ascension of the orbit's ascending node at t = 0 [rad] (0: on N's x axis,
         as on the circular orbit).
@@ -135,6 +137,8 @@ def sun_direction_N(sun, inclination: float = 0.0, raan: float = 0.0) -> np.ndar
     if sun.direction_N is not None:
         v = np.array(sun.direction_N, dtype=float)
         return v / np.linalg.norm(v)
+    if sun.epoch is not None:
+        return sun_position(julian_date(sun.epoch))[0]
     b, u = sun.beta, sun.u_noon
     ci, si = np.cos(inclination), np.sin(inclination)
     if raan != 0.0:  # the node turned by raan about z_N

@@ -25,13 +25,15 @@ import numpy as np
 from ..core.linalg import inv3
 from ..core.massprops import composite_cm, parallel_axis
 from ..core.rotation import dcm
-from .appendages import drive_acceleration, joint_kinematics, profile, sun_targets
+from .appendages import drive_acceleration, drive_from_error, glider_error, joint_kinematics, profile, sun_targets
 from .cmg import CmgModel
 from .environment import sun_direction_N
 from .flex import Modes
 from .orbit import OrbitAt, orbit_at, orbit_params, orbit_plane
 from .structure import JOINTS, ParamLayout, Structure
-from .torques import TORQUES, OrbitState
+from .sun import SHADOW_MODELS, sun_distance_m
+from .surfaces import plates_B
+from .torques import TORQUES, Environment, OrbitState, v_rel_B
 
 __all__ = ["StationModel", "ArrayState"]
 
@@ -86,7 +88,7 @@ class StationModel:
         self.driven = []  # (appendage index, joint name, offset of its angle in the extra states)
         for k in range(structure.n_app):
             for j, (kind, _) in zip(JOINTS, structure.joints[k]):
-                if kind == "s":
+                if kind in ("s", "g"):
                     self.driven.append((k, j, len(names)))
                     names += [f"{j}{k}", f"{j}{k}_rate"]
                     kinds += ["attitude", "rate"]
@@ -108,6 +110,8 @@ class StationModel:
         #: a step for every stage (a step on a segment edge is then exact for any integrator)
         self.has_steps = any(n > 0 for a in structure.joints for _, n in a)
         self.nu = 3 + self.nu_cmg + (1 if self.has_steps else 0)
+        #: whether a torque kind reads the arrays and the sun (external_torque needs ``arrays``)
+        self.needs_arrays = any(k.needs_env for k in self.torques)
 
     # -- numbers ------------------------------------------------------------------------
     def params(self, scene) -> np.ndarray:
@@ -138,6 +142,8 @@ class StationModel:
                 p[L[kind.kind]] = kind.params(scene)
         if self.structure.sun:
             p[L["sun"]] = sun_direction_N(scene.sun, *orbit_plane(scene.orbit))
+        if self.structure.eclipse:
+            p[L["shadow"]] = sun_distance_m(scene.sun)
         if self.cmg is not None:
             p[L["cmg"]] = self.cmg.params(scene.cmg)
         if self.flexible:
@@ -183,7 +189,7 @@ class StationModel:
             if jt.a0 is not None:
                 angle = jt.a0
             else:
-                alpha = xe[off - 2] if (j == "beta" and self.structure.joints[k][0][0] == "s") else None
+                alpha = xe[off - 2] if (j == "beta" and self.structure.joints[k][0][0] in ("s", "g")) else None
                 if alpha is None:
                     alpha = scene.appendage[k].alpha.a0 if not scene.appendage[k].alpha.tracked else 0.0
                 a_star, b_star = sun_targets(s_B, alpha)
@@ -248,9 +254,30 @@ class StationModel:
                     alpha, alpha_rate = ja[0], ja[1]
                 targets = self._driven_targets(k, q_BN, xe, p, omega_BN_B, alpha, alpha_rate)
                 for i, js in enumerate(out[k]):
-                    if js is not None:
-                        js[2] = drive_acceleration(js[0], js[1], *targets[i], p[self.layout[f"{JOINTS[i]}{k}"]])
+                    if js is None:
+                        continue
+                    drive = p[self.layout[f"{JOINTS[i]}{k}"]]
+                    if self.structure.joints[k][i][0] == "g":
+                        js[2] = self._glider_acceleration(t, q_BN, p, i, alpha, js, targets[i], drive)
+                    else:
+                        js[2] = drive_acceleration(js[0], js[1], *targets[i], drive)
         return out
+
+    def _glider_acceleration(self, t, q_BN, p, i, alpha, js, target, drive):
+        """Drive law of a night-glider joint: the sun target while lit (ν >= 1/2), edge-on to the
+        flow in eclipse (array normal perpendicular to the air-relative velocity, the nearer of
+        the two such angles, no rate feed-forward: the flow is fixed in an LVLH-holding body)."""
+        orbit = self.orbit_state(t, p)
+        v_B = v_rel_B(dcm(q_BN), orbit)
+        if i == 1:  # BGA: the flow in the frame turned by the SARJ, Ay(alpha) v_B
+            ca_, sa_ = ca.cos(alpha), ca.sin(alpha)
+            v_B = ca.vertcat(ca_ * v_B[0] - sa_ * v_B[2], v_B[1], sa_ * v_B[0] + ca_ * v_B[2])
+        (Y, X), rate_sun = target
+        c, s = ca.cos(js[0]), ca.sin(js[0])
+        err_sun = ca.atan2(Y * c - X * s, X * c + Y * s)
+        err_night = glider_error(js[0], v_B, i)
+        dark = self.shadow(orbit, p) < 0.5
+        return drive_from_error(ca.if_else(dark, err_night, err_sun), js[1], ca.if_else(dark, 0.0, rate_sun), drive)
 
     def arrays(self, t, q_BN, xe, p, omega_BN_B=None, u=None) -> list[ArrayState]:
         """Per array its :class:`ArrayState` at time t.
@@ -434,7 +461,19 @@ class StationModel:
         o = self.orbit_at(t, p)
         return OrbitState(o.n, o.cos_i, o.sin_i, o.cos_u, o.sin_u, o.r_N, o.v_N, o.r_hat_N, o.mu_r3)
 
-    def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True):
+    def shadow(self, orbit, p):
+        """Fraction of the sun's disc seen at the station, ν (casadi; 1 without an eclipse model)."""
+        if not self.structure.eclipse:
+            return ca.SX(1.0)
+        return SHADOW_MODELS[self.structure.eclipse](orbit.r_N, p[self.layout["sun"]], p[self.layout["shadow"]][0])
+
+    def environment(self, q_BN, orbit, p, arrays) -> Environment:
+        """The :class:`~stationbed.model.torques.Environment` of the kinds with ``needs_env``."""
+        sun_N = p[self.layout["sun"]] if self.structure.sun else None
+        nu = self.shadow(orbit, p) if orbit is not None else ca.SX(1.0)
+        return Environment(arrays, sun_N, nu, dcm(q_BN), plates_B(self.structure.surfaces, arrays))
+
+    def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True, arrays=None):
         """Sum of the scene's external torques, B components [N m], (3, 1).
 
         Parameters
@@ -442,6 +481,8 @@ class StationModel:
         t, q_BN, u, p : see the module docstring.
         I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²] (gravity gradient).
         with_potential : bool  Include the conservative kinds.
+        arrays : list of ArrayState, optional  The arrays at t; needed when a kind reads them
+            (:attr:`needs_arrays`: surfaces that turn with the arrays).
 
         Notes
         -----
@@ -451,12 +492,32 @@ class StationModel:
         """
         L_B = u[0:3]
         orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        env = None
+        if self.needs_arrays:
+            if arrays is None:
+                raise ValueError("external_torque: the scene's surfaces need the arrays at t")
+            env = self.environment(q_BN, orbit, p, arrays)
         for kind in self.torques:
             if with_potential or not kind.conservative:
                 p_k = p[self.layout[kind.kind]] if kind.n_par else None
-                for term in kind.terms_B(t, q_BN, I_O_B, p_k, orbit):
+                for term in kind.terms_B(t, q_BN, I_O_B, p_k, orbit, env):
                     L_B = L_B + term
         return L_B
+
+    def environment_outputs(self, t, q_BN, xe, p) -> list:
+        """``(name, casadi)`` pairs for the trajectory: each kind's torque with an ``output`` stem
+        (B components [N m]) and, with an eclipse model, the shadow fraction ``eclipse``."""
+        outs = []
+        orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        if self.needs_arrays:
+            env = self.environment(q_BN, orbit, p, self.arrays(t, q_BN, xe, p))
+            for kind in self.torques:
+                if kind.output:
+                    p_k = p[self.layout[kind.kind]] if kind.n_par else None
+                    outs.append((kind.output, kind.torque_B(t, q_BN, None, p_k, orbit, env)))
+        if self.structure.eclipse:
+            outs.append(("eclipse", self.shadow(orbit, p)))
+        return outs
 
     def potential(self, t, C_BN, I_O_B, p):
         """Potential energy of the conservative torque kinds [J] (0 when none).

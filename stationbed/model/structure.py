@@ -6,10 +6,12 @@ vector ``p``, whose names and slices :class:`ParamLayout` declares once.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 from .cmg import CmgModel, get_geometry
 from .orbit import orbit_kind, orbit_size
+from .surfaces import scene_plates
 from .torques import TORQUES
 
 __all__ = ["Structure", "ParamLayout", "JOINTS"]
@@ -35,6 +37,11 @@ class Structure:
         key do not change).
     orbit_kind : tuple  ``()`` for a circular orbit (or none), ``(newton_steps, j2)`` for a
         two-body orbit (:func:`~stationbed.model.orbit.orbit_kind`).
+    surfaces : tuple  The plates of the aero/SRP surfaces (:func:`~stationbed.model.surfaces.scene_plates`:
+        attachment and numbers, folded into the generated code); empty without those kinds.
+    eclipse : str  The shadow model (``"cylindrical"``, ``"conical"``; ``""``: always lit).
+
+    A sun-tracking joint whose night mode is the glider has kind ``"g"``.
     """
 
     n_app: int
@@ -45,6 +52,8 @@ class Structure:
     cmg: tuple | None = None
     modes: tuple = ()
     orbit_kind: tuple = ()
+    surfaces: tuple = ()
+    eclipse: str = ""
 
     def __post_init__(self):
         order = [k for k in TORQUES if k in self.torques]
@@ -56,9 +65,12 @@ class Structure:
         """The structure of ``scene`` (a :class:`stationbed.scene.Scene`)."""
 
         def joint(j):
-            return ("s", 0) if j.tracked else ("p", len(j.rate_step))
+            if j.tracked:
+                return ("g", 0) if j.night == "glider" else ("s", 0)
+            return ("p", len(j.rate_step))
 
         c = scene.cmg
+        plated = any(TORQUES[t.kind].needs_env for t in scene.torque)
         return cls(
             n_app=len(scene.appendage),
             orbit=scene.orbit is not None,
@@ -68,6 +80,8 @@ class Structure:
             cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none"),
             modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
             orbit_kind=orbit_kind(scene.orbit) if scene.orbit is not None else (),
+            surfaces=scene_plates(scene) if plated else (),
+            eclipse="" if scene.sun is None or scene.sun.eclipse == "none" else scene.sun.eclipse,
         )
 
     @property
@@ -78,7 +92,10 @@ class Structure:
         f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
         trq = "".join(kind.key(k in self.torques) for k, kind in TORQUES.items() if kind.symbolic)
         k = "" if not self.orbit_kind else f"k{self.orbit_kind[0]}{'j' if self.orbit_kind[1] else ''}"
-        return f"a{self.n_app}o{int(self.orbit)}{k}{trq}j{j}s{int(self.sun)}{c}{f}"
+        env = "" if not self.eclipse else f"E{self.eclipse[:3]}"
+        if self.surfaces:  # the plates' numbers are in the code: a digest of them names it
+            env += f"S{len(self.surfaces)}_" + hashlib.sha1(repr(self.surfaces).encode()).hexdigest()[:10]
+        return f"a{self.n_app}o{int(self.orbit)}{k}{trq}j{j}s{int(self.sun)}{c}{f}{env}"
 
     def n_modes(self, k: int) -> int:
         """Number of elastic modes of appendage ``k``."""
@@ -93,7 +110,8 @@ class ParamLayout:
 
     In order: ``I0`` (9), per appendage ``J<k>`` (9), its joints ``alpha<k>``, ``beta<k>`` and,
     when flexible, ``rho<k>`` (3) and ``modes<k>``; ``mtot`` (flexible scenes); ``orbit`` (6);
-    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``cmg``.
+    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``shadow``
+    (1, with an eclipse model); ``cmg``.
 
     Parameters
     ----------
@@ -133,6 +151,8 @@ class ParamLayout:
                 add(name, TORQUES[name].n_par)  # the kind's own numbers (TorqueKind.params)
         if structure.sun:
             add("sun", 3)  # unit vector to the sun, N components
+        if structure.eclipse:
+            add("shadow", 1)  # Earth-sun distance [m] (the conical shadow's sun disc)
         if structure.cmg is not None:
             add("cmg", CmgModel(*structure.cmg).n_par)  # head (limits, steering), then geometry
         self.size = n

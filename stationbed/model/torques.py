@@ -28,8 +28,11 @@ import casadi as ca
 import numpy as np
 
 from ..core.rotation import dcm
-from ..scene import ConstantTorque, HarmonicTorque
+from ..scene import AeroTorque, ConstantTorque, HarmonicTorque, SrpTorque
+from .atmosphere import EXPONENTIAL_TABLE, OMEGA_EARTH_RAD_S, band_table, density_symbolic, msis_table
 from .environment import gravity_gradient_torque
+from .sun import P_SUN_1AU_N_M2, AU_M, sun_distance_m
+from .surfaces import aero_torque_B, srp_torque_B
 
 __all__ = [
     "TorqueKind",
@@ -37,6 +40,9 @@ __all__ = [
     "GravityGradient",
     "OrbitalHarmonic",
     "OrbitState",
+    "Environment",
+    "Aero",
+    "Srp",
     "TORQUES",
     "get_torque",
     "held_torque_B",
@@ -72,6 +78,21 @@ class OrbitState(NamedTuple):
     mu_r3: Any = None
 
 
+class Environment(NamedTuple):
+    """What a kind with ``needs_env`` gets besides the orbit (casadi expressions at t)."""
+
+    #: the arrays at t (:class:`~stationbed.model.station.ArrayState`: ``C_PB``, angles, ...)
+    arrays: Any
+    #: unit vector to the sun, N components (3-vector), or None without a [sun] table
+    sun_N: Any
+    #: fraction of the sun's disc seen, ν in [0, 1] (1 without an eclipse model)
+    shadow: Any
+    #: DCM from N to B at t (3, 3), shared by the kinds
+    C_BN: Any
+    #: the plates at t, B axes (:class:`~stationbed.model.surfaces.Plate`), from ``Structure.surfaces``
+    plates: Any
+
+
 class TorqueKind:
     """Base class of an external-torque kind (stateless: class data and class methods).
 
@@ -95,6 +116,15 @@ class TorqueKind:
     5. Set ``key_always`` only for the kinds the key has always named (``g``, ``h``): their flag
        is written present or not, which keeps the cached libraries' names; a newer kind writes
        its tag only when present.
+    6. A kind that needs the arrays' orientation or the sun (surfaces that turn with ``C_PB``)
+       sets ``needs_env``: then ``_terms_B`` takes a sixth argument, an :class:`Environment`
+       (the arrays at t, the sun, the shadow fraction, the plates' attachments). Torques are
+       about the composite mass centre O, which is fixed in B (arrays are balanced about their
+       joint axes): a point of the body or of an array lies at ``r - r_O`` in B, computed once
+       in the model's structure (``Structure.surfaces``: the plates' geometry is folded into the
+       generated code as constants, so zero components cost nothing).
+    7. Set ``output`` (a CSV column stem, e.g. ``"tau_aero"``) to report the kind's torque per
+       row as ``<output>_x, _y, _z``.
     """
 
     kind: ClassVar[str] = ""
@@ -107,6 +137,8 @@ class TorqueKind:
     n_par: ClassVar[int] = 0
     key_tag: ClassVar[str] = ""
     key_always: ClassVar[bool] = False
+    needs_env: ClassVar[bool] = False
+    output: ClassVar[str] = ""
 
     # -- the scene ---------------------------------------------------------------------
     @classmethod
@@ -177,7 +209,7 @@ class TorqueKind:
 
     # -- symbols -----------------------------------------------------------------------
     @classmethod
-    def terms_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None) -> list:
+    def terms_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None, env: Environment | None = None) -> list:
         """The symbolic torque as terms to add in order, each B components [N m] (casadi (3, 1)).
 
         Parameters
@@ -187,18 +219,23 @@ class TorqueKind:
         I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
         p_k : casadi SX, shape (n_par, 1) or None  This kind's slice of ``p``.
         orbit : OrbitState or None  The orbit at t (None without an orbit).
+        env : Environment or None  For a kind with ``needs_env`` (rule 6).
         """
         if not cls.symbolic:
             return []
         if cls.needs_orbit and orbit is None:
             raise ValueError(f"torque kind {cls.kind!r} needs an orbit")
-        return list(cls._terms_B(t, q_BN, I_O_B, p_k, orbit))
+        if not cls.needs_env:
+            return list(cls._terms_B(t, q_BN, I_O_B, p_k, orbit))
+        if env is None:
+            raise ValueError(f"torque kind {cls.kind!r} needs the environment (arrays, sun)")
+        return list(cls._terms_B(t, q_BN, I_O_B, p_k, orbit, env))
 
     @classmethod
-    def torque_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None):
+    def torque_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None, env: Environment | None = None):
         """The symbolic torque, B components [N m]: the sum of :meth:`terms_B` (casadi (3, 1))."""
         total = ca.SX.zeros(3)
-        for term in cls.terms_B(t, q_BN, I_O_B, p_k, orbit):
+        for term in cls.terms_B(t, q_BN, I_O_B, p_k, orbit, env):
             total = total + term
         return total
 
@@ -325,8 +362,77 @@ class OrbitalHarmonic(TorqueKind):
         ]
 
 
+def v_rel_B(C_BN, orbit: OrbitState):
+    """Velocity of the station relative to an atmosphere co-rotating with the Earth,
+    ``C_BN (v_N - ω_E × r_N)``, ω_E along N's z (the Earth's pole), B components [m/s]."""
+    r, v = orbit.r_N, orbit.v_N
+    v_rel_N = ca.vertcat(v[0] + OMEGA_EARTH_RAD_S * r[1], v[1] - OMEGA_EARTH_RAD_S * r[0], v[2])
+    return ca.mtimes(C_BN, v_rel_N)
+
+
+class Aero(TorqueKind):
+    """``kind = "aero"``: free-molecular flat-plate drag on the ``[[surface]]`` plates
+    (:func:`~stationbed.model.surfaces.aero_torque_B`), air co-rotating with the Earth
+    (:func:`v_rel_B`), density of ``[atmosphere]`` (:mod:`~stationbed.model.atmosphere`).
+
+    ``p_k``: ``density_scale``, then the density bands (3 per band).
+    """
+
+    kind = "aero"
+    scene_model = AeroTorque
+    symbolic = True
+    needs_orbit = True
+    needs_env = True
+    n_par = 1 + band_table().size
+    key_tag = "d"
+    output = "tau_aero"
+
+    @classmethod
+    def _params(cls, scene):
+        atm = scene.atmosphere
+        scale = 1.0 if atm is None else atm.density_scale
+        table = EXPONENTIAL_TABLE
+        if atm is not None and atm.model == "msis":
+            table = msis_table(scene.sun.epoch, atm.f107, atm.f107a, atm.ap)
+        return np.concatenate([[scale], band_table(table)])
+
+    @classmethod
+    def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit, env):
+        rho = density_symbolic(orbit.r_N, p_k[1:], p_k[0])
+        return [aero_torque_B(env.plates, v_rel_B(env.C_BN, orbit), rho)[1]]
+
+
+class Srp(TorqueKind):
+    """``kind = "srp"``: solar radiation pressure on the ``[[surface]]`` plates
+    (:func:`~stationbed.model.surfaces.srp_torque_B`), ``P = 4.56e-6 N/m² (AU/d)²`` with the
+    epoch's sun distance d (1 AU without an epoch), times the shadow fraction ν.
+
+    ``p_k``: the pressure P [N/m²] at the sun's distance.
+    """
+
+    kind = "srp"
+    scene_model = SrpTorque
+    symbolic = True
+    needs_env = True
+    n_par = 1
+    key_tag = "r"
+    output = "tau_srp"
+
+    @classmethod
+    def _params(cls, scene):
+        pressure = P_SUN_1AU_N_M2 * (AU_M / sun_distance_m(scene.sun)) ** 2
+        return np.array([pressure])
+
+    @classmethod
+    def _terms_B(cls, t, q_BN, I_O_B, p_k, orbit, env):
+        s_B = ca.mtimes(env.C_BN, env.sun_N)
+        return [srp_torque_B(env.plates, s_B, p_k[0] * env.shadow)[1]]
+
+
 #: kind name -> class; the order is the order of the terms, of the slices in p and of the key
-TORQUES: dict[str, type[TorqueKind]] = {cls.kind: cls for cls in (ConstantWindow, GravityGradient, OrbitalHarmonic)}
+TORQUES: dict[str, type[TorqueKind]] = {
+    cls.kind: cls for cls in (ConstantWindow, GravityGradient, OrbitalHarmonic, Aero, Srp)
+}
 
 
 def get_torque(kind: str) -> type[TorqueKind]:

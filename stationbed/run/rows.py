@@ -16,6 +16,7 @@ import numpy as np
 from ..core.compile import FastCall
 from ..integrators import IntegrationError
 from ..model.cmg import CmgModel
+from ..model.torques import TORQUES
 from ..scene import Scene
 from .system import OUT_CHUNK
 from .trajectory import Trajectory, base_columns
@@ -80,6 +81,11 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
+    for t in scene.torque:  # environment torques (issue 14), B components [N m]
+        if TORQUES[t.kind].output:
+            cols += [f"{TORQUES[t.kind].output}_{c}" for c in "xyz"]
+    if scene.sun is not None and scene.sun.eclipse != "none":
+        cols.append("eclipse")  # fraction of the sun's disc seen
     modes = [(a.name, k + 1) for a in scene.appendage for k in range(len(a.mode))]
     if modes:
         cols += [f"eta_{n}_{k}" for n, k in modes] + [f"etadot_{n}_{k}" for n, k in modes] + ["U_strain"]
@@ -188,6 +194,8 @@ class Rows:
         modes = [f"{a.name}_{m + 1}" for a in scene.appendage for m in range(len(a.mode))]
         targets["eta"] = [f"eta_{m}" for m in modes]
         targets["etadot"] = [f"etadot_{m}" for m in modes]
+        targets.update({kind.output: [f"{kind.output}_{c}" for c in "xyz"] for kind in TORQUES.values() if kind.output})
+        targets["eclipse"] = ["eclipse"]
         #: (column indices, slice of the compiled output, in degrees?) per compiled group
         self.plan = [
             (np.array([col[c] for c in targets[name]]), sl, name.startswith("track_err"))

@@ -119,6 +119,7 @@ def build_system(structure: Structure, formulation, integrator) -> System:
             outs.append(("cmg_singularity", cmg.singularity(x[7 : 7 + cmg.nx], pc)))
     if structure.sun:
         outs += [(f"track_err{k}", e) for k, e in enumerate(_track_errors(model, t, x, p))]
+    outs += model.environment_outputs(t, x[0:4], x[7:], p)  # aero/SRP torques, shadow fraction
     if model.n_modes:
         outs += [("eta", model.eta(x[7:])), ("etadot", form.modal_rates(t, x, p)), ("U_strain", form.strain_energy(t, x, p))]
     out_layout, n = {}, 0

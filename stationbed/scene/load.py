@@ -14,7 +14,7 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
-from .tables import TAGS, Appendage, Body, Cmg, ControllerSpec, Initial, Orbit, Simulation, Sun, Torque
+from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, Orbit, Simulation, Sun, Surface, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict"]
 
@@ -34,6 +34,8 @@ class Scene(Strict):
     sun: Sun | None = None
     cmg: Cmg | None = None
     controller: ControllerSpec | None = None
+    surface: list[Surface] = []
+    atmosphere: Atmosphere | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -53,6 +55,7 @@ class Scene(Strict):
         for i, a in enumerate(self.appendage):
             if a.tracks_sun and self.sun is None:
                 raise FieldError(f"appendage[{i}]", f"'{a.name}' tracks the sun: add a [sun] table")
+        _check_environment(self)
         if self.controller is not None:
             c, sim = self.controller, self.simulation
             if c.period < TIME_RESOLUTION * sim.duration:
@@ -115,6 +118,33 @@ class Scene(Strict):
         new = scene_from_dict(data, source=source)
         new._folder = self._folder
         return new
+
+
+def _check_environment(scene) -> None:
+    """The environment keys of issue 14 agree with each other (one-line FieldError)."""
+    kinds = [t.kind for t in scene.torque]
+    for kind in ("aero", "srp"):
+        if kinds.count(kind) > 1:
+            raise FieldError("torque", f"kind '{kind}' given {kinds.count(kind)} times (once models it)")
+    if "srp" in kinds and scene.sun is None:
+        raise FieldError("torque", "kind 'srp' needs a [sun] table")
+    if scene.atmosphere is not None and "aero" not in kinds:
+        raise FieldError("atmosphere", "has no effect without a [[torque]] kind = 'aero'")
+    if scene.atmosphere is not None and scene.atmosphere.model == "msis" and (scene.sun is None or scene.sun.epoch is None):
+        raise FieldError("atmosphere.model", "'msis' needs [sun] epoch (the date of the density)")
+    if scene.sun is not None and scene.sun.eclipse != "none" and scene.orbit is None:
+        raise FieldError("sun.eclipse", "needs an [orbit] table")
+    names = scene.appendage_names
+    for i, s in enumerate(scene.surface):
+        if s.on != "body" and s.on not in names:
+            close = difflib.get_close_matches(s.on, names + ["body"], n=1, cutoff=0.5)
+            hint = f"; did you mean '{close[0]}'?" if close else f"; valid: body, {', '.join(names)}"
+            raise FieldError(f"surface[{i}].on", f"no appendage named '{s.on}'{hint}")
+    for i, a in enumerate(scene.appendage):
+        for j in ("alpha", "beta"):
+            jt = getattr(a, j)
+            if jt.tracked and jt.night == "glider" and (scene.sun is None or scene.sun.eclipse == "none"):
+                raise FieldError(f"appendage[{i}].{j}.night", "'glider' needs [sun] eclipse = 'cylindrical' or 'conical'")
 
 
 # ---------------------------------------------------------------------------------------

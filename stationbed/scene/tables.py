@@ -3,6 +3,7 @@ joints and modes, orbit, torques, sun, CMG cluster, controller and sensor."""
 
 from __future__ import annotations
 
+import datetime
 import math
 from typing import Annotated, Any, ClassVar, Literal, NamedTuple, Union
 
@@ -19,6 +20,7 @@ __all__ = [
     "RateStep", "Profile", "SunTrack", "Joint", "Simulation", "Initial", "Body", "Beam", "Mode", "Appendage",
     "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "Torque", "Sun", "CmgKind", "CMG_KINDS", "UNIT_KEYS", "Cmg",
     "Sensor", "ControllerSpec", "PYRAMID_SKEW_RAD", "PARTICIPATION_TOL", "MU_EARTH_M3_S2", "R_EARTH_M", "TAGS",
+    "AeroTorque", "SrpTorque", "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT",
 ]
 
 class RateStep(Strict):
@@ -62,6 +64,8 @@ class SunTrack(Strict):
     max_acc: float = Field(default=1.0e-4, gt=0.0)  # rad/s²
     gain: float = Field(default=0.05, gt=0.0)  # 1/s, angle loop
     rate_tau: float = Field(default=5.0, gt=0.0)  # s, rate loop time constant
+    # in eclipse: keep tracking the sun, or turn edge-on to the flow (needs [sun] eclipse)
+    night: Literal["track", "glider"] = "track"
 
     tracked: ClassVar[bool] = True
 
@@ -402,20 +406,124 @@ class HarmonicTorque(Strict):
     needs_orbit: ClassVar[bool] = True
 
 
-Torque = Annotated[Union[ConstantTorque, HarmonicTorque], Field(discriminator="kind")]
+class AeroTorque(Strict):
+    """Free-molecular aerodynamic torque on the scene's ``[[surface]]`` plates (issue 14)."""
+
+    kind: Literal["aero"]
+
+    needs_orbit: ClassVar[bool] = True
+
+
+class SrpTorque(Strict):
+    """Solar radiation pressure torque on the scene's ``[[surface]]`` plates (issue 14); needs [sun]."""
+
+    kind: Literal["srp"]
+
+    needs_orbit: ClassVar[bool] = False
+
+
+Torque = Annotated[Union[ConstantTorque, HarmonicTorque, AeroTorque, SrpTorque], Field(discriminator="kind")]
+
+#: (absorbed, specular, diffuse) fractions of a surface that names none of them
+SURFACE_FRACTIONS_DEFAULT = (0.8, 0.1, 0.1)
+
+
+class Surface(Strict):
+    """``[[surface]]``: a flat plate (``area`` [m²], ``normal``) or a box (``size`` [m], three edge
+    lengths along the axes) with its ``centre`` [m], on the body or on a named appendage (``on``).
+
+    On the body: B axes, ``centre`` in the coordinates of ``body.cm``. On an appendage: P axes,
+    ``centre`` relative to the appendage's mass centre (on its joint axes), so the plate turns
+    with C_PB. A plate is one-sided (the side its normal points to) unless ``two_sided``; a box
+    is its six one-sided outward faces. ``cd`` is the drag coefficient; ``absorbed``,
+    ``specular``, ``diffuse`` are the fractions of incident sunlight (sum 1; give two or none)."""
+
+    name: str = ""
+    on: str = "body"
+    area: float | None = Field(default=None, gt=0.0)
+    normal: Vec3 | None = None
+    size: Vec3 | None = None
+    centre: Vec3 = [0.0, 0.0, 0.0]
+    two_sided: bool = False
+    cd: float = Field(default=2.2, gt=0.0)
+    absorbed: float | None = Field(default=None, ge=0.0, le=1.0)
+    specular: float | None = Field(default=None, ge=0.0, le=1.0)
+    diffuse: float | None = Field(default=None, ge=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _shape(self):
+        plate = self.area is not None or self.normal is not None
+        if plate == (self.size is not None):
+            raise ValueError("give a plate ('area' and 'normal') or a box ('size')")
+        if plate and (self.area is None or self.normal is None):
+            raise FieldError("area" if self.area is None else "normal", "a plate needs both 'area' and 'normal'")
+        if plate and math.sqrt(sum(x * x for x in self.normal)) < 1e-12:
+            raise FieldError("normal", "must be a non-zero vector")
+        if self.size is not None and min(self.size) <= 0.0:
+            raise FieldError("size", "edge lengths must be positive")
+        if self.size is not None and self.two_sided:
+            raise FieldError("two_sided", "applies to a plate, not a box")
+        given = [x for x in (self.absorbed, self.specular, self.diffuse) if x is not None]
+        if len(given) == 1:
+            raise ValueError("give two of 'absorbed', 'specular', 'diffuse' (or all three, or none)")
+        if len(given) == 3 and abs(sum(given) - 1.0) > 1e-9:
+            raise ValueError(f"absorbed + specular + diffuse must be 1, got {sum(given):.9g}")
+        if len(given) == 2 and sum(given) > 1.0 + 1e-9:
+            raise ValueError(f"the two fractions given sum to {sum(given):.9g} > 1")
+        return self
+
+    @property
+    def fractions(self) -> tuple[float, float, float]:
+        """``(absorbed, specular, diffuse)``, the missing one completed to a sum of 1."""
+        a, s, d = self.absorbed, self.specular, self.diffuse
+        if a is None and s is None and d is None:
+            return SURFACE_FRACTIONS_DEFAULT
+        if a is None:
+            a = 1.0 - s - d
+        elif s is None:
+            s = 1.0 - a - d
+        elif d is None:
+            d = 1.0 - a - s
+        return (a, s, d)
+
+
+class Atmosphere(Strict):
+    """``[atmosphere]``: density model of the aerodynamic torque. ``exponential`` (embedded table,
+    Vallado 2013 Table 8-4) or ``msis`` (NRLMSIS 2.0 through the optional pymsis, with ``f107``,
+    ``f107a`` [sfu] and ``ap`` at the [sun] epoch); ``density_scale`` multiplies the density."""
+
+    model: Literal["exponential", "msis"] = "exponential"
+    density_scale: float = Field(default=1.0, gt=0.0)
+    f107: float = Field(default=150.0, gt=0.0)
+    f107a: float = Field(default=150.0, gt=0.0)
+    ap: float = Field(default=15.0, ge=0.0)
 
 
 class Sun(Strict):
-    """Sun direction, fixed in N over a run (it moves ~1 deg/day; no eclipse model).
+    """Sun direction, fixed in N over a run (it moves ~1 deg/day).
 
     Either ``beta`` (solar beta angle: sun elevation above the orbit plane [rad]) and ``u_noon``
     (argument of latitude at which the sun's projection lies in the orbit plane [rad]), which
-    need an [orbit]; or ``direction_N`` (any non-zero vector, normalised).
+    need an [orbit]; or ``direction_N`` (any non-zero vector, normalised); or ``epoch`` (UTC,
+    ISO 8601: the sun of that date, stationbed.model.sun). ``eclipse`` chooses the Earth's shadow
+    model ("none": always lit).
     """
 
     beta: float | None = None  # in [-pi/2, pi/2]
     u_noon: float = 0.0
     direction_N: Vec3 | None = None
+    epoch: str | None = None
+    eclipse: Literal["none", "cylindrical", "conical"] = "none"
+
+    @field_validator("epoch")
+    @classmethod
+    def _iso(cls, epoch):
+        if epoch is not None:
+            try:
+                datetime.datetime.fromisoformat(epoch.replace("Z", "+00:00"))
+            except ValueError:
+                raise ValueError(f"'{epoch}' is not an ISO 8601 date and time (e.g. 2024-03-20T03:06:00Z)") from None
+        return epoch
 
     @field_validator("beta")
     @classmethod
@@ -424,8 +532,8 @@ class Sun(Strict):
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.beta is None) == (self.direction_N is None):
-            raise ValueError("give exactly one of 'beta' (with u_noon) or 'direction_N'")
+        if sum(x is not None for x in (self.beta, self.direction_N, self.epoch)) != 1:
+            raise ValueError("give exactly one of 'beta' (with u_noon), 'direction_N' or 'epoch'")
         if self.direction_N is not None and math.sqrt(sum(x * x for x in self.direction_N)) < 1e-12:
             raise ValueError("direction_N must be a non-zero vector")
         return self
@@ -530,4 +638,5 @@ class ControllerSpec(Strict):
 
 
 #: discriminator tags -> tables (the error messages name the right table's keys)
-TAGS.update(constant=ConstantTorque, orbital_harmonic=HarmonicTorque, track=SunTrack, profile=Profile)
+TAGS.update(constant=ConstantTorque, orbital_harmonic=HarmonicTorque, track=SunTrack, profile=Profile,
+            aero=AeroTorque, srp=SrpTorque)

@@ -80,6 +80,11 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
     ):
         if origin in have:
             control.append(plot(name, origin))
+    env = [e for e in ("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B") if e in have]
+    if env:
+        control.append(plot("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment", env))
+    if "telemetry/environment/eclipse" in have:
+        control.append(plot("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse"))
     flags = [e for e in ("telemetry/cmg/singularity", "telemetry/cmg/saturated") if e in have]
     if flags:
         control.append(plot("CMG singularity measure, saturated (0/1)", "telemetry/cmg", flags))

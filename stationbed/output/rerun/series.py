@@ -4,7 +4,8 @@ Each entity holds its columns as named series (:class:`Series`), sent with one `
 call per quantity per send. Base columns (DESIGN §6) and those of issue 3 (CMG, controller, sun
 tracking) have entities of their own (``telemetry/cmg``, ``telemetry/control``,
 ``telemetry/arrays/<name>/track_err_deg``), as do the modal columns of flexible arrays (issue 6:
-``telemetry/modes/<array>/{eta, etadot}``, ``telemetry/modes/U_strain``); any other column goes
+``telemetry/modes/<array>/{eta, etadot}``, ``telemetry/modes/U_strain``), as do the environment
+torques of issue 14 (``telemetry/environment/{tau_aero_B, tau_srp_B, eclipse}``); any other column goes
 under ``telemetry/extra/<column>``. With an orbit the attitude relative to LVLH is added as
 ``telemetry/euler_lvlh_deg`` (3-2-1 roll, pitch, yaw [deg]).
 """
@@ -121,6 +122,9 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
         take(f"telemetry/modes/{n}/etadot", [f"etadot_{n}_{k}" for k in ks], [f"{n} etadot_{k}" for k in ks])
     if modes:
         take("telemetry/modes/U_strain", ["U_strain"])
+    for kind in ("aero", "srp"):  # environment torques (issue 14), B components [N m]
+        take(f"telemetry/environment/tau_{kind}_B", [f"tau_{kind}_{c}" for c in "xyz"], ["x", "y", "z"])
+    take("telemetry/environment/eclipse", ["eclipse"], ["lit fraction"])
     extra = [c for c in columns if c not in used]
     for c in extra:
         out.append(Series(f"telemetry/extra/{c}", (c,), (c,)))
