@@ -25,7 +25,35 @@ from .fused import fused_ok, run_fused
 from .rows import ROW_BATCH
 from .segments import held_torque, segment_input
 
-__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH"]
+__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts"]
+
+
+def plant_facts(scene, system, p, x, period: float) -> Plant:
+    """The :class:`Plant` facts a controller designs with: the scene's inertia about O at t = 0
+    (state ``x``), orbital rate and CMG limits (also used by :mod:`stationbed.analysis`)."""
+    inertia = FastCall.of(system.funcs["inertia"])
+    inertia.args[0][0] = 0.0
+    inertia.args[1][:] = x
+    inertia.args[2][:] = p
+    inertia()
+    c = scene.cmg
+    cmg = system.formulation.model.cmg
+    plant = Plant(
+        scene=scene,
+        inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
+        mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
+        period=period,
+    )
+    if c is not None:
+        geometry = cmg.geometry
+        plant.cmg_kind = c.kind
+        plant.h_capacity = geometry.capacity(c)
+        plant.max_torque = geometry.max_torque(c)
+        plant.n_gimbals = cmg.n_gimbals
+        plant.max_gimbal_rate = geometry.max_gimbal_rate(c)
+        plant.h_rotor = geometry.rotor_momentum(c)
+        plant.cmg_functions = cluster_functions(c)
+    return plant
 
 
 class ControllerFailure(Exception):
@@ -64,27 +92,7 @@ class ControlLoop:
             raise ValueError(
                 f"controller '{self.ctrl.name}' commands gimbal rates: the scene needs a gimballed [cmg]"
             )
-        inertia = FastCall.of(f["inertia"])
-        inertia.args[0][0] = 0.0
-        inertia.args[1][:] = x
-        inertia.args[2][:] = p
-        inertia()
-        c = scene.cmg
-        plant = Plant(
-            scene=scene,
-            inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
-            mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
-            period=self.period,
-        )
-        if c is not None:
-            geometry = cmg.geometry
-            plant.cmg_kind = c.kind
-            plant.h_capacity = geometry.capacity(c)
-            plant.max_torque = geometry.max_torque(c)
-            plant.n_gimbals = self.ng
-            plant.max_gimbal_rate = geometry.max_gimbal_rate(c)
-            plant.h_rotor = geometry.rotor_momentum(c)
-            plant.cmg_functions = cluster_functions(c)
+        plant = plant_facts(scene, system, p, x, self.period)
         self.capacity = plant.h_capacity
         try:
             self.ctrl.reset(plant)

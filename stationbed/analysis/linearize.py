@@ -1,0 +1,338 @@
+"""Linear plants of a scene for python-control (:func:`linearize`), from the simulator's own equations.
+
+The plant is the scene's formulation (``Formulation.rhs``, the expression the simulator compiles)
+written in *analysis coordinates* relative to a reference frame R, and differentiated exactly by
+casadi (``ca.jacobian``; no finite differences):
+
+* ``R``: fixed in LVLH (``q_RN(t) = q_ON(t) ⊗ q_RO``, turning at ``ω_RN_R = C_RO (0, -n, 0)``, LVLH z
+  nadir, y minus the orbit normal); without an orbit, fixed in N (``q_RN = q_RO``, ``ω_RN = 0``);
+* states ``z``: attitude error ``θ = 2 vec(q_BR)`` [rad] (the small rotation angles about B's
+  axes; exact for any rotation below 180 deg), rate of B relative to R
+  ``δω = ω_BN_B - C_BR ω_RN_R`` [rad/s], then the model's own extra states (CMG: ``h`` [N m s] of an
+  ideal cluster, gimbal angles [rad] of a gimballed one; sun-tracking joint angles and rates), then
+  the flexible arrays' modal coordinates ``η`` and rates ``η̇``;
+* inputs: the control (body-torque command ``tau_cmd_*`` [N m] through the CMG steering law when
+  the scene has a cluster, or ``gimbal_rate*`` [rad/s] with ``command="gimbal_rates"``; a scene
+  without a cluster applies the torque directly, as the simulator does), then the disturbance
+  torque ``tau_dist_*`` [N m] (the held external torque ``u[0:3]`` of the model);
+* outputs: ``att_err_*`` (θ) [rad], ``rate_err_*`` (δω) [rad/s], and ``h_*`` [N m s] with a cluster.
+
+Kinematics of the coordinates: ``q_BN = q_RN ⊗ q_BR(θ)``, ``ω_BN_B = δω + C_BR ω_RN_R``,
+``θ̇ = q_w δω + (θ/2) × δω`` and ``δω̇ = ω̇ + δω × (C_BR ω_RN_R)`` (R turns at a constant rate: a
+circular orbit), ``ω̇ = ∂ω/∂x ẋ + ∂ω/∂t`` from the formulation's ``omega(t, x)``.
+
+Time-varying terms (arrays turning, orbital harmonics, the orbit's position) are **frozen at the
+chosen time** ``t``: the plant is the tangent of the equations at that instant, not an average.
+The torque-equilibrium attitude (``about="tea"``) is the root of the torque averaged over one
+orbit (24 instants) with zero rates relative to LVLH, the extra states at their values at ``t``
+and the arrays undeformed; it is found by Newton on the same expressions, not assumed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..core.rotation import dcm, quat_mult
+from ..model import Structure
+from ..model.environment import q_ON
+from ..run.system import build_system
+
+__all__ = ["OperatingPoint", "Linearization", "linearize", "linearization", "plant_functions", "tea_search"]
+
+#: Largest TEA offset from LVLH the Newton search accepts [rad]: beyond it the "nearest"
+#: equilibrium is another principal-axis alignment, not a TEA a station would fly.
+TEA_MAX_RAD = math.radians(60.0)
+#: Newton's residual at the TEA, ``|δω̇| / n²`` (gravity-gradient terms are ~ΔI/I ~ 0.1-1 in these
+#: units): float64 round-off of ~1e-16 relative, with margin.
+TEA_RESIDUAL = 1e-10
+#: Instants of one orbit over which the TEA's torque is averaged (24: every 15 deg of argument of
+#: latitude; harmonics up to the 11th per orbit average exactly on this grid).
+TEA_SAMPLES = 24
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """An explicit linearisation point: the attitude and rate at time ``t``.
+
+    ``q_BN`` (4,) and ``omega_BN_B`` (3,) [rad/s]; R is fixed in LVLH at that attitude (fixed in N
+    without an orbit), so the plant's ``θ`` and ``δω`` are measured from it; ``xe`` the extra and
+    modal states (``η``, ``η̇``), default the scene's initial ones.
+    """
+
+    q_BN: tuple
+    omega_BN_B: tuple = (0.0, 0.0, 0.0)
+    t: float = 0.0
+    xe: tuple | None = None
+
+
+@dataclass
+class Linearization:
+    """A linearised plant with its point: ``ss`` (control.StateSpace, named signals) and the
+    numbers it was taken at."""
+
+    ss: object
+    t: float
+    q_RO: np.ndarray  # R relative to LVLH (relative to N without an orbit), scalar first
+    z0: np.ndarray  # the analysis state at the point
+    u0: np.ndarray  # the inputs at the point (control trim, then zero disturbance)
+    zdot0: np.ndarray  # ż at (z0, u0): zero at an equilibrium
+    trim_torque: np.ndarray | None  # the body torque that holds R (torque command only) [N m]
+    tea_theta: np.ndarray | None = None  # about="tea": θ of the TEA relative to LVLH [rad]
+    modal_states: list = field(default_factory=list)  # indices of η, η̇ in z
+
+
+def _structure_key(scene, command):
+    return (Structure.of(scene), scene.simulation.formulation, command)
+
+
+_PLANTS: dict = {}
+
+
+def plant_functions(scene, command: str = "torque"):
+    """The casadi Functions of the analysis plant for a scene's structure (built once, cached).
+
+    ``F(t, z, v, d, q_RO, p) -> ż`` and ``jac(...) -> (ż, A, B_v, B_d, C, y)``; the names of
+    the states, inputs and outputs. Built on the scene's own formulation, from the same
+    ``System`` the simulator compiles (``build_system``; the symbolic expressions are its
+    formulation's).
+    """
+    key = _structure_key(scene, command)
+    if key in _PLANTS:
+        return _PLANTS[key]
+    system = build_system(Structure.of(scene), scene.simulation.formulation, scene.simulation.integrator)
+    form = system.formulation
+    model = form.model
+    st = model.structure
+    cmg = model.cmg
+    ng = 0 if cmg is None else cmg.n_gimbals
+    if command == "gimbal_rates" and ng == 0:
+        raise ValueError("command = 'gimbal_rates' needs a gimballed [cmg]")
+    ne, nm = model.n_extra, model.n_modes
+    nz = 6 + ne + 2 * nm
+    nv = ng if command == "gimbal_rates" else 3
+    t = ca.SX.sym("t")
+    z = ca.SX.sym("z", nz)
+    v = ca.SX.sym("v", nv)
+    d = ca.SX.sym("d", 3)
+    q_RO = ca.SX.sym("q_RO", 4)
+    p = ca.SX.sym("p", model.layout.size)
+    th, dw = z[0:3], z[3:6]
+    e = th / 2
+    qw = ca.sqrt(1.0 - ca.dot(e, e))
+    q_BR = ca.vertcat(qw, e)
+    C_BR = dcm(q_BR)
+    if st.orbit:
+        radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))
+        q_RN = quat_mult(q_ON(u0 + n * t, incl), q_RO)
+        w_RN_R = ca.mtimes(dcm(q_RO), ca.vertcat(0.0, -n, 0.0))
+    else:
+        q_RN = q_RO
+        w_RN_R = ca.SX.zeros(3)
+    q_BN = quat_mult(q_RN, q_BR)
+    w_R_B = ca.mtimes(C_BR, w_RN_R)
+    w = dw + w_R_B
+    xe = z[6:]
+    x = form.state(t, q_BN, w, xe, p)
+    if cmg is None:
+        u = d + v
+    else:
+        fname = "actuate_rates" if command == "gimbal_rates" else "actuate"
+        act = system.sx[fname](t, x, v, p)
+        u = ca.vertcat(d, act[0 : model.nu_cmg])
+    if model.has_steps:
+        u = ca.vertcat(u, t)
+    # ẋ and the total time derivatives of ω(t, x) and η̇(t, x), on plain symbols, then evaluated
+    # at x(z) (casadi differentiates with respect to symbols only)
+    xs, us = ca.SX.sym("xs", form.nx), ca.SX.sym("us", u.numel())
+    xdot_s = form.rhs(t, xs, us, p)
+    w_s = form.omega(t, xs, p)
+    derivs = [xdot_s, ca.jtimes(w_s, xs, xdot_s) + ca.jacobian(w_s, t)]
+    if nm:
+        etad = form.modal_rates(t, xs, p)
+        derivs.append(ca.jtimes(etad, xs, xdot_s) + ca.jacobian(etad, t))
+    D = ca.Function("derivs", [t, xs, us, p], derivs)(t, x, u, p)
+    xdot, w_dot = D[0], D[1]
+    parts = [qw * dw + ca.cross(e, dw), w_dot + ca.cross(dw, w_R_B), xdot[7 : 7 + ne + nm]]
+    if nm:
+        parts.append(D[2])
+    zdot = ca.vertcat(*parts)
+    y = [th, dw]
+    if cmg is not None:
+        y.append(model.h(x[7:], p))
+    y = ca.vertcat(*y)
+    F = ca.Function("plant", [t, z, v, d, q_RO, p], [zdot], {"cse": True})
+    x_of_z = ca.Function("x_of_z", [t, z, q_RO, p], [x])
+    jac = ca.Function(
+        "plant_jac", [t, z, v, d, q_RO, p],
+        [zdot, ca.jacobian(zdot, z), ca.jacobian(zdot, v), ca.jacobian(zdot, d), ca.jacobian(y, z), y], {"cse": True},
+    )
+    # the TEA residual: the mean of δω̇ (and η̈) over given instants, zero rates, as a function of θ (and η)
+    names_z = ["att_err_x", "att_err_y", "att_err_z", "rate_err_x", "rate_err_y", "rate_err_z"]
+    names_z += list(model.extra_names) + list(model.eta_names) + [f"{n}_rate" for n in model.eta_names]
+    if command == "gimbal_rates":
+        names_v = [f"gimbal_rate{k}" for k in range(ng)]
+    else:
+        names_v = ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z"]
+    names_d = ["tau_dist_x", "tau_dist_y", "tau_dist_z"]
+    names_y = names_z[0:6] + (["h_x", "h_y", "h_z"] if cmg is not None else [])
+    out = {
+        "F": F, "jac": jac, "system": system, "states": names_z, "controls": names_v, "disturbances": names_d,
+        "outputs": names_y, "x_of_z": x_of_z, "nz": nz, "ne": ne, "nm": nm, "model": model,
+    }
+    _PLANTS[key] = out
+    return out
+
+
+def _default_z0(scene, pf, p, t, q_RO, theta):
+    """The analysis state at the point: θ, zero δω, the scene's extra states at t = 0, η = η̇ = 0."""
+    model = pf["model"]
+    z0 = np.zeros(pf["nz"])
+    z0[0:3] = theta
+    xe = model.initial_extra(scene, np.array([1.0, 0.0, 0.0, 0.0]), p)
+    z0[6 : 6 + pf["ne"]] = xe[0 : pf["ne"]]
+    return z0
+
+
+def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
+    """θ of the torque-equilibrium attitude relative to LVLH [rad] (Newton from LVLH).
+
+    Unknowns: θ and the modal coordinates η; residual: ``δω̇`` (scaled by 1/n²) and ``η̈``,
+    averaged over :data:`TEA_SAMPLES` instants of one orbit from ``t``, with zero rates and
+    zero control.
+    """
+    if scene.orbit is None:
+        raise ValueError("about = 'tea' needs an [orbit] (a torque-equilibrium attitude is relative to LVLH)")
+    n = scene.orbit.mean_motion
+    nz, ne, nm = pf["nz"], pf["ne"], pf["nm"]
+    unk = ca.SX.sym("unk", 3 + nm)
+    zs = ca.vertcat(unk[0:3], ca.DM.zeros(3), ca.DM(z0[6 : 6 + ne]), unk[3:], ca.DM.zeros(nm))
+    nv = len(pf["controls"])
+    ts = t + np.arange(TEA_SAMPLES) * (2 * math.pi / n / TEA_SAMPLES)
+    res = 0
+    for tk in ts:
+        zd = pf["F"](tk, zs, ca.DM.zeros(nv), ca.DM.zeros(3), ca.DM(q_RO), ca.DM(p))
+        res = res + ca.vertcat(zd[3:6] / n**2, zd[6 + ne + nm :] / n**2)
+    res = res / TEA_SAMPLES
+    G = ca.Function("G", [unk], [res, ca.jacobian(res, unk)])
+    xk = np.zeros(3 + nm)
+    for _ in range(60):
+        g, Jg = (np.array(v) for v in G(xk))
+        step = np.linalg.lstsq(Jg, -g.ravel(), rcond=None)[0]
+        s = float(np.linalg.norm(step[0:3]))
+        if s > 0.2:  # stay in the valid range of θ = 2 vec(q)
+            step *= 0.2 / s
+        xk = xk + step
+        if float(np.linalg.norm(step)) < 1e-13:
+            break
+    g = np.array(G(xk)[0]).ravel()
+    if not np.all(np.isfinite(xk)) or np.linalg.norm(g[0:3]) > TEA_RESIDUAL or np.linalg.norm(xk[0:3]) > TEA_MAX_RAD:
+        raise ValueError(
+            f"no torque-equilibrium attitude within {math.degrees(TEA_MAX_RAD):.0f} deg of LVLH "
+            f"(Newton ended at {np.degrees(xk[0:3]).round(2).tolist()} deg, residual {np.linalg.norm(g):.3g})"
+        )
+    return xk[0:3], xk[3:]
+
+
+def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 0.0), command: str = "torque",
+                  trim: bool = True, v0=None) -> Linearization:
+    """The linear plant of ``scene`` and its operating point (see :func:`linearize`); ``v0``: the
+    control input at the point (overrides ``trim``)."""
+    pf = plant_functions(scene, command)
+    model = pf["model"]
+    p = model.params(scene)
+    q_RO = np.asarray(q_ref, float)
+    q_RO = q_RO / np.linalg.norm(q_RO)
+    theta = np.zeros(3)
+    tea = None
+    z0 = None
+    if isinstance(about, OperatingPoint):
+        t = float(about.t)
+        q_BN = np.asarray(about.q_BN, float)
+        q_BN = q_BN / np.linalg.norm(q_BN)
+        if scene.orbit is not None:
+            o = scene.orbit
+            q_RO = quat_mult_np(quat_conj_np(np.asarray(q_ON(o.u0 + o.mean_motion * t, o.inclination), float)), q_BN)
+        else:
+            q_RO = q_BN
+        z0 = _default_z0(scene, pf, p, t, q_RO, theta)
+        if about.xe is not None:
+            z0[6:] = np.asarray(about.xe, float)
+        n = 0.0 if scene.orbit is None else scene.orbit.mean_motion
+        z0[3:6] = np.asarray(about.omega_BN_B, float) - dcm(q_RO) @ np.array([0.0, -n, 0.0])
+    elif about == "tea":
+        z0 = _default_z0(scene, pf, p, t, q_RO, theta)
+        q_RO = np.array([1.0, 0.0, 0.0, 0.0])
+        tea, eta = tea_search(pf, scene, p, z0, t)
+        z0[0:3] = tea
+        z0[6 + pf["ne"] : 6 + pf["ne"] + pf["nm"]] = eta
+    elif about == "lvlh":
+        z0 = _default_z0(scene, pf, p, t, q_RO, theta)
+    else:
+        raise ValueError(f"about = {about!r}: expected 'lvlh', 'tea' or an OperatingPoint")
+    nv = len(pf["controls"])
+    given = v0 is not None
+    v0 = np.zeros(nv) if v0 is None else np.asarray(v0, float).ravel()
+    d0 = np.zeros(3)
+    args = lambda v: (t, z0, v, d0, q_RO, p)  # noqa: E731
+    zd, A, Bv, Bd, C, _ = (np.array(m) for m in pf["jac"](*args(v0)))
+    trim_torque = None
+    if trim and command == "torque" and not given:
+        # the body torque that holds the point: δω̇ is affine in the torque (the steering law
+        # delivers the command to the body), one Newton step solves it
+        v0 = -np.linalg.solve(Bv[3:6], zd.ravel()[3:6])
+        trim_torque = v0.copy()
+        zd, A, Bv, Bd, C, _ = (np.array(m) for m in pf["jac"](*args(v0)))
+    import control
+
+    B = np.hstack([Bv, Bd])
+    D = np.zeros((C.shape[0], B.shape[1]))
+    ss = control.ss(A, B, C, D, states=pf["states"], inputs=pf["controls"] + pf["disturbances"], outputs=pf["outputs"],
+                    name=f"{scene.name}_plant")
+    nmod = pf["nm"]
+    modal = list(range(6 + pf["ne"], 6 + pf["ne"] + 2 * nmod))
+    return Linearization(ss, t, q_RO, z0, np.r_[v0, d0], zd.ravel(), trim_torque, tea, modal)
+
+
+def quat_conj_np(q):
+    return np.array([q[0], -q[1], -q[2], -q[3]])
+
+
+def quat_mult_np(a, b):
+    return np.asarray(quat_mult(np.asarray(a, float), np.asarray(b, float)), float).ravel()
+
+
+def linearize(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 0.0), command: str = "torque",
+              dt: float | None = None, trim: bool = True):
+    """The scene's plant linearised about a reference, as a python-control ``StateSpace``.
+
+    Parameters
+    ----------
+    scene : Scene
+    about : "lvlh", "tea" or OperatingPoint
+        ``"lvlh"``: R fixed in LVLH at ``q_ref`` (R = N without an orbit); ``"tea"``: R = LVLH, the
+        point at the torque-equilibrium attitude (found by Newton, :func:`tea_search`); an
+        :class:`OperatingPoint`: that attitude and rate at its time.
+    t : float  The instant the time-varying terms are frozen at [s] (ignored for an OperatingPoint).
+    q_ref : (4,)  R relative to LVLH (or N), scalar first (``"lvlh"`` only).
+    command : "torque" or "gimbal_rates"  The control input.
+    dt : float, optional  A controller period [s]: return the zero-order-hold discrete plant
+        (python-control's ``c2d(..., "zoh")``, same signal names).
+    trim : bool  Linearise at the control torque that holds the point (``"torque"`` only).
+
+    Returns
+    -------
+    control.StateSpace  States, inputs (control, then disturbance) and outputs named (see the
+    module docstring); ``sys.linearization`` is the :class:`Linearization` (point, trim torque).
+    """
+    lin = linearization(scene, about, t=t, q_ref=q_ref, command=command, trim=trim)
+    sys = lin.ss
+    if dt is not None:
+        import control
+
+        sys = control.c2d(sys, float(dt), method="zoh")
+    sys.linearization = lin
+    return sys
