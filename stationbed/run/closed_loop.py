@@ -9,7 +9,7 @@ import struct
 import numpy as np
 
 from ..core.compile import FastCall
-from ..core.rotation import rotation_angle
+from ..core.rotation import rotation_angle, rotation_vector
 from ..integrators import IntegrationError
 from ..model.cmg import cluster_functions
 from .controller import (
@@ -203,12 +203,15 @@ class ControlLoop:
         q_ref = self.ctrl.q_ref_BN
         if q_ref is None:
             err = math.nan
+            axes = [math.nan] * 3
         else:
             if q_ref.__class__ is not np.ndarray or q_ref.dtype != np.float64 or q_ref.shape != (4,):
                 q_ref = self._check_q_ref(q_ref)
             err = math.degrees(float(rotation_angle(q_ref[None], self.x[None, 0:4])[0]))
+            # per axis: the error rotation vector, B components [deg] (its norm is att_err_deg)
+            axes = np.degrees(rotation_vector(q_ref[None], self.x[None, 0:4])[0]).tolist()
         tau = self.last_cmd if self.ctrl.command == "torque" else (math.nan,) * 3
-        vals += list(tau) + [err]
+        vals += list(tau) + [err] + axes
         return vals
 
     def run(self) -> None:

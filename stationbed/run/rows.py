@@ -20,7 +20,7 @@ from ..scene import Scene
 from .system import OUT_CHUNK
 from .trajectory import Trajectory, base_columns
 
-__all__ = ["trajectory_columns", "Rows", "RowSummary", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S"]
+__all__ = ["trajectory_columns", "ATT_ERR_AXES", "Rows", "RowSummary", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S"]
 
 #: most rows in one batch handed to the sink (and in one integrator call of the open loop)
 ROW_BATCH = 64
@@ -65,6 +65,11 @@ def _sink_error(path, last_t, errno, strerror, held):
     return SinkError(path, last_t, OSError(errno, strerror), held)
 
 
+#: per-axis attitude error: the rotation vector from the controller's reference to B, B components
+#: [deg] (≈ 2 vec(q_BR) for small errors; its norm is att_err_deg)
+ATT_ERR_AXES = ["att_err_x_deg", "att_err_y_deg", "att_err_z_deg"]
+
+
 def trajectory_columns(scene: Scene) -> list[str]:
     """The CSV columns of a run of ``scene`` (DESIGN §6 core, then CMG, controller, sun)."""
     cols = base_columns(scene.appendage_names)
@@ -77,7 +82,7 @@ def trajectory_columns(scene: Scene) -> list[str]:
             cols.append("cmg_singularity")
         cols.append("cmg_saturated")
     if scene.controller is not None:
-        cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
+        cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
     modes = [(a.name, k + 1) for a in scene.appendage for k in range(len(a.mode))]
@@ -200,7 +205,7 @@ class Rows:
         if cmg is not None:
             self.held_columns += [f"{g}_rate" for g in gimbals] + ["cmg_saturated"]
         if scene.controller is not None:
-            self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
+            self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
 
     def make(self, ts, xs, held=None) -> np.ndarray:
