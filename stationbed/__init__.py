@@ -26,6 +26,9 @@ _LAZY = {
     "ControllerParams": "run.controller",
     "Measurement": "run.controller",
     "Plant": "run.controller",
+    "linearize": "analysis.linearize",
+    "OperatingPoint": "analysis.linearize",
+    "loop_analysis": "analysis.margins",
 }
 
 __all__ = sorted(_LAZY)

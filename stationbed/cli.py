@@ -132,6 +132,9 @@ def _parser() -> argparse.ArgumentParser:
     sb.add_argument("--out", type=Path, default=Path("out") / "study", help="output folder (default: out/study)")
     sb.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="default: all cases")
     sb.add_argument("--quick", action="store_true", help="shrink every case to seconds (tests, CI)")
+    from .analysis import cli as analysis_cli  # linearize, margins, plot, compare
+
+    analysis_cli.add_parsers(sub)
     return p
 
 
@@ -522,6 +525,10 @@ def _main(args) -> int:
     from .scene import SceneError
 
     try:
+        from .analysis import cli as analysis_cli
+
+        if args.cmd in analysis_cli.COMMANDS:
+            return analysis_cli.main(args)
         return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study}[args.cmd](args)
     except SceneError as e:
         _debug_traceback(e)

@@ -1,10 +1,32 @@
-"""Control-design analysis: linear plants of a scene (:mod:`.linearize`), loop margins of a
-controller's symbolic form (:mod:`.margins`).
+"""Control-design analysis: linear plants of a scene (:mod:`.linearize`), the design plants of
+the shipped laws (:mod:`.design`), loop margins of a controller's symbolic form
+(:mod:`.margins`), run dashboards and comparisons (:mod:`.dashboard`, :mod:`.compare`) and their
+commands (:mod:`.cli`).
 
-Layer: above ``run`` (it uses the compiled system and the controller registry), below the shipped
-controllers (which design on it).
+Layer: above ``run`` (the compiled system, the controller registry, trajectories), below the
+shipped controllers (which design on it). Names are imported on first use (PEP 562), so the
+command line can register its parsers without importing casadi.
 """
 
-from .linearize import Linearization, OperatingPoint, linearization, linearize, tea_search
+import importlib as _importlib
 
-__all__ = ["Linearization", "OperatingPoint", "linearization", "linearize", "tea_search"]
+_LAZY = {
+    "Linearization": "linearize",
+    "OperatingPoint": "linearize",
+    "linearization": "linearize",
+    "linearize": "linearize",
+    "tea_search": "linearize",
+    "LoopAnalysis": "margins",
+    "loop_analysis": "margins",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name):
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(_importlib.import_module(f".{mod}", __name__), name)
+    globals()[name] = value
+    return value
