@@ -26,6 +26,8 @@ _LAZY = {
     "ControllerParams": "run.controller",
     "Measurement": "run.controller",
     "Plant": "run.controller",
+    "montecarlo": "studies.montecarlo",
+    "MonteCarloResult": "studies.montecarlo",
 }
 
 __all__ = sorted(_LAZY)
