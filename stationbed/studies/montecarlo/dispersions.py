@@ -19,7 +19,8 @@ A scale kind may list ``also = [key, ...]``: those values are multiplied by the 
 
 Recorded columns (one per drawn number): a scalar key gives the column ``<key>``; an array
 ``<key>[i]`` (a matrix ``<key>[i][j]``, the upper triangle for ``inertia``); ``attitude_normal``
-records the rotation vector of the draw, ``<key>.rotvec[i]`` [rad]; ``choice`` records the
+records the rotation vector of the draw, ``<key>.rotvec[i]`` [rad], and its angle
+``<key>.angle`` [rad]; ``choice`` records the
 chosen value when every choice is a number, else its index ``<key>.choice``.
 """
 
@@ -139,6 +140,7 @@ def _draw_one(d, data: dict, rng: np.random.Generator, draw: Draw) -> None:
         new = _quat_mul(q, dq)  # turned about a body axis
         draw.changes[key] = (new / np.linalg.norm(new)).tolist()
         _record_array(draw.values, f"{key}.rotvec", angle * axis)
+        draw.values[f"{key}.angle"] = abs(float(angle))
     elif kind == "choice":
         w = None if d.weights is None else np.asarray(d.weights, float) / sum(d.weights)
         i = int(rng.choice(len(d.choices), p=w))
