@@ -29,6 +29,8 @@ _LAZY = {
     "linearize": "analysis.linearize",
     "OperatingPoint": "analysis.linearize",
     "loop_analysis": "analysis.margins",
+    "montecarlo": "studies.montecarlo",
+    "MonteCarloResult": "studies.montecarlo",
 }
 
 __all__ = sorted(_LAZY)

@@ -373,10 +373,10 @@ class ControlLoop:
         return int(lim or sat)
 
     def summary(self) -> dict:
-        """The run's summary: ticks, controller updates, saturation counts, max |h| and its fraction
-        of capacity, min singularity measure, attitude error (what ``summary.json`` holds), from
-        reductions kept as the rows are emitted (:class:`~.rows.RowSummary`: the rows need not be
-        kept)."""
+        """The run's summary: ticks, controller updates, and the :data:`~.metrics.METRICS` of the
+        run (saturation counts, max |h| and its fraction of capacity, min singularity measure,
+        attitude error, commanded torque: what ``summary.json`` holds), from the reductions kept
+        as the rows are emitted (:class:`~.metrics.RunMetrics`: the rows need not be kept)."""
         rs = self.rows.summary
         out = {
             "controller": self.ctrl.name,
@@ -386,17 +386,11 @@ class ControlLoop:
             "controller_updates": self.ctrl.n_updates,
         }
         if self.model.cmg is not None:
-            out["rate_limited_ticks"] = int(self.n_rate_limited)
-            out["momentum_saturated_ticks"] = int(self.n_momentum_saturated)
-            if rs.max_h is not None:
-                out["max_h_Nms"] = rs.max_h
-                if math.isfinite(self.capacity):
-                    out["max_h_fraction"] = float(rs.max_h / self.capacity)
-            if rs.min_singularity is not None:
-                out["min_singularity"] = rs.min_singularity
-        if rs.max_att_err is not None:
-            out["final_att_err_deg"] = float(rs.last[self.rows.columns.index("att_err_deg")])
-            out["max_att_err_deg"] = rs.max_att_err
+            rs.count_ticks(self.n_rate_limited, self.n_momentum_saturated)
+            rs.h_capacity_Nms = self.capacity
+            if math.isfinite(self.capacity):
+                out["h_capacity_Nms"] = float(self.capacity)
+        out.update(rs.values())
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())
         except Exception as e:

@@ -14,7 +14,7 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
-from .tables import TAGS, Appendage, Body, Cmg, ControllerSpec, Initial, Orbit, Simulation, Sun, Torque
+from .tables import TAGS, Appendage, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict"]
 
@@ -34,6 +34,7 @@ class Scene(Strict):
     sun: Sun | None = None
     cmg: Cmg | None = None
     controller: ControllerSpec | None = None
+    montecarlo: MonteCarlo | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
