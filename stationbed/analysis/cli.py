@@ -105,7 +105,9 @@ def _linearize(args) -> int:
     pairs = [(i, i, f"{sys.input_labels[i]} → {sys.output_labels[i]}") for i in range(min(nv, 3))] if args.command == "torque" else []
     figures.bode_png(out / "bode.png", sys, pairs or [(0, 0, f"{sys.input_labels[0]} → {sys.output_labels[0]}")],
                      f"{title}: control torque to attitude error", "rad/(N m)")
-    modal = [p for p, v in zip(*np.linalg.eig(sys.A)) if lin.modal_states and np.linalg.norm(v[lin.modal_states]) > 0.5 * np.linalg.norm(v)]
+    from .linearize import modal_poles
+
+    modal = modal_poles(sys.A, lin.modal_states)
     figures.pole_zero_png(out / "pole_zero.png", poles, zeros, title, modal)
     print(f"{scene.name}: linear plant about {args.about} at t = {lin.t:g} s: {sys.nstates} states, "
           f"{sys.ninputs} inputs ({nv} control, 3 disturbance), {sys.noutputs} outputs")
@@ -148,14 +150,17 @@ def _margins(args) -> int:
               f"{_num(c['phase_margin_deg'], '.1f'):>10}{_num(c['crossover_rad_s']):>12}{_num(c['disk_margin']):>7}"
               f"{_num(c['disk_gain_margin']):>7}{_num(c['disk_phase_margin_deg'], '.1f'):>7}"
               f"{_num(c['bandwidth_rad_s']):>12}{_num(c['sensitivity_peak']):>8}")
-    print("  closed-loop poles [rad/s] (slowest first):")
-    for s in _poles_text(la.poles)[:12]:
+    zero = int(np.sum(np.abs(la.poles) == 0.0))
+    print(f"  closed-loop poles [rad/s] (slowest first; {zero} at exactly 0: states without feedback,"
+          " e.g. gimbal angles, joint drives at rest):")
+    shown = _poles_text([p for p in la.poles if p != 0])
+    for s in shown[:14]:
         print("    " + s)
-    if len(la.poles) > 12:
+    if len(shown) > 14:
         print(f"    ... {len(la.poles)} in all (margins.json)")
-    unstable = [p for p in la.poles if p.real > 1e-9]
+    unstable = [(p, s) for p, s in zip(la.poles, la.pole_states) if p.real > 1e-9 * max(1.0, float(np.abs(la.poles).max()))]
     if unstable:
-        print(f"  UNSTABLE closed-loop poles: {', '.join(_fmt_pole(complex(p)) for p in unstable)}")
+        print("  UNSTABLE closed-loop poles: " + ", ".join(f"{_fmt_pole(complex(p))} (mostly {s})" for p, s in unstable))
     if la.structural_in_band:
         print("  WARNING structural mode(s) inside the control bandwidth: " + ", ".join(f"{w:.3g} rad/s" for w in la.structural_in_band))
     else:

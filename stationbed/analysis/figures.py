@@ -61,7 +61,7 @@ def _freq(A, lo=None, hi=None):
     lam = lam[lam > 1e-9]
     lo = lo or (lam.min() / 30 if lam.size else 1e-5)
     hi = hi or (lam.max() * 30 if lam.size else 10.0)
-    return np.logspace(np.log10(lo), np.log10(hi), 2000)
+    return np.logspace(np.log10(lo), np.log10(hi), 5000)
 
 
 def _response(A, b, c, w):
@@ -94,10 +94,12 @@ def bode_png(path, sys, pairs, title: str, units: str) -> None:
 
 def pole_zero_png(path, poles, zeros: dict, title: str, modal_poles=()) -> None:
     """Poles (x) and per-channel zeros (o) in the s-plane: the whole plane, and the low-frequency
-    region (|s| < 0.03 rad/s) where the attitude poles sit."""
+    region where the attitude poles sit (1.5 x the largest |pole| that is not an array mode)."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.2))
-    for ax, lim in zip(axes, (None, 0.03)):
+    rest = [p for p in poles if not any(abs(p - m) < 1e-12 * max(1.0, abs(m)) for m in modal_poles)]
+    zoom = float(f"{1.5 * max((abs(p) for p in rest), default=0.01) or 0.01:.1g}")
+    for ax, lim in zip(axes, (None, zoom)):
         ax.axhline(0, color="0.6", lw=0.8)
         ax.axvline(0, color="0.6", lw=0.8)
         p = np.asarray(poles)
@@ -110,7 +112,7 @@ def pole_zero_png(path, poles, zeros: dict, title: str, modal_poles=()) -> None:
         for k, (label, z) in enumerate(zeros.items()):
             z = np.asarray(z)
             zs = z if lim is None else z[np.abs(z) < lim]
-            ax.plot(zs.real, zs.imag, "o", mfc="none", ms=8 + 2 * k, label=f"zeros {label}")
+            ax.plot(zs.real, zs.imag, "o", mfc="none", ms=7 + 3 * k, label=f"zeros {label}")
         if lim is not None:
             ax.set_xlim(-lim, lim)
             ax.set_ylim(-lim, lim)
@@ -170,7 +172,7 @@ def nichols_png(path, loops, labels, title: str) -> None:
     ax.set_xlabel("phase of L [deg]")
     ax.set_ylabel("|L| [dB]")
     ax.set_title(title)
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

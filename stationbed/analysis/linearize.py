@@ -297,6 +297,23 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
     return Linearization(ss, t, q_RO, z0, np.r_[v0, d0], zd.ravel(), trim_torque, tea, modal)
 
 
+def modal_poles(A, modal_states) -> np.ndarray:
+    """The poles of ``A`` that belong to the flexible arrays: for each eigenvalue of the modal block
+    alone (the arrays on a clamped hub) in the upper half plane, the nearest pole of ``A`` (the
+    hub's freedom moves it from the clamped to the free-hub frequency) and its conjugate."""
+    if not modal_states:
+        return np.zeros(0, complex)
+    poles = list(np.linalg.eigvals(A))
+    out = []
+    for lam in np.linalg.eigvals(A[np.ix_(modal_states, modal_states)]):
+        if lam.imag <= 0 or not poles:
+            continue
+        j = int(np.argmin([abs(p - lam) for p in poles]))
+        p = poles.pop(j)
+        out += [p, np.conj(p)]
+    return np.array(out)
+
+
 def quat_conj_np(q):
     return np.array([q[0], -q[1], -q[2], -q[3]])
 

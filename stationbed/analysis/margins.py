@@ -10,9 +10,8 @@ its gain, phase and disk margins (``stability_margins``, ``disk_margins``), the 
 The zero-order hold of the controller period is not in these loops (its half-period delay costs
 ``ω T / 2`` rad of phase at ω; 0.03 deg at 0.005 rad/s and 10 Hz).
 
-A structural mode inside the control bandwidth is flagged: an open-loop pole pair whose
-eigenvector lies mostly (> 1/2 of its norm) in the modal coordinates, below the largest channel
-bandwidth.
+A structural mode inside the control bandwidth is flagged: an array mode's open-loop pole pair
+(:func:`~.linearize.modal_poles`) below the largest channel bandwidth.
 """
 
 from __future__ import annotations
@@ -30,15 +29,13 @@ from ..run.system import build_system
 from ..model import Structure
 from ..model.environment import q_ON
 from ..core.rotation import quat_mult
-from .linearize import linearization, plant_functions
+from .linearize import linearization, modal_poles, plant_functions
 
 __all__ = ["LoopAnalysis", "loop_analysis", "loop_margins", "settling_time", "frequency_grid"]
 
 #: An entry of A or K is structurally zero when below this fraction of its row's largest entry
 #: (the steering law cancels the gimbal angles' effect on the body to ~1e-17 relative: round-off).
 STRUCTURAL_ZERO = 1e-12
-#: Share of an eigenvector's norm in the modal coordinates that makes a pole a structural mode.
-MODAL_SHARE = 0.5
 
 
 def frequency_grid(A) -> np.ndarray:
@@ -141,6 +138,7 @@ class LoopAnalysis:
     structural_in_band: list = field(default_factory=list)
     controller: object = None
     loop_states: list = field(default_factory=list)  # the states the per-channel loops keep
+    pole_states: list = field(default_factory=list)  # per pole: the state its eigenvector is largest in
 
 
 def _controller_reference(ctrl, pf, scene, p, t, z_guess):
@@ -232,14 +230,19 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
             "disk_phase_margin_deg": float(dpm), "bandwidth_rad_s": bw,
             "sensitivity_peak": float(np.abs(S).max()), "sensitivity_peak_rad_s": float(w[np.argmax(np.abs(S))]),
         })
-    open_poles, vecs = np.linalg.eig(A)
-    flagged = []
+    open_poles = np.linalg.eigvals(A)
     bw_max = max((c["bandwidth_rad_s"] for c in channels if math.isfinite(c["bandwidth_rad_s"])), default=0.0)
-    if lin.modal_states:
-        mi = lin.modal_states
-        for lam, vv in zip(open_poles, vecs.T):
-            share = np.linalg.norm(vv[mi]) / np.linalg.norm(vv)
-            if lam.imag > 0 and share > MODAL_SHARE and abs(lam) < bw_max:
-                flagged.append(float(abs(lam)))
-    return LoopAnalysis(P, K, closed, loops, channels, np.linalg.eigvals(Acl), open_poles, flagged, controller,
-                        [pf["states"][j] for j in keep])
+    flagged = [float(abs(m)) for m in modal_poles(A, lin.modal_states) if m.imag > 0 and abs(m) < bw_max]
+    # A[keep, drop] = 0 (structurally): the closed loop is block triangular, its poles those of the
+    # two diagonal blocks (computed apart: the repeated zero poles of the dropped states, e.g. gimbal
+    # angles, would otherwise split by round-off into ±ε^(1/k) pairs)
+    drop = np.setdiff1d(np.arange(A.shape[0]), keep)
+    poles, where = [], []
+    for idx in (keep, drop):
+        if idx.size:
+            lam, vec = np.linalg.eig(Acl[np.ix_(idx, idx)])
+            poles += list(lam)
+            where += [pf["states"][idx[int(np.argmax(np.abs(v)))]] for v in vec.T]
+    poles = np.array(poles)
+    return LoopAnalysis(P, K, closed, loops, channels, poles, open_poles, flagged, controller,
+                        [pf["states"][j] for j in keep], where)
