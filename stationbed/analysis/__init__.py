@@ -1,4 +1,4 @@
-"""Control-design analysis: linear plants of a scene (:mod:`.linearize`), the design plants of
+"""Control-design analysis: linear plants of a scene (:mod:`.plant`), the design plants of
 the shipped laws (:mod:`.design`), loop margins of a controller's symbolic form
 (:mod:`.margins`), run dashboards and comparisons (:mod:`.dashboard`, :mod:`.compare`) and their
 commands (:mod:`.cli`).
@@ -11,11 +11,11 @@ command line can register its parsers without importing casadi.
 import importlib as _importlib
 
 _LAZY = {
-    "Linearization": "linearize",
-    "OperatingPoint": "linearize",
-    "linearization": "linearize",
-    "linearize": "linearize",
-    "tea_search": "linearize",
+    "Linearization": "plant",
+    "OperatingPoint": "plant",
+    "linearization": "plant",
+    "linearize": "plant",
+    "tea_search": "plant",
     "LoopAnalysis": "margins",
     "loop_analysis": "margins",
 }

@@ -72,7 +72,7 @@ def _linearize(args) -> int:
 
     from ..scene import load_scene
     from . import figures
-    from .linearize import linearize
+    from .plant import linearize
 
     scene = load_scene(args.scene)
     out = args.out or _default_out(scene, "linearize")
@@ -105,7 +105,7 @@ def _linearize(args) -> int:
     pairs = [(i, i, f"{sys.input_labels[i]} → {sys.output_labels[i]}") for i in range(min(nv, 3))] if args.command == "torque" else []
     figures.bode_png(out / "bode.png", sys, pairs or [(0, 0, f"{sys.input_labels[0]} → {sys.output_labels[0]}")],
                      f"{title}: control torque to attitude error", "rad/(N m)")
-    from .linearize import modal_poles
+    from .plant import modal_poles
 
     modal = modal_poles(sys.A, lin.modal_states)
     figures.pole_zero_png(out / "pole_zero.png", poles, zeros, title, modal)

@@ -1,5 +1,5 @@
 """Design plants for the shipped laws: the rigid station a controller knows from its
-:class:`~stationbed.run.controller.Plant` facts, linearised by :func:`~.linearize.linearization`
+:class:`~stationbed.run.controller.Plant` facts, linearised by :func:`~.plant.linearization`
 (the one linearisation in the project, on the simulator's own equations).
 
 A controller knows the plant's inertia about O and the orbital rate; the rigid equivalent is a
@@ -14,7 +14,7 @@ import numpy as np
 
 from ..core.constants import MU_EARTH_M3_S2
 from ..scene import scene_from_dict
-from .linearize import Linearization, linearization
+from .plant import Linearization, linearization
 
 __all__ = ["rigid_scene", "design_linearization"]
 
@@ -43,7 +43,7 @@ def rigid_scene(inertia_O_B, mean_motion: float, *, gravity_gradient: bool = Tru
 
 def design_linearization(inertia_O_B, mean_motion: float, about="lvlh", *, q_ref=(1.0, 0.0, 0.0, 0.0),
                          gravity_gradient: bool = True, cmg: bool = False, trim: bool = True) -> Linearization:
-    """:func:`~.linearize.linearization` of :func:`rigid_scene` (states ``θ, δω`` and, with
+    """:func:`~.plant.linearization` of :func:`rigid_scene` (states ``θ, δω`` and, with
     ``cmg``, ``h``; inputs: the body torque, then the disturbance torque)."""
     scene = rigid_scene(inertia_O_B, mean_motion, gravity_gradient=gravity_gradient, cmg=cmg)
     return linearization(scene, about, q_ref=q_ref, trim=trim)

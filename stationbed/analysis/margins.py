@@ -11,7 +11,7 @@ The zero-order hold of the controller period is not in these loops (its half-per
 ``ω T / 2`` rad of phase at ω; 0.03 deg at 0.005 rad/s and 10 Hz).
 
 A structural mode inside the control bandwidth is flagged: an array mode's open-loop pole pair
-(:func:`~.linearize.modal_poles`) below the largest channel bandwidth.
+(:func:`~.plant.modal_poles`) below the largest channel bandwidth.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from ..run.system import build_system
 from ..model import Structure
 from ..model.environment import q_ON
 from ..core.rotation import quat_mult
-from .linearize import linearization, modal_poles, plant_functions
+from .plant import linearization, modal_poles, plant_functions
 
 __all__ = ["LoopAnalysis", "loop_analysis", "loop_margins", "settling_time", "frequency_grid"]
 
