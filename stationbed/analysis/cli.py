@@ -101,13 +101,13 @@ def _linearize(args) -> int:
     if lin.tea_theta is not None:
         text["tea_deg"] = np.degrees(lin.tea_theta).tolist()
     (out / "poles_zeros.json").write_text(json.dumps(text, indent=1) + "\n")
+    from .plant import modal_poles
+
+    modal = modal_poles(sys.A, lin.modal_states)
     title = f"{scene.name} about {args.about}"
     pairs = [(i, i, f"{sys.input_labels[i]} → {sys.output_labels[i]}") for i in range(min(nv, 3))] if args.command == "torque" else []
     figures.bode_png(out / "bode.png", sys, pairs or [(0, 0, f"{sys.input_labels[0]} → {sys.output_labels[0]}")],
                      f"{title}: control torque to attitude error", "rad/(N m)")
-    from .plant import modal_poles
-
-    modal = modal_poles(sys.A, lin.modal_states)
     figures.pole_zero_png(out / "pole_zero.png", poles, zeros, title, modal)
     print(f"{scene.name}: linear plant about {args.about} at t = {lin.t:g} s: {sys.nstates} states, "
           f"{sys.ninputs} inputs ({nv} control, 3 disturbance), {sys.noutputs} outputs")
@@ -115,12 +115,18 @@ def _linearize(args) -> int:
     if lin.tea_theta is not None:
         print("  TEA (θ relative to LVLH) [deg]: " + ", ".join(f"{v:.4f}" for v in np.degrees(lin.tea_theta)))
     if lin.trim_torque is not None:
-        print("  torque that holds the point [N m]: " + ", ".join(f"{v:.4g}" for v in lin.trim_torque))
-    print("  poles [rad/s]:")
-    for s in _poles_text(poles):
-        print("    " + s)
+        print("  torque that holds the point [N m]: " + ", ".join(f"{v:.4g}" for v in lin.trim_torque)
+              + (" (beyond the cluster's limits: linearised at zero command)" if lin.trim_limited else ""))
+    tiny = 1e-9 * max(1.0, float(np.abs(poles).max()))
+    small = [p for p in poles if abs(p) < tiny]
+    print(f"  poles [rad/s] ({len(small)} within {tiny:.0e} of 0: states nothing pulls back, e.g. gimbal angles):")
+    for s, p in zip(_poles_text([p for p in poles if abs(p) >= tiny]), sorted([p for p in poles if abs(p) >= tiny and p.imag >= 0], key=lambda s: (abs(s), s.imag))):
+        mark = "   (array mode)" if any(abs(p - m) < 1e-12 * abs(m) for m in modal) else ""
+        print("    " + s + mark)
     for k, z in zeros.items():
-        print(f"  zeros {k}: " + (", ".join(_fmt_pole(complex(v)) for v in sorted(z, key=abs) if v.imag >= 0) or "none"))
+        z = [v for v in sorted(z, key=abs) if v.imag >= 0 and abs(v) >= tiny]
+        print(f"  zeros {k}:")
+        print("    " + ("\n    ".join(_fmt_pole(complex(v)) for v in z) or "none"))
     print(f"  wrote {out}/plant.npz, poles_zeros.json, bode.png, pole_zero.png")
     return 0
 
@@ -159,8 +165,13 @@ def _margins(args) -> int:
     if len(shown) > 14:
         print(f"    ... {len(la.poles)} in all (margins.json)")
     unstable = [(p, s) for p, s in zip(la.poles, la.pole_states) if p.real > 1e-9 * max(1.0, float(np.abs(la.poles).max()))]
-    if unstable:
-        print("  UNSTABLE closed-loop poles: " + ", ".join(f"{_fmt_pole(complex(p))} (mostly {s})" for p, s in unstable))
+    inside = [(p, s) for p, s in unstable if s in la.loop_states]
+    outside = [(p, s) for p, s in unstable if s not in la.loop_states]
+    if inside:
+        print("  UNSTABLE closed-loop poles: " + ", ".join(f"{_fmt_pole(complex(p))} (mostly {s})" for p, s in inside))
+    if outside:
+        print("  slow drift of states the attitude loop does not see (no feedback on them): "
+              + ", ".join(f"{_fmt_pole(complex(p))} ({s})" for p, s in outside))
     if la.structural_in_band:
         print("  WARNING structural mode(s) inside the control bandwidth: " + ", ".join(f"{w:.3g} rad/s" for w in la.structural_in_band))
     else:

@@ -81,6 +81,8 @@ class Linearization:
     u0: np.ndarray  # the inputs at the point (control trim, then zero disturbance)
     zdot0: np.ndarray  # ż at (z0, u0): zero at an equilibrium
     trim_torque: np.ndarray | None  # the body torque that holds R (torque command only) [N m]
+    #: the actuator could not deliver trim_torque (a CMG limit): linearised at zero command instead
+    trim_limited: bool = False
     tea_theta: np.ndarray | None = None  # about="tea": θ of the TEA relative to LVLH [rad]
     modal_states: list = field(default_factory=list)  # indices of η, η̇ in z
 
@@ -137,11 +139,13 @@ def plant_functions(scene, command: str = "torque"):
     w = dw + w_R_B
     xe = z[6:]
     x = form.state(t, q_BN, w, xe, p)
+    limited = ca.SX(0.0)
     if cmg is None:
         u = d + v
     else:
         fname = "actuate_rates" if command == "gimbal_rates" else "actuate"
         act = system.sx[fname](t, x, v, p)
+        limited = act[model.nu_cmg + 1]  # (u, singularity, limited, saturated): the limited flag
         u = ca.vertcat(d, act[0 : model.nu_cmg])
     if model.has_steps:
         u = ca.vertcat(u, t)
@@ -181,7 +185,8 @@ def plant_functions(scene, command: str = "torque"):
     names_y = names_z[0:6] + (["h_x", "h_y", "h_z"] if cmg is not None else [])
     out = {
         "F": F, "jac": jac, "system": system, "states": names_z, "controls": names_v, "disturbances": names_d,
-        "outputs": names_y, "x_of_z": x_of_z, "nz": nz, "ne": ne, "nm": nm, "model": model,
+        "outputs": names_y, "x_of_z": x_of_z,
+        "limited": ca.Function("limited", [t, z, v, q_RO, p], [limited]), "nz": nz, "ne": ne, "nm": nm, "model": model,
     }
     _PLANTS[key] = out
     return out
@@ -280,12 +285,17 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
     args = lambda v: (t, z0, v, d0, q_RO, p)  # noqa: E731
     zd, A, Bv, Bd, C, _ = (np.array(m) for m in pf["jac"](*args(v0)))
     trim_torque = None
+    trim_limited = False
     if trim and command == "torque" and not given:
         # the body torque that holds the point: δω̇ is affine in the torque (the steering law
         # delivers the command to the body), one Newton step solves it
-        v0 = -np.linalg.solve(Bv[3:6], zd.ravel()[3:6])
-        trim_torque = v0.copy()
-        zd, A, Bv, Bd, C, _ = (np.array(m) for m in pf["jac"](*args(v0)))
+        v_trim = -np.linalg.solve(Bv[3:6], zd.ravel()[3:6])
+        trim_torque = v_trim.copy()
+        if float(pf["limited"](t, z0, v_trim, q_RO, p)) > 0.5:
+            trim_limited = True  # the limit's scaling is not the plant's small-signal gain: stay at 0
+        else:
+            v0 = v_trim
+            zd, A, Bv, Bd, C, _ = (np.array(m) for m in pf["jac"](*args(v0)))
     import control
 
     B = np.hstack([Bv, Bd])
@@ -294,7 +304,7 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
                     name=f"{scene.name}_plant")
     nmod = pf["nm"]
     modal = list(range(6 + pf["ne"], 6 + pf["ne"] + 2 * nmod))
-    return Linearization(ss, t, q_RO, z0, np.r_[v0, d0], zd.ravel(), trim_torque, tea, modal)
+    return Linearization(ss, t, q_RO, z0, np.r_[v0, d0], zd.ravel(), trim_torque, trim_limited, tea, modal)
 
 
 def modal_poles(A, modal_states) -> np.ndarray:
