@@ -5,7 +5,7 @@ reference (``att_err_x/y/z_deg``), body rate, CMG momentum with its fraction of 
 angles, gimbal rates, torque command, array sun-tracking error, array modal coordinates, and every
 other ``tau_*`` column (disturbance torques a scene models: ``tau_aero_*``, ...; whatever the
 name after ``tau_``). Rows flagged ``cmg_saturated`` are marked by red ticks along the top of every
-panel.
+panel (a gimbal-rate limit or momentum saturation since the previous row).
 """
 
 from __future__ import annotations
@@ -59,6 +59,8 @@ def _groups(tr: Trajectory, meta: dict) -> list[tuple[str, list]]:
     elif has("att_err_deg"):
         out.append(("attitude error to the reference [deg]", [("att_err_deg", "total", 1)]))
     out.append(("body rate ω_BN_B [deg/s]", [("wx", "x", deg), ("wy", "y", deg), ("wz", "z", deg)]))
+    if not has("att_err_deg"):  # open loop: the momentum (conserved without external torque)
+        out.append(("angular momentum H_O, inertial [N m s]", [("HNx", "x", 1), ("HNy", "y", 1), ("HNz", "z", 1)]))
     if has("hx"):
         out.append(("CMG momentum h (B) [N m s]", [("hx", "x", 1), ("hy", "y", 1), ("hz", "z", 1), ("|h|", "|h|", 1)]))
     gim = [c for c in tr.columns if c.startswith("gimbal_") and not c.endswith("_rate")]
@@ -88,9 +90,9 @@ def dashboard(outdir, png=None) -> Path:
     png = Path(png) if png is not None else Path(outdir) / "dashboard.png"
     summ = meta.get("summary", {})
     groups = _groups(tr, meta)
-    ncol = 2
+    ncol = 1 if len(groups) == 1 else 2
     nrow = math.ceil(len(groups) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(15, 3.1 * nrow + 0.9), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(7.5 * ncol, 3.1 * nrow + 0.9), sharex=True, squeeze=False)
     div, tlabel = time_axis(float(tr.t[-1]))
     t = tr.t / div
     sat = tr["cmg_saturated"] > 0.5 if "cmg_saturated" in tr.columns else np.zeros(len(tr), bool)
@@ -110,7 +112,7 @@ def dashboard(outdir, png=None) -> Path:
             ax2.set_ylabel("|h| as % of capacity")
         if sat.any():
             ax.plot(t[sat], np.full(sat.sum(), 1.0), "|", color="tab:red", ms=8, transform=ax.get_xaxis_transform(),
-                    label="CMG saturated")
+                    label="CMG limit (rate or momentum)")
         ax.set_title(title, fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, ncol=min(4, len(lines) + int(sat.any())), loc="best")
@@ -129,7 +131,7 @@ def dashboard(outdir, png=None) -> Path:
                      ("momentum_saturated_ticks", "saturated ticks {}")):
         if summ.get(key) is not None:
             facts.append(fmt.format(summ[key]))
-    fig.suptitle(f"{name}{ctrl}: " + "; ".join(facts), fontsize=11)
+    fig.suptitle(f"{name}{ctrl}" + (": " + "; ".join(facts) if facts else ""), fontsize=11)
     fig.tight_layout()
     fig.savefig(png, dpi=100)
     plt.close(fig)

@@ -192,11 +192,11 @@ def plant_functions(scene, command: str = "torque"):
     return out
 
 
-def _default_z0(scene, pf, p, t, q_RO, theta):
-    """The analysis state at the point: θ, zero δω, the scene's extra states at t = 0, η = η̇ = 0."""
+def _default_z0(scene, pf, p):
+    """The analysis state at the point: θ = 0, δω = 0, the scene's extra states at t = 0 (CMG,
+    joints: the run's initial ones), η = η̇ = 0."""
     model = pf["model"]
     z0 = np.zeros(pf["nz"])
-    z0[0:3] = theta
     xe = model.initial_extra(scene, np.array([1.0, 0.0, 0.0, 0.0]), p)
     z0[6 : 6 + pf["ne"]] = xe[0 : pf["ne"]]
     return z0
@@ -251,7 +251,6 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
     p = model.params(scene)
     q_RO = np.asarray(q_ref, float)
     q_RO = q_RO / np.linalg.norm(q_RO)
-    theta = np.zeros(3)
     tea = None
     z0 = None
     if isinstance(about, OperatingPoint):
@@ -263,19 +262,19 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
             q_RO = quat_mult_np(quat_conj_np(np.asarray(q_ON(o.u0 + o.mean_motion * t, o.inclination), float)), q_BN)
         else:
             q_RO = q_BN
-        z0 = _default_z0(scene, pf, p, t, q_RO, theta)
+        z0 = _default_z0(scene, pf, p)
         if about.xe is not None:
             z0[6:] = np.asarray(about.xe, float)
         n = 0.0 if scene.orbit is None else scene.orbit.mean_motion
         z0[3:6] = np.asarray(about.omega_BN_B, float) - dcm(q_RO) @ np.array([0.0, -n, 0.0])
     elif about == "tea":
-        z0 = _default_z0(scene, pf, p, t, q_RO, theta)
+        z0 = _default_z0(scene, pf, p)
         q_RO = np.array([1.0, 0.0, 0.0, 0.0])
         tea, eta = tea_search(pf, scene, p, z0, t)
         z0[0:3] = tea
         z0[6 + pf["ne"] : 6 + pf["ne"] + pf["nm"]] = eta
     elif about == "lvlh":
-        z0 = _default_z0(scene, pf, p, t, q_RO, theta)
+        z0 = _default_z0(scene, pf, p)
     else:
         raise ValueError(f"about = {about!r}: expected 'lvlh', 'tea' or an OperatingPoint")
     nv = len(pf["controls"])
