@@ -109,7 +109,8 @@ def _linearize(args) -> int:
     figures.bode_png(out / "bode.png", sys, pairs or [(0, 0, f"{sys.input_labels[0]} → {sys.output_labels[0]}")],
                      f"{title}: control torque to attitude error", "rad/(N m)")
     figures.pole_zero_png(out / "pole_zero.png", poles, zeros, title, modal)
-    print(f"{scene.name}: linear plant about {args.about} at t = {lin.t:g} s: {sys.nstates} states, "
+    where = args.about if scene.orbit is not None else "N (no orbit: R fixed in N)"
+    print(f"{scene.name}: linear plant about {where} at t = {lin.t:g} s: {sys.nstates} states, "
           f"{sys.ninputs} inputs ({nv} control, 3 disturbance), {sys.noutputs} outputs")
     print("  states: " + ", ".join(sys.state_labels))
     if lin.tea_theta is not None:
