@@ -303,3 +303,19 @@ period = 0.5
     row = next(line for line in table.splitlines() if line.startswith("max_att_err_deg"))
     assert float(row.split()[-1]) == pytest.approx(s["max_att_err_deg"], rel=1e-3)  # the table's 4 digits
     assert main(["plot", str(tmp_path / "nowhere")]) == 2  # a one-line error, not a traceback
+
+
+@pytest.mark.parametrize("bandwidth, flagged", [(0.05, False), (3.0, True)], ids=["below_mode", "above_mode"])
+def test_structural_mode_inside_the_bandwidth_is_flagged(bandwidth, flagged):
+    """The array mode (free-hub ω_f ≈ 1.29 rad/s) is flagged when the pd's bandwidth (≈ ω_n) lies
+    above it, not when it lies 25x below; the flagged frequency is that mode's."""
+    d = flexible_scene().model_dump()
+    d["controller"] = {"name": "pd", "period": 0.01, "params": {"reference": "inertial", "bandwidth": bandwidth, "damping": 0.7}}
+    d["simulation"].pop("step", None)
+    la = loop_analysis(scene_from_dict(d))
+    I = np.array(HUB_J) + np.array(ARRAY_J)
+    D = np.array(H_HAT)
+    wf = 2 * math.pi * F_CLAMPED_HZ * math.sqrt(MODAL_MASS / (MODAL_MASS - D @ np.linalg.solve(I, D)))
+    assert bool(la.structural_in_band) == flagged
+    if flagged:
+        assert la.structural_in_band[0] == pytest.approx(wf, rel=1e-6)
