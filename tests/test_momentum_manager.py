@@ -190,6 +190,19 @@ def test_station_flies_the_tea_of_its_averaged_torques(mm_run, orbits):
     assert np.linalg.norm(tau_mean) < 1e-3 * u_lvlh
 
 
+@pytest.mark.slow
+def test_linearize_tea_is_the_attitude_the_station_flies(mm_run):
+    """stationbed.linearize(scene, "tea") on the full scene (sun-tracking arrays on their targets
+    over the orbit, the aero bias, DGCMGs) finds the attitude the momentum manager settles at: the
+    average over the last orbit of the 10-orbit run, to TEA_TOL_DEG (measured 0.003 deg after 5
+    orbits)."""
+    from stationbed.analysis import linearize
+
+    scene, tr = mm_run
+    tea = np.degrees(linearize(scene, "tea").linearization.tea_theta)
+    assert_allclose(tea, tr.meta["summary"]["mm_tea_found_deg"], atol=TEA_TOL_DEG)
+
+
 def test_pd_override_saturates_the_cmgs():
     """The documented override: the same scene with `pd` holding LVLH. LVLH needs ~20 N m
     steadily, which fills 4 x 4760 N m s in well under an orbit: the run reports saturation."""

@@ -23,9 +23,10 @@ circular orbit), ``ω̇ = ∂ω/∂x ẋ + ∂ω/∂t`` from the formulation's `
 
 Time-varying terms (arrays turning, orbital harmonics, the orbit's position) are **frozen at the
 chosen time** ``t``: the plant is the tangent of the equations at that instant, not an average.
-The torque-equilibrium attitude (``about="tea"``) is the root of the torque averaged over one
-orbit (24 instants) with zero rates relative to LVLH, the extra states at their values at ``t``
-and the arrays undeformed; it is found by Newton on the same expressions, not assumed.
+The torque-equilibrium attitude (``about="tea"``) is the root of the external and gyroscopic torque
+``Ḣ_B = L - ω × H`` averaged over one orbit (24 instants) with zero rates relative to LVLH and the
+extra states at their values at ``t`` (the modal coordinates solved with it); it is found by Newton
+on the same expressions, not assumed.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import numpy as np
 
 from ..core.rotation import dcm, quat_mult
 from ..model import Structure
+from ..model.appendages import profile
 from ..model.environment import q_ON
 from ..run.system import build_system
 
@@ -158,8 +160,10 @@ def plant_functions(scene, command: str = "torque"):
     if nm:
         etad = form.modal_rates(t, xs, p)
         derivs.append(ca.jtimes(etad, xs, xdot_s) + ca.jacobian(etad, t))
+    H_s = form.H_O_B(t, xs, p)
+    derivs.append(ca.jtimes(H_s, xs, xdot_s) + ca.jacobian(H_s, t))  # Ḣ_B: external + gyroscopic only
     D = ca.Function("derivs", [t, xs, us, p], derivs)(t, x, u, p)
-    xdot, w_dot = D[0], D[1]
+    xdot, w_dot, H_dot = D[0], D[1], D[-1]
     parts = [qw * dw + ca.cross(e, dw), w_dot + ca.cross(dw, w_R_B), xdot[7 : 7 + ne + nm]]
     if nm:
         parts.append(D[2])
@@ -186,7 +190,9 @@ def plant_functions(scene, command: str = "torque"):
     out = {
         "F": F, "jac": jac, "system": system, "states": names_z, "controls": names_v, "disturbances": names_d,
         "outputs": names_y, "x_of_z": x_of_z,
-        "limited": ca.Function("limited", [t, z, v, q_RO, p], [limited]), "nz": nz, "ne": ne, "nm": nm, "model": model,
+        "limited": ca.Function("limited", [t, z, v, q_RO, p], [limited]),
+        "H_dot": ca.Function("H_dot", [t, z, v, d, q_RO, p], [H_dot]),
+        "inertia": ca.Function("inertia", [t, z, q_RO, p], [system.sx["inertia"](t, x, p)]), "nz": nz, "ne": ne, "nm": nm, "model": model,
     }
     _PLANTS[key] = out
     return out
@@ -202,27 +208,69 @@ def _default_z0(scene, pf, p):
     return z0
 
 
-def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
-    """θ of the torque-equilibrium attitude relative to LVLH [rad] (Newton from LVLH).
+def _tracking_extras(model, t, theta, ext, p, n):
+    """The extra states with every sun-tracking joint on its target (angle and rate) for a station
+    at ``θ`` relative to LVLH at rest in LVLH, at time ``t`` (casadi): what the drives follow."""
+    ext = [ext[i] for i in range(ext.numel())]
+    if not model.driven:
+        return ca.vertcat(*ext) if ext else ca.SX(0, 1)
+    radius, incl, u0, _ = (p[model.layout["orbit"]][i] for i in range(4))
+    e = theta / 2
+    q_BO = ca.vertcat(ca.sqrt(1.0 - ca.dot(e, e)), e)
+    q_BN = quat_mult(q_ON(u0 + n * t, incl), q_BO)
+    w_B = ca.mtimes(dcm(q_BO), ca.vertcat(0.0, -n, 0.0))
+    xe = ca.vertcat(*ext)
+    for k in sorted({k for k, _, _ in model.driven}):
+        offs = {j: off for kk, j, off in model.driven if kk == k}
+        if "alpha" in offs:
+            ((Y, X), a_rate), _ = model._driven_targets(k, q_BN, xe, p, w_B, 0.0, 0.0)  # α* needs no α
+            alpha = ca.atan2(Y, X)
+            ext[offs["alpha"]], ext[offs["alpha"] + 1] = alpha, a_rate
+        else:
+            alpha, a_rate, _ = profile(t, p[model.layout[f"alpha{k}"]], model.structure.joints[k][0][1])
+        if "beta" in offs:
+            _, ((Yb, Xb), b_rate) = model._driven_targets(k, q_BN, xe, p, w_B, alpha, a_rate)
+            ext[offs["beta"]], ext[offs["beta"] + 1] = ca.atan2(Yb, Xb), b_rate
+    return ca.vertcat(*ext)
 
-    Unknowns: θ and the modal coordinates η; residual: ``δω̇`` (scaled by 1/n²) and ``η̈``,
-    averaged over :data:`TEA_SAMPLES` instants of one orbit from ``t``, with zero rates and
-    zero control.
+
+def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
+    """θ of the torque-equilibrium attitude relative to LVLH [rad] (Newton from LVLH), and the
+    modal coordinates η there.
+
+    A station fixed in LVLH whose motion is periodic over the orbit has a periodic ``H_B``: the
+    mean of ``Ḣ_B = L - ω × H`` over the orbit is zero. That is the residual (the formulation's
+    ``H_O_B`` differentiated along its own ``ẋ``: external and gyroscopic torques only, so array
+    drives and other internal exchanges, which average out, do not bias it), with zero rates
+    relative to LVLH and zero control, at :data:`TEA_SAMPLES` instants of one orbit from ``t``,
+    scaled by ``I⁻¹ / n²`` (dimensionless); the modal accelerations ``η̈ / n²`` (averaged) give η.
+    Sun-tracking joints sit on their targets at each instant (:func:`_tracking_extras`), so the
+    arrays turn over the orbit as they do in flight; the other extra states keep their values.
     """
     if scene.orbit is None:
         raise ValueError("about = 'tea' needs an [orbit] (a torque-equilibrium attitude is relative to LVLH)")
-    n = scene.orbit.mean_motion
-    nz, ne, nm = pf["nz"], pf["ne"], pf["nm"]
-    unk = ca.SX.sym("unk", 3 + nm)
-    zs = ca.vertcat(unk[0:3], ca.DM.zeros(3), ca.DM(z0[6 : 6 + ne]), unk[3:], ca.DM.zeros(nm))
-    nv = len(pf["controls"])
-    ts = t + np.arange(TEA_SAMPLES) * (2 * math.pi / n / TEA_SAMPLES)
-    res = 0
-    for tk in ts:
-        zd = pf["F"](tk, zs, ca.DM.zeros(nv), ca.DM.zeros(3), ca.DM(q_RO), ca.DM(p))
-        res = res + ca.vertcat(zd[3:6] / n**2, zd[6 + ne + nm :] / n**2)
-    res = res / TEA_SAMPLES
-    G = ca.Function("G", [unk], [res, ca.jacobian(res, unk)])
+    ne, nm = pf["ne"], pf["nm"]
+    q_RO = ca.DM(q_RO)
+    if "tea_G" not in pf:  # the residual as a function of (θ, η; t, extras, p, I⁻¹), built once
+        model = pf["model"]
+        unk = ca.SX.sym("unk", 3 + nm)
+        t0, ext0 = ca.SX.sym("t0"), ca.SX.sym("ext0", ne)
+        pp, I_inv = ca.SX.sym("p", model.layout.size), ca.SX.sym("I_inv", 3, 3)
+        n = pp[model.layout["orbit"]][3]
+        nv = len(pf["controls"])
+        res = 0
+        for k in range(TEA_SAMPLES):
+            tk = t0 + k * (2 * math.pi / TEA_SAMPLES) / n
+            zs = ca.vertcat(unk[0:3], ca.SX.zeros(3), _tracking_extras(model, tk, unk[0:3], ext0, pp, n), unk[3:], ca.SX.zeros(nm))
+            args = (tk, zs, ca.SX.zeros(nv), ca.SX.zeros(3), q_RO, pp)
+            parts = [ca.mtimes(I_inv, pf["H_dot"](*args)) / n**2]
+            if nm:
+                parts.append(pf["F"](*args)[6 + ne + nm :] / n**2)
+            res = res + ca.vertcat(*parts)
+        res = res / TEA_SAMPLES
+        pf["tea_G"] = ca.Function("tea_G", [unk, t0, ext0, pp, I_inv], [res, ca.jacobian(res, unk)], {"cse": True})
+    I_inv = np.linalg.inv(np.array(pf["inertia"](t, z0, q_RO, ca.DM(p))))
+    G = lambda x: pf["tea_G"](x, t, z0[6 : 6 + ne], p, I_inv)  # noqa: E731
     xk = np.zeros(3 + nm)
     for _ in range(60):
         g, Jg = (np.array(v) for v in G(xk))
@@ -272,6 +320,9 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
         q_RO = np.array([1.0, 0.0, 0.0, 0.0])
         tea, eta = tea_search(pf, scene, p, z0, t)
         z0[0:3] = tea
+        ne = pf["ne"]  # the sun-tracking joints on their targets at t, as in the search
+        ext = _tracking_extras(pf["model"], float(t), ca.DM(tea), ca.DM(z0[6 : 6 + ne]), ca.DM(p), scene.orbit.mean_motion)  # noqa: E501
+        z0[6 : 6 + ne] = np.array(ca.evalf(ext)).ravel() if ne else z0[6:6]
         z0[6 + pf["ne"] : 6 + pf["ne"] + pf["nm"]] = eta
     elif about == "lvlh":
         z0 = _default_z0(scene, pf, p)
