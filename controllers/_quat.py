@@ -69,3 +69,33 @@ def error_angle(q_err) -> float:
     """Principal angle [rad] of an error quaternion."""
     s = math.sqrt(q_err[1] ** 2 + q_err[2] ** 2 + q_err[3] ** 2)
     return 2.0 * math.atan2(s, abs(q_err[0]))
+
+
+def lvlh_error(q_BN, omega_BN_B, q_RN, w_RN_R):
+    """``(theta, domega)`` of the design model from a measurement, on floats (runs every tick).
+
+    ``q_BR = conj(q_RN) ⊗ q_BN`` with its scalar part made ≥ 0 (the short way round),
+    ``theta = 2 vec(q_BR)`` [rad], ``domega = omega_BN_B - C_BR omega_RN_R`` [rad/s].
+    """
+    qw, qx, qy, qz = q_BN
+    rw, rx, ry, rz = q_RN
+    ew = rw * qw + rx * qx + ry * qy + rz * qz
+    ex = rw * qx - rx * qw - ry * qz + rz * qy
+    ey = rw * qy + rx * qz - ry * qw - rz * qx
+    ez = rw * qz - rx * qy + ry * qx - rz * qw
+    if ew < 0.0:
+        ew, ex, ey, ez = -ew, -ex, -ey, -ez
+    vx, vy, vz = w_RN_R
+    # C_BR v = v - w t + e × t, t = 2 e × v (controllers/_quat.rotate, inlined)
+    tx = 2.0 * (ey * vz - ez * vy)
+    ty = 2.0 * (ez * vx - ex * vz)
+    tz = 2.0 * (ex * vy - ey * vx)
+    wx, wy, wz = omega_BN_B
+    return (
+        2.0 * ex,
+        2.0 * ey,
+        2.0 * ez,
+        wx - (vx - ew * tx + (ey * tz - ez * ty)),
+        wy - (vy - ew * ty + (ez * tx - ex * tz)),
+        wz - (vz - ew * tz + (ex * ty - ey * tx)),
+    )

@@ -1,10 +1,11 @@
 """``lqr``: linear-quadratic regulator about an LVLH-fixed attitude, with gravity gradient.
 
-Design (once, in ``reset``): the rigid-station model of :mod:`controllers._linear` (the plant's
-inertia about O, gravity gradient ``3 n² R̂_B × I R̂_B``, the reference frame R fixed in LVLH,
-which turns at ``(0, -n, 0)``) with state ``x = (θ, δω)``: ``θ = 2 vec(q_BR)`` [rad] and
-``δω = ω_BN_B - C_BR ω_RN_R`` [rad/s]; input the body control torque ``u`` [N m]. ``A, B`` are the
-casadi Jacobians (``ca.jacobian``) at ``x = 0``; ``K`` comes from python-control
+Design (once, in ``reset``): the rigid station of the plant facts (its inertia about O on a
+circular orbit of the plant's mean motion, gravity gradient as the scene says: the simulator's own
+equations, :func:`stationbed.analysis.design.design_linearization`), linearised about the reference
+frame R fixed in LVLH (which turns at ``(0, -n, 0)``) with state ``x = (θ, δω)``:
+``θ = 2 vec(q_BR)`` [rad] and ``δω = ω_BN_B - C_BR ω_RN_R`` [rad/s]; input the body control torque
+``u`` [N m]. ``A, B`` are the casadi Jacobians (``ca.jacobian``) at ``x = 0``; ``K`` comes from python-control
 (``control.lqr(control.ss(A, B, I, 0), Q, R)``) with Bryson weights
 ``Q = diag(1/θ_max², 1/ω_max²)``, ``R = 1/τ_max² I``.
 
@@ -28,8 +29,10 @@ from pydantic import Field
 
 from stationbed.run.controller import Controller, ControllerError, ControllerParams, UnitQuaternion
 
-from ._linear import design_model, equilibrium_torque, linearize, loop_margins, lvlh_error, settling_time
-from ._quat import lvlh_rate_varies, qmul, rotate
+from stationbed.analysis.design import design_linearization
+from stationbed.analysis.margins import loop_margins, settling_time
+
+from ._quat import lvlh_error, lvlh_rate_varies, qmul, rotate
 
 #: Largest |pole| x period for which the continuous design is used with a zero-order hold:
 #: the hold's half-period delay costs |s| T / 2 rad of phase (0.25 rad = 14 deg of the >= 60 deg
@@ -84,10 +87,9 @@ class LQR(Controller):
         self.q_RO = tuple(P.q_ref)
         self.w_RN_R = rotate(self.q_RO, (0.0, -n, 0.0))
         self.varying = lvlh_rate_varies(plant)  # two-body orbit: R's rate measured every tick
-        f = design_model(plant.inertia_O_B, n, q_RO=self.q_RO, gravity_gradient=gg)
-        x0 = np.zeros(6)
-        self.u0 = equilibrium_torque(f, x0) if P.feedforward else np.zeros(3)
-        self.A, self.B = linearize(f, x0, self.u0)
+        lin = design_linearization(plant.inertia_O_B, n, "lvlh", q_ref=self.q_RO, gravity_gradient=gg)
+        self.u0 = lin.trim_torque if P.feedforward else np.zeros(3)
+        self.A, self.B = lin.ss.A, lin.ss.B[:, 0:3]
         self.Q = bryson([P.max_attitude] * 3 + [P.max_rate] * 3)
         self.R = bryson([P.max_torque] * 3)
         try:

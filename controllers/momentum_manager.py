@@ -9,7 +9,9 @@ closed loop has ``h = 0`` on average, so the control torque averages to zero and
 settles where gravity gradient balances the other torques — its torque-equilibrium attitude
 (TEA), found by the loop, not commanded. Cyclic torques leave a bounded cyclic ``h``.
 
-Design model (:mod:`controllers._linear`, ``cmg=True``), 12 states:
+Design model (the rigid station of the plant facts with an ideal CMG cluster, linearised by
+:func:`stationbed.analysis.design.design_linearization` on the simulator's own equations, then
+augmented with ``z``), 12 states:
 ``x = (θ, δω, h, z)``: attitude ``θ = 2 vec(q_BO)`` relative to LVLH [rad], rate relative to LVLH
 ``δω = ω_BN_B - C_BO (0, -n, 0)`` [rad/s], CMG momentum ``h`` (B) [N m s] with
 ``ḣ = -u - ω × h``, and ``z = ∫ h dt`` [N m s²]; input: the body control torque ``u`` [N m];
@@ -43,7 +45,9 @@ from pydantic import Field
 
 from stationbed.run.controller import Controller, ControllerError, ControllerParams
 
-from ._linear import design_model, linearize, loop_margins, settling_time, torque_equilibrium_attitude
+from stationbed.analysis.design import design_linearization
+from stationbed.analysis.margins import loop_margins, settling_time
+
 from ._quat import lvlh_rate_varies, rotate
 from .lqr import MAX_POLE_PERIOD, _finite_or_none, bryson, design_lqr, pole_report
 
@@ -77,14 +81,19 @@ class MomentumManager(Controller):
         self._vy = -n
         self.varying = lvlh_rate_varies(plant)  # two-body orbit: LVLH's rate measured every tick
         try:
-            self.tea_design = torque_equilibrium_attitude(plant.inertia_O_B, n, gravity_gradient=gg)
-        except ControllerError as e:
+            tea = design_linearization(plant.inertia_O_B, n, "tea", gravity_gradient=gg, cmg=True, trim=False)
+        except ValueError as e:
             raise ControllerError(f"controller 'momentum_manager': {e}") from None
-        f = design_model(plant.inertia_O_B, n, gravity_gradient=gg, cmg=True)
+        self.tea_design = tea.tea_theta
+        lin = tea if P.linearize_about == "tea" else design_linearization(
+            plant.inertia_O_B, n, "lvlh", gravity_gradient=gg, cmg=True, trim=False)
         self.x_e = np.zeros(12)
         if P.linearize_about == "tea":
             self.x_e[0:3] = self.tea_design
-        self.A, self.B = linearize(f, self.x_e, np.zeros(3))
+        # (θ, δω, h) from the plant; z = ∫ h dt is the law's own state: ż = h
+        A9, B9 = lin.ss.A, lin.ss.B[:, 0:3]
+        self.A = np.block([[A9, np.zeros((9, 3))], [np.zeros((3, 6)), np.eye(3), np.zeros((3, 3))]])
+        self.B = np.vstack([B9, np.zeros((3, 3))])
         z_max = P.max_momentum / n if P.max_momentum_integral is None else P.max_momentum_integral
         self.Q = bryson([P.max_attitude] * 3 + [P.max_rate] * 3 + [P.max_momentum] * 3 + [z_max] * 3)
         self.R = bryson([P.max_torque] * 3)
@@ -116,7 +125,7 @@ class MomentumManager(Controller):
         self.tea_found = None
 
     def _update(self, t, meas):
-        # Written out on floats (it runs every tick; _linear.lvlh_error and _quat.qmul inlined,
+        # Written out on floats (it runs every tick; _quat.lvlh_error and _quat.qmul inlined,
         # tests/test_momentum_manager.py checks the command against K (x - x_e) in numpy).
         ow, ox, oy, oz = meas.q_ON.tolist()
         aw, ax, ay, az = self.q_TO

@@ -26,6 +26,11 @@ _LAZY = {
     "ControllerParams": "run.controller",
     "Measurement": "run.controller",
     "Plant": "run.controller",
+    "linearize": "analysis.plant",
+    "OperatingPoint": "analysis.plant",
+    "loop_analysis": "analysis.margins",
+    "montecarlo": "studies.montecarlo",
+    "MonteCarloResult": "studies.montecarlo",
 }
 
 __all__ = sorted(_LAZY)

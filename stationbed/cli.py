@@ -132,6 +132,11 @@ def _parser() -> argparse.ArgumentParser:
     sb.add_argument("--out", type=Path, default=Path("out") / "study", help="output folder (default: out/study)")
     sb.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="default: all cases")
     sb.add_argument("--quick", action="store_true", help="shrink every case to seconds (tests, CI)")
+    # its options are parsed by its own module (stationbed/studies/montecarlo/cli.py), imported when run
+    sub.add_parser("montecarlo", add_help=False, help="closed-loop Monte Carlo on Dask (stationbed montecarlo -h)")
+    from .analysis import cli as analysis_cli  # linearize, margins, plot, compare
+
+    analysis_cli.add_parsers(sub)
     return p
 
 
@@ -500,10 +505,18 @@ def _cmd_study(args) -> int:
     return 0
 
 
+def _cmd_montecarlo(args) -> int:
+    from .studies.montecarlo.cli import main as montecarlo_main
+
+    return montecarlo_main(args.rest)
+
+
 def main(argv=None) -> int:
     """The command line: ``stationbed run|check|list|replay|study ...``; returns the exit status
     (0 ok, 1 failed run, 2 bad input)."""
-    args = _parser().parse_args(argv)
+    args, args.rest = _parser().parse_known_args(argv)
+    if args.rest and args.cmd != "montecarlo":
+        _parser().error(f"unrecognized arguments: {' '.join(args.rest)}")
     from .core import progress
 
     progress.configure("quiet" if args.quiet else None)
@@ -522,7 +535,12 @@ def _main(args) -> int:
     from .scene import SceneError
 
     try:
-        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study}[args.cmd](args)
+        from .analysis import cli as analysis_cli
+
+        if args.cmd in analysis_cli.COMMANDS:
+            return analysis_cli.main(args)
+        return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study,
+                "montecarlo": _cmd_montecarlo}[args.cmd](args)
     except SceneError as e:
         _debug_traceback(e)
         return _fail(str(e), EXIT_BAD_INPUT)

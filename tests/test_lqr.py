@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from controllers._linear import design_model, linearize, ss_zoh
 from controllers.lqr import LQR
 from stationbed import simulate
 from stationbed.run.controller import ControllerError, Plant
@@ -91,7 +90,8 @@ def test_design_model_matches_textbook_lvlh_equations():
     J3 θ̈3 + n(J1-J2+J3) θ̇1 + n²(J2-J1) θ3 = u3."""
     J1, J2, J3 = JEOD_DIAG
     n = N_400KM
-    A, B = linearize(design_model(np.diag(JEOD_DIAG), n), np.zeros(6), np.zeros(3))
+    c = designed(inertia=np.diag(JEOD_DIAG))
+    A, B = c.A, c.B
     Jd = np.diag(JEOD_DIAG)
     stiff = -np.diag([4 * n**2 * (J2 - J3), 3 * n**2 * (J1 - J3), n**2 * (J2 - J1)])
     gyro = np.zeros((3, 3))
@@ -116,6 +116,19 @@ def test_feedforward_holds_lvlh_with_products_of_inertia():
     assert_allclose(c.u0, u_needed, rtol=1e-12)
     sc = lqr_scene(duration=1000.0, output_dt=1000.0)
     assert np.max(np.abs(lvlh_state(simulate(sc), sc))) < 1e-12  # rad, rad/s: round-off
+
+
+def ss_zoh(A, B, T: float):
+    """Zero-order-hold discretisation over ``T`` [s]: ``(e^{AT}, ∫₀ᵀ e^{As} ds B)`` (Van Loan's block
+    exponential, written here: independent of python-control's ``c2d``)."""
+    from scipy.linalg import expm
+
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n] = A
+    M[:n, n:] = B
+    E = expm(M * T)
+    return E[:n, :n], E[:n, n:]
 
 
 # -- poles -------------------------------------------------------------------------------

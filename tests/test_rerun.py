@@ -564,6 +564,7 @@ HOLD_SERIES = [
     ("telemetry/cmg/saturated", ["cmg_saturated"]),
     ("telemetry/control/tau_cmd_B", ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z"]),
     ("telemetry/control/att_err_deg", ["att_err_deg"]),
+    ("telemetry/control/att_err_axes_deg", ["att_err_x_deg", "att_err_y_deg", "att_err_z_deg"]),
     ("telemetry/arrays/stbd_pair/track_err_deg", ["track_err_deg_stbd_pair"]),
     ("telemetry/arrays/port_pair/track_err_deg", ["track_err_deg_port_pair"]),
 ]

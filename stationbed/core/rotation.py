@@ -33,6 +33,7 @@ __all__ = [
     "omega_PB_P",
     "omega_PB_P_dot",
     "rotation_angle",
+    "rotation_vector",
     "euler_321",
 ]
 
@@ -184,6 +185,29 @@ def rotation_angle(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     # |vector part of q_a* ⊗ q_b|
     w = q_a[:, :1] * q_b[:, 1:] - q_b[:, :1] * q_a[:, 1:] - np.cross(q_a[:, 1:], q_b[:, 1:])
     return 2.0 * np.arctan2(np.linalg.norm(w, axis=1), dot)
+
+
+def rotation_vector(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The rotation vector [rad] that takes attitude ``q_ref`` to ``q`` (rows, numpy), components
+    in the frame of ``q``: ``φ ê`` of ``q_e = conj(q_ref) ⊗ q`` taken the short way round, so its
+    norm is :func:`rotation_angle` (≈ ``2 vec(q_e)``, the small rotation angles about the axes).
+
+    Returns
+    -------
+    ndarray, shape (k, 3)
+    """
+    q_ref = np.atleast_2d(q_ref)
+    q = np.atleast_2d(q)
+    q_ref = q_ref / np.linalg.norm(q_ref, axis=1, keepdims=True)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w = np.sum(q_ref * q, axis=1)
+    v = q_ref[:, :1] * q[:, 1:] - q[:, :1] * q_ref[:, 1:] - np.cross(q_ref[:, 1:], q[:, 1:])
+    v = np.where((w < 0)[:, None], -v, v)
+    s = np.linalg.norm(v, axis=1)
+    angle = 2.0 * np.arctan2(s, np.abs(w))
+    # φ/|v| → 2 as |v| → 0 (φ = 2 asin|v| ≈ 2|v|)
+    scale = np.where(s > 1e-300, angle / np.where(s > 1e-300, s, 1.0), 2.0)
+    return v * scale[:, None]
 
 
 def euler_321(C_BO: np.ndarray) -> np.ndarray:

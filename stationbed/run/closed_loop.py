@@ -9,7 +9,7 @@ import struct
 import numpy as np
 
 from ..core.compile import FastCall
-from ..core.rotation import rotation_angle
+from ..core.rotation import rotation_angle, rotation_vector
 from ..integrators import IntegrationError
 from ..model.cmg import cluster_functions
 from .controller import (
@@ -25,7 +25,35 @@ from .fused import fused_ok, run_fused
 from .rows import ROW_BATCH
 from .segments import held_torque, segment_input
 
-__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH"]
+__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts"]
+
+
+def plant_facts(scene, system, p, x, period: float) -> Plant:
+    """The :class:`Plant` facts a controller designs with: the scene's inertia about O at t = 0
+    (state ``x``), orbital rate and CMG limits (also used by :mod:`stationbed.analysis`)."""
+    inertia = FastCall.of(system.funcs["inertia"])
+    inertia.args[0][0] = 0.0
+    inertia.args[1][:] = x
+    inertia.args[2][:] = p
+    inertia()
+    c = scene.cmg
+    cmg = system.formulation.model.cmg
+    plant = Plant(
+        scene=scene,
+        inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
+        mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
+        period=period,
+    )
+    if c is not None:
+        geometry = cmg.geometry
+        plant.cmg_kind = c.kind
+        plant.h_capacity = geometry.capacity(c)
+        plant.max_torque = geometry.max_torque(c)
+        plant.n_gimbals = cmg.n_gimbals
+        plant.max_gimbal_rate = geometry.max_gimbal_rate(c)
+        plant.h_rotor = geometry.rotor_momentum(c)
+        plant.cmg_functions = cluster_functions(c)
+    return plant
 
 
 class ControllerFailure(Exception):
@@ -64,27 +92,7 @@ class ControlLoop:
             raise ValueError(
                 f"controller '{self.ctrl.name}' commands gimbal rates: the scene needs a gimballed [cmg]"
             )
-        inertia = FastCall.of(f["inertia"])
-        inertia.args[0][0] = 0.0
-        inertia.args[1][:] = x
-        inertia.args[2][:] = p
-        inertia()
-        c = scene.cmg
-        plant = Plant(
-            scene=scene,
-            inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
-            mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
-            period=self.period,
-        )
-        if c is not None:
-            geometry = cmg.geometry
-            plant.cmg_kind = c.kind
-            plant.h_capacity = geometry.capacity(c)
-            plant.max_torque = geometry.max_torque(c)
-            plant.n_gimbals = self.ng
-            plant.max_gimbal_rate = geometry.max_gimbal_rate(c)
-            plant.h_rotor = geometry.rotor_momentum(c)
-            plant.cmg_functions = cluster_functions(c)
+        plant = plant_facts(scene, system, p, x, self.period)
         self.capacity = plant.h_capacity
         try:
             self.ctrl.reset(plant)
@@ -195,12 +203,15 @@ class ControlLoop:
         q_ref = self.ctrl.q_ref_BN
         if q_ref is None:
             err = math.nan
+            axes = [math.nan] * 3
         else:
             if q_ref.__class__ is not np.ndarray or q_ref.dtype != np.float64 or q_ref.shape != (4,):
                 q_ref = self._check_q_ref(q_ref)
             err = math.degrees(float(rotation_angle(q_ref[None], self.x[None, 0:4])[0]))
+            # per axis: the error rotation vector, B components [deg] (its norm is att_err_deg)
+            axes = np.degrees(rotation_vector(q_ref[None], self.x[None, 0:4])[0]).tolist()
         tau = self.last_cmd if self.ctrl.command == "torque" else (math.nan,) * 3
-        vals += list(tau) + [err]
+        vals += list(tau) + [err] + axes
         return vals
 
     def run(self) -> None:
@@ -362,10 +373,10 @@ class ControlLoop:
         return int(lim or sat)
 
     def summary(self) -> dict:
-        """The run's summary: ticks, controller updates, saturation counts, max |h| and its fraction
-        of capacity, min singularity measure, attitude error (what ``summary.json`` holds), from
-        reductions kept as the rows are emitted (:class:`~.rows.RowSummary`: the rows need not be
-        kept)."""
+        """The run's summary: ticks, controller updates, and the :data:`~.metrics.METRICS` of the
+        run (saturation counts, max |h| and its fraction of capacity, min singularity measure,
+        attitude error, commanded torque: what ``summary.json`` holds), from the reductions kept
+        as the rows are emitted (:class:`~.metrics.RunMetrics`: the rows need not be kept)."""
         rs = self.rows.summary
         out = {
             "controller": self.ctrl.name,
@@ -375,17 +386,11 @@ class ControlLoop:
             "controller_updates": self.ctrl.n_updates,
         }
         if self.model.cmg is not None:
-            out["rate_limited_ticks"] = int(self.n_rate_limited)
-            out["momentum_saturated_ticks"] = int(self.n_momentum_saturated)
-            if rs.max_h is not None:
-                out["max_h_Nms"] = rs.max_h
-                if math.isfinite(self.capacity):
-                    out["max_h_fraction"] = float(rs.max_h / self.capacity)
-            if rs.min_singularity is not None:
-                out["min_singularity"] = rs.min_singularity
-        if rs.max_att_err is not None:
-            out["final_att_err_deg"] = float(rs.last[self.rows.columns.index("att_err_deg")])
-            out["max_att_err_deg"] = rs.max_att_err
+            rs.count_ticks(self.n_rate_limited, self.n_momentum_saturated)
+            rs.h_capacity_Nms = self.capacity
+            if math.isfinite(self.capacity):
+                out["h_capacity_Nms"] = float(self.capacity)
+        out.update(rs.values())
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())
         except Exception as e:

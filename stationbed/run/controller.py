@@ -18,7 +18,7 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 2. Write ``_reset(plant)`` (design gains from the :class:`Plant` facts; it runs once per run)
    and ``_update(t, meas)`` returning the command as a sequence of floats.
 3. Set ``self.q_ref_BN`` (4,) in ``_update`` when the law has a reference attitude: the run
-   logs ``att_err_deg`` against it.
+   logs ``att_err_deg`` (and per axis ``att_err_x/y/z_deg``) against it.
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
 5. Optionally, for the fused loop (stationbed/run/fused.py: controller and dynamics in one
    compiled loop), write ``symbolic_params()`` (the law's numbers as a flat array, set by

@@ -8,7 +8,6 @@ its rows (``keep=False``) holds one batch in memory whatever its length.
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -18,10 +17,11 @@ from ..integrators import IntegrationError
 from ..model.cmg import CmgModel
 from ..model.torques import TORQUES
 from ..scene import Scene
+from .metrics import RunMetrics
 from .system import OUT_CHUNK
 from .trajectory import Trajectory, base_columns
 
-__all__ = ["trajectory_columns", "Rows", "RowSummary", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S"]
+__all__ = ["trajectory_columns", "ATT_ERR_AXES", "Rows", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S"]
 
 #: most rows in one batch handed to the sink (and in one integrator call of the open loop)
 ROW_BATCH = 64
@@ -66,6 +66,11 @@ def _sink_error(path, last_t, errno, strerror, held):
     return SinkError(path, last_t, OSError(errno, strerror), held)
 
 
+#: per-axis attitude error: the rotation vector from the controller's reference to B, B components
+#: [deg] (≈ 2 vec(q_BR) for small errors; its norm is att_err_deg)
+ATT_ERR_AXES = ["att_err_x_deg", "att_err_y_deg", "att_err_z_deg"]
+
+
 def trajectory_columns(scene: Scene) -> list[str]:
     """The CSV columns of a run of ``scene`` (DESIGN §6 core, then CMG, controller, sun)."""
     cols = base_columns(scene.appendage_names)
@@ -78,7 +83,7 @@ def trajectory_columns(scene: Scene) -> list[str]:
             cols.append("cmg_singularity")
         cols.append("cmg_saturated")
     if scene.controller is not None:
-        cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
+        cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
     for t in scene.torque:  # environment torques (issue 14), B components [N m]
@@ -90,58 +95,6 @@ def trajectory_columns(scene: Scene) -> list[str]:
     if modes:
         cols += [f"eta_{n}_{k}" for n, k in modes] + [f"etadot_{n}_{k}" for n, k in modes] + ["U_strain"]
     return cols
-
-
-class RowSummary:
-    """Reductions over every row of a run, updated batch by batch (the rows need not be kept):
-    the last row, max |h| [N m s], min singularity measure, max attitude error [deg].
-
-    Parameters
-    ----------
-    columns : list of str
-        The run's columns (:func:`trajectory_columns`).
-
-    Attributes
-    ----------
-    n_rows : int
-        Rows seen.
-    last : ndarray or None
-        The last row.
-    max_h : float or None
-        Largest ``|(hx, hy, hz)|`` (None: no such columns, or no row).
-    min_singularity : float or None
-        Smallest ``cmg_singularity``.
-    max_att_err : float or None
-        Largest finite-or-inf ``att_err_deg`` (NaN ignored; None: none was a number).
-    """
-
-    def __init__(self, columns):
-        col = {c: i for i, c in enumerate(columns)}
-        self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
-        self._sing = col.get("cmg_singularity")
-        self._err = col.get("att_err_deg")
-        self.n_rows = 0
-        self.last = None
-        self.max_h = self.min_singularity = self.max_att_err = None
-        self._err_max = math.nan  # NaN-ignoring running max (np.fmax), kept once a value is finite
-        self._err_finite = False
-
-    def update(self, rows: np.ndarray) -> None:
-        """Account for a batch ``rows`` (k, len(columns)), k >= 1."""
-        self.n_rows += len(rows)
-        self.last = rows[-1].copy()
-        if self._h is not None:
-            h = float(np.linalg.norm(rows[:, self._h], axis=1).max())
-            self.max_h = h if self.max_h is None else float(np.maximum(self.max_h, h))
-        if self._sing is not None:
-            m = float(rows[:, self._sing].min())
-            self.min_singularity = m if self.min_singularity is None else float(np.minimum(self.min_singularity, m))
-        if self._err is not None:
-            err = rows[:, self._err]
-            self._err_finite |= bool(np.isfinite(err).any())
-            self._err_max = float(np.fmax(self._err_max, np.fmax.reduce(err)))
-            if self._err_finite:
-                self.max_att_err = self._err_max
 
 
 class Rows:
@@ -162,7 +115,7 @@ class Rows:
     p : ndarray  The parameter vector of the scene.
     sink : object with ``write(rows)`` or None  Receives every batch of rows as it is made.
     keep : bool  Keep every row for :meth:`trajectory`; ``False``: only the last one (the sink
-        has them all; :attr:`summary` has the reductions over them).
+        has them all; :attr:`summary`, a :class:`~.metrics.RunMetrics`, has the reductions over them).
     """
 
     def __init__(self, scene, system, p, sink, keep: bool = True):
@@ -178,7 +131,9 @@ class Rows:
         self.progress = None
         self.keep = keep
         self.rows: list[np.ndarray] = []
-        self.summary = RowSummary(self.columns)
+        mc = getattr(scene, "montecarlo", None)
+        #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
+        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s)
         self._pending = ([], [], [])  # times, states, held values of rows not yet made
         self._flushed_at = time.perf_counter()
         col = {c: i for i, c in enumerate(self.columns)}
@@ -208,7 +163,7 @@ class Rows:
         if cmg is not None:
             self.held_columns += [f"{g}_rate" for g in gimbals] + ["cmg_saturated"]
         if scene.controller is not None:
-            self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
+            self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
 
     def make(self, ts, xs, held=None) -> np.ndarray:

@@ -75,6 +75,16 @@ class Trajectory:
         """Total angular momentum about the composite mass centre, N components [N m s], shape (N, 3)."""
         return self.cols("HNx", "HNy", "HNz")
 
+    def to_pandas(self):
+        """The table as a ``pandas.DataFrame`` indexed by time ``t`` [s] (one column per name; the
+        data is copied; ``meta`` goes to ``DataFrame.attrs``). Needs pandas."""
+        import pandas as pd
+
+        df = pd.DataFrame(self.data.copy(), columns=list(self.columns))
+        df = df.set_index("t") if "t" in self._index else df
+        df.attrs.update(self.meta)
+        return df
+
     # -- files -------------------------------------------------------------------------
     def to_csv(self, path) -> None:
         """Write the trajectory as CSV (a header row, then one row per time, full precision)."""

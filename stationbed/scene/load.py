@@ -14,7 +14,7 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
-from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, Orbit, Simulation, Sun, Surface, Torque
+from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict"]
 
@@ -36,6 +36,7 @@ class Scene(Strict):
     controller: ControllerSpec | None = None
     surface: list[Surface] = []
     atmosphere: Atmosphere | None = None
+    montecarlo: MonteCarlo | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")

@@ -21,6 +21,7 @@ __all__ = [
     "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "Torque", "Sun", "CmgKind", "CMG_KINDS", "UNIT_KEYS", "Cmg",
     "Sensor", "ControllerSpec", "PYRAMID_SKEW_RAD", "PARTICIPATION_TOL", "MU_EARTH_M3_S2", "R_EARTH_M", "TAGS",
     "AeroTorque", "SrpTorque", "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT",
+    "Dispersion", "Requirement", "MonteCarlo", "DISPERSION_KINDS",
 ]
 
 class RateStep(Strict):
@@ -585,6 +586,7 @@ class Cmg(Strict):
     dither_eps0: float = Field(default=0.01, ge=0.0)  # o-DSR off-diagonal amplitude
     dither_omega: float = Field(default=math.pi / 2, gt=0.0)  # rad/s, o-DSR dither frequency
     saturation_fraction: float = Field(default=0.9, gt=0.0, le=1.0)  # |h| / capacity flagged saturated
+    failed: list[int] = []  # failed units (1-based, as in gimbal_<unit>_...): gimbals held, no steering
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -601,6 +603,10 @@ class Cmg(Strict):
             for a in self.outer_axes_B:
                 if math.sqrt(sum(x * x for x in a)) < 1e-9:
                     raise ValueError("outer_axes_B contains a zero vector")
+        if self.failed and (CMG_KINDS[self.kind].gimbals == 0 or len(set(self.failed)) != len(self.failed)
+                            or not all(1 <= u <= self.n_units for u in self.failed)):
+            raise FieldError("failed", f"must be distinct unit numbers 1..{self.n_units} of a gimballed cluster, "
+                                       f"got {self.failed}")
         if self.gimbal0 is not None and len(self.gimbal0) != self.n_gimbals:
             raise ValueError(
                 f"gimbal0 needs {self.n_gimbals} angles for {self.kind} x {self.n_units}, got {len(self.gimbal0)}"
@@ -640,3 +646,79 @@ class ControllerSpec(Strict):
 #: discriminator tags -> tables (the error messages name the right table's keys)
 TAGS.update(constant=ConstantTorque, orbital_harmonic=HarmonicTorque, track=SunTrack, profile=Profile,
             aero=AeroTorque, srp=SrpTorque)
+
+
+#: ``[[montecarlo.disperse]] kind`` -> the keys it needs (docs/design.md "Monte Carlo")
+DISPERSION_KINDS = {
+    "normal": ("sigma",),  # value + N(mean, sigma), per element
+    "uniform": ("low", "high"),  # value + U(low, high), per element
+    "scale_normal": ("sigma",),  # value * (1 + N(0, sigma)), one factor for the whole value
+    "scale_uniform": ("low", "high"),  # value * (1 + U(low, high)), one factor
+    "inertia": ("sigma",),  # 3x3: I_ii (1 + N(0, sigma)); I_ij += N(0, sigma_products) sqrt(I_ii I_jj)
+    "attitude_normal": ("sigma",),  # quaternion turned by N(0, sigma) rad about a uniform random axis
+    "choice": ("choices",),  # one of choices (weights optional)
+    "seed": (),  # a fresh non-negative integer (e.g. controller.sensor.seed)
+}
+
+
+class Dispersion(Strict):
+    """One ``[[montecarlo.disperse]]`` entry: a scene key path and how it is drawn."""
+
+    key: str
+    kind: Literal[tuple(DISPERSION_KINDS)]
+    also: list[str] = []  # scale kinds: more key paths multiplied by the same factor
+    sigma: float | None = Field(default=None, ge=0.0)
+    mean: float = 0.0
+    low: float | None = None
+    high: float | None = None
+    sigma_products: float = Field(default=0.0, ge=0.0)
+    choices: list[Any] | None = None
+    weights: list[float] | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        for k in DISPERSION_KINDS[self.kind]:
+            if getattr(self, k) is None:
+                raise FieldError(k, f"kind = '{self.kind}' needs '{k}'")
+        if self.low is not None and self.high is not None and not self.low <= self.high:
+            raise FieldError("high", f"must be >= low ({self.low:g}), got {self.high:g}")
+        if self.also and not self.kind.startswith("scale_"):
+            raise FieldError("also", f"applies to the scale kinds (one factor for several keys), not '{self.kind}'")
+        if self.choices is not None and not self.choices:
+            raise FieldError("choices", "must not be empty")
+        if self.weights is not None:
+            if self.choices is None or len(self.weights) != len(self.choices):
+                raise FieldError("weights", "needs one weight per entry of choices")
+            if min(self.weights) < 0 or sum(self.weights) <= 0:
+                raise FieldError("weights", "must be >= 0 with a positive sum")
+        return self
+
+
+class Requirement(Strict):
+    """One ``[[montecarlo.requirement]]``: a metric bounded by ``max`` (or ``min``) in at least
+    ``coverage`` of the cases, shown with ``confidence``."""
+
+    metric: str
+    max: float | None = None
+    min: float | None = None
+    coverage: float = Field(default=0.9973, gt=0.0, lt=1.0)
+    confidence: float = Field(default=0.9, gt=0.0, lt=1.0)
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if (self.max is None) == (self.min is None):
+            raise FieldError("max", "give exactly one of max or min")
+        return self
+
+
+class MonteCarlo(Strict):
+    """``[montecarlo]``: samples, seed, dispersions, requirements (stationbed/studies/montecarlo/)."""
+
+    n: int = Field(default=100, ge=1)
+    seed: int = Field(default=0, ge=0)
+    chunk: int | None = Field(default=None, ge=1)  # samples per task (default: about n / (8 workers))
+    settle_s: float | None = Field(default=None, ge=0.0)  # s, rms_att_err_deg counts t >= settle_s
+    envelope_dt: float | None = Field(default=60.0, gt=0.0)  # s, per-sample trajectory for envelopes; none: omit
+    max_redraws: int = Field(default=100, ge=0)  # draws refused by the scene's checks before a sample is refused
+    disperse: list[Dispersion] = []
+    requirement: list[Requirement] = []

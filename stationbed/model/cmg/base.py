@@ -94,8 +94,9 @@ class CmgGeometry:
 
     @property
     def n_par(self) -> int:
-        """Size of the cluster's slice of p: :data:`HEAD_PAR`, then the geometry."""
-        return HEAD_PAR + self.n_units * self.unit_par
+        """Size of the cluster's slice of p: :data:`HEAD_PAR`, the geometry, then one number per
+        unit: 1 for a working unit, 0 for a failed one (``[cmg] failed``)."""
+        return HEAD_PAR + self.n_units * (self.unit_par + 1)
 
     # -- numbers (from the scene's [cmg] table) ---------------------------------------
     def _check(self, cfg) -> None:
@@ -105,7 +106,9 @@ class CmgGeometry:
     def params(self, cfg) -> np.ndarray:
         """The cluster's numbers in p, shape (n_par,): the head, then the geometry."""
         self._check(cfg)
-        out = np.concatenate([np.asarray(self._head_params(cfg), float), np.asarray(self._geometry_params(cfg), float).ravel()])
+        working = [0.0 if i + 1 in cfg.failed else 1.0 for i in range(self.n_units)]
+        out = np.concatenate([np.asarray(self._head_params(cfg), float), np.asarray(self._geometry_params(cfg), float).ravel(),
+                              working])
         if out.shape != (self.n_par,):
             raise ValueError(f"cmg kind {self.kind!r}: {out.shape[0]} parameters, expected {self.n_par}")
         return out
@@ -305,15 +308,24 @@ class GimballedGeometry(CmgGeometry):
     def _state_dot(self, xc, uc, omega_BN_B, pc):
         return uc
 
+    def working(self, pc):
+        """Per gimbal 1 (its unit works) or 0 (its unit failed: ``[cmg] failed``), casadi
+        (n_gimbals, 1), from the tail of ``pc``."""
+        w = pc[HEAD_PAR + self.n_units * self.unit_par :]
+        return ca.vertcat(*[w[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
+
     def _actuate(self, t, xc, tau_cmd, omega_BN_B, pc, steering, direct_rates):
         h_rotor, max_rate, h_sat, lam0, mu, eps0, om = (pc[i] for i in range(HEAD_PAR))
-        A_hat = self.A_hat(xc, pc)
+        # a failed unit's gimbals are held (rate 0): its rotor keeps its momentum, and steering
+        # and the singularity measure see only the working units' Jacobian columns
+        working = self.working(pc)
+        A_hat = ca.mtimes(self.A_hat(xc, pc), ca.diag(working))
         if direct_rates is None:
             hdot_cmd = -tau_cmd - ca.cross(omega_BN_B, self.h(xc, pc))
             rates = steer(steering, A_hat, hdot_cmd / h_rotor, t, lam0, mu, eps0, om)
         else:
             rates = direct_rates
-        rates, limited = rate_limit(rates, max_rate)
+        rates, limited = rate_limit(rates * working, max_rate)
         sat = ca.if_else(ca.norm_2(self.h(xc, pc)) >= h_sat, 1.0, 0.0)
         return rates, singularity_measure(A_hat), limited, sat
 

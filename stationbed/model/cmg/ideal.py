@@ -64,7 +64,9 @@ class IdealCluster(CmgGeometry):
     def _actuate(self, t, xc, tau_cmd, omega_BN_B, pc, steering, direct_rates):
         max_tau, max_h, frac = pc[0], pc[1], pc[2]
         n = ca.norm_2(tau_cmd)
-        scale = ca.fmin(1.0, max_tau / ca.fmax(n, 1e-300))
+        # the same numbers as fmin(1, max_tau / n), written so that its derivative inside the
+        # limit is exact (1) even at tau = 0 (stationbed.analysis differentiates the actuation)
+        scale = ca.if_else(n > max_tau, max_tau / n, 1.0)
         tau = tau_cmd * scale
         limited = ca.if_else(scale < 1.0, 1.0, 0.0)
         h_B = xc

@@ -94,5 +94,7 @@ def rate_limit(rates, max_rate):
     limited : casadi SX  1 if they were scaled, else 0.
     """
     peak = ca.mmax(ca.fabs(rates))
-    scale = ca.fmin(1.0, max_rate / ca.fmax(peak, 1e-300))
+    # = fmin(1, max_rate / peak), with an exact derivative (1) inside the limit, zero rates
+    # included (stationbed.analysis differentiates the actuation)
+    scale = ca.if_else(peak > max_rate, max_rate / peak, 1.0)
     return rates * scale, ca.if_else(scale < 1.0, 1.0, 0.0)

@@ -73,6 +73,7 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
     control = []
     for name, origin in (
         ("attitude error [deg]", "telemetry/control/att_err_deg"),
+        ("attitude error per axis (rotation vector, B) [deg]", "telemetry/control/att_err_axes_deg"),
         ("torque command tau_cmd_B [N m]", "telemetry/control/tau_cmd_B"),
         ("CMG momentum h_B [N m s]", "telemetry/cmg/h_B"),
         ("gimbal angles [rad]", "telemetry/cmg/gimbal/angle"),

@@ -113,6 +113,7 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
     take("telemetry/cmg/saturated", ["cmg_saturated"], ["saturated (0/1)"])
     take("telemetry/control/tau_cmd_B", ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z"], ["x", "y", "z"])
     take("telemetry/control/att_err_deg", ["att_err_deg"])
+    take("telemetry/control/att_err_axes_deg", ["att_err_x_deg", "att_err_y_deg", "att_err_z_deg"], ["x", "y", "z"])
     for n in appendage_names:
         take(f"telemetry/arrays/{n}/track_err_deg", [f"track_err_deg_{n}"], [n])
     modes = {n: m for n, m in (modes or {}).items() if m}

@@ -1,0 +1,210 @@
+"""The run metrics: the one definition of every per-run figure of merit (closed-loop summary,
+Monte Carlo table, ``compare``), computed by one incremental reduction over output rows.
+
+:data:`METRICS` names each metric with its unit and meaning; :class:`RunMetrics` reduces rows
+batch by batch as a run emits them (the rows need not be kept); :func:`trajectory_metrics`
+applies the same reduction to a finished trajectory (a :class:`~.trajectory.Trajectory` or a
+pandas DataFrame with the CSV columns), so a metric read back from a CSV equals the one the
+run reported.
+
+Conventions (all reductions are over the *output rows* of the run, i.e. at ``output_dt``,
+except the tick counts, which the closed loop counts at every controller tick):
+
+- ``att_err_deg`` NaN (a controller without a reference) is ignored; inf is kept (it is a
+  number the run produced, and it makes ``max`` inf).
+- ``rms_att_err_deg`` is ``sqrt(mean(err**2))`` over the rows with ``t >= settle_s`` (all rows
+  when ``settle_s`` is None) whose error is not NaN.
+- ``max_torque_cmd_Nm`` is the largest ``|(tau_cmd_x, tau_cmd_y, tau_cmd_z)|`` over the rows
+  (NaN rows, e.g. a gimbal-rate law's, ignored).
+- A metric whose columns the run does not have, or that saw no usable row, is absent from
+  :meth:`RunMetrics.values` (never a made-up 0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics"]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One per-run figure of merit.
+
+    Attributes
+    ----------
+    unit : str
+        Its unit ("deg", "N m s", "1" for a ratio, "ticks").
+    description : str
+        One line: what it measures, over which rows.
+    worse : str
+        "high" when a larger value is worse (a requirement gives a ``max``), "low" when a smaller
+        one is (``min_singularity``: a requirement gives a ``min``).
+    """
+
+    unit: str
+    description: str
+    worse: str = "high"
+
+
+#: name -> :class:`Metric`; the one definition of the project's per-run metrics
+METRICS: dict[str, Metric] = {
+    "max_att_err_deg": Metric("deg", "largest attitude error (att_err_deg) over the output rows"),
+    "final_att_err_deg": Metric("deg", "attitude error of the last output row"),
+    "rms_att_err_deg": Metric("deg", "RMS attitude error over the output rows at t >= settle_s"),
+    "max_h_Nms": Metric("N m s", "largest CMG cluster momentum |h| over the output rows"),
+    "max_h_fraction": Metric("1", "max_h_Nms as a fraction of the cluster's momentum capacity"),
+    "min_singularity": Metric("1", "smallest CMG singularity measure (cmg_singularity) over the rows", "low"),
+    "rate_limited_ticks": Metric("ticks", "controller ticks whose gimbal-rate command was limited"),
+    "momentum_saturated_ticks": Metric("ticks", "controller ticks at which the cluster was saturated"),
+    "max_torque_cmd_Nm": Metric("N m", "largest commanded torque |tau_cmd| over the output rows"),
+}
+
+
+class RunMetrics:
+    """Reductions over the output rows of one run, updated batch by batch.
+
+    Parameters
+    ----------
+    columns : list of str
+        The run's columns (:func:`~.rows.trajectory_columns`).
+    settle_s : float or None
+        Settling time [s]: ``rms_att_err_deg`` counts the rows at ``t >= settle_s`` (None: all).
+    h_capacity_Nms : float or None
+        The CMG cluster's momentum capacity [N m s] for ``max_h_fraction`` (None or not finite:
+        no fraction).
+
+    Attributes
+    ----------
+    n_rows : int
+        Rows seen.
+    last : ndarray or None
+        The last row.
+    rate_limited_ticks, momentum_saturated_ticks : int or None
+        Tick counts, not in the rows: set by :meth:`count_ticks` (None: not counted).
+    """
+
+    def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None):
+        col = {c: i for i, c in enumerate(columns)}
+        self.columns = list(columns)
+        self.settle_s = settle_s
+        self.h_capacity_Nms = h_capacity_Nms
+        self._t = col.get("t", 0)
+        self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
+        self._sing = col.get("cmg_singularity")
+        self._err = col.get("att_err_deg")
+        self._tau = [col[c] for c in ("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")] if "tau_cmd_x" in col else None
+        self.n_rows = 0
+        self.last = None
+        self.rate_limited_ticks = self.momentum_saturated_ticks = None
+        self._max_h = None
+        self._min_sing = None
+        self._err_max = math.nan  # NaN-ignoring running max (np.fmax)
+        self._err_finite = False  # a value that is not NaN was seen
+        self._sq_sum = 0.0  # sum of err**2 over the settled, non-NaN rows
+        self._sq_n = 0
+        self._tau_max = math.nan
+
+    def update(self, rows: np.ndarray) -> None:
+        """Account for a batch ``rows`` (k, len(columns)), k >= 1."""
+        self.n_rows += len(rows)
+        self.last = rows[-1].copy()
+        if self._h is not None:
+            h = float(np.linalg.norm(rows[:, self._h], axis=1).max())
+            self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
+        if self._sing is not None:
+            m = float(rows[:, self._sing].min())
+            self._min_sing = m if self._min_sing is None else float(np.minimum(self._min_sing, m))
+        if self._err is not None:
+            err = rows[:, self._err]
+            self._err_finite |= bool(np.isfinite(err).any())
+            self._err_max = float(np.fmax(self._err_max, np.fmax.reduce(err)))
+            use = ~np.isnan(err)
+            if self.settle_s is not None:
+                use &= rows[:, self._t] >= self.settle_s
+            if use.any():
+                e = err[use]
+                self._sq_sum += float(np.dot(e, e))
+                self._sq_n += int(use.sum())
+        if self._tau is not None:
+            tau = np.linalg.norm(rows[:, self._tau], axis=1)
+            self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
+
+    def count_ticks(self, rate_limited: int, momentum_saturated: int) -> None:
+        """Set the tick counts the closed loop keeps (they are not in the rows)."""
+        self.rate_limited_ticks = int(rate_limited)
+        self.momentum_saturated_ticks = int(momentum_saturated)
+
+    # the reductions, each None when it has no value
+    @property
+    def max_h_Nms(self) -> float | None:
+        return self._max_h
+
+    @property
+    def min_singularity(self) -> float | None:
+        return self._min_sing
+
+    @property
+    def max_att_err_deg(self) -> float | None:
+        return self._err_max if self._err_finite else None
+
+    def values(self) -> dict[str, float]:
+        """The metrics that have a value, by :data:`METRICS` name (ticks as int)."""
+        out: dict[str, float] = {}
+        if self.rate_limited_ticks is not None:
+            out["rate_limited_ticks"] = self.rate_limited_ticks
+            out["momentum_saturated_ticks"] = self.momentum_saturated_ticks
+        if self._max_h is not None:
+            out["max_h_Nms"] = self._max_h
+            cap = self.h_capacity_Nms
+            if cap is not None and math.isfinite(cap):
+                out["max_h_fraction"] = float(self._max_h / cap)
+        if self._min_sing is not None:
+            out["min_singularity"] = self._min_sing
+        if self._err_finite:
+            out["final_att_err_deg"] = float(self.last[self._err])
+            out["max_att_err_deg"] = self._err_max
+            if self._sq_n:
+                out["rms_att_err_deg"] = math.sqrt(self._sq_sum / self._sq_n)
+        if self._tau is not None and not math.isnan(self._tau_max):
+            out["max_torque_cmd_Nm"] = self._tau_max
+        return out
+
+
+def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None = None) -> dict[str, float]:
+    """The :data:`METRICS` of a finished run, by the same reduction the run itself uses.
+
+    Parameters
+    ----------
+    traj : Trajectory or pandas.DataFrame
+        The run's rows with the CSV columns.
+    summary : dict, optional
+        The run's summary (``summary.json``'s ``summary``, ``traj.meta["summary"]``): the tick
+        counts and the cluster capacity (``h_capacity_Nms``) come from it. Taken from
+        ``traj.meta`` when None and the trajectory has one.
+    settle_s : float, optional
+        Settling time [s] for ``rms_att_err_deg`` (None: all rows).
+
+    Returns
+    -------
+    dict
+        Metric name -> value, the metrics that have one.
+    """
+    if summary is None:
+        summary = getattr(traj, "meta", {}).get("summary") or {}
+    if hasattr(traj, "to_numpy"):  # a DataFrame
+        columns, data = [str(c) for c in traj.columns], traj.to_numpy(dtype=float)
+    else:
+        columns, data = traj.columns, traj.data
+    cap = summary.get("h_capacity_Nms")
+    if cap is None and "max_h_fraction" in summary and summary.get("max_h_fraction"):
+        cap = summary["max_h_Nms"] / summary["max_h_fraction"]
+    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap)
+    if len(data):
+        m.update(np.asarray(data, dtype=float))
+    if "rate_limited_ticks" in summary:
+        m.count_ticks(summary["rate_limited_ticks"], summary["momentum_saturated_ticks"])
+    return m.values()

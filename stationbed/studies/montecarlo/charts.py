@@ -1,0 +1,128 @@
+"""Monte Carlo charts (PNG, matplotlib Agg): histograms per metric, attitude-error and |h|
+envelopes over time (percentile bands), and a metric against the drawn value it depends on
+most (largest |Spearman rank correlation|)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy import stats as sps
+
+from ...run.metrics import METRICS
+from ..plotting import pyplot
+
+__all__ = ["histograms", "envelopes", "scatter", "strongest_driver", "ENVELOPE_BANDS"]
+
+#: percentile bands of the envelope charts (low, high) and the median line
+ENVELOPE_BANDS = ((0.135, 99.865), (5.0, 95.0), (25.0, 75.0))
+ENVELOPE_LABELS = ("99.73 % of samples", "90 %", "50 %")
+
+
+def _ok_values(df, name):
+    ok = df[df["status"] == "ok"]
+    v = ok[name].to_numpy(dtype=float)
+    return v[~np.isnan(v)]
+
+
+def histograms(df, out: Path, requirements=()) -> list[Path]:
+    """One ``hist_<metric>.png`` per metric with values; a requirement's limit as a red line."""
+    plt = pyplot()
+    paths = []
+    limits = {r.metric: (r.max if r.max is not None else r.min) for r in requirements}
+    for name, m in METRICS.items():
+        if name not in df:
+            continue
+        v = _ok_values(df, name)
+        if not len(v):
+            continue
+        fig, ax = plt.subplots(figsize=(6.4, 4.0))
+        bins = min(50, max(5, int(np.sqrt(len(v)))))
+        ax.hist(v, bins=bins if np.ptp(v) > 0 else 1, color="#4c72b0", edgecolor="white")
+        if name in limits:
+            ax.axvline(limits[name], color="red", lw=1.5, label=f"requirement {limits[name]:g}")
+            ax.legend(loc="upper right")
+        ax.set_xlabel(f"{name} [{m.unit}]")
+        ax.set_ylabel("samples")
+        ax.set_title(f"{name}: {len(v)} samples, median {np.median(v):.3g}, max {v.max():.3g}", fontsize=10)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        p = out / f"hist_{name}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    return paths
+
+
+def envelopes(t, env, out: Path, title: str) -> list[Path]:
+    """``envelope_att_err.png`` and ``envelope_h.png``: percentile bands over the samples per
+    time, the median and the worst sample's curve.
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)  Times [s].
+    env : ndarray, shape (n, T, 2)  Attitude error [deg] and |h| / capacity per sample.
+    """
+    plt = pyplot()
+    paths = []
+    t_orbit = t / 60.0
+    for j, (fname, label) in enumerate((("envelope_att_err.png", "attitude error [deg]"),
+                                        ("envelope_h.png", "|h| / capacity"))):
+        y = env[:, :, j]
+        if np.all(np.isnan(y)):
+            continue
+        fig, ax = plt.subplots(figsize=(7.5, 4.2))
+        with np.errstate(all="ignore"):
+            for (lo, hi), lab, a in zip(ENVELOPE_BANDS, ENVELOPE_LABELS, (0.18, 0.3, 0.45)):
+                ax.fill_between(t_orbit, np.nanpercentile(y, lo, axis=0), np.nanpercentile(y, hi, axis=0),
+                                color="#4c72b0", alpha=a, lw=0, label=lab)
+            ax.plot(t_orbit, np.nanmedian(y, axis=0), color="#1f3b6f", lw=1.5, label="median")
+            worst = int(np.nanargmax(np.nanmax(y, axis=1)))
+        ax.plot(t_orbit, y[worst], color="#c44e52", lw=1.0, label=f"worst sample (row {worst})")
+        ax.set_xlabel("time [min]")
+        ax.set_ylabel(label)
+        ax.set_title(f"{title}: {label} over {len(y)} samples", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+        fig.tight_layout()
+        p = out / fname
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    return paths
+
+
+def strongest_driver(df, metric: str, drawn: list[str]) -> tuple[str, float] | None:
+    """The drawn column with the largest |Spearman rank correlation| with ``metric`` over the
+    samples that ran (None: no drawn column varies)."""
+    ok = df[(df["status"] == "ok") & df[metric].notna()]
+    best = None
+    for c in drawn:
+        x = ok[c].to_numpy(dtype=float)
+        if len(x) < 3 or np.ptp(x) == 0 or np.ptp(ok[metric].to_numpy(dtype=float)) == 0:
+            continue
+        rho = sps.spearmanr(x, ok[metric].to_numpy(dtype=float)).statistic
+        if np.isfinite(rho) and (best is None or abs(rho) > abs(best[1])):
+            best = (c, float(rho))
+    return best
+
+
+def scatter(df, metric: str, drawn: list[str], out: Path) -> Path | None:
+    """``scatter_<metric>.png``: the metric against its strongest driver."""
+    found = strongest_driver(df, metric, drawn)
+    if found is None:
+        return None
+    col, rho = found
+    plt = pyplot()
+    ok = df[(df["status"] == "ok") & df[metric].notna()]
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    ax.scatter(ok[col], ok[metric], s=10, alpha=0.6, color="#4c72b0")
+    ax.set_xlabel(col)
+    ax.set_ylabel(f"{metric} [{METRICS[metric].unit}]")
+    ax.set_title(f"{metric} vs {col} (Spearman ρ = {rho:+.2f})", fontsize=10)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    p = out / f"scatter_{metric}.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    return p

@@ -1,0 +1,146 @@
+"""The end of a Monte Carlo study: the table (``samples.parquet``), ``summary.json`` (counts,
+per-metric statistics, requirement verdicts), the charts and the rerun recording
+(``montecarlo.rrd``: envelope percentiles and the worst sample's series)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
+from ...run.metrics import METRICS
+from . import charts
+from .samples import ID_COLUMNS
+from .stats import metric_stats, requirement_verdicts
+
+__all__ = ["finish", "summarise", "write_recording", "ENVELOPE_PERCENTILES", "table_text"]
+
+#: percentile lines of the envelopes in the recording
+ENVELOPE_PERCENTILES = (50.0, 90.0, 99.73, 100.0)
+
+
+def _clean(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_clean(v) for v in x]
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return _clean(x.item())
+    return x
+
+
+def drawn_of(df) -> list[str]:
+    """The drawn-value columns of a table (between the id columns and the metrics)."""
+    return [c for c in df.columns if c not in ID_COLUMNS and c not in METRICS]
+
+
+def summarise(scene, df, **extra) -> dict:
+    """``summary.json``'s content for the table ``df``."""
+    mc = scene.montecarlo
+    status = df["status"]
+    bad = df[status != "ok"]
+    return _clean({
+        "scene": scene.name,
+        "n": int(len(df)),
+        "n_planned": mc.n,
+        "seed": mc.seed,
+        "settle_s": mc.settle_s,
+        "counts": {"ok": int((status == "ok").sum()), "failed": int((status == "failed").sum()),
+                   "refused": int((status == "refused").sum()), "redraws": int(df["redraws"].sum())},
+        "failures": [{"index": int(r["index"]), "status": r["status"], "reason": r["reason"]}
+                     for _, r in bad.head(20).iterrows()],
+        "metrics": metric_stats(df),
+        "requirements": requirement_verdicts(df, mc.requirement),
+        **extra,
+    })
+
+
+def table_text(summary: dict) -> str:
+    """The summary as a plain-text table (the CLI prints it; the README shows it)."""
+    lines = [f"{summary['scene']}: {summary['n']} samples, {summary['counts']['ok']} ok, "
+             f"{summary['counts']['failed']} failed, {summary['counts']['refused']} refused "
+             f"({summary['counts']['redraws']} redraws)"]
+    head = f"{'metric':26s} {'mean':>10s} {'std':>10s} {'p50':>10s} {'p99.73':>10s} {'max':>10s} {'at':>6s}"
+    lines.append(head)
+    for name, s in summary["metrics"].items():
+        f = lambda v: "-" if v is None else f"{v:10.4g}"  # noqa: E731
+        lines.append(f"{name:26s} {f(s['mean'])} {f(s['std'])} {f(s['p50'])} {f(s['p99.73'])} {f(s['max'])} "
+                     f"{s['max_index']:6d}")
+    for r in summary["requirements"]:
+        op = "<=" if r["bound"] == "max" else ">="
+        word = "PASS" if r["pass"] else "FAIL"
+        lines.append(f"requirement {r['metric']} {op} {r['limit']:g} in {100 * r['coverage']:g} % at "
+                     f"{100 * r['confidence']:g} % confidence: {word} ({r['failures']} of {r['n']} fail; "
+                     f"lower bound {r['success_lower_bound']:.4f}; 0 failures need n >= {r['n_needed_zero_failures']})"
+                     + (f" - {r['note']}" if "note" in r else ""))
+    return "\n".join(lines)
+
+
+def write_recording(path: Path, scene, t, env, df) -> Path:
+    """``montecarlo/envelope/<series>`` (percentile lines over the samples) and
+    ``montecarlo/worst/<series>`` (the sample with the largest attitude error) on ``sim_time``."""
+    rr = import_rerun()
+    rec = rr.RecordingStream(APPLICATION_ID)
+    rec.save(path)
+    try:
+        rec.send_recording_name(f"{scene.name} montecarlo")
+        idx = df["index"].to_numpy()
+        for j, series in enumerate(("att_err_deg", "h_fraction")):
+            y = env[:, :, j]
+            if np.all(np.isnan(y)):
+                continue
+            with np.errstate(all="ignore"):
+                lines = np.stack([np.nanpercentile(y, p, axis=0) for p in ENVELOPE_PERCENTILES], axis=1)
+            ent = f"montecarlo/envelope/{series}"
+            rec.log(ent, rr.SeriesLines(names=[f"p{p:g}" for p in ENVELOPE_PERCENTILES]), static=True)
+            rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=rr.Scalars.columns(scalars=lines))
+            worst = int(np.nanargmax(np.nanmax(y, axis=1)))
+            ent = f"montecarlo/worst/{series}"
+            rec.log(ent, rr.SeriesLines(names=[f"sample {int(idx[worst])}"]), static=True)
+            rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=rr.Scalars.columns(scalars=y[worst]))
+        rec.flush()
+    finally:
+        rec.disconnect()
+    return path
+
+
+def finish(scene, result, *, wall_s: float, workers: int, chunk: int, draw_charts: bool) -> None:
+    """Statistics into ``result.summary``; with ``result.out``: the files."""
+    out = result.out
+    files = {}
+    if out is not None:
+        files = {"table": "samples.parquet", "chunks": "chunks/"}
+    result.summary = summarise(scene, result.df, wall_s=wall_s, workers=workers, chunk=chunk, files=files)
+    if out is None:
+        return
+    result.df.to_parquet(out / "samples.parquet", index=False)
+    made = []
+    if draw_charts:
+        made += charts_all(scene, result, out)
+    env = result.envelope
+    if env is not None and len(env):
+        write_recording(out / "montecarlo.rrd", scene, result.envelope_t, env, result.df)
+        made.append(out / "montecarlo.rrd")
+    result.summary["files"]["made"] = [p.name for p in made]
+    (out / "summary.json").write_text(json.dumps(result.summary, indent=2) + "\n")
+
+
+def charts_all(scene, result, out: Path) -> list[Path]:
+    """Every chart of the study in ``out``."""
+    df = result.df
+    made = charts.histograms(df, out, scene.montecarlo.requirement)
+    if result.envelope is not None and len(result.envelope):
+        made += charts.envelopes(result.envelope_t, result.envelope, out, scene.name)
+    drawn = drawn_of(df)
+    wanted = [r.metric for r in scene.montecarlo.requirement] or ["max_att_err_deg"]
+    for m in dict.fromkeys(wanted):
+        if m in df:
+            p = charts.scatter(df, m, drawn, out)
+            if p is not None:
+                made.append(p)
+    return made

@@ -1,0 +1,121 @@
+"""Running Monte Carlo samples: one sample (draw, closed or open loop run, metrics, envelope
+rows) and one chunk of samples (the unit of work a Dask worker gets).
+
+A chunk returns its table (one row per sample) and its envelope arrays; it writes nothing, so a
+worker needs no shared file system and a chunk that is run twice (a worker died) gives the same
+result. Samples of one structure share one compiled system: the first sample of a process
+loads it from the disk cache (the driver built it before dispatch), the others find it in the
+process's cache (:func:`stationbed.run.system.build_system`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...model.cmg import capacity
+from ...run.controller import one_line
+from ...run.metrics import METRICS
+from ...run.rows import trajectory_columns
+from ...run.simulation import SimulationError, simulate
+from .dispersions import draw, sample_seed
+
+__all__ = ["run_sample", "run_chunk", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink"]
+
+#: the leading columns of the table
+ID_COLUMNS = ["index", "seed", "status", "reason", "redraws", "stopped_at_s"]
+#: per-sample downsampled series kept for the envelopes
+ENVELOPE_SERIES = ("att_err_deg", "h_fraction")
+
+
+class EnvelopeSink:
+    """Keeps the rows of a run at the envelope times (multiples of ``dt``): attitude error [deg]
+    and |h| / capacity (NaN where the run has no such column).
+
+    Parameters
+    ----------
+    columns : list of str  The run's columns.
+    dt : float  Envelope sampling [s].
+    n_times : int  Envelope times ``0, dt, ..., (n_times - 1) dt``.
+    capacity : float  CMG momentum capacity [N m s] (inf/None: no fraction).
+    """
+
+    def __init__(self, columns, dt: float, n_times: int, capacity):
+        col = {c: i for i, c in enumerate(columns)}
+        self.dt = dt
+        self.values = np.full((n_times, len(ENVELOPE_SERIES)), np.nan)
+        self._err = col.get("att_err_deg")
+        self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
+        self._cap = capacity if capacity and math.isfinite(capacity) else None
+
+    def write(self, rows: np.ndarray) -> None:
+        k = rows[:, 0] / self.dt
+        i = np.rint(k)
+        on = (np.abs(k - i) < 1e-9 * np.maximum(1.0, i)) & (i < len(self.values))
+        if not on.any():
+            return
+        idx = i[on].astype(int)
+        r = rows[on]
+        if self._err is not None:
+            self.values[idx, 0] = r[:, self._err]
+        if self._h is not None and self._cap is not None:
+            self.values[idx, 1] = np.linalg.norm(r[:, self._h], axis=1) / self._cap
+
+
+def _capacity(scene) -> float | None:
+    return None if scene.cmg is None else capacity(scene.cmg)
+
+
+def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | None]:
+    """Draw and run sample ``k`` of ``scene`` (which has a ``[montecarlo]`` table).
+
+    Returns
+    -------
+    row : dict
+        :data:`ID_COLUMNS`, the drawn values, every :data:`METRICS` name (NaN when the run has
+        no value for it).
+    envelope : ndarray, shape (env_times, len(ENVELOPE_SERIES)), or None
+        The run's rows at the envelope times (NaN after a failure), None when ``env_times`` is 0.
+    """
+    mc = scene.montecarlo
+    row = {"index": k, "seed": sample_seed(mc.seed, k), "status": "ok", "reason": "", "redraws": 0,
+           "stopped_at_s": math.nan}
+    s, dr, redraws, refused = draw(scene, k)
+    row["redraws"] = redraws
+    row.update(dr.values)
+    metrics: dict = {}
+    env = None
+    if refused is not None:
+        row["status"], row["reason"] = "refused", refused
+    else:
+        sink = None
+        if env_times:
+            sink = EnvelopeSink(trajectory_columns(s), mc.envelope_dt, env_times, _capacity(s))
+        try:
+            tr = simulate(s, keep=False, sink=sink)
+            metrics = tr.meta.get("summary", {})
+        except SimulationError as e:
+            row["status"], row["reason"], row["stopped_at_s"] = "failed", e.reason, float(e.t)
+            metrics = e.trajectory.meta.get("summary", {})
+        except Exception as e:  # a controller's reset or the scene's model refused: recorded, the study goes on
+            row["status"], row["reason"] = "failed", f"{type(e).__name__}: {one_line(e)}"
+        if sink is not None:
+            env = sink.values
+    for name in METRICS:
+        v = metrics.get(name)
+        row[name] = float(v) if v is not None else math.nan
+    if env_times and env is None:
+        env = np.full((env_times, len(ENVELOPE_SERIES)), np.nan)
+    return row, env
+
+
+def run_chunk(scene, k0: int, k1: int, env_times: int = 0) -> dict:
+    """Samples ``k0 .. k1-1``: ``{"k0", "k1", "rows": [row dicts], "envelope": ndarray
+    (k1 - k0, env_times, len(ENVELOPE_SERIES)) or None}``."""
+    rows, envs = [], []
+    for k in range(k0, k1):
+        row, env = run_sample(scene, k, env_times)
+        rows.append(row)
+        envs.append(env)
+    return {"k0": k0, "k1": k1, "rows": rows, "envelope": np.stack(envs) if env_times else None}

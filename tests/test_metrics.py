@@ -1,0 +1,86 @@
+"""The run metrics (stationbed/run/metrics.py) against values computed by hand on small tables.
+
+Truths:
+- a 4-row table whose maxima, minima, RMS and norms are written out below by hand (3-4-5 and
+  1-2-2 triangles so the norms are exact integers);
+- batch independence: the same rows in one batch or in batches of one give the same values;
+- a real closed-loop run's summary equals the metrics recomputed from its own rows by
+  :func:`trajectory_metrics` (same reduction over the same rows, so bit for bit).
+"""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose
+
+from stationbed.run.metrics import METRICS, RunMetrics, trajectory_metrics
+
+COLS = ["t", "hx", "hy", "hz", "cmg_singularity", "tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg"]
+# t, h (3), singularity, tau (3), err
+TABLE = np.array(
+    [
+        [0.0, 3.0, 4.0, 0.0, 0.9, 1.0, 2.0, 2.0, 2.0],  # |h| 5, |tau| 3
+        [10.0, 0.0, 0.0, 12.0, 0.4, 0.0, 0.0, 0.0, np.nan],  # |h| 12, err ignored
+        [20.0, 6.0, 8.0, 0.0, 0.7, 2.0, 4.0, 4.0, 1.0],  # |h| 10, |tau| 6
+        [30.0, 0.0, 0.0, 1.0, 0.8, 0.0, 3.0, 4.0, 3.0],  # |h| 1, |tau| 5
+    ]
+)
+EXACT_RTOL = 1e-15  # the hand values are exact in binary floating point except sqrt: one rounding
+
+
+def _metrics(batches, settle_s=None, cap=24.0):
+    m = RunMetrics(COLS, settle_s=settle_s, h_capacity_Nms=cap)
+    for b in batches:
+        m.update(b)
+    m.count_ticks(7, 2)
+    return m.values()
+
+
+@pytest.mark.parametrize("split", [1, 2, 4], ids=["one_batch", "two_batches", "row_by_row"])
+def test_hand_computed_table(split):
+    v = _metrics(np.array_split(TABLE, split))
+    assert v["max_att_err_deg"] == 3.0
+    assert v["final_att_err_deg"] == 3.0
+    assert_allclose(v["rms_att_err_deg"], math.sqrt((4 + 1 + 9) / 3), rtol=EXACT_RTOL)  # NaN row skipped
+    assert v["max_h_Nms"] == 12.0
+    assert v["max_h_fraction"] == 0.5  # 12 / 24
+    assert v["min_singularity"] == 0.4
+    assert v["max_torque_cmd_Nm"] == 6.0  # |(2, 4, 4)|
+    assert (v["rate_limited_ticks"], v["momentum_saturated_ticks"]) == (7, 2)
+    assert set(v) <= set(METRICS)
+
+
+def test_rms_after_settling_time():
+    v = _metrics([TABLE], settle_s=15.0)  # rows at t = 20, 30: errors 1 and 3
+    assert_allclose(v["rms_att_err_deg"], math.sqrt((1 + 9) / 2), rtol=EXACT_RTOL)
+    assert v["max_att_err_deg"] == 3.0  # the max is over every row, settled or not
+
+
+def test_absent_columns_give_absent_metrics():
+    m = RunMetrics(["t", "att_err_deg"])
+    m.update(np.array([[0.0, np.nan], [1.0, np.nan]]))
+    assert m.values() == {}  # no reference, no CMG, no torque: nothing made up
+    m = RunMetrics(COLS, h_capacity_Nms=math.inf)
+    m.update(TABLE)
+    assert "max_h_fraction" not in m.values() and m.values()["max_h_Nms"] == 12.0
+
+
+def test_trajectory_metrics_of_a_dataframe_uses_summary_counts_and_capacity():
+    df = pd.DataFrame(TABLE, columns=COLS)
+    v = trajectory_metrics(df, {"rate_limited_ticks": 7, "momentum_saturated_ticks": 2, "h_capacity_Nms": 24.0})
+    assert v == _metrics([TABLE])
+
+
+def test_closed_loop_summary_is_the_metrics_of_its_rows():
+    from stationbed import load_scene, simulate
+
+    scene = load_scene("scenarios/iss_lvlh_hold.toml").replace({"simulation.duration": 600.0})
+    tr = simulate(scene)
+    s = tr.meta["summary"]
+    v = trajectory_metrics(tr)
+    assert {k: s[k] for k in v} == v
+    assert {"max_att_err_deg", "rms_att_err_deg", "max_h_fraction", "max_torque_cmd_Nm"} <= set(v)
+    df = pd.DataFrame(tr.data, columns=tr.columns)  # what a reader of the CSV gets
+    assert trajectory_metrics(df, s) == v
