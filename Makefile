@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
 	$(PY) benchmarks/bench_control.py
 	$(PY) benchmarks/bench_batch.py
+	$(PY) benchmarks/bench_montecarlo.py
 	$(PY) benchmarks/bench_basilisk.py  # optional: says so when bsk is not installed
 
 clean:
