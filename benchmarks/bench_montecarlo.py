@@ -18,13 +18,16 @@ dynamics in one compiled loop; sensor noise needs the per-tick path). Rows, in o
 4. per-sample cost: the 1-worker wall / n against the median of ``stationbed.simulate`` of the
    same samples' scenes, one by one in this process (target within 10 %);
 5. peak memory (``VmHWM``, the kernel's resident-set high-water mark) of the driver and of each
-   worker after row 1.
+   worker after row 1;
+6. the workers' CPU time per sample (``time.process_time`` summed over the workers), which other
+   work on a shared machine inflates much less than the wall, and the load average.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -74,7 +77,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from distributed import Client, LocalCluster
 
-    rows = {}
+    rows = {"loadavg_start": os.getloadavg()}
     pd_scene = bench_scene("pd")
     # 1. pd fused, whole call (cluster start-up included)
     wall, res = timed(lambda: montecarlo(pd_scene, n=args.n, workers=args.workers))
@@ -91,19 +94,22 @@ def main(argv=None) -> int:
     print(f"example_hold: {args.n_python} samples: {wall:.1f} s; 1000 samples ~ {per * 1000:.0f} s "
           f"({'measured' if args.n_python == 1000 else 'extrapolated'}; target 240 s)", flush=True)
     # 3. + 5. efficiency and worker memory, on clusters started beforehand
-    walls = {}
+    walls, cpus = {}, {}
     for k in (1, 2):
         with LocalCluster(n_workers=k, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
                 Client(cl) as client:
             montecarlo(pd_scene, n=2 * k, client=client)  # workers load the compiled system
+            cpu0 = sum(client.run(time.process_time).values())
             walls[k], _ = timed(lambda: montecarlo(pd_scene, n=args.n_eff, client=client))
+            cpus[k] = sum(client.run(time.process_time).values()) - cpu0
             if k == 2:
                 rows["memory_worker_peak_mib"] = max(client.run(vm_hwm_mib).values())
     eff = walls[1] / (2 * walls[2])
     rows["efficiency"] = {"n": args.n_eff, "wall_1_s": walls[1], "wall_2_s": walls[2], "efficiency": eff,
-                          "target": 0.85}
+                          "cpu_1_s": cpus[1], "cpu_2_s": cpus[2], "target": 0.85}
     print(f"parallel efficiency 1 -> 2 workers ({args.n_eff} samples): {walls[1]:.1f} s / {walls[2]:.1f} s "
-          f"= {100 * eff:.0f} % (target 85 %)", flush=True)
+          f"= {100 * eff:.0f} % (target 85 %); worker CPU {cpus[1]:.1f} s / {cpus[2]:.1f} s "
+          f"({1e3 * cpus[2] / args.n_eff:.0f} ms per sample)", flush=True)
     # 4. per-sample cost against simulate of the same samples
     singles = []
     for k in range(min(20, args.n_eff)):
@@ -118,6 +124,9 @@ def main(argv=None) -> int:
           f"for simulate alone: x{per_sample / statistics.median(singles):.3f} (target <= 1.10)", flush=True)
     print(f"peak memory: driver {rows['memory_driver_peak_mib']:.0f} MiB after {args.n} samples; "
           f"worker {rows['memory_worker_peak_mib']:.0f} MiB", flush=True)
+    rows["loadavg_end"] = os.getloadavg()
+    print(f"load average (1, 5, 15 min) at start {rows['loadavg_start']}, at end {rows['loadavg_end']} "
+          f"on {os.cpu_count()} cores: other work on the machine inflates the walls", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0
