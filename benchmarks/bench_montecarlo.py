@@ -52,7 +52,7 @@ def vm_hwm_mib() -> float:
 
 def bench_scene(controller: str = "pd"):
     s = load_scene(SCENE)
-    disperse = [d.model_dump(exclude_unset=True) for d in s.montecarlo.disperse if d.key != "controller.sensor.seed"]
+    disperse = [d.model_dump(exclude_unset=True) for d in s.montecarlo.disperse if not d.key.startswith("controller.sensor")]
     changes = {"controller.sensor": {}, "montecarlo.disperse": disperse}
     if controller != "pd":
         disperse = [d for d in disperse if not d["key"].startswith("controller.params")]
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     # 3. + 5. efficiency and worker memory, on clusters started beforehand
     walls, cpus = {}, {}
     for k in (1, 2):
-        with LocalCluster(n_workers=k, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+        with LocalCluster(n_workers=k, threads_per_worker=1, processes=True, dashboard_address=":0") as cl, \
                 Client(cl) as client:
             montecarlo(pd_scene, n=2 * k, client=client)  # workers load the compiled system
             cpu0 = sum(client.run(time.process_time).values())

@@ -129,3 +129,29 @@ def test_cli_serial_option_matches(serial, tmp_path):
     assert main(["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "2", "--out", str(tmp_path / "o"),
                  "--no-charts", "-q"]) == 0
     pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "o" / "samples.parquet"), serial)
+
+
+def test_ctrl_c_keeps_finished_chunks_and_resume_completes(serial, tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
+                    .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0"))
+    out = tmp_path / "o"
+    args = ["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "1", "--out", str(out), "--no-charts", "-q"]
+    cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        end = time.monotonic() + RUN_TIMEOUT_S
+        while time.monotonic() < end and proc.poll() is None and not any((out / "chunks").glob("chunk_*.parquet")):
+            time.sleep(0.05)
+        assert proc.poll() is None, "the study ended before it could be interrupted"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=RUN_TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 1 and "interrupted" in err and "--resume" in err
+    kept = sorted((out / "chunks").glob("chunk_*.parquet"))
+    assert 1 <= len(kept) < 6 and not (out / "samples.parquet").exists()
+    assert main([*args, "--resume"]) == 0
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)

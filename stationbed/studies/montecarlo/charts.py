@@ -17,6 +17,8 @@ __all__ = ["histograms", "envelopes", "scatter", "strongest_driver", "ENVELOPE_B
 #: percentile bands of the envelope charts (low, high) and the median line
 ENVELOPE_BANDS = ((0.135, 99.865), (5.0, 95.0), (25.0, 75.0))
 ENVELOPE_LABELS = ("99.73 % of samples", "90 %", "50 %")
+#: an envelope whose worst value is this many times the median's largest is drawn on a log axis
+LOG_SPREAD = 30.0
 
 
 def _ok_values(df, name):
@@ -79,11 +81,15 @@ def envelopes(t, env, out: Path, title: str) -> list[Path]:
             ax.plot(t_orbit, np.nanmedian(y, axis=0), color="#1f3b6f", lw=1.5, label="median")
             worst = int(np.nanargmax(np.nanmax(y, axis=1)))
         ax.plot(t_orbit, y[worst], color="#c44e52", lw=1.0, label=f"worst sample (row {worst})")
+        median = np.nanmedian(y, axis=0)
+        if np.nanmax(y) > LOG_SPREAD * max(np.nanmax(median), 1e-300):  # outliers would flatten the bulk
+            ax.set_yscale("log")
+            ax.set_ylim(bottom=max(np.nanpercentile(y, 0.135) / 2, 1e-6 * np.nanmax(y)))
         ax.set_xlabel("time [min]")
         ax.set_ylabel(label)
         ax.set_title(f"{title}: {label} over {len(y)} samples", fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
+        ax.legend(loc="best", fontsize=8)
         fig.tight_layout()
         p = out / fname
         fig.savefig(p, dpi=110)
