@@ -115,11 +115,11 @@ def _study_id(scene, chunk: int) -> str:
 
 def _warm(scene) -> None:
     """Build (or load) the compiled system and the fused loop of ``scene`` in this process, by a
-    run of two controller periods (or output steps): workers then load them from the disk cache."""
-    period = scene.controller.period if scene.controller is not None else scene.simulation.output_dt
-    short = min(scene.simulation.duration, 2 * period)
+    run of two output steps (the fused loop is compiled per output step): workers then load
+    them from the disk cache instead of each compiling them."""
+    short = min(scene.simulation.duration, 2 * scene.simulation.output_dt)
     try:
-        simulate(scene.replace({"simulation.duration": short, "simulation.output_dt": period}), keep=False)
+        simulate(scene.replace({"simulation.duration": short}), keep=False)
     except Exception:  # noqa: BLE001 - a failing base scene still runs its samples (and records why)
         pass
 
