@@ -40,10 +40,16 @@ def histograms(df, out: Path, requirements=()) -> list[Path]:
             continue
         fig, ax = plt.subplots(figsize=(6.4, 4.0))
         bins = min(50, max(5, int(np.sqrt(len(v)))))
-        ax.hist(v, bins=bins if np.ptp(v) > 0 else 1, color="#4c72b0", edgecolor="white")
+        if np.ptp(v) == 0:
+            bins = 1
+        elif v.min() > 0 and v.max() > LOG_SPREAD * np.median(v):  # a heavy tail: log-spaced bins
+            bins = np.geomspace(v.min(), v.max(), bins + 1)
+            ax.set_xscale("log")
+        ax.hist(v, bins=bins, color="#4c72b0", edgecolor="white")
         if name in limits:
             ax.axvline(limits[name], color="red", lw=1.5, label=f"requirement {limits[name]:g}")
-            ax.legend(loc="upper right")
+            ax.set_ylim(top=ax.get_ylim()[1] * 1.2)  # room for the legend above the bars
+            ax.legend(loc="upper center", fontsize=8)
         ax.set_xlabel(f"{name} [{m.unit}]")
         ax.set_ylabel("samples")
         ax.set_title(f"{name}: {len(v)} samples, median {np.median(v):.3g}, max {v.max():.3g}", fontsize=10)
