@@ -74,17 +74,29 @@ def main(argv=None) -> int:
     ap.add_argument("--n-eff", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--only-pd", action="store_true", help="row 1 and the driver's memory only (e.g. --n 10000)")
     args = ap.parse_args(argv)
     from distributed import Client, LocalCluster
 
     rows = {"loadavg_start": os.getloadavg()}
     pd_scene = bench_scene("pd")
     # 1. pd fused, whole call (cluster start-up included)
-    wall, res = timed(lambda: montecarlo(pd_scene, n=args.n, workers=args.workers))
+    def study_on_new_cluster():  # what montecarlo(..., workers=K) does, keeping the workers to ask
+        with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                          dashboard_address=":0") as cl, Client(cl) as client:
+            res = montecarlo(pd_scene, n=args.n, client=client)
+            return res, max(client.run(vm_hwm_mib).values())
+
+    wall, (res, worker_mib) = timed(study_on_new_cluster)
     rows["pd_fused"] = {"n": args.n, "workers": args.workers, "wall_s": wall, "target_s": 60.0,
-                        "failed": int((res.df["status"] != "ok").sum())}
+                        "failed": int((res.df["status"] != "ok").sum()), "worker_peak_mib": worker_mib}
     rows["memory_driver_peak_mib"] = vm_hwm_mib()
-    print(f"pd fused: {args.n} samples on {args.workers} workers: {wall:.1f} s (target 60 s)", flush=True)
+    print(f"pd fused: {args.n} samples on {args.workers} workers: {wall:.1f} s (target 60 s); driver peak "
+          f"{rows['memory_driver_peak_mib']:.0f} MiB, worker peak {worker_mib:.0f} MiB", flush=True)
+    if args.only_pd:
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        return 0
     # 2. example_hold, Python per tick
     py_scene = bench_scene("example_hold")
     wall, res = timed(lambda: montecarlo(py_scene, n=args.n_python, workers=args.workers))
