@@ -247,3 +247,21 @@ def test_bad_montecarlo_tables_are_one_line_errors(changes, message):
 def test_typo_in_the_montecarlo_table_names_the_nearest_key():
     with pytest.raises(SceneError, match="montecarlo.sed: unknown key; did you mean 'seed'"):
         load_scene(MC_SCENE).replace({"montecarlo.sed": 3})
+
+
+def test_sample_scene_keeps_a_relative_controller_file_reachable(tmp_path):
+    from stationbed.studies.montecarlo.replay import write_sample_scene
+
+    (tmp_path / "laws").mkdir()
+    (tmp_path / "laws" / "hold.py").write_text(open("controllers/example_hold.py").read())
+    text = open(MC_SCENE).read().replace('name = "pd"', 'name = "laws/hold.py:ExampleHold"')
+    text = text.replace("bandwidth = 0.005           # rad/s\ndamping = 0.8\nmax_slew_rate = 0.001       # rad/s\n",
+                        "kp = 4.0e-5\n")
+    text = text.replace('key = "controller.params.bandwidth"', 'key = "controller.params.kp"')
+    (tmp_path / "scene.toml").write_text(text)
+    scene = load_scene(tmp_path / "scene.toml")
+    back = write_sample_scene(scene, 0, tmp_path / "elsewhere" / "s0.toml")
+    module, _, cls = back.controller.name.rpartition(":")
+    assert cls == "ExampleHold" and module == str((tmp_path / "laws" / "hold.py").resolve())
+    tr = simulate(back.replace({"simulation.duration": 1.0}), keep=False)  # the file is found and runs
+    assert tr.meta["summary"]["controller"] == "example_hold"

@@ -9,7 +9,6 @@ import struct
 import numpy as np
 
 from ..core.compile import FastCall
-from ..core.rotation import rotation_angle, rotation_vector
 from ..integrators import IntegrationError
 from ..model.cmg import cluster_functions
 from .controller import (
@@ -201,18 +200,12 @@ class ControlLoop:
             vals += list(self.u[3 : 3 + self.ng]) if self.ng else []
             vals.append(float(sat_flag))
         q_ref = self.ctrl.q_ref_BN
-        if q_ref is None:
-            err = math.nan
-            axes = [math.nan] * 3
-        else:
+        if q_ref is not None:
             if q_ref.__class__ is not np.ndarray or q_ref.dtype != np.float64 or q_ref.shape != (4,):
                 q_ref = self._check_q_ref(q_ref)
-            err = math.degrees(float(rotation_angle(q_ref[None], self.x[None, 0:4])[0]))
-            # per axis: the error rotation vector, B components [deg] (its norm is att_err_deg)
-            axes = np.degrees(rotation_vector(q_ref[None], self.x[None, 0:4])[0]).tolist()
         tau = self.last_cmd if self.ctrl.command == "torque" else (math.nan,) * 3
-        vals += list(tau) + [err] + axes
-        return vals
+        vals += list(tau) + [math.nan] * 4  # att_err_deg and its axes: from q_ref, by the rows a batch at a time
+        return vals, q_ref
 
     def run(self) -> None:
         """Run ticks 0..K (the fused loop when :func:`~stationbed.run.fused.fused_ok`, else per
@@ -296,7 +289,7 @@ class ControlLoop:
                         self.last_cmd = cmd
                     if smooth and has_act:
                         self.u[3 : 3 + nu] = res_act[:nu]  # the row's held rates (flags counted above)
-                    self.rows.hold(t, self.x, self._held_row(sat_since_row))
+                    self.rows.hold(t, self.x, *self._held_row(sat_since_row))
                     sat_since_row = 0
                 if k == K:
                     break

@@ -164,7 +164,7 @@ def run_fused(loop, K: int) -> None:
                 loop.last_cmd = tuple(cmd)
             ctrl.q_ref_BN = tuple(q_ref)
             loop.x = x
-            loop.rows.hold(t, x, loop._held_row(flag | tail_flag))  # streamed in batches
+            loop.rows.hold(t, x, *loop._held_row(flag | tail_flag))  # streamed in batches
             if k == K:
                 break
             n_act = row_ks[j + 1] - k

@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from ..core.compile import FastCall
+from ..core.rotation import rotation_angle, rotation_vector
 from ..integrators import IntegrationError
 from ..model.cmg import CmgModel
 from ..model.torques import TORQUES
@@ -135,6 +136,7 @@ class Rows:
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
         self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s)
         self._pending = ([], [], [])  # times, states, held values of rows not yet made
+        self._q_refs = []  # the controller's reference per pending row (None: no reference)
         self._flushed_at = time.perf_counter()
         col = {c: i for i, c in enumerate(self.columns)}
         names = scene.appendage_names
@@ -165,6 +167,8 @@ class Rows:
         if scene.controller is not None:
             self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
+        self._err_col = col.get("att_err_deg")
+        self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []
 
     def make(self, ts, xs, held=None) -> np.ndarray:
         """Rows for times ``ts`` and states ``xs``.
@@ -218,13 +222,17 @@ class Rows:
             if self.keep:
                 self.rows.append(rows)
 
-    def hold(self, t: float, x, held) -> None:
-        """Add the row at ``t`` (state ``x``, the loop's ``held`` values) to the pending batch;
-        the batch is made and emitted when full or :data:`FLUSH_S` after the last one."""
+    def hold(self, t: float, x, held, q_ref=None) -> None:
+        """Add the row at ``t`` (state ``x``, the loop's ``held`` values, the controller's
+        reference ``q_ref`` (4,) or None) to the pending batch; the batch is made and emitted
+        when full or :data:`FLUSH_S` after the last one. ``att_err_deg`` is the angle between
+        ``q_ref`` and the row's attitude (NaN without a reference), computed a batch at a time
+        (:func:`~stationbed.core.rotation.rotation_angle` is row-wise: the same numbers)."""
         ts, xs, hs = self._pending
         ts.append(t)
         xs.append(np.array(x, dtype=float))
         hs.append(held)
+        self._q_refs.append(q_ref)
         if len(ts) >= ROW_BATCH or time.perf_counter() - self._flushed_at >= FLUSH_S:
             self.flush()
 
@@ -234,7 +242,15 @@ class Rows:
         ts, xs, hs = self._pending
         if ts:
             rows = self.make(ts, xs, hs)
-            ts.clear(), xs.clear(), hs.clear()
+            refs = self._q_refs
+            have = [i for i, q in enumerate(refs) if q is not None]
+            if have and self._err_col is not None:
+                q_ref = np.array([refs[i] for i in have], dtype=float)
+                q = np.array([xs[i][:4] for i in have])
+                rows[have, self._err_col] = np.degrees(rotation_angle(q_ref, q))
+                # per axis: the error rotation vector, B components [deg] (its norm is att_err_deg)
+                rows[np.ix_(have, self._axes_cols)] = np.degrees(rotation_vector(q_ref, q))
+            ts.clear(), xs.clear(), hs.clear(), refs.clear()
             check_rows(rows[:, :12], lambda ok: self.emit(rows[: len(ok)]))
 
     def trajectory(self, meta) -> Trajectory:

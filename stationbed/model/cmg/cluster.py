@@ -176,8 +176,24 @@ def cluster_functions(cfg) -> dict[str, ca.Function]:
     """Numeric casadi Functions of a scene's ``[cmg]`` table (for tests and controllers).
 
     ``h(x) -> h_B`` [N m s]; ``A(x) -> ∂h/∂x`` (gimballed kinds: [N m s/rad]); ``actuate(t, x,
-    tau, w) -> (u, m, rate_limited, saturated)``. Parameters are baked in.
+    tau, w) -> (u, m, rate_limited, saturated)``. Parameters are baked in. The Functions of a
+    table are built once per process (a Monte Carlo runs thousands of closed loops on a few
+    distinct clusters) and shared: casadi Functions are immutable.
     """
+    key = cfg.model_dump_json()
+    if key not in _CLUSTER_FUNCTIONS:
+        if len(_CLUSTER_FUNCTIONS) >= _CLUSTER_FUNCTIONS_MAX:
+            _CLUSTER_FUNCTIONS.clear()
+        _CLUSTER_FUNCTIONS[key] = _cluster_functions(cfg)
+    return dict(_CLUSTER_FUNCTIONS[key])
+
+
+#: cluster_functions of the tables seen in this process, by the table's JSON
+_CLUSTER_FUNCTIONS: dict[str, dict] = {}
+_CLUSTER_FUNCTIONS_MAX = 64
+
+
+def _cluster_functions(cfg) -> dict[str, ca.Function]:
     model = CmgModel.of(cfg)
     p = ca.DM(model.params(cfg))
     x = ca.SX.sym("x", model.nx)

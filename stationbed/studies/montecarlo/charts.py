@@ -17,6 +17,8 @@ __all__ = ["histograms", "envelopes", "scatter", "strongest_driver", "ENVELOPE_B
 #: percentile bands of the envelope charts (low, high) and the median line
 ENVELOPE_BANDS = ((0.135, 99.865), (5.0, 95.0), (25.0, 75.0))
 ENVELOPE_LABELS = ("99.73 % of samples", "90 %", "50 %")
+#: an envelope whose worst value is this many times the median's largest is drawn on a log axis
+LOG_SPREAD = 30.0
 
 
 def _ok_values(df, name):
@@ -38,10 +40,16 @@ def histograms(df, out: Path, requirements=()) -> list[Path]:
             continue
         fig, ax = plt.subplots(figsize=(6.4, 4.0))
         bins = min(50, max(5, int(np.sqrt(len(v)))))
-        ax.hist(v, bins=bins if np.ptp(v) > 0 else 1, color="#4c72b0", edgecolor="white")
+        if np.ptp(v) == 0:
+            bins = 1
+        elif v.min() > 0 and v.max() > LOG_SPREAD * np.median(v):  # a heavy tail: log-spaced bins
+            bins = np.geomspace(v.min(), v.max(), bins + 1)
+            ax.set_xscale("log")
+        ax.hist(v, bins=bins, color="#4c72b0", edgecolor="white")
         if name in limits:
             ax.axvline(limits[name], color="red", lw=1.5, label=f"requirement {limits[name]:g}")
-            ax.legend(loc="upper right")
+            ax.set_ylim(top=ax.get_ylim()[1] * 1.2)  # room for the legend above the bars
+            ax.legend(loc="upper center", fontsize=8)
         ax.set_xlabel(f"{name} [{m.unit}]")
         ax.set_ylabel("samples")
         ax.set_title(f"{name}: {len(v)} samples, median {np.median(v):.3g}, max {v.max():.3g}", fontsize=10)
@@ -79,11 +87,15 @@ def envelopes(t, env, out: Path, title: str) -> list[Path]:
             ax.plot(t_orbit, np.nanmedian(y, axis=0), color="#1f3b6f", lw=1.5, label="median")
             worst = int(np.nanargmax(np.nanmax(y, axis=1)))
         ax.plot(t_orbit, y[worst], color="#c44e52", lw=1.0, label=f"worst sample (row {worst})")
+        median = np.nanmedian(y, axis=0)
+        if np.nanmax(y) > LOG_SPREAD * max(np.nanmax(median), 1e-300):  # outliers would flatten the bulk
+            ax.set_yscale("log")
+            ax.set_ylim(bottom=max(np.nanpercentile(y, 0.135) / 2, 1e-6 * np.nanmax(y)))
         ax.set_xlabel("time [min]")
         ax.set_ylabel(label)
         ax.set_title(f"{title}: {label} over {len(y)} samples", fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
+        ax.legend(loc="best", fontsize=8)
         fig.tight_layout()
         p = out / fname
         fig.savefig(p, dpi=110)

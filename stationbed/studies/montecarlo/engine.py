@@ -115,11 +115,11 @@ def _study_id(scene, chunk: int) -> str:
 
 def _warm(scene) -> None:
     """Build (or load) the compiled system and the fused loop of ``scene`` in this process, by a
-    run of two controller periods (or output steps): workers then load them from the disk cache."""
-    period = scene.controller.period if scene.controller is not None else scene.simulation.output_dt
-    short = min(scene.simulation.duration, 2 * period)
+    run of two output steps (the fused loop is compiled per output step): workers then load
+    them from the disk cache instead of each compiling them."""
+    short = min(scene.simulation.duration, 2 * scene.simulation.output_dt)
     try:
-        simulate(scene.replace({"simulation.duration": short, "simulation.output_dt": period}), keep=False)
+        simulate(scene.replace({"simulation.duration": short}), keep=False)
     except Exception:  # noqa: BLE001 - a failing base scene still runs its samples (and records why)
         pass
 
@@ -199,7 +199,14 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
     failures = sum(int((d["status"] != "ok").sum()) for d, _ in done.values())
     with progress.task(f"montecarlo {scene.name}", total=n, unit="sample") as bar:
         n_done = sum(len(d) for d, _ in done.values())
-        bar.update(n_done, f"{failures} failed")
+        n_resumed = n_done
+
+        def show():
+            ran = n_done - n_resumed
+            eta = (time.perf_counter() - wall0) / ran * (n - n_done) if ran else math.nan
+            bar.update(n_done, f"{n_done}/{n} samples, {failures} failed" + (f", ETA {eta:.0f} s" if ran else ""))
+
+        show()
         cluster = None
         try:
             if todo:
@@ -208,7 +215,7 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
                 from distributed import Client, LocalCluster  # noqa: PLC0415 - dask only when asked
 
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None)
+                                       dashboard_address=":0")
                 client = Client(cluster)
             if client is None:
                 for k0, k1 in todo:
@@ -216,7 +223,7 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
                     keep(res)
                     n_done += k1 - k0
                     failures += sum(r["status"] != "ok" for r in res["rows"])
-                    bar.update(n_done, f"{failures} failed")
+                    show()
             elif todo:
                 from distributed import as_completed  # noqa: PLC0415
 
@@ -229,7 +236,7 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
                         keep(res)
                         n_done += res["k1"] - res["k0"]
                         failures += sum(r["status"] != "ok" for r in res["rows"])
-                        bar.update(n_done, f"{failures} failed")
+                        show()
                         fut.release()
                 except BaseException:
                     client.cancel(futures)

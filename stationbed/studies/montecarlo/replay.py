@@ -88,7 +88,13 @@ def write_sample_scene(scene: Scene, k: int, path: Path) -> Scene:
     ``settle_s`` defines ``rms_att_err_deg``) without its dispersions."""
     s = sample_scene(scene, k)
     mc = scene.montecarlo
-    s = s.replace({"montecarlo.disperse": []})
+    changes = {"montecarlo.disperse": []}
+    c = s.controller
+    if c is not None and ":" in c.name and scene.folder is not None:  # a controller file, found
+        module, _, cls = c.name.rpartition(":")                         # from the new file's folder
+        if (module.endswith(".py") or "/" in module) and not Path(module).expanduser().is_absolute():
+            changes["controller.name"] = f"{(scene.folder / module).resolve()}:{cls}"
+    s = s.replace(changes)
     header = (f"sample {k} of the Monte Carlo study of '{scene.name}' (seed {mc.seed}, sample seed "
               f"{sample_seed(mc.seed, k)}): the drawn values are filled in\n"
               f"written by: stationbed montecarlo --sample {k}")

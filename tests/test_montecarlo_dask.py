@@ -1,0 +1,157 @@
+"""The Monte Carlo on Dask: the same table serially, on 1 and 2 local workers, and on a real
+``dask scheduler`` with two ``dask worker`` processes started here, one of which is killed
+(SIGKILL) mid-run.
+
+Truth: the serial table (one process, no Dask). Every distributed table must equal it exactly
+(``assert_frame_equal`` with no tolerance): each sample draws from its own seed and a chunk
+is a pure function of its range, so where it ran cannot change a number.
+
+The processes started here are bounded: every wait has a timeout and every process is killed
+in a ``finally``; ports are chosen free at test time.
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+
+from stationbed import load_scene, montecarlo
+from stationbed.cli import main
+
+MC_SCENE = "scenarios/iss_lvlh_hold_montecarlo.toml"
+#: the longest wait for the scheduler or the workers to come up [s]
+START_TIMEOUT_S = 60.0
+#: the longest wait for the study through the scheduler [s]
+RUN_TIMEOUT_S = 120.0
+
+
+def scene(n):
+    return load_scene(MC_SCENE).replace({"simulation.duration": 120.0, "montecarlo.envelope_dt": 20.0,
+                                         "montecarlo.settle_s": 20.0, "montecarlo.n": n})
+
+
+@pytest.fixture(scope="module")
+def serial():
+    return montecarlo(scene(6), chunk=1).df
+
+
+@pytest.mark.parametrize("workers", [1, 2], ids=["1_worker", "2_workers"])
+def test_local_workers_give_the_serial_table(serial, workers):
+    got = montecarlo(scene(6), workers=workers, chunk=1).df
+    pd.testing.assert_frame_equal(got, serial)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_port(port: int, proc, timeout: float) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            raise RuntimeError(f"the dask scheduler exited with {proc.returncode}")
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.1)
+    raise TimeoutError(f"no dask scheduler on port {port} after {timeout} s")
+
+
+def _wait_workers(address: str, n: int, timeout: float) -> None:
+    from distributed import Client
+
+    with Client(address, timeout=f"{timeout}s") as c:
+        c.wait_for_workers(n, timeout=timeout)
+
+
+def test_real_scheduler_and_a_killed_worker_give_the_serial_table(serial, tmp_path):
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    log = open(tmp_path / "dask.log", "w")
+    procs = []
+    try:
+        sched = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", str(port), "--dashboard-address", ":0", "--no-show"],
+                                 stdout=log, stderr=subprocess.STDOUT, env=env)
+        procs.append(sched)
+        _wait_port(port, sched, START_TIMEOUT_S)
+        for i in range(2):
+            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                           "--nthreads", "1", "--nworkers", "1", "--no-nanny", "--name", f"w{i}",
+                                           "--dashboard-address", ":0"],
+                                          stdout=log, stderr=subprocess.STDOUT, env=env))
+        _wait_workers(address, 2, START_TIMEOUT_S)
+        out = tmp_path / "out"
+        cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))",
+               "montecarlo", str(tmp_path / "scene.toml"), "--scheduler", address, "--out", str(out),
+               "--chunk", "1", "--no-charts", "-q"]
+        (tmp_path / "scene.toml").write_text(
+            open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
+            .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0")
+            .replace("n = 1000", "n = 6"))
+        study = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
+        procs.append(study)
+        end = time.monotonic() + RUN_TIMEOUT_S
+        chunks = out / "chunks"
+        while time.monotonic() < end and study.poll() is None:  # the first chunk is back: kill a worker
+            if chunks.is_dir() and any(chunks.glob("chunk_*.parquet")):
+                break
+            time.sleep(0.05)
+        killed_mid_run = study.poll() is None
+        procs[1].send_signal(signal.SIGKILL)
+        assert study.wait(timeout=RUN_TIMEOUT_S) == 0, (tmp_path / "dask.log").read_text()[-2000:]
+        assert killed_mid_run
+        got = pd.read_parquet(out / "samples.parquet")
+        pd.testing.assert_frame_equal(got, serial)
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.kill()
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
+        log.close()
+
+
+def test_cli_serial_option_matches(serial, tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
+                    .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0"))
+    assert main(["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "2", "--out", str(tmp_path / "o"),
+                 "--no-charts", "-q"]) == 0
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "o" / "samples.parquet"), serial)
+
+
+def test_ctrl_c_keeps_finished_chunks_and_resume_completes(serial, tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
+                    .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0"))
+    out = tmp_path / "o"
+    args = ["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "1", "--out", str(out), "--no-charts", "-q"]
+    cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        end = time.monotonic() + RUN_TIMEOUT_S
+        while time.monotonic() < end and proc.poll() is None and not any((out / "chunks").glob("chunk_*.parquet")):
+            time.sleep(0.05)
+        assert proc.poll() is None, "the study ended before it could be interrupted"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=RUN_TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 1 and "interrupted" in err and "--resume" in err
+    kept = sorted((out / "chunks").glob("chunk_*.parquet"))
+    assert 1 <= len(kept) < 6 and not (out / "samples.parquet").exists()
+    assert main([*args, "--resume"]) == 0
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)
