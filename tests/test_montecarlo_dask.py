@@ -138,7 +138,10 @@ def test_ctrl_c_keeps_finished_chunks_and_resume_completes(serial, tmp_path):
     out = tmp_path / "o"
     args = ["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "1", "--out", str(out), "--no-charts", "-q"]
     cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))", *args]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # the child must get SIGINT's default action: a pytest-xdist worker ignores SIGINT, and an
+    # ignored signal is inherited (then Python installs no KeyboardInterrupt handler)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         end = time.monotonic() + RUN_TIMEOUT_S
         while time.monotonic() < end and proc.poll() is None and not any((out / "chunks").glob("chunk_*.parquet")):
