@@ -31,7 +31,6 @@ import shutil
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import casadi as ca
@@ -54,9 +53,6 @@ VM_RTOL = 1e-12
 #: generated C per added array of a dop853 system with the RHS called by the stages (measured
 #: 19 kB; 95 kB when every stage inlined it: benchmarks/bench_compile.py) [bytes]
 C_BYTES_PER_ARRAY = 40_000
-#: build time of a 32-array rigid system, dop853, momentum form (measured 11 s; 101 s when the
-#: stages inlined the RHS) [s]
-COMPILE_32_ARRAYS_S = 60.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -398,8 +394,8 @@ def test_generated_c_grows_by_a_bounded_amount_per_array(cache, monkeypatch, fre
 
 
 @pytest.mark.slow
-def test_32_arrays_compile_in_bounded_time(cache, fresh_systems):
-    t0 = time.perf_counter()
+def test_32_arrays_compile_to_c(cache, fresh_systems):
+    # the build's size is bounded by the C-bytes test above; its time (11 s measured; 101 s when
+    # the stages inlined the RHS) is a benchmark number (benchmarks/bench_compile.py), not a test
     system = build_system(Structure.of(scene_from_dict(_array_scene_dict(32))), "momentum", "dop853")
-    elapsed = time.perf_counter() - t0
-    assert (system.evaluator, elapsed <= COMPILE_32_ARRAYS_S) == (sbc.EVALUATOR_C, True), f"{elapsed:.1f} s"
+    assert system.evaluator == sbc.EVALUATOR_C
