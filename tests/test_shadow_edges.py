@@ -9,6 +9,7 @@ Truths used (none calls the finder's switching functions):
   the umbra's where it reaches 0, a glider's switch where it crosses 1/2;
 * the cylindrical shadow's entry and exit in closed form for a circular orbit:
   ``cos β cos(u - u_noon) = -sqrt(1 - (R_E/r)²)``;
+* a jump (the cylinder, a glider's switch) is cut on both sides, at ±JUMP_PAD_S;
 * a run cut at the edges agrees with the same run uncut (the physics is unchanged) to the
   integrator's tolerance, and dop853 spends fewer RHS evaluations.
 """
@@ -93,14 +94,16 @@ def test_cylindrical_edges_match_plane_geometry():
     T = 2 * math.pi / o.mean_motion
     half = math.acos(-math.sqrt(1 - (R_E / o.radius_m) ** 2) / math.cos(sun.beta))  # |u - u_noon| at the edges
     truth = sorted(((sun.u_noon + s * half - o.u0) % (2 * math.pi)) / o.mean_motion + k * T for s in (-1, 1) for k in (0, 1))
-    assert np.allclose(se.shadow_edges(scene, 2 * T), truth, rtol=0, atol=CLOSED_FORM_S)
+    edges = np.array(se.shadow_edges(scene, 2 * T)).reshape(-1, 2)  # a jump: cut on both sides
+    assert np.allclose(edges[:, 1] - edges[:, 0], 2 * se.JUMP_PAD_S, rtol=1e-6, atol=0)
+    assert np.allclose(edges.mean(axis=1), truth, rtol=0, atol=CLOSED_FORM_S)
 
 
 def test_glider_switch_is_where_the_shadow_crosses_one_half():
     glider = stationbed.load_scene(ROOT / "scenarios" / "iss_night_glider.toml")
     scene = glider.replace({"torque": [], "sun": {**glider.sun.model_dump(exclude_unset=True), "eclipse": "conical"}})
     T = 2 * math.pi / scene.orbit.mean_motion
-    edges = se.shadow_edges(scene, T)
+    edges = np.array(se.shadow_edges(scene, T)).reshape(-1, 2).mean(axis=1)  # a jump: cut on both sides
     ts, nu = _nu_fine(scene, 0.0, T)
     truth = _changes(ts, nu, 0.5)
     assert len(truth) == 2 and len(edges) == 2
@@ -115,10 +118,11 @@ def test_no_cuts_when_nothing_reads_the_shadow(eclipse, torque):
     assert se.shadow_edges(scene, 3e4) == []
 
 
-def test_cut_run_agrees_with_uncut_and_costs_fewer_rhs(monkeypatch):
+@pytest.mark.parametrize("eclipse", ["conical", "cylindrical"])
+def test_cut_run_agrees_with_uncut_and_costs_fewer_rhs(monkeypatch, eclipse):
     surfaces = [s.model_dump(exclude_unset=True)
                 for s in stationbed.load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").surface if s.size is not None]
-    scene = _scene().replace({"surface": surfaces})
+    scene = _scene(eclipse).replace({"surface": surfaces})
     T = 2 * math.pi / scene.orbit.mean_motion
     cut = stationbed.simulate(scene, duration=T)
     monkeypatch.setattr(simulation, "smooth_cuts", lambda *a: [])

@@ -13,8 +13,11 @@ the instants where ν has a kink or a jump are known before the run:
   (:meth:`~stationbed.model.station.StationModel._glider_acceleration`).
 
 An adaptive integrator that steps across such an instant shrinks its step to resolve it and
-then regrows it (~100-250 RHS evaluations per orbit on the ISS scenes, docs/design.md); cut
-there, each smooth piece is integrated on its own. The physics is unchanged.
+then regrows it (~150-450 RHS evaluations per orbit on the ISS scenes, docs/design.md); cut
+there, each smooth piece is integrated on its own. A kink (conical ν) is cut at the edge; a jump
+(cylindrical ν, a glider's switch) on both sides of it (:data:`JUMP_PAD_S`). The physics is
+unchanged. Only adaptive open-loop runs are cut (:func:`stationbed.run.segments.smooth_cuts`): a
+fixed-step run keeps its steps, and so its numbers, and a fused closed loop stays fused.
 
 Each edge is a zero of a smooth switching function of time: sampled at :data:`SAMPLES_PER_ORBIT`
 points per orbit (the penumbra, ~8 s in LEO, is far wider than the sampling is fine in the
@@ -35,12 +38,17 @@ from .environment import sun_direction_N
 from .orbit import orbit_numeric, orbit_params, orbit_plane
 from .sun import R_SUN_M, shadow_conical, sun_distance_m
 
-__all__ = ["shadow_functions", "shadow_edges", "SAMPLES_PER_ORBIT", "EDGE_XTOL_S"]
+__all__ = ["shadow_functions", "shadow_edges", "SAMPLES_PER_ORBIT", "EDGE_XTOL_S", "JUMP_PAD_S"]
 
 #: sampling of the switching functions (per orbit period, and at least every 60 s)
 SAMPLES_PER_ORBIT = 720
 #: Brent tolerance of an edge time [s]: well inside the first step dop853 takes after a cut
 EDGE_XTOL_S = 1e-6
+#: a jump is cut on both sides, this far from the edge [s]: ten times the edge's tolerance, so that
+#: every stage of the steps before (after) the jump sees the value before (after) it (one cut on
+#: the jump would leave it inside the last step, within 1e-6 s of its end, and that step would be
+#: rejected down to that size); the step across the 2e-5 s between errs by 2e-5 s x the jump
+JUMP_PAD_S = 1e-5
 
 
 def _angles(r, s_N, dist):
@@ -55,8 +63,10 @@ def _angles(r, s_N, dist):
 
 
 def shadow_functions(scene) -> list:
-    """The switching functions ``g(t)`` (vectorised over t) whose zeros are the scene's shadow
-    edges (empty without an eclipse model, or when nothing in the scene reads ν)."""
+    """The switching functions of the scene's shadow edges, each as ``(g, jump)``: ``g(t)``
+    (vectorised over t) is zero at the edge; ``jump`` says whether what the model reads jumps
+    there (the cylinder's ν, a glider's drive law) rather than only having a kink. Empty without
+    an eclipse model, or when nothing in the scene reads ν."""
     sun = scene.sun
     if sun is None or sun.eclipse == "none" or scene.orbit is None:
         return []
@@ -85,13 +95,13 @@ def shadow_functions(scene) -> list:
             perp = np.sqrt(np.maximum(r2 - along * along, 0.0))
             return np.where(along < 0, R_EARTH_M - perp, R_EARTH_M - np.sqrt(r2))
         if srp or glider:
-            out.append(behind)
+            out.append((behind, True))
         return out
     if srp:
-        out.append(lambda t: (lambda a, b, c: c - (a + b))(*_angles(pos(t), s_N, dist)))
-        out.append(lambda t: (lambda a, b, c: c - (b - a))(*_angles(pos(t), s_N, dist)))
+        out.append((lambda t: (lambda a, b, c: c - (a + b))(*_angles(pos(t), s_N, dist)), False))
+        out.append((lambda t: (lambda a, b, c: c - (b - a))(*_angles(pos(t), s_N, dist)), False))
     if glider:
-        out.append(lambda t: shadow_conical(pos(t), s_N, dist) - 0.5)
+        out.append((lambda t: shadow_conical(pos(t), s_N, dist) - 0.5, True))
     return out
 
 
@@ -105,8 +115,9 @@ def shadow_edges(scene, duration: float) -> list[float]:
     n = max(2, int(math.ceil(duration / min(period / SAMPLES_PER_ORBIT, 60.0))) + 1)
     ts = np.linspace(0.0, duration, n)
     edges = set()
-    for g in funcs:
+    for g, jump in funcs:
         gs = g(ts)
         for k in np.nonzero(np.sign(gs[:-1]) * np.sign(gs[1:]) < 0)[0]:
-            edges.add(float(brentq(lambda t: float(g(t)), ts[k], ts[k + 1], xtol=EDGE_XTOL_S)))
+            e = float(brentq(lambda t: float(g(t)), ts[k], ts[k + 1], xtol=EDGE_XTOL_S))
+            edges.update((e - JUMP_PAD_S, e + JUMP_PAD_S) if jump else (e,))
     return sorted(e for e in edges if 0.0 < e < duration)
