@@ -54,22 +54,31 @@ JUMP_PAD_S = 1e-5
 def _angles(r, s_N, dist):
     """Apparent radii of the sun (a) and the Earth (b) and their separation (c) [rad] seen from
     ``r`` (three components, floats or arrays over t), as in :func:`~stationbed.model.sun.shadow_conical`."""
+    sqrt, asin, acos, clip = _fns(r[0])
     d = [dist * s_N[k] - r[k] for k in range(3)]
-    rn = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-    dn = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    a, b = np.arcsin(R_SUN_M / dn), np.arcsin(R_EARTH_M / rn)
-    c = np.arccos(np.clip(-(r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / (rn * dn), -1.0, 1.0))
+    rn = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    a, b = asin(R_SUN_M / dn), asin(R_EARTH_M / rn)
+    c = acos(clip(-(r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / (rn * dn)))
     return a, b, c
 
 
+def _fns(x):
+    """sqrt, asin, acos and a clip to [-1, 1]: math's for a float (Brent's steps), numpy's for arrays."""
+    if isinstance(x, float):
+        return math.sqrt, math.asin, math.acos, lambda v: min(max(v, -1.0), 1.0)
+    return np.sqrt, np.arcsin, np.arccos, lambda v: np.clip(v, -1.0, 1.0)
+
+
 def shadow_functions(scene) -> list:
-    """The switching functions of the scene's shadow edges, each as ``(g, jump)``: ``g(t)``
+    """The station's position ``pos(t)`` (three components, floats or arrays over t) and the
+    switching functions of the scene's shadow edges, each as ``(g, jump)``: ``g(pos(t))``
     (vectorised over t) is zero at the edge; ``jump`` says whether what the model reads jumps
     there (the cylinder's ν, a glider's drive law) rather than only having a kink. Empty without
     an eclipse model, or when nothing in the scene reads ν."""
     sun = scene.sun
     if sun is None or sun.eclipse == "none" or scene.orbit is None:
-        return []
+        return None, []
     s_N = sun_direction_N(sun, *orbit_plane(scene.orbit))
     dist = sun_distance_m(sun)
 
@@ -79,45 +88,46 @@ def shadow_functions(scene) -> list:
         if scene.orbit.kepler:
             r = np.asarray(orbit_numeric(scene.orbit, t).r_N, float)
             return r[0], r[1], r[2]
-        radius, _, u0, n, ci, si = po  # the circular orbit's position, as orbit.orbit_at has it
-        arg = u0 + n * t  # (without its frames, which cost a matrix per time)
-        cu, su = np.cos(arg), np.sin(arg)
+        radius, _, u0, n, ci, si = (float(v) for v in po)  # the circular orbit's position, as
+        arg = u0 + n * t  # orbit.orbit_at has it (without its frames, which cost a matrix per time)
+        cu, su = (math.cos(arg), math.sin(arg)) if isinstance(arg, float) else (np.cos(arg), np.sin(arg))
         return radius * cu, radius * (su * ci), radius * (su * si)
 
     out = []
     srp = any(t.kind == "srp" for t in scene.torque)
     glider = any(getattr(getattr(a, j), "night", "track") == "glider" for a in scene.appendage for j in ("alpha", "beta"))
     if sun.eclipse == "cylindrical":
-        def behind(t):  # R_E - (distance from the Earth-sun line) behind the Earth, R_E - |r| ahead
-            r = pos(t)  # (continuous: equal where along = 0; > 0 exactly in the shadow)
+        def behind(r):  # R_E - (distance from the Earth-sun line) behind the Earth, R_E - |r| ahead
+            # (continuous: equal where along = 0; > 0 exactly in the shadow)
             along = s_N[0] * r[0] + s_N[1] * r[1] + s_N[2] * r[2]
             r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
             perp = np.sqrt(np.maximum(r2 - along * along, 0.0))
             return np.where(along < 0, R_EARTH_M - perp, R_EARTH_M - np.sqrt(r2))
         if srp or glider:
             out.append((behind, True))
-        return out
+        return pos, out
     if srp:
-        out.append((lambda t: (lambda a, b, c: c - (a + b))(*_angles(pos(t), s_N, dist)), False))
-        out.append((lambda t: (lambda a, b, c: c - (b - a))(*_angles(pos(t), s_N, dist)), False))
+        out.append((lambda r: (lambda a, b, c: c - (a + b))(*_angles(r, s_N, dist)), False))
+        out.append((lambda r: (lambda a, b, c: c - (b - a))(*_angles(r, s_N, dist)), False))
     if glider:
-        out.append((lambda t: shadow_conical(pos(t), s_N, dist) - 0.5, True))
-    return out
+        out.append((lambda r: shadow_conical(r, s_N, dist) - 0.5, True))
+    return pos, out
 
 
 def shadow_edges(scene, duration: float) -> list[float]:
     """Sorted times in (0, duration) [s] where the scene's shadow fraction has a kink or a jump,
     or a night glider switches (see the module notes); empty when nothing reads the shadow."""
-    funcs = shadow_functions(scene)
+    pos, funcs = shadow_functions(scene)
     if not funcs:
         return []
     period = 2.0 * math.pi / scene.orbit.mean_motion
     n = max(2, int(math.ceil(duration / min(period / SAMPLES_PER_ORBIT, 60.0))) + 1)
     ts = np.linspace(0.0, duration, n)
+    rs = pos(ts)
     edges = set()
     for g, jump in funcs:
-        gs = g(ts)
+        gs = g(rs)
         for k in np.nonzero(np.sign(gs[:-1]) * np.sign(gs[1:]) < 0)[0]:
-            e = float(brentq(lambda t: float(g(t)), ts[k], ts[k + 1], xtol=EDGE_XTOL_S))
+            e = float(brentq(lambda t: float(g(pos(t))), ts[k], ts[k + 1], xtol=EDGE_XTOL_S))
             edges.update((e - JUMP_PAD_S, e + JUMP_PAD_S) if jump else (e,))
     return sorted(e for e in edges if 0.0 < e < duration)
