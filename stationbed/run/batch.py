@@ -49,7 +49,7 @@ from ..integrators.dop853_batch import OK, STATUS_TEXT, DOP853Lockstep, mapped
 from ..core.rotation import quat_mult
 from ..scene import QUAT_NORM_TOL, Scene, load_scene
 from .initial import characteristic_scales, from_lvlh, initial_x
-from .segments import breakpoints, output_times, segment_input
+from .segments import breakpoints, output_times, segment_input, smooth_cuts
 from .system import build_system
 
 __all__ = ["BatchResult", "disperse_initial", "simulate_batch"]
@@ -307,7 +307,8 @@ def simulate_batch(
     jump = None
     if form.omega_is_state and steps and sim.impulse_jump:
         jump = FastCall.of(funcs["jump"])
-    edges = sorted(set([0.0, duration] + bps))
+    cuts = {c for s in {id(s): s for s in scenes}.values() for c in smooth_cuts(s, duration, DOP853)}
+    edges = sorted(set([0.0, duration] + bps) | cuts)
     x = X0.copy()
     u = np.zeros(nu)
     for a, b in zip(edges[:-1], edges[1:]):

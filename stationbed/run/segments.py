@@ -8,10 +8,11 @@ import math
 import numpy as np
 
 from ..model import StationModel
+from ..model.shadow_edges import shadow_edges
 from ..model.torques import held_torque_B, torque_breakpoints
 from ..scene import Scene
 
-__all__ = ["output_times", "OutputTimes", "breakpoints", "held_torque", "segment_input"]
+__all__ = ["output_times", "OutputTimes", "breakpoints", "smooth_cuts", "held_torque", "segment_input"]
 
 
 def output_times(duration: float, dt: float) -> np.ndarray:
@@ -77,6 +78,14 @@ def breakpoints(scene: Scene, duration: float) -> tuple[list[float], set[float]]
                         bps.add(float(st.t))
                         steps.add(float(st.t))
     return sorted(bps), steps
+
+
+def smooth_cuts(scene: Scene, duration: float, integrator_cls) -> list[float]:
+    """Extra cuts for an adaptive integrator's open-loop run: the times in (0, duration) where
+    the shadow fraction has a kink or a jump (:func:`~stationbed.model.shadow_edges.shadow_edges`).
+    The input does not jump there; cutting only spares the integrator stepping across the edge.
+    Empty for a fixed-step integrator (its steps, and so its numbers, stay as they were)."""
+    return shadow_edges(scene, duration) if integrator_cls.adaptive else []
 
 
 def held_torque(scene: Scene, t_mid: float) -> np.ndarray:

@@ -27,7 +27,7 @@ from .closed_loop import ControlLoop, ControllerFailure
 from .controller import Controller
 from .prepare import prepare
 from .rows import FLUSH_S, ROW_BATCH, Rows, SinkError, check_rows
-from .segments import OutputTimes, breakpoints, segment_input
+from .segments import OutputTimes, breakpoints, segment_input, smooth_cuts
 from .trajectory import Trajectory
 
 __all__ = ["simulate", "SimulationError", "SinkError"]
@@ -164,7 +164,7 @@ def simulate(
             return rows.trajectory(meta)
 
         clock = OutputTimes(duration, output_dt)
-        edges = sorted(set([0.0, duration] + bps))
+        edges = sorted(set([0.0, duration] + bps + smooth_cuts(scene, duration, system.integrator_cls)))
         u = np.zeros(model.nu)
         rows.emit(rows.make([0.0], [x]))
         n_win = 1  # output times per integrator call: up to ROW_BATCH, fewer when calls take long
