@@ -8,7 +8,13 @@ as C. Python then runs once per output row instead of once per tick.
 
 Conditions (otherwise the per-tick loop runs, with the same numbers): a ``fusable`` integrator
 (``rk4``) with one step per control period, no discontinuity inside the run (torque windows,
-rate steps), no sensor noise or delay, a controller with ``symbolic``.
+rate steps), no sensor delay, a controller with ``symbolic``.
+
+Sensor noise: before each compiled call Python draws the noise of its ticks from the loop's
+generator, in the per-tick loop's order (per tick: attitude, then rate; :func:`_draw`), and
+passes them as a per-tick input of the ``mapaccum``; the compiled tick corrupts the measurement
+the controller sees as ``ControlLoop._corrupt`` does (:func:`_corrupt_sx`). Same draws, same
+operations: the fused and per-tick noisy runs agree to round-off (tests/test_fused_noise.py).
 """
 
 from __future__ import annotations
