@@ -142,8 +142,12 @@ def test_ctrl_c_keeps_finished_chunks_and_resume_completes(tmp_path):
     out = tmp_path / "o"
     n = INTERRUPTED_N
     args = ["montecarlo", str(path), "--n", str(n), "--serial", "--chunk", "1", "--out", str(out), "--no-charts", "-q"]
-    cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))", *args]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Ctrl-C as in a terminal: Python's SIGINT handler, unblocked (seen in the full suite: the
+    # child of a pytest-xdist worker could inherit SIGINT ignored or blocked and never stop)
+    code = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT]); "
+            "from stationbed.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         end = time.monotonic() + RUN_TIMEOUT_S
         while time.monotonic() < end and proc.poll() is None and not any((out / "chunks").glob("chunk_*.parquet")):
