@@ -5,7 +5,7 @@
 
 Scene: ``scenarios/iss_lvlh_hold_montecarlo.toml`` (one orbit, 10 Hz, every dispersion of the
 scenario) with the sensor noise off, so the ``pd`` law runs fused (controller, steering and
-dynamics in one compiled loop; sensor noise needs the per-tick path). Rows, in one run:
+dynamics in one compiled loop; it now runs fused with the noise too, README "Monte Carlo"). Rows, in one run:
 
 1. ``pd`` fused, ``--n`` samples (default 1000) on ``--workers`` (default 2) local worker
    processes: wall of the whole ``stationbed.montecarlo`` call, cluster start-up and the

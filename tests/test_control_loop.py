@@ -5,7 +5,7 @@ controller files: test_controller_faults.py).
 The loop can advance a period three ways, and all must give the same numbers:
 
 * the *fused loop* (``stationbed.run.fused``): a controller with a symbolic form, RK4 with one step
-  per period, no discontinuity, no sensor errors: many ticks in one compiled call;
+  per period, no discontinuity, no sensor delay: many ticks in one compiled call;
 * the *per-tick fused tick*: a Python controller, RK4 with one step per period: actuation, one
   RK4 step and the next measurement in one compiled call per tick;
 * the *generic path*: any integrator, one ``Integrator.advance`` per period, split at the

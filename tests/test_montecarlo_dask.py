@@ -131,17 +131,23 @@ def test_cli_serial_option_matches(serial, tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "o" / "samples.parquet"), serial)
 
 
-def test_ctrl_c_keeps_finished_chunks_and_resume_completes(serial, tmp_path):
+#: the interrupted study: long enough (~2 s of fused samples) that Ctrl-C lands before its end
+INTERRUPTED_N, INTERRUPTED_DURATION_S = 40, 2000.0
+
+
+def test_ctrl_c_keeps_finished_chunks_and_resume_completes(tmp_path):
     path = tmp_path / "scene.toml"
-    path.write_text(open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
+    path.write_text(open(MC_SCENE).read().replace("duration = 5553.6", f"duration = {INTERRUPTED_DURATION_S}")
                     .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0"))
     out = tmp_path / "o"
-    args = ["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "1", "--out", str(out), "--no-charts", "-q"]
-    cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))", *args]
-    # the child must get SIGINT's default action: a pytest-xdist worker ignores SIGINT, and an
-    # ignored signal is inherited (then Python installs no KeyboardInterrupt handler)
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    n = INTERRUPTED_N
+    args = ["montecarlo", str(path), "--n", str(n), "--serial", "--chunk", "1", "--out", str(out), "--no-charts", "-q"]
+    # Ctrl-C as in a terminal: Python's SIGINT handler, unblocked (seen in the full suite: the
+    # child of a pytest-xdist worker could inherit SIGINT ignored or blocked and never stop)
+    code = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT]); "
+            "from stationbed.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         end = time.monotonic() + RUN_TIMEOUT_S
         while time.monotonic() < end and proc.poll() is None and not any((out / "chunks").glob("chunk_*.parquet")):
@@ -155,6 +161,7 @@ def test_ctrl_c_keeps_finished_chunks_and_resume_completes(serial, tmp_path):
             proc.wait(timeout=10)
     assert proc.returncode == 1 and "interrupted" in err and "--resume" in err
     kept = sorted((out / "chunks").glob("chunk_*.parquet"))
-    assert 1 <= len(kept) < 6 and not (out / "samples.parquet").exists()
+    assert 1 <= len(kept) < n and not (out / "samples.parquet").exists()
     assert main([*args, "--resume"]) == 0
+    serial = montecarlo(load_scene(path).replace({"montecarlo.n": n}), chunk=1).df
     pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)

@@ -8,7 +8,13 @@ as C. Python then runs once per output row instead of once per tick.
 
 Conditions (otherwise the per-tick loop runs, with the same numbers): a ``fusable`` integrator
 (``rk4``) with one step per control period, no discontinuity inside the run (torque windows,
-rate steps), no sensor noise or delay, a controller with ``symbolic``.
+rate steps), no sensor delay, a controller with ``symbolic``.
+
+Sensor noise: before each compiled call Python draws the noise of its ticks from the loop's
+generator, in the per-tick loop's order (per tick: attitude, then rate; :func:`_draw`), and
+passes them as a per-tick input of the ``mapaccum``; the compiled tick corrupts the measurement
+the controller sees as ``ControlLoop._corrupt`` does (:func:`_corrupt_sx`). Same draws, same
+operations: the fused and per-tick noisy runs agree to round-off (tests/test_fused_noise.py).
 """
 
 from __future__ import annotations
@@ -31,7 +37,8 @@ _CHUNKS: dict[tuple, dict] = {}
 
 def fused_ok(loop) -> bool:
     """Whether ``loop`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
-    integrator at one step per period, no discontinuity inside the run, no sensor errors."""
+    integrator at one step per period, no discontinuity inside the run, no sensor delay (sensor
+    noise is drawn in Python and applied inside the compiled tick: :func:`_noise_width`)."""
     ctrl = loop.ctrl
     integ = loop.integ
     return (
@@ -39,13 +46,51 @@ def fused_ok(loop) -> bool:
         and integ.fusable
         and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
         and not [b for b in loop.bps if 0.0 < b < loop.duration]
-        and not loop.noisy
+        and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
     )
 
 
-def _build(loop, n: int) -> dict:
-    """Compiled ``info`` (one tick's command, actuation, reference) and ``chunk`` (n ticks)."""
+def _noise_flags(loop) -> tuple[bool, bool]:
+    """(attitude noise on, rate noise on): which corruptions of ``ControlLoop._corrupt`` apply."""
+    if not loop.noisy:
+        return False, False
+    return loop.sensor.attitude_noise > 0, loop.sensor.rate_noise > 0
+
+
+def _noise_width(flags) -> int:
+    """Draws per tick: 3 for the attitude, then 3 for the rate (the per-tick loop's order)."""
+    return 3 * int(flags[0]) + 3 * int(flags[1])
+
+
+def _corrupt_sx(y, nz, flags, layout):
+    """``y`` as ``ControlLoop._corrupt`` corrupts it, with this tick's draws ``nz`` (the values of
+    ``rng.normal(0, sigma, 3)``): the same operations in the same order."""
+    att, rate = flags
+    parts = [y[i] for i in range(y.numel())]
+    j = 0
+    if att:
+        o = layout["q_BN"][0]
+        q = parts[o : o + 4]
+        d = [0.5 * nz[j + i] for i in range(3)]
+        qn = [
+            q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
+            q[1] + q[0] * d[0] + q[2] * d[2] - q[3] * d[1],
+            q[2] + q[0] * d[1] + q[3] * d[0] - q[1] * d[2],
+            q[3] + q[0] * d[2] + q[1] * d[1] - q[2] * d[0],
+        ]
+        norm = ca.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
+        parts[o : o + 4] = [c / norm for c in qn]
+        j = 3
+    if rate:
+        o = layout["omega_BN_B"][0]
+        parts[o : o + 3] = [parts[o + i] + nz[j + i] for i in range(3)]
+    return ca.vertcat(*parts)
+
+
+def _build(loop, n: int, flags=(False, False)) -> dict:
+    """Compiled ``info`` (one tick's command, actuation, reference) and ``chunk`` (n ticks);
+    with sensor noise (``flags``), both take each tick's draws as an extra input."""
     system, ctrl = loop.system, loop.ctrl
     sx = system.sx
     form = system.formulation
@@ -60,6 +105,10 @@ def _build(loop, n: int) -> dict:
     cp = ca.SX.sym("cp", ncp)
     u_ext = ca.SX.sym("u_ext", 3)
     y = sx["meas"](t, x, p)
+    nn = _noise_width(flags)
+    nz = ca.SX.sym("nz", nn)
+    if nn:
+        y = _corrupt_sx(y, nz, flags, loop.layout)
     try:
         cmd, q_ref = ctrl.symbolic(t, y, cp)
         cmd = ca.vertcat(cmd)
@@ -73,7 +122,7 @@ def _build(loop, n: int) -> dict:
     if model.cmg is None:
         act = ca.SX.zeros(0, 1)
         u = u_ext + cmd
-        flags = ca.SX.zeros(2)
+        sat = ca.SX.zeros(2)
     else:
         if kind == "torque":
             act = sx["actuate"](t, x, cmd, p)
@@ -81,10 +130,11 @@ def _build(loop, n: int) -> dict:
             act = sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
         u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
         k = model.nu_cmg
-        flags = ca.vertcat(act[k + 1], act[k + 2])
+        sat = ca.vertcat(act[k + 1], act[k + 2])
     if model.has_steps:
         u = ca.vertcat(u, t + h / 2)  # (steps lie outside a fused run; keeps u's layout)
-    info = sx_function("fused_info", [t, x, cp, u_ext, p], [ca.vertcat(cmd, act, q_ref)])
+    ins = [t, x, cp, u_ext, p] + ([nz] if nn else [])
+    info = sx_function("fused_info", ins, [ca.vertcat(cmd, act, q_ref)])
     rhs = sx["rhs"]
     x1 = system.integrator_cls.explicit_step(rhs, t, x, h, u, p)
     # carry: tick index i (exact integer in a double: t = t0 + i h, no accumulation), state,
@@ -93,8 +143,9 @@ def _build(loop, n: int) -> dict:
     cnt = ca.SX.sym("cnt", 2)
     n_act = ca.SX.sym("n_act")
     x_i = ca.SX.sym("x_i", nx)
-    one = sx_function("one", [t, x, cp, u_ext, p, h], [x1, flags])
-    x_new, fl = one(t0 + i * h, x_i, cp, u_ext, p, h)
+    one = sx_function("one", [t, x, cp, u_ext, p, h] + ([nz] if nn else []), [x1, sat])
+    nz_i = ca.SX.sym("nz_i", nn)
+    x_new, fl = one(t0 + i * h, x_i, cp, u_ext, p, h, *([nz_i] if nn else []))
     active = i < n_act
     carry = ca.vertcat(i, x_i, cnt)
     carry_new = ca.vertcat(
@@ -102,13 +153,16 @@ def _build(loop, n: int) -> dict:
         ca.if_else(active, x_new, x_i),
         cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2)),
     )
-    step = sx_function("fused_step", [carry, ca.vertcat(t0, h, n_act, cp, u_ext, p)], [carry_new])
+    step = sx_function("fused_step", [carry, ca.vertcat(t0, h, n_act, cp, u_ext, p)] + ([nz_i] if nn else []), [carry_new])
     acc = step.mapaccum("fused_acc", n)
     c0 = ca.MX.sym("c0", 1 + nx + 2)
     par = ca.MX.sym("par", 3 + ncp + 3 + npar)
-    traj = acc(c0, ca.repmat(par, 1, n))
-    chunk = ca.Function("fused_chunk", [c0, par], [traj[:, -1]])
+    noise = [ca.MX.sym("noise", nn, n)] if nn else []  # column i: tick i's draws
+    traj = acc(c0, ca.repmat(par, 1, n), *noise)
+    chunk = ca.Function("fused_chunk", [c0, par] + noise, [traj[:, -1]])
     tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{loop.system.formulation.model.structure.key}"
+    if nn:
+        tag += f"_noise{int(flags[0])}{int(flags[1])}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp}
 
@@ -117,10 +171,12 @@ def run_fused(loop, K: int) -> None:
     """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
     ctrl = loop.ctrl
     n = loop.n_per_out
-    key = (id(loop.system), type(ctrl), n, ctrl.command)
+    flags = _noise_flags(loop)
+    nn = _noise_width(flags)
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flags)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n)
+        _CHUNKS[key] = _build(loop, n, flags)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
@@ -131,7 +187,10 @@ def run_fused(loop, K: int) -> None:
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p
-    c0, par = chunk.args
+    c0, par = chunk.args[:2]
+    if nn:  # each tick's draws: written before each call (a chunk's columns, then the row tick's)
+        noise, info_nz = chunk.args[2], info.args[5]
+        noise[:] = 0.0
     par[0] = 0.0
     par[1] = period
     par[3 : 3 + len(cp)] = cp
@@ -147,6 +206,10 @@ def run_fused(loop, K: int) -> None:
     try:
         for j, k in enumerate(row_ks):
             t = min(k * period, duration)
+            n_act = row_ks[j + 1] - k if k < K else 1
+            if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order
+                draws = _draw(loop, n_act, flags)
+                info_nz[:] = draws[0]
             # the row at tick k: the command, actuation and reference of this tick
             info.args[0][0] = t
             info.args[1][:] = x
@@ -167,7 +230,6 @@ def run_fused(loop, K: int) -> None:
             loop.rows.hold(t, x, *loop._held_row(flag | tail_flag))  # streamed in batches
             if k == K:
                 break
-            n_act = row_ks[j + 1] - k
             # ticks k .. k + n_act - 1 in one call (tick k's actuation is recomputed inside: same)
             last_len = duration - (k + n_act - 1) * period  # the final period may be shorter
             if last_len < period * (1 - 1e-12):
@@ -181,6 +243,8 @@ def run_fused(loop, K: int) -> None:
             par[0] = k * period
             par[1] = period
             par[2] = n_full
+            if nn:
+                noise[: nn * n_full] = draws[:n_full].ravel()  # column-major (nn, n): tick by tick
             if n_full > 0:
                 chunk()
                 res = chunk.res[0]
@@ -194,6 +258,8 @@ def run_fused(loop, K: int) -> None:
                 par[2] = 1
                 c0[1 : 1 + nx] = x
                 c0[1 + nx :] = 0.0
+                if nn:
+                    noise[:nn] = draws[n_full]
                 chunk()
                 res = chunk.res[0]
                 x = res[1 : 1 + nx].copy()
@@ -214,6 +280,17 @@ def run_fused(loop, K: int) -> None:
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
         loop.rows.flush()
+
+
+def _draw(loop, n: int, flags) -> np.ndarray:
+    """The sensor draws of the next ``n`` ticks, (n, 3 or 6): per tick ``rng.normal(0, σ_att, 3)``
+    then ``rng.normal(0, σ_rate, 3)``, as ``ControlLoop._corrupt`` draws them (a Generator fills
+    an array element by element from one stream, and ``normal(0, σ)`` is ``0 + σ z``: the same
+    numbers from one ``standard_normal`` call, tests/test_fused_noise.py)."""
+    s = loop.sensor
+    z = loop.rng.standard_normal((n, _noise_width(flags)))
+    sig = ([s.attitude_noise] * 3 if flags[0] else []) + ([s.rate_noise] * 3 if flags[1] else [])
+    return 0.0 + np.asarray(sig) * z
 
 
 def _symbolic_params(ctrl):
