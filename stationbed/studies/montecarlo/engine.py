@@ -21,7 +21,10 @@ import hashlib
 import json
 import math
 import os
+import signal
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -144,6 +147,31 @@ def _frame(rows: list[dict], columns: list[str]) -> pd.DataFrame:
     return df
 
 
+@contextmanager
+def _ctrl_c_kept():
+    """Ctrl-C that is never lost: yields a list that becomes non-empty at SIGINT.
+
+    The handler raises KeyboardInterrupt as Python's own does, and also records it: a signal
+    that lands while casadi's SWIG layer converts an argument is swallowed there (seen: a study
+    ran to its end after Ctrl-C), so the engine checks the record between chunks too. Only in
+    the main thread and over Python's default handler (a caller's own handler is left alone)."""
+    seen: list[int] = []
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield seen
+        return
+
+    def handler(signum, frame):
+        seen.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None, resume=False,
               charts=True, scheduler=None) -> MonteCarloResult:
     """Run a Monte Carlo study (see :func:`stationbed.montecarlo`)."""
@@ -197,7 +225,7 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
     todo = [(k0, k1) for k0, k1 in ranges if k0 not in done]
     wall0 = time.perf_counter()
     failures = sum(int((d["status"] != "ok").sum()) for d, _ in done.values())
-    with progress.task(f"montecarlo {scene.name}", total=n, unit="sample") as bar:
+    with progress.task(f"montecarlo {scene.name}", total=n, unit="sample") as bar, _ctrl_c_kept() as ctrl_c:
         n_done = sum(len(d) for d, _ in done.values())
         n_resumed = n_done
 
@@ -224,6 +252,8 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
                     n_done += k1 - k0
                     failures += sum(r["status"] != "ok" for r in res["rows"])
                     show()
+                    if ctrl_c:  # a Ctrl-C that casadi swallowed
+                        raise KeyboardInterrupt
             elif todo:
                 from distributed import as_completed  # noqa: PLC0415
 
@@ -238,6 +268,8 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
                         failures += sum(r["status"] != "ok" for r in res["rows"])
                         show()
                         fut.release()
+                        if ctrl_c:
+                            raise KeyboardInterrupt
                 except BaseException:
                     client.cancel(futures)
                     raise
