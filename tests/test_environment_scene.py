@@ -159,3 +159,22 @@ def test_night_glider_scene_grows_less_pitch_momentum_than_tracking():
         assert tr.meta["summary"]["momentum_saturated_ticks"] == 0
     assert aero["glider"] < 0.8 * aero["track"]  # the eclipse is ~36 % of the orbit
     assert growth["glider"] < 0.5 * growth["track"]
+
+
+def test_plates_do_not_depend_on_the_mass_properties():
+    # a Monte Carlo disperses masses and mass centres: one compiled system must serve every
+    # sample, so no plate constant (part of the structure's key) may follow them; the torque
+    # still does, through the parameters (the lever arms are taken from the composite centre)
+    from stationbed.model.station import StationModel
+    from stationbed.model.structure import Structure
+
+    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace(
+        {"simulation.duration": 1.0, "simulation.output_dt": 1.0})
+    moved = scene.replace({"body.cm": [0.3, -0.2, 0.5], "appendage.stbd_pair.mass": 2600.0,
+                           "appendage.port_pair.cm": [0.0, -37.0, 0.4]})
+    assert Structure.of(moved).key == Structure.of(scene).key
+    p0, p1 = StationModel(Structure.of(scene)).params(scene), StationModel(Structure.of(moved)).params(moved)
+    L = StationModel(Structure.of(scene)).layout
+    assert not np.array_equal(p0[L["surf_O"]], p1[L["surf_O"]])
+    tau = [simulate(s, formulation="momentum").cols("tau_aero_x", "tau_aero_y", "tau_aero_z")[0] for s in (scene, moved)]
+    assert np.abs(tau[1] - tau[0]).max() > 1e-3 * np.abs(tau[0]).max()

@@ -32,7 +32,7 @@ from .flex import Modes
 from .orbit import OrbitAt, orbit_at, orbit_params, orbit_plane
 from .structure import JOINTS, ParamLayout, Structure
 from .sun import SHADOW_MODELS, sun_distance_m
-from .surfaces import plates_B
+from .surfaces import plates_B, surface_origin_params
 from .torques import TORQUES, Environment, OrbitState, v_rel_B
 
 __all__ = ["StationModel", "ArrayState"]
@@ -142,6 +142,8 @@ class StationModel:
                 p[L[kind.kind]] = kind.params(scene)
         if self.structure.sun:
             p[L["sun"]] = sun_direction_N(scene.sun, *orbit_plane(scene.orbit))
+        if self.structure.surfaces:
+            p[L["surf_O"]] = surface_origin_params(scene)
         if self.structure.eclipse:
             p[L["shadow"]] = sun_distance_m(scene.sun)
         if self.cmg is not None:
@@ -471,7 +473,7 @@ class StationModel:
         """The :class:`~stationbed.model.torques.Environment` of the kinds with ``needs_env``."""
         sun_N = p[self.layout["sun"]] if self.structure.sun else None
         nu = self.shadow(orbit, p) if orbit is not None else ca.SX(1.0)
-        return Environment(arrays, sun_N, nu, dcm(q_BN), plates_B(self.structure.surfaces, arrays))
+        return Environment(arrays, sun_N, nu, dcm(q_BN), plates_B(self.structure.surfaces, arrays, p[self.layout["surf_O"]] if self.structure.surfaces else None))
 
     def external_torque(self, t, q_BN, u, p, I_O_B, with_potential=True, arrays=None):
         """Sum of the scene's external torques, B components [N m], (3, 1).

@@ -110,7 +110,8 @@ class ParamLayout:
 
     In order: ``I0`` (9), per appendage ``J<k>`` (9), its joints ``alpha<k>``, ``beta<k>`` and,
     when flexible, ``rho<k>`` (3) and ``modes<k>``; ``mtot`` (flexible scenes); ``orbit`` (6);
-    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``shadow``
+    one slice per symbolic torque kind with numbers, named by the kind; ``sun`` (3); ``surf_O``
+    (3 + 3 n_app, with aero/SRP plates: the mass centres they are measured from); ``shadow``
     (1, with an eclipse model); ``cmg``.
 
     Parameters
@@ -151,6 +152,8 @@ class ParamLayout:
                 add(name, TORQUES[name].n_par)  # the kind's own numbers (TorqueKind.params)
         if structure.sun:
             add("sun", 3)  # unit vector to the sun, N components
+        if structure.surfaces:
+            add("surf_O", 3 + 3 * structure.n_app)  # r_O, then each appendage's mass centre (body coordinates) [m]
         if structure.eclipse:
             add("shadow", 1)  # Earth-sun distance [m] (the conical shadow's sun disc)
         if structure.cmg is not None:

@@ -7,12 +7,15 @@ numbers are folded into the generated code as constants, so an axis-aligned norm
 on an axis costs nothing, and a scene with other surfaces compiles its own code.
 
 * ``area`` [m²]; ``n`` the unit normal and ``c`` the centre, in the attachment's axes (B for
-  the body, P for an appendage); ``rho`` the appendage's mass centre from the composite mass
-  centre O, B axes [m] (zero for the body, whose ``c`` is already taken from O);
+  the body, with body coordinates; P for an appendage, from its mass centre);
+* ``rho``: unused (zeros), kept so the tuple's layout stays;
 * ``two_sided`` (0 or 1), ``cd`` the drag coefficient, ``specular`` and ``diffuse`` fractions.
 
-In B at time t: ``n_B = C_PBᵀ n``, ``r_B = rho + C_PBᵀ c`` (``n_B = n``, ``r_B = c`` on the
-body). O is fixed in B: the arrays are balanced about their joint axes, so turning them does
+No plate constant depends on the mass properties: the composite mass centre ``r_O`` and each
+appendage's mass centre ``a_k`` (body coordinates) come from the parameter vector (slice
+``surf_O``), so a Monte Carlo that disperses masses or mass centres keeps one compiled system.
+In B at time t: ``n_B = C_PBᵀ n``, ``r_B = (a_k - r_O) + C_PBᵀ c`` (``n_B = n``,
+``r_B = c - r_O`` on the body). O is fixed in B: the arrays are balanced about their joint axes, so turning them does
 not move the composite mass centre (an elastic array's deformation does not move its plates).
 
 Forces, with ``w = max(n̂·x, 0)`` (one-sided) or ``|n̂·x|`` (two-sided):
@@ -37,7 +40,7 @@ import numpy as np
 from ..core.massprops import composite_cm
 from ..scene import Surface
 
-__all__ = ["PLATE_FIELDS", "Plate", "scene_plates", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
+__all__ = ["PLATE_FIELDS", "Plate", "scene_plates", "surface_origin_params", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
 
 #: the numbers of one plate (after its attachment), in order
 PLATE_FIELDS = ("area", "n_x", "n_y", "n_z", "c_x", "c_y", "c_z", "rho_x", "rho_y", "rho_z",
@@ -95,15 +98,13 @@ def scene_plates(scene) -> tuple[tuple[float, ...], ...]:
     ----------
     scene : stationbed.scene.Scene
     """
-    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    r_O = composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
     surfaces = scene.surface or [Surface(**d) for d in default_surfaces(scene)]
     names = scene.appendage_names
     out = []
+    rho = np.zeros(3)  # the mass centres are parameters (surface_origin_params)
+    shift = np.zeros(3)
     for s in surfaces:
         k = -1 if s.on == "body" else names.index(s.on)
-        rho = np.zeros(3) if k < 0 else np.asarray(scene.appendage[k].cm, float) - r_O
-        shift = r_O if k < 0 else np.zeros(3)
         if s.size is not None:
             faces, two = _faces(s.size, s.centre), 0.0
         else:
@@ -115,20 +116,31 @@ def scene_plates(scene) -> tuple[tuple[float, ...], ...]:
     return tuple(out)
 
 
-def plates_B(specs, arrays) -> list[Plate]:
+def surface_origin_params(scene) -> np.ndarray:
+    """The ``surf_O`` parameters: the composite mass centre ``r_O``, then each appendage's mass
+    centre ``a_k`` (body coordinates [m]), shape (3 + 3 n_app,)."""
+    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
+    r_O = composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
+    return np.concatenate([np.asarray(r_O, float)] + [np.asarray(a.cm, float) for a in scene.appendage])
+
+
+def plates_B(specs, arrays, origin) -> list[Plate]:
     """The plates in B at time t (casadi, the plates' numbers as constants).
 
     Parameters
     ----------
     specs : tuple of tuple  :func:`scene_plates`.
     arrays : list of ArrayState  The arrays at t (their ``C_PB``).
+    origin : casadi SX, shape (3 + 3 n_app,)  :func:`surface_origin_params` as parameters.
     """
     out = []
+    r_O = origin[0:3]
     for q in specs:
         k = int(q[0])
-        n, c, rho = ca.SX(ca.DM(q[2:5])), ca.SX(ca.DM(q[5:8])), ca.SX(ca.DM(q[8:11]))
+        n, c = ca.SX(ca.DM(q[2:5])), ca.SX(ca.DM(q[5:8])) - r_O
         if k >= 0:
             C_BP = arrays[k].C_PB.T
+            rho = origin[3 + 3 * k : 6 + 3 * k] - r_O
             n, c = _times(C_BP, q[2:5]), rho + _times(C_BP, q[5:8])
         out.append(Plate(q[1], n, c, bool(q[11]), q[12], q[13], q[14]))
     return out
