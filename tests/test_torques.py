@@ -151,7 +151,7 @@ def symbolic_torque(scene, kind, t, q_BN):
     ts, qs, ps = ca.SX.sym("t"), ca.SX.sym("q", 4), ca.SX.sym("p", model.layout.size)
     I_O_B = ca.reshape(ps[model.layout["I0"]], 3, 3).T
     p_k = ps[model.layout[kind]] if cls.n_par else None
-    orbit = model.orbit_state(ts, ps)
+    orbit = model.orbit_at(ts, ps)
     env = model.environment(qs, orbit, ps, model.arrays(ts, qs, ca.SX(0, 1), ps)) if cls.needs_env else None
     f = ca.Function("L", [ts, qs, ps], [cls.torque_B(ts, qs, I_O_B, p_k, orbit, env)])
     return np.array(f(t, q_BN, p)).ravel(), np.array(p[model.layout["I0"]]).reshape(3, 3)
@@ -239,7 +239,7 @@ def test_conservative_torque_is_minus_the_potential_gradient(kind, rng):
     t, q_BN = 1234.5, random_q(rng)  # s
     theta, ts, ps = ca.SX.sym("theta", 3), ca.SX.sym("t"), ca.SX.sym("p", model.layout.size)
     I_O_B = ca.reshape(ps[model.layout["I0"]], 3, 3).T
-    V = cls.potential_J(perturbed(ca.SX(dcm(q_BN)), theta), I_O_B, model.orbit_state(ts, ps))
+    V = cls.potential_J(perturbed(ca.SX(dcm(q_BN)), theta), I_O_B, model.orbit_at(ts, ps))
     grad = ca.Function("g", [theta, ts, ps], [orientation_gradient(V, None, theta)])(np.zeros(3), t, p)
     L_B, I_num = symbolic_torque(scene, kind, t, q_BN)
     n = scene.orbit.mean_motion

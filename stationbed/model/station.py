@@ -33,7 +33,7 @@ from .orbit import OrbitAt, orbit_at, orbit_params, orbit_plane
 from .structure import JOINTS, ParamLayout, Structure
 from .sun import SHADOW_MODELS, sun_distance_m
 from .surfaces import plates_B, surface_origin_params
-from .torques import TORQUES, Environment, OrbitState, v_rel_B
+from .torques import TORQUES, Environment, v_rel_B
 
 __all__ = ["StationModel", "ArrayState"]
 
@@ -269,7 +269,7 @@ class StationModel:
         """Drive law of a night-glider joint: the sun target while lit (ν >= 1/2), edge-on to the
         flow in eclipse (array normal perpendicular to the air-relative velocity, the nearer of
         the two such angles, no rate feed-forward: the flow is fixed in an LVLH-holding body)."""
-        orbit = self.orbit_state(t, p)
+        orbit = self.orbit_at(t, p)
         v_B = v_rel_B(dcm(q_BN), orbit)
         if i == 1:  # BGA: the flow in the frame turned by the SARJ, Ay(alpha) v_B
             ca_, sa_ = ca.cos(alpha), ca.sin(alpha)
@@ -448,21 +448,6 @@ class StationModel:
         """The orbit at time t (:func:`stationbed.model.orbit.orbit_at`: position, velocity, LVLH)."""
         return orbit_at(t, p[self.layout["orbit"]], self.structure.orbit_kind)
 
-    def orbit_state(self, t, p) -> OrbitState:
-        """The orbit at time t as the torque kinds use it (cos u, sin u computed once).
-
-        Parameters
-        ----------
-        t : casadi SX  Time [s].
-        p : casadi SX  The parameter vector (its ``orbit`` slice).
-
-        Returns
-        -------
-        OrbitState
-        """
-        o = self.orbit_at(t, p)
-        return OrbitState(o.n, o.cos_i, o.sin_i, o.cos_u, o.sin_u, o.r_N, o.v_N, o.r_hat_N, o.mu_r3)
-
     def shadow(self, orbit, p):
         """Fraction of the sun's disc seen at the station, ν (casadi; 1 without an eclipse model)."""
         if not self.structure.eclipse:
@@ -493,7 +478,7 @@ class StationModel:
         kinds (the energy-based form takes them from their potential).
         """
         L_B = u[0:3]
-        orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        orbit = self.orbit_at(t, p) if self.structure.orbit else None
         env = None
         if self.needs_arrays:
             if arrays is None:
@@ -510,7 +495,7 @@ class StationModel:
         """``(name, casadi)`` pairs for the trajectory: each kind's torque with an ``output`` stem
         (B components [N m]) and, with an eclipse model, the shadow fraction ``eclipse``."""
         outs = []
-        orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        orbit = self.orbit_at(t, p) if self.structure.orbit else None
         if self.needs_arrays:
             env = self.environment(q_BN, orbit, p, self.arrays(t, q_BN, xe, p))
             for kind in self.torques:
@@ -531,7 +516,7 @@ class StationModel:
         I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
         """
         V = ca.SX(0)
-        orbit = self.orbit_state(t, p) if self.structure.orbit else None
+        orbit = self.orbit_at(t, p) if self.structure.orbit else None
         for kind in self.torques:
             if kind.conservative:
                 V = V + kind.potential_J(C_BN, I_O_B, orbit)

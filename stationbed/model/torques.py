@@ -31,6 +31,7 @@ from ..core.rotation import dcm
 from ..scene import AeroTorque, ConstantTorque, HarmonicTorque, SrpTorque
 from .atmosphere import EXPONENTIAL_TABLE, OMEGA_EARTH_RAD_S, band_table, density_symbolic, msis_table
 from .environment import gravity_gradient_torque
+from .orbit import OrbitAt
 from .sun import P_SUN_1AU_N_M2, AU_M, sun_distance_m
 from .surfaces import aero_torque_B, srp_torque_B
 
@@ -39,7 +40,6 @@ __all__ = [
     "ConstantWindow",
     "GravityGradient",
     "OrbitalHarmonic",
-    "OrbitState",
     "Environment",
     "Aero",
     "Srp",
@@ -48,34 +48,6 @@ __all__ = [
     "held_torque_B",
     "torque_breakpoints",
 ]
-
-
-class OrbitState(NamedTuple):
-    """The orbit at time ``t`` as the torque kinds use it (casadi expressions).
-
-    ``u`` is the argument of latitude (``u0 + n t`` on a circular orbit); its cosine and sine are
-    computed once per expression and shared by every kind (:mod:`stationbed.model.orbit`). ``r_N`` and ``v_N`` are the station's inertial position
-    and velocity: a kind that needs the station's place (density, flow, shadow) reads these, so
-    it works on any orbit the model provides. Unused fields cost nothing (casadi keeps only what
-    an output depends on).
-    """
-
-    #: mean motion n [rad/s]
-    n: Any
-    #: cos and sin of the inclination (numbers of ``p``, computed once per scene)
-    cos_i: Any
-    sin_i: Any
-    #: cos u, sin u of the argument of latitude at t
-    cos_u: Any
-    sin_u: Any
-    #: position of the mass centre relative to the Earth's centre, N components [m] (3-vector)
-    r_N: Any
-    #: inertial velocity of the mass centre, N components [m/s] (3-vector)
-    v_N: Any
-    #: unit vector from the Earth's centre to the station, N components (3-vector)
-    r_hat_N: Any = None
-    #: mu / |r|³ [1/s²] (n² on a circular orbit): the gravity gradient's factor
-    mu_r3: Any = None
 
 
 class Environment(NamedTuple):
@@ -107,7 +79,7 @@ class TorqueKind:
     3. Symbolic part (``symbolic = True``): write ``_terms_B(t, q_BN, I_O_B, p_k, orbit)``, the
        torque as a list of casadi 3-vectors (B components [N m]) that the model adds one by one
        to the running sum, in order (the order is part of the generated code). Set
-       ``needs_orbit`` when it reads ``orbit`` (an :class:`OrbitState`); set ``key_tag`` (one
+       ``needs_orbit`` when it reads ``orbit`` (an :class:`OrbitAt`); set ``key_tag`` (one
        letter of ``Structure.key``). With ``n_par > 0`` numbers in ``p``, write
        ``_params(scene)`` (shape (n_par,)); the kind reads them back as ``p_k``.
     4. A conservative kind (the torque is minus the attitude gradient of a potential) sets
@@ -120,9 +92,10 @@ class TorqueKind:
        sets ``needs_env``: then ``_terms_B`` takes a sixth argument, an :class:`Environment`
        (the arrays at t, the sun, the shadow fraction, the plates' attachments). Torques are
        about the composite mass centre O, which is fixed in B (arrays are balanced about their
-       joint axes): a point of the body or of an array lies at ``r - r_O`` in B, computed once
-       in the model's structure (``Structure.surfaces``: the plates' geometry is folded into the
-       generated code as constants, so zero components cost nothing).
+       joint axes): a point of the body or of an array lies at ``r - r_O`` in B. The plates'
+       geometry is part of the structure (``Structure.surfaces``, folded into the generated code
+       as constants, so zero components cost nothing); ``r_O`` and the arrays' mass centres are
+       parameters (slice ``surf_O``), so dispersed mass properties keep one compiled system.
     7. Set ``output`` (a CSV column stem, e.g. ``"tau_aero"``) to report the kind's torque per
        row as ``<output>_x, _y, _z``.
     """
@@ -209,7 +182,7 @@ class TorqueKind:
 
     # -- symbols -----------------------------------------------------------------------
     @classmethod
-    def terms_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None, env: Environment | None = None) -> list:
+    def terms_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitAt | None, env: Environment | None = None) -> list:
         """The symbolic torque as terms to add in order, each B components [N m] (casadi (3, 1)).
 
         Parameters
@@ -218,7 +191,7 @@ class TorqueKind:
         q_BN : casadi SX, shape (4, 1)  Euler parameters of B relative to N (scalar first).
         I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
         p_k : casadi SX, shape (n_par, 1) or None  This kind's slice of ``p``.
-        orbit : OrbitState or None  The orbit at t (None without an orbit).
+        orbit : OrbitAt or None  The orbit at t (None without an orbit).
         env : Environment or None  For a kind with ``needs_env`` (rule 6).
         """
         if not cls.symbolic:
@@ -232,7 +205,7 @@ class TorqueKind:
         return list(cls._terms_B(t, q_BN, I_O_B, p_k, orbit, env))
 
     @classmethod
-    def torque_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitState | None, env: Environment | None = None):
+    def torque_B(cls, t, q_BN, I_O_B, p_k, orbit: OrbitAt | None, env: Environment | None = None):
         """The symbolic torque, B components [N m]: the sum of :meth:`terms_B` (casadi (3, 1))."""
         total = ca.SX.zeros(3)
         for term in cls.terms_B(t, q_BN, I_O_B, p_k, orbit, env):
@@ -240,14 +213,14 @@ class TorqueKind:
         return total
 
     @classmethod
-    def potential_J(cls, C_BN, I_O_B, orbit: OrbitState | None):
+    def potential_J(cls, C_BN, I_O_B, orbit: OrbitAt | None):
         """Potential energy of a conservative kind [J] (casadi scalar).
 
         Parameters
         ----------
         C_BN : casadi SX, shape (3, 3)  DCM from N to B.
         I_O_B : casadi SX, shape (3, 3)  Total inertia about O, B axes [kg m²].
-        orbit : OrbitState or None  The orbit at t.
+        orbit : OrbitAt or None  The orbit at t.
         """
         if not cls.conservative:
             raise ValueError(f"torque kind {cls.kind!r} has no potential")
@@ -362,7 +335,7 @@ class OrbitalHarmonic(TorqueKind):
         ]
 
 
-def v_rel_B(C_BN, orbit: OrbitState):
+def v_rel_B(C_BN, orbit: OrbitAt):
     """Velocity of the station relative to an atmosphere co-rotating with the Earth,
     ``C_BN (v_N - ω_E × r_N)``, ω_E along N's z (the Earth's pole), B components [m/s]."""
     r, v = orbit.r_N, orbit.v_N
