@@ -8,7 +8,7 @@ line must be able to start ``run --rrd``'s recording process before casadi, scip
 are imported (stationbed/output/rerun/child.py).
 """
 
-import importlib as _importlib
+from .core.lazy import lazy_names as _lazy_names
 
 _LAZY = {
     "Scene": "scene",
@@ -37,14 +37,4 @@ __all__ = sorted(_LAZY)
 __version__ = "0.1.0"
 
 
-def __getattr__(name):
-    mod = _LAZY.get(name)
-    if mod is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(_importlib.import_module(f".{mod}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = _lazy_names(__name__, _LAZY)

@@ -8,7 +8,7 @@ shipped controllers (which design on it). Names are imported on first use (PEP 5
 command line can register its parsers without importing casadi.
 """
 
-import importlib as _importlib
+from ..core.lazy import lazy_names as _lazy_names
 
 _LAZY = {
     "Linearization": "plant",
@@ -23,10 +23,4 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name):
-    mod = _LAZY.get(name)
-    if mod is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(_importlib.import_module(f".{mod}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__, __dir__ = _lazy_names(__name__, _LAZY)
