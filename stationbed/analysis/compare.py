@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.plotting import pyplot, save_png
 from ..run.metrics import METRICS, trajectory_metrics
 from .dashboard import load_run, time_axis
-from .figures import pyplot
 
 __all__ = ["compare", "metrics_table"]
 
@@ -87,7 +87,5 @@ def compare(outdirs, png=None, settle_s: float | None = None) -> tuple[str, Path
         ax.tick_params(labelbottom=True)
     scenes = sorted({meta.get("scene", "?") for _, meta in runs})
     fig.suptitle(f"compare: {', '.join(names)} ({', '.join(scenes)})", fontsize=11)
-    fig.tight_layout()
-    fig.savefig(png, dpi=100)
-    plt.close(fig)
+    save_png(plt, fig, png, dpi=100)
     return table, png

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.plotting import pyplot, save_png
 from ..run.trajectory import Trajectory
-from .figures import pyplot
 
 __all__ = ["dashboard", "load_run", "time_axis"]
 
@@ -132,7 +132,5 @@ def dashboard(outdir, png=None) -> Path:
         if summ.get(key) is not None:
             facts.append(fmt.format(summ[key]))
     fig.suptitle(f"{name}{ctrl}" + (": " + "; ".join(facts) if facts else ""), fontsize=11)
-    fig.tight_layout()
-    fig.savefig(png, dpi=100)
-    plt.close(fig)
+    save_png(plt, fig, png, dpi=100)
     return png

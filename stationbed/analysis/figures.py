@@ -5,21 +5,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import eigvals
 
+from ..core.plotting import pyplot, save_png
+
 __all__ = ["pyplot", "siso_zeros", "bode_png", "pole_zero_png", "nichols_png", "AXES"]
 
 AXES = ("x (roll)", "y (pitch)", "z (yaw)")
-
-
-def pyplot():
-    """matplotlib's pyplot on the Agg backend (files only); a one-line error without matplotlib."""
-    try:
-        import matplotlib
-    except ImportError:
-        raise ValueError("charts need matplotlib: pip install 'stationbed[plot]' (or pip install matplotlib)") from None
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def structural_part(A, b, c, rel: float = 1e-12) -> np.ndarray:
@@ -80,16 +70,7 @@ def bode_png(path, sys, pairs, title: str, units: str) -> None:
         G = _response(A, B[:, i], C[o], w)
         am.loglog(w, np.abs(G), label=label)
         ap.semilogx(w, np.degrees(np.unwrap(np.angle(G))), label=label)
-    am.set_ylabel(f"magnitude [{units}]")
-    ap.set_ylabel("phase [deg]")
-    ap.set_xlabel("frequency ω [rad/s]")
-    am.set_title(title)
-    for a in (am, ap):
-        a.grid(True, which="both", alpha=0.3)
-    am.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish_bode(plt, fig, (am, ap), path, title, (f"magnitude [{units}]", "phase [deg]"))
 
 
 def pole_zero_png(path, poles, zeros: dict, title: str, modal_poles=()) -> None:
@@ -123,9 +104,7 @@ def pole_zero_png(path, poles, zeros: dict, title: str, modal_poles=()) -> None:
         ax.set_ylabel("Im s [rad/s]")
         ax.grid(True, alpha=0.3)
     axes[1].legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(plt, fig, path)
 
 
 def loop_bode_png(path, loops, labels, title: str) -> None:
@@ -140,16 +119,7 @@ def loop_bode_png(path, loops, labels, title: str) -> None:
         ap.semilogx(w, np.degrees(np.unwrap(np.angle(G))), label=label)
     am.axhline(0, color="k", lw=0.8)
     ap.axhline(-180, color="k", lw=0.8)
-    am.set_ylabel("|L(jω)| [dB]")
-    ap.set_ylabel("phase of L [deg]")
-    ap.set_xlabel("frequency ω [rad/s]")
-    am.set_title(title)
-    for a in (am, ap):
-        a.grid(True, which="both", alpha=0.3)
-    am.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish_bode(plt, fig, (am, ap), path, title, ("|L(jω)| [dB]", "phase of L [deg]"))
 
 
 def nichols_png(path, loops, labels, title: str) -> None:
@@ -173,6 +143,17 @@ def nichols_png(path, loops, labels, title: str) -> None:
     ax.set_ylabel("|L| [dB]")
     ax.set_title(title)
     ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(plt, fig, path)
+
+
+def _finish_bode(plt, fig, axes, path, title: str, ylabels) -> None:
+    """Label, grid and save a Bode figure (magnitude axis over phase axis)."""
+    am, ap = axes
+    am.set_ylabel(ylabels[0])
+    ap.set_ylabel(ylabels[1])
+    ap.set_xlabel("frequency ω [rad/s]")
+    am.set_title(title)
+    for a in axes:
+        a.grid(True, which="both", alpha=0.3)
+    am.legend(fontsize=8)
+    save_png(plt, fig, path)

@@ -3,6 +3,7 @@ when a chart is drawn, and the colours, markers and line styles the charts share
 
 from __future__ import annotations
 
+from ..core.plotting import pyplot as _pyplot
 from .common import StudyError
 
 __all__ = ["pyplot", "colours", "MARKERS", "STYLES"]
@@ -13,29 +14,9 @@ STYLES = ["-", "--", ":", "-."]
 
 
 def pyplot():
-    """matplotlib's pyplot on the Agg backend (files only).
-
-    Returns
-    -------
-    module
-        ``matplotlib.pyplot``.
-
-    Raises
-    ------
-    StudyError
-        matplotlib is not installed (the message says how to install it).
-    """
-    try:
-        import matplotlib
-    except ImportError:
-        raise StudyError(
-            "the studies draw their charts with matplotlib, which is not installed: "
-            "pip install 'stationbed[plot]' (or pip install matplotlib)"
-        ) from None
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
+    """matplotlib's pyplot on the Agg backend (:func:`stationbed.core.plotting.pyplot`); raises
+    StudyError, saying how to install it, without matplotlib."""
+    return _pyplot(StudyError)
 
 
 def colours(plt, names) -> dict:

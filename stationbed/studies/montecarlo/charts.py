@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats as sps
 
+from ...core.plotting import save_png
 from ...run.metrics import METRICS
 from ..plotting import pyplot
 
@@ -54,10 +55,8 @@ def histograms(df, out: Path, requirements=()) -> list[Path]:
         ax.set_ylabel("samples")
         ax.set_title(f"{name}: {len(v)} samples, median {np.median(v):.3g}, max {v.max():.3g}", fontsize=10)
         ax.grid(alpha=0.3)
-        fig.tight_layout()
         p = out / f"hist_{name}.png"
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
+        save_png(plt, fig, p)
         paths.append(p)
     return paths
 
@@ -96,10 +95,8 @@ def envelopes(t, env, out: Path, title: str) -> list[Path]:
         ax.set_title(f"{title}: {label} over {len(y)} samples", fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)
-        fig.tight_layout()
         p = out / fname
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
+        save_png(plt, fig, p)
         paths.append(p)
     return paths
 
@@ -133,8 +130,6 @@ def scatter(df, metric: str, drawn: list[str], out: Path) -> Path | None:
     ax.set_ylabel(f"{metric} [{METRICS[metric].unit}]")
     ax.set_title(f"{metric} vs {col} (Spearman ρ = {rho:+.2f})", fontsize=10)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
     p = out / f"scatter_{metric}.png"
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
+    save_png(plt, fig, p)
     return p
