@@ -4,7 +4,7 @@ Claims, each read from the source itself (the AST of every module, function-leve
 included), not from a hand-kept list of modules:
 
 * a module imports only from its own folder and the folders below it:
-  core < scene < model < formulations, integrators < run < analysis < controllers < output < studies < cli;
+  core < scene < model < formulations, integrators < loop < run < analysis < controllers < output < studies < cli;
 * the modules of the package import each other without a cycle;
 * nothing in the library imports the shipped controllers (they are plug-ins, found through
   their entry points);
@@ -33,12 +33,13 @@ LAYERS = {
     "model": 2,
     "formulations": 3,
     "integrators": 3,
-    "run": 4,
-    "analysis": 5,
-    "controllers": 6,
-    "output": 7,
-    "studies": 8,
-    "cli": 9,
+    "loop": 4,
+    "run": 5,
+    "analysis": 6,
+    "controllers": 7,
+    "output": 8,
+    "studies": 9,
+    "cli": 10,
 }
 #: the package's own __init__ only names what it loads lazily (PEP 562): it sits above everything
 TOP = "__init__"

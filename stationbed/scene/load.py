@@ -242,9 +242,10 @@ def _inner_model(annotation) -> type[BaseModel] | None:
     return models.pop() if len(models) == 1 else None
 
 
-def _model_at(loc: tuple) -> type[BaseModel] | None:
-    """The pydantic model class that owns the field at ``loc[:-1]`` (for key suggestions)."""
-    model: type[BaseModel] | None = Scene
+def _model_at(loc: tuple, root: type[BaseModel] | None = None) -> type[BaseModel] | None:
+    """The pydantic model class that owns the field at ``loc[:-1]`` below ``root`` (default: the
+    scene) (for key suggestions)."""
+    model: type[BaseModel] | None = root or Scene
     for part in loc[:-1]:
         if part in TAGS:  # pydantic's tag of the table chosen in a union
             model = TAGS[part]
@@ -305,7 +306,7 @@ def _given(value) -> str:
     return type(value).__name__
 
 
-def _one_line(err: ValidationError) -> str:
+def _one_line(err: ValidationError, root: type[BaseModel] | None = None) -> str:
     errors = err.errors()
     # a typo'd key also makes the intended key "missing": name the typo, it is the cause
     e = next((x for x in errors if x["type"] == "extra_forbidden"), errors[0])
@@ -314,7 +315,7 @@ def _one_line(err: ValidationError) -> str:
     etype = e["type"]
     more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
     if etype == "extra_forbidden":
-        model = _model_at(loc)
+        model = _model_at(loc, root)
         return f"{path}: {_unknown_key(model, loc[-1]) if model is not None else 'unknown key'}"
     if etype == "missing":
         return f"{path}: missing required key"

@@ -1,0 +1,15 @@
+"""The closed loop's composition parts (issue 20): named layouts, sensor plug-ins, estimators.
+
+Between the model (below) and the executors in ``run/`` (above). Everything here is written
+once as casadi expressions; the executors evaluate the same functions (docs/loop.md).
+"""
+
+from .gyro import RateGyro
+from .layout import Layout
+from .mekf import FILTER, Mekf
+from .registry import SENSORS, build_sensors, get_sensor
+from .sensor import TRUTH, Sensor, noise_rng
+from .star_tracker import StarTracker
+
+__all__ = ["Layout", "Sensor", "TRUTH", "noise_rng", "RateGyro", "StarTracker", "SENSORS", "get_sensor",
+           "build_sensors", "Mekf", "FILTER"]

@@ -1,0 +1,70 @@
+"""Rate-gyro assembly: the discrete Farrenkopf model (``[[sensor]] kind = "gyro"``).
+
+Continuous model (Farrenkopf 1978; Crassidis & Junkins, *Optimal Estimation of Dynamic
+Systems*, 2nd ed., §7.2.1): ``ω̃ = ω + β + η_v``, ``β̇ = η_u``, with white η_v, η_u of spectral
+densities σ_v² [rad²/s] and σ_u² [rad²/s³]. A sample reports the rate integrated over its
+interval (t_k, t_k+1] of length Δt, ``ω̄ = Δθ/Δt``; exactly in distribution, for any Δt:
+
+``β_k+1 = β_k + σ_u Δt^½ N_u``
+``ω̃_k+1 = ω̄ + ½(β_k+1 + β_k) + (σ_v²/Δt + σ_u² Δt/12)^½ N_v``
+
+(the ``Δt/12`` is the variance of the Brownian bridge of β averaged over the interval). Its
+Allan variance is ``σ²(τ) = σ_v²/τ + σ_u² τ/3``, the test's truth.
+
+The instrument's errors follow in the order of the hardware: scale factor and misalignment
+``(E + M) ω̄`` on the rate, the bias and noise, saturation of each axis at ``±max_rate``, then
+quantisation of the integrated angle to ``quantum`` with the remainder carried to the next
+sample (a counter: the sum of the output angles stays within half a count of the sum of the
+inputs, so quantisation adds no drift).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ..scene import GyroSensor
+from .layout import Layout
+from .sensor import Sensor
+
+__all__ = ["RateGyro"]
+
+#: saturation level used when the table sets none [rad/s] (far beyond any body rate)
+NO_SATURATION_RAD_S = 1.0e6
+
+
+class RateGyro(Sensor):
+    """The rate gyro (see the module docstring for the model)."""
+
+    kind = "gyro"
+    scene_model = GyroSensor
+    #: bias β [rad/s]; θ at the last sample [rad] (to difference the truth's running integral);
+    #: the quantiser's carried remainder [rad]
+    STATE = Layout(bias_B=3, theta_B=3, carry_B=3)
+    PARAMS = Layout(dt=1, sigma_v=1, sigma_u=1, M=(3, 3), quantum=1, max_rate=1)
+    #: the rate integrated over the sample [rad/s], B axes
+    OUTPUTS = Layout(omega_B=3)
+    reads = ("theta_B",)
+    #: N_u (3) then N_v (3)
+    n_noise = 6
+
+    def _params(self) -> dict:
+        e = self.entry
+        return dict(dt=e.period, sigma_v=e.sigma_v, sigma_u=e.sigma_u, M=e.M, quantum=e.quantum,
+                    max_rate=NO_SATURATION_RAD_S if e.max_rate is None else e.max_rate)
+
+    def _initial(self) -> dict:
+        return dict(bias_B=self.entry.bias0, theta_B=[0.0, 0.0, 0.0], carry_B=[0.0, 0.0, 0.0])
+
+    def _step(self, t, x, truth, w, p):
+        dt = p["dt"]
+        omega_avg = (truth["theta_B"] - x["theta_B"]) / dt
+        bias_next = x["bias_B"] + p["sigma_u"] * ca.sqrt(dt) * w[0:3]
+        white = ca.sqrt(p["sigma_v"] ** 2 / dt + p["sigma_u"] ** 2 * dt / 12.0)
+        raw = omega_avg + ca.mtimes(p["M"], omega_avg) + 0.5 * (x["bias_B"] + bias_next) + white * w[3:6]
+        sat = ca.fmin(ca.fmax(raw, -p["max_rate"]), p["max_rate"])
+        angle = x["carry_B"] + sat * dt
+        q = p["quantum"]
+        q_safe = ca.if_else(q > 0, q, 1.0)
+        counted = q_safe * ca.floor(angle / q_safe + 0.5)
+        out = ca.if_else(q > 0, counted, angle)
+        return dict(bias_B=bias_next, theta_B=truth["theta_B"], carry_B=angle - out), dict(omega_B=out / dt)

@@ -1,0 +1,227 @@
+"""Multiplicative extended Kalman filter: attitude and gyro bias from a gyro and star trackers.
+
+Markley, "Attitude error representations for Kalman filtering", JGCD 26(2), 2003; Crassidis &
+Junkins, *Optimal Estimation of Dynamic Systems*, 2nd ed., §7.2 (Table 7.1). In the project's
+conventions (DESIGN §3):
+
+* truth ``q_BN = q̂ ⊗ δq(δα)``, ``C_BN = (E - [δα×]) Ĉ_BN`` to first order; error state
+  ``Δx = (δα, Δβ)`` (6), ``Δβ = β - β̂``; the filter state is ``(q̂_BN, β̂, P)``
+  (:data:`FILTER`, P 6 x 6).
+* Propagation over one gyro sample Δt with ``ω̂ = ω̃ - β̂`` held: ``q̂ ← q̂ ⊗ exp(ω̂ Δt)``
+  (exact for a rate constant over the sample), ``P ← Φ P Φᵀ + Q`` with the closed forms
+
+  ``Φ₁₁ = E - [ω̂×] sin(wΔt)/w + [ω̂×]² (1 - cos wΔt)/w²``
+  ``Φ₁₂ = [ω̂×] (1 - cos wΔt)/w² - E Δt - [ω̂×]² (wΔt - sin wΔt)/w³``, ``Φ₂₁ = 0``, ``Φ₂₂ = E``
+  ``Q₁₁ = (σ_v² Δt + σ_u² Δt³/3) E``, ``Q₁₂ = Q₂₁ = -(σ_u² Δt²/2) E``, ``Q₂₂ = σ_u² Δt E``
+
+  (w = |ω̂|; series for small wΔt). Q is the discrete covariance of the Farrenkopf gyro
+  (stationbed/loop/gyro.py), so a filter tuned from the gyro's table is consistent with it.
+* Update with one star-tracker head (mounting ``q_SB``, noise-equivalent angles r): residual
+  ``z = 2 vec(δq_r)/w(δq_r)``, ``δq_r = (q̂ ⊗ q_SB)⁻¹ ⊗ q̃_SN`` (S components), ``z ≈ C_SB δα + ν``,
+  so ``H = [C_SB, 0]``, ``R = diag(r_cross², r_cross², r_about²)``;
+  ``K = P Hᵀ (H P Hᵀ + R)⁻¹``, ``Δx̂ = K z``, ``q̂ ← q̂ ⊗ δq(δα̂)``, ``β̂ ← β̂ + Δβ̂``,
+  ``P ← (E - KH) P (E - KH)ᵀ + K R Kᵀ`` (Joseph form), each valid fresh head in turn.
+
+Everything is a casadi expression: one :meth:`Mekf.function` per tick, compiled once
+(:meth:`Mekf.compiled`) and ready to be inlined in a fused loop. :meth:`Mekf.report_function`
+gives what only a test bed can know: the estimation error against truth, the 3σ bounds and the
+normalised estimation error squared ``NEES = Δxᵀ P⁻¹ Δx``.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..core.linalg import inv3
+from ..core.rotation import dcm, quat_conj, quat_mult, skew
+from .gyro import RateGyro
+from .layout import Layout
+from .star_tracker import StarTracker
+
+__all__ = ["FILTER", "Mekf", "propagate", "update", "attitude_error", "SERIES_BELOW"]
+
+#: the filter's state: estimate of q_BN (scalar first), of the gyro bias [rad/s], covariance of
+#: the error state (δα [rad], Δβ [rad/s])
+FILTER = Layout(q_BN=4, bias_B=3, P=(6, 6))
+
+#: below this rotation per step (w Δt) [rad] Φ's coefficients are their Taylor series (through
+#: x⁶: truncation < 2e-15 relative at 0.1; above it the closed forms lose < 1e-13 to cancellation)
+SERIES_BELOW = 0.1
+
+#: a rate magnitude below every physical one [rad/s]: keeps w > 0 in the closed forms' branch
+_TINY_RATE = 1e-150
+
+
+def _coefficients(w, dt):
+    """``sin(wΔt)/w``, ``(1 - cos wΔt)/w²``, ``(wΔt - sin wΔt)/w³``, accurate at every w >= 0."""
+    x = w * dt
+    ws = ca.fmax(w, _TINY_RATE)
+    xs = ws * dt
+    half = ca.sin(xs / 2) / ws
+    exact = (ca.sin(xs) / ws, 2 * half * half, (xs - ca.sin(xs)) / ws**3)
+    x2 = x * x
+    series = (
+        dt * (1 - x2 / 6 * (1 - x2 / 20 * (1 - x2 / 42))),
+        dt**2 * (0.5 - x2 / 24 * (1 - x2 / 30 * (1 - x2 / 56))),
+        dt**3 * (1.0 / 6 - x2 / 120 * (1 - x2 / 42 * (1 - x2 / 72))),
+    )
+    small = x < SERIES_BELOW
+    return [ca.if_else(small, s, e) for s, e in zip(series, exact)]
+
+
+def propagate(q, b, P, omega_meas_B, dt, sigma_v, sigma_u):
+    """One gyro sample: ``(q̂, β̂, P)`` at t + Δt from the measured rate over (t, t + Δt]."""
+    omega = omega_meas_B - b
+    w = ca.norm_2(omega)
+    ws = ca.fmax(w, _TINY_RATE)
+    half = ws * dt / 2
+    dq = ca.vertcat(ca.cos(half), ca.sin(half) / ws * omega)
+    q_next = quat_mult(q, dq)
+    q_next = q_next / ca.norm_2(q_next)
+    a1, a2, a3 = _coefficients(w, dt)
+    W = skew(omega)
+    W2 = ca.mtimes(W, W)
+    E = ca.SX.eye(3)
+    Phi11 = E - W * a1 + W2 * a2
+    Phi12 = W * a2 - E * dt - W2 * a3
+    Phi = ca.vertcat(ca.horzcat(Phi11, Phi12), ca.horzcat(ca.SX.zeros(3, 3), E))
+    qv = sigma_v**2 * dt + sigma_u**2 * dt**3 / 3
+    qc = -(sigma_u**2) * dt**2 / 2
+    qb = sigma_u**2 * dt
+    Q = ca.vertcat(ca.horzcat(qv * E, qc * E), ca.horzcat(qc * E, qb * E))
+    P_next = ca.mtimes([Phi, P, Phi.T]) + Q
+    return q_next, b, 0.5 * (P_next + P_next.T)
+
+
+def attitude_error(q_ref, q):
+    """``δα`` with ``q = q_ref ⊗ δq(δα)``: ``2 vec/w`` of ``q_ref⁻¹ ⊗ q`` (ref frame components)."""
+    d = quat_mult(quat_conj(q_ref), q)
+    return 2 * d[1:4] / d[0]
+
+
+def update(q, b, P, q_SN_meas, gate, q_SB, r):
+    """One star-tracker head: ``(q̂, β̂, P)`` after its measurement when ``gate`` is 1 (fresh and
+    valid), unchanged when 0. ``r`` = (r_cross, r_cross, r_about) [rad]."""
+    q_SN_hat = quat_mult(q, q_SB)
+    z = attitude_error(q_SN_hat, q_SN_meas)
+    H = ca.horzcat(dcm(q_SB), ca.SX.zeros(3, 3))
+    R = ca.diag(r**2)
+    PHt = ca.mtimes(P, H.T)
+    K = ca.mtimes(PHt, inv3(ca.mtimes(H, PHt) + R))
+    dx = ca.mtimes(K, z)
+    dq = ca.vertcat(1.0, dx[0:3] / 2)
+    q_new = quat_mult(q, dq / ca.norm_2(dq))
+    q_new = q_new / ca.norm_2(q_new)
+    IKH = ca.SX.eye(6) - ca.mtimes(K, H)
+    P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T])
+    P_new = 0.5 * (P_new + P_new.T)
+    on = gate > 0.5
+    return ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
+
+
+class Mekf:
+    """The MEKF of one gyro and one or more star-tracker heads, tuned from their tables.
+
+    Parameters
+    ----------
+    table : stationbed.scene.MekfEstimator  ``[estimator]``: overrides and the initial covariance.
+    gyro : RateGyro  The gyro it propagates with, one filter step per gyro sample.
+    heads : list of StarTracker  The heads it updates with (their period a whole number of the
+        gyro's); the mounting and noise it assumes are the heads' tables (knowledge).
+    """
+
+    def __init__(self, table, gyro: RateGyro, heads: list[StarTracker]):
+        if not heads:
+            raise ValueError("the MEKF needs at least one star-tracker head")
+        self.table, self.gyro, self.heads = table, gyro, list(heads)
+        self.dt = gyro.period
+        self.every = [int(round(h.period / self.dt)) for h in heads]
+        n = len(heads)
+        self.param_layout = Layout(dt=1, sigma_v=1, sigma_u=1, **{f"q_SB_{i}": 4 for i in range(n)},
+                                   **{f"r_{i}": 3 for i in range(n)})
+        #: one tick's input: the gyro's rate, then per head its output and whether it is new
+        self.inputs = Layout(omega_B=3, **{f"q_SN_{i}": 4 for i in range(n)}, **{f"valid_{i}": 1 for i in range(n)},
+                             **{f"fresh_{i}": 1 for i in range(n)})
+        g = gyro.entry
+        values = dict(dt=self.dt, sigma_v=table.sigma_v if table.sigma_v is not None else g.sigma_v,
+                      sigma_u=table.sigma_u if table.sigma_u is not None else g.sigma_u)
+        for i, h in enumerate(heads):
+            values[f"q_SB_{i}"] = h.entry.mounting()
+            values[f"r_{i}"] = [h.entry.nea_cross, h.entry.nea_cross, h.entry.nea_about]
+        if min(values["sigma_v"], min(min(values[f"r_{i}"]) for i in range(n))) <= 0:
+            raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give them in [estimator] "
+                             "for noise-free sensors)")
+        self.params = self.param_layout.pack(values)
+        self._f = self._report = None
+
+    @classmethod
+    def from_sensors(cls, table, sensors: list) -> "Mekf":
+        """The filter a ``[estimator]`` table names among built sensors (its gyro and heads)."""
+        gyros = [s for s in sensors if isinstance(s, RateGyro)]
+        gyro = next(s for s in gyros if s.name == table.gyro) if table.gyro else gyros[0]
+        heads = [s for s in sensors if isinstance(s, StarTracker)
+                 and (table.star_trackers is None or s.name in table.star_trackers)]
+        return cls(table, gyro, heads)
+
+    def initial(self, q_BN_hat, bias_B_hat=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Filter state at the start: the given estimates, ``P0 = diag(σ_att0² E, σ_bias0² E)``."""
+        t = self.table
+        P0 = np.diag([t.sigma_attitude0**2] * 3 + [t.sigma_bias0**2] * 3)
+        q = np.asarray(q_BN_hat, dtype=float)
+        return FILTER.pack(q_BN=q / np.linalg.norm(q), bias_B=bias_B_hat, P=P0)
+
+    # -- the expressions ------------------------------------------------------------------
+    def function(self) -> ca.Function:
+        """``(xf, z, p) -> (xf_next, omega_hat_B)``: propagate over one gyro sample with
+        ``z.omega_B``, then update with each fresh valid head; ω̂ = ω̃ - β̂ after the update."""
+        if self._f is None:
+            xf, z, p = FILTER.symbol("xf"), self.inputs.symbol("z"), self.param_layout.symbol("p")
+            X, Z, Pp = FILTER.split(xf), self.inputs.split(z), self.param_layout.split(p)
+            q, b, P = propagate(X["q_BN"], X["bias_B"], X["P"], Z["omega_B"], Pp["dt"], Pp["sigma_v"], Pp["sigma_u"])
+            for i in range(len(self.heads)):
+                q, b, P = update(q, b, P, Z[f"q_SN_{i}"], Z[f"valid_{i}"] * Z[f"fresh_{i}"], Pp[f"q_SB_{i}"],
+                                 Pp[f"r_{i}"])
+            name = f"mekf_{len(self.heads)}"
+            self._f = ca.Function(name, [xf, z, p], [FILTER.pack(q_BN=q, bias_B=b, P=P), Z["omega_B"] - b],
+                                  ["xf", "z", "p"], ["xf_next", "omega_hat_B"], {"cse": True})
+        return self._f
+
+    def compiled(self) -> ca.Function:
+        """:meth:`function` generated as C (cached on disk; casadi's evaluator without a compiler)."""
+        from ..core.compile import compile_functions
+
+        f = self.function()
+        return compile_functions([f], f.name())[f.name()]
+
+    def report_function(self) -> ca.Function:
+        """``(xf, q_BN, bias_B) -> (err_B, sigma3, nees)`` against the truth: the attitude error
+        δα [rad] (B, ``q = q̂ ⊗ δq(δα)``), three standard deviations of the six error states
+        (rad, rad/s) and ``Δxᵀ P⁻¹ Δx``."""
+        if self._report is None:
+            xf, q, b = FILTER.symbol("xf"), ca.SX.sym("q_BN", 4), ca.SX.sym("bias_B", 3)
+            X = FILTER.split(xf)
+            dx = ca.vertcat(attitude_error(X["q_BN"], q), b - X["bias_B"])
+            nees = ca.mtimes(dx.T, ca.solve(X["P"], dx))
+            self._report = ca.Function("mekf_report", [xf, q, b], [dx[0:3], 3 * ca.sqrt(ca.diag(X["P"])), nees],
+                                       ["xf", "q_BN", "bias_B"], ["err_B", "sigma3", "nees"])
+        return self._report
+
+    # -- numbers --------------------------------------------------------------------------
+    def record(self, xf0: np.ndarray, z: np.ndarray, f: ca.Function | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Filter states after each of N ticks, shape (N, FILTER.size), and ω̂ (N, 3), in one
+        call (``mapaccum`` of ``f``, default :meth:`compiled`); ``z`` has shape (N, inputs.size)."""
+        z = np.atleast_2d(np.asarray(z, dtype=float))
+        if z.shape[1] != self.inputs.size or np.shape(xf0) != (FILTER.size,):
+            raise ValueError(f"MEKF record: z has shape {z.shape}, expected (N, {self.inputs.size}); "
+                             f"xf0 {np.shape(xf0)}, expected ({FILTER.size},)")
+        n = z.shape[0]
+        F = (f or self.compiled()).mapaccum(f"mekf_record_{n}", n)
+        xs, w = F(xf0, z.T, np.tile(self.params[:, None], (1, n)))
+        return np.asarray(xs).T, np.asarray(w).T
+
+    def report(self, xf: np.ndarray, q_BN: np.ndarray, bias_B: np.ndarray):
+        """:meth:`report_function` over N rows: ``err_B`` (N, 3), ``sigma3`` (N, 6), ``nees`` (N,)."""
+        n = len(xf)
+        e, s, nees = self.report_function().map(n)(np.asarray(xf).T, np.asarray(q_BN).T, np.asarray(bias_B).T)
+        return np.asarray(e).T, np.asarray(s).T, np.asarray(nees).ravel()

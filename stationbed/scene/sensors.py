@@ -1,0 +1,213 @@
+"""Scene tables of the sensors and the estimator (issue 20; physics in ``stationbed/loop/``).
+
+```toml
+[[sensor]]
+kind = "gyro"              # rate-gyro assembly, discrete Farrenkopf model
+name = "rga1"
+period = 0.1               # s
+sigma_v = 1.454e-6         # rad/s^0.5, angle random walk
+sigma_u = 3.162e-10        # rad/s^1.5, rate random walk
+
+[[sensor]]
+kind = "star_tracker"
+name = "st1"
+period = 0.5               # s
+boresight_B = [0.0, -0.5, -0.866]   # or q_SB = [w, x, y, z]
+nea_cross = 9.7e-6         # rad, 1 sigma, each cross-boresight axis
+nea_about = 7.3e-5         # rad, 1 sigma, about the boresight
+sun_exclusion = 0.524      # rad
+
+[estimator]
+kind = "mekf"
+```
+
+These tables are validated on their own (:func:`sensing_from_dict`); they are **not yet part of
+:class:`~stationbed.scene.Scene`** and no executor flies them (docs/loop.md, "What remains").
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+import numpy as np
+from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
+
+from ..core.rotation import quat_from_dcm
+from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Vec3
+from .tables import TAGS
+
+__all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing", "sensing_from_dict",
+           "WHOLE_PERIODS_TOL"]
+
+#: a latency or period that is a whole number of periods to this relative tolerance is taken as
+#: one (the numbers are typed with a few digits; 1e-9 is far below any typing error)
+WHOLE_PERIODS_TOL = 1e-9
+
+
+def _whole(ratio: float) -> bool:
+    return round(ratio) >= 0 and abs(ratio - round(ratio)) <= WHOLE_PERIODS_TOL * max(1.0, ratio)
+
+
+def _angle(value: float | None, name: str) -> None:
+    if value is not None and not 0.0 <= value <= math.pi:
+        raise FieldError(name, f"must be an angle in [0, pi] rad, got {value!r}")
+
+
+class GyroSensor(Strict):
+    """``[[sensor]] kind = "gyro"``: a rate-gyro assembly measuring the body rate on B's axes.
+
+    Output ``omega_B = (E + M) ω̄ + ½(β_k + β_k+1) + noise``, the rate integrated over the
+    sample (ω̄ = Δθ/period), with the Farrenkopf bias random walk β (stationbed/loop/gyro.py)."""
+
+    kind: Literal["gyro"]
+    name: str
+    period: TimeS  # s, sample period
+    sigma_v: float = Field(ge=0.0)  # rad/s^0.5, angle random walk (ARW)
+    sigma_u: float = Field(default=0.0, ge=0.0)  # rad/s^1.5, rate random walk (bias random walk)
+    bias0: Vec3 = [0.0, 0.0, 0.0]  # rad/s, bias at t = 0 (the truth the filter must find)
+    scale_factor: Vec3 = [0.0, 0.0, 0.0]  # dimensionless, per axis (0: exact)
+    misalignment: Mat3 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]  # dimensionless, zero diagonal
+    quantum: float = Field(default=0.0, ge=0.0)  # rad per count of the integrated angle (0: none)
+    max_rate: float | None = Field(default=None, gt=0.0)  # rad/s, saturation per axis (none: never)
+
+    @model_validator(mode="after")
+    def _physical(self):
+        if any(self.misalignment[i][i] != 0.0 for i in range(3)):
+            raise FieldError("misalignment", "the diagonal must be zero (give per-axis errors in scale_factor)")
+        if any(abs(m) >= 0.1 for row in self.misalignment for m in row) or any(abs(s) >= 0.1 for s in self.scale_factor):
+            raise FieldError("misalignment", "scale factor and misalignment are small errors: each below 0.1")
+        return self
+
+    @property
+    def M(self) -> np.ndarray:
+        """(3, 3) scale factor (diagonal) plus misalignment (off-diagonal): output = (E + M) ω."""
+        return np.diag(self.scale_factor) + np.asarray(self.misalignment, dtype=float)
+
+
+class StarTrackerSensor(Strict):
+    """``[[sensor]] kind = "star_tracker"``: one head; measures its own attitude ``q_SN``
+    (boresight = S's z axis) with noise-equivalent angles across and about the boresight, at
+    its period, ``latency`` later; a Sun, Earth-limb or Moon angle below its exclusion drops the
+    measurement (output ``valid`` = 0)."""
+
+    kind: Literal["star_tracker"]
+    name: str
+    period: TimeS  # s, update period
+    q_SB: list[float] | None = Field(default=None, min_length=4, max_length=4)  # mounting, scalar first
+    boresight_B: Vec3 | None = None  # unit vector in B (alternative to q_SB), with roll
+    roll: float = 0.0  # rad, about the boresight (with boresight_B)
+    nea_cross: float = Field(ge=0.0)  # rad, 1 sigma per cross-boresight axis
+    nea_about: float = Field(ge=0.0)  # rad, 1 sigma about the boresight
+    latency: float = Field(default=0.0, ge=0.0)  # s, a whole number of periods
+    sun_exclusion: float | None = None  # rad, half-cone around the Sun (none: never blinded)
+    earth_exclusion: float | None = None  # rad, from the Earth's limb (none: never)
+    moon_exclusion: float | None = None  # rad, half-cone around the Moon (none: never)
+
+    @model_validator(mode="after")
+    def _physical(self):
+        if (self.q_SB is None) == (self.boresight_B is None):
+            raise FieldError("q_SB", "give exactly one of q_SB or boresight_B")
+        if self.q_SB is not None and abs(math.sqrt(sum(v * v for v in self.q_SB)) - 1.0) > QUAT_NORM_TOL:
+            raise FieldError("q_SB", f"must be a unit quaternion (|q| within {QUAT_NORM_TOL:g} of 1)")
+        if self.boresight_B is not None and math.sqrt(sum(v * v for v in self.boresight_B)) < 1e-9:
+            raise FieldError("boresight_B", "must not be the zero vector")
+        if self.roll != 0.0 and self.boresight_B is None:
+            raise FieldError("roll", "applies with boresight_B (q_SB holds the roll)")
+        for key in ("sun_exclusion", "earth_exclusion", "moon_exclusion"):
+            _angle(getattr(self, key), key)
+        if not _whole(self.latency / self.period):
+            raise FieldError("latency", f"{self.latency:g} s is not a whole number of periods ({self.period:g} s)")
+        return self
+
+    @property
+    def n_delay(self) -> int:
+        """Latency in periods."""
+        return int(round(self.latency / self.period))
+
+    def mounting(self) -> np.ndarray:
+        """``q_SB`` (scalar first, w >= 0): ``C_SB = dcm(q_SB)`` maps B components to S."""
+        if self.q_SB is not None:
+            q = np.asarray(self.q_SB, dtype=float)
+            q = q / np.linalg.norm(q)
+            return q if q[0] >= 0 else -q
+        z = np.asarray(self.boresight_B, dtype=float)
+        z = z / np.linalg.norm(z)
+        ref = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        x0 = ref - ref.dot(z) * z
+        x0 /= np.linalg.norm(x0)
+        y0 = np.cross(z, x0)
+        x = math.cos(self.roll) * x0 + math.sin(self.roll) * y0
+        C_SB = np.vstack([x, np.cross(z, x), z])  # rows: S's axes in B components
+        return quat_from_dcm(C_SB)
+
+
+def _sensor_tag(v) -> str:
+    kind = v.get("kind") if isinstance(v, dict) else getattr(v, "kind", None)
+    return f"kind={kind}" if kind in ("gyro", "star_tracker") else "kind=gyro"
+
+
+#: one ``[[sensor]]`` entry, chosen by its kind (the tags contain '=' so they never match a key)
+SensorEntry = Annotated[
+    Union[Annotated[GyroSensor, Tag("kind=gyro")], Annotated[StarTrackerSensor, Tag("kind=star_tracker")]],
+    Discriminator(_sensor_tag),
+]
+TAGS.update({"kind=gyro": GyroSensor, "kind=star_tracker": StarTrackerSensor})
+
+
+class MekfEstimator(Strict):
+    """``[estimator] kind = "mekf"``: the multiplicative EKF (stationbed/loop/mekf.py), tuned from
+    the sensors' tables unless a value is given here."""
+
+    kind: Literal["mekf"]
+    gyro: str | None = None  # the gyro it propagates with (default: the scene's only gyro)
+    star_trackers: list[str] | None = None  # the heads it updates with (default: every head)
+    sigma_v: float | None = Field(default=None, gt=0.0)  # rad/s^0.5 (default: the gyro's)
+    sigma_u: float | None = Field(default=None, gt=0.0)  # rad/s^1.5 (default: the gyro's)
+    sigma_attitude0: float = Field(default=1.0e-3, gt=0.0)  # rad, 1 sigma of the initial estimate per axis
+    sigma_bias0: float = Field(default=1.0e-5, gt=0.0)  # rad/s, 1 sigma of the initial bias estimate per axis
+
+
+class Sensing(Strict):
+    """The sensors and the estimator of a scene (``[[sensor]]``, ``[estimator]``)."""
+
+    sensor: list[SensorEntry] = []
+    estimator: MekfEstimator | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        names = [s.name for s in self.sensor]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise FieldError("sensor", f"names must be unique, repeated: {dup}")
+        est = self.estimator
+        if est is None:
+            return self
+        gyros = [s.name for s in self.sensor if s.kind == "gyro"]
+        heads = [s.name for s in self.sensor if s.kind == "star_tracker"]
+        if est.gyro is None and len(gyros) != 1:
+            raise FieldError("estimator.gyro", f"name the gyro to propagate with (the scene has {len(gyros)}: {gyros})")
+        if est.gyro is not None and est.gyro not in gyros:
+            raise FieldError("estimator.gyro", f"'{est.gyro}' is not a gyro of [[sensor]] (gyros: {gyros})")
+        used = heads if est.star_trackers is None else est.star_trackers
+        bad = [h for h in used if h not in heads]
+        if bad or not used:
+            raise FieldError("estimator.star_trackers", f"must name one or more star trackers of [[sensor]] "
+                                                        f"(heads: {heads}), got {bad or used}")
+        gyro = next(s for s in self.sensor if s.name == (est.gyro or gyros[0]))
+        for s in self.sensor:
+            if s.name in used and not _whole(s.period / gyro.period):
+                raise FieldError("estimator.star_trackers", f"head '{s.name}': period {s.period:g} s is not a whole "
+                                                            f"number of the gyro's ({gyro.period:g} s)")
+        return self
+
+
+def sensing_from_dict(data: dict, source: str = "scene") -> Sensing:
+    """Validate ``{"sensor": [...], "estimator": {...}}`` (the parsed TOML); raises
+    :class:`SceneError` with a one-line reason starting with ``source``."""
+    from .load import _one_line, _plain
+
+    try:
+        return Sensing.model_validate(_plain(data))
+    except ValidationError as err:
+        raise SceneError(f"{source}: {_one_line(err, root=Sensing)}") from None
