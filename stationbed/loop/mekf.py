@@ -49,8 +49,10 @@ FILTER = Layout(q_BN=4, bias_B=3, P=(6, 6))
 #: x⁶: truncation < 2e-15 relative at 0.1; above it the closed forms lose < 1e-13 to cancellation)
 SERIES_BELOW = 0.1
 
-#: a rate magnitude below every physical one [rad/s]: keeps w > 0 in the closed forms' branch
-_TINY_RATE = 1e-150
+#: a rate magnitude below every physical one [rad/s]: keeps w > 0 in the closed forms' branch,
+#: whose values casadi's if_else computes (and would pass on as NaN) even where the series is
+#: chosen; w³ of it is still a normal double
+_TINY_RATE = 1e-30
 
 
 def _coefficients(w, dt):

@@ -250,10 +250,10 @@ def _model_at(loc: tuple, root: type[BaseModel] | None = None) -> type[BaseModel
         if part in TAGS:  # pydantic's tag of the table chosen in a union
             model = TAGS[part]
             continue
+        if isinstance(part, int):  # an entry of a list (of one table, or of a union: a tag follows)
+            continue
         if model is None:
             return None
-        if isinstance(part, int):
-            continue
         field = model.model_fields.get(part)
         if field is None:
             return None
