@@ -200,7 +200,7 @@ def _allan_truth(sigma_v, sigma_u, tau, K):
     return c0 / 2, ((K - 1) * c0**2 + 2 * (K - 2) * c1**2) / (2 * (K - 1) ** 2)
 
 
-@pytest.mark.parametrize("dt, n_log2", [(1.0, 16), (0.1, 17)], ids=["dt_1s", "dt_0.1s"])
+@pytest.mark.parametrize("dt, n_log2", [(1.0, 16), (0.1, 16)], ids=["dt_1s", "dt_0.1s"])
 def test_gyro_allan_variance_inside_its_chi_squared_band(dt, n_log2):
     """σ²(τ) = σ_v²/τ + σ_u² τ/3 for τ from one sample to 1/16 of the record, at two sample
     periods (the discrete model is exact for any step); crossover at τ = √3 σ_v/σ_u = 173 s."""

@@ -33,6 +33,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..core.compile import FastCall, compile_functions
 from ..core.linalg import inv3
 from ..core.rotation import dcm, quat_conj, quat_mult, skew
 from .gyro import RateGyro
@@ -155,7 +156,8 @@ class Mekf:
             raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give them in [estimator] "
                              "for noise-free sensors)")
         self.params = self.param_layout.pack(values)
-        self._f = self._report = None
+        self._f = self._report = self._compiled = None
+        self._records: dict = {}
 
     @classmethod
     def from_sensors(cls, table, sensors: list) -> "Mekf":
@@ -191,10 +193,12 @@ class Mekf:
 
     def compiled(self) -> ca.Function:
         """:meth:`function` generated as C (cached on disk; casadi's evaluator without a compiler)."""
-        from ..core.compile import compile_functions
-
-        f = self.function()
-        return compile_functions([f], f.name())[f.name()]
+        if self._compiled is None:
+            f, r = self.function(), self.report_function()
+            lib = compile_functions([f, r], f.name())
+            self._compiled = lib[f.name()]
+            self._report_compiled = lib[r.name()]
+        return self._compiled
 
     def report_function(self) -> ca.Function:
         """``(xf, q_BN, bias_B) -> (err_B, sigma3, nees)`` against the truth: the attitude error
@@ -218,12 +222,23 @@ class Mekf:
             raise ValueError(f"MEKF record: z has shape {z.shape}, expected (N, {self.inputs.size}); "
                              f"xf0 {np.shape(xf0)}, expected ({FILTER.size},)")
         n = z.shape[0]
-        F = (f or self.compiled()).mapaccum(f"mekf_record_{n}", n)
-        xs, w = F(xf0, z.T, np.tile(self.params[:, None], (1, n)))
-        return np.asarray(xs).T, np.asarray(w).T
+        f = f or self.compiled()
+        fc = self._records.get((id(f), n))
+        if fc is None:  # buffers bound once: a (k, n) input is the (n, k) table's numbers in order
+            fc = self._records[(id(f), n)] = FastCall(f.mapaccum(f"mekf_record_{n}", n))
+        for arg, value in zip(fc.args, (xf0, z, np.tile(self.params, n))):
+            arg[:] = np.ravel(value)
+        fc()
+        return fc.res[0].reshape(n, -1).copy(), fc.res[1].reshape(n, -1).copy()
 
     def report(self, xf: np.ndarray, q_BN: np.ndarray, bias_B: np.ndarray):
         """:meth:`report_function` over N rows: ``err_B`` (N, 3), ``sigma3`` (N, 6), ``nees`` (N,)."""
         n = len(xf)
-        e, s, nees = self.report_function().map(n)(np.asarray(xf).T, np.asarray(q_BN).T, np.asarray(bias_B).T)
-        return np.asarray(e).T, np.asarray(s).T, np.asarray(nees).ravel()
+        self.compiled()
+        fc = self._records.get(("report", n))
+        if fc is None:
+            fc = self._records[("report", n)] = FastCall(self._report_compiled.map(n))
+        for arg, value in zip(fc.args, (xf, q_BN, bias_B)):
+            arg[:] = np.ravel(value)
+        fc()
+        return fc.res[0].reshape(n, 3).copy(), fc.res[1].reshape(n, 6).copy(), fc.res[2].copy()
