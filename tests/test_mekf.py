@@ -52,6 +52,8 @@ ROUNDOFF = 1e-13
 NEES_CONFIDENCE = 0.95
 #: per-state two-sided miss probability at the end (6 states: family-wise <= 6 %)
 STATE_ALPHA = 0.01
+#: bias error RMS after DURATION_S, as a fraction of the initial σ (the filter's 3σ then is 0.018)
+BIAS_END_FRACTION = 0.02
 #: an error inside its 3σ bound at least this often (Gaussian: 99.73 %)
 INSIDE_3SIGMA_MIN = 0.99
 #: noise-free sensors: the attitude error after convergence [rad] (measured 2.4e-16 after 600 s:
@@ -193,8 +195,9 @@ def test_bias_estimate_converges_to_the_simulated_bias(ensemble):
     start = np.sqrt(np.mean(errs[:, 0, 3:] ** 2))
     end = np.sqrt(np.mean(errs[:, -1, 3:] ** 2))
     assert start > 0.5 * SIGMA_BIAS0  # it started uncertain
-    assert end < 0.05 * SIGMA_BIAS0, f"bias error RMS {end:.3g} rad/s after {DURATION_S:g} s"
-    assert np.all(sig3[:, -1, 3:] < 0.1 * 3 * SIGMA_BIAS0)  # and the filter knows it
+    # the filter's own 1σ after 600 s is 6e-8 rad/s = 0.006 σ_bias0: the RMS stays within ~3σ of it
+    assert end < BIAS_END_FRACTION * SIGMA_BIAS0, f"bias error RMS {end:.3g} rad/s after {DURATION_S:g} s"
+    assert np.all(sig3[:, -1, 3:] < BIAS_END_FRACTION * SIGMA_BIAS0)  # and the filter knows it
 
 
 # -- noise-free sensors ----------------------------------------------------------------------

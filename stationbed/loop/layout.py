@@ -127,25 +127,26 @@ class Layout:
         """Every field of ``v`` by name (see :meth:`get`)."""
         return {name: self.get(v, name) for name in self._slice}
 
-    def pack(self, values: Mapping | None = None, /, **more):
+    def pack(self, values: Mapping | None = None, /, symbolic: bool = False, **more):
         """The flat vector of the named fields, in layout order (every field once).
 
-        A casadi value anywhere makes a casadi column; otherwise a numpy float64 vector of
-        shape (size,). Matrix fields are flattened column-major.
+        A casadi value anywhere (or ``symbolic=True``: always, e.g. for a layout without fields) makes a
+        casadi column; otherwise a numpy float64 vector of shape (size,). Matrix fields are
+        flattened column-major.
         """
         values = {**(values or {}), **more}
         missing = [n for n in self._slice if n not in values]
         extra = [n for n in values if n not in self._slice]
         if missing or extra:
             raise ValueError(f"{self!r}: missing fields {missing}, unknown fields {extra}")
-        if any(is_symbolic(v) for v in values.values()):
+        if symbolic or any(is_symbolic(v) for v in values.values()):
             parts = []
             for name, (rows, cols) in self._shape.items():
                 part = ca.vec(ca.DM(values[name]) if not is_symbolic(values[name]) else values[name])
                 if part.numel() != rows * cols:
                     raise ValueError(f"layout field {name!r}: {part.numel()} numbers, expected {rows * cols}")
                 parts.append(part)
-            return ca.vertcat(*parts)
+            return ca.vertcat(*parts) if parts else ca.SX(0, 1)
         out = np.empty(self.size)
         for name, (rows, cols) in self._shape.items():
             part = np.asarray(values[name], dtype=float)

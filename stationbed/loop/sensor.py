@@ -34,8 +34,9 @@ __all__ = ["Sensor", "TRUTH", "noise_rng", "SENSOR_STREAM"]
 #: * ``theta_B`` (3) [rad]: ∫₀ᵗ omega_BN_B dt, the running integral of the body rate (a gyro
 #:   differences it between its samples: the rate integrated over the sample, exactly);
 #: * ``R_N`` (3) [m]: the station's position from the Earth's centre, N components;
-#: * ``sun_N``, ``moon_N`` (3): unit vectors from the station to the Sun and the Moon, N.
-TRUTH = Layout(q_BN=4, omega_BN_B=3, theta_B=3, R_N=3, sun_N=3, moon_N=3)
+#: * ``sun_N``, ``moon_N`` (3): unit vectors from the station to the Sun and the Moon, N;
+#: * ``shadow`` (1): the fraction of the Sun's disc seen, in [0, 1] (1 in sunlight).
+TRUTH = Layout(q_BN=4, omega_BN_B=3, theta_B=3, R_N=3, sun_N=3, moon_N=3, shadow=1)
 
 #: first entry of a sensor's spawn key (a run's other streams use other first entries)
 SENSOR_STREAM = 1
@@ -134,7 +135,7 @@ class Sensor:
             x, truth = self.state.symbol("x"), TRUTH.symbol("truth")
             w, p = ca.SX.sym("w", self.n_noise), self.param_layout.symbol("p")
             x_next, y = self._step(t, self.state.split(x), TRUTH.split(truth), w, self.param_layout.split(p))
-            x_next, y = self.state.pack(x_next), self.outputs.pack(y)
+            x_next, y = self.state.pack(x_next, symbolic=True), self.outputs.pack(y, symbolic=True)
             f = ca.Function(self.key, [t, x, truth, w, p], [x_next, y], ["t", "x", "truth", "w", "p"],
                             ["x_next", "y"], {"cse": True})
             Sensor._functions[self.key] = f
