@@ -10,6 +10,7 @@ from .mekf import FILTER, Mekf
 from .registry import SENSORS, build_sensors, get_sensor
 from .sensor import TRUTH, Sensor, noise_rng
 from .star_tracker import StarTracker
+from .suite import Suite, SuiteNoise
 
 __all__ = ["Layout", "Sensor", "TRUTH", "noise_rng", "RateGyro", "StarTracker", "SENSORS", "get_sensor",
-           "build_sensors", "Mekf", "FILTER"]
+           "build_sensors", "Mekf", "FILTER", "Suite", "SuiteNoise"]

@@ -160,6 +160,6 @@ class Layout:
         """A numpy vector of zeros, shape (size,)."""
         return np.zeros(self.size)
 
-    def symbol(self, name: str) -> ca.SX:
-        """A casadi SX column of this layout's size."""
-        return ca.SX.sym(name, self.size)
+    def symbol(self, name: str, kind=ca.SX):
+        """A casadi column of this layout's size (``kind``: ``casadi.SX`` or ``casadi.MX``)."""
+        return kind.sym(name, self.size)

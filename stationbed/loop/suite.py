@@ -1,0 +1,190 @@
+"""The sensors and the estimator of a scene as one composition on the executor's tick clock.
+
+:class:`Suite` is what an executor runs: one casadi function per tick,
+
+``(k, t, x, truth, w, p) -> (x_next, y)``
+
+that steps every sensor whose sample falls on tick k (its period a whole number of ticks; tick k
+is at ``t = k · tick``, the first sample of a sensor of period n ticks at tick n), holds the
+others' last measurement, and steps the MEKF with the gyro's samples, telling it which heads are
+new. The per-tick loop evaluates it compiled (one call per tick), the fused loop inlines it in
+its ``mapaccum``; neither reads the other's internals. The state ``x``, noise ``w``, parameters
+``p`` and outputs ``y`` are :class:`Layout` s named by the sensors (``STATE``, ``NOISE``,
+``PARAMS``, ``OUTPUTS``).
+
+Noise: sensor i (file order) draws one row of standard normals per sample of its own, from
+``noise_rng(seed, i)``, in sample order; :class:`SuiteNoise` places them on the ticks where the
+sensor samples. Drawn chunk by chunk in tick order, the numbers are those of one whole draw.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions
+from .layout import Layout
+from .mekf import FILTER, Mekf
+from .registry import build_sensors
+from .sensor import TRUTH, noise_rng
+
+__all__ = ["Suite", "SuiteNoise", "TICK_RATIO_TOL"]
+
+#: a sensor period that is a whole number of ticks to this relative tolerance is taken as one
+TICK_RATIO_TOL = 1e-9
+
+
+class Suite:
+    """The sensors (and the MEKF, when the tables name one) of a :class:`~stationbed.scene.Sensing`.
+
+    Parameters
+    ----------
+    sensing : stationbed.scene.Sensing  The ``[[sensor]]`` tables and ``[estimator]``.
+    tick : float  The executor's tick period [s] (the controller period).
+    """
+
+    def __init__(self, sensing, tick: float):
+        self.sensing, self.tick = sensing, float(tick)
+        self.sensors = build_sensors(sensing.sensor)
+        self.every: dict[str, int] = {}
+        for s in self.sensors:
+            ratio = s.period / self.tick
+            if round(ratio) < 1 or abs(ratio - round(ratio)) > TICK_RATIO_TOL * ratio:
+                raise ValueError(f"sensor '{s.name}': period {s.period:g} s is not a whole number of ticks "
+                                 f"({self.tick:g} s)")
+            self.every[s.name] = int(round(ratio))
+        self.mekf = Mekf.from_sensors(sensing.estimator, self.sensors) if sensing.estimator is not None else None
+        noisy = [s for s in self.sensors if s.n_noise]
+        est = dict(mekf=FILTER.size, omega_hat_B=3) if self.mekf else {}
+        self.STATE = Layout(**{s.name: s.state.size for s in self.sensors},
+                            **{f"{s.name}.y": s.outputs.size for s in self.sensors}, **est)
+        self.NOISE = Layout(**{s.name: s.n_noise for s in noisy})
+        self.PARAMS = Layout(**{s.name: s.param_layout.size for s in self.sensors},
+                             **({"mekf": self.mekf.param_layout.size} if self.mekf else {}))
+        self.OUTPUTS = Layout(**{s.name: s.outputs.size for s in self.sensors},
+                              **{f"{s.name}.fresh": 1 for s in self.sensors},
+                              **(dict(q_BN_hat=4, bias_B_hat=3, omega_hat_B=3) if self.mekf else {}))
+        self.params = self.PARAMS.pack({s.name: s.params for s in self.sensors},
+                                       **({"mekf": self.mekf.params} if self.mekf else {}))
+        self._f = self._compiled = None
+        self._records: dict = {}
+
+    # -- state ----------------------------------------------------------------------------
+    def initial(self, q_BN_hat=(1.0, 0.0, 0.0, 0.0), bias_B_hat=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """The suite's state at tick 0: each sensor's initial state, no measurement yet (zeros,
+        a head's ``valid`` 0), the filter at the given estimates with its initial covariance."""
+        v = {s.name: s.x0 for s in self.sensors}
+        v.update({f"{s.name}.y": np.zeros(s.outputs.size) for s in self.sensors})
+        if self.mekf:
+            v.update(mekf=self.mekf.initial(q_BN_hat, bias_B_hat), omega_hat_B=np.zeros(3))
+        return self.STATE.pack(v)
+
+    # -- the tick -------------------------------------------------------------------------
+    def function(self) -> ca.Function:
+        """``(k, t, x, truth, w, p) -> (x_next, y)``, one tick (see the module docstring).
+
+        An MX function: each sensor's step and the filter's are ``Switch`` es on their tick
+        (the sensor's own SX function when due, a hold when not), so generated code computes a
+        sensor only on its samples (an SX ``if_else`` would compute both branches every tick)."""
+        if self._f is not None:
+            return self._f
+        MX = ca.MX
+        k, t = MX.sym("k"), MX.sym("t")
+        x, truth = self.STATE.symbol("x", MX), TRUTH.symbol("truth", MX)
+        w, p = self.NOISE.symbol("w", MX), self.PARAMS.symbol("p", MX)
+        X, P = self.STATE.split(x), self.PARAMS.split(p)
+        nxt, out, due = {}, {}, {}
+        for s in self.sensors:
+            due[s.name] = ca.logic_and(k > 0.5, ca.fmod(k, self.every[s.name]) == 0)
+            ws = self.NOISE.get(w, s.name) if s.name in self.NOISE else MX(0, 1)
+            nxt[s.name], nxt[f"{s.name}.y"] = _due(s.function(), f"{s.key}_tick")(
+                due[s.name], t, X[s.name], X[f"{s.name}.y"], truth, ws, P[s.name])
+            out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], due[s.name]
+        if self.mekf:
+            m = self.mekf
+            z = {"omega_B": out[m.gyro.name]}
+            for i, h in enumerate(m.heads):
+                z[f"q_SN_{i}"], z[f"valid_{i}"] = out[h.name][0:4], out[h.name][4]
+                z[f"fresh_{i}"] = due[h.name]
+            step = _due_filter(m.function())
+            nxt["mekf"], nxt["omega_hat_B"] = step(due[m.gyro.name], X["mekf"], X["omega_hat_B"],
+                                                   m.inputs.pack(z, symbolic=True), P["mekf"])
+            out.update(q_BN_hat=FILTER.get(nxt["mekf"], "q_BN"), bias_B_hat=FILTER.get(nxt["mekf"], "bias_B"),
+                       omega_hat_B=nxt["omega_hat_B"])
+        self._f = ca.Function(f"suite_{len(self.sensors)}", [k, t, x, truth, w, p],
+                              [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
+                              ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"])
+        return self._f
+
+    def compiled(self) -> ca.Function:
+        """:meth:`function` generated as C (disk cache; casadi's evaluator without a compiler)."""
+        if self._compiled is None:
+            f = self.function()
+            self._compiled = compile_functions([f], f.name())[f.name()]
+        return self._compiled
+
+    def record(self, x0: np.ndarray, k0: int, truth: np.ndarray, w: np.ndarray,
+               params: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Ticks ``k0 .. k0 + N - 1`` in one call: states after each (N, STATE.size) and outputs
+        (N, OUTPUTS.size), from the truth at each tick (N, TRUTH.size) and the noise table
+        (N, NOISE.size) of :meth:`SuiteNoise.draw`."""
+        truth = np.atleast_2d(np.asarray(truth, dtype=float))
+        n = truth.shape[0]
+        w = np.asarray(w, dtype=float).reshape(n, self.NOISE.size)
+        if truth.shape[1] != TRUTH.size or np.shape(x0) != (self.STATE.size,):
+            raise ValueError(f"suite record: truth {truth.shape}, expected (N, {TRUTH.size}); x0 {np.shape(x0)}, "
+                             f"expected ({self.STATE.size},)")
+        fc = self._records.get(n)
+        if fc is None:  # a (k, n) input is the (n, k) table's numbers in order
+            fc = self._records[n] = FastCall(self.compiled().mapaccum(f"suite_record_{n}", n, [2], [0]))
+        ks = np.arange(k0, k0 + n, dtype=float)
+        p = self.params if params is None else np.asarray(params, dtype=float)
+        for arg, value in zip(fc.args, (ks, ks * self.tick, x0, truth, w, np.tile(p, n))):
+            arg[:] = np.ravel(value)
+        fc()
+        return fc.res[0].reshape(n, -1).copy(), fc.res[1].reshape(n, -1).copy()
+
+
+class SuiteNoise:
+    """The noise of a suite's run seeded ``seed``, drawn tick chunk by tick chunk in order.
+
+    Sensor i (file order) draws its rows from ``noise_rng(seed, i)``, one per sample; ``draw``
+    places them on the ticks where it samples (zeros elsewhere: unused)."""
+
+    def __init__(self, suite: Suite, seed: int):
+        self.suite = suite
+        self.rngs = {s.name: noise_rng(seed, i) for i, s in enumerate(suite.sensors)}
+        self.next_tick = 1
+
+    def draw(self, n: int) -> np.ndarray:
+        """The noise table of the next ``n`` ticks, shape (n, NOISE.size)."""
+        k0 = self.next_tick
+        ks = np.arange(k0, k0 + n)
+        out = np.zeros((n, self.suite.NOISE.size))
+        for s in self.suite.sensors:
+            if s.name not in self.suite.NOISE:
+                continue
+            at = np.flatnonzero(ks % self.suite.every[s.name] == 0)
+            out[at, self.suite.NOISE.slice(s.name)] = s.noise(self.rngs[s.name], at.size)
+        self.next_tick += n
+        return out
+
+
+def _due(f: ca.Function, name: str) -> ca.Function:
+    """``(due, t, x, y_prev, truth, w, p) -> (x_next, y)``: the sensor's step ``f`` when due,
+    else its state and last measurement held."""
+    t, x, y = ca.SX.sym("t"), ca.SX.sym("x", f.size1_in(1)), ca.SX.sym("y", f.size1_out(1))
+    truth, w, p = ca.SX.sym("truth", f.size1_in(2)), ca.SX.sym("w", f.size1_in(3)), ca.SX.sym("p", f.size1_in(4))
+    step = ca.Function(f"{name}_do", [t, x, y, truth, w, p], f(t, x, truth, w, p))
+    hold = ca.Function(f"{name}_hold", [t, x, y, truth, w, p], [x, y])
+    return ca.Function.if_else(name, step, hold)
+
+
+def _due_filter(f: ca.Function) -> ca.Function:
+    """``(due, xf, omega_hat_prev, z, p) -> (xf_next, omega_hat)``: the filter's tick when the
+    gyro has a sample, else both held."""
+    xf, w = ca.MX.sym("xf", f.size1_in(0)), ca.MX.sym("w", 3)
+    z, p = ca.MX.sym("z", f.size1_in(1)), ca.MX.sym("p", f.size1_in(2))
+    step = ca.Function(f"{f.name()}_do", [xf, w, z, p], f(xf, z, p))
+    hold = ca.Function(f"{f.name()}_hold", [xf, w, z, p], [xf, w])
+    return ca.Function.if_else(f"{f.name()}_tick", step, hold)
