@@ -16,6 +16,9 @@ The instrument's errors follow in the order of the hardware: scale factor and mi
 quantisation of the integrated angle to ``quantum`` with the remainder carried to the next
 sample (a counter: the sum of the output angles stays within half a count of the sum of the
 inputs, so quantisation adds no drift).
+
+The state keeps θ at the last sample; the initial state has θ = 0, the truth's ``theta_B`` at
+t = 0 (an executor that starts a gyro later sets ``theta_B`` of its state to the truth's then).
 """
 
 from __future__ import annotations

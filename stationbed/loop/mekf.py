@@ -139,6 +139,7 @@ class Mekf:
             raise ValueError("the MEKF needs at least one star-tracker head")
         self.table, self.gyro, self.heads = table, gyro, list(heads)
         self.dt = gyro.period
+        #: head i has a new sample every ``every[i]`` filter steps
         self.every = [int(round(h.period / self.dt)) for h in heads]
         n = len(heads)
         self.param_layout = Layout(dt=1, sigma_v=1, sigma_u=1, **{f"q_SB_{i}": 4 for i in range(n)},
