@@ -242,3 +242,22 @@ def test_compiled_filter_gives_the_same_numbers_as_its_expression():
     c, wc = mekf.record(xf0, z)
     assert_allclose(c, a, rtol=0, atol=ROUNDOFF)
     assert_allclose(wc, wa, rtol=0, atol=ROUNDOFF)
+
+
+def test_dropped_measurements_leave_the_filter_to_the_gyro():
+    """Every head sample invalid (excluded): no update, and at rest the attitude variance grows
+    as the closed form of the random walks, P₁₁(t) = P₁₁(0) + P₂₂(0) t² + σ_v² t + σ_u² t³/3."""
+    sensing = _sensing()
+    mekf = Mekf.from_sensors(sensing.estimator, build_sensors(sensing.sensor))
+    n = 500
+    z = np.zeros((n, mekf.inputs.size))
+    for i in range(2):
+        z[4::5, mekf.inputs.slice(f"q_SN_{i}")] = [0.0, 1.0, 0.0, 0.0]  # far off: would move the estimate
+        z[4::5, mekf.inputs.slice(f"fresh_{i}")] = 1.0  # new, but not valid
+    xf, _ = mekf.record(mekf.initial([1.0, 0.0, 0.0, 0.0]), z)
+    t = GYRO_DT_S * np.arange(1, n + 1)
+    P = FILTER.get(xf, "P")
+    expected = SIGMA_ATT0**2 + SIGMA_BIAS0**2 * t**2 + SIGMA_V**2 * t + SIGMA_U**2 * t**3 / 3
+    for i in range(3):
+        assert_allclose(P[:, i, i], expected, rtol=1e-12)
+    assert_allclose(FILTER.get(xf, "q_BN"), np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), rtol=0, atol=0)
