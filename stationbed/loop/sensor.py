@@ -92,7 +92,7 @@ class Sensor:
     reads: ClassVar[tuple[str, ...]] = ()
     n_noise: ClassVar[int] = 0
 
-    #: compiled functions, by (kind, structure) (one per kind and shape, shared by instances)
+    #: the functions, by (class, key) (one per kind and shape, shared by instances)
     _functions: ClassVar[dict] = {}
     #: their mapaccum over n samples with bound buffers, by (key, n) (building one costs ~50 ms)
     _records: ClassVar[dict] = {}
@@ -129,7 +129,7 @@ class Sensor:
     def function(self) -> ca.Function:
         """``(t, x, truth, w, p) -> (x_next, y)`` as a casadi SX Function (built once per kind
         and structure; call it on numbers or on symbols)."""
-        f = Sensor._functions.get(self.key)
+        f = Sensor._functions.get((type(self), self.key))
         if f is None:
             t = ca.SX.sym("t")
             x, truth = self.state.symbol("x"), TRUTH.symbol("truth")
@@ -138,15 +138,15 @@ class Sensor:
             x_next, y = self.state.pack(x_next, symbolic=True), self.outputs.pack(y, symbolic=True)
             f = ca.Function(self.key, [t, x, truth, w, p], [x_next, y], ["t", "x", "truth", "w", "p"],
                             ["x_next", "y"], {"cse": True})
-            Sensor._functions[self.key] = f
+            Sensor._functions[(type(self), self.key)] = f
         return f
 
     def compiled(self) -> ca.Function:
         """The same function generated as C and compiled (cached on disk by a hash of the code;
         casadi's evaluator when no compiler is present: same numbers)."""
-        f = Sensor._compiled.get(self.key)
+        f = Sensor._compiled.get((type(self), self.key))
         if f is None:
-            f = Sensor._compiled[self.key] = compile_functions([self.function()], self.key)[self.key]
+            f = Sensor._compiled[(type(self), self.key)] = compile_functions([self.function()], self.key)[self.key]
         return f
 
     # -- evaluating it ------------------------------------------------------------------
@@ -181,9 +181,9 @@ class Sensor:
         truth, w = np.asarray(truth, dtype=float), np.asarray(w, dtype=float)
         self._checked(x0, truth, w, n)
         p = self.params if params is None else np.asarray(params, dtype=float)
-        fc = Sensor._records.get((self.key, n))
+        fc = Sensor._records.get((type(self), self.key, n))
         if fc is None:  # buffers bound once: a (k, n) input is the (n, k) table's numbers in order
-            fc = Sensor._records[(self.key, n)] = FastCall(self.compiled().mapaccum(f"{self.key}_record", n, [1], [0]))
+            fc = Sensor._records[(type(self), self.key, n)] = FastCall(self.compiled().mapaccum(f"{self.key}_record", n, [1], [0]))
         for arg, value in zip(fc.args, (t, x0, truth, w, np.tile(p, n))):
             arg[:] = np.ravel(value)
         fc()
