@@ -350,7 +350,8 @@ def test_star_tracker_latency_delays_measurement_and_flag():
 # -- the scene tables -------------------------------------------------------------------------
 BAD = {
     "typo": ({"sensor": [_gyro(sigma_vv=1.0)]}, "sensor[0].sigma_vv: unknown key; did you mean 'sigma_v'?"),
-    "unknown_kind": ({"sensor": [{"kind": "sun_sensor", "name": "c", "period": 1.0}]}, "sensor[0]"),
+    "unknown_kind": ({"sensor": [{"kind": "sun_sensor", "name": "c", "period": 1.0}]},
+                     "sensor[0]: unknown or missing kind; valid kinds: 'gyro', 'star_tracker'"),
     "negative_noise": ({"sensor": [_gyro(sigma_v=-1.0)]}, "sensor[0].sigma_v: must be greater than or equal to 0"),
     "misalignment_diagonal": ({"sensor": [_gyro(misalignment=[[1e-3, 0, 0], [0, 0, 0], [0, 0, 0]])]},
                               "sensor[0].misalignment: the diagonal must be zero"),
@@ -360,6 +361,7 @@ BAD = {
     "latency": ({"sensor": [_head(latency=0.3)]}, "sensor[0].latency: 0.3 s is not a whole number of periods"),
     "exclusion_angle": ({"sensor": [_head(sun_exclusion=4.0)]}, "sensor[0].sun_exclusion: must be an angle"),
     "duplicate": ({"sensor": [_gyro(), _gyro()]}, "sensor: names must be unique, repeated: ['g']"),
+    "bad_name": ({"sensor": [_gyro(name="rga 1")]}, "sensor[0].name: "),
     "no_gyro": ({"sensor": [_head()], "estimator": {"kind": "mekf"}}, "estimator.gyro: name the gyro"),
     "head_period": ({"sensor": [_gyro(period=0.3), _head()], "estimator": {"kind": "mekf"}},
                     "estimator.star_trackers: head 'st': period 1 s is not a whole number of the gyro's (0.3 s)"),

@@ -124,3 +124,11 @@ def test_tick_reads_only_what_its_sensors_read(suite):
 def test_period_not_a_whole_number_of_ticks_is_refused():
     with pytest.raises(ValueError, match="sensor 'rga': period 0.25 s is not a whole number of ticks \\(0.1 s\\)"):
         Suite(_sensing(gyro_period=0.25, head_period=1.0), TICK_S)
+
+
+def test_a_sensor_named_as_an_estimator_output_is_refused():
+    data = _sensing().model_dump()
+    data["sensor"][0]["name"] = "mekf"
+    data["estimator"]["gyro"] = "mekf"
+    with pytest.raises(ValueError, match="sensor 'mekf': the name is taken"):
+        Suite(sensing_from_dict(data), TICK_S)

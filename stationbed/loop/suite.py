@@ -28,10 +28,12 @@ from .mekf import FILTER, Mekf
 from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
 
-__all__ = ["Suite", "SuiteNoise", "TICK_RATIO_TOL"]
+__all__ = ["Suite", "SuiteNoise", "TICK_RATIO_TOL", "RESERVED"]
 
 #: a sensor period that is a whole number of ticks to this relative tolerance is taken as one
 TICK_RATIO_TOL = 1e-9
+#: names of the suite's own fields (a sensor may not be called so)
+RESERVED = frozenset({"mekf", "omega_hat_B", "q_BN_hat", "bias_B_hat"})
 
 
 class Suite:
@@ -48,6 +50,8 @@ class Suite:
         self.sensors = build_sensors(sensing.sensor)
         self.every: dict[str, int] = {}
         for s in self.sensors:
+            if s.name in RESERVED:
+                raise ValueError(f"sensor '{s.name}': the name is taken by the estimator's outputs {sorted(RESERVED)}")
             ratio = s.period / self.tick
             if round(ratio) < 1 or abs(ratio - round(ratio)) > TICK_RATIO_TOL * ratio:
                 raise ValueError(f"sensor '{s.name}': period {s.period:g} s is not a whole number of ticks "
@@ -170,14 +174,22 @@ class SuiteNoise:
         return out
 
 
+_DUE: dict = {}
+
+
 def _due(f: ca.Function, name: str) -> ca.Function:
     """``(due, t, x, y_prev, truth, w, p) -> (x_next, y)``: the sensor's step ``f`` when due,
-    else its state and last measurement held."""
+    else its state and last measurement held (one per sensor function, shared by its heads)."""
+    hit = _DUE.get(id(f))
+    if hit is not None and hit[0] is f:
+        return hit[1]
     t, x, y = ca.SX.sym("t"), ca.SX.sym("x", f.size1_in(1)), ca.SX.sym("y", f.size1_out(1))
     truth, w, p = ca.SX.sym("truth", f.size1_in(2)), ca.SX.sym("w", f.size1_in(3)), ca.SX.sym("p", f.size1_in(4))
     step = ca.Function(f"{name}_do", [t, x, y, truth, w, p], f(t, x, truth, w, p))
     hold = ca.Function(f"{name}_hold", [t, x, y, truth, w, p], [x, y])
-    return ca.Function.if_else(name, step, hold)
+    switch = ca.Function.if_else(name, step, hold)
+    _DUE[id(f)] = (f, switch)
+    return switch
 
 
 def _due_filter(f: ca.Function) -> ca.Function:

@@ -335,7 +335,7 @@ def _one_line(err: ValidationError, root: type[BaseModel] | None = None) -> str:
     if isinstance(cause, FieldError):  # a table's cross-field check naming its field
         return f"{path + '.' if path else ''}{cause.field}: {cause.reason}{more}"
     msg = e["msg"].removeprefix("Value error, ")
-    if etype == "value_error":  # the scene's own checks say what they found
+    if etype in ("value_error", "unknown_kind"):  # the scene's own checks say what they found
         return f"{path or '(top level)'}: {msg}{more}"
     msg = msg.replace("Input should be", "must be", 1)
     return f"{path or '(top level)'}: {msg}, got {_given(given)}{more}"

@@ -38,11 +38,15 @@ from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Ve
 from .tables import TAGS
 
 __all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing", "sensing_from_dict",
-           "WHOLE_PERIODS_TOL"]
+           "WHOLE_PERIODS_TOL", "SensorName"]
 
 #: a latency or period that is a whole number of periods to this relative tolerance is taken as
 #: one (the numbers are typed with a few digits; 1e-9 is far below any typing error)
 WHOLE_PERIODS_TOL = 1e-9
+
+
+#: a sensor's name: it becomes a column stem and a layout field (letters, digits, underscores)
+SensorName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
 
 
 def _whole(ratio: float) -> bool:
@@ -61,7 +65,7 @@ class GyroSensor(Strict):
     sample (ω̄ = Δθ/period), with the Farrenkopf bias random walk β (stationbed/loop/gyro.py)."""
 
     kind: Literal["gyro"]
-    name: str
+    name: SensorName
     period: TimeS  # s, sample period
     sigma_v: float = Field(ge=0.0)  # rad/s^0.5, angle random walk (ARW)
     sigma_u: float = Field(default=0.0, ge=0.0)  # rad/s^1.5, rate random walk (bias random walk)
@@ -92,7 +96,7 @@ class StarTrackerSensor(Strict):
     measurement (output ``valid`` = 0)."""
 
     kind: Literal["star_tracker"]
-    name: str
+    name: SensorName
     period: TimeS  # s, update period
     q_SB: list[float] | None = Field(default=None, min_length=4, max_length=4)  # mounting, scalar first
     boresight_B: Vec3 | None = None  # unit vector in B (alternative to q_SB), with roll
@@ -144,13 +148,14 @@ class StarTrackerSensor(Strict):
 
 def _sensor_tag(v) -> str:
     kind = v.get("kind") if isinstance(v, dict) else getattr(v, "kind", None)
-    return f"kind={kind}" if kind in ("gyro", "star_tracker") else "kind=gyro"
+    return f"kind={kind}" if kind in ("gyro", "star_tracker") else None
 
 
 #: one ``[[sensor]]`` entry, chosen by its kind (the tags contain '=' so they never match a key)
 SensorEntry = Annotated[
     Union[Annotated[GyroSensor, Tag("kind=gyro")], Annotated[StarTrackerSensor, Tag("kind=star_tracker")]],
-    Discriminator(_sensor_tag),
+    Discriminator(_sensor_tag, custom_error_type="unknown_kind",
+                  custom_error_message="unknown or missing kind; valid kinds: 'gyro', 'star_tracker'"),
 ]
 TAGS.update({"kind=gyro": GyroSensor, "kind=star_tracker": StarTrackerSensor})
 
