@@ -331,6 +331,15 @@ def test_exclusion_cones_drop_exactly_the_samples_the_geometry_says():
     assert expected.sum() > 0.3 * n
 
 
+def test_absent_sun_moon_and_orbit_never_exclude():
+    """Zero Sun and Moon vectors and a zero position (a run without them) leave every sample valid."""
+    s = _one(_head(sun_exclusion=0.6, earth_exclusion=0.35, moon_exclusion=0.25))
+    n = 50
+    truth = _truth(n, q_BN=_q_wxyz(Rotation.random(n, random_state=23)), R_N=[0.0, 0.0, 0.0])
+    _, y = s.record(np.arange(1.0, n + 1), truth, np.zeros((n, 3)))
+    assert_array_equal(y[:, 4], 1.0)
+
+
 def test_star_tracker_latency_delays_measurement_and_flag():
     e = _head(nea_cross=0.0, nea_about=0.0, sun_exclusion=0.5)
     now, late = _one(e), _one({**e, "latency": 3.0})

@@ -12,7 +12,8 @@ of ``q_SN⁻¹ ⊗ q̃_SN`` gives ν back exactly).
 The measurement is dropped (``valid = 0``) when the boresight is within ``sun_exclusion`` of the
 Sun, ``moon_exclusion`` of the Moon, or ``earth_exclusion`` of the Earth's limb (the angle to the
 Earth's centre minus its angular radius ``asin(R_E/|R|)``, R_E the WGS-84 equatorial radius).
-Angles are ``atan2(|b × s|, b · s)`` (accurate at every angle). A latency of n periods delays
+Angles are ``atan2(|b × s|, b · s)`` (accurate at every angle). A zero Sun or Moon vector (a
+run without that body) and a zero position never exclude. A latency of n periods delays
 the measurement and its flag by n samples (a delay line in the state); until it has filled,
 ``valid = 0``.
 """
@@ -81,11 +82,13 @@ class StarTracker(Sensor):
         q = ca.if_else(q[0] < 0, -q, q)
         boresight_N = dcm(q_SN)[2, :].T  # S's z axis in N components (true pointing decides)
         R = truth["R_N"]
-        r = ca.fmax(ca.norm_2(R), 1.0)  # m (no orbit: R = 0, the Earth check then never fires)
+        r = ca.fmax(ca.norm_2(R), 1.0)  # m (no orbit: R = 0, and the Earth check is off below)
         earth_limb = angle_between(boresight_N, -R / r) - ca.asin(ca.fmin(R_EARTH_M / r, 1.0))
-        blinded = ca.logic_or(ca.logic_or(angle_between(boresight_N, truth["sun_N"]) < p["sun_exclusion"],
-                                          angle_between(boresight_N, truth["moon_N"]) < p["moon_exclusion"]),
-                              earth_limb < p["earth_exclusion"])
+        sun, moon = truth["sun_N"], truth["moon_N"]
+        blinded = ca.logic_or(ca.logic_or(
+            ca.logic_and(ca.norm_2(sun) > 0.5, angle_between(boresight_N, sun) < p["sun_exclusion"]),
+            ca.logic_and(ca.norm_2(moon) > 0.5, angle_between(boresight_N, moon) < p["moon_exclusion"])),
+            ca.logic_and(ca.norm_2(R) > 1.0, earth_limb < p["earth_exclusion"]))
         now = ca.vertcat(q, 1.0 - blinded)
         line = x["line"]
         if self.entry.n_delay == 0:
