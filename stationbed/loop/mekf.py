@@ -40,7 +40,7 @@ from .gyro import RateGyro
 from .layout import Layout
 from .star_tracker import StarTracker
 
-__all__ = ["FILTER", "Mekf", "propagate", "update", "attitude_error", "SERIES_BELOW"]
+__all__ = ["FILTER", "Mekf", "propagate", "update", "attitude_error", "rotation_increment", "SERIES_BELOW"]
 
 #: the filter's state: estimate of q_BN (scalar first), of the gyro bias [rad/s], covariance of
 #: the error state (δα [rad], Δβ [rad/s])
@@ -73,13 +73,19 @@ def _coefficients(w, dt):
     return [ca.if_else(small, s, e) for s, e in zip(series, exact)]
 
 
+def rotation_increment(omega, dt):
+    """``exp(ω Δt)`` as a quaternion, ``(cos(wΔt/2), sin(wΔt/2) ω/w)``: the body's turn over Δt
+    at a constant rate ω (exact, also at w = 0)."""
+    ws = ca.fmax(ca.norm_2(omega), _TINY_RATE)
+    half = ws * dt / 2
+    return ca.vertcat(ca.cos(half), ca.sin(half) / ws * omega)
+
+
 def propagate(q, b, P, omega_meas_B, dt, sigma_v, sigma_u):
     """One gyro sample: ``(q̂, β̂, P)`` at t + Δt from the measured rate over (t, t + Δt]."""
     omega = omega_meas_B - b
     w = ca.norm_2(omega)
-    ws = ca.fmax(w, _TINY_RATE)
-    half = ws * dt / 2
-    dq = ca.vertcat(ca.cos(half), ca.sin(half) / ws * omega)
+    dq = rotation_increment(omega, dt)
     q_next = quat_mult(q, dq)
     q_next = q_next / ca.norm_2(q_next)
     a1, a2, a3 = _coefficients(w, dt)
@@ -103,21 +109,38 @@ def attitude_error(q_ref, q):
     return 2 * d[1:4] / d[0]
 
 
-def update(q, b, P, q_SN_meas, gate, q_SB, r):
+def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0):
     """One star-tracker head: ``(q̂, β̂, P)`` after its measurement when ``gate`` is 1 (fresh and
-    valid), unchanged when 0. ``r`` = (r_cross, r_cross, r_about) [rad]."""
-    q_SN_hat = quat_mult(q, q_SB)
+    valid), unchanged when 0. ``r`` = (r_cross, r_cross, r_about) [rad].
+
+    A measurement taken ``latency`` [s] ago is compared with the estimate carried back by the
+    filter's own turn since then, ``D`` (quaternion, :func:`rotation_increment` accumulated):
+    ``q̂_s = q̂ ⊗ D⁻¹``. Its error ``C_Dᵀ(δα − ε)`` holds the error of that turn,
+    ``ε = −Δβ L − ∫η_v``: ``H = C_SB C_Dᵀ [E, L E]``, and the gyro noise over the latency,
+    ``q_latency = σ_v² L + σ_u² L³/3`` [rad²], is measurement noise correlated with the state
+    error (the same noise moved the attitude since the sample): ``Cov(Δx, v) = M = −[q_L Cᵀ; 0]``,
+    ``K = (P Hᵀ + M)(H P Hᵀ + H M + Mᵀ Hᵀ + R)⁻¹`` and the Joseph form with its cross terms."""
+    if D is None:
+        q_s, C = q, dcm(q_SB)
+        H = ca.horzcat(C, ca.SX.zeros(3, 3))
+    else:
+        q_s = quat_mult(q, quat_conj(D))
+        C = ca.mtimes(dcm(q_SB), dcm(D).T)
+        H = ca.horzcat(C, latency * C)
+    q_SN_hat = quat_mult(q_s, q_SB)
     z = attitude_error(q_SN_hat, q_SN_meas)
-    H = ca.horzcat(dcm(q_SB), ca.SX.zeros(3, 3))
-    R = ca.diag(r**2)
-    PHt = ca.mtimes(P, H.T)
-    K = ca.mtimes(PHt, inv3(ca.mtimes(H, PHt) + R))
+    R = ca.diag(r**2) + q_latency * ca.SX.eye(3)
+    # the gyro noise over the latency is in the state error too: Cov(Δx, v) = M = -[q_L Cᵀ; 0]
+    M = ca.vertcat(-q_latency * C.T, ca.SX.zeros(3, 3))
+    PHt = ca.mtimes(P, H.T) + M
+    K = ca.mtimes(PHt, inv3(ca.mtimes(H, PHt) + ca.mtimes(M.T, H.T) + R))
     dx = ca.mtimes(K, z)
     dq = ca.vertcat(1.0, dx[0:3] / 2)
     q_new = quat_mult(q, dq / ca.norm_2(dq))
     q_new = q_new / ca.norm_2(q_new)
     IKH = ca.SX.eye(6) - ca.mtimes(K, H)
-    P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T])
+    cross = ca.mtimes([IKH, M, K.T])  # Joseph form with correlated noise (zero without latency)
+    P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T]) - cross - cross.T
     P_new = 0.5 * (P_new + P_new.T)
     on = gate > 0.5
     return ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
@@ -142,8 +165,13 @@ class Mekf:
         #: head i has a new sample every ``every[i]`` filter steps
         self.every = [int(round(h.period / self.dt)) for h in heads]
         n = len(heads)
+        #: per head, its latency in its own periods (samples in flight)
+        self.delays = [h.entry.n_delay for h in heads]
+        #: the filter's state: FILTER, then per head with latency the filter's own turn since
+        #: each sample in flight (quaternions, oldest first)
+        self.state = Layout(q_BN=4, bias_B=3, P=(6, 6), **{f"D_{i}": (4, d) for i, d in enumerate(self.delays) if d})
         self.param_layout = Layout(dt=1, sigma_v=1, sigma_u=1, **{f"q_SB_{i}": 4 for i in range(n)},
-                                   **{f"r_{i}": 3 for i in range(n)})
+                                   **{f"r_{i}": 3 for i in range(n)}, **{f"latency_{i}": 1 for i in range(n)})
         #: one tick's input: the gyro's rate, then per head its output and whether it is new
         self.inputs = Layout(omega_B=3, **{f"q_SN_{i}": 4 for i in range(n)}, **{f"valid_{i}": 1 for i in range(n)},
                              **{f"fresh_{i}": 1 for i in range(n)})
@@ -153,6 +181,7 @@ class Mekf:
         for i, h in enumerate(heads):
             values[f"q_SB_{i}"] = h.entry.mounting()
             values[f"r_{i}"] = [h.entry.nea_cross, h.entry.nea_cross, h.entry.nea_about]
+            values[f"latency_{i}"] = h.entry.latency
         if min(values["sigma_v"], min(min(values[f"r_{i}"]) for i in range(n))) <= 0:
             raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give them in [estimator] "
                              "for noise-free sensors)")
@@ -174,7 +203,8 @@ class Mekf:
         t = self.table
         P0 = np.diag([t.sigma_attitude0**2] * 3 + [t.sigma_bias0**2] * 3)
         q = np.asarray(q_BN_hat, dtype=float)
-        return FILTER.pack(q_BN=q / np.linalg.norm(q), bias_B=bias_B_hat, P=P0)
+        lines = {f"D_{i}": np.tile([[1.0], [0.0], [0.0], [0.0]], (1, d)) for i, d in enumerate(self.delays) if d}
+        return self.state.pack(q_BN=q / np.linalg.norm(q), bias_B=bias_B_hat, P=P0, **lines)
 
     # -- the expressions ------------------------------------------------------------------
     def function(self) -> ca.Function:
@@ -186,20 +216,36 @@ class Mekf:
         ``if_else`` computes both branches: 742 instructions to propagate, 1470 per update)."""
         if self._f is None:
             n = len(self.heads)
-            name = f"mekf_{n}"
-            xf, z, p = FILTER.symbol("xf"), self.inputs.symbol("z"), self.param_layout.symbol("p")
-            X, Z, Pp = FILTER.split(xf), self.inputs.split(z), self.param_layout.split(p)
+            name = f"mekf_{n}" + "".join(f"_{d}" for d in self.delays if any(self.delays))
+            S = self.state
+            xf, z, p = S.symbol("xf"), self.inputs.symbol("z"), self.param_layout.symbol("p")
+            X, Z, Pp = S.split(xf), self.inputs.split(z), self.param_layout.split(p)
             q, b, P = propagate(X["q_BN"], X["bias_B"], X["P"], Z["omega_B"], Pp["dt"], Pp["sigma_v"], Pp["sigma_u"])
-            prop = ca.Function(f"{name}_propagate", [xf, z, p], [FILTER.pack(q_BN=q, bias_B=b, P=P)], {"cse": True})
+            dq = rotation_increment(Z["omega_B"] - X["bias_B"], Pp["dt"])
+            lines = {f"D_{i}": ca.horzcat(*[quat_mult(X[f"D_{i}"][:, j], dq) for j in range(d)])
+                     for i, d in enumerate(self.delays) if d}
+            prop = ca.Function(f"{name}_propagate", [xf, z, p], [S.pack(q_BN=q, bias_B=b, P=P, **lines)], {"cse": True})
             skip = ca.Function(f"{name}_skip", [xf, z, p], [xf])
-            xm, zm, pm = FILTER.symbol("xf", ca.MX), self.inputs.symbol("z", ca.MX), self.param_layout.symbol("p", ca.MX)
+            xm, zm, pm = S.symbol("xf", ca.MX), self.inputs.symbol("z", ca.MX), self.param_layout.symbol("p", ca.MX)
             x1 = prop(xm, zm, pm)
-            for i in range(n):
-                q, b, P = update(X["q_BN"], X["bias_B"], X["P"], Z[f"q_SN_{i}"], 1.0, Pp[f"q_SB_{i}"], Pp[f"r_{i}"])
-                upd = ca.Function(f"{name}_update_{i}", [xf, z, p], [FILTER.pack(q_BN=q, bias_B=b, P=P)], {"cse": True})
+            for i, d in enumerate(self.delays):
+                lat = Pp[f"latency_{i}"]
+                extra = {}
+                if d:  # the oldest sample in flight arrives now
+                    extra = dict(D=X[f"D_{i}"][:, 0], latency=lat,
+                                 q_latency=Pp["sigma_v"] ** 2 * lat + Pp["sigma_u"] ** 2 * lat**3 / 3)
+                q, b, P = update(X["q_BN"], X["bias_B"], X["P"], Z[f"q_SN_{i}"], 1.0, Pp[f"q_SB_{i}"], Pp[f"r_{i}"],
+                                 **extra)
+                upd = ca.Function(f"{name}_update_{i}", [xf, z, p], [S.pack({**X, "q_BN": q, "bias_B": b, "P": P})],
+                                  {"cse": True})
                 gate = self.inputs.get(zm, f"valid_{i}") * self.inputs.get(zm, f"fresh_{i}")
                 x1 = ca.Function.if_else(f"{name}_head_{i}", upd, skip)(gate, x1, zm, pm)
-            omega_hat = self.inputs.get(zm, "omega_B") - FILTER.get(x1, "bias_B")
+                if d:  # a new sample leaves the head now: its turn starts at identity
+                    shifted = ca.horzcat(X[f"D_{i}"][:, 1:], ca.DM([1.0, 0.0, 0.0, 0.0]))
+                    shift = ca.Function(f"{name}_shift_{i}", [xf, z, p], [S.pack({**X, f"D_{i}": shifted})])
+                    x1 = ca.Function.if_else(f"{name}_sample_{i}", shift, skip)(self.inputs.get(zm, f"fresh_{i}"),
+                                                                               x1, zm, pm)
+            omega_hat = self.inputs.get(zm, "omega_B") - S.get(x1, "bias_B")
             self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"])
         return self._f
 
@@ -217,8 +263,8 @@ class Mekf:
         δα [rad] (B, ``q = q̂ ⊗ δq(δα)``), three standard deviations of the six error states
         (rad, rad/s) and ``Δxᵀ P⁻¹ Δx``."""
         if self._report is None:
-            xf, q, b = FILTER.symbol("xf"), ca.SX.sym("q_BN", 4), ca.SX.sym("bias_B", 3)
-            X = FILTER.split(xf)
+            xf, q, b = self.state.symbol("xf"), ca.SX.sym("q_BN", 4), ca.SX.sym("bias_B", 3)
+            X = self.state.split(xf)
             dx = ca.vertcat(attitude_error(X["q_BN"], q), b - X["bias_B"])
             nees = ca.mtimes(dx.T, ca.solve(X["P"], dx))
             self._report = ca.Function("mekf_report", [xf, q, b], [dx[0:3], 3 * ca.sqrt(ca.diag(X["P"])), nees],
@@ -227,12 +273,12 @@ class Mekf:
 
     # -- numbers --------------------------------------------------------------------------
     def record(self, xf0: np.ndarray, z: np.ndarray, f: ca.Function | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Filter states after each of N ticks, shape (N, FILTER.size), and ω̂ (N, 3), in one
+        """Filter states after each of N ticks, shape (N, state.size), and ω̂ (N, 3), in one
         call (``mapaccum`` of ``f``, default :meth:`compiled`); ``z`` has shape (N, inputs.size)."""
         z = np.atleast_2d(np.asarray(z, dtype=float))
-        if z.shape[1] != self.inputs.size or np.shape(xf0) != (FILTER.size,):
+        if z.shape[1] != self.inputs.size or np.shape(xf0) != (self.state.size,):
             raise ValueError(f"MEKF record: z has shape {z.shape}, expected (N, {self.inputs.size}); "
-                             f"xf0 {np.shape(xf0)}, expected ({FILTER.size},)")
+                             f"xf0 {np.shape(xf0)}, expected ({self.state.size},)")
         n = z.shape[0]
         f = f or self.compiled()
         fc = self._records.get((id(f), n))

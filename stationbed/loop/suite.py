@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions
 from .layout import Layout
-from .mekf import FILTER, Mekf
+from .mekf import Mekf
 from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
 
@@ -59,7 +59,7 @@ class Suite:
             self.every[s.name] = int(round(ratio))
         self.mekf = Mekf.from_sensors(sensing.estimator, self.sensors) if sensing.estimator is not None else None
         noisy = [s for s in self.sensors if s.n_noise]
-        est = dict(mekf=FILTER.size, omega_hat_B=3) if self.mekf else {}
+        est = dict(mekf=self.mekf.state.size, omega_hat_B=3) if self.mekf else {}
         self.STATE = Layout(**{s.name: s.state.size for s in self.sensors},
                             **{f"{s.name}.y": s.outputs.size for s in self.sensors}, **est)
         self.NOISE = Layout(**{s.name: s.n_noise for s in noisy})
@@ -113,7 +113,7 @@ class Suite:
             step = _due_filter(m.function())
             nxt["mekf"], nxt["omega_hat_B"] = step(due[m.gyro.name], X["mekf"], X["omega_hat_B"],
                                                    m.inputs.pack(z, symbolic=True), P["mekf"])
-            out.update(q_BN_hat=FILTER.get(nxt["mekf"], "q_BN"), bias_B_hat=FILTER.get(nxt["mekf"], "bias_B"),
+            out.update(q_BN_hat=m.state.get(nxt["mekf"], "q_BN"), bias_B_hat=m.state.get(nxt["mekf"], "bias_B"),
                        omega_hat_B=nxt["omega_hat_B"])
         self._f = ca.Function(f"suite_{len(self.sensors)}", [k, t, x, truth, w, p],
                               [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
