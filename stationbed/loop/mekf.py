@@ -21,6 +21,9 @@ conventions (DESIGN §3):
   so ``H = [C_SB, 0]``, ``R = diag(r_cross², r_cross², r_about²)``;
   ``K = P Hᵀ (H P Hᵀ + R)⁻¹``, ``Δx̂ = K z``, ``q̂ ← q̂ ⊗ δq(δα̂)``, ``β̂ ← β̂ + Δβ̂``,
   ``P ← (E - KH) P (E - KH)ᵀ + K R Kᵀ`` (Joseph form), each valid fresh head in turn.
+* A head with latency L: the sample of L ago is compared with the estimate carried back by the
+  filter's own turn since then (a delay line of turns per head in the state, :attr:`Mekf.state`);
+  see :func:`update` for H and the correlated noise of the turn.
 
 Everything is a casadi expression: one :meth:`Mekf.function` per tick, compiled once
 (:meth:`Mekf.compiled`) and ready to be inlined in a fused loop. :meth:`Mekf.report_function`
