@@ -62,8 +62,18 @@ def _split(name: str) -> tuple[str, int | None]:
     return (m.group(1), int(m.group(2))) if m else (name, None)
 
 
+def _closest(name: str, names) -> list[str]:
+    """Up to :data:`NEAR` of ``names`` most like ``name`` (difflib's ratio; ties in name order)."""
+    scored = []
+    for n in set(names):
+        m = difflib.SequenceMatcher(None, name, n)
+        if m.real_quick_ratio() >= 0.3 and m.quick_ratio() >= 0.3 and (r := m.ratio()) >= 0.3:
+            scored.append((-r, n))
+    return [n for _, n in sorted(scored)[:NEAR]]
+
+
 def _near(name: str, names) -> str:
-    close = difflib.get_close_matches(name, list(names), n=NEAR, cutoff=0.3)
+    close = _closest(name, names)
     return f"; nearest: {', '.join(repr(c) for c in close)}" if close else "; it has none of that kind"
 
 
@@ -113,7 +123,7 @@ class FmuController(Controller):
         for key, value in self.variables.items():
             field, _ = _split(key)
             if field not in known:
-                close = difflib.get_close_matches(field, known, n=NEAR, cutoff=0.3)
+                close = _closest(field, known)
                 hint = f"nearest: {', '.join(close)}" if close else f"the loop's names: {', '.join(known)}"
                 raise FmuError(f"controller.variables.{key}: '{key}' is not a loop name; {hint}")
             causality = "output" if field in COMMAND_OUTPUTS.values() or field == Q_REF else "input"
@@ -290,23 +300,29 @@ class FmuController(Controller):
         start = t if t >= self._t_fmu - 1e-9 * max(1.0, t) else self._t_fmu
         try:
             inst.tick(start, h)
-        except FmuStepError as e:
+        except FmuStepError:
             inst.broken = True
-            raise FmuStepError(f"{e} (at t = {t:.6g} s)") from None
+            raise
         except Exception as e:  # noqa: BLE001 - FMPy's FMICallException: an error status
             inst.broken = True
-            raise FmuStepError(f"{one_line(e)} at t = {t:.6g} s{inst.said()}") from None
+            status = getattr(e, "status", None)
+            what = f"returned status {status} ({_STATUS.get(status, 'illegal')})" if status is not None else f"failed ({one_line(e)})"
+            raise FmuStepError(f"doStep({start:.6g} s, {h:.6g} s) {what}{inst.said()}") from None
         self._t_fmu = start + h
         out = inst.outputs
         if not np.isfinite(out).all():
             i = int(np.flatnonzero(~np.isfinite(out))[0])
-            raise FmuStepError(f"output '{self._out_names[i]}' is {out[i]} after doStep at t = {t:.6g} s")
+            raise FmuStepError(f"output '{self._out_names[i]}' is {out[i]} after doStep({start:.6g} s, {h:.6g} s)")
         if self._has_q_ref:
             self.q_ref_BN = out[self._n_cmd : self._n_cmd + 4].copy()
         return out[: self._n_cmd].copy()
 
     def summary(self) -> dict:
         return {"fmu": self.name, "fmi_version": str(self.unit.md.fmiVersion)}
+
+
+#: FMI status codes (the same numbers in FMI 2 and 3)
+_STATUS = {0: "ok", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
 
 def _a(word: str) -> str:

@@ -208,13 +208,13 @@ class Instance:
                 from fmpy.fmi2 import FMU2Slave  # noqa: PLC0415
 
                 self.slave = FMU2Slave(**kw)
-                self.slave.instantiate(callbacks=self._fmi2_callbacks(fmpy))
+                self.slave.instantiate(callbacks=self._fmi2_callbacks(fmpy), loggingOn=True)
             else:
                 from fmpy.fmi3 import FMU3Slave  # noqa: PLC0415
 
                 self.slave = FMU3Slave(**kw)
                 self._log3 = self._fmi3_logger()
-                self.slave.instantiate(logMessage=self._log3)
+                self.slave.instantiate(logMessage=self._log3, loggingOn=True)
         except Exception as e:
             raise FmuError(f"FMU '{unit.shown}': cannot instantiate it ({one_line(e)}{self.said()})") from None
         if self.version == 2:
