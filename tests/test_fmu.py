@@ -38,6 +38,7 @@ import pytest
 
 import scenes
 from stationbed import montecarlo, simulate
+from stationbed.controllers.pd import PD
 from stationbed.run.controller import ControllerError, build_controller
 from stationbed.run.simulation import SimulationError
 from stationbed.scene import scene_from_dict
@@ -185,6 +186,37 @@ def test_renamed_variables_mapped_back_fly_the_same(fmus, python_pd, tmp_path):
     renamed = _rewrite(fmus(2), tmp_path / "renamed.fmu", rename)
     tr = simulate(fmu_scene(renamed, variables={"q_BN": "q", "tau_cmd": "torque", "omega_BN_B[0]": "wx"}))
     np.testing.assert_array_equal(tr.data, python_pd().data)
+
+
+class PdAsGimbalRates(PD):
+    """A plumbing check, not a law: pd's torque and q_ref_BN[0] returned as the rates of the four
+    gimbals [rad/s] (the cluster's rate limit clips them)."""
+
+    name = "pd_as_gimbal_rates"
+    command = "gimbal_rates"
+    symbolic = None  # pd's casadi form returns a torque
+
+    def _update(self, t, meas):
+        tau = super()._update(t, meas)
+        return (*tau, self.q_ref_BN[0])
+
+
+def test_an_fmu_commands_gimbal_rates_when_its_outputs_say_so(fmus):
+    """``gimbal_rate_cmd[0..3]`` mapped onto the FMU's outputs makes it a gimbal-rate law of a
+    4-SGCMG cluster: the same trajectory, bit for bit, as the Python law returning those values."""
+    over = {"cmg": {"kind": "sgcmg_pyramid", "h_rotor": 50.0, "max_gimbal_rate": 0.02}}  # N m s, rad/s
+    rates = {f"gimbal_rate_cmd[{i}]": f"tau_cmd[{i}]" for i in range(3)} | {"gimbal_rate_cmd[3]": "q_ref_BN[0]"}
+    fmu = simulate(fmu_scene(fmus(2), variables=rates, **over))
+    s = scene_from_dict(pd_scene({"name": "pd", "params": PD_PARAMS}, **over))
+    ref = simulate(s, controller=PdAsGimbalRates(period=PERIOD_S, **PD_PARAMS))
+    np.testing.assert_array_equal(fmu.data, ref.data)
+    assert all(np.ptp(fmu[f"gimbal_{i}"]) > 0.0 for i in range(1, 5))  # rad: every gimbal was driven
+
+
+def test_a_gimbal_rate_fmu_needs_one_output_per_gimbal(fmus):
+    rates = {f"gimbal_rate_cmd[{i}]": f"tau_cmd[{i}]" for i in range(3)}
+    with pytest.raises(FmuError, match=r"controller.variables.gimbal_rate_cmd\[3\]: FMU '.*' has no variable 'gimbal_rate_cmd\[3\]'"):
+        simulate(fmu_scene(fmus(2), variables=rates, cmg={"kind": "sgcmg_pyramid", "h_rotor": 50.0}))
 
 
 def test_a_run_whose_duration_is_not_whole_periods_keeps_the_fmu_clock(fmus):

@@ -173,13 +173,14 @@ class FmuController(Controller):
         """"torque" or "gimbal_rates": which command outputs the FMU has (by convention or map)."""
         outputs = set(self._of("output"))
         mapped = {_split(k)[0] for k in self.variables}
-        found = [kind for kind, f in COMMAND_OUTPUTS.items()
-                 if f in mapped or any(_split(o)[0] == f for o in outputs)]
+        found = [kind for kind, f in COMMAND_OUTPUTS.items() if f in mapped]  # a map decides
+        if not found:  # else the outputs' names
+            found = [kind for kind, f in COMMAND_OUTPUTS.items() if any(_split(o)[0] == f for o in outputs)]
         if len(found) == 1:
             return found[0]
         if found:
-            raise self._err("controller.variables", "has both tau_cmd and gimbal_rate_cmd outputs: "
-                            "the loop takes one command; map the other away")
+            raise self._err("controller.variables", "has both tau_cmd and gimbal_rate_cmd outputs: the loop "
+                            "takes one command; map the one to fly in [controller.variables]")
         raise self._err("controller.fmu", "has no command output: name its outputs tau_cmd[0..2] (torque, N m) "
                         "or gimbal_rate_cmd[0..] (rad/s), or map them in [controller.variables]"
                         f"{_near('tau_cmd[0]', outputs)}")
