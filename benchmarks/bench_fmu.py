@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     except ImportError:
         print("bench_fmu: FMPy is not installed (pip install 'stationbed[fmi]'): nothing measured")
         return 0
-    from stationbed.run.controller import build_controller
+    from stationbed.run.laws import build_controller
     from test_fmu import PD_PARAMS, fmu_scene, pd_scene
 
     from stationbed.scene import scene_from_dict

@@ -219,7 +219,7 @@ def _validate(scene) -> None:
     """Everything that can be refused before an output is opened: the formulation and integrator
     names, the step, the controller and its parameters (the compiled system is built here and
     reused by the run)."""
-    from .run.controller import build_controller
+    from .run.laws import build_controller
     from .run.prepare import prepare
 
     prepare(scene)

@@ -39,7 +39,8 @@ import pytest
 import scenes
 from stationbed import montecarlo, simulate
 from stationbed.controllers.pd import PD
-from stationbed.run.controller import ControllerError, build_controller
+from stationbed.run.controller import ControllerError
+from stationbed.run.laws import build_controller
 from stationbed.run.simulation import SimulationError
 from stationbed.scene import scene_from_dict
 
@@ -399,6 +400,18 @@ MC_TABLE = {
         {"key": "controller.params.bandwidth", "kind": "scale_uniform", "low": -0.2, "high": 0.2},
     ],
 }
+
+
+def test_a_sample_scene_written_elsewhere_still_finds_the_fmu(fmus, tmp_path):
+    """``stationbed montecarlo --sample K`` writes the sample's scene to another folder: its
+    relative ``fmu`` path becomes absolute, and the written scene flies sample K."""
+    from stationbed import load_scene
+    from stationbed.studies.montecarlo.replay import write_sample_scene
+
+    scene = load_scene(_scene_file(tmp_path / "mc", fmus(2), mc=MC_TABLE))
+    back = write_sample_scene(scene, 1, tmp_path / "elsewhere" / "sample_1.toml")
+    assert Path(back.controller.fmu) == (tmp_path / "mc" / "laws" / "pd.fmu").resolve()
+    assert simulate(back, duration=2.0).meta["status"] == "ok"
 
 
 @pytest.mark.slow

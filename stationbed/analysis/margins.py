@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ..run.closed_loop import plant_facts
-from ..run.controller import build_controller
+from ..run.laws import build_controller
 from ..run.initial import initial_state, initial_x
 from ..run.system import build_system
 from ..model import Structure

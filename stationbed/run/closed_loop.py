@@ -16,11 +16,11 @@ from .controller import (
     Measurement,
     Plant,
     command_values,
-    build_controller,
     measurement_layout,
     one_line,
 )
 from .fused import fused_ok, run_fused
+from .laws import build_controller
 from .rows import ROW_BATCH
 from .segments import held_torque, segment_input
 

@@ -73,7 +73,6 @@ __all__ = [
     "Plant",
     "ControllerError",
     "get_controller",
-    "build_controller",
     "command_values",
     "one_line",
     "controller_registry",
@@ -481,19 +480,3 @@ def get_controller(name: str, base_dir: str | Path | None = None) -> type[Contro
         )
     return _load(eps[name])
 
-
-def build_controller(spec, base_dir: str | Path | None = None) -> Controller:
-    """The controller a scene's ``[controller]`` table names, built with its period and parameters:
-    a Python law (:func:`get_controller`) or, with ``fmu = "law.fmu"``, an FMI co-simulation unit
-    (:class:`~stationbed.run.fmu.FmuController`, FMPy needed: the ``stationbed[fmi]`` extra).
-
-    Parameters
-    ----------
-    spec : ControllerSpec  The scene's ``controller`` table.
-    base_dir : str or Path, optional  The scene file's folder (relative files are found there).
-    """
-    if getattr(spec, "fmu", None) is not None:
-        from .fmu import FmuController  # noqa: PLC0415 - FMPy only for scenes that fly an FMU
-
-        return FmuController(spec.fmu, period=spec.period, params=spec.params, variables=spec.variables, base_dir=base_dir)
-    return get_controller(spec.name, base_dir=base_dir)(period=spec.period, **spec.params)
