@@ -304,11 +304,14 @@ class FmuController(Controller):
         except FmuStepError:
             inst.broken = True
             raise
-        except Exception as e:  # noqa: BLE001 - FMPy's FMICallException: an error status
+        except Exception as e:  # noqa: BLE001 - an error status (FmiStatus, or FMPy's FMICallException)
             inst.broken = True
             status = getattr(e, "status", None)
             what = f"returned status {status} ({_STATUS.get(status, 'illegal')})" if status is not None else f"failed ({one_line(e)})"
-            raise FmuStepError(f"doStep({start:.6g} s, {h:.6g} s) {what}{inst.said()}") from None
+            call = f"doStep({start:.6g} s, {h:.6g} s)"
+            fn = getattr(e, "function", "DoStep")
+            call = call if fn.endswith("DoStep") else f"{fn} (in the step {call})"
+            raise FmuStepError(f"{call} {what}{inst.said()}") from None
         self._t_fmu = start + h
         out = inst.outputs
         if not np.isfinite(out).all():
