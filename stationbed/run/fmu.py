@@ -293,7 +293,7 @@ class FmuController(Controller):
     def _update(self, t, meas):
         inst = self._inst
         if inst.n_in:
-            np.take(meas.y, self._in_idx, out=inst.inputs)
+            meas.y.take(self._in_idx, out=inst.inputs)
         h = self.period
         # the FMU's clock runs on from the end of its last step; the loop's ticks are that,
         # except the last tick of a run whose duration is not a whole number of periods (its
@@ -313,13 +313,14 @@ class FmuController(Controller):
             call = call if fn.endswith("DoStep") else f"{fn} (in the step {call})"
             raise FmuStepError(f"{call} {what}{inst.said()}") from None
         self._t_fmu = start + h
-        out = inst.outputs
-        if not np.isfinite(out).all():
-            i = int(np.flatnonzero(~np.isfinite(out))[0])
+        out = inst.outputs.tolist()  # Python floats: cheaper to check and hand over than arrays
+        if not all(map(math.isfinite, out)):
+            i = next(i for i, v in enumerate(out) if not math.isfinite(v))
             raise FmuStepError(f"output '{self._out_names[i]}' is {out[i]} after doStep({start:.6g} s, {h:.6g} s)")
+        n = self._n_cmd
         if self._has_q_ref:
-            self.q_ref_BN = out[self._n_cmd : self._n_cmd + 4].copy()
-        return out[: self._n_cmd].copy()
+            self.q_ref_BN = np.array(out[n : n + 4])
+        return tuple(out[:n])
 
     def summary(self) -> dict:
         return {"fmu": self.name, "fmi_version": str(self.unit.md.fmiVersion)}
