@@ -150,6 +150,15 @@ def test_the_pd_fmu_flies_the_python_pd_bit_for_bit(fmus, python_pd, version, in
     assert np.ptp(ref["tau_cmd_x"]) > 10.0  # N m: the law worked (the roll error was taken out)
 
 
+def test_the_fmu_sees_the_sensors_measurement(fmus):
+    """With sensor noise and a one-period delay the FMU is given what a Python law is given (the
+    corrupted, delayed measurement, the same draws): the same trajectory, bit for bit."""
+    sensor = {"attitude_noise": 1.0e-4, "rate_noise": 1.0e-6, "delay": PERIOD_S, "seed": 3}  # rad, rad/s, s
+    ref = simulate(scene_from_dict(pd_scene({"name": "pd", "params": PD_PARAMS, "sensor": sensor})), fused=False)
+    fmu = simulate(fmu_scene(fmus(2), **{"controller.sensor": sensor}))
+    np.testing.assert_array_equal(fmu.data, ref.data)
+
+
 def test_the_pd_fmu_matches_the_fused_pd_to_round_off(fmus):
     """The fused pd is the same law compiled as casadi C: it differs from the Python arithmetic
     the FMU runs by round-off only (FUSED_RTOL of each column's largest value)."""
