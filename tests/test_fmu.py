@@ -14,6 +14,7 @@ Truths:
   show);
 * the fused ``pd`` (the same law compiled as casadi C): round-off, the bound of
   tests/test_controller_contract.py;
+* an FMI 3 FMU with *array* variables (``tests/fmu_laws/pd_fmi3_arrays.py``): the same again;
 * renaming the FMU's variables (its modelDescription.xml, the binary untouched) and mapping them
   back in ``[controller.variables]`` gives the same trajectory again;
 * the FMU's clock check proves the reset between runs (a reused instance not reset starts its
@@ -59,13 +60,15 @@ FUSED_RTOL = 1e-9
 VERSIONS = pytest.mark.parametrize("version", [2, 3], ids=["fmi2", "fmi3"])
 
 
-def _build(version: int, dest: Path) -> Path:
+def _build(version, dest: Path) -> Path:
+    """The pd FMU of FMI ``version`` (2, 3, or "3a": FMI 3 with array variables)."""
     if version == 2:
         from pythonfmu import FmuBuilder
     else:
         pythonfmu3 = pytest.importorskip("pythonfmu3", reason="pythonfmu3 (builds the FMI 3 test FMU) is not installed")
         FmuBuilder = pythonfmu3.FmuBuilder
-    return FmuBuilder.build_FMU(LAWS / f"pd_fmi{version}.py", dest=dest, project_files=[LAWS / "pd_core.py"])
+    script = LAWS / ("pd_fmi3_arrays.py" if version == "3a" else f"pd_fmi{version}.py")
+    return FmuBuilder.build_FMU(script, dest=dest, project_files=[LAWS / "pd_core.py"])
 
 
 @pytest.fixture(scope="session")
@@ -74,7 +77,7 @@ def fmus(tmp_path_factory):
     folder = tmp_path_factory.mktemp("fmus")
     built = {}
 
-    def get(version: int) -> Path:
+    def get(version) -> Path:
         if version not in built:
             built[version] = _build(version, folder / f"v{version}")
         return built[version]
@@ -227,6 +230,20 @@ def test_a_gimbal_rate_fmu_needs_one_output_per_gimbal(fmus):
     rates = {f"gimbal_rate_cmd[{i}]": f"tau_cmd[{i}]" for i in range(3)}
     with pytest.raises(FmuError, match=r"controller.variables.gimbal_rate_cmd\[3\]: FMU '.*' has no variable 'gimbal_rate_cmd\[3\]'"):
         simulate(fmu_scene(fmus(2), variables=rates, cmg={"kind": "sgcmg_pyramid", "h_rotor": 50.0}))
+
+
+def test_fmi3_array_variables_fly_the_same(fmus, python_pd):
+    """An FMI 3 FMU whose inputs, outputs and parameters are arrays (``q_BN`` of 4, the plant fact
+    ``inertia_O_B`` of 9, the command as the array ``torque`` mapped by ``tau_cmd = "torque"``): one
+    value reference per array, all values in one call; the Python law's trajectory, bit for bit."""
+    tr = simulate(fmu_scene(fmus("3a"), params={"q_ref": [1.0, 0.0, 0.0, 0.0]}, variables={"tau_cmd": "torque"}))
+    np.testing.assert_array_equal(tr.data, python_pd().data)
+
+
+def test_an_array_where_a_scalar_is_mapped_is_refused(fmus):
+    with pytest.raises(FmuError, match=r"controller.variables.tau_cmd\[0\]: FMU '.*' variable 'torque' is an array of 3 values, "
+                                       r"expected 1: map the whole field to an array"):
+        simulate(fmu_scene(fmus("3a"), variables={f"tau_cmd[{i}]": "torque" for i in range(3)}))
 
 
 def test_a_run_whose_duration_is_not_whole_periods_keeps_the_fmu_clock(fmus):

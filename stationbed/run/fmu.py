@@ -35,6 +35,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from operator import itemgetter
 from pathlib import Path
 
 import numpy as np
@@ -130,28 +131,49 @@ class FmuController(Controller):
             if _split(key)[1] is not None:
                 self._check_var(f"controller.variables.{key}", value, causality)
 
-    def _check_var(self, where: str, name: str, causality: str) -> None:
-        """``name`` is an FMU variable of ``causality`` holding a Real/Float64."""
+    def _size(self, name: str) -> int:
+        """Values a variable holds: 1 for a scalar, the product of its dimensions for an FMI 3 array."""
+        dims = getattr(self._vars[name], "dimensions", None) or []
+        n = 1
+        for d in dims:
+            start = getattr(d, "start", None)
+            if start in (None, ""):
+                raise self._err("controller.fmu", f"array '{name}' has a dimension set by a structural parameter: "
+                                "stationbed exchanges arrays of fixed size only")
+            n *= int(start)
+        return n
+
+    def _check_var(self, where: str, name: str, causality: str, size: int | None = 1) -> None:
+        """``name`` is an FMU variable of ``causality`` holding Real/Float64 values, ``size`` of
+        them (a scalar for 1; any size for None)."""
         var = self._vars.get(name)
         if var is None:
             raise self._err(where, f"has no variable '{name}'{_near(name, self._of(causality))}")
         if var.causality != causality:
             role = "a measurement drives an FMU input" if causality == "input" else "the command is an FMU output"
             raise self._err(where, f"variable '{name}' is {_a(var.causality)}, not {_a(causality)} ({role})")
-        if not _is_float(var) or getattr(var, "dimensions", None):
-            kind = f"an array {var.type}" if getattr(var, "dimensions", None) else var.type
-            raise self._err(where, f"variable '{name}' is {kind}: the loop exchanges scalar Real (FMI 2) / Float64 (FMI 3) values")
+        if not _is_float(var):
+            raise self._err(where, f"variable '{name}' is {var.type}: the loop exchanges Real (FMI 2) / Float64 (FMI 3) values")
+        n = self._size(name)
+        if size is not None and n != size:
+            what = f"an array of {n} values" if n > 1 else "a scalar"
+            raise self._err(where, f"variable '{name}' is {what}, expected {size}" + (
+                ": map the whole field to an array (field = \"name\")" if size == 1 else ""))
 
-    def _expand(self, where: str, base: str, n: int) -> list[str]:
-        """``base[0..n-1]`` or ``base[1..n]``, whichever the FMU has in full."""
+    def _expand(self, where: str, base: str, n: int) -> list[tuple[str, int]]:
+        """The slots ``(variable, element)`` of a field of ``n`` values: an FMI 3 array ``base``
+        of ``n`` values, or the scalars ``base[0..n-1]`` or ``base[1..n]``, whichever the FMU has."""
+        if base in self._vars and getattr(self._vars[base], "dimensions", None) and self._size(base) == n:
+            return [(base, j) for j in range(n)]
         for b in (0, 1):
             names = [f"{base}[{b + i}]" for i in range(n)]
             if all(x in self._vars for x in names):
-                return names
-        raise self._err(where, f"has no variables {base}[0..{n - 1}] or {base}[1..{n}]{_near(base + '[0]', self._vars)}")
+                return [(x, 0) for x in names]
+        raise self._err(where, f"has no variables {base}[0..{n - 1}] or {base}[1..{n}] (nor an array '{base}' of {n})"
+                        f"{_near(base + '[0]', self._vars)}")
 
-    def _element_map(self, sizes: dict[str, int]) -> dict[str, str]:
-        """Loop element -> FMU variable, from ``[controller.variables]`` (elements and fields)."""
+    def _element_map(self, sizes: dict[str, int]) -> dict[str, tuple[str, int]]:
+        """Loop element -> FMU slot ``(variable, element)``, from ``[controller.variables]``."""
         out = {}
         for key, value in self.variables.items():
             field, i = _split(key)
@@ -159,15 +181,25 @@ class FmuController(Controller):
             n = sizes[field]
             if i is None:
                 causality = "input" if field in MEASUREMENT_FIELDS else "output"
-                for j, name in enumerate(self._expand(where, value, n)):
-                    self._check_var(where, name, causality)
-                    out[f"{field}[{j}]"] = name
+                for j, slot in enumerate(self._expand(where, value, n)):
+                    self._check_var(where, slot[0], causality, size=None)
+                    out[f"{field}[{j}]"] = slot
             elif i >= n:
                 raise FmuError(f"{where}: the scene's {field} has {n} elements ({field}[0..{n - 1}])" if n else
                                f"{where}: the scene has no {field} (no such element)")
             else:
-                out[key] = value
+                out[key] = (value, 0)
         return out
+
+    def _conventional(self, field: str, n: int) -> list[tuple[str, int]] | None:
+        """The slots of ``field`` by the loop's own name (scalars ``field[i]`` or an array ``field``)."""
+        if field in self._vars and getattr(self._vars[field], "dimensions", None) and self._size(field) == n:
+            return [(field, j) for j in range(n)]
+        return None
+
+    def _shown(self, slot: tuple[str, int]) -> str:
+        name, j = slot
+        return f"{name}[{j}] (array element)" if self._size(name) > 1 else name
 
     def _command_kind(self) -> str:
         """"torque" or "gimbal_rates": which command outputs the FMU has (by convention or map)."""
@@ -190,12 +222,13 @@ class FmuController(Controller):
         out = []
         for name, value in params.items():
             where = f"controller.params.{name}"
-            if isinstance(value, list):
-                pairs = list(zip(self._expand(where, name, len(value)), value))
+            if isinstance(value, list) and name in self._vars and getattr(self._vars[name], "dimensions", None):
+                out.append(self._param(where, name, value))  # an FMI 3 array parameter
+            elif isinstance(value, list):
+                for (vname, _), v in zip(self._expand(where, name, len(value)), value):
+                    out.append(self._param(where, vname, v))
             else:
-                pairs = [(name, value)]
-            for vname, v in pairs:
-                out.append(self._param(where, vname, v))
+                out.append(self._param(where, name, value))
         return out
 
     def _param(self, where: str, name: str, value):
@@ -207,6 +240,11 @@ class FmuController(Controller):
             raise self._err(where, f"variable '{name}' is {_a(var.causality)}, not a parameter{hint}")
         if var.variability not in ("fixed", "tunable"):
             raise self._err(where, f"parameter '{name}' is {var.variability}: only fixed and tunable parameters can be set")
+        if getattr(var, "dimensions", None):
+            n = self._size(name)
+            if not isinstance(value, list) or len(value) != n:
+                raise self._err(where, f"parameter '{name}' is an array of {n} values, got {value!r}")
+            return var, [_typed(self, where, var, v) for v in value]
         return var, _typed(self, where, var, value)
 
     def _plant_params(self, plant) -> list:
@@ -220,15 +258,20 @@ class FmuController(Controller):
         for name, n in PLANT_PARAMS.items():
             if name in self.fmu_params:
                 continue
-            names = [name] if n == 1 and name in self._vars else None
-            if names is None:
-                try:
-                    names = self._expand("", name, n)
-                except FmuError:
-                    continue  # the FMU does not take this fact
-            for vname, v in zip(names, facts[name]):
+            where = f"plant fact {name}"
+            if name in self._vars and self._vars[name].causality == "parameter":
+                if getattr(self._vars[name], "dimensions", None):  # an FMI 3 array
+                    out.append(self._param(where, name, facts[name]))
+                elif n == 1:
+                    out.append(self._param(where, name, facts[name][0]))
+                continue
+            try:
+                slots = self._expand("", name, n)
+            except FmuError:
+                continue  # the FMU does not take this fact
+            for (vname, _), v in zip(slots, facts[name]):
                 if self._vars[vname].causality == "parameter":
-                    out.append(self._param(f"plant fact {name}", vname, v))
+                    out.append(self._param(where, vname, v))
         return out
 
     # -- a run -------------------------------------------------------------------------------
@@ -238,43 +281,63 @@ class FmuController(Controller):
         sizes = {f: k for f, (o, k) in layout.items()}
         sizes.update(tau_cmd=3, gimbal_rate_cmd=ng, q_ref_BN=4)
         emap = self._element_map(sizes)
-        # inputs: each FMU input driven by exactly one measurement element
-        driver: dict[str, str] = {}
-        for el, fv in emap.items():
-            if _split(el)[0] in MEASUREMENT_FIELDS:
-                if fv in driver:
-                    raise self._err(f"controller.variables.{el}", f"input '{fv}' is driven twice ({driver[fv]} and {el})")
-                driver[fv] = el
         elements = {f"{f}[{i}]": o + i for f, (o, k) in layout.items() for i in range(k)}
-        for el in elements:
-            if el not in emap and el not in driver and el in self._vars and self._vars[el].causality == "input":
-                driver[el] = el
+        # inputs: each value of each FMU input driven by exactly one measurement element
+        driver: dict[tuple[str, int], str] = {}
+        for el, slot in emap.items():
+            if _split(el)[0] in MEASUREMENT_FIELDS:
+                if slot in driver:
+                    raise self._err(f"controller.variables.{el}", f"input '{self._shown(slot)}' is driven twice "
+                                    f"({driver[slot]} and {el})")
+                driver[slot] = el
+        for f, (o, k) in layout.items():  # by the loop's names: an array `f`, or scalars `f[i]`
+            slots = self._conventional(f, k) or [(f"{f}[{i}]", 0) for i in range(k)]
+            for i, slot in enumerate(slots):
+                el = f"{f}[{i}]"
+                if el not in emap and slot not in driver and slot[0] in self._vars and self._vars[slot[0]].causality == "input":
+                    driver[slot] = el
         inputs = self._of("input")
+        in_idx = []
         for name in inputs:
-            if name not in driver:
-                raise self._err("controller.variables", f"input '{name}' is driven by no measurement: name one in "
-                                f"[controller.variables], e.g. \"q_BN[0]\" = \"{name}\"{_near(name, elements)}")
-            self._check_var(f"controller.variables.{driver[name]}", name, "input")
-        self._in_names = inputs
-        self._in_idx = np.array([elements[driver[n]] for n in inputs], dtype=np.intp)
+            n = self._size(name)
+            for j in range(n):
+                if (name, j) not in driver:
+                    shown = self._shown((name, j))
+                    raise self._err("controller.variables", f"input '{shown}' is driven by no measurement: name one in "
+                                    f"[controller.variables], e.g. \"q_BN[0]\" = \"{name}\"{_near(name, elements)}")
+                in_idx.append(elements[driver[(name, j)]])
+            self._check_var(f"controller.variables.{driver[(name, 0)]}", name, "input", size=None)
+        self._in_idx = np.array(in_idx, dtype=np.intp)
         # outputs: the command, then the reference attitude when the FMU gives it
         field = COMMAND_OUTPUTS[self.command]
-        cmd = [emap.get(f"{field}[{i}]", f"{field}[{i}]") for i in range(sizes[field])]
-        for i, name in enumerate(cmd):
-            self._check_var(f"controller.variables.{field}[{i}]", name, "output")
-        q_names = [emap.get(f"{Q_REF}[{i}]", f"{Q_REF}[{i}]") for i in range(4)]
-        given = [n in self._vars and self._vars[n].causality == "output" for n in q_names]
+        conv = self._conventional(field, sizes[field]) or [(f"{field}[{i}]", 0) for i in range(sizes[field])]
+        cmd = [emap.get(f"{field}[{i}]", conv[i]) for i in range(sizes[field])]
+        for i, (name, j) in enumerate(cmd):
+            self._check_var(f"controller.variables.{field}[{i}]", name, "output", size=None)
+        conv = self._conventional(Q_REF, 4) or [(f"{Q_REF}[{i}]", 0) for i in range(4)]
+        q_slots = [emap.get(f"{Q_REF}[{i}]", conv[i]) for i in range(4)]
+        given = [n in self._vars and self._vars[n].causality == "output" for n, _ in q_slots]
         explicit = any(_split(k)[0] == Q_REF for k in self.variables)
         if explicit or any(given):
-            for i, name in enumerate(q_names):
-                self._check_var(f"controller.variables.{Q_REF}[{i}]", name, "output")
+            for i, (name, j) in enumerate(q_slots):
+                self._check_var(f"controller.variables.{Q_REF}[{i}]", name, "output", size=None)
         else:
-            q_names = []
-        self._out_names = cmd + q_names
+            q_slots = []
+        # the output variables read each tick (each once, in first-use order) and where each
+        # slot's value lands in the values read
+        out_vars, offset = [], {}
+        for name, _ in cmd + q_slots:
+            if name not in offset:
+                offset[name] = sum(self._size(v) for v in out_vars)
+                out_vars.append(name)
+        pos = [offset[n] + j for n, j in cmd + q_slots]
+        self._out_names = {p: self._shown(sl) for p, sl in zip(pos, cmd + q_slots)}
+        self._cmd_of = itemgetter(*pos[: len(cmd)])
+        self._q_of = itemgetter(*pos[len(cmd):]) if q_slots else None
         self._n_cmd = len(cmd)
-        self._has_q_ref = bool(q_names)
         vr = lambda names: [self._vars[n].valueReference for n in names]  # noqa: E731
-        self._in_vrs, self._out_vrs = vr(inputs), vr(self._out_names)
+        self._in_vrs, self._out_vrs = vr(inputs), vr(out_vars)
+        self._n_values = (len(in_idx), sum(self._size(v) for v in out_vars))
 
     def _reset(self, plant) -> None:
         self._bind(plant)
@@ -287,7 +350,7 @@ class FmuController(Controller):
         except Exception as e:  # noqa: BLE001 - the FMU refused its parameters or its initialisation
             inst.broken = True
             raise FmuError(f"FMU '{self.name}': initialisation at t = 0 failed ({one_line(e)}{inst.said()})") from None
-        inst.bind(self._in_vrs, self._out_vrs)
+        inst.bind(self._in_vrs, self._out_vrs, *self._n_values)
         self._t_fmu = 0.0
 
     def _update(self, t, meas):
@@ -314,13 +377,16 @@ class FmuController(Controller):
             raise FmuStepError(f"{call} {what}{inst.said()}") from None
         self._t_fmu = start + h
         out = inst.outputs.tolist()  # Python floats: cheaper to check and hand over than arrays
-        if not all(map(math.isfinite, out)):
-            i = next(i for i, v in enumerate(out) if not math.isfinite(v))
+        cmd = self._cmd_of(out)
+        if self._n_cmd == 1:
+            cmd = (cmd,)
+        q = self._q_of(out) if self._q_of is not None else ()
+        if not (all(map(math.isfinite, cmd)) and all(map(math.isfinite, q))):
+            i = next(p for p in self._out_names if not math.isfinite(out[p]))
             raise FmuStepError(f"output '{self._out_names[i]}' is {out[i]} after doStep({start:.6g} s, {h:.6g} s)")
-        n = self._n_cmd
-        if self._has_q_ref:
-            self.q_ref_BN = np.array(out[n : n + 4])
-        return tuple(out[:n])
+        if q:
+            self.q_ref_BN = np.array(q)
+        return cmd
 
     def summary(self) -> dict:
         return {"fmu": self.name, "fmi_version": str(self.unit.md.fmiVersion)}
@@ -346,9 +412,9 @@ _TYPES = {
 
 def _typed(ctrl: FmuController, where: str, var, value):
     accepted, conv = _TYPES.get(var.type, ((), None))
-    if conv is None or getattr(var, "dimensions", None):
-        raise ctrl._err(where, f"parameter '{var.name}' is {var.type}{' (array)' if getattr(var, 'dimensions', None) else ''}: "
-                        "stationbed sets scalar Real/Float, Integer, Boolean and String parameters")
+    if conv is None:
+        raise ctrl._err(where, f"parameter '{var.name}' is {var.type}: "
+                        "stationbed sets Real/Float, Integer, Boolean and String parameters")
     if isinstance(value, bool) and conv is not bool or not isinstance(value, accepted):
         raise ctrl._err(where, f"parameter '{var.name}' is {var.type}, got {value!r} ({type(value).__name__})")
     if conv is float and not math.isfinite(float(value)):

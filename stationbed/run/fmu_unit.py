@@ -299,19 +299,23 @@ class Instance:
 
     def _set(self, var, value) -> None:
         vr = [var.valueReference]
+        values = value if isinstance(value, list) else [value]  # an FMI 3 array: all its values
         if self.version == 2:
-            getattr(self.slave, "set" + _FMI2_SET[var.type])(vr, [value])
+            getattr(self.slave, "set" + _FMI2_SET[var.type])(vr, values)
         else:
-            getattr(self.slave, "set" + var.type)(vr, [value])
+            getattr(self.slave, "set" + var.type)(vr, values)
 
-    def bind(self, in_vrs, out_vrs) -> None:
-        """Fix the value references read and written every tick (ctypes arrays, made once)."""
+    def bind(self, in_vrs, out_vrs, n_in_values: int | None = None, n_out_values: int | None = None) -> None:
+        """Fix the value references written and read every tick (ctypes arrays, made once) and
+        the numbers of values (more than references when FMI 3 arrays are among them)."""
         VR = ctypes.c_uint32
         self.n_in, self.n_out = len(in_vrs), len(out_vrs)
+        self.nv_in = self.n_in if n_in_values is None else n_in_values
+        self.nv_out = self.n_out if n_out_values is None else n_out_values
         self.in_vr = (VR * max(1, self.n_in))(*in_vrs)
         self.out_vr = (VR * max(1, self.n_out))(*out_vrs)
-        self.inputs = np.zeros(max(1, self.n_in))
-        self.outputs = np.zeros(max(1, self.n_out))
+        self.inputs = np.zeros(self.nv_in) if self.nv_in else np.zeros(1)
+        self.outputs = np.zeros(self.nv_out) if self.nv_out else np.zeros(1)
         dp = ctypes.POINTER(ctypes.c_double)
         self.in_ptr = self.inputs.ctypes.data_as(dp)
         self.out_ptr = self.outputs.ctypes.data_as(dp)
@@ -335,7 +339,7 @@ class Instance:
                     raise FmiStatus("fmi2GetReal", status)
             return
         if self.n_in:
-            status = self._set_real(c, self.in_vr, self.n_in, self.in_ptr, self.n_in)
+            status = self._set_real(c, self.in_vr, self.n_in, self.in_ptr, self.nv_in)
             if status > 1:
                 raise FmiStatus("fmi3SetFloat64", status)
         status = self._do_step(c, t, h, True, *self._flag_refs)
@@ -347,7 +351,7 @@ class Instance:
         if early:
             raise FmuStepError(f"doStep({t:.6g} s, {h:.6g} s) returned early at {last:.6g} s{self.said()}")
         if self.n_out:
-            status = self._get_real(c, self.out_vr, self.n_out, self.out_ptr, self.n_out)
+            status = self._get_real(c, self.out_vr, self.n_out, self.out_ptr, self.nv_out)
             if status > 1:
                 raise FmiStatus("fmi3GetFloat64", status)
 
