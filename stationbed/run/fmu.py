@@ -56,6 +56,8 @@ MEASUREMENT_FIELDS = tuple(measurement_layout(0, 0))
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 #: how many near names an error lists
 NEAR = 4
+#: a tick (k * period, computed) is on the FMU's clock (a sum of steps) within this, relative to t
+CLOCK_RTOL = 1e-9
 
 
 def _split(name: str) -> tuple[str, int | None]:
@@ -361,7 +363,7 @@ class FmuController(Controller):
         # the FMU's clock runs on from the end of its last step; the loop's ticks are that,
         # except the last tick of a run whose duration is not a whole number of periods (its
         # command is logged, never flown)
-        start = t if t >= self._t_fmu - 1e-9 * max(1.0, t) else self._t_fmu
+        start = t if t >= self._t_fmu - CLOCK_RTOL * max(1.0, t) else self._t_fmu
         try:
             inst.tick(start, h)
         except FmuStepError:
