@@ -305,6 +305,15 @@ def test_a_failing_do_step_stops_the_run_and_keeps_the_rows(fmus, python_pd, ver
     np.testing.assert_array_equal(tr.data, ref.data[: len(tr.t)])
 
 
+def test_an_fmi3_step_that_asks_to_terminate_stops_the_run(fmus, python_pd):
+    with pytest.raises(SimulationError) as exc:
+        simulate(fmu_scene(fmus(3), params={"terminate_at": FAIL_AT_S}))
+    e = exc.value
+    assert e.t == FAIL_AT_S and "doStep(5 s, 0.5 s) asked to terminate the simulation" in str(e)
+    assert "end of mission at 5.0 s" in str(e)  # the FMU's own last words
+    np.testing.assert_array_equal(e.trajectory.data, python_pd().data[: len(e.trajectory.t)])
+
+
 def test_a_non_finite_output_names_the_variable(fmus):
     with pytest.raises(SimulationError) as exc:
         simulate(fmu_scene(fmus(2), params={"nan_at": 7.0}))

@@ -6,7 +6,8 @@ call :meth:`PdCore.step` from ``do_step``: the FMU runs the very law of
 on the values the loop wrote through FMI. Flying it must give the Python law's trajectory.
 
 Test hooks (parameters): ``fail_at`` [s] makes ``do_step`` fail from that time on, ``nan_at`` [s]
-makes ``tau_cmd[1]`` NaN; negative = never. The FMU keeps its own clock and fails a step that
+makes ``tau_cmd[1]`` NaN, ``terminate_at`` [s] makes an FMI 3 step ask to terminate the
+simulation; negative = never. The FMU keeps its own clock and fails a step that
 does not start where the last one ended (as the FMI reference FMUs do), so a co-simulation
 master that loses the chain (or a reset that does not restart it at 0) is caught.
 """
@@ -21,7 +22,7 @@ INPUTS = (("q_BN", 4), ("omega_BN_B", 3), ("q_ON", 4), ("omega_ON_O", 3))
 OUTPUTS = (("tau_cmd", 3), ("q_ref_BN", 4), ("n_steps", 1))
 REAL_PARAMS = (("bandwidth", 1, 0.01), ("damping", 1, 0.9), ("max_slew_rate", 1, 0.005),
                ("q_ref", 4, None), ("inertia_O_B", 9, None), ("mean_motion", 1, 0.0),
-               ("fail_at", 1, -1.0), ("nan_at", 1, -1.0))
+               ("fail_at", 1, -1.0), ("nan_at", 1, -1.0), ("terminate_at", 1, -1.0))
 BOOL_PARAMS = (("lvlh", True), ("gyro_compensation", True))
 #: the FMU's clock check [s]: ticks are k * period, computed without accumulation by the loop
 CLOCK_TOL_S = 1e-9

@@ -1,6 +1,6 @@
 """FMI 3 co-simulation FMU of the shipped ``pd`` law (built by the tests with pythonfmu3)."""
 
-from pythonfmu3 import Boolean, Fmi3Causality, Fmi3Slave, Fmi3Status, Fmi3Variability, Float64
+from pythonfmu3 import Boolean, Fmi3Causality, Fmi3Slave, Fmi3Status, Fmi3StepResult, Fmi3Variability, Float64
 
 from pd_core import PdCore
 
@@ -28,6 +28,9 @@ class PdFmi3(Fmi3Slave):
             self.register_variable(var, nested=False)
 
     def do_step(self, current_time, step_size):
+        if 0.0 <= self.core.v["terminate_at"] <= current_time:
+            self.log(f"end of mission at {current_time} s", Fmi3Status.ok)
+            return Fmi3StepResult(terminateSimulation=True)
         ok = self.core.step(current_time, step_size)
         if not ok:
             self.log(self.core.message, Fmi3Status.error)
