@@ -479,4 +479,3 @@ def get_controller(name: str, base_dir: str | Path | None = None) -> type[Contro
             f"unknown controller '{name}'; valid: {', '.join(sorted(eps))}, module:Class or path/file.py:Class{hint}"
         )
     return _load(eps[name])
-
