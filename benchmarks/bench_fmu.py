@@ -1,20 +1,22 @@
-"""FMU law cost per tick (issue 23): the shipped pd flown as Python and as FMI 2 / FMI 3 FMUs.
+"""FMU law cost per tick (issue 23): laws flown as Python and as FMI 2 / FMI 3 FMUs.
 
     python benchmarks/bench_fmu.py [--duration S] [--repeats N] [--smoke] [--json PATH]
 
-The FMUs are the tests' (tests/fmu_laws/: pythonfmu / pythonfmu3 pack the shipped ``pd``), built
-here into a temporary folder. Timed side by side in one process (interleaved, median of
-``--repeats``, after a warm-up that loads the compiled system and instantiates the FMU), on the
-tests' scene (a small station in LVLH, no CMG) at 10 Hz for ``--duration`` seconds:
+The FMUs are the tests' (tests/fmu_laws/), built here into a temporary folder: the shipped ``pd``
+packed by pythonfmu (FMI 2) and pythonfmu3 (FMI 3), and a rate-damping law compiled from C (no
+Python inside: what a Simulink or Modelica export is). Timed side by side in one process
+(interleaved, median of ``--repeats``, after a warm-up that loads the compiled system and
+instantiates the FMUs), on the tests' scene (a small station in LVLH, no CMG) at 10 Hz for
+``--duration`` seconds:
 
-* ``python pd``: the law's Python ``_update`` every tick (``fused=False``);
-* ``fmu pd (FMI 2/3)``: the same law inside the FMU, through FMPy every tick;
-* ``FMU call alone``: the instance's tick (write 14 inputs, ``doStep``, read 7 outputs) in a bare
-  loop, no simulation: what the FMU itself costs (here pythonfmu's Python getters and setters
-  around the law; a compiled Simulink or Modelica FMU costs less).
+* ``python pd``, ``python rate damping``: the law's Python ``_update`` every tick (``fused=False``);
+* ``fmu ...``: the same law inside an FMU, through FMPy every tick; "added" is its cost over its
+  Python twin, whose trajectory it flies bit for bit (checked here);
+* ``FMU call alone``: the instance's tick (write the inputs, ``doStep``, read the outputs) in a bare
+  loop, no simulation: what the FMU itself costs.
 
-The per-tick cost an FMU law adds is ``fmu pd - python pd``; both runs give the same trajectory
-bit for bit (checked here too). ``--smoke``: a 50 s run, one repeat (CI: does it run).
+Per tick is the slope between a run of the duration and one a fifth as long (a run's set-up
+cancels). ``--smoke``: a 50 s run, one repeat (CI: does it run).
 """
 
 from __future__ import annotations
@@ -75,10 +77,11 @@ def main(argv=None) -> int:
     if args.smoke:
         args.duration, args.repeats = 50.0, 1
     try:
-        import fmpy  # noqa: F401
+        import fmpy
     except ImportError:
         print("bench_fmu: FMPy is not installed (pip install 'stationbed[fmi]'): nothing measured")
         return 0
+    from fmu_laws import c_rate_damp
     from stationbed.run.laws import build_controller
     from test_fmu import PD_PARAMS, fmu_scene, pd_scene
 
@@ -87,23 +90,37 @@ def main(argv=None) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
     over = {"controller.period": PERIOD_S, "simulation.step": PERIOD_S, "simulation.output_dt": OUTPUT_DT_S,
             "simulation.duration": args.duration}
-    runs = {"python pd": scene_from_dict(pd_scene({"name": "pd", "params": PD_PARAMS}, **over))}
+    # name -> (scene, Python controller or None, the Python twin it must fly the same as)
+    runs = {"python pd": (scene_from_dict(pd_scene({"name": "pd", "params": PD_PARAMS}, **over)), None, None)}
     notes = {}
     for version in (2, 3):
         path, why = _build(version, tmp)
         if path is None:
-            notes[f"fmu pd (FMI {version})"] = why
+            notes[f"fmu pd (FMI {version}, pythonfmu)"] = why
             continue
-        runs[f"fmu pd (FMI {version})"] = fmu_scene(path, **over)
-    first = {name: stationbed.simulate(s, fused=False) for name, s in runs.items()}  # warm-up
-    ref = first["python pd"]
-    for name, tr in first.items():
-        if not np.array_equal(tr.data, ref.data):
-            print(f"bench_fmu: {name} does not fly the Python pd's trajectory", file=sys.stderr)
+        runs[f"fmu pd (FMI {version}, pythonfmu)"] = (fmu_scene(path, **over), None, "python pd")
+    spin = {**over, "initial.omega_BN_B": [0.01, -0.02, 0.005]}  # rad/s
+    runs["python rate damping"] = (scene_from_dict(pd_scene({"name": "pd"}, **spin)), c_rate_damp.RateDamp, None)
+    if c_rate_damp.compiler() is None:
+        notes["fmu rate damping (FMI 2, C)"] = "not built (no C compiler)"
+    else:
+        path = c_rate_damp.build(tmp / "c", platform=fmpy.platform)
+        runs["fmu rate damping (FMI 2, C)"] = (scene_from_dict(pd_scene({"fmu": str(path)}, **spin)), None,
+                                                "python rate damping")
+
+    def fly(name, scene, keep=True):
+        _, law, _ = runs[name]
+        return stationbed.simulate(scene, fused=False, keep=keep, controller=law(period=PERIOD_S) if law else None)
+
+    first = {name: fly(name, r[0]) for name, r in runs.items()}  # warm-up
+    for name, (_, _, twin) in runs.items():
+        if twin is not None and not np.array_equal(first[name].data, first[twin].data, equal_nan=True):
+            print(f"bench_fmu: {name} does not fly {twin}'s trajectory", file=sys.stderr)
             return 1
+    ref = first["python pd"]
     # per tick: the slope between a run of the duration and one of a fifth of it (the set-up of a
     # run, the same for both, cancels)
-    short = {name: s.replace({"simulation.duration": args.duration / 5}) for name, s in runs.items()}
+    short = {name: r[0].replace({"simulation.duration": args.duration / 5}) for name, r in runs.items()}
     walls = {name: [] for name in runs}
     slopes = {name: [] for name in runs}
     ticks = ref.meta["summary"]["ticks"] + 1  # controller calls per run
@@ -111,15 +128,15 @@ def main(argv=None) -> int:
     for _ in range(args.repeats):
         for name in runs:  # interleaved: all see the same machine load
             t0 = time.perf_counter()
-            stationbed.simulate(runs[name], fused=False, keep=False)
+            fly(name, runs[name][0], keep=False)
             t1 = time.perf_counter()
-            stationbed.simulate(short[name], fused=False, keep=False)
+            fly(name, short[name], keep=False)
             t2 = time.perf_counter()
             walls[name].append(t1 - t0)
             slopes[name].append(((t1 - t0) - (t2 - t1)) / (ticks - ticks_short))
     per_tick = {k: statistics.median(v) for k, v in slopes.items()}
     alone = {}
-    for name, s in runs.items():
+    for name, (s, _, _) in runs.items():
         if name.startswith("fmu"):
             ctrl = build_controller(s.controller, base_dir=s.folder)
             times = []
@@ -128,22 +145,21 @@ def main(argv=None) -> int:
                 times.append(_call_alone(ctrl, max(200, ticks)))
             alone[name] = min(times)
 
-    print(f"# FMU law cost per tick: pd, {args.duration:g} s at {1 / ref.meta['summary']['period_s']:g} Hz "
+    print(f"# FMU law cost per tick: {args.duration:g} s at {1 / ref.meta['summary']['period_s']:g} Hz "
           f"({ticks} ticks), median of {args.repeats}")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python "
           f"{platform.python_version()}, FMPy {fmpy.__version__}")
     print()
-    print("| law | wall per run [s] | per tick (slope) [us] | added per tick vs python pd [us] | FMU call alone [us] |")
+    print("| law | wall per run [s] | per tick (slope) [us] | added per tick vs its Python twin [us] | FMU call alone [us] |")
     print("|---|---|---|---|---|")
-    base = per_tick["python pd"]
-    for name in runs:
-        extra = "" if name == "python pd" else f"{(per_tick[name] - base) * 1e6:.1f}"
+    for name, (_, _, twin) in runs.items():
+        extra = "" if twin is None else f"{(per_tick[name] - per_tick[twin]) * 1e6:.1f}"
         a = f"{alone[name] * 1e6:.1f}" if name in alone else ""
         print(f"| {name} | {statistics.median(walls[name]):.3f} | {per_tick[name] * 1e6:.1f} | {extra} | {a} |")
     for name, why in notes.items():
         print(f"| {name} | {why} | | | |")
     print()
-    print("same trajectory as the Python pd, bit for bit: yes")
+    print("each FMU flies its Python twin's trajectory, bit for bit: yes")
     if args.json:
         args.json.write_text(json.dumps({"per_tick_s": per_tick, "walls_s": walls, "call_alone_s": alone,
                                          "ticks": ticks}, indent=2))

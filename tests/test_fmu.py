@@ -15,6 +15,8 @@ Truths:
 * the fused ``pd`` (the same law compiled as casadi C): round-off, the bound of
   tests/test_controller_contract.py;
 * an FMI 3 FMU with *array* variables (``tests/fmu_laws/pd_fmi3_arrays.py``): the same again;
+* a C FMU (no Python inside, as Simulink and Modelica export them) against the same law in
+  Python: bit for bit;
 * renaming the FMU's variables (its modelDescription.xml, the binary untouched) and mapping them
   back in ``[controller.variables]`` gives the same trajectory again;
 * the FMU's clock check proves the reset between runs (a reused instance not reset starts its
@@ -151,6 +153,23 @@ def test_the_pd_fmu_flies_the_python_pd_bit_for_bit(fmus, python_pd, version, in
     s = fmu.meta["summary"]
     assert s["fmi_version"] == f"{version}.0" and s["controller_updates"] == round(DURATION_S / PERIOD_S) + 1
     assert np.ptp(ref["tau_cmd_x"]) > 10.0  # N m: the law worked (the roll error was taken out)
+
+
+def test_a_compiled_c_fmu_flies_its_python_twin_bit_for_bit(tmp_path):
+    """An FMU as Simulink or Modelica export one: a C shared library behind the FMI 2 functions, no
+    Python inside (tests/fmu_laws/c_rate_damp.py, rate damping on the plant fact ``inertia_O_B``
+    the loop sets). The same law in Python, the same operations in the same order (the C built
+    without fused multiply-adds): the same trajectory, bit for bit."""
+    from fmu_laws import c_rate_damp
+
+    if c_rate_damp.compiler() is None:
+        pytest.skip("no C compiler (cc) to build the C FMU")
+    path = c_rate_damp.build(tmp_path, platform=fmpy.platform)
+    spin = {"initial.omega_BN_B": [0.01, -0.02, 0.005]}  # rad/s
+    fmu = simulate(scene_from_dict(pd_scene({"fmu": str(path)}, **spin)))
+    ref = simulate(scene_from_dict(pd_scene({"name": "pd"}, **spin)), controller=c_rate_damp.RateDamp(period=PERIOD_S))
+    np.testing.assert_array_equal(fmu.data, ref.data)
+    assert abs(fmu["wx"][-1]) < 0.5 * abs(fmu["wx"][0])  # the rate was damped
 
 
 def test_the_fmu_sees_the_sensors_measurement(fmus):
