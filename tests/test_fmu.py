@@ -470,12 +470,18 @@ def test_a_sample_scene_written_elsewhere_still_finds_the_fmu(fmus, tmp_path):
 
 @pytest.mark.slow
 def test_a_monte_carlo_of_an_fmu_law_gives_the_serial_table_on_two_workers(fmus, tmp_path):
-    """Four samples of 30 s, the FMU's bandwidth dispersed: the table on 2 Dask workers equals the
-    serial one exactly (the scene names the FMU relative to its file; each worker finds it)."""
+    """Four samples of 30 s, the FMU's bandwidth dispersed: the serial study extracts the FMU once
+    and instantiates it once; the table on 2 Dask workers equals the serial one exactly (the scene
+    names the FMU relative to its file; each worker finds it)."""
     from stationbed import load_scene
 
     scene = load_scene(_scene_file(tmp_path / "mc", fmus(2), mc=MC_TABLE))
+    before = unit_stats()
     serial = montecarlo(scene, chunk=1).df
+    after = unit_stats()
+    # this process: the study's FMU file extracted once, one instance for the warm-up run and
+    # the four samples (reset between them)
+    assert (after["extracted"] - before["extracted"], after["instantiated"] - before["instantiated"]) == (1, 1)
     assert (serial["status"] == "ok").all(), serial["reason"].tolist()
     assert serial["final_att_err_deg"].nunique() == len(serial)  # the samples differ
     pd.testing.assert_frame_equal(montecarlo(scene, workers=2, chunk=1).df, serial)
