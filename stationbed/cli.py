@@ -219,13 +219,13 @@ def _validate(scene) -> None:
     """Everything that can be refused before an output is opened: the formulation and integrator
     names, the step, the controller and its parameters (the compiled system is built here and
     reused by the run)."""
-    from .run.controller import get_controller
+    from .run.laws import build_controller
     from .run.prepare import prepare
 
     prepare(scene)
     spec = scene.controller
     if spec is not None:
-        get_controller(spec.name, base_dir=scene.folder)(period=spec.period, **spec.params)
+        build_controller(spec, base_dir=scene.folder)
 
 
 def _run(args, recorder) -> int:

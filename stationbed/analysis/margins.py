@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ..run.closed_loop import plant_facts
-from ..run.controller import get_controller
+from ..run.laws import build_controller
 from ..run.initial import initial_state, initial_x
 from ..run.system import build_system
 from ..model import Structure
@@ -176,7 +176,7 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
         spec = scene.controller
         if spec is None:
             raise ValueError("margins: the scene has no [controller]")
-        controller = get_controller(spec.name, base_dir=scene.folder)(period=spec.period, **spec.params)
+        controller = build_controller(spec, base_dir=scene.folder)
     if not callable(getattr(controller, "symbolic", None)):
         raise ValueError(f"margins: controller '{controller.name}' has no symbolic form (Controller.symbolic)")
     command = controller.command

@@ -16,11 +16,11 @@ from .controller import (
     Measurement,
     Plant,
     command_values,
-    get_controller,
     measurement_layout,
     one_line,
 )
 from .fused import fused_ok, run_fused
+from .laws import build_controller
 from .rows import ROW_BATCH
 from .segments import held_torque, segment_input
 
@@ -85,7 +85,7 @@ class ControlLoop:
         cmg = model.cmg
         self.ng = 0 if cmg is None else cmg.n_gimbals
         if controller is None:
-            controller = get_controller(spec.name, base_dir=scene.folder)(period=spec.period, **spec.params)
+            controller = build_controller(spec, base_dir=scene.folder)
         self.ctrl = controller
         if self.ctrl.command == "gimbal_rates" and self.ng == 0:
             raise ValueError(

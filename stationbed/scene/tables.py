@@ -353,12 +353,27 @@ class Sensor(Strict):
 
 
 class ControllerSpec(Strict):
-    """``[controller]``: a registry name (controllers/) or ``module:Class``, its period and parameters."""
+    """``[controller]``: a registry name (controllers/) or ``module:Class``, or an FMI
+    co-simulation unit (``fmu``, issue 23), its period and parameters."""
 
-    name: str
+    name: str = ""
+    fmu: str | None = None  # path of a co-simulation FMU, relative to the scene file's folder
+    variables: dict[str, str] = {}  # FMU laws: loop name -> FMU variable (stationbed/run/fmu.py)
     period: TimeS = 0.1  # s
     params: dict[str, Any] = {}
     sensor: Sensor = Sensor()
+
+    @model_validator(mode="after")
+    def _law(self):
+        if self.fmu is None and not self.name:
+            raise FieldError("name", "give the law: name = \"pd\" (or module:Class) or fmu = \"path/law.fmu\"")
+        if self.fmu is not None and self.name:
+            raise FieldError("fmu", f"give name = {self.name!r} or fmu = {self.fmu!r}, not both")
+        if self.fmu is not None and not self.fmu.strip():
+            raise FieldError("fmu", "is empty: give the path of a co-simulation FMU")
+        if self.variables and self.fmu is None:
+            raise FieldError("variables", "maps the variables of an FMU law: set controller.fmu")
+        return self
 
 
 #: discriminator tags -> tables (the error messages name the right table's keys)

@@ -94,6 +94,8 @@ def write_sample_scene(scene: Scene, k: int, path: Path) -> Scene:
         module, _, cls = c.name.rpartition(":")                         # from the new file's folder
         if (module.endswith(".py") or "/" in module) and not Path(module).expanduser().is_absolute():
             changes["controller.name"] = f"{(scene.folder / module).resolve()}:{cls}"
+    if c is not None and c.fmu is not None and scene.folder is not None and not Path(c.fmu).expanduser().is_absolute():
+        changes["controller.fmu"] = str((scene.folder / c.fmu).resolve())  # an FMU law, likewise
     s = s.replace(changes)
     header = (f"sample {k} of the Monte Carlo study of '{scene.name}' (seed {mc.seed}, sample seed "
               f"{sample_seed(mc.seed, k)}): the drawn values are filled in\n"
