@@ -7,11 +7,18 @@ key naming the study and its range, so Dask re-runs a chunk whose worker died an
 is the same. Before dispatch the driver builds the scene's compiled system (a short run of the
 base scene), so workers load it from the disk cache instead of compiling it each.
 
-Files (``out`` given): ``chunks/chunk_<k0>_<k1>.parquet`` and ``chunks/envelope_<k0>_<k1>.npy``
-per finished chunk; ``study.json`` (what the chunks belong to: a re-run with ``resume`` skips
-the chunks already on disk only when it matches); at the end ``samples.parquet`` (every row,
-by index), ``summary.json``, the charts and ``montecarlo.rrd``. Ctrl-C (KeyboardInterrupt)
-cancels what is queued and keeps every finished chunk.
+Work is generated lazily (the ranges not yet on disk, cut into chunks) and at most
+:data:`IN_FLIGHT_PER_WORKER` chunks per worker are in flight; an n whose table and envelopes
+cannot fit in this process's memory is refused before anything runs (:func:`check_memory`).
+
+Files (``out`` given, :mod:`.folder`): ``study.lock`` (held while the study runs),
+``chunks/chunk_<study>_<k0>_<k1>.parquet`` and ``chunks/envelope_<study>_<k0>_<k1>.npy`` per
+finished chunk, tagged with the study's identity; ``study.json`` (the identity, the law's
+source hashes, the chunk size; a ``resume`` keeps the chunks of its own study, runs the rest
+with the recorded chunk size, and refuses another study's); at the end ``samples.parquet``
+(every row, by index), ``summary.json``, the charts and ``montecarlo.rrd``. Ctrl-C
+(KeyboardInterrupt), a full disk or a lost scheduler (:class:`.folder.StudyStop`) cancel what
+is queued and keep every finished chunk.
 """
 
 from __future__ import annotations
@@ -202,8 +209,9 @@ def check_memory(n: int, n_columns: int, n_env: int, available: int | None) -> N
 
 
 def in_flight(items, submit, wait_first, limit: int, pending: set):
-    """Yield finished futures in the order they finish, with at most ``limit`` submitted and not
-    yet yielded; ``items`` is consumed only as room frees up. ``pending`` (a set, filled here)
+    """Yield finished futures in the order they finish, with at most ``limit`` drawn from
+    ``items`` and not yet handed back (the one being handed back included); ``items`` is
+    consumed only as room frees up. ``pending`` (a set, filled here)
     holds what is in flight, for the caller to cancel."""
     it = iter(items)
     for item in it:
@@ -214,10 +222,12 @@ def in_flight(items, submit, wait_first, limit: int, pending: set):
         done, _ = wait_first(set(pending))
         for fut in done:
             pending.discard(fut)
-            nxt = next(it, None)
-            if nxt is not None:
-                pending.add(submit(nxt))
             yield fut
+            while len(pending) < limit:  # refill once the caller is done with it
+                nxt = next(it, None)
+                if nxt is None:
+                    break
+                pending.add(submit(nxt))
 
 
 def _gaps(n: int, size: int, done: dict):
@@ -311,7 +321,35 @@ def _run(scene, study, record, columns, n_env, out, client, workers, chunk, resu
     size = chunk or recorded or chunk_size(scene, n_workers)
     if files is not None:
         files.write_record({**record, "scene": scene.name, "n": n, "chunk": size})
-    said: set[str] = set()
+    said: set[str] = set()  # warnings said in this study (here, or by a worker): each once
+    seen = _Seen(said)
+    logging.getLogger(progress.LOGGER).addFilter(seen)
+    try:
+        return _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts,
+                           scheduler)
+    finally:
+        logging.getLogger(progress.LOGGER).removeFilter(seen)
+
+
+class _Seen(logging.Filter):
+    """Notes the warnings this process says, so a worker's copy of one is not said again."""
+
+    def __init__(self, said: set):
+        super().__init__()
+        self.said = said
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            msg = record.getMessage()
+            if msg in self.said:
+                return False
+            self.said.add(msg)
+        return True
+
+
+def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts, scheduler):
+    mc = scene.montecarlo
+    n = mc.n
 
     def keep(res):
         df = _frame(res["rows"], columns)
@@ -320,10 +358,8 @@ def _run(scene, study, record, columns, n_env, out, client, workers, chunk, resu
         if files is not None:
             files.write(k0, k1, df, env)
         done[k0] = (k1, df, env)
-        for w in res.get("warnings", ()):
-            if w not in said:  # once per study, however many workers saw it
-                said.add(w)
-                logging.getLogger(progress.LOGGER).warning(w)
+        for w in res.get("warnings", ()):  # _Seen drops the ones said before
+            logging.getLogger(progress.LOGGER).warning(w)
 
     todo = _gaps(n, size, done)
     has_todo = sum(k1 - k0 for k0, (k1, _, _) in done.items()) < n
