@@ -40,8 +40,6 @@ from stationbed import load_scene, montecarlo
 from stationbed.cli import main
 from stationbed.scene import SceneError
 from stationbed.studies.montecarlo import charts, stats
-from stationbed.studies.montecarlo.engine import in_flight
-from stationbed.studies.montecarlo.folder import law_sources
 from stationbed.studies.montecarlo.report import table_text
 
 MC_SCENE = ROOT / "scenarios" / "iss_lvlh_hold_montecarlo.toml"
@@ -237,6 +235,8 @@ def test_resume_after_editing_the_controller_file_is_refused_naming_it(tmp_path,
 
 
 def test_law_sources_follow_the_files_it_imports_from_its_folder(tmp_path, monkeypatch):
+    from stationbed.studies.montecarlo.folder import law_sources
+
     laws = tmp_path / "laws"
     laws.mkdir()
     (laws / "gains.py").write_text("KP = 4.0e-5\n")
@@ -280,6 +280,8 @@ def test_a_billion_samples_are_refused_at_once_with_the_reason(scene_file, tmp_p
 
 def test_work_is_generated_lazily_and_bounded_in_flight():
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    from stationbed.studies.montecarlo.engine import in_flight
 
     consumed, finished, most = [], [], [0]
 
@@ -396,15 +398,32 @@ def test_reports_of_a_study_whose_samples_all_fail_raise_no_numpy_warning(tmp_pa
 
 
 def test_a_warning_every_worker_sees_is_said_once_with_the_prefix(tmp_path):
-    scene = tmp_path / "scene.toml"
-    scene.write_text(short_text(duration=10.0).replace("envelope_dt = 20.0", "envelope_dt = 10.0"))
-    env = {**os.environ, "STATIONBED_NO_COMPILE": "1"}  # every process says it runs without compiled code
+    """A law whose reset overflows a float: numpy warns in every process that runs a sample."""
+    scene = _law_scene(tmp_path)
+    law = tmp_path / "laws" / "hold.py"
+    law.write_text(law.read_text().replace("        self.J = np.array(plant.inertia_O_B)\n",
+                                           "        self.J = np.array(plant.inertia_O_B)\n"
+                                           "        self.big = np.float64(1e308) * 10.0  # overflows: numpy warns\n"))
+    scene.write_text(scene.read_text().replace("duration = 60.0", "duration = 10.0"))
     res = _cli("montecarlo", scene, "--n", "2", "--workers", "2", "--chunk", "1", "--out", tmp_path / "o",
-               "--no-charts", "-q", "--exit-zero", env=env)
+               "--no-charts", "-q", "--exit-zero")
     assert res.returncode == 0, res.stderr
     lines = res.stderr.strip().splitlines()
-    assert all(ln.startswith("stationbed: ") for ln in lines), res.stderr
-    assert len([ln for ln in lines if "without compiled code" in ln]) == 1, res.stderr
+    assert all(ln.startswith("stationbed: warning: ") for ln in lines), res.stderr
+    assert len([ln for ln in lines if "overflow" in ln]) == 1, res.stderr
+
+
+def test_a_workers_warnings_are_held_for_the_driver(capsys):
+    import logging
+    import warnings
+
+    from stationbed.studies.montecarlo.samples import held_warnings
+
+    with held_warnings() as said:
+        logging.getLogger("stationbed").warning("running without compiled code")
+        warnings.warn("a law's own warning", UserWarning)
+    assert said[0] == "running without compiled code" and said[1].startswith("UserWarning: a law's own warning")
+    assert capsys.readouterr().err == ""
 
 
 # -- item 16 (part): dispersion keys and where the samples run ------------------------------------
@@ -432,3 +451,70 @@ def test_two_places_to_run_are_refused(scene_file, tmp_path, capsys, options):
     assert main(["montecarlo", str(scene_file), "--out", str(tmp_path / "o"), *options]) == 2
     assert "choose one" in one_error_line(capsys.readouterr().err)
     assert not (tmp_path / "o").exists()
+
+
+# -- item 14: a scheduler that dies mid-study (real processes, bounded in time) --------------------
+#: the longest wait for the scheduler and its worker to come up, and for the study to stop [s]
+START_TIMEOUT_S = 60.0
+
+
+def _wait_port(port: int, proc, timeout: float) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        assert proc.poll() is None, f"the dask scheduler exited with {proc.returncode}"
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.1)
+    raise TimeoutError(f"no dask scheduler on port {port} after {timeout} s")
+
+
+def test_a_scheduler_that_dies_mid_study_is_one_line_and_resume_completes(tmp_path):
+    from distributed import Client
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    log = open(tmp_path / "dask.log", "w")
+    procs = []
+    scene = tmp_path / "scene.toml"
+    scene.write_text(short_text(n=8, duration=300.0))
+    out = tmp_path / "o"
+    try:
+        sched = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", str(port), "--dashboard-address", ":0", "--no-show"],
+                                 stdout=log, stderr=subprocess.STDOUT, env=env)
+        procs.append(sched)
+        _wait_port(port, sched, START_TIMEOUT_S)
+        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                                       "--no-nanny", "--dashboard-address", ":0"],
+                                      stdout=log, stderr=subprocess.STDOUT, env=env))
+        with Client(address, timeout=f"{START_TIMEOUT_S}s") as c:
+            c.wait_for_workers(1, timeout=START_TIMEOUT_S)
+        study = subprocess.Popen([str(STATIONBED), "montecarlo", str(scene), "--scheduler", address, "--out", str(out),
+                                  "--chunk", "1", "--no-charts", "-q", "--exit-zero"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        procs.append(study)
+        end = time.monotonic() + RUN_TIMEOUT_S
+        while time.monotonic() < end and study.poll() is None and not any((out / "chunks").glob("chunk_*.parquet")):
+            time.sleep(0.05)
+        assert study.poll() is None, "the study ended before its scheduler could be stopped"
+        sched.kill()
+        _, err = study.communicate(timeout=START_TIMEOUT_S)
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.kill()
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
+        log.close()
+    assert study.returncode == 1, err
+    line = one_error_line(err)
+    assert address in line and "kept" in line and "--resume" in line
+    kept = list((out / "chunks").glob("chunk_*.parquet"))
+    assert 1 <= len(kept) < 8 and not (out / "samples.parquet").exists()
+    assert _study(scene, out, "--resume") == 0  # the rest serially, same numbers
+    serial = montecarlo(load_scene(scene), chunk=8, charts=False).df
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)

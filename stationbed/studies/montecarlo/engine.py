@@ -45,7 +45,7 @@ from ...scene import Scene, SceneError, load_scene
 from .dispersions import check_keys, drawn_columns
 from .folder import STUDY_JSON, ChunkFiles, StudyStop, locked, study_identity
 from .report import finish
-from .samples import ENVELOPE_SERIES, ID_COLUMNS, run_chunk
+from .samples import ENVELOPE_SERIES, ID_COLUMNS, held_warnings, run_chunk
 
 __all__ = ["MonteCarloResult", "run_study", "study_scene", "chunk_size", "envelope_times"]
 
@@ -379,7 +379,10 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
         cluster = None
         try:
             if has_todo:
-                _warm(scene)
+                with held_warnings(log=False) as said:
+                    _warm(scene)
+                for w in said:
+                    logging.getLogger(progress.LOGGER).warning(w)
             if has_todo and client is None and workers:
                 from distributed import Client, LocalCluster  # noqa: PLC0415 - dask only when asked
 
