@@ -348,10 +348,11 @@ def test_a_full_disk_mid_study_keeps_the_finished_chunks(scene_file, tmp_path, c
     real, calls = pq.write_table, []
 
     def full_disk(table, where, *a, **k):  # the second chunk finds the disk full
-        calls.append(where)
+        calls.append(str(where) if isinstance(where, (str, Path)) else str(getattr(where, "path", where)))
         if len(calls) == 2:
-            Path(where).write_bytes(b"PAR1 half a file")
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(where))
+            if isinstance(where, (str, Path)):
+                Path(where).write_bytes(b"PAR1 half a file")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), calls[-1])
         return real(table, where, *a, **k)
 
     monkeypatch.setattr(pq, "write_table", full_disk)
