@@ -204,8 +204,8 @@ def check_memory(n: int, n_columns: int, n_env: int, available: int | None) -> N
         fit = int(available / (MEMORY_FACTOR * per))
         raise SceneError(f"montecarlo.n = {n}: the table and envelopes of the study need ~{_gib(need)} in this "
                          f"process ({_gib(per)} per sample, kept for the statistics), more than the {_gib(available)} "
-                         f"of memory available; about {fit} samples fit (fewer envelope times, a larger "
-                         f"montecarlo.envelope_dt, make each sample smaller)")
+                         f"of memory available; about {fit} samples fit: run fewer (several studies with "
+                         f"other seeds), or keep fewer envelope times (a larger montecarlo.envelope_dt)")
 
 
 def in_flight(items, submit, wait_first, limit: int, pending: set):
