@@ -330,6 +330,8 @@ def _cmd_check(args) -> int:
     from .studies.check import check_scene
 
     scene, _ = _scene_with_options(args)
+    if args.rrd:  # before the formulations run: a recording never replaces the scene
+        check_outputs({"the scene file": args.scene}, {"--rrd": args.rrd})
     res = check_scene(scene)
     print(res.table())
     if args.rrd:

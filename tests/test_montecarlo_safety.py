@@ -519,3 +519,13 @@ def test_a_scheduler_that_dies_mid_study_is_one_line_and_resume_completes(tmp_pa
     assert _study(scene, out, "--resume") == 0  # the rest serially, same numbers
     serial = montecarlo(load_scene(scene), chunk=8, charts=False).df
     pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)
+
+
+def test_check_refuses_a_recording_that_is_the_scene_file(tmp_path, capsys):
+    """Item 7 for `check`: the output is checked before any formulation runs."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text((ROOT / "scenarios" / "torque_window.toml").read_text())
+    before = scene.read_bytes()
+    assert main(["check", str(scene), "--rrd", str(scene)]) == 2
+    assert str(scene) in one_error_line(capsys.readouterr().err)
+    assert scene.read_bytes() == before

@@ -269,10 +269,15 @@ def _distributed_logs_quiet():
             g.setLevel(lv)
 
 
-def _lost(where: str, e: BaseException, chunks_dir, n_kept: int) -> StudyStop:
+def _lost(where: str, e: BaseException, chunks_dir, n_kept: int, client) -> StudyStop:
+    """One line for a study Dask stopped: the scheduler gone (the client is no longer
+    connected), or a chunk Dask cancelled while it still answers."""
     what = f"{type(e).__name__}" + (f": {str(e).splitlines()[0]}" if str(e) else "")
     kept = (f"the {n_kept} finished chunks in {chunks_dir} are kept: run the same command again with --resume"
             if chunks_dir is not None else "nothing was written (no --out)")
+    if getattr(client, "status", "running") in ("running", "newly-created") and \
+            not isinstance(e, (OSError, TimeoutError)):
+        return StudyStop(f"{where} cancelled a chunk ({what}); {kept}")
     return StudyStop(f"{where} stopped answering mid-study ({what}); {kept}")
 
 
@@ -407,8 +412,9 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                 pending: set = set()
                 with _distributed_logs_quiet():
                     try:
-                        sc = client.scatter(scene, broadcast=True)
-                        submit = lambda r: client.submit(run_chunk, sc, r[0], r[1], n_env, True,  # noqa: E731
+                        # the scene goes with each task (~7 kB), not scattered: a scattered value whose
+                        # holders die cannot be recomputed, and Dask then cancels the tasks needing it
+                        submit = lambda r: client.submit(run_chunk, scene, r[0], r[1], n_env, True,  # noqa: E731
                                                          key=f"montecarlo-{study}-{r[0]}-{r[1]}", retries=2)
                         wait_first = lambda fs: wait(fs, return_when="FIRST_COMPLETED")  # noqa: E731
                         for fut in in_flight(todo, submit, wait_first, IN_FLIGHT_PER_WORKER * n_workers, pending):
@@ -416,7 +422,7 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                                 res = fut.result()
                             except Exception as e:  # noqa: BLE001 - a lost scheduler cancels the futures
                                 if _is_lost(e, client):
-                                    raise _lost(where, e, chunks_dir, len(done)) from None
+                                    raise _lost(where, e, chunks_dir, len(done), client) from None
                                 raise
                             keep(res)
                             n_done += res["k1"] - res["k0"]
@@ -428,7 +434,7 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                     except (OSError, TimeoutError) as e:
                         if isinstance(e, StudyStop) or not _is_lost(e, client):
                             raise
-                        raise _lost(where, e, chunks_dir, len(done)) from None
+                        raise _lost(where, e, chunks_dir, len(done), client) from None
                     except BaseException:
                         if pending:
                             try:
@@ -462,7 +468,8 @@ def _recorded_chunk(out: Path) -> int | None:
 
 
 def _is_lost(e: BaseException, client) -> bool:
-    """Whether ``e`` (from a future or the client) means the scheduler is gone."""
+    """Whether ``e`` (from a future or the client) stops the study: the scheduler gone, or a
+    chunk cancelled (a chunk's own error is not: run_chunk records a sample's failure)."""
     from concurrent.futures import CancelledError  # noqa: PLC0415
 
     status = getattr(client, "status", "running")
