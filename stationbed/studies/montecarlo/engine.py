@@ -258,7 +258,8 @@ def _connect(scheduler: str, timeout_s: float):
 def _distributed_logs_quiet():
     """distributed's own log lines (a reconnect's traceback when the scheduler goes away) off
     while this process drives a study: the study says what happened in one line."""
-    logs = [logging.getLogger(n) for n in ("distributed", "tornado")]
+    names = [n for n in list(logging.Logger.manager.loggerDict) if n.split(".")[0] in ("distributed", "tornado")]
+    logs = [logging.getLogger(n) for n in ["distributed", "tornado", *names]]  # children may set their own level
     before = [g.level for g in logs]
     for g in logs:
         g.setLevel(logging.CRITICAL + 1)
@@ -418,12 +419,7 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                                                          key=f"montecarlo-{study}-{r[0]}-{r[1]}", retries=2)
                         wait_first = lambda fs: wait(fs, return_when="FIRST_COMPLETED")  # noqa: E731
                         for fut in in_flight(todo, submit, wait_first, IN_FLIGHT_PER_WORKER * n_workers, pending):
-                            try:
-                                res = fut.result()
-                            except Exception as e:  # noqa: BLE001 - a lost scheduler cancels the futures
-                                if _is_lost(e, client):
-                                    raise _lost(where, e, chunks_dir, len(done), client) from None
-                                raise
+                            res = fut.result()
                             keep(res)
                             n_done += res["k1"] - res["k0"]
                             failures += sum(r["status"] != "ok" for r in res["rows"])
@@ -431,16 +427,15 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                             fut.release()
                             if ctrl_c:
                                 raise KeyboardInterrupt
-                    except (OSError, TimeoutError) as e:
-                        if isinstance(e, StudyStop) or not _is_lost(e, client):
-                            raise
-                        raise _lost(where, e, chunks_dir, len(done), client) from None
-                    except BaseException:
+                    except BaseException as e:  # Ctrl-C, a full disk, a lost scheduler: cancel what is queued
                         if pending:
                             try:
                                 client.cancel(list(pending))
                             except Exception:  # noqa: BLE001 - the scheduler is gone: nothing to cancel
                                 pass
+                        if isinstance(e, Exception) and not isinstance(e, StudyStop) and _is_lost(e, client):
+                            # a future's result() or wait() raises when the scheduler went away
+                            raise _lost(where, e, chunks_dir, len(done), client) from None
                         raise
         finally:
             if cluster is not None:
