@@ -180,9 +180,17 @@ ROW_OVERHEAD_B = 200
 
 
 def _available_memory() -> int | None:
-    """Physical memory available now [bytes] (None where the system does not say)."""
+    """Memory available to this process now [bytes]: Linux's MemAvailable (free memory plus
+    what the page cache would give back), else the physical memory; None where unknown."""
     try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return None
 
