@@ -134,6 +134,15 @@ def test_default_output_folder_stays_inside_out(tmp_path, command, monkeypatch):
     assert [p.name for p in (work / "out").iterdir()] == [f"escaped{'_montecarlo' if command[0] == 'montecarlo' else ''}"]
 
 
+def test_a_sample_never_replaces_its_studys_summary(scene_file, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert _study(scene_file, out) == 0
+    summary = (out / "summary.json").read_bytes()
+    assert main(["montecarlo", str(scene_file), "--sample", "1", "--out", str(out), "-q"]) == 2
+    assert "holds a Monte Carlo study" in one_error_line(capsys.readouterr().err)
+    assert (out / "summary.json").read_bytes() == summary
+
+
 # -- item 7: outputs checked against inputs ------------------------------------------------------
 @pytest.mark.parametrize("how", ["sample_scene", "rrd", "study_summary"])
 def test_an_output_that_is_the_scene_file_is_refused(tmp_path, how, capsys):

@@ -8,8 +8,8 @@
 Without ``--scheduler`` it starts a local Dask cluster of K worker processes (default: the
 machine's cores; ``--serial`` runs in this process); with it, it connects to a running
 ``dask scheduler`` and ships the chunks there (the three are exclusive: one says where the
-samples run). ``--sample K`` writes the exact scene of sample K (``DIR/sample_K.toml``) and runs
-it alone (``DIR/trajectory.csv``, ``DIR/summary.json``; a failed run keeps its rows in
+samples run). ``--sample K`` writes the exact scene of sample K (``DIR/sample_K.toml``; default
+DIR ``out/<scene>_montecarlo/sample_K``, never a study's folder) and runs it alone (``DIR/trajectory.csv``, ``DIR/summary.json``; a failed run keeps its rows in
 ``DIR/trajectory.partial.csv``, as ``stationbed run``).
 
 Exit status: 0 when the study ran and every requirement is shown to hold (``--exit-zero``: 0
@@ -169,7 +169,11 @@ def main(argv=None) -> int:
             scene = scene.replace(parse_assignments(args.set), source=f"{args.scene} with --set")
         scene = study_scene(scene, args.n)
         out = args.out or default_out(scene.name, suffix="_montecarlo")
-        if args.sample is not None:
+        if args.sample is not None:  # its own folder: its summary.json is not the study's
+            out = args.out or out / f"sample_{args.sample}"
+            if (out / "study.json").exists():
+                raise ValueError(f"--out {out} holds a Monte Carlo study (study.json): --sample {args.sample} would "
+                                 f"replace its summary.json; choose another --out")
             return _run_sample(scene, args, out)
         check_outputs({"the scene file": args.scene}, {f"the study's {f}": out / f for f in STUDY_FILES if f != "chunks"})
         workers = None if (args.serial or args.scheduler) else (args.workers or os.cpu_count() or 1)
