@@ -364,12 +364,17 @@ def test_a_full_disk_mid_study_keeps_the_finished_chunks(scene_file, tmp_path, c
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), calls[-1])
         return real(table, where, *a, **k)
 
+    other = tmp_path / "other.toml"
+    other.write_text(short_text(n=1).replace("seed = 2026", "seed = 7"))
+    assert _study(other, out) == 0  # a finished study in the folder first: its results must not stay
+    capsys.readouterr()
     monkeypatch.setattr(pq, "write_table", full_disk)
     assert _study(scene_file, out, "--chunk", "1") == 1
     err = one_error_line(capsys.readouterr().err)
     assert "No space left on device" in err and str(Path(calls[1]).with_suffix("")) in err
     assert "1 finished chunks" in err and "--resume" in err
     assert sorted(p.suffix for p in (out / "chunks").iterdir()) == [".npy", ".npy", ".parquet"]  # no .tmp left
+    assert sorted(p.name for p in out.iterdir()) == ["chunks", "study.json", "study.lock"]  # nothing of the other
     monkeypatch.setattr(pq, "write_table", real)
     assert _study(scene_file, out, "--chunk", "1", "--resume") == 0
     serial = montecarlo(load_scene(scene_file), chunk=4, charts=False).df

@@ -41,6 +41,14 @@ LOCK_NAME = "study.lock"
 STUDY_JSON = "study.json"
 
 
+def result_files() -> list[str]:
+    """The names of the results a study writes at its end (report.finish, charts)."""
+    from ...run.metrics import METRICS  # noqa: PLC0415
+
+    return (["samples.parquet", "summary.json", "montecarlo.rrd", "envelope_att_err.png", "envelope_h.png"]
+            + [f"{kind}_{m}.png" for kind in ("hist", "scatter") for m in METRICS])
+
+
 class StudyStop(RuntimeError):
     """The study stopped for a reason outside the samples (a full disk, a lost scheduler); the
     message is one line naming the file or address, what is kept and how to resume."""
@@ -171,10 +179,13 @@ class ChunkFiles:
         return [(p, m) for p in sorted(self.dir.iterdir()) if (m := CHUNK_NAME.match(p.name))]
 
     def start(self) -> None:
-        """A fresh study: remove the chunk files this program wrote (any study's), nothing else."""
+        """A fresh study: remove the chunk files this program wrote (any study's) and the last
+        study's results (:func:`result_files`), so nothing of it mixes with this one; nothing else."""
         self.dir.mkdir(parents=True, exist_ok=True)
         for p, _ in self._ours():
             p.unlink()
+        for name in result_files():
+            (self.out / name).unlink(missing_ok=True)
 
     def write_record(self, record: dict) -> None:
         """``study.json``: the identity (and what it is made of), scene name, n and chunk size."""
