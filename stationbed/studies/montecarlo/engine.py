@@ -456,8 +456,13 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
     env = np.concatenate([done[k][2] for k in order]) if n_env else None
     env_t = np.arange(n_env) * mc.envelope_dt if n_env else np.zeros(0)
     result = MonteCarloResult(df=df, summary={}, envelope_t=env_t, envelope=env, out=out)
-    finish(scene, result, wall_s=wall, workers=n_workers if client is not None else 0, chunk=size,
-           draw_charts=charts and out is not None)
+    try:
+        finish(scene, result, wall_s=wall, workers=n_workers if client is not None else 0, chunk=size,
+               draw_charts=charts and out is not None)
+    except OSError as e:  # a full disk at the end: every chunk is on disk already
+        raise StudyStop(f"cannot write {e.filename or out}: {e.strerror or e}; all {len(done)} chunks in "
+                        f"{chunks_dir} are kept: free the disk and run the same command again with --resume "
+                        f"(it only writes the results)") from e
     return result
 
 
