@@ -543,3 +543,13 @@ def test_check_refuses_a_recording_that_is_the_scene_file(tmp_path, capsys):
     assert main(["check", str(scene), "--rrd", str(scene)]) == 2
     assert str(scene) in one_error_line(capsys.readouterr().err)
     assert scene.read_bytes() == before
+
+
+@pytest.mark.parametrize("options, words", [(["--rrd", "x.rrd"], "--rrd applies to --sample"),
+                                            (["--sample", "0", "--resume"], "--resume applies to a study"),
+                                            (["--sample", "0", "--workers", "2"], "drop --workers")],
+                         ids=["rrd_without_sample", "resume_with_sample", "workers_with_sample"])
+def test_an_option_the_mode_would_ignore_is_refused(scene_file, tmp_path, capsys, options, words):
+    assert main(["montecarlo", str(scene_file), "--out", str(tmp_path / "o"), *options]) == 2
+    assert words in one_error_line(capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()

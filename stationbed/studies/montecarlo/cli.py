@@ -144,6 +144,10 @@ def _where(args) -> None:
                          f"one, whose workers run the study; --serial: this process)")
     if args.sample is not None and given:
         raise ValueError(f"--sample runs one sample in this process: drop {given[0]}")
+    if args.sample is not None and (args.resume or args.chunk is not None):
+        raise ValueError(f"{'--resume' if args.resume else '--chunk'} applies to a study, not to --sample")
+    if args.sample is None and args.rrd is not None:
+        raise ValueError("--rrd applies to --sample K (a study writes montecarlo.rrd in --out)")
     if not (args.connect_timeout > 0 and args.connect_timeout < float("inf")):
         raise ValueError(f"--connect-timeout must be a positive number of seconds, got {args.connect_timeout:g}")
 
