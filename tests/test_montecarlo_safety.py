@@ -13,7 +13,9 @@ Claims, each a case that misbehaved before:
 * the study folder: a second study is refused while one holds the lock; chunks are tagged with
   their study, and a resume refuses another study's chunks, a damaged chunk or study.json, and an
   edited controller file (naming it); a fresh start removes only its own kind of files; a resume
-  with other workers keeps the recorded chunk size; an n that cannot fit is refused at once;
+  with other workers keeps the recorded chunk size, and the ranges it runs tile the missing
+  samples exactly (random cases); work is drawn lazily with a bounded number in flight; an n
+  that cannot fit is refused at once;
 * stops: a full disk (a write raising ENOSPC) and an unreachable scheduler end in one
   ``stationbed: error:`` line naming the file or address, what is kept and how to resume;
 * no stray stderr: no numpy warning from the reports, and a warning that every Dask worker sees
@@ -553,3 +555,25 @@ def test_an_option_the_mode_would_ignore_is_refused(scene_file, tmp_path, capsys
     assert main(["montecarlo", str(scene_file), "--out", str(tmp_path / "o"), *options]) == 2
     assert words in one_error_line(capsys.readouterr().err)
     assert not (tmp_path / "o").exists()
+
+
+#: random cases of the tiling check (each a few microseconds)
+GAP_CASES = 300
+
+
+def test_the_gaps_a_resume_runs_are_exactly_the_missing_samples():
+    """Items 12-13: the lazily generated ranges and the finished chunks tile 0..n-1 exactly,
+    for random n, chunk sizes and finished chunks (of any sizes, as a resume with another
+    --chunk leaves them)."""
+    from stationbed.studies.montecarlo.engine import _gaps
+
+    rng = np.random.default_rng(13)
+    for _ in range(GAP_CASES):
+        n, size = int(rng.integers(1, 60)), int(rng.integers(1, 10))
+        edges = sorted({0, n, *(int(c) for c in rng.integers(0, n, rng.integers(0, 12)))})
+        done = {a: (b, None, None) for a, b in zip(edges, edges[1:]) if rng.random() < 0.5}
+        gaps = list(_gaps(n, size, done))
+        assert all(0 < b - a <= size for a, b in gaps)
+        covered = sorted([*gaps, *((a, v[0]) for a, v in done.items())])
+        assert covered[0][0] == 0 and covered[-1][1] == n, (n, size, done, gaps)
+        assert all(b == c for (_, b), (c, _) in zip(covered, covered[1:])), (n, size, done, gaps)  # no gap, no overlap
