@@ -122,6 +122,8 @@ def study_identity(scene) -> tuple[str, dict]:
 
 
 def _what_changed(old: dict, new: dict) -> str:
+    if "scene_sha256" not in old:
+        return "it was written by an earlier version of stationbed, whose chunks are not tagged"
     if old.get("scene_sha256") != new["scene_sha256"]:
         return "the scene changed (a value, a dispersion or a requirement)"
     before, now = old.get("law_sources", {}), new["law_sources"]
