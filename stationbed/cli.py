@@ -18,10 +18,13 @@ import argparse
 import json
 import math
 import os
-import re
 import sys
 import traceback
 from pathlib import Path
+
+# a failed or interrupted run leaves its rows under PARTIAL_CSV, never over a finished result
+from .core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, BadOutput, check_outputs, default_out
+from .core.paths import partial_path as _partial
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -170,43 +173,14 @@ def _cmd_run(args) -> int:
             recorder.abort()
 
 
-#: a failed or interrupted run leaves its rows under these names, never over a finished result
-PARTIAL_CSV = "trajectory.partial.csv"
-CSV_NAME = "trajectory.csv"
-SUMMARY_NAME = "summary.json"
-
-
-def _partial(path: Path) -> Path:
-    """``rec.rrd`` -> ``rec.partial.rrd``: where an output is written until its run ends."""
-    return path.with_name(f"{path.stem}.partial{path.suffix}")
-
-
-def _safe_name(name: str) -> str:
-    """A scene name as one folder name under ``out/`` (no separators, no ``..``, not absolute)."""
-    clean = re.sub(r"[^A-Za-z0-9_-]+", "_", name).strip("_")
-    return clean or "scene"
-
-
 def _output_paths(args, scene_name: str | None) -> dict[str, Path]:
     """The run's output files, checked against its inputs and each other (BadOutput)."""
-    out = args.out if args.out is not None else Path("out") / _safe_name(scene_name or "")
+    out = args.out if args.out is not None else default_out(scene_name)
     paths = {"csv": out / CSV_NAME, "partial_csv": out / PARTIAL_CSV, "summary": out / SUMMARY_NAME}
     if args.rrd is not None:
         paths.update(rrd=args.rrd, partial_rrd=_partial(args.rrd))
-    inputs = {"the scene file": args.scene}
-    seen: dict[str, str] = {}
-    for what, p in [*inputs.items(), *paths.items()]:
-        key = os.path.realpath(p)
-        if key in seen:
-            raise BadOutput(f"{p} is both {seen[key]} and {what.replace('_', ' ')}: choose another --rrd or --out")
-        seen[key] = what.replace("_", " ") if what not in inputs else what
-        if Path(key).is_dir() and what not in inputs:
-            raise BadOutput(f"{p} ({what.replace('_', ' ')}) is a folder")
+    check_outputs({"the scene file": args.scene}, {k.replace("_", " "): p for k, p in paths.items()})
     return {"out": out, **paths}
-
-
-class BadOutput(ValueError):
-    """An output path that is an input, another output, or a folder (exit 2, nothing written)."""
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -356,6 +330,8 @@ def _cmd_check(args) -> int:
     from .studies.check import check_scene
 
     scene, _ = _scene_with_options(args)
+    if args.rrd:  # before the formulations run: a recording never replaces the scene
+        check_outputs({"the scene file": args.scene}, {"--rrd": args.rrd})
     res = check_scene(scene)
     print(res.table())
     if args.rrd:

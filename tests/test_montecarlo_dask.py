@@ -92,7 +92,7 @@ def test_real_scheduler_and_a_killed_worker_give_the_serial_table(serial, tmp_pa
         out = tmp_path / "out"
         cmd = [sys.executable, "-c", "import sys; from stationbed.cli import main; sys.exit(main(sys.argv[1:]))",
                "montecarlo", str(tmp_path / "scene.toml"), "--scheduler", address, "--out", str(out),
-               "--chunk", "1", "--no-charts", "-q"]
+               "--chunk", "1", "--no-charts", "-q", "--exit-zero"]
         (tmp_path / "scene.toml").write_text(
             open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
             .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0")
@@ -127,7 +127,7 @@ def test_cli_serial_option_matches(serial, tmp_path):
     path.write_text(open(MC_SCENE).read().replace("duration = 5553.6", "duration = 120.0")
                     .replace("settle_s = 1800.0", "settle_s = 20.0").replace("envelope_dt = 30.0", "envelope_dt = 20.0"))
     assert main(["montecarlo", str(path), "--n", "6", "--serial", "--chunk", "2", "--out", str(tmp_path / "o"),
-                 "--no-charts", "-q"]) == 0
+                 "--no-charts", "-q", "--exit-zero"]) == 0
     pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "o" / "samples.parquet"), serial)
 
 
@@ -162,6 +162,6 @@ def test_ctrl_c_keeps_finished_chunks_and_resume_completes(tmp_path):
     assert proc.returncode == 1 and "interrupted" in err and "--resume" in err
     kept = sorted((out / "chunks").glob("chunk_*.parquet"))
     assert 1 <= len(kept) < n and not (out / "samples.parquet").exists()
-    assert main([*args, "--resume"]) == 0
+    assert main([*args, "--resume", "--exit-zero"]) == 0
     serial = montecarlo(load_scene(path).replace({"montecarlo.n": n}), chunk=1).df
     pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)

@@ -45,8 +45,24 @@ def main(args) -> int:
     return {"linearize": _linearize, "margins": _margins, "plot": _plot, "compare": _compare}[args.cmd](args)
 
 
-def _default_out(scene, what: str) -> Path:
-    return Path("out") / scene.name / what
+def _out(args, scene, what: str, files: tuple[str, ...]) -> Path:
+    """``--out`` or ``out/<scene name>/<what>`` (core.paths.default_out, never outside ``out/``),
+    its files checked against the scene file before anything is written."""
+    from ..core.paths import check_outputs, default_out
+
+    out = args.out or default_out(scene.name, what)
+    check_outputs({"the scene file": args.scene}, {f"{what}'s {f}": out / f for f in files})
+    return out
+
+
+def _png_is_no_input(png, outdirs) -> None:
+    """``--png`` is checked against the run files it reads (BadOutput before anything is read)."""
+    if png is None:
+        return
+    from ..core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, check_outputs
+
+    inputs = {f"the input {d / f}": d / f for d in outdirs for f in (CSV_NAME, PARTIAL_CSV, SUMMARY_NAME)}
+    check_outputs(inputs, {"--png": png})
 
 
 def _fmt_pole(s) -> str:
@@ -75,7 +91,7 @@ def _linearize(args) -> int:
     from .plant import linearize
 
     scene = load_scene(args.scene)
-    out = args.out or _default_out(scene, "linearize")
+    out = _out(args, scene, "linearize", ("plant.npz", "poles_zeros.json", "bode.png", "pole_zero.png"))
     out.mkdir(parents=True, exist_ok=True)
     sys = linearize(scene, _about(args.about), t=args.t, command=args.command)
     lin = sys.linearization
@@ -144,7 +160,7 @@ def _margins(args) -> int:
     from .margins import loop_analysis
 
     scene = load_scene(args.scene)
-    out = args.out or _default_out(scene, "margins")
+    out = _out(args, scene, "margins", ("margins.json", "loop_bode.png", "nichols.png"))
     out.mkdir(parents=True, exist_ok=True)
     la = loop_analysis(scene, t=args.t)
     ctrl = la.controller
@@ -191,6 +207,7 @@ def _margins(args) -> int:
 def _plot(args) -> int:
     from .dashboard import dashboard
 
+    _png_is_no_input(args.png, [args.outdir])
     png = dashboard(args.outdir, args.png)
     print(f"wrote {png}")
     return 0
@@ -199,6 +216,7 @@ def _plot(args) -> int:
 def _compare(args) -> int:
     from .compare import compare
 
+    _png_is_no_input(args.png, args.outdirs)
     table, png = compare(args.outdirs, args.png, settle_s=args.settle)
     print(table)
     print(f"wrote {png}")

@@ -28,6 +28,7 @@ from ..run.initial import initial_state, initial_x
 from ..run.system import build_system
 from ..model import Structure
 from ..model.environment import q_ON
+from ..core.paths import safe_name
 from ..core.rotation import quat_mult
 from .plant import linearization, modal_poles, plant_functions
 
@@ -204,7 +205,7 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
     A, Bv, Bd, C = P.A, P.B[:, :nv], P.B[:, nv:], P.C
     Acl = A + Bv @ K
     closed = control.ss(Acl, Bd, C, np.zeros((C.shape[0], Bd.shape[1])), states=pf["states"], inputs=pf["disturbances"],
-                        outputs=pf["outputs"], name=f"{scene.name}_closed_loop")
+                        outputs=pf["outputs"], name=f"{safe_name(scene.name)}_closed_loop")
     loops, channels = [], []
     keep = loop_states(A, K)
     Ak, Bk, Kk = A[np.ix_(keep, keep)], Bv[keep], K[:, keep]

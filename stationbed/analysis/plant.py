@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ..core.paths import safe_name
 from ..core.rotation import dcm, quat_mult
 from ..model import Structure
 from ..model.appendages import profile
@@ -351,7 +352,7 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
     B = np.hstack([Bv, Bd])
     D = np.zeros((C.shape[0], B.shape[1]))
     ss = control.ss(A, B, C, D, states=pf["states"], inputs=pf["controls"] + pf["disturbances"], outputs=pf["outputs"],
-                    name=f"{scene.name}_plant")
+                    name=f"{safe_name(scene.name)}_plant")
     nmod = pf["nm"]
     modal = list(range(6 + pf["ne"], 6 + pf["ne"] + 2 * nmod))
     return Linearization(ss, t, q_RO, z0, np.r_[v0, d0], zd.ravel(), trim_torque, trim_limited, tea, modal)

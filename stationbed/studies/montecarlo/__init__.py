@@ -31,13 +31,24 @@ def montecarlo(scene, n: int | None = None, client=None, *, workers: int | None 
         Start a local Dask cluster of this many worker processes (one thread each) for the run.
     out : str or Path, optional
         Folder for the chunks, ``samples.parquet``, ``summary.json``, charts and recording
-        (None: nothing is written; the result holds the table).
+        (None: nothing is written; the result holds the table). Locked while the study runs
+        (``study.lock``: a second study into it raises SceneError).
     chunk : int, optional
-        Samples per task (default: the scene's ``montecarlo.chunk``, or about n / (4 workers)).
+        Samples per task (default: the scene's ``montecarlo.chunk``, or about n / (4 workers);
+        with ``resume``, the size the study recorded).
     resume : bool
-        Keep the finished chunks already in ``out`` (same study) and run only the others.
+        Keep the finished chunks already in ``out`` (tagged with this study: same scene, same
+        controller source) and run only the missing samples; SceneError for another study's
+        chunks or a damaged file.
     charts : bool
         Draw the PNG charts (with ``out``).
+
+    Raises
+    ------
+    SceneError
+        Bad input (nothing run): the scene, an n that cannot fit in memory, another study in ``out``.
+    StudyStop
+        The study stopped mid-way (a full disk, a lost scheduler); the finished chunks are kept.
 
     Returns
     -------

@@ -12,12 +12,39 @@ from scipy import stats as sps
 from ...core.plotting import save_png
 from ...run.metrics import METRICS
 from ..plotting import pyplot
+from .stats import percentile_needs, quiet_nan
 
-__all__ = ["histograms", "envelopes", "scatter", "strongest_driver", "ENVELOPE_BANDS"]
+__all__ = ["histograms", "envelopes", "scatter", "strongest_driver", "ENVELOPE_COVERAGE", "envelope_bands",
+           "band_limits"]
 
-#: percentile bands of the envelope charts (low, high) and the median line
-ENVELOPE_BANDS = ((0.135, 99.865), (5.0, 95.0), (25.0, 75.0))
-ENVELOPE_LABELS = ("99.73 % of samples", "90 %", "50 %")
+#: the central bands of the envelope charts: the fraction of the samples each holds at every time
+ENVELOPE_COVERAGE = (0.9973, 0.90, 0.50)
+
+
+def envelope_bands(n: int) -> list[tuple[float, float, float, str]]:
+    """The bands ``(lo, hi, coverage, label)`` an envelope chart of ``n`` samples draws, widest first.
+
+    A central band of coverage c lies between the percentiles (1 - c)/2 and (1 + c)/2, each an
+    order statistic (:func:`band_limits`), so it holds at least c of the samples at every time.
+    It is drawn only when n supports its tails (:func:`.stats.percentile_needs`: at least one
+    sample expected beyond each edge); where the widest band is not supported, the band of all
+    n samples (min to max) is drawn in its place, labelled as what it is."""
+    bands = []
+    for c in ENVELOPE_COVERAGE:
+        lo, hi = 50.0 * (1.0 - c), 50.0 * (1.0 + c)
+        if n >= percentile_needs(hi):
+            bands.append((lo, hi, c, f"p{lo:.3g}-p{hi:.3g}: at least {100 * c:g} % of samples"))
+        elif c == ENVELOPE_COVERAGE[0]:
+            bands.append((0.0, 100.0, 1.0, f"min-max: all {n} samples (too few for a {100 * c:g} % band: "
+                                           f"n >= {percentile_needs(hi)})"))
+    return bands
+
+
+def band_limits(y, lo: float, hi: float):
+    """The band's edges per time over the samples (rows of ``y``): the order statistics below
+    ``lo`` and above ``hi`` (numpy's "lower" / "higher" percentiles), NaN samples left out."""
+    with quiet_nan():
+        return (np.nanpercentile(y, lo, axis=0, method="lower"), np.nanpercentile(y, hi, axis=0, method="higher"))
 #: an envelope whose worst value is this many times the median's largest is drawn on a log axis
 LOG_SPREAD = 30.0
 
@@ -79,17 +106,18 @@ def envelopes(t, env, out: Path, title: str) -> list[Path]:
         if np.all(np.isnan(y)):
             continue
         fig, ax = plt.subplots(figsize=(7.5, 4.2))
-        with np.errstate(all="ignore"):
-            for (lo, hi), lab, a in zip(ENVELOPE_BANDS, ENVELOPE_LABELS, (0.18, 0.3, 0.45)):
-                ax.fill_between(t_orbit, np.nanpercentile(y, lo, axis=0), np.nanpercentile(y, hi, axis=0),
-                                color="#4c72b0", alpha=a, lw=0, label=lab)
-            ax.plot(t_orbit, np.nanmedian(y, axis=0), color="#1f3b6f", lw=1.5, label="median")
+        for (lo, hi, _, lab), a in zip(envelope_bands(len(y)), (0.18, 0.3, 0.45)):
+            ax.fill_between(t_orbit, *band_limits(y, lo, hi), color="#4c72b0", alpha=a, lw=0, label=lab)
+        with quiet_nan():
+            median = np.nanmedian(y, axis=0)
             worst = int(np.nanargmax(np.nanmax(y, axis=1)))
+            bottom = max(np.nanmin(y) / 2, 1e-6 * np.nanmax(y))
+            spread = np.nanmax(y) > LOG_SPREAD * max(np.nanmax(median), 1e-300)  # outliers would flatten the bulk
+        ax.plot(t_orbit, median, color="#1f3b6f", lw=1.5, label="median")
         ax.plot(t_orbit, y[worst], color="#c44e52", lw=1.0, label=f"worst sample (row {worst})")
-        median = np.nanmedian(y, axis=0)
-        if np.nanmax(y) > LOG_SPREAD * max(np.nanmax(median), 1e-300):  # outliers would flatten the bulk
+        if spread:
             ax.set_yscale("log")
-            ax.set_ylim(bottom=max(np.nanpercentile(y, 0.135) / 2, 1e-6 * np.nanmax(y)))
+            ax.set_ylim(bottom=bottom)
         ax.set_xlabel("time [min]")
         ax.set_ylabel(label)
         ax.set_title(f"{title}: {label} over {len(y)} samples", fontsize=10)

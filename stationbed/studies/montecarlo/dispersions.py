@@ -26,6 +26,7 @@ chosen value when every choice is a number, else its index ``<key>.choice``.
 
 from __future__ import annotations
 
+import difflib
 import math
 
 import numpy as np
@@ -43,21 +44,47 @@ def sample_seed(seed: int, k: int) -> int:
 
 def value_at(data: dict, path: str):
     """The value at a key path in a scene's data (``Scene.model_dump()``), or KeyError naming
-    the part that is missing."""
+    the part that is missing (and the nearest existing name)."""
     node = data
     for key in split_path(path):
         if isinstance(node, list) and isinstance(key, str):
             names = [e.get("name") if isinstance(e, dict) else None for e in node]
             if key not in names:
-                raise KeyError(f"no entry named '{key}'")
+                raise KeyError(f"no entry named '{key}'{_nearest(key, [x for x in names if x])}")
             key = names.index(key)
         if isinstance(node, list):
             if not 0 <= key < len(node):
                 raise KeyError(f"no entry [{key}] (there are {len(node)})")
         elif not isinstance(node, dict) or isinstance(key, int) or key not in node:
-            raise KeyError(f"no key '{key}'")
+            near = _nearest(key, list(node)) if isinstance(node, dict) and isinstance(key, str) else ""
+            raise KeyError(f"no key '{key}'{near}")
         node = node[key]
     return node
+
+
+def _nearest(key: str, names: list[str]) -> str:
+    close = difflib.get_close_matches(key, names, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+#: what each kind changes: "number" (a number or an array of numbers, any shape), or a shape
+KIND_NEEDS = {"normal": "number", "uniform": "number", "scale_normal": "number", "scale_uniform": "number",
+              "inertia": (3, 3), "attitude_normal": (4,)}
+
+
+def _numeric_shape(value):
+    """The shape of a number or a rectangular array of numbers (booleans are not numbers), else None."""
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return None
+    if isinstance(value, (int, float)):
+        return ()
+    if isinstance(value, list):
+        shapes = {_numeric_shape(v) for v in value}
+        if len(shapes) == 1 and None not in shapes:
+            return (len(value), *shapes.pop())
+        if not value:
+            return (0,)
+    return None
 
 
 class Draw:
@@ -159,17 +186,28 @@ def _draw_one(d, data: dict, rng: np.random.Generator, draw: Draw) -> None:
 
 
 def check_keys(scene: Scene) -> None:
-    """Every ``[[montecarlo.disperse]] key`` names a value of the scene, else SceneError naming
-    the entry (checked before any sample runs)."""
+    """Every ``[[montecarlo.disperse]] key`` names a value of the scene that its kind can draw
+    (numbers for the numeric kinds), else SceneError naming the entry (checked before any
+    sample runs)."""
     data = scene.model_dump()
     for i, d in enumerate(scene.montecarlo.disperse):
         for j, key in enumerate([d.key, *d.also]):
-            where = "key" if j == 0 else f"also[{j - 1}]"
+            where = f"montecarlo.disperse[{i}]." + ("key" if j == 0 else f"also[{j - 1}]")
             try:
                 split_path(key)
-                value_at(data, key)
+                value = value_at(data, key)
             except (KeyError, ValueError) as e:
-                raise SceneError(f"montecarlo.disperse[{i}].{where}: '{key}' names no value of the scene ({e})") from None
+                msg = e.args[0] if e.args else str(e)
+                raise SceneError(f"{where}: '{key}' names no value of the scene ({msg})") from None
+            need = KIND_NEEDS.get(d.kind)
+            if need is None:
+                continue
+            shape = _numeric_shape(value)
+            if shape is None or (need != "number" and shape != need):
+                what = (f"holds {type(value).__name__} {value!r}" if shape is None else f"has shape {shape}")
+                wants = "a number or an array of numbers" if need == "number" else f"an array of shape {need}"
+                raise SceneError(f"{where}: '{key}' {what}; kind '{d.kind}' needs {wants}"
+                                 + ("; 'choice' draws among listed values of any type" if shape is None else ""))
 
 
 def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:

@@ -7,18 +7,25 @@ key naming the study and its range, so Dask re-runs a chunk whose worker died an
 is the same. Before dispatch the driver builds the scene's compiled system (a short run of the
 base scene), so workers load it from the disk cache instead of compiling it each.
 
-Files (``out`` given): ``chunks/chunk_<k0>_<k1>.parquet`` and ``chunks/envelope_<k0>_<k1>.npy``
-per finished chunk; ``study.json`` (what the chunks belong to: a re-run with ``resume`` skips
-the chunks already on disk only when it matches); at the end ``samples.parquet`` (every row,
-by index), ``summary.json``, the charts and ``montecarlo.rrd``. Ctrl-C (KeyboardInterrupt)
-cancels what is queued and keeps every finished chunk.
+Work is generated lazily (the ranges not yet on disk, cut into chunks) and at most
+:data:`IN_FLIGHT_PER_WORKER` chunks per worker are in flight; an n whose table and envelopes
+cannot fit in this process's memory is refused before anything runs (:func:`check_memory`).
+
+Files (``out`` given, :mod:`.folder`): ``study.lock`` (held while the study runs),
+``chunks/chunk_<study>_<k0>_<k1>.parquet`` and ``chunks/envelope_<study>_<k0>_<k1>.npy`` per
+finished chunk, tagged with the study's identity; ``study.json`` (the identity, the law's
+source hashes, the chunk size; a ``resume`` keeps the chunks of its own study, runs the rest
+with the recorded chunk size, and refuses another study's); at the end ``samples.parquet``
+(every row, by index), ``summary.json``, the charts and ``montecarlo.rrd``. Ctrl-C
+(KeyboardInterrupt), a full disk or a lost scheduler (:class:`.folder.StudyStop`) cancel what
+is queued and keep every finished chunk.
 """
 
 from __future__ import annotations
 
 import difflib
-import hashlib
 import json
+import logging
 import math
 import os
 import signal
@@ -36,8 +43,9 @@ from ...run.metrics import METRICS
 from ...run.simulation import simulate
 from ...scene import Scene, SceneError, load_scene
 from .dispersions import check_keys, drawn_columns
+from .folder import STUDY_JSON, ChunkFiles, StudyStop, locked, study_identity
 from .report import finish
-from .samples import ID_COLUMNS, run_chunk
+from .samples import ENVELOPE_SERIES, ID_COLUMNS, held_warnings, run_chunk
 
 __all__ = ["MonteCarloResult", "run_study", "study_scene", "chunk_size", "envelope_times"]
 
@@ -111,11 +119,6 @@ def envelope_times(scene) -> int:
     return int(math.floor(scene.simulation.duration / dt + 1e-9)) + 1
 
 
-def _study_id(scene, chunk: int) -> str:
-    text = json.dumps({"scene": scene.model_dump(mode="json"), "chunk": chunk}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
 def _warm(scene) -> None:
     """Build (or load) the compiled system and the fused loop of ``scene`` in this process, by a
     run of two output steps (the fused loop is compiled per output step): workers then load
@@ -125,12 +128,6 @@ def _warm(scene) -> None:
         simulate(scene.replace({"simulation.duration": short}), keep=False)
     except Exception:  # noqa: BLE001 - a failing base scene still runs its samples (and records why)
         pass
-
-
-def _write_atomic(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    os.replace(tmp, path)
 
 
 def _frame(rows: list[dict], columns: list[str]) -> pd.DataFrame:
@@ -172,61 +169,219 @@ def _ctrl_c_kept():
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+#: chunks in flight per worker (submitted, not yet back): enough to keep every worker busy
+IN_FLIGHT_PER_WORKER = 2
+#: the study keeps its table and envelopes in this process until the statistics; an n whose
+#: estimate (x this factor: pandas' copies when the chunks are joined and written) exceeds the
+#: memory available is refused before anything runs
+MEMORY_FACTOR = 3.0
+#: bytes per sample besides its numbers (status and reason strings, pandas' per-row share)
+ROW_OVERHEAD_B = 200
+
+
+def _available_memory() -> int | None:
+    """Memory available to this process now [bytes]: Linux's MemAvailable (free memory plus
+    what the page cache would give back), else the physical memory; None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _gib(b: float) -> str:
+    for unit, f in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if b >= f:
+            return f"{b / f:.3g} {unit}"
+    return f"{b / 2**10:.3g} KiB"
+
+
+def check_memory(n: int, n_columns: int, n_env: int, available: int | None) -> None:
+    """SceneError when ``n`` samples' table and envelopes cannot fit in ``available`` bytes."""
+    if available is None:
+        return
+    per = 8 * n_columns + ROW_OVERHEAD_B + 8 * len(ENVELOPE_SERIES) * n_env
+    need = MEMORY_FACTOR * per * n
+    if need > available:
+        fit = int(available / (MEMORY_FACTOR * per))
+        raise SceneError(f"montecarlo.n = {n}: the table and envelopes of the study need ~{_gib(need)} in this "
+                         f"process ({_gib(per)} per sample, kept for the statistics), more than the {_gib(available)} "
+                         f"of memory available; about {fit} samples fit: run fewer (several studies with "
+                         f"other seeds), or keep fewer envelope times (a larger montecarlo.envelope_dt)")
+
+
+def in_flight(items, submit, wait_first, limit: int, pending: set):
+    """Yield finished futures in the order they finish, with at most ``limit`` drawn from
+    ``items`` and not yet handed back (the one being handed back included); ``items`` is
+    consumed only as room frees up. ``pending`` (a set, filled here)
+    holds what is in flight, for the caller to cancel."""
+    it = iter(items)
+    for item in it:
+        pending.add(submit(item))
+        if len(pending) >= limit:
+            break
+    while pending:
+        done, _ = wait_first(set(pending))
+        for fut in done:
+            pending.discard(fut)
+            yield fut
+            while len(pending) < limit:  # refill once the caller is done with it
+                nxt = next(it, None)
+                if nxt is None:
+                    break
+                pending.add(submit(nxt))
+
+
+def _gaps(n: int, size: int, done: dict):
+    """The chunk ranges ``(k0, k1)`` of at most ``size`` samples that cover what ``done``
+    (``{k0: (k1, ...)}``) does not, in order, generated lazily."""
+    k = 0
+    for a in sorted(done) + [n]:
+        while k < a:
+            k1 = min(k + size, a)
+            yield k, k1
+            k = k1
+        if a < n:
+            k = done[a][0]
+
+
+def _connect(scheduler: str, timeout_s: float):
+    from distributed import Client  # noqa: PLC0415
+
+    try:
+        return Client(scheduler, timeout=f"{timeout_s}s")
+    except (OSError, TimeoutError) as e:
+        raise StudyStop(f"no dask scheduler answered at {scheduler} within {timeout_s:g} s "
+                        f"({str(e).splitlines()[0] if str(e) else type(e).__name__}); nothing was run: start it "
+                        f"(dask scheduler), check the address, or wait longer with --connect-timeout") from None
+
+
+@contextmanager
+def _distributed_logs_quiet():
+    """distributed's own log lines (a reconnect's traceback when the scheduler goes away) off
+    while this process drives a study: the study says what happened in one line."""
+    names = [n for n in list(logging.Logger.manager.loggerDict) if n.split(".")[0] in ("distributed", "tornado")]
+    logs = [logging.getLogger(n) for n in ["distributed", "tornado", *names]]  # children may set their own level
+    before = [g.level for g in logs]
+    for g in logs:
+        g.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for g, lv in zip(logs, before):
+            g.setLevel(lv)
+
+
+def _lost(where: str, e: BaseException, chunks_dir, n_kept: int, client) -> StudyStop:
+    """One line for a study Dask stopped: the scheduler gone (the client is no longer
+    connected), or a chunk Dask cancelled while it still answers."""
+    what = f"{type(e).__name__}" + (f": {str(e).splitlines()[0]}" if str(e) else "")
+    kept = (f"the {n_kept} finished chunks in {chunks_dir} are kept: run the same command again with --resume"
+            if chunks_dir is not None else "nothing was written (no --out)")
+    if getattr(client, "status", "running") in ("running", "newly-created") and \
+            not isinstance(e, (OSError, TimeoutError)):
+        return StudyStop(f"{where} cancelled a chunk ({what}); {kept}")
+    return StudyStop(f"{where} stopped answering mid-study ({what}); {kept}")
+
+
 def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None, resume=False,
-              charts=True, scheduler=None) -> MonteCarloResult:
+              charts=True, scheduler=None, connect_timeout_s: float = 10.0) -> MonteCarloResult:
     """Run a Monte Carlo study (see :func:`stationbed.montecarlo`)."""
     scene = study_scene(scene, n)
     mc = scene.montecarlo
     n = mc.n
     n_env = envelope_times(scene)
-    own_cluster = None
-    if client is None and scheduler is not None:
-        from distributed import Client  # noqa: PLC0415
-
-        client = Client(scheduler, timeout="30s")
-        own_cluster = client
-    n_workers = workers or (len(client.scheduler_info().get("workers", {})) if client is not None else 1) or 1
-    size = chunk or chunk_size(scene, n_workers)
-    ranges = [(k0, min(k0 + size, n)) for k0 in range(0, n, size)]
     columns = ID_COLUMNS + drawn_columns(scene) + list(METRICS)
-    study = _study_id(scene, size)
-    done: dict[int, tuple[pd.DataFrame, np.ndarray | None]] = {}
-    chunks_dir = None
-    if out is not None:
+    check_memory(n, len(columns), n_env, _available_memory())
+    study, record = study_identity(scene)
+    own_client = None
+    if client is None and scheduler is not None:
+        client = own_client = _connect(scheduler, connect_timeout_s)
+    try:
+        if out is None:
+            return _run(scene, study, record, columns, n_env, None, client, workers, chunk, resume, charts,
+                        scheduler)
         out = Path(out)
-        chunks_dir = out / "chunks"
-        chunks_dir.mkdir(parents=True, exist_ok=True)
-        meta = out / "study.json"
-        info = {"study": study, "scene": scene.name, "n": n, "chunk": size}
-        if resume and meta.exists():
-            if json.loads(meta.read_text()).get("study") != study:
-                raise SceneError(f"{out}: --resume: the chunks there belong to another study (scene, n or chunk "
-                                 f"changed); use another --out or drop --resume")
-            for k0, k1 in ranges:
-                p = chunks_dir / f"chunk_{k0:07d}_{k1:07d}.parquet"
-                if p.exists():
-                    env_p = chunks_dir / f"envelope_{k0:07d}_{k1:07d}.npy"
-                    done[k0] = (pd.read_parquet(p), np.load(env_p) if n_env and env_p.exists() else None)
-        elif not resume:
-            for p in chunks_dir.glob("*_*_*.*"):
-                p.unlink()
-        meta.write_text(json.dumps(info, indent=2) + "\n")
+        out.mkdir(parents=True, exist_ok=True)
+        with locked(out):
+            return _run(scene, study, record, columns, n_env, out, client, workers, chunk, resume, charts,
+                        scheduler)
+    finally:
+        if own_client is not None:
+            with _distributed_logs_quiet():
+                own_client.close(timeout=2)
+
+
+def _run(scene, study, record, columns, n_env, out, client, workers, chunk, resume, charts, scheduler):
+    mc = scene.montecarlo
+    n = mc.n
+    n_workers = workers or (len(client.scheduler_info().get("workers", {})) if client is not None else 1) or 1
+    done: dict[int, tuple[int, pd.DataFrame, np.ndarray | None]] = {}
+    files = None
+    recorded = None
+    if out is not None:
+        files = ChunkFiles(out, study, record)
+        if resume:
+            recorded = _recorded_chunk(out)
+            done = files.resume(n, n_env)
+        else:
+            files.start()
+    size = chunk or recorded or chunk_size(scene, n_workers)
+    if files is not None:
+        files.write_record({**record, "scene": scene.name, "n": n, "chunk": size})
+    said: set[str] = set()  # warnings said in this study (here, or by a worker): each once
+    seen = _Seen(said)
+    logging.getLogger(progress.LOGGER).addFilter(seen)
+    try:
+        return _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts,
+                           scheduler)
+    finally:
+        logging.getLogger(progress.LOGGER).removeFilter(seen)
+
+
+class _Seen(logging.Filter):
+    """Notes the warnings this process says, so a worker's copy of one is not said again."""
+
+    def __init__(self, said: set):
+        super().__init__()
+        self.said = said
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            msg = record.getMessage()
+            if msg in self.said:
+                return False
+            self.said.add(msg)
+        return True
+
+
+def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts, scheduler):
+    mc = scene.montecarlo
+    n = mc.n
 
     def keep(res):
         df = _frame(res["rows"], columns)
         env = res["envelope"]
         k0, k1 = res["k0"], res["k1"]
-        if chunks_dir is not None:
-            if env is not None:
-                _write_atomic(chunks_dir / f"envelope_{k0:07d}_{k1:07d}.npy", lambda p: np.save(open(p, "wb"), env))
-            _write_atomic(chunks_dir / f"chunk_{k0:07d}_{k1:07d}.parquet", lambda p: df.to_parquet(p, index=False))
-        done[k0] = (df, env)
+        if files is not None:
+            files.write(k0, k1, df, env)
+        done[k0] = (k1, df, env)
+        for w in res.get("warnings", ()):  # _Seen drops the ones said before
+            logging.getLogger(progress.LOGGER).warning(w)
 
-    todo = [(k0, k1) for k0, k1 in ranges if k0 not in done]
+    todo = _gaps(n, size, done)
+    has_todo = sum(k1 - k0 for k0, (k1, _, _) in done.items()) < n
     wall0 = time.perf_counter()
-    failures = sum(int((d["status"] != "ok").sum()) for d, _ in done.values())
+    failures = sum(int((d["status"] != "ok").sum()) for _, d, _ in done.values())
+    chunks_dir = files.dir if files is not None else None
     with progress.task(f"montecarlo {scene.name}", total=n, unit="sample") as bar, _ctrl_c_kept() as ctrl_c:
-        n_done = sum(len(d) for d, _ in done.values())
+        n_done = sum(len(d) for _, d, _ in done.values())
         n_resumed = n_done
 
         def show():
@@ -237,9 +392,12 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
         show()
         cluster = None
         try:
-            if todo:
-                _warm(scene)
-            if todo and client is None and workers:
+            if has_todo:
+                with held_warnings(log=False) as said:
+                    _warm(scene)
+                for w in said:
+                    logging.getLogger(progress.LOGGER).warning(w)
+            if has_todo and client is None and workers:
                 from distributed import Client, LocalCluster  # noqa: PLC0415 - dask only when asked
 
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
@@ -254,37 +412,73 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
                     show()
                     if ctrl_c:  # a Ctrl-C that casadi swallowed
                         raise KeyboardInterrupt
-            elif todo:
-                from distributed import as_completed  # noqa: PLC0415
+            elif has_todo:
+                from distributed import wait  # noqa: PLC0415
 
-                sc = client.scatter(scene, broadcast=True)
-                futures = [client.submit(run_chunk, sc, k0, k1, n_env, key=f"montecarlo-{study}-{k0}-{k1}",
-                                         retries=2) for k0, k1 in todo]
-                try:
-                    for fut in as_completed(futures):
-                        res = fut.result()
-                        keep(res)
-                        n_done += res["k1"] - res["k0"]
-                        failures += sum(r["status"] != "ok" for r in res["rows"])
-                        show()
-                        fut.release()
-                        if ctrl_c:
-                            raise KeyboardInterrupt
-                except BaseException:
-                    client.cancel(futures)
-                    raise
+                where = (f"the dask scheduler at {scheduler}" if scheduler else
+                         "the local Dask cluster" if cluster is not None else
+                         f"the dask scheduler at {getattr(client.scheduler, 'address', '?')}")
+                pending: set = set()
+                with _distributed_logs_quiet():
+                    try:
+                        # the scene goes with each task (~7 kB), not scattered: a scattered value whose
+                        # holders die cannot be recomputed, and Dask then cancels the tasks needing it
+                        submit = lambda r: client.submit(run_chunk, scene, r[0], r[1], n_env, True,  # noqa: E731
+                                                         key=f"montecarlo-{study}-{r[0]}-{r[1]}", retries=2)
+                        wait_first = lambda fs: wait(fs, return_when="FIRST_COMPLETED")  # noqa: E731
+                        for fut in in_flight(todo, submit, wait_first, IN_FLIGHT_PER_WORKER * n_workers, pending):
+                            res = fut.result()
+                            keep(res)
+                            n_done += res["k1"] - res["k0"]
+                            failures += sum(r["status"] != "ok" for r in res["rows"])
+                            show()
+                            fut.release()
+                            if ctrl_c:
+                                raise KeyboardInterrupt
+                    except BaseException as e:  # Ctrl-C, a full disk, a lost scheduler: cancel what is queued
+                        if pending:
+                            try:
+                                client.cancel(list(pending))
+                            except Exception:  # noqa: BLE001 - the scheduler is gone: nothing to cancel
+                                pass
+                        if isinstance(e, Exception) and not isinstance(e, StudyStop) and _is_lost(e, client):
+                            # a future's result() or wait() raises when the scheduler went away
+                            raise _lost(where, e, chunks_dir, len(done), client) from None
+                        raise
         finally:
             if cluster is not None:
-                client.close()
-                cluster.close()
-            if own_cluster is not None:
-                own_cluster.close()
+                with _distributed_logs_quiet():
+                    client.close()
+                    cluster.close()
     wall = time.perf_counter() - wall0
     order = sorted(done)
-    df = pd.concat([done[k][0] for k in order], ignore_index=True)
-    env = np.concatenate([done[k][1] for k in order]) if n_env else None
+    df = pd.concat([done[k][1] for k in order], ignore_index=True)
+    env = np.concatenate([done[k][2] for k in order]) if n_env else None
     env_t = np.arange(n_env) * mc.envelope_dt if n_env else np.zeros(0)
     result = MonteCarloResult(df=df, summary={}, envelope_t=env_t, envelope=env, out=out)
-    finish(scene, result, wall_s=wall, workers=n_workers if client is not None else 0, chunk=size,
-           draw_charts=charts and out is not None)
+    try:
+        finish(scene, result, wall_s=wall, workers=n_workers if client is not None else 0, chunk=size,
+               draw_charts=charts and out is not None)
+    except OSError as e:  # a full disk at the end: every chunk is on disk already
+        raise StudyStop(f"cannot write {e.filename or out}: {e.strerror or e}; all {len(done)} chunks in "
+                        f"{chunks_dir} are kept: free the disk and run the same command again with --resume "
+                        f"(it only writes the results)") from e
     return result
+
+
+def _recorded_chunk(out: Path) -> int | None:
+    """The chunk size study.json recorded (a resume keeps it, whatever the workers now)."""
+    try:
+        v = json.loads((out / STUDY_JSON).read_text()).get("chunk")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return v if isinstance(v, int) and v > 0 else None
+
+
+def _is_lost(e: BaseException, client) -> bool:
+    """Whether ``e`` (from a future or the client) stops the study: the scheduler gone, or a
+    chunk cancelled (a chunk's own error is not: run_chunk records a sample's failure)."""
+    from concurrent.futures import CancelledError  # noqa: PLC0415
+
+    status = getattr(client, "status", "running")
+    return isinstance(e, (CancelledError, OSError, TimeoutError)) or status not in ("running", "newly-created")

@@ -14,12 +14,17 @@ from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
 from ...run.metrics import METRICS
 from . import charts
 from .samples import ID_COLUMNS
-from .stats import metric_stats, requirement_verdicts
+from .stats import PERCENTILES, metric_stats, percentile_needs, quiet_nan, requirement_verdicts
 
-__all__ = ["finish", "summarise", "write_recording", "ENVELOPE_PERCENTILES", "table_text"]
+__all__ = ["finish", "summarise", "write_recording", "ENVELOPE_PERCENTILES", "recorded_percentiles", "table_text"]
 
-#: percentile lines of the envelopes in the recording
+#: percentile lines of the envelopes in the recording (those the sample count supports)
 ENVELOPE_PERCENTILES = (50.0, 90.0, 99.73, 100.0)
+
+
+def recorded_percentiles(n: int) -> list[float]:
+    """The :data:`ENVELOPE_PERCENTILES` that ``n`` samples support (:func:`.stats.percentile_needs`)."""
+    return [p for p in ENVELOPE_PERCENTILES if n >= percentile_needs(p)]
 
 
 def _clean(x):
@@ -55,6 +60,7 @@ def summarise(scene, df, **extra) -> dict:
         "failures": [{"index": int(r["index"]), "status": r["status"], "reason": r["reason"]}
                      for _, r in bad.head(20).iterrows()],
         "metrics": metric_stats(df),
+        "percentile_needs_n": {f"p{p:g}": percentile_needs(p) for p in PERCENTILES},
         "requirements": requirement_verdicts(df, mc.requirement),
         **extra,
     })
@@ -67,10 +73,16 @@ def table_text(summary: dict) -> str:
              f"({summary['counts']['redraws']} redraws)"]
     head = f"{'metric':26s} {'mean':>10s} {'std':>10s} {'p50':>10s} {'p99.73':>10s} {'max':>10s} {'at':>6s}"
     lines.append(head)
+    blank = set()
     for name, s in summary["metrics"].items():
-        f = lambda v: "-" if v is None else f"{v:10.4g}"  # noqa: E731
-        lines.append(f"{name:26s} {f(s['mean'])} {f(s['std'])} {f(s['p50'])} {f(s['p99.73'])} {f(s['max'])} "
+        f = lambda v: f"{'-':>10s}" if v is None else f"{v:10.4g}"  # noqa: E731
+        blank |= {p for p in ("p50", "p99.73") if s.get(p) is None}
+        lines.append(f"{name:26s} {f(s['mean'])} {f(s['std'])} {f(s.get('p50'))} {f(s.get('p99.73'))} {f(s['max'])} "
                      f"{s['max_index']:6d}")
+    for p in sorted(blank, key=lambda p: float(p[1:])):
+        need = percentile_needs(float(p[1:]))
+        lines.append(f"{p} blank: it needs n >= {need} samples that ran (at least one expected beyond it); "
+                     f"below that it would be the largest sample under another name")
     for r in summary["requirements"]:
         op = "<=" if r["bound"] == "max" else ">="
         word = "PASS" if r["pass"] else "FAIL"
@@ -94,12 +106,13 @@ def write_recording(path: Path, scene, t, env, df) -> Path:
             y = env[:, :, j]
             if np.all(np.isnan(y)):
                 continue
-            with np.errstate(all="ignore"):
-                lines = np.stack([np.nanpercentile(y, p, axis=0) for p in ENVELOPE_PERCENTILES], axis=1)
+            shown = recorded_percentiles(len(y))
+            with quiet_nan():
+                lines = np.stack([np.nanpercentile(y, p, axis=0) for p in shown], axis=1)
+                worst = int(np.nanargmax(np.nanmax(y, axis=1)))
             ent = f"montecarlo/envelope/{series}"
-            rec.log(ent, rr.SeriesLines(names=[f"p{p:g}" for p in ENVELOPE_PERCENTILES]), static=True)
+            rec.log(ent, rr.SeriesLines(names=[f"p{p:g}" for p in shown]), static=True)
             rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=rr.Scalars.columns(scalars=lines))
-            worst = int(np.nanargmax(np.nanmax(y, axis=1)))
             ent = f"montecarlo/worst/{series}"
             rec.log(ent, rr.SeriesLines(names=[f"sample {int(idx[worst])}"]), static=True)
             rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=rr.Scalars.columns(scalars=y[worst]))

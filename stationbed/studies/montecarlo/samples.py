@@ -10,7 +10,11 @@ process's cache (:func:`stationbed.run.system.build_system`).
 
 from __future__ import annotations
 
+import logging
 import math
+import warnings
+from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -21,7 +25,7 @@ from ...run.rows import trajectory_columns
 from ...run.simulation import SimulationError, simulate
 from .dispersions import draw, sample_seed
 
-__all__ = ["run_sample", "run_chunk", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink"]
+__all__ = ["run_sample", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink"]
 
 #: the leading columns of the table
 ID_COLUMNS = ["index", "seed", "status", "reason", "redraws", "stopped_at_s"]
@@ -110,12 +114,54 @@ def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | No
     return row, env
 
 
-def run_chunk(scene, k0: int, k1: int, env_times: int = 0) -> dict:
+class _Held(logging.Filter):
+    """Holds the "stationbed" logger's warnings (kept, not printed) while a worker runs a chunk."""
+
+    def __init__(self):
+        super().__init__()
+        self.messages: list[str] = []
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            msg = record.getMessage()
+            if msg not in self.messages:
+                self.messages.append(msg)
+            return False
+        return True
+
+
+@contextmanager
+def held_warnings(log: bool = True):
+    """The warnings of the block, as one-line messages, instead of on this process's stderr:
+    Python warnings, and with ``log`` the "stationbed" logger's. A Dask worker's stderr is the
+    user's terminal, without the command line's ``stationbed:`` prefix, once per worker: the
+    driver says them (:func:`.engine.run_study`), once per study."""
+    held = _Held()
+    logger = logging.getLogger("stationbed")
+    if log:
+        logger.addFilter(held)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")
+            yield held.messages
+    finally:
+        logger.removeFilter(held)
+    for w in caught:
+        msg = f"{w.category.__name__}: {w.message} ({Path(w.filename).name}:{w.lineno})"
+        if msg not in held.messages:
+            held.messages.append(msg)
+
+
+def run_chunk(scene, k0: int, k1: int, env_times: int = 0, hold_log: bool = False) -> dict:
     """Samples ``k0 .. k1-1``: ``{"k0", "k1", "rows": [row dicts], "envelope": ndarray
-    (k1 - k0, env_times, len(ENVELOPE_SERIES)) or None}``."""
+    (k1 - k0, env_times, len(ENVELOPE_SERIES)) or None, "warnings": [str]}``. The chunk's
+    Python warnings (and with ``hold_log``, on a Dask worker, the "stationbed" logger's) are
+    returned for the driver to say once, not printed here."""
     rows, envs = [], []
-    for k in range(k0, k1):
-        row, env = run_sample(scene, k, env_times)
-        rows.append(row)
-        envs.append(env)
-    return {"k0": k0, "k1": k1, "rows": rows, "envelope": np.stack(envs) if env_times else None}
+    with held_warnings(hold_log) as said:
+        for k in range(k0, k1):
+            row, env = run_sample(scene, k, env_times)
+            rows.append(row)
+            envs.append(env)
+    return {"k0": k0, "k1": k1, "rows": rows, "envelope": np.stack(envs) if env_times else None,
+            "warnings": list(said)}

@@ -16,16 +16,35 @@ being >= p. With zero failures this reads p**n <= 1 - c, so the verdict needs at
 from __future__ import annotations
 
 import math
+import warnings
+from contextlib import contextmanager
 
 import numpy as np
 from scipy import stats as sps
 
 from ...run.metrics import METRICS
 
-__all__ = ["PERCENTILES", "metric_stats", "verdict", "n_needed", "requirement_verdicts", "success_lower_bound"]
+__all__ = ["PERCENTILES", "percentile_needs", "quiet_nan", "metric_stats", "verdict", "n_needed", "requirement_verdicts", "success_lower_bound"]
 
-#: percentiles reported per metric
+#: percentiles reported per metric (each only where the sample count supports it)
 PERCENTILES = (50.0, 90.0, 99.0, 99.73)
+
+
+def percentile_needs(p: float) -> int:
+    """Samples the ``p``-th percentile needs: ``n >= 1 / (1 - p/100)``, so that at least one
+    sample is expected beyond it (below that, the "percentile" is the largest sample under
+    another name: 2 for p50, 10 for p90, 100 for p99, 371 for p99.73). p100 (the max) needs 1."""
+    tail = 1.0 - p / 100.0
+    return 1 if tail <= 0 else int(math.ceil(1.0 / tail - 1e-9))
+
+
+@contextmanager
+def quiet_nan():
+    """numpy's "All-NaN slice" / "Mean of empty slice" warnings off: an empty or all-NaN column
+    (every sample failed before a time) has no statistic, and NaN says so."""
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
 
 
 def n_needed(coverage: float, confidence: float, failures: int = 0) -> int:
@@ -57,7 +76,8 @@ def verdict(n: int, failures: int, coverage: float, confidence: float) -> bool:
 
 def metric_stats(df, metrics=None) -> dict:
     """Per metric over the samples that ran to the end (status ok) and have a value: count, mean,
-    std (ddof 1), percentiles :data:`PERCENTILES`, min / max with the index of the sample."""
+    std (ddof 1), percentiles :data:`PERCENTILES` (None when ``count`` is below
+    :func:`percentile_needs`), min / max with the index of the sample."""
     ok = df[df["status"] == "ok"]
     out = {}
     for name in metrics or METRICS:
@@ -70,8 +90,8 @@ def metric_stats(df, metrics=None) -> dict:
         v, idx = v[good], ok["index"].to_numpy()[good]
         s = {"unit": METRICS[name].unit, "count": int(len(v)), "mean": float(np.mean(v)),
              "std": float(np.std(v, ddof=1)) if len(v) > 1 else math.nan}
-        for p in PERCENTILES:
-            s[f"p{p:g}"] = float(np.percentile(v, p))
+        for p in PERCENTILES:  # None (blank) where n cannot support it: see percentile_needs
+            s[f"p{p:g}"] = float(np.percentile(v, p)) if len(v) >= percentile_needs(p) else None
         s["min"], s["min_index"] = float(v.min()), int(idx[int(np.argmin(v))])
         s["max"], s["max_index"] = float(v.max()), int(idx[int(np.argmax(v))])
         out[name] = s
