@@ -4,7 +4,7 @@ Claims, each read from the source itself (the AST of every module, function-leve
 included), not from a hand-kept list of modules:
 
 * a module imports only from its own folder and the folders below it:
-  core < scene < model < formulations, integrators < run < analysis < controllers < output < studies < cli;
+  core < scene < model < formulations, integrators < run < analysis, plan < controllers < output < studies < cli;
 * the modules of the package import each other without a cycle;
 * nothing in the library imports the shipped controllers (they are plug-ins, found through
   their entry points);
@@ -35,6 +35,7 @@ LAYERS = {
     "integrators": 3,
     "run": 4,
     "analysis": 5,
+    "plan": 5,  # planned slews: the simulator's plant facts (run) below, the schedule law above
     "controllers": 6,
     "output": 7,
     "studies": 8,

@@ -1,0 +1,210 @@
+"""Planned slews (issue 26): stationbed.plan, the ``schedule`` law and ``stationbed plan``.
+
+Independent truths:
+
+* closed form: the minimum-energy rest-to-rest single-axis slew of a rigid body about a principal
+  axis (θ over T, inertia I) has the cubic angle θ(t) = θ (3s² - 2s³), s = t/T, and the torque
+  energy ∫τ² dt = 12 I² θ² / T³ (Euler-Lagrange on ∫ (I θ̈)² dt: θ'''' = 0, cubic; rest at both
+  ends fixes it); the law inside the plan (τ = -J (kp ε + kd ω̃)) only re-parametrises τ;
+* a balance law: in deep space the total angular momentum H_N = C_NB (J ω + h) of the planned
+  trajectory stays constant (the CMG exchanges momentum with the body, nothing else acts);
+* the published 2006 case: PSOPT's optimal cost 6.680107e6 (imperial units; its
+  doc/SQP_BACKEND_BENCHMARK.md, IPOPT) for Bhatt's statement, which the scenario converts to SI;
+* optimality: IPOPT's converged status at the requested KKT tolerance and the Hermite-Simpson
+  defects below DEFECT_TOL; mesh refinement moves the cost by less than REFINE_RTOL;
+* the flown closed loop (the scene's cluster, the simulator's momentum form) against the plan.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from scenes import ROOT, one_error_line
+from stationbed import SceneError, load_scene
+from stationbed.cli import main
+from stationbed.core.rotation import dcm
+from stationbed.plan import PlanError, plan_scene, read_plan, write_plan
+from stationbed.plan.collocation import solve
+from stationbed.scene import scene_from_dict
+
+ZPM = ROOT / "scenarios" / "iss_zpm_2006.toml"
+#: ft lbf -> N m (and slug ft² -> kg m², ft lbf s -> N m s): 0.3048 m x 4.4482216152605 N
+FT_LBF_NM = 1.3558179483314004
+#: PSOPT's optimal cost of the 7200 s case (IPOPT; doc/SQP_BACKEND_BENCHMARK.md), imperial units
+PSOPT_COST_IMPERIAL = 6.680107e6
+#: our cost may differ from PSOPT's by: its boundary quaternions are free within ±1e-4 per
+#: component and |q|² within 1 ± 2e-4 (both lower its cost; ours are exact: +0.20 % converged),
+#: and 60 Hermite-Simpson intervals are 0.08 % above the converged cost (measured)
+PUBLISHED_COST_RTOL = 5e-3
+#: the Hermite-Simpson defects (scaled states: q, ω / ω_s, h / h_max) at convergence: IPOPT's
+#: constraint tolerance is 1e-8 on the scaled NLP
+DEFECT_TOL = 1e-8
+#: 60 -> 90 intervals on the 2006 case moves the cost by 0.08 % (measured; 90 -> 120: 0.007 %)
+REFINE_RTOL = 2e-3
+#: the minimum-energy slew on 20 intervals: Hermite-Simpson is exact for a cubic angle but the
+#: quaternion is not a polynomial (measured: energy 7.6e-7 relative, angle 6.0e-6 rad; on 40
+#: intervals 1.0e-8 and 1.1e-7 rad: the discretisation's error, not a different optimum)
+ENERGY_RTOL = 1e-5
+ANGLE_TOL_RAD = 1e-5
+#: H_N of the deep-space plan: exact for the continuous model; the collocation keeps it to its
+#: discretisation error (measured ~1e-5 of |H|)
+H_BALANCE_RTOL = 1e-4
+#: flown vs planned: the loop holds each torque over its 1 s period and interpolates the command
+#: linearly between the plan's points (60 s apart), where Hermite-Simpson's is quadratic
+#: (measured: 157 N m s = 1.1 % of capacity, 0.027 deg)
+FLOWN_H_FRACTION = 0.02
+FLOWN_ATT_DEG = 0.1
+
+I_ZZ = 1000.0  # kg m²
+SLEW_RAD = 1.0
+T_S = 100.0
+
+
+def slew_scene(**plan):
+    """A rigid body in deep space turning SLEW_RAD about its z principal axis in T_S."""
+    half = 0.5 * SLEW_RAD
+    d = {
+        "name": "plan_slew",
+        "simulation": {"duration": T_S, "integrator": "rk4", "step": 0.1, "output_dt": 1.0},
+        "initial": {"q_BN": [1.0, 0.0, 0.0, 0.0]},
+        "body": {"mass": 100.0, "inertia": [[800.0, 0.0, 0.0], [0.0, 900.0, 0.0], [0.0, 0.0, I_ZZ]]},
+        "cmg": {"kind": "ideal", "max_momentum": 100.0, "max_torque": 5.0},  # needs 15 N m s, 0.6 N m
+        "plan": {"duration": T_S, "frame": "inertial", "q_end": [math.cos(half), 0.0, 0.0, math.sin(half)],
+                 "objective": "torque_energy", "kp": 0.1, "kd": 0.6, "intervals": 20, **plan},
+        "controller": {"name": "schedule", "period": 0.1},
+    }
+    return d
+
+
+@pytest.fixture(scope="module")
+def zpm():
+    scene = load_scene(ZPM)
+    prob, sol = plan_scene(scene)
+    return scene, prob, sol
+
+
+# -- optimality and the published case ---------------------------------------------------------
+
+def test_zpm_converges_to_the_kkt_tolerance(zpm):
+    _, prob, sol = zpm
+    assert sol.stats["status"] == "Solve_Succeeded"
+    assert sol.stats["inf_pr"] <= prob.tol and sol.stats["inf_du"] <= prob.tol
+
+
+def test_zpm_collocation_defects_are_below_the_bound(zpm):
+    _, _, sol = zpm
+    assert sol.stats["max_defect"] <= DEFECT_TOL
+    assert sol.stats["constraint_violation"]["end conditions"] <= DEFECT_TOL
+
+
+def test_zpm_cost_is_the_published_one(zpm):
+    _, _, sol = zpm
+    assert_allclose(sol.cost / FT_LBF_NM**2, PSOPT_COST_IMPERIAL, rtol=PUBLISHED_COST_RTOL)
+
+
+def test_zpm_keeps_within_the_limits(zpm):
+    _, prob, sol = zpm
+    h = np.linalg.norm(sol.h_B, axis=1)
+    assert np.max(h) <= prob.h_max * (1 + 1e-8)
+    assert np.max(np.linalg.norm(sol.h_dot_B, axis=1)) <= prob.tau_max * (1 + 1e-8)
+    # the peak bound is active: γ is max |h|² (the min-max through the auxiliary bound)
+    assert_allclose(math.sqrt(sol.gamma_N2m2s2), np.max(h), rtol=1e-6)
+    assert_allclose(np.linalg.norm(sol.q_BR, axis=1), 1.0, atol=1e-6)
+    assert_allclose(np.linalg.norm(sol.q_CR, axis=1), 1.0, atol=1e-9)
+
+
+def test_zpm_refined_mesh_moves_the_cost_little(zpm):
+    scene, prob, sol = zpm
+    import dataclasses
+
+    fine = solve(dataclasses.replace(prob, intervals=90), guess=sol)
+    assert abs(fine.cost - sol.cost) <= REFINE_RTOL * sol.cost
+
+
+# -- independent answers ----------------------------------------------------------------------
+
+def test_minimum_energy_single_axis_slew_is_the_cubic():
+    prob, sol = plan_scene(scene_from_dict(slew_scene()))
+    assert_allclose(sol.energy_N2m2s, 12.0 * I_ZZ**2 * SLEW_RAD**2 / T_S**3, rtol=ENERGY_RTOL)
+    s = sol.t / T_S
+    angle = 2.0 * np.arctan2(sol.q_BR[:, 3], sol.q_BR[:, 0])
+    assert_allclose(angle, SLEW_RAD * (3 * s**2 - 2 * s**3), atol=ANGLE_TOL_RAD)
+    assert_allclose(sol.q_BR[:, 1:3], 0.0, atol=ANGLE_TOL_RAD)  # it stays on the axis
+
+
+def test_deep_space_plan_conserves_total_momentum():
+    d = slew_scene(objective="weighted", weight_peak=1e-3, q_end=[0.8, 0.36, -0.48, 0.0])
+    d["body"]["inertia"] = [[800.0, 30.0, -20.0], [30.0, 900.0, 15.0], [-20.0, 15.0, I_ZZ]]
+    d["cmg"]["h0_B"] = [40.0, -25.0, 10.0]
+    prob, sol = plan_scene(scene_from_dict(d))
+    J = prob.model.J
+    H_N = np.array([dcm(q).T @ (J @ w + h) for q, w, h in zip(sol.q_BR, sol.omega_BN_B, sol.h_B)])
+    assert_allclose(H_N, np.broadcast_to(H_N[0], H_N.shape), atol=H_BALANCE_RTOL * np.linalg.norm(H_N[0]))
+
+
+# -- failures ---------------------------------------------------------------------------------
+
+def test_infeasible_momentum_limit_fails_with_one_line():
+    """Rest to rest from h = 0, the body must reach a rate of at least θ/T: |h| ≥ I θ/T."""
+    d = slew_scene(max_momentum=0.5 * I_ZZ * SLEW_RAD / T_S, max_iter=200)
+    with pytest.raises(PlanError) as err:
+        plan_scene(scene_from_dict(d))
+    msg = str(err.value)
+    assert "\n" not in msg
+    assert "IPOPT stopped: Infeasible_Problem_Detected" in msg and "plan.max_momentum" in msg
+
+
+def test_cli_reports_an_infeasible_plan_on_one_line(tmp_path, capsys):
+    import tomllib
+
+    text = ZPM.read_text().replace('max_momentum = 14642.833841979125', 'max_momentum = 6000.0')
+    bad = tmp_path / "zpm_tight.toml"
+    bad.write_text(text.replace("intervals = 60", "intervals = 10\nmax_iter = 150"))
+    assert tomllib.loads(bad.read_text())["cmg"]["max_momentum"] == 6000.0
+    code = main(["plan", str(bad), "--out", str(tmp_path / "out"), "--no-fly"])
+    line = one_error_line(capsys.readouterr().err)
+    assert code == 2 and "IPOPT stopped" in line
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"plan": {"duration": 10.0, "q_end": [1.0, 0, 0, 0], "intervalz": 3}}, r"plan\.intervalz: unknown key; did you mean 'intervals'\?"),
+    ({"plan": {"duration": 10.0, "q_end": [1.0, 0, 0, 0], "frame": "lvlh"}}, r"plan\.frame: 'lvlh' needs an \[orbit\]"),
+    ({"plan": {"duration": 10.0, "q_end": [0.9, 0, 0, 0]}}, r"plan\.q_end: .*norm"),
+    ({"cmg": {"kind": "sgcmg_pyramid"}}, r"plan: plans the momentum of an ideal \[cmg\]"),
+], ids=["unknown_key", "lvlh_without_orbit", "not_unit", "gimballed_cluster"])
+def test_bad_plan_tables_are_one_line_errors(change, match):
+    d = slew_scene()
+    d.update(copy.deepcopy(change))
+    with pytest.raises(SceneError, match=match):
+        scene_from_dict(d)
+
+
+# -- files and flight -------------------------------------------------------------------------
+
+def test_plan_files_round_trip(zpm, tmp_path):
+    scene, prob, sol = zpm
+    info = write_plan(scene, prob, sol, tmp_path, chart=False)
+    back = read_plan(tmp_path / "plan.json")
+    assert_allclose(back["q_CR"], sol.q_CR, rtol=1e-10)
+    assert_allclose(back["t"], sol.t)
+    assert info["peak_fraction"] == pytest.approx(sol.peak_h_Nms / prob.h_max)
+    assert json.loads((tmp_path / "plan.json").read_text())["solver"]["intervals"] == 60
+
+
+def test_flown_zpm_tracks_the_plan_and_the_eigenaxis_slew_saturates(zpm, tmp_path):
+    from stationbed.studies.plan_flight import fly_plan
+
+    scene, prob, sol = zpm
+    write_plan(scene, prob, sol, tmp_path, chart=False)
+    f = fly_plan(scene, tmp_path / "plan.json", tmp_path)
+    assert f["flown_vs_planned_max_dh_Nms"] <= FLOWN_H_FRACTION * prob.h_max
+    assert f["flown_vs_planned_max_attitude_deg"] <= FLOWN_ATT_DEG
+    assert f["flown_saturated_ticks"] == 0
+    assert f["eigenaxis_saturated_ticks"] > 0 and f["eigenaxis_peak_fraction"] >= 1.0
+    assert (tmp_path / "plan.rrd").stat().st_size > 0
