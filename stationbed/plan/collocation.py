@@ -50,6 +50,7 @@ class Problem:
     h_max : float [N m s] ; tau_max : float [N m]  Limits on |h| and |ḣ|.
     w_energy : float ; w_peak : float  Weights of ∫|τ|² dt and of γ = max|h|².
     r_hat_R : callable t -> (3,)  The Earth direction in R at time t (constant in LVLH).
+    torque_B : callable t -> (3,)  Other external torque at time t, B components [N m].
     intervals : int ; max_iter : int ; tol : float  Mesh and IPOPT settings.
     """
 
@@ -70,6 +71,11 @@ class Problem:
     max_iter: int = 3000
     tol: float = 1e-8
     peak_regularisation: float = 0.0
+    torque_B: object = None
+
+    def disturbance(self, t) -> np.ndarray:
+        """The known external torque (besides gravity gradient) at ``t`` [N m], B components."""
+        return np.zeros(3) if self.torque_B is None else np.asarray(self.torque_B(t), float)
 
 
 @dataclass
@@ -100,10 +106,11 @@ def _point_function(p: Problem, w_s: float):
     x = ca.SX.sym("x", 10)
     u = ca.SX.sym("u", 4)
     r = ca.SX.sym("r", 3)
+    L = ca.SX.sym("L", 3)
     q, w, h = x[0:4], w_s * x[4:7], p.h_max * x[7:10]
-    q_dot, w_dot, h_dot, tau = rates(q, w, h, u, r, p.model)
+    q_dot, w_dot, h_dot, tau = rates(q, w, h, u, r, p.model, L)
     f = ca.vertcat(q_dot, w_dot / w_s, h_dot / p.h_max)
-    return ca.Function("point", [x, u, r], [f, tau, h_dot])
+    return ca.Function("point", [x, u, r, L], [f, tau, h_dot])
 
 
 def _slew_angle(q0, q1) -> float:
@@ -135,8 +142,9 @@ def simulate_commands(p: Problem, t, q_CR, substeps: int = 4):
     x = ca.SX.sym("x", 10)
     u = ca.SX.sym("u", 4)
     r = ca.SX.sym("r", 3)
-    qd, wd, hd, _ = rates(x[0:4], x[4:7], x[7:10], u, r, p.model)
-    f = ca.Function("f", [x, u, r], [ca.vertcat(qd, wd, hd)])
+    L = ca.SX.sym("L", 3)
+    qd, wd, hd, _ = rates(x[0:4], x[4:7], x[7:10], u, r, p.model, L)
+    f = ca.Function("f", [x, u, r, L], [ca.vertcat(qd, wd, hd)])
     out = [np.concatenate([p.q0, p.w0, p.h0])]
     xk = out[0].copy()
     for k in range(len(t) - 1):
@@ -148,7 +156,7 @@ def simulate_commands(p: Problem, t, q_CR, substeps: int = 4):
                 qc = (1 - a) * q_CR[k] + a * q_CR[k + 1]
                 return qc / np.linalg.norm(qc)
             def F(tt, xx):
-                return np.asarray(f(xx, cmd(tt), p.r_hat_R(tt))).ravel()
+                return np.asarray(f(xx, cmd(tt), p.r_hat_R(tt), p.disturbance(tt))).ravel()
             k1 = F(ta, xk)
             k2 = F(ta + dt / 2, xk + dt / 2 * k1)
             k3 = F(ta + dt / 2, xk + dt / 2 * k2)
@@ -191,12 +199,13 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
     point = _point_function(p, w_s)
     fmap = point.map(M)
     r_hat = np.array([p.r_hat_R(tk) for tk in t]).T  # (3, M)
+    L_ext = np.array([p.disturbance(tk) for tk in t]).T  # (3, M)
 
     opti = ca.Opti()
     X = opti.variable(10, M)
     U = opti.variable(4, M)
     gam = opti.variable()
-    F, TAU, HD = fmap(X, U, r_hat)
+    F, TAU, HD = fmap(X, U, r_hat, L_ext)
     groups = {}
 
     def add(name, expr, lb, ub):
@@ -286,7 +295,7 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
     Xv = np.asarray(val(X)).T
     Uv = np.asarray(val(U)).T
     gv = float(val(gam))
-    Fv, tau_v, hd_v = (np.asarray(a) for a in fmap(Xv.T, Uv.T, r_hat))
+    Fv, tau_v, hd_v = (np.asarray(a) for a in fmap(Xv.T, Uv.T, r_hat, L_ext))
     w = Xv[:, 4:7] * w_s
     h = Xv[:, 7:10] * p.h_max
     tau = tau_v.T

@@ -12,9 +12,12 @@ rate, in their own components, as the ISS law does), with R the reference frame 
 (DESIGN §3-4; the same as the simulator's momentum form with an ideal cluster):
 
     q̇_BR = ½ q_BR ⊗ (0, ω_BN_B - C_BR ω_RN_R)
-    J ω̇ = L_gg + τ - ω × J ω,          L_gg = 3 n² r̂_B × J r̂_B,  r̂_B = C_BR r̂_R
+    J ω̇ = L + τ - ω × J ω,   L = L_gg + L_B,   L_gg = 3 n² r̂_B × J r̂_B,  r̂_B = C_BR r̂_R
     ḣ = -τ - ω × h                      (the store delivers exactly τ to the body: the total
-                                          H = J ω + h obeys Ḣ|_B = L_gg - ω × H)
+                                          H = J ω + h obeys Ḣ|_B = L - ω × H)
+
+with ``L_B`` the scene's other torques known as functions of time (constant windows, orbital
+harmonics: PSOPT's aerodynamic model is one).
 
 PSOPT's ``dae`` writes the same with ``u = -τ`` (its ``hdot = u - ω × h``, ``J ω̇ = τ_d - ω × Jω - u``).
 """
@@ -64,7 +67,7 @@ def law_torque(q_BR, omega_BN_B, q_CR, m: Rotational):
     return -_mv(m.J, m.kp * eps + m.kd * w_tilde)
 
 
-def rates(q_BR, omega_BN_B, h_B, q_CR, r_hat_R, m: Rotational):
+def rates(q_BR, omega_BN_B, h_B, q_CR, r_hat_R, m: Rotational, L_B=None):
     """``(q̇_BR, ω̇_BN_B, ḣ_B, τ_B)`` of the model.
 
     Parameters
@@ -75,6 +78,8 @@ def rates(q_BR, omega_BN_B, h_B, q_CR, r_hat_R, m: Rotational):
     q_CR : (4,)  Commanded attitude relative to R.
     r_hat_R : (3,)  Unit vector to (or from) the Earth's centre, R components.
     m : Rotational
+    L_B : (3,), optional  Other external torque (known in time: the scene's constant and
+        orbital-harmonic torques), B components [N m].
     """
     C_BR = dcm(q_BR)
     w_BR_B = omega_BN_B - _mv(C_BR, m.w_RN_R)
@@ -83,7 +88,8 @@ def rates(q_BR, omega_BN_B, h_B, q_CR, r_hat_R, m: Rotational):
     tau = law_torque(q_BR, omega_BN_B, q_CR, m)
     r_B = _mv(C_BR, r_hat_R)
     L_gg = 3.0 * m.n2 * _cross(r_B, _mv(m.J, r_B))
-    w_dot = _mv(np.linalg.inv(m.J), L_gg + tau - _cross(omega_BN_B, _mv(m.J, omega_BN_B)))
+    L = L_gg if L_B is None else L_gg + L_B
+    w_dot = _mv(np.linalg.inv(m.J), L + tau - _cross(omega_BN_B, _mv(m.J, omega_BN_B)))
     h_dot = -tau - _cross(omega_BN_B, h_B)
     return q_dot, w_dot, h_dot, tau
 

@@ -18,7 +18,11 @@ from ..run.prepare import prepare
 from .collocation import PlanError, Problem, Solution, solve
 from .model import Rotational
 
-__all__ = ["scene_problem", "plan_scene", "PEAK_REGULARISATION"]
+__all__ = ["scene_problem", "plan_scene", "PEAK_REGULARISATION", "PLANNED_TORQUES"]
+
+#: the ``[[torque]]`` kinds a plan models (known functions of time, B components); the others
+#: (aero, srp: functions of the attitude on the scene's surfaces) are not in the plan's model
+PLANNED_TORQUES = ("constant", "orbital_harmonic")
 
 #: energy weight that keeps a pure peak-momentum objective's optimum unique (many command histories
 #: share one peak): 1e-6 of the energy of τ_max held over the slew, per unit of the peak's scale
@@ -30,6 +34,10 @@ def scene_problem(scene, *, intervals: int | None = None) -> Problem:
     spec = scene.plan
     if spec is None:
         raise PlanError(f"scene '{scene.name}' has no [plan] table")
+    for i, tq in enumerate(scene.torque):
+        if tq.kind not in PLANNED_TORQUES:
+            raise PlanError(f"torque[{i}]: kind '{tq.kind}' is not in the plan's model (it plans gravity gradient and "
+                            f"kinds {', '.join(PLANNED_TORQUES)}): remove it from the scene to plan")
     prep = prepare(scene)
     plant = plant_facts(scene, prep.system, prep.p, prep.x0, scene.controller.period if scene.controller else 1.0)
     J = np.asarray(plant.inertia_O_B, float)
@@ -49,6 +57,20 @@ def scene_problem(scene, *, intervals: int | None = None) -> Problem:
             if orbit is None:
                 return np.array([1.0, 0.0, 0.0])
             return np.asarray(orbit_position_N(orbit.u0 + n * t, 1.0, orbit.inclination), float)
+    torques = list(scene.torque)
+
+    def torque_B(t):
+        L = np.zeros(3)
+        for tq in torques:
+            if tq.kind == "constant":
+                if tq.start <= t < tq.stop:
+                    L += np.asarray(tq.torque_B, float)
+            else:
+                u = orbit.u0 + n * t
+                L += (np.asarray(tq.bias_B) + np.asarray(tq.cos1_B) * np.cos(u) + np.asarray(tq.sin1_B) * np.sin(u)
+                      + np.asarray(tq.cos2_B) * np.cos(2 * u) + np.asarray(tq.sin2_B) * np.sin(2 * u))
+        return L
+
     q0 = np.asarray(scene.initial.q_BN, float)
     q1 = np.asarray(spec.q_end, float)
     w0 = np.asarray(scene.initial.omega_BN_B, float) + dcm(q0) @ w_RN_R
@@ -74,6 +96,7 @@ def scene_problem(scene, *, intervals: int | None = None) -> Problem:
         h1=None if spec.h_end_B is None else np.asarray(spec.h_end_B, float),
         h_max=float(h_max), tau_max=float(tau_max), w_energy=w_e, w_peak=w_p, r_hat_R=r_hat,
         intervals=intervals or spec.intervals, max_iter=spec.max_iter, tol=spec.tol, peak_regularisation=reg,
+        torque_B=torque_B if torques else None,
     )
 
 
