@@ -233,3 +233,27 @@ def test_torques_outside_the_model_are_refused():
     d["torque"] = [{"kind": "aero"}]
     with pytest.raises(PlanError, match=r"torque\[0\]: kind 'aero' is not in the plan's model"):
         plan_scene(scene_from_dict(d))
+
+
+def test_objectives_trade_peak_momentum_against_torque_energy():
+    """On one mesh, minimising the peak alone gives the lowest peak and the most energy, the
+    energy alone the reverse (it runs the store up to its capacity), the weighted sum between."""
+    base = load_scene(ZPM).replace({"plan.intervals": 30})
+    sols = {obj: plan_scene(base.replace({"plan.objective": obj}))[1]
+            for obj in ("peak_momentum", "weighted", "torque_energy")}
+    peak = {k: s.peak_h_Nms for k, s in sols.items()}
+    energy = {k: s.energy_N2m2s for k, s in sols.items()}
+    assert peak["peak_momentum"] < peak["weighted"] < peak["torque_energy"]
+    assert energy["peak_momentum"] > energy["weighted"] > energy["torque_energy"]
+    cap = base.cmg.max_momentum
+    assert peak["torque_energy"] == pytest.approx(cap, rel=1e-6)
+
+
+def test_bench_smoke_runs(capsys):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_plan", ROOT / "benchmarks" / "bench_plan.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--smoke"]) == 0
+    assert "Hermite-Simpson intervals" in capsys.readouterr().out

@@ -17,7 +17,7 @@ from .base import QUAT_NORM_TOL, FieldError, Strict, TimeS, Vec3
 
 __all__ = ["PlanSpec", "PLAN_OBJECTIVES"]
 
-#: objective -> (energy weight used, peak weight used): what each preset keeps of the weights
+#: the objectives: the weighted sum, or one of its two terms alone (see PlanSpec)
 PLAN_OBJECTIVES = ("weighted", "torque_energy", "peak_momentum")
 
 Quaternion = Annotated[list[float], Field(min_length=4, max_length=4)]
