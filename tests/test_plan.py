@@ -157,7 +157,7 @@ def test_infeasible_momentum_limit_fails_with_one_line():
         plan_scene(scene_from_dict(d))
     msg = str(err.value)
     assert "\n" not in msg
-    assert "IPOPT stopped: Infeasible_Problem_Detected" in msg and "plan.max_momentum" in msg
+    assert "IPOPT stopped: Infeasible_Problem_Detected" in msg and "raise plan.max_momentum" in msg
 
 
 def test_cli_reports_an_infeasible_plan_on_one_line(tmp_path, capsys):

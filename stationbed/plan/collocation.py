@@ -172,8 +172,8 @@ def simulate_commands(p: Problem, t, q_CR, substeps: int = 4):
 _RELAX = {
     "momentum limit": ("N m s", "raise plan.max_momentum or lengthen plan.duration"),
     "torque limit": ("N m", "raise plan.max_torque or lengthen plan.duration"),
-    "end conditions": ("(scaled)", "free plan.h_end_B, lengthen plan.duration or raise plan.max_momentum"),
-    "dynamics defects": ("(scaled)", "raise plan.intervals or plan.max_iter"),
+    "end conditions": ("(scaled units)", "free plan.h_end_B, lengthen plan.duration or raise plan.max_momentum"),
+    "dynamics defects": ("(scaled units)", "raise plan.intervals or plan.max_iter"),
     "unit quaternions": ("", "raise plan.intervals"),
 }
 
@@ -290,10 +290,7 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
         "warm_start": "eigenaxis" if guess is None else "solution",
     }
     if not info["success"]:
-        unit, relax = _RELAX[worst]
-        raise PlanError(
-            f"IPOPT stopped: {info['status']} after {info['iterations']} iterations; largest violation "
-            f"{viol[worst][0]:.3g} {unit} in the {worst}: {relax}".replace("  ", " "))
+        raise PlanError(_failure(info, viol, worst, val, X, HD, p))
     Xv = np.asarray(val(X)).T
     Uv = np.asarray(val(U)).T
     gv = float(val(gam))
@@ -307,6 +304,36 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
         cost=p.w_energy * E + p.w_peak * p.h_max**2 * gv, energy_N2m2s=E,
         peak_h_Nms=float(np.max(np.linalg.norm(h, axis=1))), gamma_N2m2s2=p.h_max**2 * gv, stats=info,
     )
+
+
+#: IPOPT statuses that mean "no point satisfies the constraints" (the request, not the mesh)
+INFEASIBLE = ("Infeasible_Problem_Detected", "Restoration_Failed", "Error_In_Step_Computation")
+#: a limit counts as reached at IPOPT's last point above this fraction of it
+LIMIT_REACHED = 0.99
+
+
+def _failure(info, viol, worst, val, X, HD, p: Problem) -> str:
+    """The one-line reason of a failed solve: status, iterations, the largest violation and its
+    constraint group, how close the last point came to the limits, and what to relax."""
+    unit, relax = _RELAX[worst]
+    h_frac = float(np.max(np.sqrt(np.sum(np.asarray(val(X[7:10, :])) ** 2, axis=0))))
+    t_frac = float(np.max(np.sqrt(np.sum(np.asarray(val(HD)) ** 2, axis=0)))) / p.tau_max
+    if info["status"] in INFEASIBLE:
+        parts = []
+        if h_frac >= LIMIT_REACHED:
+            parts.append("raise plan.max_momentum")
+        if t_frac >= LIMIT_REACHED:
+            parts.append("raise plan.max_torque")
+        parts.append("lengthen plan.duration")
+        if p.h1 is not None:
+            parts.append("free plan.h_end_B")
+        relax = "the request looks infeasible: " + ", ".join(parts[:-1]) + f" or {parts[-1]}" if len(parts) > 1 \
+            else "the request looks infeasible: " + parts[0]
+    elif info["status"] == "Maximum_Iterations_Exceeded":
+        relax = f"raise plan.max_iter (now {p.max_iter}) or plan.intervals; or {relax}"
+    return (f"IPOPT stopped: {info['status']} after {info['iterations']} iterations; largest violation "
+            f"{viol[worst][0]:.3g} {unit} in the {worst}; at the last point |h| reaches {100 * h_frac:.0f} % of "
+            f"the momentum limit and |h_dot| {100 * t_frac:.0f} % of the torque limit: {relax}").replace("  ", " ")
 
 
 def _interp(t_from, Y, t_to):
