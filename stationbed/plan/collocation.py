@@ -12,8 +12,7 @@ interval (points ``i``, ``m``, ``j``):
 At every point: ``|h|² ≤ γ ≤ h_max²`` (the min-max through an auxiliary bound), ``|ḣ| ≤ τ_max``,
 ``|q_CR| = 1``, and ``||q_BR|² - 1| ≤ QUAT_BAND`` (the dynamics keep ``|q|`` to the
 discretisation's accuracy; an equality at every point would over-determine the defects; PSOPT's
-example bands it too, at 2e-4). The band can be active (the law's ``ε`` grows with ``|q|``), so it
-moves the cost by its own order, 1e-6 relative. Objective: ``w_E ∫|τ|² dt + w_γ γ`` (Simpson's rule).
+example bands it too, at 2e-4; the model reads only ``q / |q|``). Objective: ``w_E ∫|τ|² dt + w_γ γ`` (Simpson's rule).
 """
 
 from __future__ import annotations
@@ -30,10 +29,11 @@ from .model import Rotational, rates
 
 __all__ = ["Problem", "Solution", "PlanError", "solve", "QUAT_BAND", "eigenaxis_commands", "simulate_commands"]
 
-#: ``||q|² - 1|`` allowed at the collocation points: what a person types (scene quaternions are unit
-#: to 1e-6), 200 times tighter than PSOPT's band; above the defects' tolerance (1e-8), so the
-#: defects and the norm never fight.
-QUAT_BAND = 1e-6
+#: ``||q|² - 1|`` allowed at the collocation points (PSOPT's example: 2e-4). The model uses
+#: ``q / |q|`` everywhere (``dcm`` divides by ``|q|²``, the law normalises), so the band gives the
+#: optimiser nothing to gain: it only absorbs Hermite-Simpson's drift of ``|q|``, which on coarse
+#: meshes exceeds 1e-6 (a 1 rad slew on 6 intervals: 1e-5) and made such problems infeasible.
+QUAT_BAND = 1e-4
 
 
 class PlanError(ValueError):
@@ -72,6 +72,7 @@ class Problem:
     intervals: int = 60
     max_iter: int = 3000
     tol: float = 1e-8
+    #: ρ: a small energy term added to a pure peak objective (many histories share one peak)
     peak_regularisation: float = 0.0
     torque_B: object = None
 
@@ -241,8 +242,9 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
     # the objective's scale: what a torque of τ_max held over the slew and a full store would cost
     scale = p.w_energy * p.tau_max**2 * T + p.w_peak * p.h_max**2
     scale = scale if scale > 0 else 1.0
-    reg = p.peak_regularisation * p.tau_max**2 * T
-    J_si = p.w_energy * energy + p.w_peak * p.h_max**2 * gam + reg * energy / max(p.tau_max**2 * T, 1e-300)
+    # the regularisation: the energy of τ_max held over the slew weighs as ρ full stores
+    w_reg = p.peak_regularisation * p.w_peak * p.h_max**2 / (p.tau_max**2 * T)
+    J_si = (p.w_energy + w_reg) * energy + p.w_peak * p.h_max**2 * gam
     opti.minimize(J_si / scale)
 
     # warm start: the eigenaxis path flown by the law, or a given solution (mesh refinement)

@@ -60,8 +60,10 @@ def _mv(M, v):
 
 
 def law_torque(q_BR, omega_BN_B, q_CR, m: Rotational):
-    """``τ_B = -J (kp ε + kd ω̃)`` [N m], B components (see the module docstring)."""
-    e = quat_mult(quat_conj(q_CR), q_BR)
+    """``τ_B = -J (kp ε + kd ω̃)`` [N m], B components (see the module docstring). ``q_BR`` is
+    normalised first: off-unit quaternions (the collocation's band) do not change the law."""
+    norm = ca.norm_2(q_BR) if isinstance(q_BR, (ca.SX, ca.MX)) else np.linalg.norm(q_BR)
+    e = quat_mult(quat_conj(q_CR), q_BR / norm)
     eps = 2.0 * e[1:4]
     w_tilde = omega_BN_B - _mv(dcm(q_CR), m.w_RN_R)
     return -_mv(m.J, m.kp * eps + m.kd * w_tilde)
