@@ -4,7 +4,7 @@
                               [--rtol X] [--atol X] [--duration S] [--step S] [--rrd FILE]
     stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE]
     stationbed replay FILE.rrd [--web]
-    stationbed plan SCENE.toml [--out DIR] [--intervals N] [--refine N] [--no-fly]
+    stationbed plan SCENE.toml [--out DIR] [--intervals N] [--refine N] [--no-fly] [--set KEY.PATH=VALUE]
     stationbed list
 
 Any bad input or failed run: one line on stderr (``stationbed: error: ...``), non-zero exit
@@ -121,6 +121,8 @@ def _parser() -> argparse.ArgumentParser:
     pn.add_argument("--intervals", type=int, default=None, help="collocation intervals (default: plan.intervals)")
     pn.add_argument("--refine", type=int, default=None, help="solve again on this many intervals, warm started")
     pn.add_argument("--no-fly", action="store_true", help="only plan (no closed-loop flight)")
+    pn.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="change one scene value, read as TOML (repeatable): --set 'plan.objective=\"peak_momentum\"'")
 
     rp = sub.add_parser("replay", help="open a rerun recording in the viewer (or say how to)")
     rp.add_argument("file", type=Path, help="a .rrd recording (stationbed run/check --rrd)")
@@ -496,14 +498,13 @@ def _cmd_replay(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from .scene import load_scene
     from .studies.plan_flight import plan_and_fly
 
     for name in ("intervals", "refine"):
         v = getattr(args, name)
         if v is not None and v < 2:
             return _fail(f"--{name} must be at least 2, got {v}", EXIT_BAD_INPUT)
-    scene = load_scene(args.scene)
+    scene, _ = _scene_with_options(args)
     if scene.plan is None:
         return _fail(f"{args.scene}: plan: missing [plan] table", EXIT_BAD_INPUT)
     out = args.out or Path("out") / scene.name / "plan"
