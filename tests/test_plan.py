@@ -208,7 +208,13 @@ def test_flown_zpm_tracks_the_plan_and_the_eigenaxis_slew_saturates(zpm, tmp_pat
     assert f["flown_vs_planned_max_attitude_deg"] <= FLOWN_ATT_DEG
     assert f["flown_saturated_ticks"] == 0
     assert f["eigenaxis_saturated_ticks"] > 0 and f["eigenaxis_peak_fraction"] >= 1.0
-    assert (tmp_path / "plan.rrd").stat().st_size > 0
+    from test_rerun import read_temporal
+
+    rec = read_temporal(tmp_path / "plan.rrd")
+    planned = rec["plan/h_norm_planned"]
+    assert_allclose(planned["t"], sol.t, atol=1e-9)
+    assert_allclose(planned["Scalars:scalars"].ravel(), np.linalg.norm(sol.h_B, axis=1), rtol=1e-9)
+    assert {"plan/h_norm_flown", "plan/h_norm_eigenaxis", "plan/flown_vs_planned_deg", "plan/q_CR"} <= set(rec)
 
 
 def test_known_torques_enter_the_momentum_balance():
