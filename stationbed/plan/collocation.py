@@ -150,20 +150,19 @@ def simulate_commands(p: Problem, t, q_CR, substeps: int = 4):
     f = ca.Function("f", [x, u, r, L], [ca.vertcat(qd, wd, hd)])
     out = [np.concatenate([p.q0, p.w0, p.h0])]
     xk = out[0].copy()
+    def F(k, tt, xx):  # the rates within gap k, the command linear across it
+        a = (tt - t[k]) / (t[k + 1] - t[k])
+        qc = (1 - a) * q_CR[k] + a * q_CR[k + 1]
+        return np.asarray(f(xx, qc / np.linalg.norm(qc), p.r_hat_R(tt), p.disturbance(tt))).ravel()
+
     for k in range(len(t) - 1):
         dt = (t[k + 1] - t[k]) / substeps
         for j in range(substeps):
             ta = t[k] + j * dt
-            def cmd(tt):
-                a = (tt - t[k]) / (t[k + 1] - t[k])
-                qc = (1 - a) * q_CR[k] + a * q_CR[k + 1]
-                return qc / np.linalg.norm(qc)
-            def F(tt, xx):
-                return np.asarray(f(xx, cmd(tt), p.r_hat_R(tt), p.disturbance(tt))).ravel()
-            k1 = F(ta, xk)
-            k2 = F(ta + dt / 2, xk + dt / 2 * k1)
-            k3 = F(ta + dt / 2, xk + dt / 2 * k2)
-            k4 = F(ta + dt, xk + dt * k3)
+            k1 = F(k, ta, xk)
+            k2 = F(k, ta + dt / 2, xk + dt / 2 * k1)
+            k3 = F(k, ta + dt / 2, xk + dt / 2 * k2)
+            k4 = F(k, ta + dt, xk + dt * k3)
             xk = xk + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         out.append(xk.copy())
     return np.array(out)
@@ -212,8 +211,13 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
     groups = {}
 
     def add(name, expr, lb, ub):
-        opti.subject_to(opti.bounded(lb, expr, ub) if lb is not None and ub is not None and lb != ub
-                        else (expr == lb if lb == ub else (expr <= ub if lb is None else expr >= lb)))
+        """``lb <= expr <= ub`` (an equality when they are equal, one-sided when lb is None)."""
+        if lb is None:
+            opti.subject_to(expr <= ub)
+        elif lb == ub:
+            opti.subject_to(expr == lb)
+        else:
+            opti.subject_to(opti.bounded(lb, expr, ub))
         groups.setdefault(name, []).append((expr, lb, ub))
 
     i, m, j = np.arange(0, M - 1, 2), np.arange(1, M, 2), np.arange(2, M, 2)
@@ -296,7 +300,7 @@ def solve(p: Problem, guess: Solution | None = None) -> Solution:
     Xv = np.asarray(val(X)).T
     Uv = np.asarray(val(U)).T
     gv = float(val(gam))
-    Fv, tau_v, hd_v = (np.asarray(a) for a in fmap(Xv.T, Uv.T, r_hat, L_ext))
+    _, tau_v, hd_v = (np.asarray(a) for a in fmap(Xv.T, Uv.T, r_hat, L_ext))
     w = Xv[:, 4:7] * w_s
     h = Xv[:, 7:10] * p.h_max
     tau = tau_v.T
