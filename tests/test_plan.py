@@ -331,3 +331,18 @@ def test_inertial_plan_on_an_orbit_feels_the_gravity_gradient():
     H_N = np.array([dcm(q).T @ (J @ w + h) for q, w, h in zip(sol.q_BR, sol.omega_BN_B, sol.h_B)])
     assert np.linalg.norm(impulse) > 1e-3  # N m s: the gradient matters here
     assert_allclose(H_N[-1] - H_N[0], impulse, atol=H_BALANCE_RTOL * np.linalg.norm(impulse))
+
+
+@pytest.mark.parametrize("params, match", [
+    ({}, r"controller 'schedule': give params\.plan \(a plan\.json\) or a \[plan\] table"),
+    ({"plan": "no/such/plan.json"}, r"controller 'schedule': no/such/plan\.json: not a readable plan"),
+], ids=["nothing_to_fly", "missing_file"])
+def test_schedule_without_a_plan_is_a_one_line_error(params, match):
+    from stationbed import simulate
+    from stationbed.run.controller import ControllerError
+
+    d = slew_scene()
+    d.pop("plan")
+    d["controller"] = {"name": "schedule", "period": 0.1, "params": params}
+    with pytest.raises(ControllerError, match=match):
+        simulate(scene_from_dict(d).replace({"simulation.duration": 1.0}))
