@@ -12,6 +12,7 @@ import dataclasses
 import numpy as np
 
 from ..core.rotation import dcm
+from ..model.cmg import CmgModel, cluster_functions
 from ..model.environment import omega_ON_O, orbit_position_N
 from ..run.closed_loop import plant_facts
 from ..run.prepare import prepare
@@ -29,6 +30,16 @@ PLANNED_TORQUES = ("constant", "orbital_harmonic")
 #: case (30 intervals) 1e-6 left IPOPT wandering (3000 iterations), 1e-3 converges in 48 with the
 #: peak 1.2e-5 below ρ = 1e-2's; the reported cost leaves the term out
 PEAK_REGULARISATION = 1e-3
+
+
+def start_momentum(cmg) -> np.ndarray:
+    """The cluster's momentum at t = 0, B components [N m s]: an ideal store's ``h0_B``, a
+    gimballed cluster's ``h`` at its ``gimbal0`` (zeros without a cluster)."""
+    if cmg is None:
+        return np.zeros(3)
+    if cmg.kind == "ideal":
+        return np.asarray(cmg.h0_B, float)
+    return np.asarray(cluster_functions(cmg)["h"](CmgModel.of(cmg).initial_state(cmg)), float).ravel()
 
 
 def scene_problem(scene, *, intervals: int | None = None) -> Problem:
@@ -77,10 +88,9 @@ def scene_problem(scene, *, intervals: int | None = None) -> Problem:
     q1 = np.asarray(spec.q_end, float)
     w0 = np.asarray(scene.initial.omega_BN_B, float) + dcm(q0) @ w_RN_R
     w1 = np.asarray(spec.omega_end, float) + dcm(q1) @ w_RN_R
-    cmg = scene.cmg
-    h0 = np.asarray(cmg.h0_B if cmg is not None else [0.0, 0.0, 0.0], float)
-    h_max = spec.max_momentum or cmg.max_momentum
-    tau_max = spec.max_torque or cmg.max_torque
+    h0 = start_momentum(scene.cmg)
+    h_max = spec.max_momentum or scene.cmg.max_momentum
+    tau_max = spec.max_torque or scene.cmg.max_torque
     w_e, w_p, reg = spec.weight_energy, spec.weight_peak, 0.0
     if spec.objective == "torque_energy":
         w_e, w_p = 1.0, 0.0

@@ -2,7 +2,8 @@
 zero-propellant manoeuvre); :mod:`stationbed.plan` solves it.
 
 The start is the scene's ``[initial]`` state and CMG momentum (``[cmg] h0_B`` of an ideal
-cluster); the end conditions, limits, objective and mesh are here. Attitudes and rates are
+cluster, or a gimballed cluster's momentum at its ``gimbal0``); the end conditions, limits,
+objective and mesh are here. Attitudes and rates are
 relative to ``frame`` (LVLH or inertial), as ``[initial] frame`` states them.
 """
 
@@ -29,8 +30,9 @@ class PlanSpec(Strict):
     Keys (SI): ``duration`` [s]; ``frame`` ("lvlh" or "inertial"); ``q_end`` (scalar first,
     body relative to ``frame``); ``omega_end`` [rad/s] (body rate relative to ``frame``, B
     components; default at rest in it); ``h_end_B`` [N m s] (CMG momentum at the end; default
-    free); ``max_momentum`` [N m s] (|h| limit; default the cluster's ``max_momentum``);
-    ``max_torque`` [N m] (|ḣ| limit; default the cluster's ``max_torque``); ``objective``
+    free); ``max_momentum`` [N m s] (|h| limit; default an ideal cluster's ``max_momentum``);
+    ``max_torque`` [N m] (|ḣ| limit; default an ideal cluster's ``max_torque``; both required
+    with a gimballed cluster); ``objective``
     ("weighted": ``weight_energy ∫|τ|² dt + weight_peak max|h|²``; "torque_energy"; "peak_momentum");
     ``weight_energy`` [1/(N² m² s)], ``weight_peak`` [1/(N² m² s²)]; ``kp`` [1/s²] and ``kd``
     [1/s]: the ISS-style law ``τ = -J (kp ε + kd ω̃)`` flown inside the optimisation;

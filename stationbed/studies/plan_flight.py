@@ -85,6 +85,9 @@ def fly_plan(scene, plan_json, out_dir) -> dict:
         "flown_vs_planned_max_attitude_deg": math.degrees(float(np.max(att))),
         "flown_final_error_deg": math.degrees(float(rotation_angle(_relative_attitude(scene, flown)[-1], q_end)[0])),
         "flown_saturated_ticks": sf.get("momentum_saturated_ticks"),
+        "flown_rate_limited_ticks": sf.get("rate_limited_ticks"),
+        "flown_min_singularity": (float(np.min(flown["cmg_singularity"])) if "cmg_singularity" in flown.columns
+                                  else None),
         "eigenaxis_peak_h_Nms": float(np.max(h_eig)),
         "eigenaxis_peak_fraction": float(np.max(h_eig)) / cap,
         "eigenaxis_saturated_ticks": se.get("momentum_saturated_ticks"),
