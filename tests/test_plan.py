@@ -178,10 +178,12 @@ def test_cli_reports_an_infeasible_plan_on_one_line(tmp_path, capsys):
     ({"plan": {"duration": 10.0, "q_end": [1.0, 0, 0, 0], "frame": "lvlh"}}, r"plan\.frame: 'lvlh' needs an \[orbit\]"),
     ({"plan": {"duration": 10.0, "q_end": [0.9, 0, 0, 0]}}, r"plan\.q_end: .*norm"),
     ({"cmg": {"kind": "sgcmg_pyramid"}}, r"plan\.max_momentum: missing: give it \(a gimballed cluster \(sgcmg_pyramid\)"),
-], ids=["unknown_key", "lvlh_without_orbit", "not_unit", "gimballed_cluster"])
+    ({"cmg": None}, r"plan: needs a \[cmg\] table"),
+], ids=["unknown_key", "lvlh_without_orbit", "not_unit", "gimballed_cluster", "no_cluster"])
 def test_bad_plan_tables_are_one_line_errors(change, match):
     d = slew_scene()
     d.update(copy.deepcopy(change))
+    d = {k: v for k, v in d.items() if v is not None}
     with pytest.raises(SceneError, match=match):
         scene_from_dict(d)
 

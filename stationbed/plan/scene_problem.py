@@ -34,9 +34,7 @@ PEAK_REGULARISATION = 1e-3
 
 def start_momentum(cmg) -> np.ndarray:
     """The cluster's momentum at t = 0, B components [N m s]: an ideal store's ``h0_B``, a
-    gimballed cluster's ``h`` at its ``gimbal0`` (zeros without a cluster)."""
-    if cmg is None:
-        return np.zeros(3)
+    gimballed cluster's ``h`` at its ``gimbal0``."""
     if cmg.kind == "ideal":
         return np.asarray(cmg.h0_B, float)
     return np.asarray(cluster_functions(cmg)["h"](CmgModel.of(cmg).initial_state(cmg)), float).ravel()

@@ -138,11 +138,13 @@ def _check_plan(scene) -> None:
         raise FieldError("plan.frame", f"'{plan.frame}' differs from initial.frame '{scene.initial.frame}': "
                                        "state both attitudes in one frame")
     cmg = scene.cmg
-    ideal = cmg is not None and cmg.kind == "ideal"
-    where = "[cmg] max_momentum" if cmg is None or ideal else f"a gimballed cluster ({cmg.kind}): its usable |h| is a choice"
+    if cmg is None:
+        raise FieldError("plan", "needs a [cmg] table: a plan keeps the CMG momentum within its limits")
+    ideal = cmg.kind == "ideal"
+    where = "[cmg] max_momentum" if ideal else f"a gimballed cluster ({cmg.kind}): its usable |h| is a choice"
     if plan.max_momentum is None and not (ideal and cmg.max_momentum is not None):
         raise FieldError("plan.max_momentum", f"missing: give it ({where})")
-    where = "[cmg] max_torque" if cmg is None or ideal else f"a gimballed cluster ({cmg.kind}): its torque follows its gimbal rates"
+    where = "[cmg] max_torque" if ideal else f"a gimballed cluster ({cmg.kind}): its torque follows its gimbal rates"
     if plan.max_torque is None and not (ideal and cmg.max_torque is not None):
         raise FieldError("plan.max_torque", f"missing: give it ({where})")
 
