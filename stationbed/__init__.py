@@ -29,6 +29,8 @@ _LAZY = {
     "linearize": "analysis.plant",
     "OperatingPoint": "analysis.plant",
     "loop_analysis": "analysis.margins",
+    "plan_scene": "plan",
+    "PlanError": "plan",
     "montecarlo": "studies.montecarlo",
     "MonteCarloResult": "studies.montecarlo",
 }

@@ -4,6 +4,7 @@
                               [--rtol X] [--atol X] [--duration S] [--step S] [--rrd FILE]
     stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE]
     stationbed replay FILE.rrd [--web]
+    stationbed plan SCENE.toml [--out DIR] [--intervals N] [--refine N] [--no-fly] [--set KEY.PATH=VALUE]
     stationbed list
 
 Any bad input or failed run: one line on stderr (``stationbed: error: ...``), non-zero exit
@@ -115,6 +116,16 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--rrd", type=Path, default=None, help="all formulations in one recording")
 
     sub.add_parser("list", help="registered formulations and integrators")
+
+    pn = sub.add_parser("plan", help="plan a slew ([plan] table), fly it with the schedule law, compare an eigenaxis slew")
+    _quiet(pn)
+    pn.add_argument("scene", type=Path)
+    pn.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene name>/plan)")
+    pn.add_argument("--intervals", type=int, default=None, help="collocation intervals (default: plan.intervals)")
+    pn.add_argument("--refine", type=int, default=None, help="solve again on this many intervals, warm started")
+    pn.add_argument("--no-fly", action="store_true", help="only plan (no closed-loop flight)")
+    pn.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="change one scene value, read as TOML (repeatable): --set 'plan.objective=\"peak_momentum\"'")
 
     rp = sub.add_parser("replay", help="open a rerun recording in the viewer (or say how to)")
     rp.add_argument("file", type=Path, help="a .rrd recording (stationbed run/check --rrd)")
@@ -462,6 +473,32 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _cmd_plan(args) -> int:
+    from .studies.plan_flight import plan_and_fly
+
+    for name in ("intervals", "refine"):
+        v = getattr(args, name)
+        if v is not None and v < 2:
+            return _fail(f"--{name} must be at least 2, got {v}", EXIT_BAD_INPUT)
+    scene, _ = _scene_with_options(args)
+    if scene.plan is None:
+        return _fail(f"{args.scene}: plan: missing [plan] table", EXIT_BAD_INPUT)
+    out = args.out or Path("out") / scene.name / "plan"
+    info = plan_and_fly(scene, out, intervals=args.intervals, refine=args.refine, fly=not args.no_fly)
+    st = info["solver"]
+    print(f"plan: cost {info['cost']:.7g}, peak |h| {info['peak_h_Nms']:.6g} N m s "
+          f"({100 * info['peak_fraction']:.1f} % of capacity); {st['intervals']} intervals, "
+          f"{st['iterations']} iterations, {st['time_s']:.2f} s")
+    if "flight" in info:
+        f = info["flight"]
+        print(f"flown: peak |h| {f['flown_peak_h_Nms']:.6g} N m s, max |h| - planned {f['flown_vs_planned_max_dh_Nms']:.3g} "
+              f"N m s, attitude within {f['flown_vs_planned_max_attitude_deg']:.3g} deg of the plan; eigenaxis pd slew: "
+              f"peak |h| {f['eigenaxis_peak_h_Nms']:.6g} N m s ({100 * f['eigenaxis_peak_fraction']:.0f} %), "
+              f"{f['eigenaxis_saturated_ticks']} saturated ticks")
+    print(f"wrote {out}")
+    return 0
+
+
 def _cmd_study(args) -> int:
     from .studies import StudyError, precision_study, stability_study
 
@@ -516,7 +553,7 @@ def _main(args) -> int:
         if args.cmd in analysis_cli.COMMANDS:
             return analysis_cli.main(args)
         return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study,
-                "montecarlo": _cmd_montecarlo}[args.cmd](args)
+                "plan": _cmd_plan, "montecarlo": _cmd_montecarlo}[args.cmd](args)
     except SceneError as e:
         _debug_traceback(e)
         return _fail(str(e), EXIT_BAD_INPUT)

@@ -12,6 +12,7 @@ returns a finite command of the right length at every tick, the run logs that co
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 import json
 
 import numpy as np
@@ -26,7 +27,9 @@ NAMES = sorted(REGISTRY)
 
 #: Values for parameters that have no default (a law that needs them says so: a missing one is
 #: a ControllerError naming it, tested below). Every such parameter must appear here.
-EXAMPLE_PARAMS = {"torque_command": {"torque_B": [2.0, -1.0, 0.5]}}  # N m
+EXAMPLE_PARAMS = {"torque_command": {"torque_B": [2.0, -1.0, 0.5]},  # N m
+                  # a hand-written LVLH hold plan (tests/data/hold_plan/README.md)
+                  "schedule": {"plan": str(Path(__file__).parent / "data" / "hold_plan" / "plan.json")}}
 
 PERIOD_S = 0.1  # s
 #: ticks per run: enough for the warm-up of every law (filters, integrators, plan shifts) to be

@@ -4,7 +4,7 @@ Claims, each read from the source itself (the AST of every module, function-leve
 included), not from a hand-kept list of modules:
 
 * a module imports only from its own folder and the folders below it:
-  core < scene < model < formulations, integrators < loop < run < analysis < controllers < output < studies < cli;
+  core < scene < model < formulations, integrators < loop < run < analysis, plan < controllers < output < studies < cli;
 * the modules of the package import each other without a cycle;
 * nothing in the library imports the shipped controllers (they are plug-ins, found through
   their entry points);
@@ -36,6 +36,7 @@ LAYERS = {
     "loop": 4,
     "run": 5,
     "analysis": 6,
+    "plan": 6,  # planned slews: the simulator's plant facts (run) below, the schedule law above
     "controllers": 7,
     "output": 8,
     "studies": 9,

@@ -14,6 +14,7 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .plan import PlanSpec
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict"]
@@ -37,6 +38,7 @@ class Scene(Strict):
     surface: list[Surface] = []
     atmosphere: Atmosphere | None = None
     montecarlo: MonteCarlo | None = None
+    plan: PlanSpec | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -70,6 +72,7 @@ class Scene(Strict):
             if abs(d - round(d)) > 1e-9 * max(d, 1.0):
                 raise FieldError("controller.sensor.delay", f"{c.sensor.delay:g} s is not a whole number of "
                                                             f"controller periods ({c.period:g} s)")
+        _check_plan(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -119,6 +122,31 @@ class Scene(Strict):
         new = scene_from_dict(data, source=source)
         new._folder = self._folder
         return new
+
+
+def _check_plan(scene) -> None:
+    """``[plan]`` agrees with the rest of the scene (one-line FieldError)."""
+    plan = scene.plan
+    if plan is None:
+        return
+    orbit = scene.orbit
+    if orbit is not None and orbit.kepler:
+        raise FieldError("plan", "plans on a circular orbit ('radius' or 'altitude'), not a two-body one")
+    if plan.frame == "lvlh" and orbit is None:
+        raise FieldError("plan.frame", "'lvlh' needs an [orbit] table")
+    if scene.initial.frame != plan.frame:
+        raise FieldError("plan.frame", f"'{plan.frame}' differs from initial.frame '{scene.initial.frame}': "
+                                       "state both attitudes in one frame")
+    cmg = scene.cmg
+    if cmg is None:
+        raise FieldError("plan", "needs a [cmg] table: a plan keeps the CMG momentum within its limits")
+    ideal = cmg.kind == "ideal"
+    where = "[cmg] max_momentum" if ideal else f"a gimballed cluster ({cmg.kind}): its usable |h| is a choice"
+    if plan.max_momentum is None and not (ideal and cmg.max_momentum is not None):
+        raise FieldError("plan.max_momentum", f"missing: give it ({where})")
+    where = "[cmg] max_torque" if ideal else f"a gimballed cluster ({cmg.kind}): its torque follows its gimbal rates"
+    if plan.max_torque is None and not (ideal and cmg.max_torque is not None):
+        raise FieldError("plan.max_torque", f"missing: give it ({where})")
 
 
 def _check_environment(scene) -> None:
