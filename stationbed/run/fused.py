@@ -28,7 +28,7 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
-from .segments import held_torque
+from .segments import held_torque_from
 
 __all__ = ["fused_ok", "run_fused"]
 
@@ -183,7 +183,7 @@ def run_fused(loop, K: int) -> None:
     cp = np.asarray(_symbolic_params(ctrl), dtype=float)
     nx = loop.system.formulation.nx
     p, period, duration = loop.p, loop.period, loop.duration
-    u_ext = held_torque(loop.scene, 0.5 * duration)  # constant: no torque window inside a fused run
+    u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)  # constant: no edge inside a fused run
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p
