@@ -384,7 +384,9 @@ class ControlLoop:
             rs.count_ticks(self.n_rate_limited, self.n_momentum_saturated)
             rs.h_capacity_Nms = self.capacity
             if math.isfinite(self.capacity):
-                out["h_capacity_Nms"] = float(self.capacity)
+                out["h_capacity_Nms"] = float(self.capacity)  # the working units'
+            if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
+                out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())
