@@ -345,6 +345,14 @@ def smooth_integral_N(tr) -> np.ndarray:
     return np.vstack([np.zeros(3), np.cumsum(0.5 * (f[1:] + f[:-1]) * dt, axis=0)])
 
 
+def test_the_balance_scene_has_every_registered_torque_kind():
+    """A kind added to the registry must join the balance below (and its torque its integral)."""
+    from stationbed.model.torques import TORQUES
+
+    scene = scene_from_dict(kinds_scene([(20.0, 40.0)]))
+    assert [k for k, cls in TORQUES.items() if not cls.present(scene)] == []
+
+
 KIND_WINDOWS = {
     "on_grid": [(20.0, 40.0)],
     "off_grid": [(20.05, 40.03)],
