@@ -145,3 +145,19 @@ def test_lqr_margins_use_the_same_interval():
         assert_allclose(mg["gain_margin_down"], lo, rtol=GAIN_RTOL, atol=1e-12)
         assert mg["gain_margin_up"] == hi == math.inf
         assert mg["gain_margin_down"] <= 0.5
+
+
+def test_upper_margin_at_a_lightly_damped_mode():
+    """``L(s) = g (s + a) ω0² / (s (s + 1) (s² + 2 ζ ω0 s + ω0²))`` with ζ = 0.00265: the phase
+    crosses -180 deg within a fraction of a percent of ω0; the upper bound is found there and
+    equals the eigenvalue sweep (no lower bound: L has an integrator)."""
+    import control
+
+    w0, zeta, g, a = 4.69, 0.00265, 0.00726, 1.9  # rad/s, -, 1/s, rad/s
+    L = control.ss(control.tf(np.polymul([g, g * a], [w0**2]), np.polymul([1.0, 1.0, 0.0], [1.0, 2 * zeta * w0, w0**2])))
+    lo, hi = sweep_interval(lambda k: L.A - k * L.B @ L.C)
+    mg = siso_margins(L)
+    assert lo == 0.0 and 1.0 < hi < math.inf
+    assert mg["gain_margin_down"] == 0.0
+    assert_allclose(mg["gain_margin_up"], hi, rtol=GAIN_RTOL)
+    assert abs(mg["phase_crossover_rad_s"] / w0 - 1.0) < 0.05

@@ -67,6 +67,11 @@ def gain_crossings(L) -> list[tuple[float, float]]:
 
     A, B, C = (np.asarray(M, float) for M in (L.A, L.B, L.C))
     w = frequency_grid(A)
+    # a lightly damped pole turns the phase within ~|Re| of its frequency: sample it densely there
+    poles = np.linalg.eigvals(A)
+    dense = [p.imag + max(abs(p.real), 1e-6 * p.imag) * np.linspace(-20.0, 20.0, 81) for p in poles if p.imag > 0]
+    w = np.unique(np.concatenate([w] + dense))
+    w = w[w > 0]
     out = []
     L0 = _response(A, B, C, w[0] * 1e-6)  # real s: L(0⁺) is real
     if math.isfinite(L0.real) and L0.real < 0.0:
