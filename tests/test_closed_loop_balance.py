@@ -20,8 +20,8 @@ hypothesis with edges on the tick grid, off it, at 0, at the duration and beyond
 
 Executors: the generic per-period path (``RK4Generic``: RK4 declared not fusable; ``dop853``),
 the per-tick fused tick (``rk4``, ``fused=False``), the fused loop (``rk4`` with a symbolic
-law; it runs only without a discontinuity inside the run and otherwise hands over to the
-per-tick loop, asserted here), the open loop and the open-loop batch (``simulate_batch``; the
+law; it splits its chunks at edges on the tick grid and hands a run with an edge between ticks
+to the per-tick loop, asserted here), the open loop and the open-loop batch (``simulate_batch``; the
 Monte Carlo's closed-loop samples run through ``simulate``, i.e. the executors above).
 """
 
@@ -105,17 +105,18 @@ def window_impulse_x(windows, t) -> np.ndarray:
     return total
 
 
-def interior(windows, duration=DURATION_S) -> bool:
-    """Whether some window edge lies inside (0, duration): a discontinuity inside the run."""
-    return any(0.0 < e < duration for w in windows for e in w)
+def fuses(windows, duration=DURATION_S) -> bool:
+    """Whether the fused loop can take the run: every window edge inside (0, duration) on the tick
+    grid (``k * PERIOD_S`` exactly); an edge between ticks needs the per-tick loop's cut."""
+    return all(round(e / PERIOD_S) * PERIOD_S == e for w in windows for e in w if 0.0 < e < duration)
 
 
 def run_closed(executor: str, windows, **kw):
     integrator, override, fused = CLOSED[executor]
     tr = simulate(scene_from_dict(sphere_scene(windows, integrator=integrator, **kw)), integrator=override, fused=fused)
     used = tr.meta["summary"]["fused"]
-    # the fused loop runs exactly when nothing is discontinuous inside the run
-    assert used == (executor == "fused" and not interior(windows)), tr.meta["summary"]
+    # the fused loop runs exactly when every edge inside the run is on the tick grid
+    assert used == (executor == "fused" and fuses(windows)), tr.meta["summary"]
     return tr
 
 
@@ -240,7 +241,7 @@ def test_held_command_acts_over_its_period(executor, windows):
     d["simulation"]["output_dt"] = 0.5
     ctrl = SineTorque(period=PERIOD_S)
     tr = simulate(scene_from_dict(d), integrator=override, controller=ctrl, fused=fused)
-    assert tr.meta["summary"]["fused"] == (executor == "fused" and not interior(windows, duration))
+    assert tr.meta["summary"]["fused"] == (executor == "fused" and fuses(windows, duration))
     dH = tr.H_O_N - tr.H_O_N[0]
     expect = held_command_impulse(tr.t, duration) + window_impulse_x(windows, tr.t)
     assert tr.t[-1] == duration
@@ -373,7 +374,7 @@ def test_every_torque_kind_balance(executor, case):
     tr = simulate(scene_from_dict(kinds_scene(windows, integrator, controller=closed)), integrator=override,
                   fused=bool(fused))
     if closed:
-        assert tr.meta["summary"]["fused"] == (executor == "fused" and not interior(windows, KIND_DURATION_S))
+        assert tr.meta["summary"]["fused"] == (executor == "fused" and fuses(windows, KIND_DURATION_S))
     expect = smooth_integral_N(tr) + window_integral_N(tr, windows)
     assert np.abs(expect[-1]).max() > 100 * ONE_TICK_NMS  # the balance has something to check
     assert_allclose(tr.H_O_N - tr.H_O_N[0], expect, rtol=0, atol=KIND_ABS)
