@@ -173,6 +173,8 @@ def _margins(args) -> int:
               f"{_num(c['phase_margin_deg'], '.1f'):>10}{_num(c['crossover_rad_s']):>12}{_num(c['disk_margin']):>7}"
               f"{_num(c['disk_gain_margin']):>7}{_num(c['disk_phase_margin_deg'], '.1f'):>7}"
               f"{_num(c['bandwidth_rad_s']):>12}{_num(c['sensitivity_peak']):>8}")
+    print("  GM down .. GM up: the gain interval; each loop, closed with gain k (the others at 1), keeps its "
+          "stability for GM down < k < GM up")
     zero = int(np.sum(np.abs(la.poles) == 0.0))
     print(f"  closed-loop poles [rad/s] (slowest first; {zero} at exactly 0: states without feedback,"
           " e.g. gimbal angles, joint drives at rest):")

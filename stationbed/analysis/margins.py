@@ -32,7 +32,7 @@ from ..core.paths import safe_name
 from ..core.rotation import quat_mult
 from .plant import linearization, modal_poles, plant_functions
 
-__all__ = ["LoopAnalysis", "loop_analysis", "loop_margins", "settling_time", "frequency_grid"]
+__all__ = ["LoopAnalysis", "loop_analysis", "loop_margins", "settling_time", "frequency_grid", "gain_crossings"]
 
 #: An entry of A or K is structurally zero when below this fraction of its row's largest entry
 #: (the steering law cancels the gimbal angles' effect on the body to ~1e-17 relative: round-off).
@@ -47,27 +47,75 @@ def frequency_grid(A) -> np.ndarray:
     return np.logspace(np.log10(lo) - 3, np.log10(hi) + 3, 3000)
 
 
+def _response(A, B, C, s) -> complex:
+    """``C (sI - A)⁻¹ B`` of a SISO state-space loop at the complex frequency ``s``."""
+    return complex((C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B)).item())
+
+
+def gain_crossings(L) -> list[tuple[float, float]]:
+    """The gains at which the loop ``L`` (negative feedback) puts a closed-loop pole on the
+    imaginary axis: ``1 + k L(jω) = 0`` with ``k > 0``, i.e. every ``ω`` where ``L(jω)`` is real
+    and negative, ``k = -1 / L(jω)``. Returns ``(k, ω)`` pairs [-, rad/s], ω = 0 included.
+
+    ``L(jω)`` is evaluated from the state-space matrices directly (no transfer-function
+    polynomials: a loop with structurally zero poles, e.g. sun-tracking joints at rest, made
+    python-control's ``stability_margins`` divide 0 by 0 at ω = 0, drop that crossing and warn).
+    ω = 0: ``L(0⁺)`` at ``s`` six decades below :func:`frequency_grid` (the limit, as the poles
+    at exactly 0 are uncontrollable or unobservable); ω > 0: sign changes of ``Im L(jω)`` on the
+    grid, refined by Brent's method.
+    """
+    from scipy.optimize import brentq
+
+    A, B, C = (np.asarray(M, float) for M in (L.A, L.B, L.C))
+    w = frequency_grid(A)
+    # a lightly damped pole turns the phase within ~|Re| of its frequency: sample it densely there
+    poles = np.linalg.eigvals(A)
+    dense = [p.imag + max(abs(p.real), 1e-6 * p.imag) * np.linspace(-20.0, 20.0, 81) for p in poles if p.imag > 0]
+    w = np.unique(np.concatenate([w] + dense))
+    w = w[w > 0]
+    out = []
+    L0 = _response(A, B, C, w[0] * 1e-6)  # real s: L(0⁺) is real
+    if math.isfinite(L0.real) and L0.real < 0.0:
+        out.append((-1.0 / L0.real, 0.0))
+    im = np.array([_response(A, B, C, 1j * wk).imag for wk in w])
+    for i in np.nonzero(np.sign(im[:-1]) * np.sign(im[1:]) < 0)[0]:
+        wc = brentq(lambda x: _response(A, B, C, 1j * x).imag, w[i], w[i + 1], xtol=1e-14 * w[i], rtol=1e-12)
+        r = _response(A, B, C, 1j * wc)
+        if r.real < 0.0 and abs(r.imag) <= 1e-6 * abs(r):  # a crossing, not a pole (|L| -> inf)
+            out.append((-1.0 / r.real, float(wc)))
+    return out
+
+
 def siso_margins(L) -> dict:
-    """Gain and phase margins of a SISO loop over all its crossings (python-control's
-    ``stability_margins(L, returnall=True)``): the smallest upward gain margin (> 1; inf when
-    none), the largest downward one (< 1; 0 when none), the smallest phase margin [deg] and its
-    crossover [rad/s], the phase crossover of the upward gain margin [rad/s]."""
+    """Gain and phase margins of a SISO loop (negative feedback).
+
+    The gain interval ``(gain_margin_down, gain_margin_up)``: the loop closed as ``1 + k L``
+    keeps its nominal (k = 1) stability for every gain inside it; the bounds are the crossings of
+    :func:`gain_crossings` nearest to 1 below and above (0 / inf when none). A plant that gravity
+    gradient makes unstable has a *lower* gain margin (often at ω = 0). The phase margin [deg]
+    and its crossover [rad/s] over all gain crossovers are python-control's
+    (``stability_margins(L, returnall=True)``; its own gain-margin search, which misses the ω = 0
+    crossing of such loops, is not used, and its 0/0 warnings there are silenced); the phase
+    crossover [rad/s] is that of the upper bound."""
     import control
 
-    gm, pm, _, wpc, wgc, _ = control.stability_margins(L, returnall=True)
-    gm, pm = np.atleast_1d(np.asarray(gm, float)), np.atleast_1d(np.asarray(pm, float))
-    wgc, wpc = np.atleast_1d(np.asarray(wgc, float)), np.atleast_1d(np.asarray(wpc, float))
-    up = np.nonzero(gm > 1.0)[0]
-    down = gm[(gm < 1.0) & (gm > 0.0)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        _, pm, _, _, wgc, _ = control.stability_margins(L, returnall=True)
+    pm, wgc = np.atleast_1d(np.asarray(pm, float)), np.atleast_1d(np.asarray(wgc, float))
     ok = np.nonzero(np.isfinite(pm))[0]
     k = ok[np.argmin(np.abs(pm[ok]))] if ok.size else None
-    j = up[np.argmin(gm[up])] if up.size else None
+    cross = gain_crossings(L)
+    below = [c for c in cross if c[0] < 1.0]
+    above = [c for c in cross if c[0] > 1.0]
+    lo = max(below) if below else (0.0, math.nan)
+    hi = min(above) if above else (math.inf, math.nan)
     return {
-        "gain_margin_up": float(gm[j]) if j is not None else math.inf,
-        "gain_margin_down": float(down.max()) if down.size else 0.0,
+        "gain_margin_up": float(hi[0]),
+        "gain_margin_down": float(lo[0]),
         "phase_margin_deg": float(abs(pm[k])) if k is not None else math.inf,
         "crossover_rad_s": float(wgc[k]) if k is not None and wgc.size == pm.size else math.nan,
-        "phase_crossover_rad_s": float(wpc[j]) if j is not None and wpc.size == gm.size else math.nan,
+        "phase_crossover_rad_s": float(hi[1]),
+        "phase_crossover_down_rad_s": float(lo[1]),
     }
 
 

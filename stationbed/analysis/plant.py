@@ -23,6 +23,12 @@ circular orbit), ``ω̇ = ∂ω/∂x ẋ + ∂ω/∂t`` from the formulation's `
 
 Time-varying terms (arrays turning, orbital harmonics, the orbit's position) are **frozen at the
 chosen time** ``t``: the plant is the tangent of the equations at that instant, not an average.
+Every torque the scene flies is in the point: the symbolic kinds (gravity gradient, harmonics,
+aero, SRP) are in the equations; the *held* kinds (``constant`` windows) enter as the disturbance
+input's operating value ``d0 = held_torque_B(scene, t)``, so the trim cancels them and the TEA
+balances them (:func:`held_over_orbit`: a held torque that switches inside the orbit the TEA
+averages over is refused, naming the kind and the time, since a TEA needs torques that repeat
+every orbit).
 The torque-equilibrium attitude (``about="tea"``) is the root of the external and gyroscopic torque
 ``Ḣ_B = L - ω × H`` averaged over one orbit (24 instants) with zero rates relative to LVLH and the
 extra states at their values at ``t`` (the modal coordinates solved with it); it is found by Newton
@@ -42,9 +48,18 @@ from ..core.rotation import dcm, quat_mult
 from ..model import Structure
 from ..model.appendages import profile
 from ..model.environment import q_ON
+from ..model.torques import get_torque, held_torque_B
 from ..run.system import build_system
 
-__all__ = ["OperatingPoint", "Linearization", "linearize", "linearization", "plant_functions", "tea_search"]
+__all__ = [
+    "OperatingPoint",
+    "Linearization",
+    "linearize",
+    "linearization",
+    "plant_functions",
+    "tea_search",
+    "held_over_orbit",
+]
 
 #: Largest TEA offset from LVLH the Newton search accepts [rad]: beyond it the "nearest"
 #: equilibrium is another principal-axis alignment, not a TEA a station would fly.
@@ -81,7 +96,7 @@ class Linearization:
     t: float
     q_RO: np.ndarray  # R relative to LVLH (relative to N without an orbit), scalar first
     z0: np.ndarray  # the analysis state at the point
-    u0: np.ndarray  # the inputs at the point (control trim, then zero disturbance)
+    u0: np.ndarray  # the inputs at the point (control trim, then the held kinds' torque at t)
     zdot0: np.ndarray  # ż at (z0, u0): zero at an equilibrium
     trim_torque: np.ndarray | None  # the body torque that holds R (torque command only) [N m]
     #: the actuator could not deliver trim_torque (a CMG limit): linearised at zero command instead
@@ -256,6 +271,7 @@ def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
         model = pf["model"]
         unk = ca.SX.sym("unk", 3 + nm)
         t0, ext0 = ca.SX.sym("t0"), ca.SX.sym("ext0", ne)
+        d_k = ca.SX.sym("d_k", 3, TEA_SAMPLES)  # the held torque at each instant, B [N m]
         pp, I_inv = ca.SX.sym("p", model.layout.size), ca.SX.sym("I_inv", 3, 3)
         n = pp[model.layout["orbit"]][3]
         nv = len(pf["controls"])
@@ -263,15 +279,17 @@ def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
         for k in range(TEA_SAMPLES):
             tk = t0 + k * (2 * math.pi / TEA_SAMPLES) / n
             zs = ca.vertcat(unk[0:3], ca.SX.zeros(3), _tracking_extras(model, tk, unk[0:3], ext0, pp, n), unk[3:], ca.SX.zeros(nm))
-            args = (tk, zs, ca.SX.zeros(nv), ca.SX.zeros(3), q_RO, pp)
+            args = (tk, zs, ca.SX.zeros(nv), d_k[:, k], q_RO, pp)
             parts = [ca.mtimes(I_inv, pf["H_dot"](*args)) / n**2]
             if nm:
                 parts.append(pf["F"](*args)[6 + ne + nm :] / n**2)
             res = res + ca.vertcat(*parts)
         res = res / TEA_SAMPLES
-        pf["tea_G"] = ca.Function("tea_G", [unk, t0, ext0, pp, I_inv], [res, ca.jacobian(res, unk)], {"cse": True})
+        pf["tea_G"] = ca.Function("tea_G", [unk, t0, ext0, pp, I_inv, d_k], [res, ca.jacobian(res, unk)],
+                                  {"cse": True})
     I_inv = np.linalg.inv(np.array(pf["inertia"](t, z0, q_RO, ca.DM(p))))
-    G = lambda x: pf["tea_G"](x, t, z0[6 : 6 + ne], p, I_inv)  # noqa: E731
+    held = held_over_orbit(scene, t)
+    G = lambda x: pf["tea_G"](x, t, z0[6 : 6 + ne], p, I_inv, held)  # noqa: E731
     xk = np.zeros(3 + nm)
     for _ in range(60):
         g, Jg = (np.array(v) for v in G(xk))
@@ -289,6 +307,28 @@ def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
             f"(Newton ended at {np.degrees(xk[0:3]).round(2).tolist()} deg, residual {np.linalg.norm(g):.3g})"
         )
     return xk[0:3], xk[3:]
+
+
+def held_over_orbit(scene, t: float) -> np.ndarray:
+    """The held torque (every held kind's, e.g. ``constant`` windows) at the TEA's
+    :data:`TEA_SAMPLES` instants of the orbit from ``t``, B components [N m], shape (3, TEA_SAMPLES).
+
+    Raises ValueError naming the kind, its entry and the time when a held torque switches inside
+    that orbit: the TEA balances torques that repeat every orbit, and a window that opens or
+    closes inside it does not (linearise at a ``t`` where it is on, or off, for a whole orbit)."""
+    n = scene.orbit.mean_motion
+    t_end = t + 2 * math.pi / n
+    for i, entry in enumerate(scene.torque):
+        kind = get_torque(entry.kind)
+        for b in kind.breakpoints(entry):
+            if t < b < t_end:
+                raise ValueError(
+                    f"torque[{i}] (kind = {kind.kind!r}) switches at t = {b:g} s, inside the orbit the TEA "
+                    f"averages over (t = {t:g} .. {t_end:.6g} s): a torque-equilibrium attitude needs torques "
+                    "that repeat every orbit; choose a time when it is on (or off) for a whole orbit"
+                )
+    times = t + np.arange(TEA_SAMPLES) * (2 * math.pi / TEA_SAMPLES) / n
+    return np.column_stack([held_torque_B(scene, tk) for tk in times])
 
 
 def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 0.0), command: str = "torque",
@@ -332,7 +372,7 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
     nv = len(pf["controls"])
     given = v0 is not None
     v0 = np.zeros(nv) if v0 is None else np.asarray(v0, float).ravel()
-    d0 = np.zeros(3)
+    d0 = held_torque_B(scene, t)  # the held kinds' torque at t (the symbolic kinds are in the equations)
     args = lambda v: (t, z0, v, d0, q_RO, p)  # noqa: E731
     zd, A, Bv, Bd, C, _ = (np.array(m) for m in pf["jac"](*args(v0)))
     trim_torque = None

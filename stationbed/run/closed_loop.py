@@ -22,7 +22,7 @@ from .controller import (
 from .fused import fused_ok, run_fused
 from .laws import build_controller
 from .rows import ROW_BATCH
-from .segments import held_torque, segment_input
+from .segments import held_torque_from, segment_input
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts"]
 
@@ -186,13 +186,15 @@ class ControlLoop:
         edges = [t0] + inner + [t1]
         for a, b in zip(edges[:-1], edges[1:]):
             segment_input(self.scene, self.model, a, b, self.u)
-            if self.u_ext is not None:
-                self.u_ext[:] = self.u[0:3]  # the fused tick's copy of the held torque
             u = self.u.copy()
             if self.act is None:
                 u[0:3] += cmd
             # an array rate step at b: continue from the state just after it
             self.x[:] = self.apply_jump(b, self.integ.advance(a, b, self.x, u))
+        if self.u_ext is not None:
+            # the fused tick holds this torque from t1 on: the stretch that *starts* at t1, not
+            # the segment that ended there (an edge on the tick grid ends a segment at t1)
+            self.u_ext[:] = held_torque_from(self.scene, t1, self.bps, self.duration)
 
     def _held_row(self, sat_flag: int):
         vals = []
@@ -221,7 +223,7 @@ class ControlLoop:
         tick = self._fast_tick()
         bps = [b for b in self.bps if 0.0 < b < duration]
         ib = 0  # next breakpoint
-        self.u[0:3] = held_torque(self.scene, 0.5 * period)
+        self.u[0:3] = held_torque_from(self.scene, 0.0, bps, duration)
         if tick is not None:
             self.u_ext[:] = self.u[0:3]
             fc, xin, res_x, res_y, res_act = tick
@@ -382,7 +384,9 @@ class ControlLoop:
             rs.count_ticks(self.n_rate_limited, self.n_momentum_saturated)
             rs.h_capacity_Nms = self.capacity
             if math.isfinite(self.capacity):
-                out["h_capacity_Nms"] = float(self.capacity)
+                out["h_capacity_Nms"] = float(self.capacity)  # the working units'
+            if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
+                out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())

@@ -7,8 +7,10 @@ per-tick path compiles (``meas``, ``actuate``, ``rhs``), as a casadi ``mapaccum`
 as C. Python then runs once per output row instead of once per tick.
 
 Conditions (otherwise the per-tick loop runs, with the same numbers): a ``fusable`` integrator
-(``rk4``) with one step per control period, no discontinuity inside the run (torque windows,
-rate steps), no sensor delay, a controller with ``symbolic``.
+(``rk4``) with one step per control period, torque-window edges inside the run only on the tick
+grid (a chunk is split there and each stretch holds its own torque,
+:func:`~.segments.held_torque_from`; an edge inside a tick needs the per-tick loop's cut), no
+array rate step with them, no sensor delay, a controller with ``symbolic``.
 
 Sensor noise: before each compiled call Python draws the noise of its ticks from the loop's
 generator, in the per-tick loop's order (per tick: attitude, then rate; :func:`_draw`), and
@@ -28,24 +30,38 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
-from .segments import held_torque
+from .segments import held_torque_from
 
 __all__ = ["fused_ok", "run_fused"]
 
 _CHUNKS: dict[tuple, dict] = {}
 
 
+def _edge_ticks(loop) -> list[int] | None:
+    """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) of the
+    discontinuities inside the run; None when one lies between ticks or the scene has array rate
+    steps (both need the per-tick loop)."""
+    inside = [b for b in loop.bps if 0.0 < b < loop.duration]
+    if inside and loop.model.has_steps:
+        return None
+    ks = [round(b / loop.period) for b in inside]
+    if any(k * loop.period != b for k, b in zip(ks, inside)):
+        return None
+    return sorted(set(ks))
+
+
 def fused_ok(loop) -> bool:
     """Whether ``loop`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
-    integrator at one step per period, no discontinuity inside the run, no sensor delay (sensor
-    noise is drawn in Python and applied inside the compiled tick: :func:`_noise_width`)."""
+    integrator at one step per period, every discontinuity inside the run on the tick grid
+    (:func:`_edge_ticks`), no sensor delay (sensor noise is drawn in Python and applied inside
+    the compiled tick: :func:`_noise_width`)."""
     ctrl = loop.ctrl
     integ = loop.integ
     return (
         callable(getattr(ctrl, "symbolic", None))
         and integ.fusable
         and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
-        and not [b for b in loop.bps if 0.0 < b < loop.duration]
+        and _edge_ticks(loop) is not None
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
     )
@@ -183,7 +199,8 @@ def run_fused(loop, K: int) -> None:
     cp = np.asarray(_symbolic_params(ctrl), dtype=float)
     nx = loop.system.formulation.nx
     p, period, duration = loop.p, loop.period, loop.duration
-    u_ext = held_torque(loop.scene, 0.5 * duration)  # constant: no torque window inside a fused run
+    u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
+    edges = _edge_ticks(loop)  # where the held torque may change: a chunk is split there
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p
@@ -194,7 +211,8 @@ def run_fused(loop, K: int) -> None:
     par[0] = 0.0
     par[1] = period
     par[3 : 3 + len(cp)] = cp
-    par[3 + len(cp) : 6 + len(cp)] = u_ext
+    i_ext = slice(3 + len(cp), 6 + len(cp))
+    par[i_ext] = u_ext
     par[6 + len(cp) :] = p
     nu_cmg = loop.nu_cmg
     ncmd = loop.n_cmd
@@ -237,34 +255,28 @@ def run_fused(loop, K: int) -> None:
                 n_full = n_act - 1
             else:
                 n_full = n_act
-            c0[0] = 0.0
-            c0[1 : 1 + nx] = x
-            c0[1 + nx :] = 0.0
-            par[0] = k * period
-            par[1] = period
-            par[2] = n_full
-            if nn:
-                noise[: nn * n_full] = draws[:n_full].ravel()  # column-major (nn, n): tick by tick
-            if n_full > 0:
-                chunk()
-                res = chunk.res[0]
-                x = res[1 : 1 + nx].copy()
-                counts = res[1 + nx :]
-            else:
-                counts = np.zeros(2)
+            # one call per stretch of held torque: an edge on the tick grid splits the chunk, and
+            # each stretch holds the torque of the stretch that starts there (not the one before)
+            cuts = [k] + [e for e in edges if k < e < k + n_full] + [k + n_full]
+            pieces = [(a, b, period) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
             if n_full < n_act:  # the short final period
-                par[0] = (k + n_full) * period
-                par[1] = last_len
-                par[2] = 1
+                pieces.append((k + n_full, k + n_act, last_len))
+            counts = np.zeros(2)
+            for a, b, h in pieces:
+                c0[0] = 0.0
                 c0[1 : 1 + nx] = x
                 c0[1 + nx :] = 0.0
-                if nn:
-                    noise[:nn] = draws[n_full]
+                par[0] = a * period
+                par[1] = h
+                par[2] = b - a
+                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
+                if nn:  # column-major (nn, n): tick by tick
+                    noise[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
                 x = res[1 : 1 + nx].copy()
-                counts = counts + res[1 + nx :]
-                par[1] = period
+                counts += res[1 + nx :]
+            par[1] = period
             ticks += n_act
             loop.n_rate_limited += int(counts[0])
             loop.n_momentum_saturated += int(counts[1])

@@ -55,8 +55,9 @@ METRICS: dict[str, Metric] = {
     "max_att_err_deg": Metric("deg", "largest attitude error (att_err_deg) over the output rows"),
     "final_att_err_deg": Metric("deg", "attitude error of the last output row"),
     "rms_att_err_deg": Metric("deg", "RMS attitude error over the output rows at t >= settle_s"),
-    "max_h_Nms": Metric("N m s", "largest CMG cluster momentum |h| over the output rows"),
-    "max_h_fraction": Metric("1", "max_h_Nms as a fraction of the cluster's momentum capacity"),
+    "max_h_Nms": Metric("N m s", "largest momentum |h| of the CMG cluster's working units over the output rows "
+                        "(a failed unit's held rotor momentum left out)"),
+    "max_h_fraction": Metric("1", "max_h_Nms as a fraction of the working units' momentum capacity"),
     "min_singularity": Metric("1", "smallest CMG singularity measure (cmg_singularity) over the rows", "low"),
     "rate_limited_ticks": Metric("ticks", "controller ticks whose gimbal-rate command was limited"),
     "momentum_saturated_ticks": Metric("ticks", "controller ticks at which the cluster was saturated"),
@@ -75,7 +76,11 @@ class RunMetrics:
         Settling time [s]: ``rms_att_err_deg`` counts the rows at ``t >= settle_s`` (None: all).
     h_capacity_Nms : float or None
         The CMG cluster's momentum capacity [N m s] for ``max_h_fraction`` (None or not finite:
-        no fraction).
+        no fraction): its working units' (:func:`~stationbed.model.cmg.capacity`).
+    h_held_B : array_like, shape (3,), optional
+        The failed units' held rotor momentum, B components [N m s]
+        (:func:`~stationbed.model.cmg.held_momentum_B`): ``max_h_Nms`` is that of the working
+        units, ``|h - h_held_B|`` (None: no failed unit).
 
     Attributes
     ----------
@@ -87,11 +92,13 @@ class RunMetrics:
         Tick counts, not in the rows: set by :meth:`count_ticks` (None: not counted).
     """
 
-    def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None):
+    def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None,
+                 h_held_B=None):
         col = {c: i for i, c in enumerate(columns)}
         self.columns = list(columns)
         self.settle_s = settle_s
         self.h_capacity_Nms = h_capacity_Nms
+        self.h_held_B = None if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
         self._t = col.get("t", 0)
         self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
         self._sing = col.get("cmg_singularity")
@@ -113,7 +120,8 @@ class RunMetrics:
         self.n_rows += len(rows)
         self.last = rows[-1].copy()
         if self._h is not None:
-            h = float(np.linalg.norm(rows[:, self._h], axis=1).max())
+            hb = rows[:, self._h] if self.h_held_B is None else rows[:, self._h] - self.h_held_B
+            h = float(np.linalg.norm(hb, axis=1).max())
             self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
         if self._sing is not None:
             m = float(rows[:, self._sing].min())
@@ -183,7 +191,8 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
         The run's rows with the CSV columns.
     summary : dict, optional
         The run's summary (``summary.json``'s ``summary``, ``traj.meta["summary"]``): the tick
-        counts and the cluster capacity (``h_capacity_Nms``) come from it. Taken from
+        counts, the cluster capacity (``h_capacity_Nms``) and a failed unit's held momentum
+        (``h_held_B_Nms``) come from it. Taken from
         ``traj.meta`` when None and the trajectory has one.
     settle_s : float, optional
         Settling time [s] for ``rms_att_err_deg`` (None: all rows).
@@ -202,7 +211,7 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
     cap = summary.get("h_capacity_Nms")
     if cap is None and "max_h_fraction" in summary and summary.get("max_h_fraction"):
         cap = summary["max_h_Nms"] / summary["max_h_fraction"]
-    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap)
+    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap, h_held_B=summary.get("h_held_B_Nms"))
     if len(data):
         m.update(np.asarray(data, dtype=float))
     if "rate_limited_ticks" in summary:

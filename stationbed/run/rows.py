@@ -134,7 +134,9 @@ class Rows:
         self.rows: list[np.ndarray] = []
         mc = getattr(scene, "montecarlo", None)
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
-        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s)
+        cmg = system.formulation.model.cmg
+        held = None if cmg is None or not scene.cmg.failed else cmg.geometry.held_momentum_B(scene.cmg)
+        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held)
         self._pending = ([], [], [])  # times, states, held values of rows not yet made
         self._q_refs = []  # the controller's reference per pending row (None: no reference)
         self._flushed_at = time.perf_counter()

@@ -12,7 +12,15 @@ from ..model.shadow_edges import shadow_edges
 from ..model.torques import held_torque_B, torque_breakpoints
 from ..scene import Scene
 
-__all__ = ["output_times", "OutputTimes", "breakpoints", "smooth_cuts", "held_torque", "segment_input"]
+__all__ = [
+    "output_times",
+    "OutputTimes",
+    "breakpoints",
+    "smooth_cuts",
+    "held_torque",
+    "held_torque_from",
+    "segment_input",
+]
 
 
 def output_times(duration: float, dt: float) -> np.ndarray:
@@ -92,6 +100,19 @@ def held_torque(scene: Scene, t_mid: float) -> np.ndarray:
     """The external torque held over the segment whose mid time is ``t_mid`` [s], B components
     [N m], shape (3,): every torque kind's held part (:func:`~stationbed.model.torques.held_torque_B`)."""
     return held_torque_B(scene, t_mid)
+
+
+def held_torque_from(scene: Scene, t: float, bps, duration: float) -> np.ndarray:
+    """The external torque held over the smooth stretch that *starts* at ``t`` [s]: from ``t`` to
+    the first breakpoint after it (``bps``, sorted, from :func:`breakpoints`) or to ``duration``.
+
+    What an executor that carries the held torque from tick to tick (the closed loop's fused
+    tick, the fused loop) must hold after integrating up to ``t``. Taking the value of the
+    segment that *ended* at ``t`` instead is issue 19's window bug: with an edge exactly on a
+    tick boundary no segment starts at the edge, so the value before it was carried past it.
+    B components [N m], shape (3,)."""
+    end = next((b for b in bps if b > t), max(duration, t))
+    return held_torque(scene, 0.5 * (t + end) if end > t else t)
 
 
 def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.ndarray) -> None:

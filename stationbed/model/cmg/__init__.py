@@ -24,7 +24,7 @@ scene's ``CMG_KINDS`` (:mod:`stationbed.scene`: units, gimbals per unit, which k
 """
 
 from .base import HEAD_PAR, CmgGeometry, GimballedGeometry
-from .cluster import CMG_GEOMETRIES, CmgModel, capacity, cluster_functions, cmg_geometry, get_geometry
+from .cluster import CMG_GEOMETRIES, CmgModel, capacity, cluster_functions, cmg_geometry, get_geometry, held_momentum_B
 from .dgcmg import DoubleGimbal, dgcmg_triads
 from .ideal import IdealCluster
 from .pyramid import Pyramid, pyramid_axes
@@ -44,6 +44,7 @@ __all__ = [
     "dgcmg_triads",
     "pyramid_axes",
     "capacity",
+    "held_momentum_B",
     "steer",
     "singularity_measure",
     "rate_limit",

@@ -114,10 +114,21 @@ class CmgGeometry:
         return out
 
     def capacity(self, cfg) -> float:
-        """Momentum capacity of the cluster [N m s] (inf without a limit): what the saturation
-        flag and the summary's fraction refer to."""
+        """Momentum capacity of the cluster's *working* units [N m s] (inf without a limit): what
+        the saturation flag and the summary's fraction refer to. A failed unit (``[cmg] failed``)
+        is held: the working units' momentum ``h - held_momentum_B`` moves in their envelope."""
         self._check(cfg)
         return float(self._capacity(cfg))
+
+    def held_momentum_B(self, cfg) -> np.ndarray:
+        """The failed units' rotor momentum, B components [N m s], shape (3,): constant, as their
+        gimbals are held at their initial angles (zero without failed units). The working units'
+        momentum is ``h - held_momentum_B``: capacity, saturation and the metrics refer to it."""
+        self._check(cfg)
+        if not self.gimballed or not cfg.failed:
+            return np.zeros(3)
+        m = self.unit_momenta_B(cfg, self.initial_state(cfg))
+        return m[[u - 1 for u in sorted(cfg.failed)]].sum(axis=0)
 
     def initial_state(self, cfg) -> np.ndarray:
         """The cluster's state at t = 0, shape (nx,)."""
@@ -326,7 +337,12 @@ class GimballedGeometry(CmgGeometry):
         else:
             rates = direct_rates
         rates, limited = rate_limit(rates * working, max_rate)
-        sat = ca.if_else(ca.norm_2(self.h(xc, pc)) >= h_sat, 1.0, 0.0)
+        # saturation of the working units: their momentum (the failed units' is held) against
+        # their capacity (h_sat = saturation_fraction x capacity of the working units)
+        w_unit = pc[HEAD_PAR + self.n_units * self.unit_par :]
+        spins = [s for s, _ in self.spins(xc, pc)]
+        h_work = h_rotor * sum((w_unit[i] * spins[i] for i in range(1, self.n_units)), w_unit[0] * spins[0])
+        sat = ca.if_else(ca.norm_2(h_work) >= h_sat, 1.0, 0.0)
         return rates, singularity_measure(A_hat), limited, sat
 
     # -- plug-in -----------------------------------------------------------------------

@@ -14,7 +14,8 @@ from .ideal import IdealCluster
 from .pyramid import Pyramid
 from .steering import STEERING_LAWS
 
-__all__ = ["CmgModel", "CMG_GEOMETRIES", "get_geometry", "cmg_geometry", "capacity", "cluster_functions"]
+__all__ = ["CmgModel", "CMG_GEOMETRIES", "get_geometry", "cmg_geometry", "capacity", "held_momentum_B",
+           "cluster_functions"]
 
 #: scene ``[cmg] kind`` -> geometry class
 CMG_GEOMETRIES: dict[str, type[CmgGeometry]] = {cls.kind: cls for cls in (IdealCluster, DoubleGimbal, Pyramid)}
@@ -36,8 +37,14 @@ def cmg_geometry(cfg) -> CmgGeometry:
 def capacity(cfg) -> float:
     """Momentum capacity of a scene's cluster [N m s] (inf without a limit); see the kinds'
     ``_capacity``: ideal ``max_momentum``, dgcmg ``n h_rotor``, pyramid
-    ``h_rotor min(2 + 2 cos β, 4 sin β)``."""
+    ``h_rotor min(2 + 2 cos β, 4 sin β)``, of the working units (``[cmg] failed`` left out)."""
     return cmg_geometry(cfg).capacity(cfg)
+
+
+def held_momentum_B(cfg) -> np.ndarray:
+    """The failed units' (held) rotor momentum of a scene's cluster, B components [N m s], shape
+    (3,); ``h`` minus it is the working units' momentum, which :func:`capacity` bounds."""
+    return cmg_geometry(cfg).held_momentum_B(cfg)
 
 
 @dataclass(frozen=True)

@@ -55,7 +55,7 @@ def dgcmg_triads(outer_axes_B=None) -> np.ndarray:
 class DoubleGimbal(GimballedGeometry):
     """Double-gimbal units; per unit ``pc`` holds its triad ``e1, e2, e3`` (9 numbers, B).
 
-    Capacity ``n h_rotor`` (a spherical envelope)."""
+    Capacity ``n h_rotor`` (a spherical envelope), n the working units."""
 
     kind = "dgcmg"
     gimbals_per_unit = 2
@@ -63,7 +63,7 @@ class DoubleGimbal(GimballedGeometry):
     unit_par = 9
 
     def _capacity(self, cfg):
-        return cfg.n_units * cfg.h_rotor
+        return (cfg.n_units - len(cfg.failed)) * cfg.h_rotor
 
     def _geometry_params(self, cfg):
         return dgcmg_triads(cfg.outer_axes_B).ravel()

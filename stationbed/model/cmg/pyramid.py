@@ -40,14 +40,21 @@ class Pyramid(GimballedGeometry):
     """Single-gimbal units on a pyramid; per unit ``pc`` holds ``g`` then ``s0`` (6 numbers, B).
 
     Capacity ``h_rotor min(2 + 2 cos β, 4 sin β)``: the envelope along x/y and along z
-    (3.2 h_rotor at 53.13 deg, where the envelope is nearly spherical)."""
+    (3.2 h_rotor at 53.13 deg, where the envelope is nearly spherical). In general, along each
+    body axis e the sum over the working units of the largest component of their spin, which
+    turns in the plane normal to its gimbal axis g: ``|g × e|``; the capacity is the least of
+    the three (with a failed unit, its term is left out)."""
 
     kind = "sgcmg_pyramid"
     gimbals_per_unit = 1
     unit_par = 6
 
     def _capacity(self, cfg):
-        return cfg.h_rotor * min(2 + 2 * math.cos(cfg.skew), 4 * math.sin(cfg.skew))
+        if not cfg.failed:
+            return cfg.h_rotor * min(2 + 2 * math.cos(cfg.skew), 4 * math.sin(cfg.skew))
+        g, _ = pyramid_axes(cfg.skew)
+        work = [i for i in range(self.n_units) if i + 1 not in cfg.failed]
+        return cfg.h_rotor * min(sum(float(np.linalg.norm(np.cross(g[i], e))) for i in work) for e in np.eye(3))
 
     def _geometry_params(self, cfg):
         g, s0 = pyramid_axes(cfg.skew)

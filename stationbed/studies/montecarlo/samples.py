@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model.cmg import capacity
+from ...model.cmg import capacity, held_momentum_B
 from ...run.controller import one_line
 from ...run.metrics import METRICS
 from ...run.rows import trajectory_columns
@@ -42,16 +42,19 @@ class EnvelopeSink:
     columns : list of str  The run's columns.
     dt : float  Envelope sampling [s].
     n_times : int  Envelope times ``0, dt, ..., (n_times - 1) dt``.
-    capacity : float  CMG momentum capacity [N m s] (inf/None: no fraction).
+    capacity : float  CMG momentum capacity of the working units [N m s] (inf/None: no fraction).
+    h_held_B : array_like, shape (3,), optional  The failed units' held momentum [N m s]: the
+        fraction is the working units' ``|h - h_held_B| / capacity``.
     """
 
-    def __init__(self, columns, dt: float, n_times: int, capacity):
+    def __init__(self, columns, dt: float, n_times: int, capacity, h_held_B=None):
         col = {c: i for i, c in enumerate(columns)}
         self.dt = dt
         self.values = np.full((n_times, len(ENVELOPE_SERIES)), np.nan)
         self._err = col.get("att_err_deg")
         self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
         self._cap = capacity if capacity and math.isfinite(capacity) else None
+        self._held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
 
     def write(self, rows: np.ndarray) -> None:
         k = rows[:, 0] / self.dt
@@ -64,7 +67,7 @@ class EnvelopeSink:
         if self._err is not None:
             self.values[idx, 0] = r[:, self._err]
         if self._h is not None and self._cap is not None:
-            self.values[idx, 1] = np.linalg.norm(r[:, self._h], axis=1) / self._cap
+            self.values[idx, 1] = np.linalg.norm(r[:, self._h] - self._held, axis=1) / self._cap
 
 
 def _capacity(scene) -> float | None:
@@ -95,7 +98,8 @@ def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | No
     else:
         sink = None
         if env_times:
-            sink = EnvelopeSink(trajectory_columns(s), mc.envelope_dt, env_times, _capacity(s))
+            held = None if s.cmg is None else held_momentum_B(s.cmg)
+            sink = EnvelopeSink(trajectory_columns(s), mc.envelope_dt, env_times, _capacity(s), held)
         try:
             tr = simulate(s, keep=False, sink=sink)
             metrics = tr.meta.get("summary", {})
