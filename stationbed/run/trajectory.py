@@ -94,11 +94,26 @@ class Trajectory:
 
     @classmethod
     def from_csv(cls, path) -> "Trajectory":
-        """Read a trajectory CSV written by :meth:`to_csv` or ``stationbed run``."""
+        """Read a trajectory CSV written by :meth:`to_csv` or ``stationbed run``.
+
+        A header with no rows gives an empty trajectory. A file that is not such a table raises
+        ValueError naming the file and the first bad line: empty (no header), a row of another
+        width (a file cut mid-row, or damaged), a value that is not a number.
+        """
         with open(path, newline="") as fh:
-            header = next(csv.reader(fh))
-            data = np.loadtxt(fh, delimiter=",", ndmin=2)
-        return cls(header, data.reshape(-1, len(header)))
+            header = next(csv.reader(fh), None)
+            if not header or not all(header):
+                raise ValueError(f"{path}: no header row (an empty or damaged trajectory CSV)")
+            body = fh.read()
+        if not body.strip():
+            return cls(header, np.empty((0, len(header))))
+        try:
+            data = np.loadtxt(body.splitlines(), delimiter=",", ndmin=2)
+        except ValueError:
+            raise ValueError(f"{path}: {_bad_line(body, len(header))}") from None
+        if data.shape[1] != len(header):
+            raise ValueError(f"{path}: rows have {data.shape[1]} values, the header {len(header)} columns")
+        return cls(header, data)
 
     def to_npz(self, path) -> None:
         """Write the columns and data to a numpy ``.npz`` file."""
@@ -109,3 +124,21 @@ class Trajectory:
         """Read a trajectory written by :meth:`to_npz`."""
         with np.load(path) as z:
             return cls([str(c) for c in z["columns"]], z["data"])
+
+
+def _bad_line(body: str, width: int) -> str:
+    """Why the rows of a trajectory CSV (``body``, after the header) do not read: the first line
+    of another width or with a value that is not a number, counted from the file's first line."""
+    lines = body.splitlines()
+    for i, line in enumerate(lines, start=2):
+        values = line.split(",")
+        if len(values) != width:
+            cut = i == len(lines) + 1 and not body.endswith("\n")
+            return (f"line {i} has {len(values)} values, the header {width} columns"
+                    + (" (the file ends mid-row: cut, or still being written)" if cut else ""))
+        for j, v in enumerate(values):
+            try:
+                float(v)
+            except ValueError:
+                return f"line {i}, column {j + 1}: {v.strip()[:20]!r} is not a number"
+    return "rows that do not read as numbers"
