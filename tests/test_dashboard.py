@@ -202,7 +202,7 @@ def test_compare_settle_applies_to_every_row_metric(hold_run, capsys):
 def test_compare_settle_that_cannot_apply_is_refused(hold_run, settle):
     res = run_cli("compare", hold_run, "--settle", settle, "--png", hold_run.parent / "x.png")
     assert res.returncode == 2
-    assert res.stderr.count("\n") == 1 and res.stderr.startswith("stationbed: error: --settle")
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("stationbed: error: ") and "--settle" in res.stderr
     assert not (hold_run.parent / "x.png").exists()
 
 
