@@ -206,10 +206,12 @@ def _margins(args) -> int:
 
 
 def _plot(args) -> int:
-    from .dashboard import dashboard
+    from .dashboard import dashboard, load_run, run_state
 
-    png = dashboard(args.outdir, args.png)
-    print(f"wrote {png}")
+    run = load_run(args.outdir)
+    png = dashboard(args.outdir, args.png, run=run)
+    state = run_state(run[1])
+    print(f"wrote {png}" + (f" ({state})" if state else ""))
     return 0
 
 

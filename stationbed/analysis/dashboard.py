@@ -147,9 +147,10 @@ def _finite_range(lines) -> bool:
     return any(np.isfinite(y).any() for y, _, _ in lines)
 
 
-def dashboard(outdir, png=None) -> Path:
-    """Draw the dashboard of a run folder; returns the PNG's path (default OUTDIR/dashboard.png)."""
-    tr, meta = load_run(outdir)
+def dashboard(outdir, png=None, run=None) -> Path:
+    """Draw the dashboard of a run folder; returns the PNG's path (default OUTDIR/dashboard.png).
+    ``run``: the folder's ``(trajectory, meta)`` when already read (:func:`load_run`)."""
+    tr, meta = run if run is not None else load_run(outdir)
     if len(tr) == 0:
         raise ValueError(f"{Path(outdir) / meta['rows_file']}: no rows (the run stopped before its first output row)")
     plt = pyplot()
