@@ -9,6 +9,7 @@ appendage [rad], then anything else a scene adds.
 from __future__ import annotations
 
 import csv
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,13 +105,14 @@ class Trajectory:
             header = next(csv.reader(fh), None)
             if not header or not all(header):
                 raise ValueError(f"{path}: no header row (an empty or damaged trajectory CSV)")
-            body = fh.read()
-        if not body.strip():
+            with warnings.catch_warnings():  # a header without rows is an empty trajectory, said by the caller
+                warnings.filterwarnings("ignore", message="loadtxt: input contained no data")
+                try:
+                    data = np.loadtxt(fh, delimiter=",", ndmin=2)
+                except ValueError:
+                    raise ValueError(f"{path}: {_bad_line(path, len(header))}") from None
+        if data.size == 0:
             return cls(header, np.empty((0, len(header))))
-        try:
-            data = np.loadtxt(body.splitlines(), delimiter=",", ndmin=2)
-        except ValueError:
-            raise ValueError(f"{path}: {_bad_line(body, len(header))}") from None
         if data.shape[1] != len(header):
             raise ValueError(f"{path}: rows have {data.shape[1]} values, the header {len(header)} columns")
         return cls(header, data)
@@ -126,19 +128,23 @@ class Trajectory:
             return cls([str(c) for c in z["columns"]], z["data"])
 
 
-def _bad_line(body: str, width: int) -> str:
-    """Why the rows of a trajectory CSV (``body``, after the header) do not read: the first line
-    of another width or with a value that is not a number, counted from the file's first line."""
-    lines = body.splitlines()
-    for i, line in enumerate(lines, start=2):
-        values = line.split(",")
-        if len(values) != width:
-            cut = i == len(lines) + 1 and not body.endswith("\n")
-            return (f"line {i} has {len(values)} values, the header {width} columns"
-                    + (" (the file ends mid-row: cut, or still being written)" if cut else ""))
-        for j, v in enumerate(values):
-            try:
-                float(v)
-            except ValueError:
-                return f"line {i}, column {j + 1}: {v.strip()[:20]!r} is not a number"
+def _bad_line(path, width: int) -> str:
+    """Why the rows of the trajectory CSV at ``path`` do not read (read again, line by line): the
+    first line of another width or with a value that is not a number, counted from line 1."""
+    with open(path, newline="") as fh:
+        fh.readline()  # the header
+        i, line = 1, ""
+        for i, line in enumerate(fh, start=2):
+            values = line.rstrip("\r\n").split(",")
+            if not line.strip():
+                continue
+            if len(values) != width:
+                cut = not line.endswith("\n") and not fh.read(1)
+                return (f"line {i} has {len(values)} values, the header {width} columns"
+                        + (" (the file ends mid-row: cut, or still being written)" if cut else ""))
+            for j, v in enumerate(values):
+                try:
+                    float(v)
+                except ValueError:
+                    return f"line {i}, column {j + 1}: {v.strip()[:20]!r} is not a number"
     return "rows that do not read as numbers"
