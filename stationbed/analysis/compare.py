@@ -75,7 +75,7 @@ def _norm(tr, *cols):
     return np.linalg.norm(tr.cols(*cols), axis=1) if cols[0] in tr.columns else None
 
 
-def _panels(runs, settle_s):
+def _panels(runs):
     """(title, values-of-a-run function) of the panels some run has values for."""
     deg = np.degrees(1.0)
     frac = lambda tr, meta: None if (h := _norm(tr, "hx", "hy", "hz")) is None or not (cap := capacity_Nms(meta.get("summary") or {})) else h / cap  # noqa: E731
@@ -133,7 +133,7 @@ def compare(outdirs, png=None, settle_s: float | None = None) -> tuple[str, Path
     plt = pyplot()
     png = Path(png) if png is not None else Path(outdirs[0]).resolve().parent / "compare.png"
     with np.errstate(all="ignore"):  # NaN rows are gaps
-        panels = [(title, [get(tr, meta) for tr, meta in runs]) for title, get in _panels(runs, settle_s)]
+        panels = [(title, [get(tr, meta) for tr, meta in runs]) for title, get in _panels(runs)]
     t_end = max(float(tr.t[-1]) for tr, _ in runs)
     div, tlabel = time_axis(t_end)
     ncol = 2 if len(panels) > 1 else 1

@@ -1,11 +1,15 @@
-"""``stationbed plot OUTDIR``: one dashboard PNG of a run folder (trajectory.csv, summary.json).
+"""``stationbed plot OUTDIR``: one dashboard PNG of a run folder (trajectory.csv, or the partial rows
+of a failed run, and summary.json).
 
 Panels, each drawn when the run has its columns: per-axis attitude error to the controller's
-reference (``att_err_x/y/z_deg``), body rate, CMG momentum with its fraction of capacity, gimbal
-angles, gimbal rates, torque command, array sun-tracking error, array modal coordinates, and every
-other ``tau_*`` column (disturbance torques a scene models: ``tau_aero_*``, ...; whatever the
-name after ``tau_``). Rows flagged ``cmg_saturated`` are marked by red ticks along the top of every
-panel (a gimbal-rate limit or momentum saturation since the previous row).
+reference (``att_err_x/y/z_deg``); the body rate relative to that reference (inertial in open
+loop; :mod:`.signals`); CMG momentum h and, apart, |h| as a fraction of the capacity (from 0);
+gimbal angles and rates; the torque command beside the torque the cluster delivered; array
+sun-tracking error; array modal coordinates; every other ``tau_*`` column (disturbance torques a
+scene models: ``tau_aero_*``, ...; whatever the name after ``tau_``). Rows flagged
+``cmg_saturated`` are marked by red ticks along the top of every panel (a gimbal-rate limit or
+momentum saturation since the previous row). A failed or interrupted run's rows are drawn with its
+state in the title.
 """
 
 from __future__ import annotations
