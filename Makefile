@@ -8,7 +8,7 @@ OUT    ?= out/power_tower_free_drift
 # pytest workers: both cores of the CI machine
 JOBS   ?= 2
 
-.PHONY: run test test-fast bench check install clean
+.PHONY: run test test-fast bench bench-smoke check install clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,11 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_fmu.py  # optional: says so when FMPy is not installed
 	$(PY) benchmarks/bench_plan.py $(if $(SMOKE),--smoke)
 	$(PY) benchmarks/bench_basilisk.py  # optional: says so when bsk is not installed
+
+# every benchmark with tiny sizes, one repeat, no target judged: they all still run (CI does this
+# through tests/test_benchmarks_smoke.py)
+bench-smoke: $(STAMP)
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b --smoke > /dev/null || { echo "$$b failed"; exit 1; }; done
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

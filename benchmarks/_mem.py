@@ -1,6 +1,6 @@
 """Peak memory of one benchmark path, measured in a fresh subprocess.
 
-    python benchmarks/_mem.py PATH_NAME [--n N]      (prints one JSON line)
+    python benchmarks/_mem.py PATH_NAME [--n N] [--duration S]     (prints one JSON line)
 
 Why a subprocess: ``ru_maxrss`` is a process-wide high-water mark that never goes down, so
 paths measured one after another in one process would hide each other. Each path gets its own
@@ -72,25 +72,26 @@ def _reset_hwm() -> bool:
         return False
 
 
-def _runner(name: str, n: int, threads: int, rtol: float | None = None):
-    """(warm-up, full run) callables of a path."""
+def _runner(name: str, n: int, threads: int, rtol: float | None = None, duration: float | None = None):
+    """(warm-up, full run) callables of a path; the full run covers one orbit, or ``duration`` [s]
+    (smoke mode)."""
     import stationbed
     from stationbed.run.batch import disperse_initial, simulate_batch
 
     if name == "open_loop":
         scene = stationbed.load_scene(GG_SCENE)
-        T = 2 * math.pi / scene.orbit.mean_motion
+        T = duration or 2 * math.pi / scene.orbit.mean_motion
         return (lambda: stationbed.simulate(scene, duration=100.0)), (lambda: stationbed.simulate(scene, duration=T))
     if name in ("closed_python", "closed_fused"):
         scene = stationbed.load_scene(HOLD_SCENE)
-        T = 2 * math.pi / scene.orbit.mean_motion
+        T = duration or 2 * math.pi / scene.orbit.mean_motion
         fused = name == "closed_fused"
         return (lambda: stationbed.simulate(scene, duration=20.0, fused=fused)), (
             lambda: stationbed.simulate(scene, duration=T, fused=fused)
         )
     if name == "batch":
         scene = stationbed.load_scene(GG_SCENE)
-        T = 2 * math.pi / scene.orbit.mean_motion
+        T = duration or 2 * math.pi / scene.orbit.mean_motion
         q0s, w0s = disperse_initial(scene, n, attitude_sigma_rad=math.radians(1.0), rate_sigma_rad_s=1e-5, seed=1)
         kw = dict(threads=threads, rtol=rtol)
         return (lambda: simulate_batch(scene, q0s, w0s, duration=20.0, **kw)), (
@@ -99,8 +100,9 @@ def _runner(name: str, n: int, threads: int, rtol: float | None = None):
     raise SystemExit(f"unknown path {name!r}; valid: {', '.join(PATHS)}")
 
 
-def measure_here(name: str, n: int = 1000, threads: int = 2, rtol: float | None = None) -> dict:
-    warm, run = _runner(name, n, threads, rtol)
+def measure_here(name: str, n: int = 1000, threads: int = 2, rtol: float | None = None,
+                 duration: float | None = None) -> dict:
+    warm, run = _runner(name, n, threads, rtol, duration)
     warm()
     hwm_warm = _status_kib("VmHWM")
     reset = _reset_hwm()
@@ -126,11 +128,14 @@ def measure_here(name: str, n: int = 1000, threads: int = 2, rtol: float | None 
     )
 
 
-def measure(name: str, n: int = 1000, threads: int = 2, rtol: float | None = None, timeout: float = 600.0) -> dict:
+def measure(name: str, n: int = 1000, threads: int = 2, rtol: float | None = None, timeout: float = 600.0,
+            duration: float | None = None) -> dict:
     """Run :func:`measure_here` in a fresh interpreter; returns its dict."""
     cmd = [sys.executable, str(Path(__file__).resolve()), name, "--n", str(n), "--threads", str(threads)]
     if rtol is not None:
         cmd += ["--rtol", repr(rtol)]
+    if duration is not None:
+        cmd += ["--duration", repr(duration)]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=dict(os.environ))
     if res.returncode != 0:
         raise RuntimeError(f"memory probe {name!r} failed:\n{res.stderr[-2000:]}")
@@ -145,5 +150,6 @@ if __name__ == "__main__":
     ap.add_argument("--n", type=int, default=1000, help="batch samples (batch path)")
     ap.add_argument("--threads", type=int, default=2, help="batch threads (batch path)")
     ap.add_argument("--rtol", type=float, default=None, help="batch rtol (default: the scene's)")
+    ap.add_argument("--duration", type=float, default=None, help="simulated time of the full run [s] (default: one orbit)")
     a = ap.parse_args()
-    print(json.dumps(measure_here(a.path, a.n, a.threads, a.rtol)))
+    print(json.dumps(measure_here(a.path, a.n, a.threads, a.rtol, a.duration)))

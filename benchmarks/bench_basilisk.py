@@ -1,9 +1,11 @@
 """Optional benchmark: the closest Basilisk scene beside stationbed (issue 5, item 4).
 
-    python benchmarks/bench_basilisk.py [--repeats N] [--no-closed-loop] [--json PATH]
+    python benchmarks/bench_basilisk.py [--repeats N] [--no-closed-loop] [--json PATH] [--smoke]
 
-Needs the Basilisk package (``pip install bsk``); without it, prints one line and exits 0. It is
-never a CI dependency and no test imports Basilisk.
+Compares with the Basilisk package (``pip install bsk``); without it, says so and runs the
+stationbed side of both scenes alone (its rows, times and errors), so the script's own scenes
+and paths are exercised anyway (CI runs it with ``--smoke``). Basilisk is never a CI dependency
+and no test imports it.
 
 (a) Open loop. A rigid spacecraft with the JEOD ISS inertia of
 ``scenarios/iss_lvlh_gravity_gradient.toml`` (4.0e5 kg, products of inertia included) in the same
@@ -50,6 +52,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _smoke  # noqa: E402
 
 try:
     import Basilisk  # noqa: F401
@@ -77,26 +82,32 @@ def _duration_s(n: float) -> float:
     return float(round(2.0 * math.pi / n))
 
 
-def open_loop_scene() -> dict:
-    """iss_lvlh_gravity_gradient without its array pairs, one orbit, output every 10 s."""
+def open_loop_scene(duration: float | None = None) -> dict:
+    """iss_lvlh_gravity_gradient without its array pairs, one orbit (or ``duration`` [s]), output every 10 s."""
     data = tomllib.loads(OPEN_SCENE.read_text())
     data.pop("appendage", None)
     data["name"] = "iss_rigid_lvlh_gravity_gradient"
     _, _, _, n = _orbit_params(data)
     sim = data["simulation"]
-    sim["duration"] = _duration_s(n)
+    sim["duration"] = duration or _duration_s(n)
     sim["output_dt"] = OUTPUT_DT_S
     return data
 
 
-def hold_scene() -> dict:
-    """iss_lvlh_hold without arrays, sun and aero-like torque, one orbit."""
+#: the tables of iss_lvlh_hold that go with its arrays and environment: the arrays themselves, the
+#: sun they track, the aero and solar-pressure torques and the surfaces those act on (two of which
+#: ride on the arrays: a surface on a missing array, or one no torque uses, is a scene error)
+HOLD_DROPPED = ("appendage", "torque", "sun", "surface", "atmosphere")
+
+
+def hold_scene(duration: float | None = None) -> dict:
+    """iss_lvlh_hold without arrays, sun, surfaces and their torques, one orbit (or ``duration`` [s])."""
     data = tomllib.loads(HOLD_SCENE.read_text())
-    for key in ("appendage", "torque", "sun"):
+    for key in HOLD_DROPPED:
         data.pop(key, None)
     data["name"] = "iss_rigid_lvlh_hold"
     _, _, _, n = _orbit_params(data)
-    data["simulation"]["duration"] = _duration_s(n)
+    data["simulation"]["duration"] = duration or _duration_s(n)
     data["simulation"]["output_dt"] = OUTPUT_DT_S
     return data
 
@@ -192,11 +203,12 @@ def _max_angle(t_a, q_a, t_b, q_b) -> float:
 
 
 # ----------------------------------------------------------------------------- (a)
-def open_loop(repeats: int) -> list[dict]:
+def open_loop(repeats: int, bsk: bool = True, duration: float | None = None) -> list[dict]:
+    """Rows of (a); without Basilisk (``bsk`` False) the stationbed rows only."""
     import stationbed
     from stationbed.scene import scene_from_dict
 
-    data = open_loop_scene()
+    data = open_loop_scene(duration)
     scene = scene_from_dict(data, "bench_basilisk:open")
     ref = stationbed.simulate(scene, integrator="dop853", rtol=1e-12, atol=1e-14)
     t_ref, q_ref = ref.t, ref.q_BN
@@ -204,7 +216,7 @@ def open_loop(repeats: int) -> list[dict]:
                for h in STEPS_S}
     sb_runs[f"stationbed dop853 rtol {RTOL:g}"] = lambda: stationbed.simulate(
         scene, integrator="dop853", rtol=RTOL, atol=ATOL)
-    bsk_runs = {f"Basilisk RK4 {h:g} s": (lambda h=h: basilisk_open_loop(data, h)) for h in STEPS_S}
+    bsk_runs = {f"Basilisk RK4 {h:g} s": (lambda h=h: basilisk_open_loop(data, h)) for h in STEPS_S} if bsk else {}
     first = {k: f() for k, f in {**sb_runs, **bsk_runs}.items()}  # warm-up + results
     med = _median_interleaved({**sb_runs, **bsk_runs}, repeats)
     rows = []
@@ -218,7 +230,7 @@ def open_loop(repeats: int) -> list[dict]:
                          t=t, q=q))
     # pairwise: Basilisk vs stationbed at the same step
     dop = next(r for r in rows if r["path"].startswith("stationbed dop853"))
-    for h in STEPS_S:
+    for h in STEPS_S if bsk else ():
         b = next(r for r in rows if r["path"] == f"Basilisk RK4 {h:g} s")
         s = next(r for r in rows if r["path"] == f"stationbed rk4 {h:g} s")
         b["vs_same_step_rad"] = _max_angle(s["t"], s["q"], b["t"], b["q"])
@@ -376,13 +388,14 @@ def basilisk_closed_loop(data: dict, pd_bandwidth: float, pd_damping: float):
     return np.asarray(rec.times(), dtype=float) * 1e-9, ang, run_s
 
 
-def closed_loop(repeats: int) -> list[dict]:
+def closed_loop(repeats: int, bsk: bool = True, duration: float | None = None) -> list[dict]:
+    """Rows of (b); without Basilisk (``bsk`` False) the stationbed rows only."""
     import stationbed
     from stationbed.model.environment import q_ON
     from stationbed.core.rotation import rotation_angle
     from stationbed.scene import scene_from_dict
 
-    data = hold_scene()
+    data = hold_scene(duration)
     scene = scene_from_dict(data, "bench_basilisk:hold")
     params = data["controller"]["params"]
     u0, inc, n = scene.orbit.u0, scene.orbit.inclination, scene.orbit.mean_motion
@@ -394,9 +407,10 @@ def closed_loop(repeats: int) -> list[dict]:
     runs = {
         "stationbed rk4 0.1 s, pd in Python": lambda: stationbed.simulate(scene, fused=False),
         "stationbed rk4 0.1 s, fused": lambda: stationbed.simulate(scene, fused=True),
-        "Basilisk RK4 0.1 s, mrpFeedback + VSCMG steering": lambda: basilisk_closed_loop(
-            data, params["bandwidth"], params["damping"]),
     }
+    if bsk:
+        runs["Basilisk RK4 0.1 s, mrpFeedback + VSCMG steering"] = lambda: basilisk_closed_loop(
+            data, params["bandwidth"], params["damping"])
     first = {k: f() for k, f in runs.items()}
     med = _median_interleaved(runs, repeats)
     rows = []
@@ -415,19 +429,27 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-closed-loop", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
-    if Basilisk is None:
-        print("Basilisk is not installed: skipping (optional; `pip install bsk` to run this comparison)")
-        return 0
-    from Basilisk.architecture import bskLogging
-
-    bskLogging.setDefaultLogLevel(bskLogging.BSK_WARNING)
+    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
+    duration = None
+    if args.smoke:
+        args.repeats, duration = 1, _smoke.SMOKE_DURATION_S
     import stationbed
 
-    ver = getattr(Basilisk, "__version__", None) or _bsk_version()
-    print(f"Basilisk {ver}, stationbed {stationbed.__version__}, {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores, python {platform.python_version()}")
-    rows = open_loop(args.repeats)
+    bsk = Basilisk is not None
+    if bsk:
+        from Basilisk.architecture import bskLogging
+
+        bskLogging.setDefaultLogLevel(bskLogging.BSK_WARNING)
+        ver = getattr(Basilisk, "__version__", None) or _bsk_version()
+        print(f"Basilisk {ver}, stationbed {stationbed.__version__}, {platform.processor() or platform.machine()}, "
+              f"{os.cpu_count()} cores, python {platform.python_version()}")
+    else:
+        print("Basilisk is not installed (optional; `pip install bsk` to compare): the stationbed side of each "
+              f"scene runs alone, without Basilisk rows; stationbed {stationbed.__version__}, "
+              f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
+    rows = open_loop(args.repeats, bsk, duration)
     print("\n(a) open loop: rigid JEOD-ISS inertia, gravity gradient, one orbit free drift from LVLH")
     print("| path | wall [s] (median) | Basilisk / stationbed rk4, same step | Basilisk / stationbed dop853 "
           "| max angle vs ref [rad] | max angle Basilisk vs stationbed rk4, same step [rad] |")
@@ -440,10 +462,10 @@ def main(argv=None) -> int:
         print(f"| {r['path']} | {r['wall_s']:.4f} | {fmt(r, 'ratio', '.1f')} | {fmt(r, 'ratio_dop853', '.0f')} | "
               f"{r['err_ref_rad']:.2e} | {fmt(r, 'vs_same_step_rad', '.2e')} |")
     builds = ", ".join(f"{r['build_s'] * 1e3:.1f} ms" for r in rows if r["build_s"] is not None)
-    print(f"ref: stationbed dop853 rtol 1e-12. Basilisk wall includes building its sim ({builds} of it).")
+    print("ref: stationbed dop853 rtol 1e-12." + (f" Basilisk wall includes building its sim ({builds} of it)." if bsk else ""))
     out = {"open_loop": [{k: v for k, v in r.items() if k not in ("t", "q")} for r in rows]}
     if not args.no_closed_loop:
-        rows_b = closed_loop(args.repeats)
+        rows_b = closed_loop(args.repeats, bsk, duration)
         print("\n(b) closed loop: rigid principal-axis station, 4 CMGs, 10 Hz attitude control, LVLH hold, one orbit")
         print("| path | wall [s] (median) | / stationbed fused | error from LVLH at t=0 / end / max 2nd half [deg] |")
         print("|---|---|---|---|")

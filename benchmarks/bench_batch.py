@@ -1,7 +1,7 @@
 """Monte Carlo batch benchmark (issue 5 part 4): 1000 one-orbit samples in <= 60 s, and peak memory.
 
     python benchmarks/bench_batch.py [--n N] [--repeats R] [--threads 1,2] [--check K]
-                                     [--memory | --no-memory] [--json PATH]
+                                     [--memory | --no-memory] [--json PATH] [--smoke]
 
 Batch: ``--n`` samples (default 1000) of one orbit (T = 2 pi / n) of
 ``scenarios/iss_lvlh_gravity_gradient.toml``, open loop, momentum form, initial attitude dispersed
@@ -51,12 +51,14 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT))
 
 import _mem  # noqa: E402
+import _smoke  # noqa: E402
 import stationbed  # noqa: E402
 from stationbed.run.batch import disperse_initial, simulate_batch  # noqa: E402
 from stationbed.core.rotation import rotation_angle  # noqa: E402
 
 SCENE = ROOT / "scenarios" / "iss_lvlh_gravity_gradient.toml"
 TARGET_S = 60.0
+SMOKE_N = 4  # samples in smoke mode
 ATT_SIGMA_RAD = math.radians(1.0)  # 1 deg 1-sigma per axis about LVLH
 RATE_SIGMA_RAD_S = 1e-5  # rad/s 1-sigma per axis
 TIGHT_RTOL = 1e-12
@@ -79,10 +81,10 @@ def _accuracy(scene, batch, idx, T, rtol):
     return agree, err
 
 
-def _memory_table(n: int, threads: int) -> list[dict]:
+def _memory_table(n: int, threads: int, duration: float | None = None) -> list[dict]:
     rows = []
     for name, what in _mem.PATHS.items():
-        r = _mem.measure(name, n=n, threads=threads)
+        r = _mem.measure(name, n=n, threads=threads, duration=duration)
         r["what"] = what.replace("N one-orbit", f"{n} one-orbit") + (f", threads={threads}" if name == "batch" else "")
         rows.append(r)
     return rows
@@ -127,13 +129,18 @@ def main(argv=None) -> int:
     mem.add_argument("--memory", action="store_true", help="print only the peak-memory table")
     mem.add_argument("--no-memory", action="store_true", help="skip the memory measurements")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers as JSON")
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, one repeat, memory of each path once")
+    duration = None
+    if args.smoke:
+        args.n, args.repeats, args.check, duration = SMOKE_N, 1, 1, _smoke.SMOKE_DURATION_S
     thread_counts = [int(t) for t in args.threads.split(",")]
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     stamp = _dt.datetime.now().isoformat(timespec="seconds")
 
     if args.memory:
-        rows = _memory_table(args.n, max(thread_counts))
+        rows = _memory_table(args.n, max(thread_counts), duration)
         _print_memory(rows)
         print(f"\n{_basilisk_note()}\nmachine: {machine}; {stamp}")
         if args.json:
@@ -141,7 +148,7 @@ def main(argv=None) -> int:
         return 0
 
     scene = stationbed.load_scene(SCENE)
-    T = 2 * math.pi / scene.orbit.mean_motion
+    T = duration or 2 * math.pi / scene.orbit.mean_motion
     q0s, w0s = disperse_initial(
         scene, args.n, attitude_sigma_rad=ATT_SIGMA_RAD, rate_sigma_rad_s=RATE_SIGMA_RAD_S, seed=args.seed
     )
@@ -175,7 +182,7 @@ def main(argv=None) -> int:
         )
     agree, err = _accuracy(scene, tight, idx, T, TIGHT_RTOL)
     rows.append(dict(rtol=TIGHT_RTOL, threads=best, wall_s=tight_wall, walls_s=[tight_wall], b=tight, agree=agree, err=err))
-    if not args.no_memory:
+    if not args.no_memory and not args.smoke:  # (smoke: the batch path is measured once, in the table below)
         for r in rows:
             m = _mem.measure("batch", n=args.n, threads=r["threads"], rtol=r["rtol"])
             r["peak_rss_mib"], r["run_increase_mib"] = m["peak_rss_mib"], m["run_increase_mib"]
@@ -206,12 +213,12 @@ def main(argv=None) -> int:
     ok = worst <= TARGET_S and all(np.all(r["b"].status == 0) for r in rows)
     print(
         f"\ntarget: {n} one-orbit samples <= {TARGET_S:g} s: slowest median {worst:.2f} s"
-        f" -> {'PASS' if ok else 'FAIL'}"
+        f" -> {_smoke.verdict(ok, args.smoke)}"
     )
     print(f"all runs (s): " + "; ".join(f"{th} thread(s): " + ", ".join(f"{w:.3f}" for w in walls[th]) for th in thread_counts))
     mem_rows = None
     if not args.no_memory:
-        mem_rows = _memory_table(n, best)
+        mem_rows = _memory_table(n, best, duration)
         _print_memory(mem_rows)
     print(f"\n{_basilisk_note()}\nmachine: {machine}; {stamp}")
     if args.json:
@@ -227,7 +234,7 @@ def main(argv=None) -> int:
             memory=mem_rows,
         )
         args.json.write_text(json.dumps(out, indent=2))
-    return 0 if ok else 1
+    return _smoke.targets_exit(ok, args.smoke)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Compile time and generated C size against the number of solar arrays (issue 12, item 9).
 
     python benchmarks/bench_compile.py [--arrays 2 8 16 32 48] [--formulation momentum]
-                                       [--integrator dop853] [--rhs-inline-max OPS] [--json PATH]
+                                       [--integrator dop853] [--rhs-inline-max OPS] [--json PATH] [--smoke]
 
 For each count, a rigid station with that many arrays on a ring (each turning at orbital rate,
 gravity gradient on: :func:`array_scene`) is built from scratch into an empty temporary compile
@@ -29,6 +29,12 @@ from pathlib import Path
 import casadi as ca
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _smoke  # noqa: E402
+
+#: array counts of a smoke run: one build from an empty cache, the smallest station with arrays
+SMOKE_ARRAYS = [1]
 
 
 def array_scene(n: int, formulation: str = "momentum", integrator: str = "dop853") -> dict:
@@ -91,7 +97,11 @@ def main(argv=None) -> int:
     ap.add_argument("--rhs-inline-max", type=float, default=None, metavar="OPS",
                     help="override the integrator's RHS_INLINE_MAX_OPS (inf: inline the RHS into every stage)")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"arrays {SMOKE_ARRAYS}")
+    if args.smoke:
+        args.arrays = SMOKE_ARRAYS
     rows = []
     import stationbed
 

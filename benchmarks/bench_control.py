@@ -1,6 +1,6 @@
 """Closed-loop speed benchmark: one orbit of iss_lvlh_hold with the 10 Hz pd (issue 3, DESIGN §9).
 
-    python benchmarks/bench_control.py [--scene PATH] [--repeats N] [--json PATH]
+    python benchmarks/bench_control.py [--scene PATH] [--repeats N] [--json PATH] [--smoke]
 
 Paths, timed side by side in one process (interleaved, median of ``--repeats`` runs each, after a
 warm-up run that compiles or loads the cached build):
@@ -36,6 +36,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _smoke  # noqa: E402
 
 import stationbed  # noqa: E402
 from stationbed.core.rotation import rotation_angle  # noqa: E402
@@ -51,10 +54,14 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--no-dop853", action="store_true", help="skip the DOP853 info row")
     ap.add_argument("--json", type=Path, default=None)
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
+    if args.smoke:
+        args.repeats = 1
 
     scene = stationbed.load_scene(args.scene)
-    T = 2 * math.pi / scene.orbit.mean_motion
+    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / scene.orbit.mean_motion
     t_build = time.perf_counter()
     runs = {
         "python": lambda: stationbed.simulate(scene, duration=T, fused=False),
@@ -95,8 +102,8 @@ def main(argv=None) -> int:
     print()
     ok_py = med["python"] <= TARGET_PYTHON_S
     ok_fu = med["fused"] <= TARGET_FUSED_S
-    print(f"python controller: {med['python']:.3f} s/orbit (target <= {TARGET_PYTHON_S} s): {'PASS' if ok_py else 'FAIL'}")
-    print(f"fused:             {med['fused']:.3f} s/orbit (target <= {TARGET_FUSED_S} s): {'PASS' if ok_fu else 'FAIL'}")
+    print(f"python controller: {med['python']:.3f} s/orbit (target <= {TARGET_PYTHON_S} s): {_smoke.verdict(ok_py, args.smoke)}")
+    print(f"fused:             {med['fused']:.3f} s/orbit (target <= {TARGET_FUSED_S} s): {_smoke.verdict(ok_fu, args.smoke)}")
     print(f"fused / python speed-up: {med['python'] / med['fused']:.1f}x; all runs: "
           + ", ".join(f"{k} {[round(w, 3) for w in v]}" for k, v in walls.items()))
     if args.json:

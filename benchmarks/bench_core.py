@@ -1,7 +1,7 @@
 """Core speed benchmark: one orbit, compiled library paths vs scipy + numpy (DESIGN §9).
 
     python benchmarks/bench_core.py [--scene PATH] [--repeats N] [--scipy-repeats N] [--rk4-step S]
-                                    [--no-flex] [--json PATH]
+                                    [--no-flex] [--json PATH] [--smoke]
 
 For one orbit (T = 2 pi / n) of the scene at rtol 1e-9, atol 1e-12:
 
@@ -60,6 +60,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
+import _smoke  # noqa: E402
 import stationbed  # noqa: E402
 from stationbed.scene import scene_from_dict  # noqa: E402
 from numpy_rhs import initial_state as np_initial_state  # noqa: E402
@@ -195,14 +196,18 @@ def main(argv=None) -> int:
     ap.add_argument("--rk4-step", type=float, default=RK4_STEP_S, help="RK4's fixed step [s] (default %(default)s)")
     ap.add_argument("--no-flex", action="store_true", help="skip the flexible-scene rows (issue 6)")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers as JSON")
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
+    if args.smoke:
+        args.repeats = args.scipy_repeats = 1
 
     scene_path = args.scene
     if not scene_path.exists() and scene_path == DEFAULT_SCENE and FALLBACK_SCENE.exists():
         print(f"note: {scene_path.name} not found, using {FALLBACK_SCENE.name}", file=sys.stderr)
         scene_path = FALLBACK_SCENE
     scene = stationbed.load_scene(scene_path)
-    T = _orbit_period(scene)
+    T = _smoke.SMOKE_DURATION_S if args.smoke else _orbit_period(scene)
     forms = ["momentum", "momentum27", "dalembert"]
     forms += [f for f in stationbed.FORMULATIONS if f not in forms]
     forms = [f for f in forms if f in stationbed.FORMULATIONS]
@@ -229,7 +234,7 @@ def main(argv=None) -> int:
         if flex is not None:
             for form in FLEX_FORMS:
                 add("flex", flex, form, integ)
-    timed = _time_interleaved(runs, args.repeats)
+    timed = _time_interleaved(runs, args.repeats, block=1 if args.smoke else BLOCK)
     for (tag, form, integ), (traj, _, _) in timed.items():
         if tag == "rigid" and not np.array_equal(traj.t, t_eval):
             raise SystemExit(f"{form}/{integ}: output times differ from the reference run")
@@ -449,7 +454,7 @@ def main(argv=None) -> int:
     print("| target | value | result |")
     print("|---|---:|---|")
     for tg in targets:
-        print(f"| {tg['target']} | {tg['value']} | {'PASS' if tg['ok'] else 'FAIL'} |")
+        print(f"| {tg['target']} | {tg['value']} | {_smoke.verdict(tg['ok'], args.smoke)} |")
     print()
     print("accuracy cross-checks (max over the orbit):")
     for k, v in checks.items():
@@ -487,7 +492,7 @@ def main(argv=None) -> int:
         )
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(payload, indent=2) + "\n")
-    return 0 if all(tg["ok"] for tg in targets) else 1
+    return _smoke.targets_exit(all(tg["ok"] for tg in targets), args.smoke)
 
 
 if __name__ == "__main__":

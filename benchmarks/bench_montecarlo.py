@@ -1,7 +1,7 @@
 """Monte Carlo benchmark (issue 13): closed-loop samples of one orbit on a local Dask cluster.
 
     python benchmarks/bench_montecarlo.py [--n N] [--n-python N] [--n-eff N] [--workers K]
-                                          [--json PATH]
+                                          [--json PATH] [--smoke]
 
 Scene: ``scenarios/iss_lvlh_hold_montecarlo.toml`` (one orbit, 10 Hz, every dispersion of the
 scenario) with the sensor noise off, so the ``pd`` law runs fused (controller, steering and
@@ -35,7 +35,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import _smoke  # noqa: E402
 from stationbed import load_scene, montecarlo, simulate  # noqa: E402
 from stationbed.studies.montecarlo.replay import sample_scene  # noqa: E402
 
@@ -50,10 +52,16 @@ def vm_hwm_mib() -> float:
     return float("nan")
 
 
-def bench_scene(controller: str = "pd"):
+#: smoke mode: samples of each row (pd, example_hold, efficiency) and workers
+SMOKE_N, SMOKE_WORKERS = 2, 1
+
+
+def bench_scene(controller: str = "pd", duration: float | None = None):
     s = load_scene(SCENE)
     disperse = [d.model_dump(exclude_unset=True) for d in s.montecarlo.disperse if not d.key.startswith("controller.sensor")]
     changes = {"controller.sensor": {}, "montecarlo.disperse": disperse}
+    if duration is not None:  # smoke: a few seconds per sample (the settling time inside them)
+        changes.update({"simulation.duration": duration, "montecarlo.settle_s": 0.5 * duration})
     if controller != "pd":
         disperse = [d for d in disperse if not d["key"].startswith("controller.params")]
         changes.update({"controller.name": controller, "controller.params": {"reference": "lvlh"},
@@ -75,11 +83,17 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--only-pd", action="store_true", help="row 1 and the driver's memory only (e.g. --n 10000)")
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s per row, {SMOKE_WORKERS} workers")
+    duration = None
+    if args.smoke:
+        args.n = args.n_python = args.n_eff = SMOKE_N
+        args.workers, duration = SMOKE_WORKERS, _smoke.SMOKE_DURATION_S
     from distributed import Client, LocalCluster
 
     rows = {"loadavg_start": os.getloadavg()}
-    pd_scene = bench_scene("pd")
+    pd_scene = bench_scene("pd", duration)
     # 1. pd fused, whole call (cluster start-up included)
     def study_on_new_cluster():  # what montecarlo(..., workers=K) does, keeping the workers to ask
         with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
@@ -98,7 +112,7 @@ def main(argv=None) -> int:
             args.json.write_text(json.dumps(rows, indent=2) + "\n")
         return 0
     # 2. example_hold, Python per tick
-    py_scene = bench_scene("example_hold")
+    py_scene = bench_scene("example_hold", duration)
     wall, res = timed(lambda: montecarlo(py_scene, n=args.n_python, workers=args.workers))
     per = wall / args.n_python
     rows["example_hold"] = {"n": args.n_python, "workers": args.workers, "wall_s": wall,

@@ -1,6 +1,6 @@
 """What a rerun recording costs a run (issue 4: logging adds <= 10 % to a 3-orbit run's wall time).
 
-    python benchmarks/bench_rerun.py [--scene PATH ...] [--repeats N] [--parts] [--cli-repeats N] [--cli-only]
+    python benchmarks/bench_rerun.py [--scene PATH ...] [--repeats N] [--parts] [--cli-repeats N] [--cli-only] [--smoke]
 
 For each scene (default: the closed-loop ``iss_lvlh_hold`` — 4 DGCMGs, 10 Hz PD, sun-tracking
 arrays, ~1 s — and the open-loop ``iss_lvlh_gravity_gradient``, a few ms; both 3 orbits), in one
@@ -39,6 +39,10 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import _smoke  # noqa: E402
+
 DEFAULT_SCENES = [ROOT / "scenarios" / "iss_lvlh_hold.toml", ROOT / "scenarios" / "iss_lvlh_gravity_gradient.toml"]
 BIN = Path(sys.executable).parent
 TARGET_RATIO = 1.10
@@ -138,13 +142,14 @@ def _parts_ms(scene, traj, tmp: Path, repeats: int) -> dict:
     return {"open": t_open, "send": t_send, "close": t_close}
 
 
-def _cli_ms(scene_path: Path, tmp: Path, repeats: int) -> tuple[float, float, list, list]:
+def _cli_ms(scene_path: Path, tmp: Path, repeats: int, duration: float | None = None) -> tuple[float, float, list, list]:
     """Wall time of ``stationbed run`` processes without and with ``--rrd``, interleaved:
     medians [ms] and the single runs [s]."""
     runs: dict[bool, list] = {False: [], True: []}
     for _ in range(repeats):
         for rrd in (False, True):
             extra = ["--rrd", str(tmp / "cli" / "recording.rrd")] if rrd else []
+            extra += ["--duration", repr(duration)] if duration is not None else []
             t0 = time.perf_counter()
             subprocess.run([str(BIN / "stationbed"), "run", str(scene_path), "--out", str(tmp / "cli"), *extra],
                            capture_output=True, check=True)
@@ -152,10 +157,10 @@ def _cli_ms(scene_path: Path, tmp: Path, repeats: int) -> tuple[float, float, li
     return 1e3 * statistics.median(runs[False]), 1e3 * statistics.median(runs[True]), runs[False], runs[True]
 
 
-def _print_cli(name: str, scene_path: Path, tmp: Path, repeats: int) -> tuple:
-    t_cli, t_cli_rrd, a, b = _cli_ms(scene_path, tmp, repeats)
+def _print_cli(name: str, scene_path: Path, tmp: Path, repeats: int, duration: float | None = None) -> tuple:
+    t_cli, t_cli_rrd, a, b = _cli_ms(scene_path, tmp, repeats, duration)
     ratio = t_cli_rrd / t_cli
-    verdict = "PASS" if ratio <= TARGET_RATIO else "MISS"
+    verdict = "not judged (smoke)" if duration is not None else "PASS" if ratio <= TARGET_RATIO else "MISS"
     print(f"`stationbed run` process ({name}), median of {repeats} interleaved: {t_cli:.0f} ms, with --rrd "
           f"{t_cli_rrd:.0f} ms ({t_cli_rrd - t_cli:+.0f} ms, {100 * (ratio - 1):+.1f} %): {verdict}")
     print(f"  runs [s]: without {' '.join(f'{x:.2f}' for x in a)}; with --rrd {' '.join(f'{x:.2f}' for x in b)}")
@@ -169,7 +174,12 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", action="store_true", help="also time the RrdSink's open / send / close")
     ap.add_argument("--cli-repeats", type=int, default=0, help="also time whole `stationbed run` processes")
     ap.add_argument("--cli-only", action="store_true", help="only the `stationbed run` processes (default 7 repeats)")
+    _smoke.add_option(ap)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s runs, one repeat, parts and one CLI pair for the first scene")
+    duration = None
+    if args.smoke:
+        args.repeats, args.parts, args.cli_repeats, duration = 1, True, 1, _smoke.SMOKE_DURATION_S
 
     if args.cli_only:
         import os
@@ -177,7 +187,7 @@ def main(argv=None) -> int:
         tmp = Path(tempfile.mkdtemp(prefix="bench_rerun_"))
         load = f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
         print(f"whole processes, {load} at the start")
-        rows = [_print_cli(p.stem, p, tmp, args.cli_repeats or 7) for p in (args.scene or DEFAULT_SCENES)]
+        rows = [_print_cli(p.stem, p, tmp, args.cli_repeats or 7, duration) for p in (args.scene or DEFAULT_SCENES)]
         print("\n| scene | `stationbed run` [ms] | with `--rrd` [ms] | added | target <= 10 % |")
         print("|---|---:|---:|---:|---|")
         for name, a, b, ratio, verdict in rows:
@@ -190,8 +200,10 @@ def main(argv=None) -> int:
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_rerun_"))
     results = []
-    for path in args.scene or DEFAULT_SCENES:
+    for i, path in enumerate(args.scene or DEFAULT_SCENES):
         scene = stationbed.load_scene(path)
+        if duration is not None:
+            scene = scene.replace({"simulation.duration": duration})
         traj = stationbed.simulate(scene)  # warm-up: compile / load the cached functions
         t0 = time.perf_counter()
         stationbed.simulate(scene)
@@ -216,7 +228,7 @@ def main(argv=None) -> int:
         ratio = med["csv + rrd"] / med["csv"]
         added = med["csv + rrd"] - med["csv"]
         share = med_in["csv + rrd"] / med["csv"]
-        verdict = "PASS" if ratio <= TARGET_RATIO else "MISS"
+        verdict = _smoke.verdict(ratio <= TARGET_RATIO, args.smoke).replace("FAIL", "MISS")
         print(f"\nrecording adds {added:+.1f} ms = {100 * (ratio - 1):+.1f} % to `stationbed run` in process "
               f"(target <= {100 * (TARGET_RATIO - 1):.0f} %): {verdict}; time inside the sink "
               f"{med_in['csv + rrd']:.1f} ms = {100 * share:.1f} % (the low-noise measure of the same cost)")
@@ -224,8 +236,8 @@ def main(argv=None) -> int:
             p = _parts_ms(scene, traj, tmp, repeats)
             print(f"RrdSink parts [ms]: open {p['open']:.1f} (stream, blueprint, static geometry), "
                   f"send {len(traj)} rows {p['send']:.1f}, close {p['close']:.1f}")
-        if args.cli_repeats:
-            _print_cli(scene.name, path, tmp, args.cli_repeats)
+        if args.cli_repeats and not (args.smoke and i > 0):
+            _print_cli(scene.name, path, tmp, args.cli_repeats, duration)
         results.append((scene.name, med["csv"], ratio, cpu["csv + rrd"] / cpu["csv"], share, verdict))
     print("\n| scene | csv run, wall [ms] | csv + rrd / csv, wall | CPU | in-sink share | target <= 1.10 (wall) |")
     print("|---|---:|---:|---:|---:|---|")

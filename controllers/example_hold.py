@@ -27,8 +27,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from stationbed.run.controller import Controller, ControllerParams
-from stationbed.core.rotation import dcm, quat_mult
+from stationbed import Controller, ControllerParams, dcm, quat_conj, quat_mult  # the public names, as in the README
 
 
 class ExampleHoldParams(ControllerParams):
@@ -55,7 +54,7 @@ class ExampleHold(Controller):
         # the reference attitude R relative to N: LVLH now, or N itself
         q_RN = meas.q_ON.copy() if self.params.reference == "lvlh" else np.array([1.0, 0.0, 0.0, 0.0])
         self.q_ref_BN = q_RN  # the run logs att_err_deg against this
-        q_e = quat_mult(q_RN * [1, -1, -1, -1], meas.q_BN)  # B relative to R
+        q_e = quat_mult(quat_conj(q_RN), meas.q_BN)  # B relative to R
         e = 2.0 * np.sign(q_e[0] or 1.0) * q_e[1:]
         w_RN_R = meas.omega_ON_O if self.params.reference == "lvlh" else self.w_RN_R  # LVLH's rate, measured
         w_ref_B = dcm(q_e) @ w_RN_R  # the reference's rate, in B

@@ -33,6 +33,10 @@ _LAZY = {
     "PlanError": "plan",
     "montecarlo": "studies.montecarlo",
     "MonteCarloResult": "studies.montecarlo",
+    # quaternion helpers a controller writer needs (q scalar first; dcm(q_BN) = C_BN)
+    "dcm": "core.rotation",
+    "quat_mult": "core.rotation",
+    "quat_conj": "core.rotation",
 }
 
 __all__ = sorted(_LAZY)

@@ -71,7 +71,8 @@ def _scene_options(p, formulation: bool = True) -> None:
     p.add_argument("--output-dt", type=float, default=None, help="simulation.output_dt [s]")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="change one scene value, read as TOML (repeatable): --set simulation.rtol=1e-10, "
-                        "--set appendage.stbd.mass=3e3, --set 'simulation.integrator=\"rk4\"'")
+                        "--set appendage.stbd_pair.mass=3e3 (an array by name: stbd_pair in scenarios/iss_*.toml), "
+                        "--set 'simulation.integrator=\"rk4\"'")
 
 
 def _scene_with_options(args):
@@ -97,7 +98,10 @@ def _quiet(p, top: bool = False) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     p = _Parser(prog="stationbed", description="Space-station attitude control test bed")
+    p.add_argument("--version", action="version", version=f"stationbed {__version__}")
     _quiet(p, top=True)
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
 
@@ -130,6 +134,9 @@ def _parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("replay", help="open a rerun recording in the viewer (or say how to)")
     rp.add_argument("file", type=Path, help="a .rrd recording (stationbed run/check --rrd)")
     rp.add_argument("--web", action="store_true", help="serve the web viewer instead (rerun --web-viewer)")
+    rp.add_argument("--bind", default=None, metavar="ADDR",
+                    help=f"address the web viewer listens on (default {WEB_BIND_DEFAULT}: this machine only; "
+                         "0.0.0.0 serves every network the machine is on)")
 
     st = sub.add_parser("study", help="work-precision and stability studies (CSV + PNG charts)")
     ss = st.add_subparsers(dest="study", required=True, parser_class=_Parser)
@@ -382,6 +389,9 @@ RRD_MAGIC = b"RRF"
 #: Environment variable naming the rerun viewer binary `stationbed replay` starts (tests, or
 #: a viewer outside the venv); default: the binary rerun-sdk bundles, then `rerun` on PATH.
 RERUN_BINARY_ENV = "STATIONBED_RERUN"
+#: where ``replay --web`` serves: this machine only unless ``--bind`` says otherwise (rerun's own
+#: default, 0.0.0.0, would offer the recording to every network the machine is on)
+WEB_BIND_DEFAULT = "127.0.0.1"
 
 
 def _rerun_binary() -> str | None:
@@ -428,7 +438,8 @@ def _cmd_replay(args) -> int:
     that show the recording are printed on stdout (the answer, not an error). Exit 1: the
     viewer binary is missing or failed (the same commands printed, the reason on stderr).
     Exit 2: FILE is missing or not a rerun recording. ``--web`` serves the web viewer
-    (``rerun --web-viewer FILE``, http://localhost:9090), which needs no display.
+    (``rerun --web-viewer --bind 127.0.0.1 FILE``, http://localhost:9090), which needs no display;
+    it listens on this machine only unless ``--bind ADDR`` names another address.
     """
     import shlex
     import subprocess
@@ -442,7 +453,11 @@ def _cmd_replay(args) -> int:
     exe = _rerun_binary()
     shown = _rerun_command(exe)
     native = f"{shown} {shlex.quote(str(f))}"
-    web = f"{shown} --web-viewer {shlex.quote(str(f))}"
+    bind = getattr(args, "bind", None)
+    if bind is not None and not args.web:
+        return _fail("--bind is where the web viewer listens: it needs --web", EXIT_BAD_INPUT)
+    bind = bind or WEB_BIND_DEFAULT
+    web = f"{shown} --web-viewer --bind {shlex.quote(bind)} {shlex.quote(str(f))}"
 
     def how(reason: str) -> None:
         print(f"{reason}; to replay {f}:")
@@ -455,7 +470,7 @@ def _cmd_replay(args) -> int:
     if not args.web and not _has_display():
         how("no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so no viewer window can open")
         return 0
-    cmd = [exe, "--web-viewer", str(f)] if args.web else [exe, str(f)]
+    cmd = [exe, "--web-viewer", "--bind", bind, str(f)] if args.web else [exe, str(f)]
     try:
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
     except OSError as e:

@@ -941,11 +941,11 @@ def test_replay_without_display_prints_the_commands_exit_0(tmp_path, small_rrd, 
     assert cli_main(["replay", str(small_rrd)]) == 0
     out = capsys.readouterr().out
     assert "no display" in out
-    assert f"{exe} {small_rrd}" in out and f"{exe} --web-viewer {small_rrd}" in out
+    assert f"{exe} {small_rrd}" in out and f"{exe} --web-viewer --bind 127.0.0.1 {small_rrd}" in out
     assert not (tmp_path / "argv.txt").exists()  # nothing was started
 
 
-@pytest.mark.parametrize("web, argv", [(False, []), (True, ["--web-viewer"])], ids=["native", "web"])
+@pytest.mark.parametrize("web, argv", [(False, []), (True, ["--web-viewer", "--bind", "127.0.0.1"])], ids=["native", "web"])
 def test_replay_starts_the_viewer_on_the_file(tmp_path, small_rrd, monkeypatch, web, argv):
     monkeypatch.setenv("STATIONBED_RERUN", str(fake_viewer(tmp_path, 0)))
     if web:
@@ -962,7 +962,7 @@ def test_replay_failing_viewer_prints_the_commands_exit_1(tmp_path, small_rrd, m
     monkeypatch.setenv("DISPLAY", ":0")
     assert cli_main(["replay", str(small_rrd)]) == 1
     out, err = capsys.readouterr()
-    assert "exited with status 3" in out and f"{exe} --web-viewer {small_rrd}" in out
+    assert "exited with status 3" in out and f"{exe} --web-viewer --bind 127.0.0.1 {small_rrd}" in out
     assert "status 3" in one_error_line(err)
 
 

@@ -101,7 +101,7 @@ def test_cylindrical_edges_match_plane_geometry():
 
 def test_glider_switch_is_where_the_shadow_crosses_one_half():
     glider = stationbed.load_scene(ROOT / "scenarios" / "iss_night_glider.toml")
-    scene = glider.replace({"torque": [], "sun": {**glider.sun.model_dump(exclude_unset=True), "eclipse": "conical"}})
+    scene = glider.replace({"torque": [], "surface": [], "sun": {**glider.sun.model_dump(exclude_unset=True), "eclipse": "conical"}})
     T = 2 * math.pi / scene.orbit.mean_motion
     edges = np.array(se.shadow_edges(scene, T)).reshape(-1, 2).mean(axis=1)  # a jump: cut on both sides
     ts, nu = _nu_fine(scene, 0.0, T)

@@ -18,26 +18,43 @@ def _about(s: str):
     raise ValueError(f"--about must be 'lvlh' or 'tea', got {s!r}")
 
 
+def _seconds(positive: bool = False):
+    """argparse type of a time option: a finite number of seconds, >= 0 (> 0 when ``positive``);
+    anything else is refused (argparse names the option; exit 2) before any work."""
+    import argparse
+
+    def conv(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a number of seconds, got {s!r}") from None
+        if not math.isfinite(v) or v < 0 or (positive and v == 0):
+            raise argparse.ArgumentTypeError(f"must be a finite time {'> 0' if positive else '>= 0'} [s], got {s!r}")
+        return v
+
+    return conv
+
+
 def add_parsers(sub) -> None:
     """Add the four commands to the ``stationbed`` subparsers."""
     lz = sub.add_parser("linearize", help="linear plant of a scene (python-control StateSpace): matrices, poles, zeros, Bode and pole-zero PNGs")
     lz.add_argument("scene", type=Path)
     lz.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene>/linearize)")
     lz.add_argument("--about", default="lvlh", help="'lvlh' (R fixed in LVLH) or 'tea' (torque-equilibrium attitude, found)")
-    lz.add_argument("--t", type=float, default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
-    lz.add_argument("--dt", type=float, default=None, help="also write the zero-order-hold plant for this period [s]")
+    lz.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
+    lz.add_argument("--dt", type=_seconds(positive=True), default=None, help="also write the zero-order-hold plant for this period [s]")
     lz.add_argument("--command", default="torque", choices=["torque", "gimbal_rates"], help="control input (default torque)")
     mg = sub.add_parser("margins", help="loop margins of the scene's controller (its symbolic form): table, Bode and Nichols PNGs")
     mg.add_argument("scene", type=Path)
     mg.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene>/margins)")
-    mg.add_argument("--t", type=float, default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
+    mg.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
     pl = sub.add_parser("plot", help="dashboard PNG of a run folder (trajectory.csv, summary.json)")
     pl.add_argument("outdir", type=Path)
     pl.add_argument("--png", type=Path, default=None, help="output file (default: OUTDIR/dashboard.png)")
     cp = sub.add_parser("compare", help="overlay runs and print their metrics (the Monte Carlo's definitions)")
     cp.add_argument("outdirs", type=Path, nargs="+")
     cp.add_argument("--png", type=Path, default=None, help="output file (default: compare.png in the first folder's parent)")
-    cp.add_argument("--settle", type=float, default=None, help="settling time for the metrics [s] (default: the metrics' own)")
+    cp.add_argument("--settle", type=_seconds(), default=None, help="settling time for the metrics [s] (default: the metrics' own)")
 
 
 def main(args) -> int:
@@ -207,11 +224,13 @@ def _margins(args) -> int:
 
 
 def _plot(args) -> int:
-    from .dashboard import dashboard
+    from .dashboard import dashboard, load_run, run_state
 
     _png_is_no_input(args.png, [args.outdir])
-    png = dashboard(args.outdir, args.png)
-    print(f"wrote {png}")
+    run = load_run(args.outdir)
+    png = dashboard(args.outdir, args.png, run=run)
+    state = run_state(run[1])
+    print(f"wrote {png}" + (f" ({state})" if state else ""))
     return 0
 
 

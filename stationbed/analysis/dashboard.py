@@ -1,11 +1,15 @@
-"""``stationbed plot OUTDIR``: one dashboard PNG of a run folder (trajectory.csv, summary.json).
+"""``stationbed plot OUTDIR``: one dashboard PNG of a run folder (trajectory.csv, or the partial rows
+of a failed run, and summary.json).
 
 Panels, each drawn when the run has its columns: per-axis attitude error to the controller's
-reference (``att_err_x/y/z_deg``), body rate, CMG momentum with its fraction of capacity, gimbal
-angles, gimbal rates, torque command, array sun-tracking error, array modal coordinates, and every
-other ``tau_*`` column (disturbance torques a scene models: ``tau_aero_*``, ...; whatever the
-name after ``tau_``). Rows flagged ``cmg_saturated`` are marked by red ticks along the top of every
-panel (a gimbal-rate limit or momentum saturation since the previous row).
+reference (``att_err_x/y/z_deg``); the body rate relative to that reference (inertial in open
+loop; :mod:`.signals`); CMG momentum h and, apart, |h| as a fraction of the capacity (from 0);
+gimbal angles and rates; the torque command beside the torque the cluster delivered; array
+sun-tracking error; array modal coordinates; every other ``tau_*`` column (disturbance torques a
+scene models: ``tau_aero_*``, ...; whatever the name after ``tau_``). Rows flagged
+``cmg_saturated`` are marked by red ticks along the top of every panel (a gimbal-rate limit or
+momentum saturation since the previous row). A failed or interrupted run's rows are drawn with its
+state in the title.
 """
 
 from __future__ import annotations
@@ -18,23 +22,57 @@ import numpy as np
 
 from ..core.plotting import pyplot, save_png
 from ..run.trajectory import Trajectory
+from .signals import ERR_AXES, delivered_torque, h_fraction, relative_rate
 
-__all__ = ["dashboard", "load_run", "time_axis"]
+__all__ = ["dashboard", "load_run", "run_state", "capacity_Nms", "time_axis", "ROWS_FILES"]
+
+
+#: the files a run folder holds its rows in: the result, or the rows a failed or interrupted run kept
+ROWS_FILES = ("trajectory.csv", "trajectory.partial.csv")
 
 
 def load_run(outdir) -> tuple[Trajectory, dict]:
-    """The trajectory and summary.json (``{}`` when absent) of a run folder; ValueError naming
-    the file when the folder has no trajectory.csv."""
+    """The trajectory and summary.json (``{}`` when absent) of a run folder.
+
+    The rows are the ones summary.json names (``rows_file``: the last run's, finished or not),
+    else ``trajectory.csv``, else ``trajectory.partial.csv`` (a failed or interrupted run keeps its
+    rows there); ``meta["rows_file"]`` says which was read and ``meta["partial"]`` whether they are
+    a failed or interrupted run's. ValueError naming the file for a folder without rows, a CSV
+    cut mid-row or damaged, or a summary.json that is not JSON.
+    """
     outdir = Path(outdir)
-    csv = outdir / "trajectory.csv"
-    if not csv.is_file():
-        raise ValueError(f"{csv}: no such file (a run folder written by 'stationbed run --out DIR')")
-    tr = Trajectory.from_csv(csv)
     meta = {}
-    if (outdir / "summary.json").is_file():
-        meta = json.loads((outdir / "summary.json").read_text())
+    summary = outdir / "summary.json"
+    if summary.is_file():
+        try:
+            meta = json.loads(summary.read_text())
+        except (ValueError, UnicodeDecodeError) as e:
+            raise ValueError(f"{summary}: not JSON ({e})") from None
+        if not isinstance(meta, dict):
+            raise ValueError(f"{summary}: not a run summary (a JSON object)")
+    named = meta.get("rows_file")
+    order = ([named] if named in ROWS_FILES else []) + [n for n in ROWS_FILES if n != named]
+    csv = next((outdir / n for n in order if (outdir / n).is_file()), None)
+    if csv is None:
+        raise ValueError(f"{outdir / ROWS_FILES[0]}: no such file, nor {ROWS_FILES[1]} "
+                         "(a run folder written by 'stationbed run --out DIR')")
+    tr = Trajectory.from_csv(csv)
+    meta["rows_file"] = csv.name
+    meta["partial"] = csv.name != ROWS_FILES[0]
+    if named is not None and named != csv.name:  # summary.json is another run's (the file it names is gone): not these rows'
+        meta = {"rows_file": csv.name, "partial": meta["partial"]}
     tr.meta.update(meta)
     return tr, meta
+
+
+def run_state(meta: dict) -> str:
+    """'' for a finished run, else what the rows are ("failed run: rows to t = 100 s, trajectory.partial.csv")."""
+    if not meta.get("partial"):
+        return ""
+    what = meta.get("status") if meta.get("status") in ("failed", "interrupted") else "unfinished"
+    at = meta.get("stopped_at", meta.get("last_t"))
+    return f"{what} run: rows to t = {at:g} s in {meta['rows_file']}" if isinstance(at, (int, float)) else \
+        f"{what} run: rows in {meta['rows_file']}"
 
 
 def time_axis(t_end: float) -> tuple[float, str]:
@@ -46,81 +84,112 @@ def time_axis(t_end: float) -> tuple[float, str]:
     return 1.0, "t [s]"
 
 
-def _groups(tr: Trajectory, meta: dict) -> list[tuple[str, list]]:
-    """(panel title, [(column or array, label, scale)]) for the panels the run has data for."""
+def capacity_Nms(summary: dict) -> float | None:
+    """The CMG cluster's momentum capacity [N m s] a run reported (None when it has none)."""
+    cap = summary.get("h_capacity_Nms")
+    if cap is None and summary.get("max_h_fraction"):
+        cap = summary["max_h_Nms"] / summary["max_h_fraction"]
+    return float(cap) if cap is not None and math.isfinite(cap) and cap > 0 else None
+
+
+def _panels(tr: Trajectory, summ: dict) -> list[tuple[str, list]]:
+    """(panel title, [(values (k,), label, style)]) for the panels the run has data for."""
     cols = set(tr.columns)
     has = lambda *names: all(n in cols for n in names)  # noqa: E731
     deg = math.degrees(1.0)
+    total = {"color": "k", "lw": 1.0, "ls": "--"}
+    axes3 = ("x", "y", "z")
     out = []
-    if has("att_err_x_deg"):
+    if has(*ERR_AXES):
         out.append(("attitude error to the reference [deg]",
-                    [("att_err_x_deg", "x (roll)", 1), ("att_err_y_deg", "y (pitch)", 1), ("att_err_z_deg", "z (yaw)", 1),
-                     ("att_err_deg", "total", 1)]))
+                    [(tr[c], f"{a} ({n})", {}) for c, a, n in zip(ERR_AXES, axes3, ("roll", "pitch", "yaw"))]
+                    + [(tr["att_err_deg"], "total", total)]))
     elif has("att_err_deg"):
-        out.append(("attitude error to the reference [deg]", [("att_err_deg", "total", 1)]))
-    out.append(("body rate ω_BN_B [deg/s]", [("wx", "x", deg), ("wy", "y", deg), ("wz", "z", deg)]))
+        out.append(("attitude error to the reference [deg]", [(tr["att_err_deg"], "total", total)]))
+    w_BR = relative_rate(tr)
+    if w_BR is not None:
+        out.append(("body rate relative to the reference ω_BR_B [deg/s]", [(w_BR[:, i] * deg, a, {}) for i, a in enumerate(axes3)]))
+    else:
+        out.append(("body rate ω_BN_B (inertial) [deg/s]", [(tr[c] * deg, a, {}) for c, a in zip(("wx", "wy", "wz"), axes3)]))
     if not has("att_err_deg"):  # open loop: the momentum (conserved without external torque)
-        out.append(("angular momentum H_O, inertial [N m s]", [("HNx", "x", 1), ("HNy", "y", 1), ("HNz", "z", 1)]))
+        out.append(("angular momentum H_O, inertial [N m s]", [(tr[c], a, {}) for c, a in zip(("HNx", "HNy", "HNz"), axes3)]))
     if has("hx"):
-        out.append(("CMG momentum h (B) [N m s]", [("hx", "x", 1), ("hy", "y", 1), ("hz", "z", 1), ("|h|", "|h|", 1)]))
+        out.append(("CMG momentum h (B) [N m s]", [(tr[c], a, {}) for c, a in zip(("hx", "hy", "hz"), axes3)]))
+        frac = h_fraction(tr, capacity_Nms(summ))
+        if frac is not None:
+            out.append(("CMG momentum |h| / capacity", [(frac, "|h| / capacity", {"color": "k", "lw": 1.0})]))
     gim = [c for c in tr.columns if c.startswith("gimbal_") and not c.endswith("_rate")]
     if gim:
-        out.append(("gimbal angles [deg]", [(c, c.removeprefix("gimbal_"), deg) for c in gim]))
-        out.append(("gimbal rate commands [deg/s]", [(c + "_rate", c.removeprefix("gimbal_"), deg) for c in gim]))
-    if has("tau_cmd_x"):
-        out.append(("torque command [N m]", [("tau_cmd_x", "x", 1), ("tau_cmd_y", "y", 1), ("tau_cmd_z", "z", 1)]))
+        out.append(("gimbal angles [deg]", [(tr[c] * deg, c.removeprefix("gimbal_"), {}) for c in gim]))
+        out.append(("gimbal rate commands [deg/s]", [(tr[c + "_rate"] * deg, c.removeprefix("gimbal_"), {}) for c in gim]))
+    tau = delivered_torque(tr)
+    if has("tau_cmd_x") or tau is not None:
+        lines = []
+        for i, a in enumerate(axes3):
+            color = f"C{i}"
+            if has("tau_cmd_x"):
+                lines.append((tr[f"tau_cmd_{a}"], f"{a} command", {"color": color, "lw": 1.0}))
+            if tau is not None:
+                lines.append((tau[:, i], f"{a} delivered", {"color": color, "lw": 1.0, "ls": "--"}))
+        title = "CMG torque on the body: command (solid), delivered -(ḣ + ω×h) (dashed) [N m]" if tau is not None \
+            else "torque command [N m]"
+        out.append((title, lines))
     trk = [c for c in tr.columns if c.startswith("track_err_deg_")]
     if trk:
-        out.append(("array sun-tracking error [deg]", [(c, c.removeprefix("track_err_deg_"), 1) for c in trk]))
+        out.append(("array sun-tracking error [deg]", [(tr[c], c.removeprefix("track_err_deg_"), {}) for c in trk]))
     eta = [c for c in tr.columns if c.startswith("eta_")]
     if eta:
-        out.append(("array modal coordinates η (tip deflection) [mm]", [(c, c.removeprefix("eta_"), 1e3) for c in eta]))
+        out.append(("array modal coordinates η (tip deflection) [mm]", [(tr[c] * 1e3, c.removeprefix("eta_"), {}) for c in eta]))
     dist = [c for c in tr.columns if c.startswith("tau_") and not c.startswith("tau_cmd_")]
     if dist:
-        out.append(("disturbance torques [N m]", [(c, c.removeprefix("tau_"), 1) for c in dist]))
+        out.append(("disturbance torques [N m]", [(tr[c], c.removeprefix("tau_"), {}) for c in dist]))
     return out
 
 
-def dashboard(outdir, png=None) -> Path:
-    """Draw the dashboard of a run folder; returns the PNG's path (default OUTDIR/dashboard.png)."""
-    tr, meta = load_run(outdir)
+def _finite_range(lines) -> bool:
+    """True when some value of the panel is finite (an all-NaN panel is drawn empty, not warned about)."""
+    return any(np.isfinite(y).any() for y, _, _ in lines)
+
+
+def dashboard(outdir, png=None, run=None) -> Path:
+    """Draw the dashboard of a run folder; returns the PNG's path (default OUTDIR/dashboard.png).
+    ``run``: the folder's ``(trajectory, meta)`` when already read (:func:`load_run`)."""
+    tr, meta = run if run is not None else load_run(outdir)
     if len(tr) == 0:
-        raise ValueError(f"{Path(outdir) / 'trajectory.csv'}: no rows")
+        raise ValueError(f"{Path(outdir) / meta['rows_file']}: no rows (the run stopped before its first output row)")
     plt = pyplot()
     png = Path(png) if png is not None else Path(outdir) / "dashboard.png"
     summ = meta.get("summary", {})
-    groups = _groups(tr, meta)
+    with np.errstate(all="ignore"):  # NaN rows (no reference yet, a gimbal-rate law's torque) are gaps
+        groups = _panels(tr, summ)
     ncol = 1 if len(groups) == 1 else 2
     nrow = math.ceil(len(groups) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(7.5 * ncol, 3.1 * nrow + 0.9), sharex=True, squeeze=False)
     div, tlabel = time_axis(float(tr.t[-1]))
     t = tr.t / div
     sat = tr["cmg_saturated"] > 0.5 if "cmg_saturated" in tr.columns else np.zeros(len(tr), bool)
-    cap = summ.get("h_capacity_Nms")
-    if cap is None and summ.get("max_h_fraction"):
-        cap = summ["max_h_Nms"] / summ["max_h_fraction"]
     for ax, (title, lines) in zip(axes.flat, groups):
-        for col, label, scale in lines:
-            y = np.linalg.norm(tr.cols("hx", "hy", "hz"), axis=1) if col == "|h|" else tr[col]
-            style = {"color": "k", "lw": 1.0, "ls": "--"} if label in ("total", "|h|") else {"lw": 1.0}
-            ax.plot(t, y * scale, label=label, **style)
-        if title.startswith("CMG") and cap:
-            if np.linalg.norm(tr.cols("hx", "hy", "hz"), axis=1).max() > 0.5 * cap:
-                ax.axhline(cap, color="tab:red", lw=0.8, ls=":", label="capacity")
-            ax2 = ax.twinx()  # the same scale as a fraction of the capacity
-            ax2.set_ylim(np.array(ax.get_ylim()) / cap * 100.0)
-            ax2.set_ylabel("|h| as % of capacity")
+        for y, label, style in lines:
+            ax.plot(t, y, label=label, **({"lw": 1.0} | style))
+        if title.startswith("CMG momentum |h|"):
+            top = max(1.1, float(np.nanmax(lines[0][0])) * 1.05) if _finite_range(lines) else 1.1
+            ax.set_ylim(0.0, top)  # a fraction of a norm: never below 0
+            ax.axhline(1.0, color="tab:red", lw=0.8, ls=":", label="capacity")
         if sat.any():
             ax.plot(t[sat], np.full(sat.sum(), 1.0), "|", color="tab:red", ms=8, transform=ax.get_xaxis_transform(),
                     label="CMG limit (rate or momentum)")
         ax.set_title(title, fontsize=10)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, ncol=min(4, len(lines) + int(sat.any())), loc="best")
+        if _finite_range(lines):
+            ax.legend(fontsize=7, ncol=min(6, len(lines) + int(sat.any())), loc="best")
+        else:
+            ax.text(0.5, 0.5, "no values (NaN in every row)", ha="center", va="center", transform=ax.transAxes, color="0.4")
     for ax in axes.flat[len(groups):]:
         ax.set_visible(False)
-    for ax in axes[-1]:
-        ax.set_xlabel(tlabel)
-        ax.tick_params(labelbottom=True)
+    for col in range(ncol):  # the lowest panel of each column carries the time axis
+        shown = [ax for ax in axes[:, col] if ax.get_visible()]
+        shown[-1].set_xlabel(tlabel)
+        shown[-1].tick_params(labelbottom=True)
     name = meta.get("scene", Path(outdir).name)
     ctrl = ""
     if summ.get("controller"):
@@ -131,6 +200,8 @@ def dashboard(outdir, png=None) -> Path:
                      ("momentum_saturated_ticks", "saturated ticks {}")):
         if summ.get(key) is not None:
             facts.append(fmt.format(summ[key]))
-    fig.suptitle(f"{name}{ctrl}" + (": " + "; ".join(facts) if facts else ""), fontsize=11)
-    save_png(plt, fig, png, dpi=100)
+    state = run_state(meta)
+    fig.suptitle(f"{name}{ctrl}" + (": " + "; ".join(facts) if facts else "") + (f"\n{state}" if state else ""),
+                 fontsize=11, color="tab:red" if state else "k")
+    save_png(plt, fig, png, dpi=100, title_in=0.1 + 0.2 * (1 + bool(state)))
     return png

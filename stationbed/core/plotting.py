@@ -29,8 +29,9 @@ def pyplot(missing: type[Exception] = ValueError):
     return plt
 
 
-def save_png(plt, fig, path, dpi: int = 110) -> None:
-    """Lay ``fig`` out, write it as a PNG at ``path`` and free it."""
-    fig.tight_layout()
+def save_png(plt, fig, path, dpi: int = 110, title_in: float = 0.0) -> None:
+    """Lay ``fig`` out, write it as a PNG at ``path`` and free it; ``title_in`` [inch] is kept
+    free above the panels for a suptitle (tight_layout leaves none)."""
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - title_in / fig.get_figheight()))
     fig.savefig(path, dpi=dpi)
     plt.close(fig)

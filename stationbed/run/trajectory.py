@@ -9,6 +9,7 @@ appendage [rad], then anything else a scene adds.
 from __future__ import annotations
 
 import csv
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -94,11 +95,27 @@ class Trajectory:
 
     @classmethod
     def from_csv(cls, path) -> "Trajectory":
-        """Read a trajectory CSV written by :meth:`to_csv` or ``stationbed run``."""
+        """Read a trajectory CSV written by :meth:`to_csv` or ``stationbed run``.
+
+        A header with no rows gives an empty trajectory. A file that is not such a table raises
+        ValueError naming the file and the first bad line: empty (no header), a row of another
+        width (a file cut mid-row, or damaged), a value that is not a number.
+        """
         with open(path, newline="") as fh:
-            header = next(csv.reader(fh))
-            data = np.loadtxt(fh, delimiter=",", ndmin=2)
-        return cls(header, data.reshape(-1, len(header)))
+            header = next(csv.reader(fh), None)
+            if not header or not all(header):
+                raise ValueError(f"{path}: no header row (an empty or damaged trajectory CSV)")
+            with warnings.catch_warnings():  # a header without rows is an empty trajectory, said by the caller
+                warnings.filterwarnings("ignore", message="loadtxt: input contained no data")
+                try:
+                    data = np.loadtxt(fh, delimiter=",", ndmin=2)
+                except ValueError:
+                    raise ValueError(f"{path}: {_bad_line(path, len(header))}") from None
+        if data.size == 0:
+            return cls(header, np.empty((0, len(header))))
+        if data.shape[1] != len(header):
+            raise ValueError(f"{path}: rows have {data.shape[1]} values, the header {len(header)} columns")
+        return cls(header, data)
 
     def to_npz(self, path) -> None:
         """Write the columns and data to a numpy ``.npz`` file."""
@@ -109,3 +126,25 @@ class Trajectory:
         """Read a trajectory written by :meth:`to_npz`."""
         with np.load(path) as z:
             return cls([str(c) for c in z["columns"]], z["data"])
+
+
+def _bad_line(path, width: int) -> str:
+    """Why the rows of the trajectory CSV at ``path`` do not read (read again, line by line): the
+    first line of another width or with a value that is not a number, counted from line 1."""
+    with open(path, newline="") as fh:
+        fh.readline()  # the header
+        i, line = 1, ""
+        for i, line in enumerate(fh, start=2):
+            values = line.rstrip("\r\n").split(",")
+            if not line.strip():
+                continue
+            if len(values) != width:
+                cut = not line.endswith("\n") and not fh.read(1)
+                return (f"line {i} has {len(values)} values, the header {width} columns"
+                        + (" (the file ends mid-row: cut, or still being written)" if cut else ""))
+            for j, v in enumerate(values):
+                try:
+                    float(v)
+                except ValueError:
+                    return f"line {i}, column {j + 1}: {v.strip()[:20]!r} is not a number"
+    return "rows that do not read as numbers"

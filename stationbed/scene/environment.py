@@ -15,7 +15,7 @@ from .base import FieldError, Strict, Vec3
 
 __all__ = [
     "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "AeroTorque", "SrpTorque", "Torque",
-    "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT", "Sun",
+    "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT", "Sun", "SUN_EPOCH_RANGE",
 ]
 
 
@@ -264,6 +264,13 @@ class Atmosphere(Strict):
     ap: float = Field(default=15.0, ge=0.0)
 
 
+#: The range of dates the sun model is stated for: the Astronomical Almanac's low-precision solar
+#: coordinates (stationbed/model/sun.py), 0.01 deg "between 1950 and 2050"; an epoch outside it
+#: is refused rather than computed with an error nobody has bounded. [first day, day after the last)
+SUN_EPOCH_RANGE = (datetime.datetime(1950, 1, 1, tzinfo=datetime.timezone.utc),
+                   datetime.datetime(2051, 1, 1, tzinfo=datetime.timezone.utc))
+
+
 class Sun(Strict):
     """Sun direction, fixed in N over a run (it moves ~1 deg/day).
 
@@ -285,9 +292,15 @@ class Sun(Strict):
     def _iso(cls, epoch):
         if epoch is not None:
             try:
-                datetime.datetime.fromisoformat(epoch.replace("Z", "+00:00"))
+                when = datetime.datetime.fromisoformat(epoch.replace("Z", "+00:00"))
             except ValueError:
                 raise ValueError(f"'{epoch}' is not an ISO 8601 date and time (e.g. 2024-03-20T03:06:00Z)") from None
+            if when.tzinfo is None:
+                when = when.replace(tzinfo=datetime.timezone.utc)
+            first, end = SUN_EPOCH_RANGE
+            if not first <= when < end:
+                raise ValueError(f"'{epoch}' is outside {first.year}-{end.year - 1}, the range the sun model is stated "
+                                 "for (Astronomical Almanac low-precision formulas, 0.01 deg)")
         return epoch
 
     @field_validator("beta")

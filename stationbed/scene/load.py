@@ -159,6 +159,9 @@ def _check_environment(scene) -> None:
         raise FieldError("torque", "kind 'srp' needs a [sun] table")
     if scene.atmosphere is not None and "aero" not in kinds:
         raise FieldError("atmosphere", "has no effect without a [[torque]] kind = 'aero'")
+    if scene.surface and not {"aero", "srp"} & set(kinds):
+        raise FieldError("surface", f"{len(scene.surface)} surface(s) but no [[torque]] uses them: they have no effect "
+                                    "without kind = 'aero' or 'srp' (add one, or remove the [[surface]] tables: --set surface=[])")
     if scene.atmosphere is not None and scene.atmosphere.model == "msis" and (scene.sun is None or scene.sun.epoch is None):
         raise FieldError("atmosphere.model", "'msis' needs [sun] epoch (the date of the density)")
     if scene.sun is not None and scene.sun.eclipse != "none" and scene.orbit is None:

@@ -1,7 +1,8 @@
 """Blueprints (the viewer's layout), stored in the recording's file as a blueprint store.
 
-A run: the 3-D view beside stacked time-series panels (state; controller and CMG; elastic modes),
-each panel only when its series are logged. A check: the formulations' rates and attitudes
+A run: the 3-D view beside one tab per group of time-series panels (motion; control; CMG;
+environment and array tracking; elastic modes), each panel only when its series are logged and
+each tab only when it has a panel; a closed-loop run opens on its control tab. A check: the formulations' rates and attitudes
 overlaid, beside their pairwise differences and the check's tolerances.
 """
 
@@ -19,15 +20,15 @@ __all__ = ["run_blueprint", "check_blueprint"]
 
 
 def run_blueprint(scene, extra=(), duration: float | None = None):
-    """3-D station view beside stacked time-series panels.
+    """3-D station view beside tabs of time-series panels (a tab per group, see the module docstring).
 
     Parameters
     ----------
     scene : stationbed.scene.Scene
     extra : sequence of str, optional
-        Row columns beyond :func:`~stationbed.run.trajectory.base_columns`: the CMG, controller
-        and sun-tracking panels appear (in a second column of plots) when their columns are there,
-        the modal coordinates, rates and strain energy of flexible arrays in a column of their own.
+        Row columns beyond :func:`~stationbed.run.trajectory.base_columns`: the control, CMG and
+        environment tabs appear when their columns are there, the modal coordinates, rates and
+        strain energy of flexible arrays in a tab of their own.
     duration : float, optional
         Run length [s]: the plots' time axis and the playback speed (default: the scene's
         ``simulation.duration``).
@@ -70,29 +71,28 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
     if unknown:
         state.append(plot("extra", "telemetry/extra"))
 
-    control = []
-    for name, origin in (
-        ("attitude error [deg]", "telemetry/control/att_err_deg"),
-        ("attitude error per axis (rotation vector, B) [deg]", "telemetry/control/att_err_axes_deg"),
-        ("torque command tau_cmd_B [N m]", "telemetry/control/tau_cmd_B"),
-        ("CMG momentum h_B [N m s]", "telemetry/cmg/h_B"),
-        ("gimbal angles [rad]", "telemetry/cmg/gimbal/angle"),
-        ("gimbal rates [rad/s]", "telemetry/cmg/gimbal/rate"),
-    ):
-        if origin in have:
-            control.append(plot(name, origin))
-    env = [e for e in ("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B") if e in have]
-    if env:
-        control.append(plot("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment", env))
-    if "telemetry/environment/eclipse" in have:
-        control.append(plot("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse"))
+    def present(pairs):
+        return [plot(name, origin) for name, origin in pairs if origin in have]
+
+    control = present((("attitude error [deg]", "telemetry/control/att_err_deg"),
+                       ("attitude error per axis (rotation vector, B) [deg]", "telemetry/control/att_err_axes_deg"),
+                       ("torque command tau_cmd_B [N m]", "telemetry/control/tau_cmd_B")))
+    cmg = present((("CMG momentum h_B [N m s]", "telemetry/cmg/h_B"),
+                   ("gimbal angles [rad]", "telemetry/cmg/gimbal/angle"),
+                   ("gimbal rates [rad/s]", "telemetry/cmg/gimbal/rate")))
     flags = [e for e in ("telemetry/cmg/singularity", "telemetry/cmg/saturated") if e in have]
     if flags:
-        control.append(plot("CMG singularity measure, saturated (0/1)", "telemetry/cmg", flags))
+        cmg.append(plot("CMG singularity measure, saturated (0/1)", "telemetry/cmg", flags))
+    environment = []
+    env = [e for e in ("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B") if e in have]
+    if env:
+        environment.append(plot("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment", env))
+    if "telemetry/environment/eclipse" in have:
+        environment.append(plot("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse"))
     track = [f"telemetry/arrays/{n}/track_err_deg" for n in scene.appendage_names]
     track = [e for e in track if e in have]
     if track:
-        control.append(plot("array sun-tracking error [deg]", "telemetry/arrays", track))
+        environment.append(plot("array sun-tracking error [deg]", "telemetry/arrays", track))
 
     elastic = []
     for name, what in (("modal coordinates eta (beam modes: tip deflection [m])", "eta"), ("modal rates etadot", "etadot")):
@@ -103,17 +103,30 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
         elastic.append(plot("strain energy U_strain [J]", "telemetry/modes/U_strain"))
 
     view3d = rrb.Spatial3DView(name=f"{scene.name} (N axes, CM at origin)", origin="world", eye_controls=eye)
-    columns = [rrb.Vertical(*c) for c in (state, control, elastic) if c]
-    if len(columns) > 1:
-        layout = rrb.Horizontal(view3d, *columns, column_shares=[2] + [1] * len(columns))
-    else:
-        layout = rrb.Horizontal(view3d, *columns, column_shares=[3, 2])
+    tabs = [(name, views) for name, views in (("motion", state), ("control", control), ("CMG", cmg),
+                                              ("environment", environment), ("elastic modes", elastic)) if views]
+    names = [name for name, _ in tabs]
+    active = names.index("control") if control else 0  # (rerun 0.41 matches a str active_tab to views only)
+    layout = rrb.Horizontal(view3d, rrb.Tabs(*(_group(rrb, name, views) for name, views in tabs), active_tab=active),
+                            column_shares=[1, 1])
     return rrb.Blueprint(
         layout,
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(timeline=TIMELINE, playback_speed=max(1.0, duration / 60.0), play_state="paused"),
     )
+
+
+#: panels in one tab stacked in a column; more are laid out in a grid of two columns, so no panel
+#: is shorter than a quarter of the viewer's height (issue 19: 17 stacked panels were ~60 px each)
+MAX_STACKED = 3
+
+
+def _group(rrb, name, views):
+    """One tab: its panels stacked (up to :data:`MAX_STACKED`), else in a two-column grid."""
+    if len(views) <= MAX_STACKED:
+        return rrb.Vertical(*views, name=name)
+    return rrb.Grid(*views, grid_columns=2, name=name)
 
 
 def check_blueprint(names, pairs):

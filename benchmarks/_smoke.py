@@ -1,0 +1,43 @@
+"""Smoke mode, shared by every script in benchmarks/ (issue 19, item 20).
+
+``--smoke`` (or ``STATIONBED_BENCH_SMOKE=1`` in the environment) runs a benchmark with tiny
+sizes (a few simulated seconds instead of an orbit, a handful of samples), one repeat, and judges
+no target: every path it would time still runs, so a benchmark cannot rot unnoticed. CI runs each
+script this way (tests/test_benchmarks_smoke.py; ``make bench-smoke``). Its numbers are not
+measurements: the first line printed says so.
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["ENV", "SMOKE_DURATION_S", "add_option", "announce", "verdict", "targets_exit"]
+
+#: the environment variable that turns smoke mode on for every script (e.g. in CI)
+ENV = "STATIONBED_BENCH_SMOKE"
+#: simulated time a smoke run covers in place of an orbit [s]: long enough for several controller
+#: ticks, output rows and adaptive steps, short enough that a script's runs take well under a second
+SMOKE_DURATION_S = 20.0
+
+
+def add_option(ap) -> None:
+    """Add ``--smoke`` to an argparse parser (default: on when :data:`ENV` is set, not "0")."""
+    ap.add_argument("--smoke", action="store_true", default=os.environ.get(ENV, "") not in ("", "0"),
+                    help=f"tiny sizes, one repeat, no target judged (CI; also ${ENV}=1)")
+
+
+def announce(smoke: bool, what: str = "") -> None:
+    """Print the smoke-mode line first, when on."""
+    if smoke:
+        print(f"smoke mode ({what or 'tiny sizes, one repeat'}): every path runs, no number below is a measurement, "
+              "no target is judged")
+
+
+def verdict(ok: bool, smoke: bool) -> str:
+    """PASS / FAIL of a target, or that it was not judged (smoke mode)."""
+    return "not judged (smoke)" if smoke else ("PASS" if ok else "FAIL")
+
+
+def targets_exit(ok: bool, smoke: bool) -> int:
+    """The exit status of a script whose targets are ``ok``: 0 in smoke mode whatever they are."""
+    return 0 if smoke or ok else 1
