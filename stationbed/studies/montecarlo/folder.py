@@ -92,6 +92,10 @@ def law_sources(scene) -> dict[str, str]:
     spec = scene.controller
     if spec is None:
         return {}
+    if spec.fmu is not None:  # an FMU law: the unit itself is its source (binary and model inside)
+        fmu = Path(spec.fmu) if Path(spec.fmu).is_absolute() else Path(scene.folder or ".") / spec.fmu
+        fmu = fmu.resolve()
+        return {str(fmu): _hash_file(fmu)} if fmu.is_file() else {}
     from ...run.controller import get_controller  # noqa: PLC0415 - loads the law's file
 
     cls = get_controller(spec.name, base_dir=scene.folder)
