@@ -59,6 +59,7 @@ import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
+from types import SimpleNamespace
 from pathlib import Path
 from typing import Annotated, Any, ClassVar
 
@@ -70,6 +71,7 @@ __all__ = [
     "Controller",
     "ControllerParams",
     "Measurement",
+    "BatchMeasurement",
     "Plant",
     "ControllerError",
     "get_controller",
@@ -154,6 +156,29 @@ class Measurement:
         for name, (o, k) in layout.items():
             v = y[o : o + k]
             setattr(self, name, v.reshape(3, 3) if name == "C_ON" else v)
+
+
+class BatchMeasurement:
+    """What a batch of controllers sees at a tick (:meth:`Controller.update_batch`): the fields
+    of :class:`Measurement` with a leading sample axis, views of ``y`` (n_samples, n_y) refreshed
+    in place: ``q_BN`` (n, 4), ``omega_BN_B`` (n, 3), ..., ``C_ON`` (n, 3, 3); ``t`` is the tick's
+    time [s], the same for every sample (the samples advance in lockstep)."""
+
+    __slots__ = Measurement.__slots__ + ("n_samples", "layout")
+
+    def __init__(self, y: np.ndarray, layout: dict[str, tuple[int, int]]):
+        self.t = 0.0
+        self.y = y
+        self.layout = layout
+        self.n_samples = y.shape[0]
+        for name, (o, k) in layout.items():
+            v = y[:, o : o + k]
+            setattr(self, name, v.reshape(-1, 3, 3) if name == "C_ON" else v)
+
+
+#: attributes of a controller that stay per sample (not stacked) in :meth:`Controller.batch_of`
+_PER_MEMBER = frozenset({"period", "params", "params_batch", "q_ref_BN", "n_updates", "plant", "members", "n_samples",
+                         "batch_failed", "batch_stopped", "_member_meas"})
 
 
 @dataclass
@@ -243,6 +268,79 @@ class Controller:
     def summary(self) -> dict:
         """Design facts to report (poles, margins...); empty by default."""
         return {}
+
+    # -- batch (many samples per call; stationbed/run/lockstep.py) -------------------------
+    @classmethod
+    def batch_of(cls, members: list["Controller"]) -> "Controller":
+        """One controller that stands for ``members`` (each reset with its own plant) in
+        :meth:`update_batch`: every number, tuple of numbers or numpy array the members set in
+        ``_reset`` (gains, ``J``...) becomes an array with a leading sample axis (a float gain:
+        shape (n,); a (3, 3) ``J``: (n, 3, 3)); strings and flags are the first member's (one
+        that differs between members becomes the list of their values); anything else (objects)
+        is the first member's; the numeric parameters are ``params_batch.<name>``, arrays (n,) (a
+        bandwidth drawn per sample). ``members`` keeps the per-sample controllers (the default
+        :meth:`update_batch` calls them; ``params`` is the first member's)."""
+        b = object.__new__(cls)
+        b.__dict__.update(members[0].__dict__)
+        for name, v in members[0].__dict__.items():
+            if name in _PER_MEMBER or v is None:
+                continue
+            vals = [getattr(m, name, None) for m in members]
+            if isinstance(v, (bool, str)):  # a switch: one value for the batch, or the list of them
+                if any(w != v for w in vals):
+                    setattr(b, name, vals)  # (a law that assumes one value then fails, loudly)
+                continue
+            try:
+                arr = np.asarray(vals, dtype=float)
+            except (TypeError, ValueError):
+                continue  # not numbers (objects, ragged): the first member's
+            if arr.dtype == float and arr.shape[0] == len(members):
+                setattr(b, name, arr)
+        b.params_batch = SimpleNamespace(**{
+            name: np.array([getattr(m.params, name) for m in members], dtype=float)
+            for name, v in members[0].params.__dict__.items()
+            if isinstance(v, (int, float)) and not isinstance(v, bool)})
+        b.members = list(members)
+        b.n_samples = len(members)
+        b.batch_failed = {}
+        b.batch_stopped = set()  # samples that failed: not called again (the executor keeps it)
+        b.q_ref_BN = None
+        return b
+
+    def update_batch(self, t: float, meas: BatchMeasurement):
+        """The commands of every sample for the period starting at ``t`` [s].
+
+        Called on :meth:`batch_of`'s controller. Every field of ``meas`` has a leading sample
+        axis; per-sample parameters are the arrays :meth:`batch_of` stacked. Returns an array
+        (n_samples, n_command); set ``self.q_ref_BN`` to an (n_samples, 4) array (or leave None).
+        A row that is not finite fails that sample alone (its reason as a single run's).
+
+        This default calls each member's :meth:`update` with its own :class:`Measurement` (the
+        row of ``meas``): correct for any law, as slow as per tick. A member that raises or
+        returns a bad command gets a NaN row and its reason in ``self.batch_failed[i]``
+        (``(reason, exception)``); the others go on.
+        """
+        per = self.__dict__.get("_member_meas")
+        if per is None or per[0] is not meas.y:  # each member's Measurement: a row of meas.y
+            per = self._member_meas = (meas.y, [Measurement(meas.y[i], meas.layout) for i in range(meas.n_samples)])
+        ncmd = 3 if self.command == "torque" else self.members[0].plant.n_gimbals
+        out = np.full((meas.n_samples, ncmd), np.nan)
+        self.batch_failed = {}
+        for i, m in enumerate(self.members):
+            if i in self.batch_stopped:
+                continue
+            mi = per[1][i]
+            mi.t = t
+            try:
+                cmd = m.update(t, mi)
+            except Exception as e:  # the user's code: this sample fails, the batch goes on
+                self.batch_failed[i] = (f"controller '{m.name}' raised {type(e).__name__}: {one_line(e)}", e)
+                continue
+            try:
+                out[i] = command_values(cmd, ncmd, m.command)
+            except ValueError as e:
+                self.batch_failed[i] = (f"controller '{m.name}' returned {e}", None)
+        return out
 
     # -- plug-in -------------------------------------------------------------------------
     def _reset(self, plant: Plant) -> None:

@@ -1,0 +1,428 @@
+"""The lockstep batch executor: many samples of one compiled system advance together, one
+control period per step, the law called once per tick for all of them (issue 22).
+
+Per tick: the law's :meth:`~.controller.Controller.update_batch` (every measurement field with a
+leading sample axis) -> one call of the compiled tick mapped over the samples (casadi
+``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
+step, measure; the map calls that very machine code once per sample, so a sample's numbers are
+its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
+delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and metrics).
+
+A tick that a sample's single run integrates on the generic path (a discontinuity inside it or
+at its end, the final tick) is run for that sample alone with its own
+:class:`~.closed_loop.ControlLoop` (the same calls, the same numbers). A sample that fails (a
+bad or non-finite command, the law raising, a non-finite state) stops alone, with its single
+run's reason and time; the batch goes on.
+
+:func:`executor` says which executor a run gets: ``fused`` (a law with ``symbolic``, where the
+fused loop applies), ``batch`` (an RK4 tick at one step per period) or ``per-tick``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..core.compile import FastCall
+from ..integrators import IntegrationError
+from ..integrators.dop853_batch import mapped
+from .closed_loop import ControlLoop, ControllerFailure
+from .controller import BatchMeasurement, Controller
+from .fused import fused_ok
+from .prepare import prepare
+from .rows import Rows
+from .segments import breakpoints, held_torque_from
+
+__all__ = ["executor", "run_lockstep", "vectorised"]
+
+#: ticks of sensor noise drawn per call of a sample's generator (the same stream as per tick)
+DRAW_BLOCK = 256
+
+
+def vectorised(ctrl) -> bool:
+    """Whether the law overrides :meth:`Controller.update_batch` (else the default loops)."""
+    return type(ctrl).update_batch is not Controller.update_batch
+
+
+def _tick_ok(loop) -> bool:
+    integ = loop.integ
+    name = "tick_rates" if loop.ctrl.command == "gimbal_rates" else "tick_torque"
+    return integ.fusable and name in integ.funcs and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
+
+
+def executor(loop) -> str:
+    """``"fused"``, ``"batch"`` or ``"per-tick"``: the executor a sample of ``loop`` runs on."""
+    if loop.fused and fused_ok(loop):
+        return "fused"
+    if _tick_ok(loop):
+        return "batch"
+    return "per-tick"
+
+
+class _Sample:
+    """One sample's set-up, as :func:`~.simulation.simulate` makes it (its own loop and rows)."""
+
+    def __init__(self, scene, sink, keep, fused):
+        shared = FastCall._cache
+        FastCall._cache = {}  # this sample's own compiled-call buffers (parameters, state), not shared
+        try:
+            self._setup(scene, sink, keep, fused)
+        finally:
+            FastCall._cache = shared
+
+    def _setup(self, scene, sink, keep, fused):
+        sim = scene.simulation
+        run = prepare(scene, sim.formulation, sim.integrator, rtol=sim.rtol, atol=sim.atol)
+        self.scene, self.run = scene, run
+        system, p = run.system, run.p
+        self.rows = Rows(scene, system, p, sink, keep)
+        duration = sim.duration
+        bps, steps = breakpoints(scene, duration)
+        form, funcs = system.formulation, system.funcs
+        jump = FastCall.of(funcs["jump"]) if (form.omega_is_state and steps and sim.impulse_jump) else None
+
+        def apply_jump(t, x):
+            if jump is None or t not in steps:
+                return x
+            a = jump.args
+            a[0][0] = t * (1.0 - 1e-15) - 1e-300
+            a[1][0] = t
+            a[2][:] = x
+            a[3][:] = p
+            jump()
+            return jump.res[0].copy()
+
+        self.meta = {"scene": scene.name, "formulation": form.name, "integrator": system.integrator_cls.name,
+                     "rtol": run.rtol, "atol": run.atol, "build_s": system.build_s, "evaluator": system.evaluator}
+        self.loop = ControlLoop(scene, system, run.integrator, p, run.x0.copy(), self.rows, duration,
+                                sim.output_dt, bps, apply_jump, None, fused)
+        self.kind = executor(self.loop)
+
+
+def _generic_ticks(loop, K: int) -> set[int]:
+    """The ticks k < K that the per-tick loop integrates on its generic path: a discontinuity
+    in (t_k, t_k+1] (its ``smooth`` test, ``next_bp > t_next``)."""
+    out = set()
+    for b in loop.bps:
+        if not 0.0 < b < loop.duration:
+            continue
+        k = max(0, int(b // loop.period) - 1)
+        while k < K:
+            t = k * loop.period
+            t_next = min((k + 1) * loop.period, loop.duration)
+            if t < b <= t_next:
+                out.add(k)
+                break
+            k += 1
+    return out
+
+
+def run_lockstep(scenes, *, fused: bool = True, keep: bool = False):
+    """Run the closed-loop ``scenes`` (samples of one study), those that can in lockstep.
+
+    Returns, per scene in order, ``(kind, result)``: the executor (``fused``, ``batch``,
+    ``per-tick``) and a :class:`~.trajectory.Trajectory` or the exception the single run would
+    have raised (a :class:`~.simulation.SimulationError` with its partial trajectory).
+    Samples that cannot run in lockstep run one by one (:func:`~.simulation.simulate`)."""
+    from .simulation import SimulationError, simulate  # noqa: PLC0415 - simulation imports this module's peers
+
+    out: list = [None] * len(scenes)
+    groups: dict[tuple, list[int]] = {}
+    samples: dict[int, _Sample] = {}
+    for i, s in enumerate(scenes):
+        try:
+            smp = _Sample(s, None, keep, fused)
+        except Exception as e:  # noqa: BLE001 - the single run raises the same: recorded per sample
+            out[i] = ("per-tick", e)
+            continue
+        if smp.kind != "batch":
+            try:
+                out[i] = (smp.kind, simulate(s, keep=keep, fused=fused))
+            except Exception as e:  # noqa: BLE001
+                out[i] = (smp.kind, e)
+            continue
+        sim = s.simulation
+        key = (id(smp.run.system), type(smp.loop.ctrl), smp.loop.ctrl.command, sim.duration, sim.output_dt,
+               smp.loop.period)
+        groups.setdefault(key, []).append(i)
+        samples[i] = smp
+    for idx in groups.values():
+        if len(idx) == 1:  # alone: the per-tick loop is the same work
+            i = idx[0]
+            out[i] = ("per-tick", _single(samples[i], SimulationError))
+            continue
+        for i, res in zip(idx, _Lockstep([samples[i] for i in idx]).run(SimulationError)):
+            out[i] = ("batch", res)
+    return out
+
+
+def _single(smp: _Sample, SimulationError):
+    loop = smp.loop
+    t0 = time.perf_counter()
+    try:
+        loop.run()
+    except (IntegrationError, ControllerFailure) as e:
+        smp.meta.update(status="failed", stopped_at=e.t, summary=loop.summary())
+        err = SimulationError(e.t, e.reason, smp.rows.trajectory(smp.meta))
+        err.__cause__ = e.__cause__
+        return err
+    return _done(smp, time.perf_counter() - t0)
+
+
+def _done(smp: _Sample, wall: float):
+    integ = smp.loop.integ
+    smp.meta.update(status="ok", wall_s=wall, n_rhs=integ.n_rhs, n_steps=integ.n_steps)
+    smp.meta["summary"] = smp.loop.summary()
+    return smp.rows.trajectory(smp.meta)
+
+
+class _Lockstep:
+    """The samples of one group (one compiled system, law class, duration, period) in lockstep."""
+
+    def __init__(self, samples: list[_Sample]):
+        self.S = samples
+        n = self.n = len(samples)
+        lp = samples[0].loop
+        self.ncmd, self.nu, self.has_act = lp.n_cmd, lp.nu_cmg, lp.act is not None
+        name = "tick_rates" if lp.ctrl.command == "gimbal_rates" else "tick_torque"
+        f = lp.integ.funcs[name]
+        fc = self.fc = mapped(f, n, 1)  # the compiled tick, called once per sample by casadi's map
+        nx = lp.system.formulation.nx
+        self.T, self.H = fc.args[0], fc.args[1]
+        self.X = fc.args[2].reshape(n, nx)
+        self.CMD = fc.args[3].reshape(n, -1)
+        self.UEXT = fc.args[4].reshape(n, 3)
+        self.P = fc.args[5].reshape(n, -1)
+        self.X1 = fc.res[0].reshape(n, nx)
+        self.Y1 = fc.res[1].reshape(n, -1)
+        self.ACT = fc.res[2].reshape(n, -1)
+        ny = self.Y1.shape[1]
+        self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
+        self.seen = np.zeros((n, ny))  # what the law sees
+        self.M = BatchMeasurement(self.seen, lp.layout)
+        # sensors: per sample its own generator, noise levels and delay
+        sens = [s.loop.sensor for s in samples]
+        self.noisy = np.array([s.loop.noisy for s in samples])
+        self.sig_a = np.array([x.attitude_noise for x in sens])
+        self.sig_r = np.array([x.rate_noise for x in sens])
+        self.delay = np.array([s.loop.delay if s.loop.noisy else 0 for s in samples])
+        self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
+        self.z = np.zeros((n, DRAW_BLOCK, 6))
+        self.layout = lp.layout
+
+    # -- sensors -------------------------------------------------------------------------
+    def _draw(self, k: int) -> None:
+        """Each noisy sample's draws for ticks k .. k + DRAW_BLOCK - 1, in its single run's order
+        (per tick: attitude 3, then rate 3; ``normal(0, s, 3)`` is ``0 + s * standard_normal``)."""
+        self.z[:] = 0.0
+        for i, s in enumerate(self.S):
+            if not self.noisy[i]:
+                continue
+            a, r = self.sig_a[i] > 0, self.sig_r[i] > 0
+            w = 3 * int(a) + 3 * int(r)
+            if w == 0:
+                continue
+            zi = s.loop.rng.standard_normal((DRAW_BLOCK, w))
+            if a:
+                self.z[i, :, 0:3] = zi[:, 0:3]
+            if r:
+                self.z[i, :, 3:6] = zi[:, w - 3 : w]
+
+    def _sense(self, k: int) -> None:
+        """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
+        seen, raw = self.seen, self.raw
+        if not self.noisy.any():
+            seen[:] = raw
+            return
+        rows = np.arange(self.n)
+        D = self.delay
+        slot = k % (D + 1)
+        if k == 0:
+            self.hist[:] = raw[:, None, :]
+        self.hist[rows, slot] = raw
+        src = np.where(k >= D, (k - D) % (D + 1), 0)
+        seen[:] = self.hist[rows, src]
+        kb = k % DRAW_BLOCK
+        if kb == 0:
+            self._draw(k)
+        z = self.z[:, kb]
+        att = self.noisy & (self.sig_a > 0)
+        if att.any():
+            o = self.layout["q_BN"][0]
+            q = seen[:, o : o + 4]
+            d = 0.5 * (0.0 + self.sig_a[:, None] * z[:, 0:3])
+            qn = np.stack([
+                q[:, 0] - q[:, 1] * d[:, 0] - q[:, 2] * d[:, 1] - q[:, 3] * d[:, 2],
+                q[:, 1] + q[:, 0] * d[:, 0] + q[:, 2] * d[:, 2] - q[:, 3] * d[:, 1],
+                q[:, 2] + q[:, 0] * d[:, 1] + q[:, 3] * d[:, 0] - q[:, 1] * d[:, 2],
+                q[:, 3] + q[:, 0] * d[:, 2] + q[:, 1] * d[:, 1] - q[:, 2] * d[:, 0],
+            ], axis=1)
+            # np.linalg.norm of a (4,) is sqrt(dot): a stacked matmul makes the same dot per row
+            norm = np.sqrt(np.matmul(qn[:, None, :], qn[:, :, None])[:, 0, 0])
+            q[att] = (qn / norm[:, None])[att]
+        rate = self.noisy & (self.sig_r > 0)
+        if rate.any():
+            o = self.layout["omega_BN_B"][0]
+            w = seen[:, o : o + 3]
+            w[rate] = (w + (0.0 + self.sig_r[:, None] * z[:, 3:6]))[rate]
+
+    def _measure(self, i: int, t: float, x) -> None:
+        m = self.S[i].loop.meas
+        m.args[0][0] = t
+        m.args[1][:] = x
+        m()
+        self.raw[i] = m.res[0]
+
+    # -- the run -------------------------------------------------------------------------
+    def run(self, SimulationError) -> list:
+        S, n = self.S, self.n
+        lp = S[0].loop
+        period, duration, n_per_out = lp.period, lp.duration, lp.n_per_out
+        K = max(1, math.ceil(duration / period - 1e-9))
+        ctrl = type(lp.ctrl).batch_of([s.loop.ctrl for s in S])
+        vec = vectorised(ctrl)
+        generic = [_generic_ticks(s.loop, K) for s in S]
+        any_generic = set().union(*generic)
+        for i, s in enumerate(S):
+            self.P[i] = s.run.p
+            self.X[i] = s.loop.x
+            bps = [b for b in s.loop.bps if 0.0 < b < duration]
+            self.UEXT[i] = held_torque_from(s.scene, 0.0, bps, duration)
+            s.loop.u[0:3] = self.UEXT[i]
+            self._measure(i, 0.0, self.X[i])
+        alive = np.ones(n, dtype=bool)
+        errors: dict[int, BaseException] = {}
+        ticks = np.zeros(n, dtype=int)
+        n_fast = np.zeros(n, dtype=int)
+        satrow = np.zeros(n, dtype=bool)
+        lim_n = np.zeros(n, dtype=int)
+        sat_n = np.zeros(n, dtype=int)
+        ncmd, nu, has_act = self.ncmd, self.nu, self.has_act
+        wall0 = time.perf_counter()
+
+        def fail(i, e):
+            alive[i] = False
+            ctrl.batch_stopped.add(i)
+            errors[i] = e
+
+        self._sense(0)
+        M = self.M
+        try:
+            for k in range(K + 1):
+                t = k * period
+                if k == K:
+                    t = duration
+                M.t = t
+                try:
+                    cmd = ctrl.update_batch(t, M)
+                    cmd = np.asarray(cmd, dtype=float)
+                    if cmd.shape != (n, ncmd):
+                        raise ValueError(f"update_batch returned shape {cmd.shape}, expected ({n}, {ncmd})")
+                except Exception as e:  # the batch law itself failed: every sample with its reason
+                    for i in np.flatnonzero(alive):
+                        c = ControllerFailure(t, f"controller '{lp.ctrl.name}' update_batch raised "
+                                                 f"{type(e).__name__}: {e}")
+                        c.__cause__ = e
+                        fail(i, c)
+                    break
+                for i, (reason, exc) in ctrl.batch_failed.items():
+                    if alive[i]:
+                        c = ControllerFailure(t, reason)
+                        c.__cause__ = exc
+                        fail(i, c)
+                if vec:
+                    bad = alive & ~np.isfinite(cmd).all(axis=1)
+                    for i in np.flatnonzero(bad):
+                        try:
+                            S[i].loop._check_command(t, cmd[i])
+                        except ControllerFailure as e:
+                            fail(i, e)
+                    for i in np.flatnonzero(alive):
+                        S[i].loop.ctrl.n_updates += 1
+                    q_ref = ctrl.q_ref_BN
+                if not alive.any():
+                    break
+                t_next = min((k + 1) * period, duration)
+                smooth = alive.copy()
+                if k == K:
+                    smooth[:] = False
+                elif k in any_generic:
+                    for i in range(n):
+                        if k in generic[i]:
+                            smooth[i] = False
+                if smooth.any():
+                    self.T[:] = t
+                    self.H[:] = t_next - t
+                    self.CMD[:] = np.where(alive[:, None], cmd, 0.0)
+                    self.fc()
+                    if has_act:
+                        lim = smooth & (self.ACT[:, nu + 1] > 0.5)
+                        sat = smooth & (self.ACT[:, nu + 2] > 0.5)
+                        lim_n += lim
+                        sat_n += sat
+                        satrow |= lim | sat
+                row = k % n_per_out == 0 or k == K
+                for i in np.flatnonzero(alive & ~smooth):  # the generic path, per sample
+                    lo = S[i].loop
+                    lo.x[:] = self.X[i]
+                    satrow[i] |= bool(lo._actuate(t, cmd[i], count=k < K))
+                if row:
+                    for i in np.flatnonzero(alive):
+                        lo = S[i].loop
+                        if ncmd == 3:
+                            lo.last_cmd = tuple(cmd[i].tolist())
+                        if smooth[i] and has_act:
+                            lo.u[3 : 3 + nu] = self.ACT[i, :nu]
+                        if vec:
+                            lo.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
+                        lo.x[:] = self.X[i]
+                        try:
+                            lo.rows.hold(t, lo.x, *lo._held_row(int(satrow[i])))
+                        except ControllerFailure as e:
+                            fail(i, e)
+                        satrow[i] = False
+                if k == K:
+                    break
+                ticks += alive
+                for i in np.flatnonzero(smooth):
+                    v = self.X1[i, 4]
+                    if not -1e300 < v < 1e300:
+                        fail(i, IntegrationError(t_next, "state is not finite (NaN or inf)"))
+                        continue
+                    self.X[i] = self.X1[i]
+                    self.raw[i] = self.Y1[i]
+                    n_fast[i] += 1
+                for i in np.flatnonzero(alive & ~smooth):
+                    lo = S[i].loop
+                    try:
+                        lo._advance(t, t_next, cmd[i])
+                    except IntegrationError as e:
+                        fail(i, e)
+                        continue
+                    bps = [b for b in lo.bps if 0.0 < b < duration]
+                    self.UEXT[i] = held_torque_from(S[i].scene, t_next, bps, duration)
+                    self.X[i] = lo.x
+                    self._measure(i, t_next, lo.x)
+                self._sense(k + 1)
+        finally:
+            wall = (time.perf_counter() - wall0) / n
+            results = []
+            for i, s in enumerate(S):
+                lo = s.loop
+                lo.ticks = int(ticks[i])
+                lo.n_rate_limited += int(lim_n[i])
+                lo.n_momentum_saturated += int(sat_n[i])
+                lo.integ.count_steps(int(n_fast[i]))
+                lo.x[:] = self.X[i]
+                s.rows.flush()
+                e = errors.get(i)
+                if e is None:
+                    results.append(_done(s, wall))
+                else:
+                    s.meta.update(status="failed", stopped_at=e.t, summary=lo.summary())
+                    err = SimulationError(e.t, e.reason, s.rows.trajectory(s.meta))
+                    err.__cause__ = e.__cause__
+                    results.append(err)
+        return results
