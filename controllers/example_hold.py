@@ -61,3 +61,26 @@ class ExampleHold(Controller):
         p = self.params
         tau = -self.J @ (p.kp * e + p.kd * (meas.omega_BN_B - w_ref_B))
         return tau  # a (3,) array; a tuple or list of 3 floats does as well
+
+    def update_batch(self, t, meas):
+        # Optional: the same law for many samples at once (the Monte Carlo runs its samples in
+        # lockstep and calls this once per tick; without it, the default calls _update per
+        # sample). Every field of meas has a leading sample axis: meas.q_BN is (n, 4); per-sample
+        # numbers are arrays: self.J is (n, 3, 3), self.params_batch.kp is (n,). The rotation
+        # helpers take component-first arrays ((4, n): q[0] is the n scalar parts), so the same
+        # formulas run on every sample; stacked matmul does each sample's 3x3 product as `@` does.
+        n = meas.n_samples
+        lvlh = self.params.reference == "lvlh"
+        q_RN = meas.q_ON.copy() if lvlh else np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        self.q_ref_BN = q_RN
+        q_e = quat_mult(quat_conj(q_RN.T), meas.q_BN.T)  # (4, n)
+        s = np.sign(q_e[0])
+        s[s == 0.0] = 1.0  # (`q_e[0] or 1.0` of _update)
+        e = (2.0 * s * q_e[1:]).T  # (n, 3)
+        w_RN_R = meas.omega_ON_O if lvlh else self.w_RN_R
+        C = dcm(q_e).transpose(2, 0, 1)  # (n, 3, 3)
+        w_ref_B = np.matmul(C, w_RN_R[:, :, None])[:, :, 0]
+        p = self.params_batch
+        v = p.kp[:, None] * e + p.kd[:, None] * (meas.omega_BN_B - w_ref_B)
+        return np.matmul(-self.J, v[:, :, None])[:, :, 0]  # (n, 3)
+

@@ -189,6 +189,70 @@ class MomentumManager(Controller):
         self._count += 1
         return u
 
+    def update_batch(self, t, meas):
+        # many samples at once (stationbed/run/lockstep.py): _update's float operations on (n,)
+        # arrays in the same order (bit for bit). The law's state is per sample: z, _sum (n, 3),
+        # _count, _next_orbit (n,) live in this batch object (Controller.batch_of stacked them
+        # from the members); the TEA found is handed to each member, whose summary reports it.
+        if isinstance(self.varying, list):
+            return super().update_batch(t, meas)
+        ow, ox, oy, oz = meas.q_ON.T
+        aw, ax, ay, az = self.q_TO.T
+        self.q_ref_BN = np.stack([
+            ow * aw - ox * ax - oy * ay - oz * az,
+            ow * ax + ox * aw + oy * az - oz * ay,
+            ow * ay - ox * az + oy * aw + oz * ax,
+            ow * az + ox * ay - oy * ax + oz * aw,
+        ], axis=1)
+        qw, qx, qy, qz = meas.q_BN.T
+        ew = ow * qw + ox * qx + oy * qy + oz * qz
+        ex = ow * qx - ox * qw - oy * qz + oz * qy
+        ey = ow * qy + ox * qz - oy * qw - oz * qx
+        ez = ow * qz - ox * qy + oy * qx - oz * qw
+        neg = ew < 0.0
+        ew, ex, ey, ez = (np.where(neg, -v, v) for v in (ew, ex, ey, ez))
+        th0, th1, th2 = 2.0 * ex, 2.0 * ey, 2.0 * ez
+        vy = self._vy
+        tx = -2.0 * ez * vy
+        tz = 2.0 * ex * vy
+        wx, wy, wz = meas.omega_BN_B.T
+        if self.varying:
+            r0, r1, r2 = rotate((ew, ex, ey, ez), tuple(meas.omega_ON_O.T))
+            w0, w1, w2 = wx - r0, wy - r1, wz - r2
+        else:
+            w0 = wx - (-ew * tx + ey * tz)
+            w1 = wy - (vy + (ez * tx - ex * tz))
+            w2 = wz - (-ew * tz - ey * tx)
+        h0, h1, h2 = meas.h_B.T
+        z = self.z
+        xe = self._xe
+        x0, x1, x2 = th0 - xe[:, 0], th1 - xe[:, 1], th2 - xe[:, 2]
+        z0, z1, z2 = z[:, 0], z[:, 1], z[:, 2]
+        k = self._k
+        u = np.empty((meas.n_samples, 3))
+        for i in range(3):
+            a = k[:, i]
+            u[:, i] = -(a[:, 0] * x0 + a[:, 1] * x1 + a[:, 2] * x2 + a[:, 3] * w0 + a[:, 4] * w1 + a[:, 5] * w2) - (
+                a[:, 6] * h0 + a[:, 7] * h1 + a[:, 8] * h2 + a[:, 9] * z0 + a[:, 10] * z1 + a[:, 11] * z2)
+        T = self._T
+        z[:, 0] += T * h0
+        z[:, 1] += T * h1
+        z[:, 2] += T * h2
+        s = self._sum
+        due = t >= self._next_orbit
+        if due.any():
+            for i in np.flatnonzero(due):
+                c = self._count[i]
+                self.members[i].tea_found = (s[i, 0] / c, s[i, 1] / c, s[i, 2] / c)
+            s[due] = 0.0
+            self._count[due] = 0.0
+            self._next_orbit[due] += self._orbit_s[due]
+        s[:, 0] += th0
+        s[:, 1] += th1
+        s[:, 2] += th2
+        self._count += 1
+        return u
+
     def summary(self):
         if self.plant is None:
             return {}

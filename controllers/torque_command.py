@@ -47,5 +47,12 @@ class TorqueCommand(Controller):
     def _update(self, t, meas):
         return self.on if self.start <= t < self.stop else self.off
 
+    def update_batch(self, t, meas):
+        # per sample (n,): start, stop; on, off (n, 3) (Controller.batch_of stacked them)
+        import numpy as np  # noqa: PLC0415
+
+        active = (self.start <= t) & (t < self.stop)
+        return np.where(active[:, None], self.on, self.off)
+
     def summary(self):
         return {"torque_command_N_m": list(self.on)}

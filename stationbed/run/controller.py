@@ -291,11 +291,11 @@ class Controller:
                     setattr(b, name, vals)  # (a law that assumes one value then fails, loudly)
                 continue
             try:
-                arr = np.asarray(vals, dtype=float)
+                arr = np.asarray(vals)
             except (TypeError, ValueError):
-                continue  # not numbers (objects, ragged): the first member's
-            if arr.dtype == float and arr.shape[0] == len(members):
-                setattr(b, name, arr)
+                continue  # ragged: the first member's
+            if arr.dtype.kind in "iuf" and arr.shape[0] == len(members):  # (complex poles: the first's)
+                setattr(b, name, arr.astype(float))
         b.params_batch = SimpleNamespace(**{
             name: np.array([getattr(m.params, name) for m in members], dtype=float)
             for name, v in members[0].params.__dict__.items()

@@ -119,27 +119,35 @@ def _generic_ticks(loop, K: int) -> set[int]:
     return out
 
 
-def run_lockstep(scenes, *, fused: bool = True, keep: bool = False):
+def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
     """Run the closed-loop ``scenes`` (samples of one study), those that can in lockstep.
 
     Returns, per scene in order, ``(kind, result)``: the executor (``fused``, ``batch``,
-    ``per-tick``) and a :class:`~.trajectory.Trajectory` or the exception the single run would
+    ``per-tick``; ``open-loop`` without a ``[controller]``) and a :class:`~.trajectory.Trajectory` or the exception the single run would
     have raised (a :class:`~.simulation.SimulationError` with its partial trajectory).
+    ``sinks``: per scene a row sink (as :func:`~.simulation.simulate`'s ``sink``) or None.
     Samples that cannot run in lockstep run one by one (:func:`~.simulation.simulate`)."""
     from .simulation import SimulationError, simulate  # noqa: PLC0415 - simulation imports this module's peers
 
     out: list = [None] * len(scenes)
     groups: dict[tuple, list[int]] = {}
     samples: dict[int, _Sample] = {}
+    sinks = [None] * len(scenes) if sinks is None else list(sinks)
     for i, s in enumerate(scenes):
+        if s.controller is None:  # open loop: simulate's own path
+            try:
+                out[i] = ("open-loop", simulate(s, keep=keep, sink=sinks[i]))
+            except Exception as e:  # noqa: BLE001
+                out[i] = ("open-loop", e)
+            continue
         try:
-            smp = _Sample(s, None, keep, fused)
+            smp = _Sample(s, sinks[i], keep, fused)
         except Exception as e:  # noqa: BLE001 - the single run raises the same: recorded per sample
             out[i] = ("per-tick", e)
             continue
         if smp.kind != "batch":
             try:
-                out[i] = (smp.kind, simulate(s, keep=keep, fused=fused))
+                out[i] = (smp.kind, simulate(s, keep=keep, fused=fused, sink=sinks[i]))
             except Exception as e:  # noqa: BLE001
                 out[i] = (smp.kind, e)
             continue

@@ -141,6 +141,7 @@ def _frame(rows: list[dict], columns: list[str]) -> pd.DataFrame:
     df["redraws"] = df["redraws"].astype("int64")
     df["status"] = df["status"].astype(str)
     df["reason"] = df["reason"].astype(str)
+    df["executor"] = df["executor"].fillna("").astype(str)
     return df
 
 
@@ -372,6 +373,8 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
         if files is not None:
             files.write(k0, k1, df, env)
         done[k0] = (k1, df, env)
+        for r in res["rows"]:
+            kinds[r.get("executor", "")] = kinds.get(r.get("executor", ""), 0) + 1
         for w in res.get("warnings", ()):  # _Seen drops the ones said before
             logging.getLogger(progress.LOGGER).warning(w)
 
@@ -383,11 +386,14 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
     with progress.task(f"montecarlo {scene.name}", total=n, unit="sample") as bar, _ctrl_c_kept() as ctrl_c:
         n_done = sum(len(d) for _, d, _ in done.values())
         n_resumed = n_done
+        kinds: dict[str, int] = {}  # samples per executor (fused, batch, per-tick)
 
         def show():
             ran = n_done - n_resumed
             eta = (time.perf_counter() - wall0) / ran * (n - n_done) if ran else math.nan
-            bar.update(n_done, f"{n_done}/{n} samples, {failures} failed" + (f", ETA {eta:.0f} s" if ran else ""))
+            how = ", ".join(f"{k} {v}" for k, v in kinds.items() if k)
+            bar.update(n_done, f"{n_done}/{n} samples, {failures} failed" + (f" ({how})" if how else "")
+                       + (f", ETA {eta:.0f} s" if ran else ""))
 
         show()
         cluster = None

@@ -57,6 +57,9 @@ def summarise(scene, df, **extra) -> dict:
         "settle_s": mc.settle_s,
         "counts": {"ok": int((status == "ok").sum()), "failed": int((status == "failed").sum()),
                    "refused": int((status == "refused").sum()), "redraws": int(df["redraws"].sum())},
+        # which executor ran the samples (fused, batch: lockstep, per-tick; "" refused)
+        "executors": {str(k): int(v) for k, v in df["executor"].value_counts().items() if k}
+        if "executor" in df else {},
         "failures": [{"index": int(r["index"]), "status": r["status"], "reason": r["reason"]}
                      for _, r in bad.head(20).iterrows()],
         "metrics": metric_stats(df),
@@ -70,7 +73,9 @@ def table_text(summary: dict) -> str:
     """The summary as a plain-text table (the CLI prints it; the README shows it)."""
     lines = [f"{summary['scene']}: {summary['n']} samples, {summary['counts']['ok']} ok, "
              f"{summary['counts']['failed']} failed, {summary['counts']['refused']} refused "
-             f"({summary['counts']['redraws']} redraws)"]
+             f"({summary['counts']['redraws']} redraws)"
+             + (f"; executors: {', '.join(f'{k} {v}' for k, v in summary['executors'].items())}"
+                if summary.get("executors") else "")]
     head = f"{'metric':26s} {'mean':>10s} {'std':>10s} {'p50':>10s} {'p99.73':>10s} {'max':>10s} {'at':>6s}"
     lines.append(head)
     blank = set()

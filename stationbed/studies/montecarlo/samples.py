@@ -22,13 +22,15 @@ from ...model.cmg import capacity, held_momentum_B
 from ...run.controller import one_line
 from ...run.metrics import METRICS
 from ...run.rows import trajectory_columns
+from ...run.lockstep import run_lockstep
 from ...run.simulation import SimulationError, simulate
+from ...run.trajectory import Trajectory
 from .dispersions import draw, sample_seed
 
-__all__ = ["run_sample", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink"]
+__all__ = ["run_sample", "run_batch", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink"]
 
 #: the leading columns of the table
-ID_COLUMNS = ["index", "seed", "status", "reason", "redraws", "stopped_at_s"]
+ID_COLUMNS = ["index", "seed", "status", "reason", "redraws", "stopped_at_s", "executor"]
 #: per-sample downsampled series kept for the envelopes
 ENVELOPE_SERIES = ("att_err_deg", "h_fraction")
 
@@ -85,29 +87,49 @@ def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | No
     envelope : ndarray, shape (env_times, len(ENVELOPE_SERIES)), or None
         The run's rows at the envelope times (NaN after a failure), None when ``env_times`` is 0.
     """
+    row, s, sink = _drawn(scene, k, env_times)
+    result = None
+    if s is not None:
+        try:
+            result = simulate(s, keep=False, sink=sink)
+        except Exception as e:  # noqa: BLE001 - recorded as the sample's failure (_finished)
+            result = e
+        row["executor"] = "fused" if isinstance(result, Trajectory) and result.meta.get("summary", {}).get("fused") \
+            else "per-tick"
+    return _finished(row, result, sink, env_times)
+
+
+def _drawn(scene, k: int, env_times: int):
+    """Sample ``k`` drawn: its row so far, its scene (None when refused) and envelope sink."""
     mc = scene.montecarlo
     row = {"index": k, "seed": sample_seed(mc.seed, k), "status": "ok", "reason": "", "redraws": 0,
-           "stopped_at_s": math.nan}
+           "stopped_at_s": math.nan, "executor": ""}
     s, dr, redraws, refused = draw(scene, k)
     row["redraws"] = redraws
     row.update(dr.values)
-    metrics: dict = {}
-    env = None
+    sink = None
     if refused is not None:
         row["status"], row["reason"] = "refused", refused
-    else:
-        sink = None
-        if env_times:
-            held = None if s.cmg is None else held_momentum_B(s.cmg)
-            sink = EnvelopeSink(trajectory_columns(s), mc.envelope_dt, env_times, _capacity(s), held)
-        try:
-            tr = simulate(s, keep=False, sink=sink)
-            metrics = tr.meta.get("summary", {})
-        except SimulationError as e:
-            row["status"], row["reason"], row["stopped_at_s"] = "failed", e.reason, float(e.t)
-            metrics = e.trajectory.meta.get("summary", {})
-        except Exception as e:  # a controller's reset or the scene's model refused: recorded, the study goes on
-            row["status"], row["reason"] = "failed", f"{type(e).__name__}: {one_line(e)}"
+        return row, None, None
+    if env_times:
+        held = None if s.cmg is None else held_momentum_B(s.cmg)
+        sink = EnvelopeSink(trajectory_columns(s), mc.envelope_dt, env_times, _capacity(s), held)
+    return row, s, sink
+
+
+def _finished(row: dict, result, sink, env_times: int):
+    """The row and envelope of a sample from its run's result: a Trajectory, or the exception
+    its run raised (a SimulationError: failed at a time; another: a refused reset or model)."""
+    metrics: dict = {}
+    env = None
+    if result is not None:
+        if isinstance(result, SimulationError):
+            row["status"], row["reason"], row["stopped_at_s"] = "failed", result.reason, float(result.t)
+            metrics = result.trajectory.meta.get("summary", {})
+        elif isinstance(result, BaseException):  # a controller's reset or the scene's model refused
+            row["status"], row["reason"] = "failed", f"{type(result).__name__}: {one_line(result)}"
+        else:
+            metrics = result.meta.get("summary", {})
         if sink is not None:
             env = sink.values
     for name in METRICS:
@@ -116,6 +138,22 @@ def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | No
     if env_times and env is None:
         env = np.full((env_times, len(ENVELOPE_SERIES)), np.nan)
     return row, env
+
+
+def run_batch(scene, k0: int, k1: int, env_times: int = 0) -> list[tuple[dict, np.ndarray | None]]:
+    """Samples ``k0 .. k1-1`` drawn, then run together (:func:`~stationbed.run.lockstep.run_lockstep`:
+    in lockstep where the law and scene allow, else fused or per tick, one by one); the same
+    rows as :func:`run_sample` of each, with the executor that ran it."""
+    drawn = [_drawn(scene, k, env_times) for k in range(k0, k1)]
+    todo = [i for i, d in enumerate(drawn) if d[1] is not None]
+    results = run_lockstep([drawn[i][1] for i in todo], sinks=[drawn[i][2] for i in todo])
+    by = dict(zip(todo, results))
+    out = []
+    for i, (row, s, sink) in enumerate(drawn):
+        kind, res = by.get(i, ("", None))
+        row["executor"] = kind
+        out.append(_finished(row, res, sink, env_times))
+    return out
 
 
 class _Held(logging.Filter):
@@ -163,8 +201,7 @@ def run_chunk(scene, k0: int, k1: int, env_times: int = 0, hold_log: bool = Fals
     returned for the driver to say once, not printed here."""
     rows, envs = [], []
     with held_warnings(hold_log) as said:
-        for k in range(k0, k1):
-            row, env = run_sample(scene, k, env_times)
+        for row, env in run_batch(scene, k0, k1, env_times):
             rows.append(row)
             envs.append(env)
     return {"k0": k0, "k1": k1, "rows": rows, "envelope": np.stack(envs) if env_times else None,

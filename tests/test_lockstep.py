@@ -1,0 +1,167 @@
+"""The lockstep batch executor (stationbed/run/lockstep.py, issue 22) and the batch law interface
+(``Controller.update_batch``).
+
+Truth, independent of the batch code: each sample's single run, ``simulate(scene_k,
+fused=False)`` (the per-tick loop, the law's ``_update`` called on each tick). The batch runs
+the same compiled tick (casadi's map calls the very machine code once per sample), the sensor
+of each sample from its own generator, and laws whose ``update_batch`` does ``_update``'s
+operations element by element: each sample's rows equal its single run's bit for bit
+(``np.array_equal``), its summary (ticks, updates, saturation counts, metrics) too. Where a law's
+vectorised form cannot promise that, the bound and its reason are stated next to the test.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scenes import ROOT
+from stationbed import load_scene, simulate
+from stationbed.run.controller import Controller
+from stationbed.run.lockstep import executor, run_lockstep, vectorised
+from stationbed.run.simulation import SimulationError
+from stationbed.scene import scene_from_dict
+
+DURATION_S = 5.0  # s: 50 ticks of 10 Hz, 6 rows (enough for every path, a few seconds per law)
+NOISE = {"attitude_noise": 1e-3, "rate_noise": 1e-5}  # rad, rad/s: 10x the Monte Carlo scene's, so it shows
+N_SAMPLES = 3
+
+
+def _samples(params: dict, name: str, sensor: dict | None = None, **extra) -> list:
+    """Three samples of iss_lvlh_hold (DGCMGs, SR steering, tracking arrays, aero, SRP) that
+    differ as Monte Carlo samples do: inertia, initial attitude, rate and sensor seed."""
+    base = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml")
+    inertia = np.array(base.body.inertia)
+    out = []
+    for k in range(N_SAMPLES):
+        ch = {"simulation.duration": DURATION_S, "simulation.output_dt": 1.0, "controller.name": name,
+              "controller.params": params, "body.inertia": (inertia * (1.0 + 0.03 * k)).tolist(),
+              "initial.omega_BN_B": [1e-5 * k, -2e-5, 1e-5], **extra}
+        if sensor is not None:
+            ch["controller.sensor"] = {**sensor, "seed": 100 + k}
+        out.append(base.replace(ch))
+    return out
+
+
+def _same(batch, single):
+    assert not isinstance(batch, BaseException), batch
+    assert batch.columns == single.columns
+    assert np.array_equal(batch.data, single.data, equal_nan=True), \
+        f"max diff {np.nanmax(np.abs(batch.data - single.data)):.3g}"
+    a, b = batch.meta["summary"], single.meta["summary"]
+    assert {k: v for k, v in a.items()} == {k: v for k, v in b.items()}
+
+
+LAWS = [
+    ("pd", {"reference": "lvlh", "bandwidth": 0.01}),
+    ("lqr", {}),
+    ("momentum_manager", {}),
+    ("example_hold", {"reference": "lvlh"}),
+    ("torque_command", {"torque_B": [5.0, -3.0, 1.0], "start": 1.0, "stop": 3.05}),
+]
+
+
+@pytest.mark.parametrize("name,params", LAWS, ids=[n for n, _ in LAWS])
+def test_batch_row_k_is_the_single_run_k_bit_for_bit(name, params):
+    """Every shipped law (vectorised update_batch), with sensor noise: batch row k == single run
+    k, bit for bit, summary included; the executor says ``batch``."""
+    scenes = _samples(params, name, NOISE)
+    res = run_lockstep(scenes, keep=True, fused=False)
+    for s, (kind, tr) in zip(scenes, res):
+        assert kind == "batch"
+        _same(tr, simulate(s, fused=False))
+
+
+def test_the_default_update_batch_loops_and_gives_the_same_numbers():
+    """A law without update_batch (a subclass of example_hold that only has _update): the base
+    class's default calls each sample's update; same numbers, delay and noise included."""
+    scenes = _samples({"reference": "lvlh"}, "example_hold", {**NOISE, "delay": 0.3})
+
+    class OnlyUpdate(type(_law(scenes[0]))):
+        update_batch = Controller.update_batch
+
+    assert not vectorised(OnlyUpdate())
+    res = _run_with(scenes, OnlyUpdate)
+    for s, tr in zip(scenes, res):
+        _same(tr, simulate(s, fused=False, controller=OnlyUpdate(period=0.1, reference="lvlh")))
+
+
+def _law(scene):
+    from stationbed.run.laws import build_controller  # noqa: PLC0415
+
+    return build_controller(scene.controller)
+
+
+def _run_with(scenes, cls):
+    """run_lockstep with the law replaced by ``cls`` (a module-less class: patched into the registry's lookup)."""
+    import stationbed.run.closed_loop as cl  # noqa: PLC0415
+
+    orig = cl.build_controller
+    cl.build_controller = lambda spec, base_dir=None: cls(period=spec.period, **spec.params)
+    try:
+        return [tr for _, tr in run_lockstep(scenes, keep=True, fused=False)]
+    finally:
+        cl.build_controller = orig
+
+
+class FailsOne(Controller):
+    """A PD-like law whose sample with gain ``bad`` returns NaN from t = 1.5 s (or raises)."""
+
+    name = "fails_one"
+    from stationbed.run.controller import ControllerParams as _P
+
+    class Params(_P):
+        k: float = 1.0e3
+        bad: float = -1.0
+        how: str = "nan"
+
+    def _update(self, t, meas):
+        if self.params.k == self.params.bad and t >= 1.5:
+            if self.params.how == "raise":
+                raise RuntimeError("gain went bad")
+            return (float("nan"), 0.0, 0.0)
+        return tuple(-self.params.k * w for w in meas.omega_BN_B.tolist())
+
+
+@pytest.mark.parametrize("how", ["nan", "raise"])
+def test_a_failing_sample_fails_alone_with_its_single_runs_reason(how):
+    """One sample's law returns NaN (or raises) at 1.5 s: that sample fails with the reason and
+    time of its single run (same partial rows); the other samples finish, bit for bit."""
+    scenes = [s.replace({"controller.params": {"k": 1e3 * (k + 1), "bad": 2e3, "how": how}})
+              for k, s in enumerate(_samples({}, "pd"))]
+    res = _run_with(scenes, FailsOne)
+    for k, (s, tr) in enumerate(zip(scenes, res)):
+        law = FailsOne(period=0.1, k=1e3 * (k + 1), bad=2e3, how=how)
+        if k == 1:
+            with pytest.raises(SimulationError) as err:
+                simulate(s, fused=False, controller=law)
+            assert isinstance(tr, SimulationError)
+            assert (tr.t, tr.reason) == (err.value.t, err.value.reason)
+            assert np.array_equal(tr.trajectory.data, err.value.trajectory.data, equal_nan=True)
+        else:
+            _same(tr, simulate(s, fused=False, controller=law))
+
+
+def test_executor_choice_by_capability():
+    """pd with its symbolic form: fused (where the fused loop applies); a law without one: batch;
+    a non-fusable integrator: per-tick. run_lockstep says which ran each sample."""
+    pd_scenes = _samples({"reference": "lvlh"}, "pd")
+    assert [k for k, _ in run_lockstep(pd_scenes[:2])] == ["fused", "fused"]
+    eh = _samples({"reference": "lvlh"}, "example_hold")
+    assert [k for k, _ in run_lockstep(eh[:2])] == ["batch", "batch"]
+    dop = [s.replace({"simulation.integrator": "dop853", "simulation.step": None}) for s in eh[:2]]
+    kinds = [k for k, _ in run_lockstep(dop)]
+    assert kinds == ["per-tick", "per-tick"]
+
+
+def test_window_edges_on_and_off_the_tick_grid_take_the_generic_tick():
+    """Torque windows with edges on (1.0 s) and off (2.05 s) the tick grid, different per
+    sample: those ticks run on the sample's own generic path, as its single run does; bit for bit."""
+    base = _samples({"reference": "lvlh"}, "example_hold")
+    kinds = [t.model_dump(exclude_unset=True) for t in base[0].torque]
+    scenes = [s.replace({"torque": kinds + [{"kind": "constant", "torque_B": [20.0, -5.0, 3.0], "start": 1.0 + 0.05 * k,
+                                     "stop": 2.05 + 0.1 * k}]}) for k, s in enumerate(base)]
+    res = run_lockstep(scenes, keep=True, fused=False)
+    for s, (kind, tr) in zip(scenes, res):
+        assert kind == "batch"
+        _same(tr, simulate(s, fused=False))
