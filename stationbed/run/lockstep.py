@@ -310,7 +310,12 @@ class _Lockstep:
         ncmd, nu, has_act = self.ncmd, self.nu, self.has_act
         wall0 = time.perf_counter()
 
+        n_upd = np.zeros(n, dtype=int)
+        n_alive = n
+
         def fail(i, e):
+            nonlocal n_alive
+            n_alive -= int(alive[i])
             alive[i] = False
             ctrl.batch_stopped.add(i)
             errors[i] = e
@@ -341,38 +346,48 @@ class _Lockstep:
                         c.__cause__ = exc
                         fail(i, c)
                 if vec:
-                    bad = alive & ~np.isfinite(cmd).all(axis=1)
-                    for i in np.flatnonzero(bad):
-                        try:
-                            S[i].loop._check_command(t, cmd[i])
-                        except ControllerFailure as e:
-                            fail(i, e)
-                    for i in np.flatnonzero(alive):
-                        S[i].loop.ctrl.n_updates += 1
+                    finite = np.isfinite(cmd).all(axis=1)
+                    if not finite.all():
+                        for i in np.flatnonzero(alive & ~finite):
+                            try:
+                                S[i].loop._check_command(t, cmd[i])
+                            except ControllerFailure as e:
+                                fail(i, e)
+                    n_upd += alive
                     q_ref = ctrl.q_ref_BN
                 if not alive.any():
                     break
                 t_next = min((k + 1) * period, duration)
-                smooth = alive.copy()
-                if k == K:
-                    smooth[:] = False
-                elif k in any_generic:
-                    for i in range(n):
-                        if k in generic[i]:
-                            smooth[i] = False
-                if smooth.any():
+                all_smooth = k < K and k not in any_generic and n_alive == n
+                if all_smooth:
+                    smooth = alive
+                else:
+                    smooth = alive.copy()
+                    if k == K:
+                        smooth[:] = False
+                    elif k in any_generic:
+                        for i in range(n):
+                            if k in generic[i]:
+                                smooth[i] = False
+                if all_smooth or smooth.any():
                     self.T[:] = t
                     self.H[:] = t_next - t
-                    self.CMD[:] = np.where(alive[:, None], cmd, 0.0)
+                    if n_alive == n:
+                        self.CMD[:] = cmd
+                    else:
+                        self.CMD[:] = np.where(alive[:, None], cmd, 0.0)
                     self.fc()
                     if has_act:
-                        lim = smooth & (self.ACT[:, nu + 1] > 0.5)
-                        sat = smooth & (self.ACT[:, nu + 2] > 0.5)
-                        lim_n += lim
-                        sat_n += sat
-                        satrow |= lim | sat
+                        lim = self.ACT[:, nu + 1] > 0.5
+                        sat = self.ACT[:, nu + 2] > 0.5
+                        if lim.any() or sat.any():
+                            lim &= smooth
+                            sat &= smooth
+                            lim_n += lim
+                            sat_n += sat
+                            satrow |= lim | sat
                 row = k % n_per_out == 0 or k == K
-                for i in np.flatnonzero(alive & ~smooth):  # the generic path, per sample
+                for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):  # the generic path, per sample
                     lo = S[i].loop
                     lo.x[:] = self.X[i]
                     satrow[i] |= bool(lo._actuate(t, cmd[i], count=k < K))
@@ -394,15 +409,20 @@ class _Lockstep:
                 if k == K:
                     break
                 ticks += alive
-                for i in np.flatnonzero(smooth):
-                    v = self.X1[i, 4]
-                    if not -1e300 < v < 1e300:
+                v = self.X1[:, 4]
+                ok = (v > -1e300) & (v < 1e300)  # the per-tick loop's test of a finite state
+                if all_smooth and ok.all():
+                    self.X[:] = self.X1
+                    self.raw[:] = self.Y1
+                    n_fast += 1
+                else:
+                    for i in np.flatnonzero(smooth & ~ok):
                         fail(i, IntegrationError(t_next, "state is not finite (NaN or inf)"))
-                        continue
-                    self.X[i] = self.X1[i]
-                    self.raw[i] = self.Y1[i]
-                    n_fast[i] += 1
-                for i in np.flatnonzero(alive & ~smooth):
+                    good = smooth & ok
+                    self.X[good] = self.X1[good]
+                    self.raw[good] = self.Y1[good]
+                    n_fast += good
+                for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):
                     lo = S[i].loop
                     try:
                         lo._advance(t, t_next, cmd[i])
@@ -420,6 +440,7 @@ class _Lockstep:
             for i, s in enumerate(S):
                 lo = s.loop
                 lo.ticks = int(ticks[i])
+                lo.ctrl.n_updates += int(n_upd[i])
                 lo.n_rate_limited += int(lim_n[i])
                 lo.n_momentum_saturated += int(sat_n[i])
                 lo.integ.count_steps(int(n_fast[i]))
