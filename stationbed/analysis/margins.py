@@ -52,24 +52,13 @@ def _response(A, B, C, s) -> complex:
     return complex((C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B)).item())
 
 
-#: the eigenvector matrix of a loop may be this ill-conditioned for its modal form (the response's
-#: relative error is about cond(V) x 1e-16: <= 1e-8 here); beyond it, or defective, a solve per s
-MODAL_COND_MAX = 1e8
-
-
 def _responses(A, B, C, s) -> np.ndarray:
-    """:func:`_response` at every complex frequency of ``s`` (1-D): through the eigenvectors of
-    ``A`` when they are well conditioned (a Monte Carlo designs a law per sample, issue 22: a
-    solve per frequency cost ~0.5 s per design), else one stacked solve."""
+    """:func:`_response` at every complex frequency of ``s`` (1-D), in one stacked solve (the
+    same LAPACK solve per frequency; a Monte Carlo designs a law per sample, issue 22)."""
     n = A.shape[0]
-    b, c = B.reshape(n), C.reshape(n)
-    lam, V = np.linalg.eig(A)
-    if np.linalg.cond(V) < MODAL_COND_MAX:  # modal form: C V diag(1 / (s - λ)) V⁻¹ B, O(n) per s
-        cv, vb = c @ V, np.linalg.solve(V, b.astype(complex))
-        return (cv * vb / (s[:, None] - lam)).sum(axis=1)
     S = s[:, None, None] * np.eye(n) - A
-    X = np.linalg.solve(S, np.broadcast_to(b[:, None], (len(s), n, 1)))
-    return np.matmul(c.reshape(1, n), X)[:, 0, 0]
+    X = np.linalg.solve(S, np.broadcast_to(B.reshape(n, -1), (len(s), n, B.reshape(n, -1).shape[1])))
+    return np.matmul(C.reshape(1, n), X)[:, 0, 0]
 
 
 def gain_crossings(L) -> list[tuple[float, float]]:
