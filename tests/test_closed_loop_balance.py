@@ -392,3 +392,55 @@ def test_every_torque_kind_balance_batch():
         assert_allclose(res.q_BN[i], tr.q_BN, rtol=0, atol=1e-9)
         expect = smooth_integral_N(tr) + window_integral_N(tr, windows)
         assert_allclose(res.H_O_N[i] - res.H_O_N[i, 0], expect, rtol=0, atol=KIND_ABS)
+
+
+# ---------------------------------------------------------------------------------------------
+# the lockstep batch executor (stationbed/run/lockstep.py, issue 22): its own balance
+# ---------------------------------------------------------------------------------------------
+
+#: the samples of one batch: sample i's windows shifted by i x LOCKSTEP_SHIFT_S (off the tick
+#: grid for i = 1), so the batch carries edges on and off the grid at once
+LOCKSTEP_SHIFT_S = 0.037
+
+
+def _lockstep(scenes):
+    from stationbed.run.lockstep import run_lockstep  # noqa: PLC0415
+
+    res = run_lockstep(scenes, keep=True, fused=False)
+    assert [k for k, _ in res] == ["batch"] * len(scenes), [k for k, _ in res]
+    return [tr for _, tr in res]
+
+
+@EDGE_SETTINGS
+@given(windows=windows_st)
+def test_window_impulse_lockstep(windows):
+    """Three samples in lockstep (ideal CMG, pd holding inertial, its vectorised update_batch),
+    each with its own windows: at every row each sample's ΔH_N is L_X times its own windows'
+    time on so far, along N's x."""
+    per = [[(a + i * LOCKSTEP_SHIFT_S, b + i * LOCKSTEP_SHIFT_S) for a, b in windows] for i in range(3)]
+    for w, tr in zip(per, _lockstep([scene_from_dict(sphere_scene(w)) for w in per])):
+        dH = tr.H_O_N - tr.H_O_N[0]
+        assert_allclose(dH[:, 0], window_impulse_x(w, tr.t), rtol=0, atol=CLOSED_FORM_ABS)
+        assert_allclose(dH[:, 1:], 0.0, rtol=0, atol=CLOSED_FORM_ABS)
+
+
+@pytest.mark.parametrize(
+    "windows", [[], [(5.0, 12.0)], [(5.03, 12.07)]], ids=["none", "on_grid", "off_grid"]
+)
+def test_held_command_acts_over_its_period_lockstep(windows):
+    """The held-command balance for the batch executor, with the default (looping)
+    update_batch of a law that has none (SineTorque, loaded by module:Class): every command acts
+    over its own period, the short last one included, for each of two samples."""
+    duration = 10.05
+    scenes = []
+    for _ in range(2):
+        d = sphere_scene(windows, cmg=False, duration=duration)
+        d["controller"] = {"name": f"{__name__}:SineTorque", "period": PERIOD_S}
+        d["simulation"]["output_dt"] = 0.5
+        scenes.append(scene_from_dict(d))
+    for tr in _lockstep(scenes):
+        dH = tr.H_O_N - tr.H_O_N[0]
+        assert tr.t[-1] == duration
+        expect = held_command_impulse(tr.t, duration) + window_impulse_x(windows, tr.t)
+        assert_allclose(dH[:, 0], expect, rtol=0, atol=CLOSED_FORM_ABS)
+        assert_allclose(dH[:, 1:], 0.0, rtol=0, atol=CLOSED_FORM_ABS)

@@ -203,10 +203,15 @@ class _Lockstep:
         self.CMD = fc.args[3].reshape(n, -1)
         self.UEXT = fc.args[4].reshape(n, 3)
         self.P = fc.args[5].reshape(n, -1)
-        self.X1 = fc.res[0].reshape(n, nx)
-        self.Y1 = fc.res[1].reshape(n, -1)
-        self.ACT = fc.res[2].reshape(n, -1)
-        ny = self.Y1.shape[1]
+        # an output buffer holds its nonzeros, sample after sample: a sparse output (structural
+        # zeros, e.g. C_ON's off-diagonal in deep space) fills the first nnz values of a sample's
+        # row, as the per-tick loop's buffer of the same function holds them
+        nnz = [f.sparsity_out(j).nnz() for j in range(3)]
+        self.X1 = fc.res[0][: n * nnz[0]].reshape(n, nnz[0])
+        self.Y1 = fc.res[1][: n * nnz[1]].reshape(n, nnz[1])
+        self.ACT = fc.res[2][: n * nnz[2]].reshape(n, nnz[2])
+        self.ny1 = nnz[1]
+        ny = f.numel_out(1)
         self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
         self.seen = np.zeros((n, ny))  # what the law sees
         self.M = BatchMeasurement(self.seen, lp.layout)
@@ -413,14 +418,14 @@ class _Lockstep:
                 ok = (v > -1e300) & (v < 1e300)  # the per-tick loop's test of a finite state
                 if all_smooth and ok.all():
                     self.X[:] = self.X1
-                    self.raw[:] = self.Y1
+                    self.raw[:, : self.ny1] = self.Y1
                     n_fast += 1
                 else:
                     for i in np.flatnonzero(smooth & ~ok):
                         fail(i, IntegrationError(t_next, "state is not finite (NaN or inf)"))
                     good = smooth & ok
                     self.X[good] = self.X1[good]
-                    self.raw[good] = self.Y1[good]
+                    self.raw[good, : self.ny1] = self.Y1[good]
                     n_fast += good
                 for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):
                     lo = S[i].loop
