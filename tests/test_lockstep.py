@@ -165,3 +165,28 @@ def test_window_edges_on_and_off_the_tick_grid_take_the_generic_tick():
     for s, (kind, tr) in zip(scenes, res):
         assert kind == "batch"
         _same(tr, simulate(s, fused=False))
+
+
+def test_the_monte_carlo_runs_a_python_law_in_lockstep_with_the_single_runs_numbers():
+    """The Monte Carlo scene (every dispersion, sensor noise, a failed CMG unit now and then)
+    with example_hold: the chunk runs in lockstep (executor column "batch", counted in the
+    summary), and every row equals run_sample's (its single run through simulate)."""
+    from stationbed import montecarlo  # noqa: PLC0415
+    from stationbed.studies.montecarlo.samples import run_sample  # noqa: PLC0415
+
+    s = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_montecarlo.toml")
+    disperse = [d.model_dump(exclude_unset=True) for d in s.montecarlo.disperse
+                if not d.key.startswith("controller.params")]
+    s = s.replace({"simulation.duration": 3.0, "montecarlo.settle_s": 1.0, "montecarlo.envelope_dt": 1.0,
+                   "simulation.output_dt": 1.0, "controller.name": "example_hold",
+                   "controller.params": {"reference": "lvlh"}, "montecarlo.disperse": disperse})
+    res = montecarlo(s, n=4, chunk=4)
+    assert (res.df["executor"] == "batch").all() and res.summary["executors"] == {"batch": 4}
+    for k in range(4):
+        row, env = run_sample(s.replace({"montecarlo.n": 4}), k, len(res.envelope_t))
+        got = res.df.iloc[k]
+        for name, v in row.items():
+            if name == "executor":
+                continue
+            assert got[name] == v or (isinstance(v, float) and np.isnan(v) and np.isnan(got[name])), name
+        assert np.array_equal(res.envelope[k], env, equal_nan=True)
