@@ -190,3 +190,24 @@ def test_the_monte_carlo_runs_a_python_law_in_lockstep_with_the_single_runs_numb
                 continue
             assert got[name] == v or (isinstance(v, float) and np.isnan(v) and np.isnan(got[name])), name
         assert np.array_equal(res.envelope[k], env, equal_nan=True)
+
+
+def test_the_readmes_update_batch_gives_the_guides_numbers(tmp_path):
+    """The README's update_batch, added to the guide's LvlhHold as printed: two samples in
+    lockstep equal their single runs (through the guide's _update) bit for bit."""
+    import re  # noqa: PLC0415
+
+    from test_readme_guide import guide_blocks  # noqa: PLC0415
+
+    readme = (ROOT / "README.md").read_text()
+    section = readme.split("### Many samples at once", 1)[1].split("\n## ", 1)[0]
+    method = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    py, _ = guide_blocks()
+    law = tmp_path / "lvlh_hold.py"
+    law.write_text(py + "\n" + method)
+    scenes = [s.replace({"controller.name": f"{law}:LvlhHold", "controller.params": {"kd": 0.012 + 0.001 * k}})
+              for k, s in enumerate(_samples({}, "pd", NOISE)[:2])]
+    res = run_lockstep(scenes, keep=True, fused=False)
+    assert [k for k, _ in res] == ["batch", "batch"]
+    for s, (_, tr) in zip(scenes, res):
+        _same(tr, simulate(s, fused=False))
