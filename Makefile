@@ -39,6 +39,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_environment.py
 	$(PY) benchmarks/bench_linearize.py
 	$(PY) benchmarks/bench_montecarlo.py
+	$(PY) benchmarks/bench_lockstep.py
 	$(PY) benchmarks/bench_fmu.py  # optional: says so when FMPy is not installed
 	$(PY) benchmarks/bench_plan.py $(if $(SMOKE),--smoke)
 	$(PY) benchmarks/bench_basilisk.py  # optional: says so when bsk is not installed
