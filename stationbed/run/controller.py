@@ -321,19 +321,20 @@ class Controller:
         (``(reason, exception)``); the others go on.
         """
         per = self.__dict__.get("_member_meas")
-        if per is None or per[0] is not meas.y:  # each member's Measurement: a row of meas.y
-            per = self._member_meas = (meas.y, [Measurement(meas.y[i], meas.layout) for i in range(meas.n_samples)])
+        if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
+            per = self._member_meas = (meas.y, [(m.update, m, Measurement(meas.y[i], meas.layout))
+                                                for i, m in enumerate(self.members)])
         ncmd = 3 if self.command == "torque" else self.members[0].plant.n_gimbals
         out = np.full((meas.n_samples, ncmd), np.nan)
         self.batch_failed = {}
         pack, step = _doubles(ncmd).pack_into, 8 * ncmd
         stopped = self.batch_stopped
-        for i, (m, mi) in enumerate(zip(self.members, per[1])):
+        for i, (update, m, mi) in enumerate(per[1]):
             if stopped and i in stopped:
                 continue
             mi.t = t
             try:
-                cmd = m.update(t, mi)
+                cmd = update(t, mi)
             except Exception as e:  # the user's code: this sample fails, the batch goes on
                 self.batch_failed[i] = (f"controller '{m.name}' raised {type(e).__name__}: {one_line(e)}", e)
                 continue

@@ -224,6 +224,7 @@ class _Lockstep:
         self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
         self.z = np.zeros((n, DRAW_BLOCK, 6))
         self.layout = lp.layout
+        self.any_noisy = bool(self.noisy.any())
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
@@ -246,7 +247,7 @@ class _Lockstep:
     def _sense(self, k: int) -> None:
         """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
         seen, raw = self.seen, self.raw
-        if not self.noisy.any():
+        if not self.any_noisy:
             seen[:] = raw
             return
         rows = np.arange(self.n)
@@ -317,6 +318,7 @@ class _Lockstep:
 
         n_upd = np.zeros(n, dtype=int)
         n_alive = n
+        h_set = -1.0
 
         def fail(i, e):
             nonlocal n_alive
@@ -358,7 +360,7 @@ class _Lockstep:
                                 S[i].loop._check_command(t, cmd[i])
                             except ControllerFailure as e:
                                 fail(i, e)
-                    n_upd += alive
+                    n_upd += alive if n_alive < n else 1
                     q_ref = ctrl.q_ref_BN
                 if not alive.any():
                     break
@@ -376,16 +378,18 @@ class _Lockstep:
                                 smooth[i] = False
                 if all_smooth or smooth.any():
                     self.T[:] = t
-                    self.H[:] = t_next - t
+                    if t_next - t != h_set:
+                        h_set = t_next - t
+                        self.H[:] = h_set
                     if n_alive == n:
                         self.CMD[:] = cmd
                     else:
                         self.CMD[:] = np.where(alive[:, None], cmd, 0.0)
                     self.fc()
                     if has_act:
-                        lim = self.ACT[:, nu + 1] > 0.5
-                        sat = self.ACT[:, nu + 2] > 0.5
-                        if lim.any() or sat.any():
+                        if (self.ACT[:, nu + 1 : nu + 3] > 0.5).any():
+                            lim = self.ACT[:, nu + 1] > 0.5
+                            sat = self.ACT[:, nu + 2] > 0.5
                             lim &= smooth
                             sat &= smooth
                             lim_n += lim
@@ -413,14 +417,16 @@ class _Lockstep:
                         satrow[i] = False
                 if k == K:
                     break
-                ticks += alive
+                ticks += alive if n_alive < n else 1
                 v = self.X1[:, 4]
-                ok = (v > -1e300) & (v < 1e300)  # the per-tick loop's test of a finite state
-                if all_smooth and ok.all():
+                # the per-tick loop's test of a finite state, -1e300 < v < 1e300, for all at once
+                # (NaN fails both: the max of an array with a NaN is NaN)
+                if all_smooth and np.abs(v).max() < 1e300:
                     self.X[:] = self.X1
                     self.raw[:, : self.ny1] = self.Y1
                     n_fast += 1
                 else:
+                    ok = (v > -1e300) & (v < 1e300)
                     for i in np.flatnonzero(smooth & ~ok):
                         fail(i, IntegrationError(t_next, "state is not finite (NaN or inf)"))
                     good = smooth & ok
