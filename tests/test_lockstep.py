@@ -146,7 +146,10 @@ def test_executor_choice_by_capability():
     """pd with its symbolic form: fused (where the fused loop applies); a law without one: batch;
     a non-fusable integrator: per-tick. run_lockstep says which ran each sample."""
     pd_scenes = _samples({"reference": "lvlh"}, "pd")
-    assert [k for k, _ in run_lockstep(pd_scenes[:2])] == ["fused", "fused"]
+    res = run_lockstep(pd_scenes[:2], keep=True)
+    assert [k for k, _ in res] == ["fused", "fused"]
+    for s, (_, tr) in zip(pd_scenes, res):  # the sample's own loop, fused, as simulate runs it
+        _same(tr, simulate(s))
     eh = _samples({"reference": "lvlh"}, "example_hold")
     assert [k for k, _ in run_lockstep(eh[:2])] == ["batch", "batch"]
     dop = [s.replace({"simulation.integrator": "dop853", "simulation.step": None}) for s in eh[:2]]

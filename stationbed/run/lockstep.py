@@ -95,7 +95,7 @@ class _Sample:
             return jump.res[0].copy()
 
         self.meta = {"scene": scene.name, "formulation": form.name, "integrator": system.integrator_cls.name,
-                     "rtol": run.rtol, "atol": run.atol, "build_s": system.build_s, "evaluator": system.evaluator}
+                     "rtol": sim.rtol, "atol": sim.atol, "build_s": system.build_s, "evaluator": system.evaluator}
         self.loop = ControlLoop(scene, system, run.integrator, p, run.x0.copy(), self.rows, duration,
                                 sim.output_dt, bps, apply_jump, None, fused)
         self.kind = executor(self.loop)
@@ -126,7 +126,8 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
     ``per-tick``; ``open-loop`` without a ``[controller]``) and a :class:`~.trajectory.Trajectory` or the exception the single run would
     have raised (a :class:`~.simulation.SimulationError` with its partial trajectory).
     ``sinks``: per scene a row sink (as :func:`~.simulation.simulate`'s ``sink``) or None.
-    Samples that cannot run in lockstep run one by one (:func:`~.simulation.simulate`)."""
+    Samples that cannot run in lockstep run one by one, each through its own loop as
+    :func:`~.simulation.simulate` runs it (fused or per tick)."""
     from .simulation import SimulationError, simulate  # noqa: PLC0415 - simulation imports this module's peers
 
     out: list = [None] * len(scenes)
@@ -145,9 +146,9 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
         except Exception as e:  # noqa: BLE001 - the single run raises the same: recorded per sample
             out[i] = ("per-tick", e)
             continue
-        if smp.kind != "batch":
+        if smp.kind != "batch":  # fused or per tick: this sample's own loop, as simulate runs it
             try:
-                out[i] = (smp.kind, simulate(s, keep=keep, fused=fused, sink=sinks[i]))
+                out[i] = (smp.kind, _single(smp, SimulationError))
             except Exception as e:  # noqa: BLE001
                 out[i] = (smp.kind, e)
             continue
