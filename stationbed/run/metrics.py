@@ -111,7 +111,9 @@ class RunMetrics:
         self._min_sing = None
         self._err_max = math.nan  # NaN-ignoring running max (np.fmax)
         self._err_finite = False  # a value that is not NaN was seen
-        self._sq_sum = 0.0  # sum of err**2 over the settled, non-NaN rows
+        # sum of err**2 over the settled, non-NaN rows, kept exactly (Shewchuk's partials, as
+        # math.fsum): the value cannot depend on how the rows were batched (timed flushes)
+        self._sq_partials: list[float] = []
         self._sq_n = 0
         self._tau_max = math.nan
 
@@ -135,7 +137,8 @@ class RunMetrics:
                 use &= rows[:, self._t] >= self.settle_s
             if use.any():
                 e = err[use]
-                self._sq_sum += float(np.dot(e, e))
+                for x in (e * e).tolist():
+                    _exact_add(self._sq_partials, x)
                 self._sq_n += int(use.sum())
         if self._tau is not None:
             tau = np.linalg.norm(rows[:, self._tau], axis=1)
@@ -176,10 +179,27 @@ class RunMetrics:
             out["final_att_err_deg"] = float(self.last[self._err])
             out["max_att_err_deg"] = self._err_max
             if self._sq_n:
-                out["rms_att_err_deg"] = math.sqrt(self._sq_sum / self._sq_n)
+                out["rms_att_err_deg"] = math.sqrt(math.fsum(self._sq_partials) / self._sq_n)
         if self._tau is not None and not math.isnan(self._tau_max):
             out["max_torque_cmd_Nm"] = self._tau_max
         return out
+
+
+def _exact_add(partials: list[float], x: float) -> None:
+    """Add ``x`` to the non-overlapping partials whose exact sum is the running total
+    (Shewchuk 1997; the recipe behind ``math.fsum``): ``math.fsum(partials)`` is then the
+    correctly rounded sum whatever the order and grouping of the additions."""
+    i = 0
+    for y in partials:
+        if abs(x) < abs(y):
+            x, y = y, x
+        hi = x + y
+        lo = y - (hi - x)
+        if lo:
+            partials[i] = lo
+            i += 1
+        x = hi
+    partials[i:] = [x]
 
 
 def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None = None) -> dict[str, float]:
