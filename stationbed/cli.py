@@ -71,7 +71,7 @@ def _scene_options(p, formulation: bool = True) -> None:
     p.add_argument("--output-dt", type=float, default=None, help="simulation.output_dt [s]")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="change one scene value, read as TOML (repeatable): --set simulation.rtol=1e-10, "
-                        "--set appendage.stbd_pair.mass=3e3 (an array by name: stbd_pair in scenarios/iss_*.toml), "
+                        "--set appendage.stbd_pair.mass=3e3 (an array by name: stbd_pair in scenarios/iss_lvlh_*.toml), "
                         "--set 'simulation.integrator=\"rk4\"'")
 
 
