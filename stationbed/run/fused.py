@@ -64,6 +64,7 @@ def fused_ok(loop) -> bool:
         and _edge_ticks(loop) is not None
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
+        and getattr(loop, "flight", None) is None
     )
 
 

@@ -1,0 +1,191 @@
+"""What the law flies on: the truth row, the sensors and the estimate, as one function per tick.
+
+:class:`Flight` is the sensing half of the closed loop's composition (issue 20, docs/loop.md).
+Both executors run it, neither reads the other's internals:
+
+* the per-tick loop (``run/closed_loop.py``) calls :meth:`Flight.compiled` once per tick;
+* the fused loop (``run/fused_flight.py``) inlines :meth:`Flight.function` in its ``mapaccum``
+  (MX, so the suite's ``Switch`` nodes stay lazy in the generated code).
+
+``(k, t, t_prev, y, theta_prev, omega_prev, xs, w, ps) -> (theta, xs_next, y_seen, ys)``
+
+* ``y`` is the true measurement vector at tick k (the model's compiled ``meas``, offsets from the
+  executor's measurement layout); from it the :data:`~.sensor.TRUTH` row: ``q_BN``, ``omega_BN_B``,
+  ``R_N`` (``r_N``), ``sun_N``; ``moon_N`` zero (no Moon ephemeris: the scene refuses a Moon
+  exclusion, so a zero vector is never read as a Moon) and ``shadow`` 1 (no shipped sensor reads it);
+* ``theta_B = ∫ω dt`` by the trapezoid over the tick, ``theta = theta_prev + (t - t_prev)/2
+  (omega_prev + omega)``: a gyro differences it, so its output is the mean of the trapezoid rates
+  over its sample. The error against the exact integral is ``h³/12 |ω̈|`` per tick (ISS hold:
+  ω̈ below 1e-9 rad/s³, h = 0.1 s: 1e-13 rad, against the gyro's own noise σ_v √h = 5e-7 rad);
+* ``xs, w, ps`` are the :class:`~.suite.Suite` 's state, noise row and parameters;
+* ``y_seen`` is what the law receives: ``y`` with ``q_BN`` and ``omega_BN_B`` replaced by the
+  MEKF's ``q_BN_hat`` and ``omega_hat_B`` when the scene has an ``[estimator]``; ``y`` itself
+  otherwise (the sensors are then flown and recorded, the law keeps the ideal measurement path:
+  the truth-fed comparison run);
+* ``ys`` the suite's outputs (:attr:`Suite.OUTPUTS`).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions
+from .sensor import TRUTH, noise_rng
+from .suite import Suite, SuiteNoise
+
+__all__ = ["Flight", "INIT_STREAM", "flight_columns"]
+
+#: first entry of the spawn key of the initial-estimate draw (sensors use 1: SENSOR_STREAM)
+INIT_STREAM = 2
+
+
+class Flight:
+    """The sensing of a scene flown on the executor's tick.
+
+    Parameters
+    ----------
+    sensing : object with ``sensor`` and ``estimator``  The scene (or a :class:`~stationbed.scene.Sensing`).
+    tick : float  The controller period [s].
+    layout : dict name -> (offset, size)  The executor's measurement vector.
+    seed : int  The run's seed (sensor i draws from ``noise_rng(seed, i)``).
+    """
+
+    def __init__(self, sensing, tick: float, layout: dict, seed: int):
+        self.suite = Suite(sensing, tick)
+        self.mekf = self.suite.mekf
+        self.layout = dict(layout)
+        self.ny = max(o + k for o, k in self.layout.values())
+        self.seed = int(seed)
+        self.heads = [s for s in self.suite.sensors if s.kind == "star_tracker"]
+        self._f = self._compiled = self._report = None
+
+    # -- the tick ---------------------------------------------------------------------------
+    def function(self) -> ca.Function:
+        """The tick as an MX function (module docstring)."""
+        if self._f is not None:
+            return self._f
+        S = self.suite
+        MX = ca.MX
+        k, t, t_prev = MX.sym("k"), MX.sym("t"), MX.sym("t_prev")
+        y, th0, om0 = MX.sym("y", self.ny), MX.sym("theta_prev", 3), MX.sym("omega_prev", 3)
+        xs, w, ps = S.STATE.symbol("xs", MX), S.NOISE.symbol("w", MX), S.PARAMS.symbol("ps", MX)
+
+        def field(name):
+            o, n = self.layout[name]
+            return y[o : o + n]
+
+        om = field("omega_BN_B")
+        th = th0 + (t - t_prev) / 2 * (om0 + om)
+        truth = TRUTH.pack(q_BN=field("q_BN"), omega_BN_B=om, theta_B=th, R_N=field("r_N"), sun_N=field("sun_N"),
+                           moon_N=MX.zeros(3), shadow=MX.ones(1), symbolic=True)
+        xs1, ys = S.function()(k, t, xs, truth, w, ps)
+        seen = y
+        if self.mekf is not None:
+            parts = []
+            cut = 0
+            repl = {"q_BN": S.OUTPUTS.get(ys, "q_BN_hat"), "omega_BN_B": S.OUTPUTS.get(ys, "omega_hat_B")}
+            for name, (o, n) in sorted(self.layout.items(), key=lambda kv: kv[1][0]):
+                if name in repl:
+                    if o > cut:
+                        parts.append(y[cut:o])
+                    parts.append(repl[name])
+                    cut = o + n
+            if cut < self.ny:
+                parts.append(y[cut:])
+            seen = ca.vertcat(*parts)
+        self._f = ca.Function("flight_tick", [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
+                              ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
+                              ["theta", "xs_next", "y_seen", "ys"])
+        return self._f
+
+    def compiled(self) -> FastCall:
+        """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall`."""
+        if self._compiled is None:
+            f = self.function()
+            tag = f"flight_{abs(hash(tuple(s.key for s in self.suite.sensors))) % 10**12}_{self.ny}"
+            self._compiled = FastCall(compile_functions([f], tag)[f.name()])
+            self._compiled.args[8][:] = self.suite.params
+        return self._compiled
+
+    # -- the run's numbers ----------------------------------------------------------------------
+    def initial(self, q_BN: np.ndarray) -> np.ndarray:
+        """The suite's state at tick 0. With an estimator, its attitude estimate is the truth
+        turned by δα ~ N(0, σ_attitude0² E) (``q = q̂ ⊗ δq(δα)``, drawn from the run's own
+        stream ``SeedSequence(seed, spawn_key=(INIT_STREAM,))``) and its bias estimate zero, so
+        the initial error is what the filter's P₀ says it is."""
+        if self.mekf is None:
+            return self.suite.initial()
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(INIT_STREAM,)))
+        da = self.suite.sensing.estimator.sigma_attitude0 * rng.standard_normal(3)
+        dq = np.concatenate([[1.0], -da / 2])
+        dq /= np.linalg.norm(dq)
+        q = np.asarray(q_BN, dtype=float)
+        q = q / np.linalg.norm(q)
+        qh = _quat_mult(q, dq)
+        return self.suite.initial(qh if qh[0] >= 0 else -qh)
+
+    def noise(self) -> "TickNoise":
+        """The run's noise, tick by tick from tick 0 (:class:`TickNoise`)."""
+        return TickNoise(SuiteNoise(self.suite, self.seed))
+
+    # -- columns --------------------------------------------------------------------------------
+    def columns(self) -> list[str]:
+        """:func:`flight_columns` of the scene."""
+        return flight_columns(self.suite.sensing)
+
+    def row(self, xs: np.ndarray, ys: np.ndarray, q_BN: np.ndarray) -> list[float]:
+        """The values of :meth:`columns` from the suite's state and outputs after a tick and the
+        true attitude (the true bias is the filter's gyro's state)."""
+        S = self.suite
+        vals = []
+        if self.mekf is not None:
+            if self._report is None:
+                self._report = FastCall(self.mekf.report_function())
+            r = self._report
+            gyro = self.mekf.gyro
+            r.args[0][:] = S.STATE.get(xs, "mekf")
+            r.args[1][:] = q_BN
+            r.args[2][:] = gyro.state.get(S.STATE.get(xs, gyro.name), "bias_B")
+            r()
+            err, s3, nees = r.res[0], r.res[1], r.res[2][0]
+            vals += list(np.degrees(err)) + list(np.degrees(s3[:3])) + list(S.OUTPUTS.get(ys, "bias_B_hat")) + [nees]
+        return vals + [float(S.OUTPUTS.get(ys, h.name)[4]) for h in self.heads]
+
+
+def flight_columns(scene) -> list[str]:
+    """The run's columns of a scene's sensing: with an estimator the attitude estimation error
+    per axis (B, deg, ``q = q̂ ⊗ δq(δα)``), its 3σ (deg), the bias estimate (rad/s), ``nees``
+    (6 states); per star-tracker head ``st_valid_<name>`` (1 when its held sample is valid)."""
+    cols = []
+    if getattr(scene, "estimator", None) is not None:
+        cols += [f"est_err_{a}_deg" for a in "xyz"] + [f"est_3sigma_{a}_deg" for a in "xyz"]
+        cols += [f"est_bias_{a}" for a in "xyz"] + ["nees"]
+    return cols + [f"st_valid_{s.name}" for s in getattr(scene, "sensor", []) if s.kind == "star_tracker"]
+
+
+class TickNoise:
+    """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
+    draws nothing: a zero row), asked in tick order (each tick once)."""
+
+    def __init__(self, noise: SuiteNoise):
+        self.noise = noise
+        self.width = noise.suite.NOISE.size
+
+    def rows(self, k0: int, n: int) -> np.ndarray:
+        out = np.zeros((n, self.width))
+        if n <= 0:
+            return out
+        first = max(k0, 1)
+        if first != self.noise.next_tick:
+            raise ValueError(f"sensor noise asked for tick {first}, the next tick is {self.noise.next_tick}")
+        m = k0 + n - first
+        if m > 0:
+            out[first - k0 :] = self.noise.draw(m)
+        return out
+
+
+def _quat_mult(p, q):
+    pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
+    return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
+
