@@ -15,10 +15,10 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
 from .plan import PlanSpec
-from .sensors import MekfEstimator, SensorEntry, check_sensing
+from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
-__all__ = ["Scene", "load_scene", "scene_from_dict"]
+__all__ = ["Scene", "load_scene", "scene_from_dict", "sensing_from_dict"]
 
 
 class Scene(Strict):
@@ -438,3 +438,12 @@ def load_scene(path: str | Path) -> Scene:
     scene = scene_from_dict(data, source=str(path))
     scene._folder = path.resolve().parent
     return scene
+
+
+def sensing_from_dict(data: dict, source: str = "scene") -> Sensing:
+    """Validate ``{"sensor": [...], "estimator": {...}}`` (the parsed TOML); raises
+    :class:`SceneError` with a one-line reason starting with ``source``."""
+    try:
+        return Sensing.model_validate(_plain(data))
+    except ValidationError as err:
+        raise SceneError(f"{source}: {_one_line(err, root=Sensing)}") from None

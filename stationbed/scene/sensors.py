@@ -38,8 +38,8 @@ from ..core.rotation import quat_from_dcm
 from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Vec3
 from .tables import TAGS
 
-__all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing", "sensing_from_dict",
-           "WHOLE_PERIODS_TOL", "SensorName", "check_sensing"]
+__all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing",
+           "WHOLE_PERIODS_TOL", "SensorName", "check_sensing"]  # sensing_from_dict: in load.py
 
 #: a latency or period that is a whole number of periods to this relative tolerance is taken as
 #: one (the numbers are typed with a few digits; 1e-9 is far below any typing error)
@@ -216,14 +216,3 @@ def check_sensing(sensor: list, estimator, period: float | None = None) -> None:
         if s.name in used and not _whole(s.period / gyro.period):
             raise FieldError("estimator.star_trackers", f"head '{s.name}': period {s.period:g} s is not a whole "
                                                         f"number of the gyro's ({gyro.period:g} s)")
-
-
-def sensing_from_dict(data: dict, source: str = "scene") -> Sensing:
-    """Validate ``{"sensor": [...], "estimator": {...}}`` (the parsed TOML); raises
-    :class:`SceneError` with a one-line reason starting with ``source``."""
-    from .load import _one_line, _plain
-
-    try:
-        return Sensing.model_validate(_plain(data))
-    except ValidationError as err:
-        raise SceneError(f"{source}: {_one_line(err, root=Sensing)}") from None
