@@ -109,11 +109,14 @@ class Flight:
         return self._compiled
 
     # -- the run's numbers ----------------------------------------------------------------------
-    def initial(self, q_BN: np.ndarray) -> np.ndarray:
+    def initial(self, q_BN: np.ndarray, omega_BN_B: np.ndarray) -> np.ndarray:
         """The suite's state at tick 0. With an estimator, its attitude estimate is the truth
         turned by δα ~ N(0, σ_attitude0² E) (``q = q̂ ⊗ δq(δα)``, drawn from the run's own
         stream ``SeedSequence(seed, spawn_key=(INIT_STREAM,))``) and its bias estimate zero, so
-        the initial error is what the filter's P₀ says it is."""
+        the initial error is what the filter's P₀ says it is. Its rate ``ω̂`` until the gyro's
+        first sample is what a noise-free sample at t = 0 would give, ``ω + β₀ − β̂₀`` (the
+        station flew before t = 0; zero would be a rate error of the orbital rate at the first
+        ticks)."""
         if self.mekf is None:
             return self.suite.initial()
         rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(INIT_STREAM,)))
@@ -123,7 +126,10 @@ class Flight:
         q = np.asarray(q_BN, dtype=float)
         q = q / np.linalg.norm(q)
         qh = _quat_mult(q, dq)
-        return self.suite.initial(qh if qh[0] >= 0 else -qh)
+        x = self.suite.initial(qh if qh[0] >= 0 else -qh)
+        bias0 = np.asarray(self.mekf.gyro.entry.bias0, dtype=float)
+        x[self.suite.STATE.slice("omega_hat_B")] = np.asarray(omega_BN_B, dtype=float) + bias0
+        return x
 
     def noise(self) -> "TickNoise":
         """The run's noise, tick by tick from tick 0 (:class:`TickNoise`)."""

@@ -142,8 +142,13 @@ class ControlLoop:
     def _init_flight(self, scene) -> None:
         """The sensors and estimator: the law sees ``seen`` (the flight tick's ``y_seen``)."""
         fl = self.flight = Flight(scene, self.period, self.layout, seed=self.sensor.seed)
-        q0 = np.array(self.x[:4], dtype=float)
-        self.xs = fl.initial(q0 / np.linalg.norm(q0))
+        m = self.meas
+        m.args[0][0] = 0.0
+        m.args[1][:] = self.x
+        m()
+        y0 = m.res[0]
+        (oq, _), (ow, _) = self.layout["q_BN"], self.layout["omega_BN_B"]
+        self.xs = fl.initial(y0[oq : oq + 4], y0[ow : ow + 3])
         self.ys = np.zeros(fl.suite.OUTPUTS.size)
         self.th, self.om_prev, self.t_prev = np.zeros(3), np.zeros(3), 0.0
         self.tick_noise = fl.noise()
