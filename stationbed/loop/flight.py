@@ -27,6 +27,8 @@ Both executors run it, neither reads the other's internals:
 
 from __future__ import annotations
 
+import hashlib
+
 import casadi as ca
 import numpy as np
 
@@ -58,6 +60,18 @@ class Flight:
         self.ny = max(o + k for o, k in self.layout.values())
         self.seed = int(seed)
         self.heads = [s for s in self.suite.sensors if s.kind == "star_tracker"]
+        m = self.mekf
+        #: what the tick's expression depends on (numbers are inputs): equal keys, equal functions
+        self.key = (tuple((s.name, s.key) for s in self.suite.sensors), tuple(sorted(self.suite.every.items())),
+                    None if m is None else (m.gyro.name, tuple(h.name for h in m.heads), tuple(m.delays), tuple(m.every)),
+                    tuple(sorted(self.layout.items())))
+        self.tag = hashlib.sha256(repr(self.key).encode()).hexdigest()[:16]
+        S = self.suite
+        self._rows = dict(
+            mekf=S.STATE.slice("mekf") if m else None,
+            gyro=(S.STATE.slice(m.gyro.name), m.gyro.state.slice("bias_B")) if m else None,
+            bias=S.OUTPUTS.slice("bias_B_hat") if m else None,
+            valid=[S.OUTPUTS.slice(h.name).start + 4 for h in self.heads])
         self._f = self._compiled = self._report = None
 
     # -- the tick ---------------------------------------------------------------------------
@@ -65,6 +79,10 @@ class Flight:
         """The tick as an MX function (module docstring)."""
         if self._f is not None:
             return self._f
+        hit = _TICKS.get(self.key)
+        if hit is not None:
+            self._f = hit
+            return hit
         S = self.suite
         MX = ca.MX
         k, t, t_prev = MX.sym("k"), MX.sym("t"), MX.sym("t_prev")
@@ -97,14 +115,17 @@ class Flight:
         self._f = ca.Function("flight_tick", [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
                               ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
                               ["theta", "xs_next", "y_seen", "ys"])
+        _TICKS[self.key] = self._f
         return self._f
 
     def compiled(self) -> FastCall:
         """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall`."""
         if self._compiled is None:
-            f = self.function()
-            tag = f"flight_{abs(hash(tuple(s.key for s in self.suite.sensors))) % 10**12}_{self.ny}"
-            self._compiled = FastCall(compile_functions([f], tag)[f.name()])
+            lib = _COMPILED.get(self.key)
+            if lib is None:
+                f = self.function()
+                lib = _COMPILED[self.key] = compile_functions([f], f"flight_{self.tag}")[f.name()]
+            self._compiled = FastCall(lib)
             self._compiled.args[8][:] = self.suite.params
         return self._compiled
 
@@ -143,20 +164,19 @@ class Flight:
     def row(self, xs: np.ndarray, ys: np.ndarray, q_BN: np.ndarray) -> list[float]:
         """The values of :meth:`columns` from the suite's state and outputs after a tick and the
         true attitude (the true bias is the filter's gyro's state)."""
-        S = self.suite
+        sl = self._rows
         vals = []
         if self.mekf is not None:
             if self._report is None:
                 self._report = FastCall(self.mekf.report_function())
             r = self._report
-            gyro = self.mekf.gyro
-            r.args[0][:] = S.STATE.get(xs, "mekf")
+            r.args[0][:] = xs[sl["mekf"]]
             r.args[1][:] = q_BN
-            r.args[2][:] = gyro.state.get(S.STATE.get(xs, gyro.name), "bias_B")
+            r.args[2][:] = xs[sl["gyro"][0]][sl["gyro"][1]]
             r()
             err, s3, nees = r.res[0], r.res[1], r.res[2][0]
-            vals += list(np.degrees(err)) + list(np.degrees(s3[:3])) + list(S.OUTPUTS.get(ys, "bias_B_hat")) + [nees]
-        return vals + [float(S.OUTPUTS.get(ys, h.name)[4]) for h in self.heads]
+            vals += list(np.degrees(err)) + list(np.degrees(s3[:3])) + list(ys[sl["bias"]]) + [nees]
+        return vals + [float(ys[i]) for i in sl["valid"]]
 
 
 def flight_columns(scene) -> list[str]:
@@ -170,24 +190,38 @@ def flight_columns(scene) -> list[str]:
     return cols + [f"st_valid_{s.name}" for s in getattr(scene, "sensor", []) if s.kind == "star_tracker"]
 
 
+#: ticks of noise drawn at a time (any size gives the same numbers: SuiteNoise draws in tick order)
+NOISE_BLOCK = 4096
+_TICKS: dict = {}
+_COMPILED: dict = {}
+
+
 class TickNoise:
     """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
-    draws nothing: a zero row), asked in tick order (each tick once)."""
+    draws nothing: a zero row), asked in tick order (each tick once); drawn
+    :data:`NOISE_BLOCK` ticks at a time."""
 
     def __init__(self, noise: SuiteNoise):
         self.noise = noise
         self.width = noise.suite.NOISE.size
+        self.buf, self.k0, self.next = np.zeros((0, self.width)), 1, 0
 
     def rows(self, k0: int, n: int) -> np.ndarray:
-        out = np.zeros((n, self.width))
         if n <= 0:
-            return out
+            return np.zeros((0, self.width))
+        if k0 != self.next:
+            raise ValueError(f"sensor noise asked for tick {k0}, the next tick is {self.next}")
+        self.next = k0 + n
+        out = np.zeros((n, self.width))
         first = max(k0, 1)
-        if first != self.noise.next_tick:
-            raise ValueError(f"sensor noise asked for tick {first}, the next tick is {self.noise.next_tick}")
-        m = k0 + n - first
-        if m > 0:
-            out[first - k0 :] = self.noise.draw(m)
+        while first < k0 + n:
+            i = first - self.k0
+            if i >= len(self.buf):
+                self.k0, i = first, 0
+                self.buf = self.noise.draw(max(NOISE_BLOCK, k0 + n - first))
+            m = min(len(self.buf) - i, k0 + n - first)
+            out[first - k0 : first - k0 + m] = self.buf[i : i + m]
+            first += m
         return out
 
 

@@ -103,8 +103,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     c0, parm, wm = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nw, n)
     traj = acc(c0, ca.repmat(parm, 1, n), wm)
     chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
-    tag = (f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_"
-           f"{abs(hash(tuple(s.key for s in S.sensors))) % 10**12}")
+    tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"])}
 
@@ -114,7 +113,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     ctrl, flight = loop.ctrl, loop.flight
     n = loop.n_per_out
     cp = np.asarray(symbolic_params, dtype=float)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, id(flight.function()))
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key)  # structure, not numbers
     if key not in _CHUNKS:
         t_build = time.perf_counter()
         _CHUNKS[key] = _build(loop, n, cp)
