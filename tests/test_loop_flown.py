@@ -153,3 +153,18 @@ def test_mekf_flown_in_the_loop_is_consistent():
     assert lo <= np.mean(nees_end) <= hi, (np.mean(nees_end), NEES_BAND)
     assert lo <= np.mean(nees_mid) <= hi, (np.mean(nees_mid), NEES_BAND)
     assert np.mean(inside) >= INSIDE_3SIGMA_MIN
+
+
+def test_rerun_series_of_the_estimation_columns():
+    """The estimation columns get their own rerun entities (error beside its 3σ per axis, bias,
+    NEES, heads' valid flags); none is left to ``telemetry/extra``."""
+    from stationbed.output.rerun.series import telemetry_series
+    from stationbed.run.rows import trajectory_columns
+
+    scene = load_scene(SCENARIO)
+    cols = trajectory_columns(scene)
+    series, extra = telemetry_series(cols, scene.appendage_names)
+    names = {s.entity: s.columns for s in series}
+    assert names["telemetry/estimation/err_x_deg"] == ("est_err_x_deg", "est_3sigma_x_deg")
+    assert names["telemetry/estimation/st_valid"] == ("st_valid_st1", "st_valid_st2")
+    assert not [c for c in extra if c.startswith(("est_", "st_valid")) or c == "nees"]
