@@ -11,13 +11,16 @@ Both executors run it, neither reads the other's internals:
 
 * ``y`` is the true measurement vector at tick k (the model's compiled ``meas``, offsets from the
   executor's measurement layout); from it the :data:`~.sensor.TRUTH` row: ``q_BN``, ``omega_BN_B``,
-  ``R_N`` (``r_N``), ``sun_N``; ``moon_N`` zero (no Moon ephemeris: the scene refuses a Moon
-  exclusion, so a zero vector is never read as a Moon) and ``shadow`` 1 (no shipped sensor reads it);
+  ``R_N`` (``r_N``), ``sun_N``; ``moon_N`` from the station to the Moon, whose geocentric
+  position is held at the scene's epoch as the Sun is (:mod:`stationbed.model.moon`; zero
+  without an epoch, and the scene then refuses a Moon exclusion); ``shadow`` 1 (no shipped
+  sensor reads it);
 * ``theta_B = ∫ω dt`` by the trapezoid over the tick, ``theta = theta_prev + (t - t_prev)/2
   (omega_prev + omega)``: a gyro differences it, so its output is the mean of the trapezoid rates
   over its sample. The error against the exact integral is ``h³/12 |ω̈|`` per tick (ISS hold:
   ω̈ below 1e-9 rad/s³, h = 0.1 s: 1e-13 rad, against the gyro's own noise σ_v √h = 5e-7 rad);
-* ``xs, w, ps`` are the :class:`~.suite.Suite` 's state, noise row and parameters;
+* ``xs, w`` are the :class:`~.suite.Suite` 's state and noise row; ``ps`` its parameters then
+  the Moon's geocentric position (:attr:`Flight.params`);
 * ``y_seen`` is what the law receives: ``y`` with ``q_BN`` and ``omega_BN_B`` replaced by the
   MEKF's ``q_BN_hat`` and ``omega_hat_B`` when the scene has an ``[estimator]``; ``y`` itself
   otherwise (the sensors are then flown and recorded, the law keeps the ideal measurement path:
@@ -53,8 +56,12 @@ class Flight:
     seed : int  The run's seed (sensor i draws from ``noise_rng(seed, i)``).
     """
 
-    def __init__(self, sensing, tick: float, layout: dict, seed: int):
+    def __init__(self, sensing, tick: float, layout: dict, seed: int, moon_R_N=None):
         self.suite = Suite(sensing, tick)
+        #: the Moon's geocentric position [m] (N), held over the run as the Sun is (or None: no
+        #: Moon, ``moon_N`` zero); the tick's parameters are the suite's, then this
+        self.has_moon = moon_R_N is not None
+        self.params = np.concatenate([self.suite.params, np.zeros(3) if moon_R_N is None else np.asarray(moon_R_N, float)])
         self.mekf = self.suite.mekf
         self.layout = dict(layout)
         self.ny = max(o + k for o, k in self.layout.values())
@@ -64,7 +71,7 @@ class Flight:
         #: what the tick's expression depends on (numbers are inputs): equal keys, equal functions
         self.key = (tuple((s.name, s.key) for s in self.suite.sensors), tuple(sorted(self.suite.every.items())),
                     None if m is None else (m.gyro.name, tuple(h.name for h in m.heads), tuple(m.delays), tuple(m.every)),
-                    tuple(sorted(self.layout.items())))
+                    tuple(sorted(self.layout.items())), self.has_moon)
         self.tag = hashlib.sha256(repr(self.key).encode()).hexdigest()[:16]
         S = self.suite
         self._rows = dict(
@@ -87,7 +94,7 @@ class Flight:
         MX = ca.MX
         k, t, t_prev = MX.sym("k"), MX.sym("t"), MX.sym("t_prev")
         y, th0, om0 = MX.sym("y", self.ny), MX.sym("theta_prev", 3), MX.sym("omega_prev", 3)
-        xs, w, ps = S.STATE.symbol("xs", MX), S.NOISE.symbol("w", MX), S.PARAMS.symbol("ps", MX)
+        xs, w, ps = S.STATE.symbol("xs", MX), S.NOISE.symbol("w", MX), MX.sym("ps", S.PARAMS.size + 3)
 
         def field(name):
             o, n = self.layout[name]
@@ -95,9 +102,13 @@ class Flight:
 
         om = field("omega_BN_B")
         th = th0 + (t - t_prev) / 2 * (om0 + om)
+        moon_N = MX.zeros(3)
+        if self.has_moon:  # from the station: the parallax (up to 1 deg) counts in a cone's edge
+            d = ps[S.PARAMS.size :] - field("r_N")
+            moon_N = d / ca.norm_2(d)
         truth = TRUTH.pack(q_BN=field("q_BN"), omega_BN_B=om, theta_B=th, R_N=field("r_N"), sun_N=field("sun_N"),
-                           moon_N=MX.zeros(3), shadow=MX.ones(1), symbolic=True)
-        xs1, ys = S.function()(k, t, xs, truth, w, ps)
+                           moon_N=moon_N, shadow=MX.ones(1), symbolic=True)
+        xs1, ys = S.function()(k, t, xs, truth, w, ps[: S.PARAMS.size])
         seen = y
         if self.mekf is not None:
             parts = []
@@ -126,7 +137,7 @@ class Flight:
                 f = self.function()
                 lib = _COMPILED[self.key] = compile_functions([f], f"flight_{self.tag}")[f.name()]
             self._compiled = FastCall(lib)
-            self._compiled.args[8][:] = self.suite.params
+            self._compiled.args[8][:] = self.params
         return self._compiled
 
     # -- the run's numbers ----------------------------------------------------------------------

@@ -11,6 +11,8 @@ import numpy as np
 from ..core.compile import FastCall
 from ..integrators import IntegrationError
 from ..loop.flight import Flight
+from ..model.moon import moon_position
+from ..model.sun import julian_date
 from ..model.cmg import cluster_functions
 from .controller import (
     ControllerError,
@@ -141,7 +143,11 @@ class ControlLoop:
     # -- sensing (issue 20) ---------------------------------------------------------------
     def _init_flight(self, scene) -> None:
         """The sensors and estimator: the law sees ``seen`` (the flight tick's ``y_seen``)."""
-        fl = self.flight = Flight(scene, self.period, self.layout, seed=self.sensor.seed)
+        moon = None
+        if scene.sun is not None and scene.sun.epoch is not None:  # held at the epoch, as the Sun
+            u, dist, _, _ = moon_position(julian_date(scene.sun.epoch))
+            moon = u * dist
+        fl = self.flight = Flight(scene, self.period, self.layout, seed=self.sensor.seed, moon_R_N=moon)
         m = self.meas
         m.args[0][0] = 0.0
         m.args[1][:] = self.x

@@ -40,7 +40,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     nx, npar = form.nx, model.layout.size
     ncp = len(symbolic_params)
     S = flight.suite
-    ns, nw, nps = S.STATE.size, S.NOISE.size, S.PARAMS.size
+    ns, nw, nps = S.STATE.size, S.NOISE.size, flight.params.size
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -128,7 +128,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     ia[2][:] = cp
     ia[3][:] = u_ext
     ia[4][:] = p
-    ia[11][:] = S.params
+    ia[11][:] = flight.params
     c0, par, noise = chunk.args
     ncp = len(cp)
     par[1] = period
@@ -136,7 +136,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     i_ext = slice(4 + ncp, 7 + ncp)
     par[i_ext] = u_ext
     par[7 + ncp : 7 + ncp + p.size] = p
-    par[7 + ncp + p.size :] = S.params
+    par[7 + ncp + p.size :] = flight.params
     nu_cmg, ncmd = loop.nu_cmg, loop.n_cmd
     nw = S.NOISE.size
     x = np.array(loop.x, dtype=float)

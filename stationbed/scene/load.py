@@ -137,9 +137,9 @@ def _check_sensors(scene) -> None:
     c = scene.controller
     check_sensing(scene.sensor, scene.estimator, c.period)
     for i, s in enumerate(scene.sensor):
-        if getattr(s, "moon_exclusion", None) is not None:
-            raise FieldError(f"sensor[{i}].moon_exclusion", "stationbed has no Moon ephemeris yet: remove the key "
-                                                            "(the Moon is never in the cone)")
+        if getattr(s, "moon_exclusion", None) is not None and (scene.sun is None or scene.sun.epoch is None):
+            raise FieldError(f"sensor[{i}].moon_exclusion", "needs [sun] epoch (the Moon's place is computed for a "
+                                                            "date: stationbed/model/moon.py)")
     if scene.estimator is not None and (c.sensor.attitude_noise > 0 or c.sensor.rate_noise > 0 or c.sensor.delay > 0):
         raise FieldError("controller.sensor", "with an [estimator] the law flies on the estimate: the ideal "
                                               "measurement's noise and delay must be 0")
