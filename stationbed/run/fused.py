@@ -64,6 +64,7 @@ def fused_ok(loop) -> bool:
         and _edge_ticks(loop) is not None
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
+        and not (getattr(loop, "flight", None) is not None and loop.noisy)
     )
 
 
@@ -186,6 +187,10 @@ def _build(loop, n: int, flags=(False, False)) -> dict:
 def run_fused(loop, K: int) -> None:
     """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
     ctrl = loop.ctrl
+    if getattr(loop, "flight", None) is not None:  # sensors and estimator (issue 20)
+        from .fused_flight import run_fused_flight
+
+        return run_fused_flight(loop, K, _symbolic_params(ctrl), _edge_ticks(loop))
     n = loop.n_per_out
     flags = _noise_flags(loop)
     nn = _noise_width(flags)

@@ -62,6 +62,12 @@ METRICS: dict[str, Metric] = {
     "rate_limited_ticks": Metric("ticks", "controller ticks whose gimbal-rate command was limited"),
     "momentum_saturated_ticks": Metric("ticks", "controller ticks at which the cluster was saturated"),
     "max_torque_cmd_Nm": Metric("N m", "largest commanded torque |tau_cmd| over the output rows"),
+    # sensors and estimator (issue 20): the columns of stationbed.loop.flight.flight_columns
+    "max_est_err_deg": Metric("deg", "largest attitude estimation error |est_err| (truth vs MEKF) over the output rows"),
+    "rms_est_err_deg": Metric("deg", "RMS attitude estimation error |est_err| over the output rows"),
+    "mean_nees": Metric("1", "mean of the MEKF's NEES (6 states; consistent: 6) over the output rows"),
+    "est_inside_3sigma": Metric("1", "fraction of the output rows and axes with |est_err| <= its 3 sigma", "low"),
+    "st_dropout_rows": Metric("rows", "output rows at which a star-tracker head's held sample is invalid, summed over heads"),
 }
 
 
@@ -104,6 +110,11 @@ class RunMetrics:
         self._sing = col.get("cmg_singularity")
         self._err = col.get("att_err_deg")
         self._tau = [col[c] for c in ("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")] if "tau_cmd_x" in col else None
+        self._est = [col[f"est_err_{a}_deg"] for a in "xyz"] if "est_err_x_deg" in col else None
+        self._s3 = [col[f"est_3sigma_{a}_deg"] for a in "xyz"] if self._est else None
+        self._nees = col.get("nees")
+        self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
+        self._est_red = [0.0, 0.0, 0, 0.0, 0, 0]  # max, sum err², rows, sum nees, inside, dropouts
         self.n_rows = 0
         self.last = None
         self.rate_limited_ticks = self.momentum_saturated_ticks = None
@@ -140,6 +151,17 @@ class RunMetrics:
                 for x in (e * e).tolist():
                     _exact_add(self._sq_partials, x)
                 self._sq_n += int(use.sum())
+        if self._est is not None:
+            r = self._est_red
+            e = rows[:, self._est]
+            n2 = np.einsum("ij,ij->i", e, e)
+            r[0] = max(r[0], float(np.sqrt(n2.max())))
+            r[1] += float(n2.sum())
+            r[2] += len(rows)
+            r[3] += float(rows[:, self._nees].sum())
+            r[4] += int((np.abs(e) <= rows[:, self._s3]).sum())
+        if self._st:
+            self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
         if self._tau is not None:
             tau = np.linalg.norm(rows[:, self._tau], axis=1)
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
@@ -182,6 +204,12 @@ class RunMetrics:
                 out["rms_att_err_deg"] = math.sqrt(math.fsum(self._sq_partials) / self._sq_n)
         if self._tau is not None and not math.isnan(self._tau_max):
             out["max_torque_cmd_Nm"] = self._tau_max
+        r = self._est_red
+        if self._est is not None and r[2]:
+            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(r[1] / r[2]), mean_nees=r[3] / r[2],
+                       est_inside_3sigma=r[4] / (3 * r[2]))
+        if self._st and self.n_rows:
+            out["st_dropout_rows"] = r[5]
         return out
 
 
