@@ -14,6 +14,7 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
@@ -39,6 +40,7 @@ class Scene(Strict):
     atmosphere: Atmosphere | None = None
     montecarlo: MonteCarlo | None = None
     plan: PlanSpec | None = None
+    knowledge: Knowledge | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -73,6 +75,7 @@ class Scene(Strict):
                 raise FieldError("controller.sensor.delay", f"{c.sensor.delay:g} s is not a whole number of "
                                                             f"controller periods ({c.period:g} s)")
         _check_plan(self)
+        _check_knowledge(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -122,6 +125,20 @@ class Scene(Strict):
         new = scene_from_dict(data, source=source)
         new._folder = self._folder
         return new
+
+
+def _check_knowledge(scene) -> None:
+    """``[knowledge]`` describes a plant the scene accepts (one-line FieldError naming it)."""
+    k = scene.knowledge
+    if k is None:
+        return
+    for name in ("failed_units", "cmg"):
+        if getattr(k, name) is not None and scene.cmg is None:
+            raise FieldError(f"knowledge.{name}", "needs a [cmg] table")
+    try:
+        knowledge_scene(scene)
+    except SceneError as e:
+        raise FieldError("knowledge", f"the plant it believes is refused: {str(e).removeprefix('[knowledge]: ')}") from None
 
 
 def _check_plan(scene) -> None:
