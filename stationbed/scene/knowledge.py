@@ -18,6 +18,7 @@ object built from values: nothing in it refers to the scene being flown.
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import numpy as np
@@ -96,4 +97,6 @@ def knowledge_scene(scene):
     """What flight software believes: ``scene`` (a :class:`~stationbed.scene.Scene`) with the
     ``[knowledge]`` substitutions of this module's docstring; raises SceneError naming
     ``[knowledge]`` when that scene is refused (e.g. ``failed_units`` beyond the cluster)."""
-    return scene.replace(knowledge_changes(scene), source="[knowledge]")
+    # a deep copy: a table left at its default is one object shared by every scene built
+    # (pydantic keeps a model default as is), and nothing of the flown scene may be reachable
+    return copy.deepcopy(scene.replace(knowledge_changes(scene), source="[knowledge]"))
