@@ -45,12 +45,15 @@ PERIOD_S = 0.1  # s, the controller period (10 Hz)
 INERTIA_RTOL = 1e-13
 #: a command is -k J e with the hand inertia: a few roundings of products of 1e8-size numbers
 TAU_RTOL = 1e-12
+# lqr's reset also computes its loop margins (~1.5 s on this machine): two samples per study
+# (the truth differs between them; every sample's gain is compared)
+
 #: the smallest relative difference between truth and knowledge that the tests rely on (the
 #: 5 % dispersion or the 10-30 % [knowledge] offsets make it far larger)
 DIFFERS = 1e-3
 
 
-def lqr_study(known: bool = False, n: int = 3):
+def lqr_study(known: bool = False, n: int = 2, more=()):
     """A rigid station on a 400 km orbit flown by lqr, its inertia dispersed 5 % (one tick)."""
     d = {
         "name": "knowledge_lqr",
@@ -58,9 +61,10 @@ def lqr_study(known: bool = False, n: int = 3):
         "initial": {"frame": "lvlh", "q_BN": [1.0, 0.0, 0.0, 0.0], "omega_BN_B": [0.0, 0.0, 0.0]},
         "body": {"mass": 4.0e5, "inertia": NOMINAL_I, "cm": [0.0, 0.0, 0.0]},
         "orbit": {"altitude": 400000.0, "inclination": 0.9006, "u0": 0.3, "gravity_gradient": True},
-        "controller": {"name": "lqr", "period": PERIOD_S},
+        "controller": {"name": "lqr", "period": PERIOD_S, "params": {"max_torque": 20.0}},
         "montecarlo": {"n": n, "seed": 11, "envelope_dt": None, "disperse": [
-            {"key": "body.inertia", "kind": "inertia", "sigma": 0.05, "sigma_products": 0.005, "known": known}]},
+            {"key": "body.inertia", "kind": "inertia", "sigma": 0.05, "sigma_products": 0.005, "known": known},
+            *more]},
     }
     return scene_from_dict(d)
 
@@ -82,7 +86,7 @@ def hand_design(inertia, mean_motion):
 
 def test_lqr_gain_is_the_nominal_design_in_every_sample():
     scene = lqr_study()
-    flown = [flown_gain(scene, k) for k in range(3)]
+    flown = [flown_gain(scene, k) for k in range(2)]
     truths = [np.array(s.body.inertia) for s, _ in flown]
     for a in truths[1:]:
         assert np.max(np.abs(a - truths[0]) / np.abs(truths[0]).max()) > DIFFERS  # the truth differs
@@ -96,7 +100,7 @@ def test_a_known_dispersion_reaches_the_law():
     scene = lqr_study(known=True)
     res = montecarlo(scene)
     gains = []
-    for k in range(3):
+    for k in range(2):
         row = res.df.iloc[k]
         J = np.zeros((3, 3))
         for i in range(3):
@@ -110,13 +114,17 @@ def test_a_known_dispersion_reaches_the_law():
 
 
 def test_monte_carlo_rows_record_the_truth_and_what_the_law_was_told():
-    scene = lqr_study()
-    res = montecarlo(scene)
-    for k in range(3):
+    gain = {"key": "controller.params.max_torque", "kind": "scale_uniform", "low": -0.2, "high": 0.2}
+    angle = {"key": "initial.q_BN", "kind": "attitude_normal", "sigma": 0.01}
+    res = montecarlo(lqr_study(more=[gain, angle]))
+    for k in range(2):
         row = res.df.iloc[k]
         for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
             assert row[f"told.body.inertia[{i}][{j}]"] == NOMINAL_I[i][j]
         assert abs(row["body.inertia[0][0]"] - NOMINAL_I[0][0]) > DIFFERS * NOMINAL_I[0][0]
+        # the law's own setting is built with the drawn value: it is what the law was told
+        assert row["told.controller.params.max_torque.scale"] == pytest.approx(row["controller.params.max_torque.scale"], rel=1e-15)
+        assert row["initial.q_BN.angle"] > 0.0 and row["told.initial.q_BN.angle"] == 0.0
 
 
 # -- pd on a [knowledge] inertia: an independent hand computation ---------------------------------
@@ -295,3 +303,21 @@ def test_a_known_dispersion_cannot_contradict_a_stated_belief():
     scene = lqr_study(known=True).replace({"knowledge.inertia": NOMINAL_I})
     with pytest.raises(SceneError, match=r"montecarlo.disperse\[0\].known: 'body.inertia' is given by \[knowledge\] inertia"):
         check_keys(scene)
+
+
+# -- the planner plans on knowledge -----------------------------------------------------------------
+
+def test_the_planner_plans_on_knowledge():
+    from stationbed import load_scene
+    from stationbed.plan.scene_problem import scene_problem
+
+    J_known = [[3.0e7, 0.0, 0.0], [0.0, 4.0e7, 0.0], [0.0, 0.0, 5.0e7]]  # kg m², not the scene's
+    radius_m = 6.8e6  # m, the believed orbit (the scene's is 6714455 m)
+    mu = 3.986004418e14  # m³/s², [orbit] mu's default
+    scene = load_scene("scenarios/iss_zpm_2006.toml").replace({
+        "knowledge.inertia": J_known, "knowledge.cmg.max_momentum": 12000.0,
+        "knowledge.orbit": {"radius": radius_m, "inclination": 0.9006}})
+    prob = scene_problem(scene)
+    assert_allclose(prob.model.J, J_known, rtol=INERTIA_RTOL, atol=0)  # one body at its mass centre
+    assert prob.h_max == 12000.0
+    assert_allclose(prob.model.n2, mu / radius_m**3, rtol=1e-14, atol=0)
