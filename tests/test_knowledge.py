@@ -321,3 +321,15 @@ def test_the_planner_plans_on_knowledge():
     assert_allclose(prob.model.J, J_known, rtol=INERTIA_RTOL, atol=0)  # one body at its mass centre
     assert prob.h_max == 12000.0
     assert_allclose(prob.model.n2, mu / radius_m**3, rtol=1e-14, atol=0)
+
+
+def test_the_command_line_refuses_bad_knowledge_with_exit_2(tmp_path, capsys):
+    from stationbed.cli import main
+
+    path = tmp_path / "bad_knowledge.toml"
+    path.write_text('name = "k"\n[simulation]\nduration = 1.0\n[body]\nmass = 1.0\n'
+                    'inertia = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.5]]\n'
+                    '[knowledge]\nmass = 0.0\n')
+    assert main(["run", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("stationbed: error: ") and "knowledge.mass: must be greater than 0" in err[0]
