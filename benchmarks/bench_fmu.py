@@ -175,7 +175,7 @@ def _plant(scene):
     from stationbed.run.prepare import prepare
 
     run = prepare(scene)
-    return plant_facts(scene, run.system, run.p, run.x0, scene.controller.period)
+    return plant_facts(scene, run.system, scene.controller.period)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,9 @@ from ..integrators import IntegrationError
 from ..loop.flight import Flight
 from ..model.moon import moon_position
 from ..model.sun import julian_date
+from ..model import Structure
 from ..model.cmg import cluster_functions
+from ..scene import knowledge_scene
 from .controller import (
     ControllerError,
     Measurement,
@@ -23,6 +25,7 @@ from .controller import (
     one_line,
 )
 from .fused import fused_ok, run_fused
+from .initial import initial_state, initial_x
 from .laws import build_controller
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
@@ -33,20 +36,32 @@ __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOIS
 NOISE_BLOCK = 256
 
 
-def plant_facts(scene, system, p, x, period: float) -> Plant:
-    """The :class:`Plant` facts a controller designs with: the scene's inertia about O at t = 0
-    (state ``x``), orbital rate and CMG limits (also used by :mod:`stationbed.analysis`)."""
+def plant_facts(scene, system, period: float) -> Plant:
+    """The :class:`Plant` facts a controller designs with: what flight software believes, never
+    the truth being flown. Built from the *knowledge scene* of ``scene``
+    (:func:`stationbed.scene.knowledge_scene`: the scene with its ``[knowledge]`` substituted,
+    failed CMG units unknown unless listed there): its inertia about O at t = 0 (the compiled
+    ``inertia`` of ``system`` at the knowledge's own state and parameters), orbital rate and CMG
+    limits; ``plant.scene`` is the knowledge scene (also used by :mod:`stationbed.analysis`
+    and :mod:`stationbed.plan`, which design and plan on knowledge too)."""
+    known = knowledge_scene(scene)
+    model = system.formulation.model
+    if Structure.of(known) != model.structure:
+        raise ValueError("[knowledge] changes the model's structure (e.g. a circular orbit believed two-body); "
+                         "it may change values only")
+    p = model.params(known)
+    x = initial_x(system, known, *initial_state(known), p)
     inertia = FastCall.of(system.funcs["inertia"])
     inertia.args[0][0] = 0.0
     inertia.args[1][:] = x
     inertia.args[2][:] = p
     inertia()
-    c = scene.cmg
-    cmg = system.formulation.model.cmg
+    c = known.cmg
+    cmg = model.cmg
     plant = Plant(
-        scene=scene,
+        scene=known,
         inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
-        mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
+        mean_motion=None if known.orbit is None else known.orbit.mean_motion,
         period=period,
     )
     if c is not None:
@@ -97,8 +112,8 @@ class ControlLoop:
             raise ValueError(
                 f"controller '{self.ctrl.name}' commands gimbal rates: the scene needs a gimballed [cmg]"
             )
-        plant = plant_facts(scene, system, p, x, self.period)
-        self.capacity = plant.h_capacity
+        plant = plant_facts(scene, system, self.period)  # knowledge, never the truth flown
+        self.capacity = math.inf if cmg is None else cmg.geometry.capacity(scene.cmg)  # the truth's working units
         try:
             self.ctrl.reset(plant)
         except ValueError:  # the law's own refusal of this plant (e.g. "needs an [orbit]"): bad input

@@ -158,7 +158,9 @@ class Measurement:
 
 @dataclass
 class Plant:
-    """Facts about the plant a controller may design with (from the scene, at t = 0).
+    """Facts about the plant a controller may design with, at t = 0: what flight software
+    believes (the scene's knowledge, :func:`stationbed.scene.knowledge_scene`), never the truth
+    being flown; ``scene`` is that knowledge scene.
 
     inertia_O_B : (3, 3)  Total inertia about the composite mass centre, B axes [kg m²].
     mean_motion : float or None  Orbital rate n [rad/s]; None in deep space.

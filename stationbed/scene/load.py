@@ -14,6 +14,7 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
@@ -42,6 +43,7 @@ class Scene(Strict):
     plan: PlanSpec | None = None
     sensor: list[SensorEntry] = []  # issue 20: flown by the closed loop (stationbed/loop/)
     estimator: MekfEstimator | None = None
+    knowledge: Knowledge | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -77,6 +79,7 @@ class Scene(Strict):
                                                             f"controller periods ({c.period:g} s)")
         _check_plan(self)
         _check_sensors(self)
+        _check_knowledge(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -143,6 +146,20 @@ def _check_sensors(scene) -> None:
     if scene.estimator is not None and (c.sensor.attitude_noise > 0 or c.sensor.rate_noise > 0 or c.sensor.delay > 0):
         raise FieldError("controller.sensor", "with an [estimator] the law flies on the estimate: the ideal "
                                               "measurement's noise and delay must be 0")
+
+
+def _check_knowledge(scene) -> None:
+    """``[knowledge]`` describes a plant the scene accepts (one-line FieldError naming it)."""
+    k = scene.knowledge
+    if k is None:
+        return
+    for name in ("failed_units", "cmg"):
+        if getattr(k, name) is not None and scene.cmg is None:
+            raise FieldError(f"knowledge.{name}", "needs a [cmg] table")
+    try:
+        knowledge_scene(scene)
+    except SceneError as e:
+        raise FieldError("knowledge", f"the plant it believes is refused: {str(e).removeprefix('[knowledge]: ')}") from None
 
 
 def _check_plan(scene) -> None:
