@@ -136,3 +136,16 @@ def test_rate_is_recorded_and_ignored_without_environment():
     tr = simulate(_with_rate(scene, 10), duration=2.0)
     s = tr.meta["summary"]
     assert (s["environment_rate_asked"], s["environment_rate_ticks"]) == (10, 0)
+
+
+@pytest.mark.slow
+def test_held_environment_with_sensor_noise(orbit):
+    """With sensor noise (the draws passed per tick into the held blocks too) the held run stays
+    inside the noiseless orbit's bound over 600 s: the same draws reach the same ticks."""
+    scene, _, (M1, M2, fast) = orbit
+    noisy = scene.replace({"controller.sensor": {"attitude_noise": 1e-5, "rate_noise": 1e-6, "seed": 3}})
+    every = simulate(noisy, duration=600.0)
+    held = simulate(_with_rate(noisy, 20), duration=600.0)
+    assert held.meta["summary"]["environment_rate_ticks"] == 20
+    err = float(np.max(rotation_angle(every.q_BN, held.q_BN)))
+    assert 0.0 < err <= hold_bound_rad(20 * PERIOD_S, M1, M2, fast, I_MIN_KG_M2, OMEGA_N_RAD_S, ZETA)

@@ -31,8 +31,8 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
 from .rates import carry_width, environment_rate, held_chunk
-from .system import environment_split as rates_split
 from .segments import held_torque_from
+from .system import environment_split as rates_split
 
 __all__ = ["fused_ok", "run_fused"]
 
