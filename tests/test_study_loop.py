@@ -60,3 +60,10 @@ def test_held_environment_costs_no_accuracy_at_this_rate(study):
     _, rows = study
     err = {(r["substeps"], r["environment_rate"]): float(r["att_err_rad"]) for r in rows}
     assert abs(err[("1", "10")] - err[("1", "0")]) <= 0.01 * err[("1", "0")]
+
+
+def test_integrators_option_refused_on_a_closed_loop_scene(tmp_path, capsys):
+    """The loop's study has no integrator to choose: naming some is bad input, said in one line."""
+    code = main(["study", "precision", str(SCENE), "--integrators", "rk4", "--quick", "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("stationbed: error: --integrators:") and err.count("\n") == 1

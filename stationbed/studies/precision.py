@@ -174,6 +174,10 @@ def precision_study(
     if scene.controller is not None:  # the closed loop's own choices (issue 25): precision_loop.py
         from .precision_loop import loop_precision
 
+        if integrators is not None:
+            raise ValueError(f"--integrators: {scene.name} has a [controller]: its study sweeps RK4 sub-steps per tick "
+                             "and the environment's rate against DOP853 (no integrator to choose)")
+
         return loop_precision(scene, out, duration, formulations=formulations, quick=quick, repeats=repeats,
                               log=log, plt=plt)
     forms = registered_formulations(formulations)
