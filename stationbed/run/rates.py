@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 
 import casadi as ca
+import numpy as np
 
 from .system import environment_split
 
@@ -38,9 +39,10 @@ ENV_CARRY = 5
 
 
 def environment_rate(loop) -> int:
-    """The environment rate this loop runs (ticks per evaluation; 0 = every integrator stage):
-    the scene's ``[simulation] environment_rate`` when the scene has environment torques and the
-    loop runs fused, else 0."""
+    """The environment rate the fused loop runs for ``loop`` (ticks per evaluation; 0 = every
+    integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
+    environment torques, else 0. The per-tick loops evaluate every stage
+    (:func:`rate_summary` reports 0 for them)."""
     n = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
     if n <= 0 or loop.system.sx is None:
         return 0
@@ -52,7 +54,7 @@ def carry_width(rate: int) -> int:
     return ENV_CARRY if rate else 0
 
 
-def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int, i_time: tuple) -> ca.Function:
+def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int, ranges: tuple) -> ca.Function:
     """``fused_chunk(c0, par[, noise]) -> carry`` of ``n`` ticks with the environment held over
     blocks of ``rate`` ticks.
 
@@ -64,10 +66,10 @@ def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int,
     rate, n : int  Ticks per block, ticks per chunk.
     nx, npar_tick : int  State size; size of the chunk's ``par`` = ``(t0, h, n_act, cp, u_ext, p)``.
     nn : int  Sensor draws per tick (0: none).
-    i_time : tuple  Slices of ``par``: ``(cp, u_ext, p)``.
+    ranges : tuple  Slices of ``par``: ``(cp, u_ext, p)``.
     """
     env_B = environment_split(system)["env_B"]
-    s_cp, s_ext, s_p = i_time
+    s_cp, s_ext, s_p = ranges
     nb = math.ceil(n / rate)
     # one tick in the chunk's carry: (i, x, counts); par = (t0, h, n_act, cp, u_ext, p, L_hold)
     i, x_i, cnt = ca.SX.sym("i"), ca.SX.sym("x_i", nx), ca.SX.sym("cnt", 2)
@@ -174,8 +176,6 @@ def torque_rates(t, L, nu=None):
     neighbours too), the penumbra stretches (``0 < nu < 1``) as ``fast`` with their largest
     first difference. Sampling finer than the block length is the caller's part (the
     differences see nothing between samples)."""
-    import numpy as np
-
     t, L = np.asarray(t, float), np.asarray(L, float)
     dt = np.diff(t)
     d1 = np.diff(L, axis=0) / dt[:, None]
