@@ -27,6 +27,7 @@ from .controller import (
 from .fused import fused_ok, run_fused
 from .initial import initial_state, initial_x
 from .laws import build_controller
+from .rates import rate_summary
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
 
@@ -472,6 +473,7 @@ class ControlLoop:
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
+        out.update(rate_summary(self))  # the effect rates run (issue 25)
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())
         except Exception as e:
