@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_core.py
 	$(PY) benchmarks/bench_orbit.py
 	$(PY) benchmarks/bench_control.py
+	$(PY) benchmarks/bench_estimated.py $(if $(SMOKE),--smoke)
 	$(PY) benchmarks/bench_batch.py
 	$(PY) benchmarks/bench_environment.py
 	$(PY) benchmarks/bench_linearize.py

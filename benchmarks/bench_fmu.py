@@ -36,7 +36,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import _smoke  # noqa: E402
 import stationbed  # noqa: E402
 
 #: a 10 Hz law (iss_lvlh_hold's rate), a row every 10 s
@@ -71,9 +73,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=600.0, help="s of simulated time per run (default 600)")
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--smoke", action="store_true", help="a 50 s run, one repeat: check that it runs")
+    _smoke.add_option(ap)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, "a 50 s run, one repeat")
     if args.smoke:
         args.duration, args.repeats = 50.0, 1
     try:
@@ -172,7 +175,7 @@ def _plant(scene):
     from stationbed.run.prepare import prepare
 
     run = prepare(scene)
-    return plant_facts(scene, run.system, run.p, run.x0, scene.controller.period)
+    return plant_facts(scene, run.system, scene.controller.period)
 
 
 if __name__ == "__main__":

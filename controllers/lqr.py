@@ -1,7 +1,8 @@
 """``lqr``: linear-quadratic regulator about an LVLH-fixed attitude, with gravity gradient.
 
-Design (once, in ``reset``): the rigid station of the plant facts (its inertia about O on a
-circular orbit of the plant's mean motion, gravity gradient as the scene says: the simulator's own
+Design (once, in ``reset``): the rigid station of the plant facts, what flight software believes
+(``[knowledge]``, the nominal scene in a Monte Carlo; never the truth flown): its inertia about O on a
+circular orbit of the plant's mean motion, gravity gradient as the knowledge says (the simulator's own
 equations, :func:`stationbed.analysis.design.design_linearization`), linearised about the reference
 frame R fixed in LVLH (which turns at ``(0, -n, 0)``) with state ``x = (θ, δω)``:
 ``θ = 2 vec(q_BR)`` [rad] and ``δω = ω_BN_B - C_BR ω_RN_R`` [rad/s]; input the body control torque

@@ -11,7 +11,8 @@ Model (a copy of the plant's equations, DESIGN §4, for a rigid station):
     δ̇ = u                                    the command, held over each control period
 
 with ``J`` = :attr:`Plant.inertia_O_B`, ``h`` and ``A = ∂h/∂δ`` the cluster's own casadi
-functions (:attr:`Plant.cmg_functions`: the simulation's geometry and parameters) and ``L_gg``
+functions (:attr:`Plant.cmg_functions`: the geometry and parameters flight software believes,
+failed units only as ``[knowledge] failed_units`` lists them) and ``L_gg``
 the gravity-gradient torque when the scene has an orbit with ``gravity_gradient``. Not
 modelled: array motion (the inertia is frozen at t = 0) and the scene's ``[[torque]]``
 disturbances: feedback handles them.

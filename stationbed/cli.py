@@ -71,7 +71,7 @@ def _scene_options(p, formulation: bool = True) -> None:
     p.add_argument("--output-dt", type=float, default=None, help="simulation.output_dt [s]")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="change one scene value, read as TOML (repeatable): --set simulation.rtol=1e-10, "
-                        "--set appendage.stbd_pair.mass=3e3 (an array by name: stbd_pair in scenarios/iss_*.toml), "
+                        "--set appendage.stbd_pair.mass=3e3 (an array by name: stbd_pair in scenarios/iss_lvlh_*.toml), "
                         "--set 'simulation.integrator=\"rk4\"'")
 
 
@@ -300,6 +300,11 @@ def _summary_line(s: dict) -> str:
         parts.append(
             f"gimbal-rate limited {s['rate_limited_ticks']} ticks, momentum saturated {s['momentum_saturated_ticks']} ticks"
         )
+    if "mean_nees" in s:  # sensors and the MEKF (issue 20)
+        parts.append(f"estimation error max {s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
+                     f"inside 3 sigma {100 * s['est_inside_3sigma']:.1f} %, mean NEES {s['mean_nees']:.3g} (6 states)")
+    if "st_dropout_rows" in s:
+        parts.append(f"star-tracker dropout rows {s['st_dropout_rows']}")
     return "; ".join(parts)
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..run.closed_loop import plant_facts
 from ..run.laws import build_controller
-from ..run.initial import initial_state, initial_x
+from ..run.initial import initial_state
 from ..run.system import build_system
 from ..model import Structure
 from ..model.environment import q_ON
@@ -242,7 +242,7 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
     model = system.formulation.model
     p = model.params(scene)
     q0, w0 = initial_state(scene)
-    controller.reset(plant_facts(scene, system, p, initial_x(system, scene, q0, w0, p), controller.period))
+    controller.reset(plant_facts(scene, system, controller.period))  # the law designs on knowledge
     pf = plant_functions(scene, command)
     z_guess = np.zeros(pf["nz"])
     z_guess[6 : 6 + pf["ne"]] = model.initial_extra(scene, q0, p)[0 : pf["ne"]]

@@ -4,6 +4,7 @@ Between the model (below) and the executors in ``run/`` (above). Everything here
 once as casadi expressions; the executors evaluate the same functions (docs/loop.md).
 """
 
+from .flight import Flight, flight_columns
 from .gyro import RateGyro
 from .layout import Layout
 from .mekf import FILTER, Mekf
@@ -13,4 +14,5 @@ from .star_tracker import StarTracker
 from .suite import Suite, SuiteNoise
 
 __all__ = ["Layout", "Sensor", "TRUTH", "noise_rng", "RateGyro", "StarTracker", "SENSORS", "get_sensor",
-           "build_sensors", "Mekf", "FILTER", "Suite", "SuiteNoise"]
+           "build_sensors", "Mekf", "FILTER", "Suite", "SuiteNoise", "Flight",
+           "flight_columns"]

@@ -1,8 +1,8 @@
 """A scene's ``[plan]`` table -> the :class:`~.collocation.Problem` it asks for, and the plan.
 
-The station is the simulator's own: the composite inertia about the mass centre at t = 0 (the
-arrays frozen where they start) and the cluster's limits, as :func:`stationbed.run.closed_loop.plant_facts`
-gives them to every controller; the start is the scene's ``[initial]`` state and ``[cmg] h0_B``.
+The station is flight software's knowledge of it: the composite inertia about the mass centre at
+t = 0 (the arrays frozen where they start), the orbit, disturbances and the cluster's limits of the
+knowledge scene, as :func:`stationbed.run.closed_loop.plant_facts` gives them to every controller; the start is the scene's ``[initial]`` state and ``[cmg] h0_B``.
 """
 
 from __future__ import annotations
@@ -50,7 +50,8 @@ def scene_problem(scene, *, intervals: int | None = None) -> Problem:
             raise PlanError(f"torque[{i}]: kind '{tq.kind}' is not in the plan's model (it plans gravity gradient and "
                             f"kinds {', '.join(PLANNED_TORQUES)}): remove it from the scene to plan")
     prep = prepare(scene)
-    plant = plant_facts(scene, prep.system, prep.p, prep.x0, scene.controller.period if scene.controller else 1.0)
+    plant = plant_facts(scene, prep.system, scene.controller.period if scene.controller else 1.0)
+    scene = plant.scene  # the plan is flight software's: it plans on knowledge ([knowledge]), not the truth
     J = np.asarray(plant.inertia_O_B, float)
     orbit = scene.orbit
     n = orbit.mean_motion if orbit is not None else 0.0

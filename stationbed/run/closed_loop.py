@@ -10,7 +10,12 @@ import numpy as np
 
 from ..core.compile import FastCall
 from ..integrators import IntegrationError
+from ..loop.flight import Flight
+from ..model.moon import moon_position
+from ..model.sun import julian_date
+from ..model import Structure
 from ..model.cmg import cluster_functions
+from ..scene import knowledge_scene
 from .controller import (
     ControllerError,
     Measurement,
@@ -20,27 +25,44 @@ from .controller import (
     one_line,
 )
 from .fused import fused_ok, run_fused
+from .initial import initial_state, initial_x
 from .laws import build_controller
+from .rates import rate_summary
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
 
-__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts"]
+__all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOISE_BLOCK"]
+
+#: sensor noise rows drawn at a time by the per-tick loop (any size gives the same numbers)
+NOISE_BLOCK = 256
 
 
-def plant_facts(scene, system, p, x, period: float) -> Plant:
-    """The :class:`Plant` facts a controller designs with: the scene's inertia about O at t = 0
-    (state ``x``), orbital rate and CMG limits (also used by :mod:`stationbed.analysis`)."""
+def plant_facts(scene, system, period: float) -> Plant:
+    """The :class:`Plant` facts a controller designs with: what flight software believes, never
+    the truth being flown. Built from the *knowledge scene* of ``scene``
+    (:func:`stationbed.scene.knowledge_scene`: the scene with its ``[knowledge]`` substituted,
+    failed CMG units unknown unless listed there): its inertia about O at t = 0 (the compiled
+    ``inertia`` of ``system`` at the knowledge's own state and parameters), orbital rate and CMG
+    limits; ``plant.scene`` is the knowledge scene (also used by :mod:`stationbed.analysis`
+    and :mod:`stationbed.plan`, which design and plan on knowledge too)."""
+    known = knowledge_scene(scene)
+    model = system.formulation.model
+    if Structure.of(known) != model.structure:
+        raise ValueError("[knowledge] changes the model's structure (e.g. a circular orbit believed two-body); "
+                         "it may change values only")
+    p = model.params(known)
+    x = initial_x(system, known, *initial_state(known), p)
     inertia = FastCall.of(system.funcs["inertia"])
     inertia.args[0][0] = 0.0
     inertia.args[1][:] = x
     inertia.args[2][:] = p
     inertia()
-    c = scene.cmg
-    cmg = system.formulation.model.cmg
+    c = known.cmg
+    cmg = model.cmg
     plant = Plant(
-        scene=scene,
+        scene=known,
         inertia_O_B=inertia.res[0].reshape(3, 3).T.copy(),
-        mean_motion=None if scene.orbit is None else scene.orbit.mean_motion,
+        mean_motion=None if known.orbit is None else known.orbit.mean_motion,
         period=period,
     )
     if c is not None:
@@ -91,8 +113,8 @@ class ControlLoop:
             raise ValueError(
                 f"controller '{self.ctrl.name}' commands gimbal rates: the scene needs a gimballed [cmg]"
             )
-        plant = plant_facts(scene, system, p, x, self.period)
-        self.capacity = plant.h_capacity
+        plant = plant_facts(scene, system, self.period)  # knowledge, never the truth flown
+        self.capacity = math.inf if cmg is None else cmg.geometry.capacity(scene.cmg)  # the truth's working units
         try:
             self.ctrl.reset(plant)
         except ValueError:  # the law's own refusal of this plant (e.g. "needs an [orbit]"): bad input
@@ -115,6 +137,9 @@ class ControlLoop:
         else:
             self.M = Measurement(self.meas.res[0], self.layout)
         self.sensor = sensor
+        self.flight = None  # the scene's [[sensor]] and [estimator] (issue 20), flown each tick
+        if scene.sensor:
+            self._init_flight(scene)
         self.act = None
         if cmg is not None:
             name = "actuate_rates" if self.ctrl.command == "gimbal_rates" else "actuate"
@@ -131,6 +156,54 @@ class ControlLoop:
         self.n_rate_limited = 0
         self.n_momentum_saturated = 0
 
+    # -- sensing (issue 20) ---------------------------------------------------------------
+    def _init_flight(self, scene) -> None:
+        """The sensors and estimator: the law sees ``seen`` (the flight tick's ``y_seen``)."""
+        moon = None
+        if scene.sun is not None and scene.sun.epoch is not None:  # held at the epoch, as the Sun
+            u, dist, _, _ = moon_position(julian_date(scene.sun.epoch))
+            moon = u * dist
+        fl = self.flight = Flight(scene, self.period, self.layout, seed=self.sensor.seed, moon_R_N=moon)
+        m = self.meas
+        m.args[0][0] = 0.0
+        m.args[1][:] = self.x
+        m()
+        y0 = m.res[0]
+        (oq, _), (ow, _) = self.layout["q_BN"], self.layout["omega_BN_B"]
+        self.xs = fl.initial(y0[oq : oq + 4], y0[ow : ow + 3])
+        self.ys = np.zeros(fl.suite.OUTPUTS.size)
+        self.th, self.om_prev, self.t_prev = np.zeros(3), np.zeros(3), 0.0
+        self.tick_noise = fl.noise()
+        self._w, self._w_k0 = np.zeros((0, fl.suite.NOISE.size)), 0
+        if not self.noisy:
+            self.seen = np.zeros(self.meas.res[0].size)
+            self.M = Measurement(self.seen, self.layout)
+
+    def _noise_row(self, k: int) -> np.ndarray:
+        """Tick k's sensor draws (drawn :data:`NOISE_BLOCK` ticks at a time, in tick order)."""
+        i = k - self._w_k0
+        if i >= len(self._w):
+            self._w_k0, i = k, 0
+            self._w = self.tick_noise.rows(k, NOISE_BLOCK)
+        return self._w[i]
+
+    def _fly(self, k: int, t: float, y: np.ndarray) -> np.ndarray:
+        """Tick k of the sensing from the true measurement ``y``: returns what the law sees."""
+        fc = self.flight.compiled()
+        a = fc.args
+        a[0][0], a[1][0], a[2][0] = k, t, self.t_prev
+        a[3][:] = y
+        a[4][:] = self.th
+        a[5][:] = self.om_prev
+        a[6][:] = self.xs
+        a[7][:] = self._noise_row(k)
+        fc()
+        self.th[:], self.xs[:], self.ys[:] = fc.res[0], fc.res[1], fc.res[3]
+        o, _ = self.layout["omega_BN_B"]
+        self.om_prev[:] = y[o : o + 3]
+        self.t_prev = t
+        return fc.res[2]
+
     # -- one tick ------------------------------------------------------------------------
     def _sense(self, k: int, t: float) -> None:
         m = self.meas
@@ -141,11 +214,20 @@ class ControlLoop:
         if self.meas_out is not None:
             self.meas_out[:] = m.res[0]
         self.M.t = t
-        if self.noisy:
-            self._corrupt(k)
+        self._after_sense(k, t, m.res[0])
 
-    def _corrupt(self, k: int) -> None:
-        y = self.meas.res[0]
+    def _after_sense(self, k: int, t: float, y: np.ndarray) -> None:
+        """The sensing, then the ideal path's noise and delay, on the true measurement ``y``."""
+        if self.flight is not None:
+            y = self._fly(k, t, y)
+            if not self.noisy:
+                self.seen[:] = y
+                return
+        if self.noisy:
+            self._corrupt(k, y)
+
+    def _corrupt(self, k: int, y=None) -> None:
+        y = self.meas.res[0] if y is None else y
         slot = k % (self.delay + 1)
         if k == 0:
             self.history[:] = y
@@ -207,6 +289,9 @@ class ControlLoop:
                 q_ref = self._check_q_ref(q_ref)
         tau = self.last_cmd if self.ctrl.command == "torque" else (math.nan,) * 3
         vals += list(tau) + [math.nan] * 4  # att_err_deg and its axes: from q_ref, by the rows a batch at a time
+        if self.flight is not None:
+            q = np.asarray(self.x[:4], dtype=float)
+            vals += self.flight.row(self.xs, self.ys, q / np.linalg.norm(q))
         return vals, q_ref
 
     def run(self) -> None:
@@ -234,7 +319,7 @@ class ControlLoop:
         i_lim, i_sat = nu + 1, nu + 2
         has_act = self.act is not None
         ncmd = self.n_cmd
-        noisy = self.noisy
+        noisy = self.noisy or self.flight is not None
         M = self.M
         ticks = 0
         h_set = -1.0
@@ -305,7 +390,7 @@ class ControlLoop:
                     xin[:] = res_x
                     if noisy:
                         self.meas.res[0][:] = res_y
-                        self._corrupt(k + 1)
+                        self._after_sense(k + 1, t_next, res_y)
                 else:
                     self.ticks = ticks
                     while ib < len(bps) and bps[ib] <= t_next:
@@ -351,7 +436,7 @@ class ControlLoop:
         fc.args[2][:] = self.x
         self.x = fc.args[2]  # the loop's state lives in the tick's input buffer
         self.u_ext = fc.args[4]
-        if not self.noisy:  # the controller reads the tick's output directly (no copy)
+        if not self.noisy and self.flight is None:  # the controller reads the tick's output directly (no copy)
             self.meas_out = fc.res[1]
             self.M = Measurement(self.meas_out, self.layout)
         return fc, fc.args[2], fc.res[0], fc.res[1], fc.res[2]
@@ -388,6 +473,7 @@ class ControlLoop:
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
+        out.update(rate_summary(self))  # the effect rates run (issue 25)
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())
         except Exception as e:

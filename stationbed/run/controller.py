@@ -183,7 +183,9 @@ _PER_MEMBER = frozenset({"period", "params", "params_batch", "q_ref_BN", "n_upda
 
 @dataclass
 class Plant:
-    """Facts about the plant a controller may design with (from the scene, at t = 0).
+    """Facts about the plant a controller may design with, at t = 0: what flight software
+    believes (the scene's knowledge, :func:`stationbed.scene.knowledge_scene`), never the truth
+    being flown; ``scene`` is that knowledge scene.
 
     inertia_O_B : (3, 3)  Total inertia about the composite mass centre, B axes [kg m²].
     mean_motion : float or None  Orbital rate n [rad/s]; None in deep space.
@@ -482,8 +484,17 @@ def command_values(value, n: int, kind: str = "torque", finite: bool = True) -> 
 ENTRY_POINT_GROUP = "stationbed.controllers"
 
 
+_ENTRY_POINTS: dict = {}
+
+
 def _entry_points():
-    return {ep.name: ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
+    """The group's entry points, scanned once per ``sys.path`` (the scan reads every installed
+    distribution's metadata: ~5 ms, once per Monte Carlo sample before; issue 25)."""
+    key = tuple(sys.path)
+    if key not in _ENTRY_POINTS:
+        _ENTRY_POINTS.clear()
+        _ENTRY_POINTS[key] = {ep.name: ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
+    return _ENTRY_POINTS[key]
 
 
 def _load(ep) -> type[Controller]:

@@ -30,7 +30,9 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
+from .rates import carry_width, environment_rate, held_chunk
 from .segments import held_torque_from
+from .system import environment_split as rates_split
 
 __all__ = ["fused_ok", "run_fused"]
 
@@ -64,6 +66,7 @@ def fused_ok(loop) -> bool:
         and _edge_ticks(loop) is not None
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
+        and not (getattr(loop, "flight", None) is not None and loop.noisy)
     )
 
 
@@ -104,7 +107,7 @@ def _corrupt_sx(y, nz, flags, layout):
     return ca.vertcat(*parts)
 
 
-def _build(loop, n: int, flags=(False, False)) -> dict:
+def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
     """Compiled ``info`` (one tick's command, actuation, reference) and ``chunk`` (n ticks);
     with sensor noise (``flags``), both take each tick's draws as an extra input."""
     system, ctrl = loop.system, loop.ctrl
@@ -176,7 +179,16 @@ def _build(loop, n: int, flags=(False, False)) -> dict:
     noise = [ca.MX.sym("noise", nn, n)] if nn else []  # column i: tick i's draws
     traj = acc(c0, ca.repmat(par, 1, n), *noise)
     chunk = ca.Function("fused_chunk", [c0, par] + noise, [traj[:, -1]])
+    if rate:  # the environment at its own rate (rates.py): same tick, environment held per block
+        L_env = ca.SX.sym("L_env", 3)
+        u_held = ca.substitute(u, u_ext, u_ext + L_env)
+        x1h = system.integrator_cls.explicit_step(rates_split(system)["rhs_fast"], t, x, h, u_held, p)
+        one_h = sx_function("one", [t, x, cp, u_ext, p, h, L_env] + ([nz] if nn else []), [x1h, sat])
+        ranges = (slice(3, 3 + ncp), slice(3 + ncp, 6 + ncp), slice(6 + ncp, 6 + ncp + npar))
+        chunk = held_chunk(system, one_h, rate, n, nx, 6 + ncp + npar, nn, ranges)
     tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{loop.system.formulation.model.structure.key}"
+    if rate:
+        tag += f"_env{rate}"
     if nn:
         tag += f"_noise{int(flags[0])}{int(flags[1])}"
     funcs = compile_functions([info, chunk], tag)
@@ -186,13 +198,20 @@ def _build(loop, n: int, flags=(False, False)) -> dict:
 def run_fused(loop, K: int) -> None:
     """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
     ctrl = loop.ctrl
+    if getattr(loop, "flight", None) is not None:  # sensors and estimator (issue 20)
+        from .fused_flight import run_fused_flight
+
+        return run_fused_flight(loop, K, _symbolic_params(ctrl), _edge_ticks(loop))
     n = loop.n_per_out
     flags = _noise_flags(loop)
     nn = _noise_width(flags)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flags)
+    rate = environment_rate(loop)
+    ne = carry_width(rate)  # the held environment's carry (rates.py), passed from chunk to chunk
+    env_c = np.zeros(ne)
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flags, rate)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n, flags)
+        _CHUNKS[key] = _build(loop, n, flags, rate)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
@@ -265,7 +284,8 @@ def run_fused(loop, K: int) -> None:
             for a, b, h in pieces:
                 c0[0] = 0.0
                 c0[1 : 1 + nx] = x
-                c0[1 + nx :] = 0.0
+                c0[1 + nx : 3 + nx] = 0.0
+                c0[3 + nx :] = env_c
                 par[0] = a * period
                 par[1] = h
                 par[2] = b - a
@@ -275,7 +295,8 @@ def run_fused(loop, K: int) -> None:
                 chunk()
                 res = chunk.res[0]
                 x = res[1 : 1 + nx].copy()
-                counts += res[1 + nx :]
+                counts += res[1 + nx : 3 + nx]
+                env_c = res[3 + nx :].copy()
             par[1] = period
             ticks += n_act
             loop.n_rate_limited += int(counts[0])

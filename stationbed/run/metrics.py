@@ -62,6 +62,12 @@ METRICS: dict[str, Metric] = {
     "rate_limited_ticks": Metric("ticks", "controller ticks whose gimbal-rate command was limited"),
     "momentum_saturated_ticks": Metric("ticks", "controller ticks at which the cluster was saturated"),
     "max_torque_cmd_Nm": Metric("N m", "largest commanded torque |tau_cmd| over the output rows"),
+    # sensors and estimator (issue 20): the columns of stationbed.loop.flight.flight_columns
+    "max_est_err_deg": Metric("deg", "largest attitude estimation error |est_err| (truth vs MEKF) over the output rows"),
+    "rms_est_err_deg": Metric("deg", "RMS attitude estimation error |est_err| over the output rows"),
+    "mean_nees": Metric("1", "mean of the MEKF's NEES (6 states; consistent: 6) over the output rows"),
+    "est_inside_3sigma": Metric("1", "fraction of the output rows and axes with |est_err| <= its 3 sigma", "low"),
+    "st_dropout_rows": Metric("rows", "output rows at which a star-tracker head's held sample is invalid, summed over heads"),
 }
 
 
@@ -104,6 +110,11 @@ class RunMetrics:
         self._sing = col.get("cmg_singularity")
         self._err = col.get("att_err_deg")
         self._tau = [col[c] for c in ("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")] if "tau_cmd_x" in col else None
+        self._est = [col[f"est_err_{a}_deg"] for a in "xyz"] if "est_err_x_deg" in col else None
+        self._s3 = [col[f"est_3sigma_{a}_deg"] for a in "xyz"] if self._est else None
+        self._nees = col.get("nees")
+        self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
+        self._est_red = [0.0, 0.0, 0, 0.0, 0, 0]  # max, sum err², rows, sum nees, inside, dropouts
         self.n_rows = 0
         self.last = None
         self.rate_limited_ticks = self.momentum_saturated_ticks = None
@@ -111,7 +122,9 @@ class RunMetrics:
         self._min_sing = None
         self._err_max = math.nan  # NaN-ignoring running max (np.fmax)
         self._err_finite = False  # a value that is not NaN was seen
-        self._sq_sum = 0.0  # sum of err**2 over the settled, non-NaN rows
+        # sum of err**2 over the settled, non-NaN rows, kept exactly (Shewchuk's partials, as
+        # math.fsum): the value cannot depend on how the rows were batched (timed flushes)
+        self._sq_partials: list[float] = []
         self._sq_n = 0
         self._tau_max = math.nan
 
@@ -135,8 +148,20 @@ class RunMetrics:
                 use &= rows[:, self._t] >= self.settle_s
             if use.any():
                 e = err[use]
-                self._sq_sum += float(np.dot(e, e))
+                for x in (e * e).tolist():
+                    _exact_add(self._sq_partials, x)
                 self._sq_n += int(use.sum())
+        if self._est is not None:
+            r = self._est_red
+            e = rows[:, self._est]
+            n2 = np.einsum("ij,ij->i", e, e)
+            r[0] = max(r[0], float(np.sqrt(n2.max())))
+            r[1] += float(n2.sum())
+            r[2] += len(rows)
+            r[3] += float(rows[:, self._nees].sum())
+            r[4] += int((np.abs(e) <= rows[:, self._s3]).sum())
+        if self._st:
+            self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
         if self._tau is not None:
             tau = np.linalg.norm(rows[:, self._tau], axis=1)
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
@@ -176,10 +201,33 @@ class RunMetrics:
             out["final_att_err_deg"] = float(self.last[self._err])
             out["max_att_err_deg"] = self._err_max
             if self._sq_n:
-                out["rms_att_err_deg"] = math.sqrt(self._sq_sum / self._sq_n)
+                out["rms_att_err_deg"] = math.sqrt(math.fsum(self._sq_partials) / self._sq_n)
         if self._tau is not None and not math.isnan(self._tau_max):
             out["max_torque_cmd_Nm"] = self._tau_max
+        r = self._est_red
+        if self._est is not None and r[2]:
+            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(r[1] / r[2]), mean_nees=r[3] / r[2],
+                       est_inside_3sigma=r[4] / (3 * r[2]))
+        if self._st and self.n_rows:
+            out["st_dropout_rows"] = r[5]
         return out
+
+
+def _exact_add(partials: list[float], x: float) -> None:
+    """Add ``x`` to the non-overlapping partials whose exact sum is the running total
+    (Shewchuk 1997; the recipe behind ``math.fsum``): ``math.fsum(partials)`` is then the
+    correctly rounded sum whatever the order and grouping of the additions."""
+    i = 0
+    for y in partials:
+        if abs(x) < abs(y):
+            x, y = y, x
+        hi = x + y
+        lo = y - (hi - x)
+        if lo:
+            partials[i] = lo
+            i += 1
+        x = hi
+    partials[i:] = [x]
 
 
 def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None = None) -> dict[str, float]:

@@ -15,6 +15,7 @@ import numpy as np
 from ..core.compile import FastCall
 from ..core.rotation import rotation_angle, rotation_vector
 from ..integrators import IntegrationError
+from ..loop.flight import flight_columns
 from ..model.cmg import CmgModel
 from ..model.torques import TORQUES
 from ..scene import Scene
@@ -85,6 +86,7 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols.append("cmg_saturated")
     if scene.controller is not None:
         cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
+        cols += flight_columns(scene)  # sensors and estimator (issue 20)
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
     for t in scene.torque:  # environment torques (issue 14), B components [N m]
@@ -168,6 +170,7 @@ class Rows:
             self.held_columns += [f"{g}_rate" for g in gimbals] + ["cmg_saturated"]
         if scene.controller is not None:
             self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
+            self.held_columns += flight_columns(scene)
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
         self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []

@@ -16,7 +16,7 @@ from ..model import StationModel, Structure
 from ..model.environment import orbit_position_N, q_ON
 from .controller import measurement_layout
 
-__all__ = ["System", "build_system", "OUT_CHUNK"]
+__all__ = ["System", "build_system", "environment_split", "OUT_CHUNK"]
 
 OUT_CHUNK = 64  # output rows evaluated per compiled call
 
@@ -37,6 +37,8 @@ class System:
     #: what runs the equations: ``compile.EVALUATOR_C`` (generated C) or ``EVALUATOR_VM``
     #: (casadi's virtual machine: no compiler, or no usable cache; same numbers, slower)
     evaluator: str = EVALUATOR_C
+    #: :func:`environment_split`'s SX functions, built on first use
+    split: dict = None
 
 
 _SYSTEMS: dict[tuple, System] = {}
@@ -172,3 +174,42 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     )
     _SYSTEMS[key] = system
     return system
+
+
+def environment_split(system: System) -> dict | None:
+    """The right-hand side without the environment torques, and those torques on their own, for
+    a loop that evaluates them at their own rate (``[simulation] environment_rate``,
+    docs/design.md "Effects at their own rate"); None when the scene has none.
+
+    Returns ``{"rhs_fast": f(t, x, u, p) -> ẋ, "env_B": g(t, x, p) -> L_env_B}`` (SX Functions,
+    not compiled: the fused loop composes them). The environment torques are the kinds with
+    ``needs_env`` (aero and SRP on the scene's surfaces, with the shadow fraction inside SRP);
+    ``rhs_fast(t, x, u + [L_env_B; 0], p)`` is ``rhs(t, x, u, p)`` up to the order of the sum
+    (round-off) when ``L_env_B = env_B(t, x, p)``.
+    """
+    if system.split is not None:
+        return system.split or None
+    form = system.formulation
+    model = form.model
+    env_kinds = [k for k in model.torques if k.needs_env]
+    if not env_kinds or system.sx is None:
+        system.split = {}
+        return None
+    fast_model = StationModel(model.structure)
+    fast_model.torques = tuple(k for k in fast_model.torques if not k.needs_env)
+    fast_model.needs_arrays = False
+    fast = type(form)(fast_model)
+    nx, nu, npar = form.nx, model.nu, model.layout.size
+    t = ca.SX.sym("t")
+    x, u, p = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("p", npar)
+    rhs_fast = sx_function("rhs_fast", [t, x, u, p], [fast.rhs(t, x, u, p)])
+    if system.sx["rhs"].n_instructions() > system.integrator_cls.RHS_INLINE_MAX_OPS:
+        rhs_fast = sx_function("rhs_fast", [t, x, u, p], [fast.rhs(t, x, u, p)], called=True)
+    orbit = model.orbit_at(t, p) if model.structure.orbit else None
+    env = model.environment(x[0:4], orbit, p, form.arrays(t, x, p))
+    L_B = ca.SX.zeros(3)
+    for kind in env_kinds:
+        p_k = p[model.layout[kind.kind]] if kind.n_par else None
+        L_B = L_B + kind.torque_B(t, x[0:4], None, p_k, orbit, env)
+    system.split = {"rhs_fast": rhs_fast, "env_B": sx_function("env_B", [t, x, p], [L_B])}
+    return system.split

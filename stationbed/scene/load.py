@@ -14,10 +14,12 @@ from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
+from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
-__all__ = ["Scene", "load_scene", "scene_from_dict"]
+__all__ = ["Scene", "load_scene", "scene_from_dict", "sensing_from_dict"]
 
 
 class Scene(Strict):
@@ -39,6 +41,9 @@ class Scene(Strict):
     atmosphere: Atmosphere | None = None
     montecarlo: MonteCarlo | None = None
     plan: PlanSpec | None = None
+    sensor: list[SensorEntry] = []  # issue 20: flown by the closed loop (stationbed/loop/)
+    estimator: MekfEstimator | None = None
+    knowledge: Knowledge | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -73,6 +78,8 @@ class Scene(Strict):
                 raise FieldError("controller.sensor.delay", f"{c.sensor.delay:g} s is not a whole number of "
                                                             f"controller periods ({c.period:g} s)")
         _check_plan(self)
+        _check_sensors(self)
+        _check_knowledge(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -122,6 +129,37 @@ class Scene(Strict):
         new = scene_from_dict(data, source=source)
         new._folder = self._folder
         return new
+
+
+def _check_sensors(scene) -> None:
+    """``[[sensor]]`` and ``[estimator]`` agree with each other and with the controller (issue 20)."""
+    if not scene.sensor and scene.estimator is None:
+        return
+    if scene.controller is None:
+        raise FieldError("sensor", "sensors are flown by the closed loop: add a [controller] table")
+    c = scene.controller
+    check_sensing(scene.sensor, scene.estimator, c.period)
+    for i, s in enumerate(scene.sensor):
+        if getattr(s, "moon_exclusion", None) is not None and (scene.sun is None or scene.sun.epoch is None):
+            raise FieldError(f"sensor[{i}].moon_exclusion", "needs [sun] epoch (the Moon's place is computed for a "
+                                                            "date: stationbed/model/moon.py)")
+    if scene.estimator is not None and (c.sensor.attitude_noise > 0 or c.sensor.rate_noise > 0 or c.sensor.delay > 0):
+        raise FieldError("controller.sensor", "with an [estimator] the law flies on the estimate: the ideal "
+                                              "measurement's noise and delay must be 0")
+
+
+def _check_knowledge(scene) -> None:
+    """``[knowledge]`` describes a plant the scene accepts (one-line FieldError naming it)."""
+    k = scene.knowledge
+    if k is None:
+        return
+    for name in ("failed_units", "cmg"):
+        if getattr(k, name) is not None and scene.cmg is None:
+            raise FieldError(f"knowledge.{name}", "needs a [cmg] table")
+    try:
+        knowledge_scene(scene)
+    except SceneError as e:
+        raise FieldError("knowledge", f"the plant it believes is refused: {str(e).removeprefix('[knowledge]: ')}") from None
 
 
 def _check_plan(scene) -> None:
@@ -417,3 +455,12 @@ def load_scene(path: str | Path) -> Scene:
     scene = scene_from_dict(data, source=str(path))
     scene._folder = path.resolve().parent
     return scene
+
+
+def sensing_from_dict(data: dict, source: str = "scene") -> Sensing:
+    """Validate ``{"sensor": [...], "estimator": {...}}`` (the parsed TOML); raises
+    :class:`SceneError` with a one-line reason starting with ``source``."""
+    try:
+        return Sensing.model_validate(_plain(data))
+    except ValidationError as err:
+        raise SceneError(f"{source}: {_one_line(err, root=Sensing)}") from None

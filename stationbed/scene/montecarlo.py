@@ -37,6 +37,7 @@ class Dispersion(Strict):
     sigma_products: float = Field(default=0.0, ge=0.0)
     choices: list[Any] | None = None
     weights: list[float] | None = None
+    known: bool = False  # flight software is told the drawn value (a calibrated parameter); else it believes the nominal
 
     @model_validator(mode="after")
     def _consistent(self):

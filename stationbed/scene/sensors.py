@@ -21,8 +21,9 @@ sun_exclusion = 0.524      # rad
 kind = "mekf"
 ```
 
-These tables are validated on their own (:func:`sensing_from_dict`); they are **not yet part of
-:class:`~stationbed.scene.Scene`** and no executor flies them (docs/loop.md, "What remains").
+The scene holds them as ``Scene.sensor`` and ``Scene.estimator`` (checked against the controller
+period there); the closed-loop executors fly them (docs/loop.md). :func:`sensing_from_dict`
+validates the tables on their own.
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ from ..core.rotation import quat_from_dcm
 from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Vec3
 from .tables import TAGS
 
-__all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing", "sensing_from_dict",
-           "WHOLE_PERIODS_TOL", "SensorName"]
+__all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing",
+           "WHOLE_PERIODS_TOL", "SensorName", "check_sensing"]  # sensing_from_dict: in load.py
 
 #: a latency or period that is a whole number of periods to this relative tolerance is taken as
 #: one (the numbers are typed with a few digits; 1e-9 is far below any typing error)
@@ -181,38 +182,37 @@ class Sensing(Strict):
 
     @model_validator(mode="after")
     def _consistent(self):
-        names = [s.name for s in self.sensor]
-        dup = sorted({n for n in names if names.count(n) > 1})
-        if dup:
-            raise FieldError("sensor", f"names must be unique, repeated: {dup}")
-        est = self.estimator
-        if est is None:
-            return self
-        gyros = [s.name for s in self.sensor if s.kind == "gyro"]
-        heads = [s.name for s in self.sensor if s.kind == "star_tracker"]
-        if est.gyro is None and len(gyros) != 1:
-            raise FieldError("estimator.gyro", f"name the gyro to propagate with (the scene has {len(gyros)}: {gyros})")
-        if est.gyro is not None and est.gyro not in gyros:
-            raise FieldError("estimator.gyro", f"'{est.gyro}' is not a gyro of [[sensor]] (gyros: {gyros})")
-        used = heads if est.star_trackers is None else est.star_trackers
-        bad = [h for h in used if h not in heads]
-        if bad or not used:
-            raise FieldError("estimator.star_trackers", f"must name one or more star trackers of [[sensor]] "
-                                                        f"(heads: {heads}), got {bad or used}")
-        gyro = next(s for s in self.sensor if s.name == (est.gyro or gyros[0]))
-        for s in self.sensor:
-            if s.name in used and not _whole(s.period / gyro.period):
-                raise FieldError("estimator.star_trackers", f"head '{s.name}': period {s.period:g} s is not a whole "
-                                                            f"number of the gyro's ({gyro.period:g} s)")
+        check_sensing(self.sensor, self.estimator)
         return self
 
 
-def sensing_from_dict(data: dict, source: str = "scene") -> Sensing:
-    """Validate ``{"sensor": [...], "estimator": {...}}`` (the parsed TOML); raises
-    :class:`SceneError` with a one-line reason starting with ``source``."""
-    from .load import _one_line, _plain
-
-    try:
-        return Sensing.model_validate(_plain(data))
-    except ValidationError as err:
-        raise SceneError(f"{source}: {_one_line(err, root=Sensing)}") from None
+def check_sensing(sensor: list, estimator, period: float | None = None) -> None:
+    """The ``[[sensor]]`` tables and ``[estimator]`` agree with each other (and, given the
+    controller ``period`` [s], each sensor's period is a whole number of it); FieldError."""
+    names = [s.name for s in sensor]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise FieldError("sensor", f"names must be unique, repeated: {dup}")
+    for i, s in enumerate(sensor):
+        if period is not None and not (round(s.period / period) >= 1 and _whole(s.period / period)):
+            raise FieldError(f"sensor[{i}].period", f"{s.period:g} s is not a whole number of controller "
+                                                    f"periods ({period:g} s)")
+    est = estimator
+    if est is None:
+        return
+    gyros = [s.name for s in sensor if s.kind == "gyro"]
+    heads = [s.name for s in sensor if s.kind == "star_tracker"]
+    if est.gyro is None and len(gyros) != 1:
+        raise FieldError("estimator.gyro", f"name the gyro to propagate with (the scene has {len(gyros)}: {gyros})")
+    if est.gyro is not None and est.gyro not in gyros:
+        raise FieldError("estimator.gyro", f"'{est.gyro}' is not a gyro of [[sensor]] (gyros: {gyros})")
+    used = heads if est.star_trackers is None else est.star_trackers
+    bad = [h for h in used if h not in heads]
+    if bad or not used:
+        raise FieldError("estimator.star_trackers", f"must name one or more star trackers of [[sensor]] "
+                                                    f"(heads: {heads}), got {bad or used}")
+    gyro = next(s for s in sensor if s.name == (est.gyro or gyros[0]))
+    for s in sensor:
+        if s.name in used and not _whole(s.period / gyro.period):
+            raise FieldError("estimator.star_trackers", f"head '{s.name}': period {s.period:g} s is not a whole "
+                                                        f"number of the gyro's ({gyro.period:g} s)")

@@ -105,6 +105,10 @@ class Simulation(Strict):
     # at an array-rate step (impulse), re-initialise omega-state formulations so that H is
     # continuous (omega jumps); false integrates through it (the stability study's failure case)
     impulse_jump: bool = True
+    # the environment torques (aero, SRP; kinds with needs_env) evaluated once every this many
+    # control ticks in the fused loop, held at their extrapolated mid-block value; 0 = at every
+    # integrator stage (docs/design.md "Effects at their own rate")
+    environment_rate: Annotated[int, Field(ge=0)] = 0
 
     @model_validator(mode="after")
     def _resolved(self):

@@ -128,7 +128,8 @@ def precision_study(
     repeats: int | None = None,
     log=progress.echo,
 ) -> PrecisionResult:
-    """Work-precision diagram of one scene.
+    """Work-precision diagram of one scene (of the closed loop's own choices when the scene has a
+    ``[controller]``: :func:`~.precision_loop.loop_precision`, a ``LoopPrecisionResult``).
 
     For each formulation x integrator x setting: the largest attitude error [rad] and rate error
     [rad/s] against the reference over ``N_OUTPUT`` rows, the median wall time [s] of ``repeats``
@@ -170,6 +171,15 @@ def precision_study(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     duration = float(duration or scene.simulation.duration)
+    if scene.controller is not None:  # the closed loop's own choices (issue 25): precision_loop.py
+        from .precision_loop import loop_precision
+
+        if integrators is not None:
+            raise ValueError(f"--integrators: {scene.name} has a [controller]: its study sweeps RK4 sub-steps per tick "
+                             "and the environment's rate against DOP853 (no integrator to choose)")
+
+        return loop_precision(scene, out, duration, formulations=formulations, quick=quick, repeats=repeats,
+                              log=log, plt=plt)
     forms = registered_formulations(formulations)
     integs = registered_integrators(integrators)
     with progress.task("study precision", total=len(integs) * len(forms), unit="methods") as bar:

@@ -126,6 +126,14 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
     for kind in ("aero", "srp"):  # environment torques (issue 14), B components [N m]
         take(f"telemetry/environment/tau_{kind}_B", [f"tau_{kind}_{c}" for c in "xyz"], ["x", "y", "z"])
     take("telemetry/environment/eclipse", ["eclipse"], ["lit fraction"])
+    # sensors and estimator (issue 20): error and its 3 sigma side by side per axis, bias, NEES, heads
+    for a in "xyz":
+        take(f"telemetry/estimation/err_{a}_deg", [f"est_err_{a}_deg", f"est_3sigma_{a}_deg"],
+             [f"{a} error", f"{a} 3 sigma"])
+    take("telemetry/estimation/bias_B", ["est_bias_x", "est_bias_y", "est_bias_z"], ["x", "y", "z"])
+    take("telemetry/estimation/nees", ["nees"])
+    heads = [c for c in columns if c.startswith("st_valid_")]
+    take("telemetry/estimation/st_valid", heads, [c.removeprefix("st_valid_") for c in heads])
     extra = [c for c in columns if c not in used]
     for c in extra:
         out.append(Series(f"telemetry/extra/{c}", (c,), (c,)))

@@ -17,11 +17,22 @@ or by name), ``controller.params.bandwidth``, ``cmg.failed``.
 A scale kind may list ``also = [key, ...]``: those values are multiplied by the same factor
 (e.g. every coefficient of a disturbance torque by one amplitude factor).
 
+Knowledge (docs/design.md "Knowledge is not truth"): the drawn values are the *truth* flown;
+flight software keeps believing the nominal value of every dispersed key path (written to the
+sample's ``[knowledge.values]``, so ``plant.scene`` and the law's design see the nominal) unless
+the dispersion says ``known = true`` (a calibrated parameter: the law is told the drawn value).
+Keys under ``controller.`` other than ``controller.sensor.`` are the law's own settings (its
+gains): the law is built with the drawn value, so they are always known. A key path the scene's
+``[knowledge.values]`` already gives keeps that belief.
+
 Recorded columns (one per drawn number): a scalar key gives the column ``<key>``; an array
 ``<key>[i]`` (a matrix ``<key>[i][j]``, the upper triangle for ``inertia``); ``attitude_normal``
 records the rotation vector of the draw, ``<key>.rotvec[i]`` [rad], and its angle
 ``<key>.angle`` [rad]; ``choice`` records the
-chosen value when every choice is a number, else its index ``<key>.choice``.
+chosen value when every choice is a number, else its index ``<key>.choice``. Each column ``C``
+has its twin ``told.C``: the same quantity in what the law was told (the sample's knowledge
+scene): the nominal value (scale 1, rotation 0, the nominal choice's index, NaN when the nominal
+is not among the choices) unless the dispersion is known.
 """
 
 from __future__ import annotations
@@ -31,10 +42,14 @@ import math
 
 import numpy as np
 
-from ...scene import Scene, SceneError
+from ...scene import Scene, SceneError, knowledge_scene
 from ...scene.assign import split_path
+from ...scene.knowledge import NAMED_PATHS
 
-__all__ = ["sample_seed", "draw", "Draw", "value_at", "check_keys", "drawn_columns"]
+__all__ = ["sample_seed", "draw", "Draw", "value_at", "check_keys", "drawn_columns", "TOLD", "law_setting"]
+
+#: prefix of the columns of what the law was told (``told.<column>``)
+TOLD = "told."
 
 
 def sample_seed(seed: int, k: int) -> int:
@@ -185,6 +200,71 @@ def _draw_one(d, data: dict, rng: np.random.Generator, draw: Draw) -> None:
         raise ValueError(f"unknown dispersion kind {kind!r}")
 
 
+def law_setting(key: str) -> bool:
+    """Whether a key path is the law's own setting (``controller.params...``, its name, period):
+    the law is built with the drawn value, so flight software knows it."""
+    return key.startswith("controller.") and not key.startswith("controller.sensor")
+
+
+def _pins(scene: Scene, data: dict, dr: Draw) -> dict:
+    """``[knowledge.values]`` of a sample: the file's own, then per dispersed key path the nominal
+    value (or, ``known``, the drawn one), except the law's settings and paths the file gives."""
+    own = dict(scene.knowledge.values) if scene.knowledge is not None else {}
+    pins = dict(own)
+    for d in scene.montecarlo.disperse:
+        for key in [d.key, *d.also]:
+            if law_setting(key) or key in own:
+                continue
+            pins[key] = dr.changes[key] if d.known else value_at(data, key)
+    return pins
+
+
+def _rotvec(q_from, q_to) -> np.ndarray:
+    """The rotation vector [rad] of ``q_from⁻¹ ⊗ q_to`` (shortest way)."""
+    q0 = np.asarray(q_from, float)
+    dq = _quat_mul(np.array([q0[0], -q0[1], -q0[2], -q0[3]]), np.asarray(q_to, float))
+    dq = dq / np.linalg.norm(dq) * (1.0 if dq[0] >= 0 else -1.0)
+    s = float(np.linalg.norm(dq[1:]))
+    return np.zeros(3) if s == 0.0 else dq[1:] / s * 2.0 * math.atan2(s, dq[0])
+
+
+def _told_one(d, known: dict, nominal: dict, values: dict) -> None:
+    """The ``told.`` columns of dispersion ``d`` from the knowledge scene's data ``known``
+    (``nominal``: the study's scene), named as :func:`_draw_one` names the truth's."""
+    key, kind, t = d.key, d.kind, TOLD
+    v = value_at(known, key)
+    if kind in ("normal", "uniform"):
+        _record_array(values, t + key, v)
+    elif kind in ("scale_normal", "scale_uniform"):
+        b, a = np.asarray(value_at(nominal, key), float).ravel(), np.asarray(v, float).ravel()
+        i = int(np.argmax(np.abs(b))) if b.size else 0
+        values[f"{t}{key}.scale"] = float(a[i] / b[i]) if b.size and b[i] != 0.0 else math.nan
+    elif kind == "inertia":
+        J = np.asarray(v, float)
+        for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+            values[f"{t}{key}[{i}][{j}]"] = float(J[i, j])
+    elif kind == "attitude_normal":
+        r = _rotvec(value_at(nominal, key), v)
+        _record_array(values, f"{t}{key}.rotvec", r)
+        values[f"{t}{key}.angle"] = float(np.linalg.norm(r))
+    elif kind == "choice":
+        numeric = all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in d.choices)
+        if numeric:
+            values[t + key] = float(v)
+        else:
+            values[f"{t}{key}.choice"] = float(d.choices.index(v)) if v in d.choices else math.nan
+    elif kind == "seed":
+        values[t + key] = float(v)
+
+
+def told(scene: Scene, sample: Scene) -> dict[str, float]:
+    """The ``told.`` columns of a drawn ``sample`` of ``scene``: what its law was told."""
+    known, nominal, values = knowledge_scene(sample).model_dump(), scene.model_dump(), {}
+    for d in scene.montecarlo.disperse:
+        _told_one(d, known, nominal, values)
+    return values
+
+
 def check_keys(scene: Scene) -> None:
     """Every ``[[montecarlo.disperse]] key`` names a value of the scene that its kind can draw
     (numbers for the numeric kinds), else SceneError naming the entry (checked before any
@@ -208,6 +288,20 @@ def check_keys(scene: Scene) -> None:
                 wants = "a number or an array of numbers" if need == "number" else f"an array of shape {need}"
                 raise SceneError(f"{where}: '{key}' {what}; kind '{d.kind}' needs {wants}"
                                  + ("; 'choice' draws among listed values of any type" if shape is None else ""))
+        _check_known(scene, d, f"montecarlo.disperse[{i}].known")
+
+
+def _check_known(scene: Scene, d, where: str) -> None:
+    """A ``known`` dispersion must not contradict a belief the scene's ``[knowledge]`` states."""
+    k = scene.knowledge
+    if not d.known or k is None:
+        return
+    for key in [d.key, *d.also]:
+        if key in k.values:
+            raise SceneError(f"{where}: '{key}' is given by [knowledge.values]: the scene would state two beliefs")
+        for name, path in NAMED_PATHS.items():
+            if getattr(k, name) is not None and (key == path or key.startswith(path + ".")):
+                raise SceneError(f"{where}: '{key}' is given by [knowledge] {name}: the scene would state two beliefs")
 
 
 def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
@@ -218,7 +312,8 @@ def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
     scene : Scene or None
         The drawn scene (None: refused).
     draw : Draw
-        The accepted (or last refused) draw's changes and recorded values.
+        The accepted (or last refused) draw's changes and recorded values (the truth drawn and,
+        ``told.``, what the law was told; NaN when refused).
     redraws : int
         Draws the scene refused before this one.
     reason : str or None
@@ -232,10 +327,15 @@ def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
         dr = Draw()
         for d in mc.disperse:
             _draw_one(d, data, rng, dr)
+        pins = _pins(scene, data, dr)
         try:
-            return scene.replace(dr.changes, source=f"sample {k}"), dr, redraws, None
+            s = scene.replace({**dr.changes, **({"knowledge.values": pins} if pins else {})}, source=f"sample {k}")
         except SceneError as e:
             last = str(e)
+            continue
+        dr.values.update(told(scene, s))
+        return s, dr, redraws, None
+    dr.values.update({TOLD + c: math.nan for c in list(dr.values)})
     return None, dr, mc.max_redraws, f"no valid draw in {mc.max_redraws + 1} tries; last: {last}"
 
 
@@ -247,4 +347,4 @@ def drawn_columns(scene: Scene) -> list[str]:
     rng = np.random.default_rng(sample_seed(mc.seed, 0))
     for d in mc.disperse:
         _draw_one(d, data, rng, dr)
-    return list(dr.values)
+    return list(dr.values) + [TOLD + c for c in dr.values]

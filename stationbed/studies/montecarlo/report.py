@@ -13,6 +13,7 @@ import numpy as np
 from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
 from ...run.metrics import METRICS
 from . import charts
+from .dispersions import TOLD
 from .samples import ID_COLUMNS
 from .stats import PERCENTILES, metric_stats, percentile_needs, quiet_nan, requirement_verdicts
 
@@ -40,8 +41,9 @@ def _clean(x):
 
 
 def drawn_of(df) -> list[str]:
-    """The drawn-value columns of a table (between the id columns and the metrics)."""
-    return [c for c in df.columns if c not in ID_COLUMNS and c not in METRICS]
+    """The drawn-value columns of a table (between the id columns and the metrics), without their
+    ``told.`` twins (what the law was told: a driver is a truth)."""
+    return [c for c in df.columns if c not in ID_COLUMNS and c not in METRICS and not c.startswith(TOLD)]
 
 
 def summarise(scene, df, **extra) -> dict:

@@ -1,0 +1,85 @@
+"""The closed loop flown on sensors and the MEKF vs on the truth, side by side (issue 20).
+
+    python benchmarks/bench_estimated.py [--repeats N] [--json PATH] [--smoke]
+
+One orbit of ``scenarios/iss_lvlh_hold_estimated.toml`` (two 10 Hz gyros, two 1 Hz star-tracker
+heads, the MEKF; the pd law on the estimate) against the same scene with ``sensor = []`` and no
+estimator (the pd law on the truth), interleaved in one process, median of ``--repeats`` runs
+each after a warm-up run that compiles or loads the cached builds:
+
+* ``fused``: the fused loop (``simulate(..., fused=True)``), target: estimated <= 1.5x truth-fed;
+* ``per_tick`` (info): the per-tick loop (the law in Python, one compiled flight tick per tick).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _smoke  # noqa: E402
+
+import stationbed  # noqa: E402
+
+SCENE = ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml"
+TARGET_RATIO = 1.5  # issue 20: the estimated fused loop <= 1.5x the fused loop without sensors
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--json", type=Path, default=None)
+    _smoke.add_option(ap)
+    args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
+    if args.smoke:
+        args.repeats = 1
+    est = stationbed.load_scene(SCENE)
+    truth = est.replace({"sensor": [], "estimator": None})
+    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / est.orbit.mean_motion
+    runs = {
+        "fused_truth": lambda: stationbed.simulate(truth, duration=T, fused=True),
+        "fused_estimated": lambda: stationbed.simulate(est, duration=T, fused=True),
+        "per_tick_truth": lambda: stationbed.simulate(truth, duration=T, fused=False),
+        "per_tick_estimated": lambda: stationbed.simulate(est, duration=T, fused=False),
+    }
+    t_build = time.perf_counter()
+    first = {name: f() for name, f in runs.items()}
+    build_s = time.perf_counter() - t_build
+    walls = {name: [] for name in runs}
+    for _ in range(args.repeats):
+        for name, f in runs.items():
+            t0 = time.perf_counter()
+            f()
+            walls[name].append(time.perf_counter() - t0)
+    med = {k: statistics.median(v) for k, v in walls.items()}
+    ratio = med["fused_estimated"] / med["fused_truth"]
+    ratio_tick = med["per_tick_estimated"] / med["per_tick_truth"]
+    s = first["fused_estimated"].meta["summary"]
+    print(f"# one orbit ({T:.1f} s) of {est.name}, fused and per-tick, estimated vs truth-fed "
+          f"(median of {args.repeats}; warm-up incl. compile/load {build_s:.1f} s)")
+    print("| path | truth-fed [s] | estimated [s] | ratio |")
+    print("|---|---|---|---|")
+    print(f"| fused | {med['fused_truth']:.3f} | {med['fused_estimated']:.3f} | {ratio:.2f} |")
+    print(f"| per tick | {med['per_tick_truth']:.3f} | {med['per_tick_estimated']:.3f} | {ratio_tick:.2f} |")
+    print(f"estimation: max error {s.get('max_est_err_deg', math.nan):.2e} deg, RMS {s.get('rms_est_err_deg', math.nan):.2e} deg, "
+          f"mean NEES {s.get('mean_nees', math.nan):.2f}, inside 3 sigma {s.get('est_inside_3sigma', math.nan):.4f}, "
+          f"star-tracker dropout rows {s.get('st_dropout_rows')}")
+    ok = ratio <= TARGET_RATIO
+    print(f"fused estimated / truth-fed: {ratio:.2f} (target <= {TARGET_RATIO}): {_smoke.verdict(ok, args.smoke)}")
+    if args.json:
+        args.json.write_text(json.dumps({"walls": walls, "median": med, "ratio_fused": ratio,
+                                         "ratio_per_tick": ratio_tick, "summary": s}, indent=1, default=float))
+    return _smoke.targets_exit(ok, args.smoke)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,242 @@
+"""What the law flies on: the truth row, the sensors and the estimate, as one function per tick.
+
+:class:`Flight` is the sensing half of the closed loop's composition (issue 20, docs/loop.md).
+Both executors run it, neither reads the other's internals:
+
+* the per-tick loop (``run/closed_loop.py``) calls :meth:`Flight.compiled` once per tick;
+* the fused loop (``run/fused_flight.py``) inlines :meth:`Flight.function` in its ``mapaccum``
+  (MX, so the suite's ``Switch`` nodes stay lazy in the generated code).
+
+``(k, t, t_prev, y, theta_prev, omega_prev, xs, w, ps) -> (theta, xs_next, y_seen, ys)``
+
+* ``y`` is the true measurement vector at tick k (the model's compiled ``meas``, offsets from the
+  executor's measurement layout); from it the :data:`~.sensor.TRUTH` row: ``q_BN``, ``omega_BN_B``,
+  ``R_N`` (``r_N``), ``sun_N``; ``moon_N`` from the station to the Moon, whose geocentric
+  position is held at the scene's epoch as the Sun is (:mod:`stationbed.model.moon`; zero
+  without an epoch, and the scene then refuses a Moon exclusion); ``shadow`` 1 (no shipped
+  sensor reads it);
+* ``theta_B = ∫ω dt`` by the trapezoid over the tick, ``theta = theta_prev + (t - t_prev)/2
+  (omega_prev + omega)``: a gyro differences it, so its output is the mean of the trapezoid rates
+  over its sample. The error against the exact integral is ``h³/12 |ω̈|`` per tick (ISS hold:
+  ω̈ below 1e-9 rad/s³, h = 0.1 s: 1e-13 rad, against the gyro's own noise σ_v √h = 5e-7 rad);
+* ``xs, w`` are the :class:`~.suite.Suite` 's state and noise row; ``ps`` its parameters then
+  the Moon's geocentric position (:attr:`Flight.params`);
+* ``y_seen`` is what the law receives: ``y`` with ``q_BN`` and ``omega_BN_B`` replaced by the
+  MEKF's ``q_BN_hat`` and ``omega_hat_B`` when the scene has an ``[estimator]``; ``y`` itself
+  otherwise (the sensors are then flown and recorded, the law keeps the ideal measurement path:
+  the truth-fed comparison run);
+* ``ys`` the suite's outputs (:attr:`Suite.OUTPUTS`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions
+from .sensor import TRUTH, noise_rng
+from .suite import Suite, SuiteNoise
+
+__all__ = ["Flight", "INIT_STREAM", "flight_columns"]
+
+#: first entry of the spawn key of the initial-estimate draw (sensors use 1: SENSOR_STREAM)
+INIT_STREAM = 2
+
+
+class Flight:
+    """The sensing of a scene flown on the executor's tick.
+
+    Parameters
+    ----------
+    sensing : object with ``sensor`` and ``estimator``  The scene (or a :class:`~stationbed.scene.Sensing`).
+    tick : float  The controller period [s].
+    layout : dict name -> (offset, size)  The executor's measurement vector.
+    seed : int  The run's seed (sensor i draws from ``noise_rng(seed, i)``).
+    """
+
+    def __init__(self, sensing, tick: float, layout: dict, seed: int, moon_R_N=None):
+        self.suite = Suite(sensing, tick)
+        #: the Moon's geocentric position [m] (N), held over the run as the Sun is (or None: no
+        #: Moon, ``moon_N`` zero); the tick's parameters are the suite's, then this
+        self.has_moon = moon_R_N is not None
+        self.params = np.concatenate([self.suite.params, np.zeros(3) if moon_R_N is None else np.asarray(moon_R_N, float)])
+        self.mekf = self.suite.mekf
+        self.layout = dict(layout)
+        self.ny = max(o + k for o, k in self.layout.values())
+        self.seed = int(seed)
+        self.heads = [s for s in self.suite.sensors if s.kind == "star_tracker"]
+        m = self.mekf
+        #: what the tick's expression depends on (numbers are inputs): equal keys, equal functions
+        self.key = (tuple((s.name, s.key) for s in self.suite.sensors), tuple(sorted(self.suite.every.items())),
+                    None if m is None else (m.gyro.name, tuple(h.name for h in m.heads), tuple(m.delays), tuple(m.every)),
+                    tuple(sorted(self.layout.items())), self.has_moon)
+        self.tag = hashlib.sha256(repr(self.key).encode()).hexdigest()[:16]
+        S = self.suite
+        self._rows = dict(
+            mekf=S.STATE.slice("mekf") if m else None,
+            gyro=(S.STATE.slice(m.gyro.name), m.gyro.state.slice("bias_B")) if m else None,
+            bias=S.OUTPUTS.slice("bias_B_hat") if m else None,
+            valid=[S.OUTPUTS.slice(h.name).start + 4 for h in self.heads])
+        self._f = self._compiled = self._report = None
+
+    # -- the tick ---------------------------------------------------------------------------
+    def function(self) -> ca.Function:
+        """The tick as an MX function (module docstring)."""
+        if self._f is not None:
+            return self._f
+        hit = _TICKS.get(self.key)
+        if hit is not None:
+            self._f = hit
+            return hit
+        S = self.suite
+        MX = ca.MX
+        k, t, t_prev = MX.sym("k"), MX.sym("t"), MX.sym("t_prev")
+        y, th0, om0 = MX.sym("y", self.ny), MX.sym("theta_prev", 3), MX.sym("omega_prev", 3)
+        xs, w, ps = S.STATE.symbol("xs", MX), S.NOISE.symbol("w", MX), MX.sym("ps", S.PARAMS.size + 3)
+
+        def field(name):
+            o, n = self.layout[name]
+            return y[o : o + n]
+
+        om = field("omega_BN_B")
+        th = th0 + (t - t_prev) / 2 * (om0 + om)
+        moon_N = MX.zeros(3)
+        if self.has_moon:  # from the station: the parallax (up to 1 deg) counts in a cone's edge
+            d = ps[S.PARAMS.size :] - field("r_N")
+            moon_N = d / ca.norm_2(d)
+        truth = TRUTH.pack(q_BN=field("q_BN"), omega_BN_B=om, theta_B=th, R_N=field("r_N"), sun_N=field("sun_N"),
+                           moon_N=moon_N, shadow=MX.ones(1), symbolic=True)
+        xs1, ys = S.function()(k, t, xs, truth, w, ps[: S.PARAMS.size])
+        seen = y
+        if self.mekf is not None:
+            parts = []
+            cut = 0
+            repl = {"q_BN": S.OUTPUTS.get(ys, "q_BN_hat"), "omega_BN_B": S.OUTPUTS.get(ys, "omega_hat_B")}
+            for name, (o, n) in sorted(self.layout.items(), key=lambda kv: kv[1][0]):
+                if name in repl:
+                    if o > cut:
+                        parts.append(y[cut:o])
+                    parts.append(repl[name])
+                    cut = o + n
+            if cut < self.ny:
+                parts.append(y[cut:])
+            seen = ca.vertcat(*parts)
+        self._f = ca.Function("flight_tick", [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
+                              ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
+                              ["theta", "xs_next", "y_seen", "ys"])
+        _TICKS[self.key] = self._f
+        return self._f
+
+    def compiled(self) -> FastCall:
+        """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall`."""
+        if self._compiled is None:
+            lib = _COMPILED.get(self.key)
+            if lib is None:
+                f = self.function()
+                lib = _COMPILED[self.key] = compile_functions([f], f"flight_{self.tag}")[f.name()]
+            self._compiled = FastCall(lib)
+            self._compiled.args[8][:] = self.params
+        return self._compiled
+
+    # -- the run's numbers ----------------------------------------------------------------------
+    def initial(self, q_BN: np.ndarray, omega_BN_B: np.ndarray) -> np.ndarray:
+        """The suite's state at tick 0. With an estimator, its attitude estimate is the truth
+        turned by δα ~ N(0, σ_attitude0² E) (``q = q̂ ⊗ δq(δα)``, drawn from the run's own
+        stream ``SeedSequence(seed, spawn_key=(INIT_STREAM,))``) and its bias estimate zero, so
+        the initial error is what the filter's P₀ says it is. Its rate ``ω̂`` until the gyro's
+        first sample is what a noise-free sample at t = 0 would give, ``ω + β₀ − β̂₀`` (the
+        station flew before t = 0; zero would be a rate error of the orbital rate at the first
+        ticks)."""
+        if self.mekf is None:
+            return self.suite.initial()
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(INIT_STREAM,)))
+        da = self.suite.sensing.estimator.sigma_attitude0 * rng.standard_normal(3)
+        dq = np.concatenate([[1.0], -da / 2])
+        dq /= np.linalg.norm(dq)
+        q = np.asarray(q_BN, dtype=float)
+        q = q / np.linalg.norm(q)
+        qh = _quat_mult(q, dq)
+        x = self.suite.initial(qh if qh[0] >= 0 else -qh)
+        bias0 = np.asarray(self.mekf.gyro.entry.bias0, dtype=float)
+        x[self.suite.STATE.slice("omega_hat_B")] = np.asarray(omega_BN_B, dtype=float) + bias0
+        return x
+
+    def noise(self) -> "TickNoise":
+        """The run's noise, tick by tick from tick 0 (:class:`TickNoise`)."""
+        return TickNoise(SuiteNoise(self.suite, self.seed))
+
+    # -- columns --------------------------------------------------------------------------------
+    def columns(self) -> list[str]:
+        """:func:`flight_columns` of the scene."""
+        return flight_columns(self.suite.sensing)
+
+    def row(self, xs: np.ndarray, ys: np.ndarray, q_BN: np.ndarray) -> list[float]:
+        """The values of :meth:`columns` from the suite's state and outputs after a tick and the
+        true attitude (the true bias is the filter's gyro's state)."""
+        sl = self._rows
+        vals = []
+        if self.mekf is not None:
+            if self._report is None:
+                self._report = FastCall(self.mekf.report_function())
+            r = self._report
+            r.args[0][:] = xs[sl["mekf"]]
+            r.args[1][:] = q_BN
+            r.args[2][:] = xs[sl["gyro"][0]][sl["gyro"][1]]
+            r()
+            err, s3, nees = r.res[0], r.res[1], r.res[2][0]
+            vals += list(np.degrees(err)) + list(np.degrees(s3[:3])) + list(ys[sl["bias"]]) + [nees]
+        return vals + [float(ys[i]) for i in sl["valid"]]
+
+
+def flight_columns(scene) -> list[str]:
+    """The run's columns of a scene's sensing: with an estimator the attitude estimation error
+    per axis (B, deg, ``q = q̂ ⊗ δq(δα)``), its 3σ (deg), the bias estimate (rad/s), ``nees``
+    (6 states); per star-tracker head ``st_valid_<name>`` (1 when its held sample is valid)."""
+    cols = []
+    if getattr(scene, "estimator", None) is not None:
+        cols += [f"est_err_{a}_deg" for a in "xyz"] + [f"est_3sigma_{a}_deg" for a in "xyz"]
+        cols += [f"est_bias_{a}" for a in "xyz"] + ["nees"]
+    return cols + [f"st_valid_{s.name}" for s in getattr(scene, "sensor", []) if s.kind == "star_tracker"]
+
+
+#: ticks of noise drawn at a time (any size gives the same numbers: SuiteNoise draws in tick order)
+NOISE_BLOCK = 4096
+_TICKS: dict = {}
+_COMPILED: dict = {}
+
+
+class TickNoise:
+    """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
+    draws nothing: a zero row), asked in tick order (each tick once); drawn
+    :data:`NOISE_BLOCK` ticks at a time."""
+
+    def __init__(self, noise: SuiteNoise):
+        self.noise = noise
+        self.width = noise.suite.NOISE.size
+        self.buf, self.k0, self.next = np.zeros((0, self.width)), 1, 0
+
+    def rows(self, k0: int, n: int) -> np.ndarray:
+        if n <= 0:
+            return np.zeros((0, self.width))
+        if k0 != self.next:
+            raise ValueError(f"sensor noise asked for tick {k0}, the next tick is {self.next}")
+        self.next = k0 + n
+        out = np.zeros((n, self.width))
+        first = max(k0, 1)
+        while first < k0 + n:
+            i = first - self.k0
+            if i >= len(self.buf):
+                self.k0, i = first, 0
+                self.buf = self.noise.draw(max(NOISE_BLOCK, k0 + n - first))
+            m = min(len(self.buf) - i, k0 + n - first)
+            out[first - k0 : first - k0 + m] = self.buf[i : i + m]
+            first += m
+        return out
+
+
+def _quat_mult(p, q):
+    pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
+    return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
+

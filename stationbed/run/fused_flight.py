@@ -1,0 +1,207 @@
+"""The fused closed loop flown on sensors and an estimate (issue 20): :mod:`.fused` with the
+scene's :class:`~stationbed.loop.Flight` tick inlined.
+
+Per tick, in one compiled ``mapaccum`` (as the per-tick loop does it, call by call): the true
+measurement ``y = meas(t, x)``; the flight tick (truth row, sensors, MEKF; what the law sees);
+the law on what it sees; actuation; one RK4 step. The step is an MX function around the SX
+dynamics, so the suite's ``Switch`` nodes stay lazy in the generated C (a sensor computes only on
+its samples). The carry holds the tick index, the state, the saturation counts and the flight's
+memory: the previous tick's time and true rate, ``theta_B`` and the suite state. The noise of
+each tick is a per-tick input, drawn in Python in tick order (:class:`~stationbed.loop.flight.TickNoise`:
+the same numbers as the per-tick loop's blocks).
+
+Neither executor reads the other's internals: both call the same ``Flight.function()``
+(compiled there, inlined here) and the loop's public sensing state (``xs``, ``th``, ``om_prev``,
+``t_prev``, ``tick_noise``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions, sx_function
+from ..integrators import IntegrationError
+from .controller import ControllerError, one_line
+from .segments import held_torque_from
+
+__all__ = ["run_fused_flight"]
+
+_CHUNKS: dict[tuple, dict] = {}
+
+
+def _build(loop, n: int, symbolic_params) -> dict:
+    system, ctrl, flight = loop.system, loop.ctrl, loop.flight
+    sx = system.sx
+    form = system.formulation
+    model = form.model
+    nx, npar = form.nx, model.layout.size
+    ncp = len(symbolic_params)
+    S = flight.suite
+    ns, nw, nps = S.STATE.size, S.NOISE.size, flight.params.size
+    kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
+    ng = loop.ng
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    y = ca.SX.sym("y", flight.ny)
+    try:
+        cmd, q_ref = ctrl.symbolic(t, y, cp)
+        cmd = ca.vertcat(cmd)
+    except Exception as e:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
+    if cmd.numel() != loop.n_cmd:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, "
+                              f"expected {loop.n_cmd} ({ctrl.command})")
+    if model.cmg is None:
+        act, u, sat = ca.SX.zeros(0, 1), u_ext + cmd, ca.SX.zeros(2)
+    else:
+        if kind == "torque":
+            act = sx["actuate"](t, x, cmd, p)
+        else:
+            act = sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
+        u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
+        kk = model.nu_cmg
+        sat = ca.vertcat(act[kk + 1], act[kk + 2])
+    if model.has_steps:
+        u = ca.vertcat(u, t + h / 2)
+    x1 = system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p)
+    core = sx_function("ff_core", [t, x, y, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref)])
+    meas = sx["meas"]
+    fl = flight.function()
+    o_om = flight.layout["omega_BN_B"][0]
+    MX = ca.MX
+    # the row tick: its command, actuation, reference and the flight's state and outputs after it
+    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
+    ki, tpi, thi, omi = MX.sym("k"), MX.sym("t_prev"), MX.sym("th", 3), MX.sym("om", 3)
+    xsi, wi, psi = MX.sym("xs", ns), MX.sym("w", nw), MX.sym("ps", nps)
+    yi = meas(ti, xi, pi_)
+    _, xs1, seen, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
+    _, _, info_out = core(ti, xi, seen, cpi, ui, pi_, 0.0)
+    info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
+    # the chunk's step
+    nc = 1 + nx + 2 + 1 + 3 + 3 + ns
+    npar_all = 4 + ncp + 3 + npar + nps
+    c, par, w = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("w", nw)
+    i, xc, cnt = c[0], c[1 : 1 + nx], c[1 + nx : 3 + nx]
+    tp, th, om, xs = c[3 + nx], c[4 + nx : 7 + nx], c[7 + nx : 10 + nx], c[10 + nx :]
+    t0, hh, n_act, k0 = par[0], par[1], par[2], par[3]
+    cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
+    pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
+    tt = t0 + i * hh
+    yt = meas(tt, xc, pc)
+    th1, xs1, seen, _ = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+    x_new, fl_sat, _ = core(tt, xc, seen, cpc, uc, pc, hh)
+    on = i < n_act
+    c_new = ca.vertcat(i + 1, ca.if_else(on, x_new, xc),
+                       cnt + ca.if_else(on, ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), MX.zeros(2)),
+                       ca.if_else(on, tt, tp), ca.if_else(on, th1, th), ca.if_else(on, yt[o_om : o_om + 3], om),
+                       ca.if_else(on, xs1, xs))
+    step = ca.Function("ffl_step", [c, par, w], [c_new])
+    acc = step.mapaccum("ffl_acc", n)
+    c0, parm, wm = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nw, n)
+    traj = acc(c0, ca.repmat(parm, 1, n), wm)
+    chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
+    tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
+    funcs = compile_functions([info, chunk], tag)
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"])}
+
+
+def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
+    """Run ticks 0..K fused with the loop's flight, emitting the per-tick loop's rows."""
+    ctrl, flight = loop.ctrl, loop.flight
+    n = loop.n_per_out
+    cp = np.asarray(symbolic_params, dtype=float)
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key)  # structure, not numbers
+    if key not in _CHUNKS:
+        t_build = time.perf_counter()
+        _CHUNKS[key] = _build(loop, n, cp)
+        _CHUNKS[key]["build_s"] = time.perf_counter() - t_build
+    fns = _CHUNKS[key]
+    info, chunk = fns["info"], fns["chunk"]
+    nx = loop.system.formulation.nx
+    S = flight.suite
+    p, period, duration = loop.p, loop.period, loop.duration
+    u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
+    ia = info.args
+    ia[2][:] = cp
+    ia[3][:] = u_ext
+    ia[4][:] = p
+    ia[11][:] = flight.params
+    c0, par, noise = chunk.args
+    ncp = len(cp)
+    par[1] = period
+    par[4 : 4 + ncp] = cp
+    i_ext = slice(4 + ncp, 7 + ncp)
+    par[i_ext] = u_ext
+    par[7 + ncp : 7 + ncp + p.size] = p
+    par[7 + ncp + p.size :] = flight.params
+    nu_cmg, ncmd = loop.nu_cmg, loop.n_cmd
+    nw = S.NOISE.size
+    x = np.array(loop.x, dtype=float)
+    xs, th, om, tp = loop.xs.copy(), loop.th.copy(), loop.om_prev.copy(), loop.t_prev
+    tail_flag = ticks = 0
+    loop.used_fused = True
+    row_ks = sorted(set(range(0, K, n)) | {K})
+    try:
+        for j, k in enumerate(row_ks):
+            t = min(k * period, duration)
+            n_act = row_ks[j + 1] - k if k < K else 1
+            draws = loop.tick_noise.rows(k, n_act)
+            ia[0][0] = t
+            ia[1][:] = x
+            ia[5][0], ia[6][0] = k, tp
+            ia[7][:], ia[8][:], ia[9][:] = th, om, xs
+            ia[10][:] = draws[0]
+            info()
+            r = info.res[0]
+            cmd = r[:ncmd]
+            act = r[ncmd : ncmd + (nu_cmg + 3 if loop.act is not None else 0)]
+            lim = sat = 0
+            if loop.act is not None:
+                lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
+                loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
+            if ncmd == 3:
+                loop.last_cmd = tuple(cmd)
+            ctrl.q_ref_BN = tuple(r[-4:])
+            loop.x, loop.xs, loop.ys = x, info.res[1].copy(), info.res[2].copy()
+            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            if k == K:
+                loop.th, loop.om_prev, loop.t_prev = th, om, tp
+                break
+            last_len = duration - (k + n_act - 1) * period
+            n_full = n_act - 1 if last_len < period * (1 - 1e-12) else n_act
+            cuts = [k] + [e for e in edges if k < e < k + n_full] + [k + n_full]
+            pieces = [(a, b, period) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+            if n_full < n_act:
+                pieces.append((k + n_full, k + n_act, last_len))
+            counts = np.zeros(2)
+            for a, b, h in pieces:
+                c0[0] = 0.0
+                c0[1 : 1 + nx] = x
+                c0[1 + nx : 3 + nx] = 0.0
+                c0[3 + nx] = tp
+                c0[4 + nx : 7 + nx], c0[7 + nx : 10 + nx], c0[10 + nx :] = th, om, xs
+                par[0], par[1], par[2], par[3] = a * period, h, b - a, a
+                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
+                noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
+                chunk()
+                res = chunk.res[0]
+                x = res[1 : 1 + nx].copy()
+                counts += res[1 + nx : 3 + nx]
+                tp = float(res[3 + nx])
+                th, om, xs = res[4 + nx : 7 + nx].copy(), res[7 + nx : 10 + nx].copy(), res[10 + nx :].copy()
+            ticks += n_act
+            loop.n_rate_limited += int(counts[0])
+            loop.n_momentum_saturated += int(counts[1])
+            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
+            if not np.all(np.isfinite(x)):
+                loop.ticks = ticks
+                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+    finally:
+        loop.ticks = ticks
+        loop.x = x
+        ctrl.count_compiled_updates(ticks + 1)
+        loop.integ.count_steps(ticks)
+        loop.rows.flush()

@@ -1,0 +1,203 @@
+"""Effects at their own rate: the fused tick with the environment torques evaluated once per
+block of ticks (issue 25, docs/design.md "Effects at their own rate").
+
+Aero and solar pressure on the scene's surfaces (with the shadow fraction inside SRP) change at
+orbital rate, yet the every-stage loop evaluates them at each of RK4's four stages on every face:
+~35 % of a fused tick of ``iss_lvlh_hold``. With ``[simulation] environment_rate = N`` (N >= 1)
+the fused loop evaluates them once every N control ticks, at the block's first tick, and holds
+over the block the value linearly extrapolated to the block's middle from the previous
+evaluation,
+
+    L_hold = L_k + (L_k - L_prev) / (t_k - t_prev) * (n_b h / 2),
+
+(``n_b`` the block's active ticks; the first block of a run holds ``L_k``). The block's mean
+torque is then right to second order in its length, the error of a constant hold's first order
+cancels; what is left, and how it reaches the attitude through the loop, is bounded in
+docs/design.md and checked against the every-stage evaluation by tests/test_effect_rates.py.
+
+Composition: the tick (``one``: actuate, one RK4 step of the right-hand side *without* the
+environment kinds, :func:`~.system.environment_split`, with ``u_ext + L_hold``) is mapped N times
+into a block (casadi ``mapaccum``), and the blocks ``ceil(n / N)`` times into the chunk of ``n``
+ticks; the tail of the last block is masked by the tick counter (``i < n_act``), as the
+every-stage chunk masks its tail. The carry gains ``(L_prev, t_prev, have_prev)``, which the
+executor passes from chunk to chunk (:func:`carry_width`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from .system import environment_split
+
+__all__ = ["environment_rate", "carry_width", "held_chunk", "rate_summary", "g_norms", "hold_bound_rad", "torque_rates"]
+
+#: the extra carry of a held-environment chunk: L_prev (3, B components [N m]), t_prev [s], have_prev
+ENV_CARRY = 5
+
+
+def environment_rate(loop) -> int:
+    """The environment rate the fused loop runs for ``loop`` (ticks per evaluation; 0 = every
+    integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
+    environment torques, else 0. The per-tick loops evaluate every stage
+    (:func:`rate_summary` reports 0 for them)."""
+    n = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
+    if n <= 0 or loop.system.sx is None:
+        return 0
+    return n if environment_split(loop.system) is not None else 0
+
+
+def carry_width(rate: int) -> int:
+    """Extra carry values of a chunk at ``rate`` (0 for the every-stage chunk)."""
+    return ENV_CARRY if rate else 0
+
+
+def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int, ranges: tuple) -> ca.Function:
+    """``fused_chunk(c0, par[, noise]) -> carry`` of ``n`` ticks with the environment held over
+    blocks of ``rate`` ticks.
+
+    Parameters
+    ----------
+    system : System  Its :func:`~.system.environment_split` gives ``env_B(t, x, p)``.
+    one : casadi Function  ``one(t, x, cp, u_ext, p, h, L_env[, nz]) -> (x1, flags)``: one tick
+        with ``u_ext + L_env`` as the held external torque.
+    rate, n : int  Ticks per block, ticks per chunk.
+    nx, npar_tick : int  State size; size of the chunk's ``par`` = ``(t0, h, n_act, cp, u_ext, p)``.
+    nn : int  Sensor draws per tick (0: none).
+    ranges : tuple  Slices of ``par``: ``(cp, u_ext, p)``.
+    """
+    env_B = environment_split(system)["env_B"]
+    s_cp, s_ext, s_p = ranges
+    nb = math.ceil(n / rate)
+    # one tick in the chunk's carry: (i, x, counts); par = (t0, h, n_act, cp, u_ext, p, L_hold)
+    i, x_i, cnt = ca.SX.sym("i"), ca.SX.sym("x_i", nx), ca.SX.sym("cnt", 2)
+    par = ca.SX.sym("par", npar_tick + 3)
+    t0, h, n_act = par[0], par[1], par[2]
+    nz_i = ca.SX.sym("nz_i", nn)
+    x_new, fl = one(t0 + i * h, x_i, par[s_cp], par[s_ext], par[s_p], h, par[npar_tick:], *([nz_i] if nn else []))
+    active = i < n_act
+    tick = ca.Function(
+        "held_tick", [ca.vertcat(i, x_i, cnt), par] + ([nz_i] if nn else []),
+        [ca.vertcat(i + 1, ca.if_else(active, x_new, x_i),
+                    cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2)))],
+        {"cse": True},
+    )
+    acc = tick.mapaccum("held_block_acc", rate)
+    cb, pb = ca.MX.sym("cb", 1 + nx + 2), ca.MX.sym("pb", npar_tick + 3)
+    nzb = [ca.MX.sym("nzb", nn * rate)] if nn else []
+    tb = acc(cb, ca.repmat(pb, 1, rate), *([ca.reshape(nzb[0], nn, rate)] if nn else []))
+    block = ca.Function("held_block", [cb, pb] + nzb, [tb[:, -1]])
+    # one block: evaluate the environment at its first tick, hold the extrapolated mid value
+    co = ca.MX.sym("co", 1 + nx + 2 + ENV_CARRY)
+    po = ca.MX.sym("po", npar_tick)
+    nzo = [ca.MX.sym("nzo", nn * rate)] if nn else []
+    i, x = co[0], co[1 : 1 + nx]
+    L_prev, t_prev, have = co[3 + nx : 6 + nx], co[6 + nx], co[7 + nx]
+    t0, h, n_act = po[0], po[1], po[2]
+    t_now = t0 + i * h
+    L_now = env_B(t_now, x, po[s_p])
+    n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
+    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
+    L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
+    c_new = block(co[0 : 3 + nx], ca.vertcat(po, L_hold), *nzo)
+    live = n_b > 0
+    outer = ca.Function(
+        "held_outer", [co, po] + nzo,
+        [ca.vertcat(c_new, ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have))],
+    )
+    acc_o = outer.mapaccum("held_acc", nb)
+    c0 = ca.MX.sym("c0", 1 + nx + 2 + ENV_CARRY)
+    par0 = ca.MX.sym("par", npar_tick)
+    noise = [ca.MX.sym("noise", nn, nb * rate)] if nn else []  # column i: tick i's draws
+    traj = acc_o(c0, ca.repmat(par0, 1, nb), *([ca.reshape(noise[0], nn * rate, nb)] if nn else []))
+    return ca.Function("fused_chunk", [c0, par0] + noise, [traj[:, -1]])
+
+
+def rate_summary(loop) -> dict:
+    """What the run's summary records of the effect rates: the environment's ticks per
+    evaluation (0 = every integrator stage) as run, and as the scene asked. A block never spans
+    an output row (each chunk starts its own), so the run's rate is at most the ticks per row."""
+    asked = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
+    ran = min(environment_rate(loop), loop.n_per_out) if getattr(loop, "used_fused", False) else 0
+    return {"environment_rate_ticks": ran, "environment_rate_asked": asked}
+
+
+def g_norms(I_kg_m2: float, omega_n: float, zeta: float) -> tuple[float, float, float]:
+    """Norms of one axis of the linearised PD loop ``I θ̈ + 2 ζ ω_n I θ̇ + ω_n² I θ = e``:
+    ``(‖g‖₁, ‖ġ‖₁ bound, max |g| bound)`` of its torque-to-angle impulse response
+    ``g(t) = exp(-ζ ω_n t) sin(ω_d t) / (I ω_d)``, ``ω_d = ω_n √(1 - ζ²)`` (0 < ζ < 1).
+
+    ``‖g‖₁ = coth(π ζ / (2 √(1 - ζ²))) / (I ω_n²)`` (the integral of |e^{-at} sin bt| is
+    ``b coth(π a / 2b) / (a² + b²)``); ``|ġ| <= e^{-ζ ω_n t} / (I √(1 - ζ²))`` gives
+    ``‖ġ‖₁ <= 1 / (I ζ ω_n √(1 - ζ²))``; ``|g| <= 1 / (I ω_d)``.
+    """
+    s = math.sqrt(1.0 - zeta * zeta)
+    g1 = 1.0 / math.tanh(math.pi * zeta / (2.0 * s)) / (I_kg_m2 * omega_n**2)
+    return g1, 1.0 / (I_kg_m2 * zeta * omega_n * s), 1.0 / (I_kg_m2 * omega_n * s)
+
+
+def hold_bound_rad(delta_s: float, M1: float, M2: float, fast: list[tuple[float, float]], I_kg_m2: float,
+                   omega_n: float, zeta: float) -> float:
+    """Bound on the attitude change [rad] that holding the environment torque over blocks of
+    ``delta_s`` (extrapolated to the block's middle, module docstring) makes in a PD loop.
+
+    Parameters
+    ----------
+    delta_s : float  Block length N h [s].
+    M1, M2 : float  Largest |dL/dt| [N m/s] and |d²L/dt²| [N m/s²] of the environment torque
+        (any axis) where it is smooth.
+    fast : list of (duration [s], largest |dL/dt| [N m/s])  The stretches where it is not
+        (penumbra crossings: the shadow fraction's kinks and its fast change between them).
+    I_kg_m2, omega_n, zeta : float  Smallest principal inertia, the loop's ω_n [rad/s] and ζ.
+
+    Notes
+    -----
+    Over a block ``[t_k, t_k + Δ]`` the error ``e = L - L_hold`` is, by Taylor's theorem, a
+    zero-mean ramp ``L̇_k (s - Δ/2)`` plus a remainder ``|r| <= (3/4) M2 Δ²`` (``s²/2`` from L,
+    ``Δ²/4`` from the slope of the extrapolation). The angle is ``θ = ∫ g(t - τ) e(τ) dτ``:
+    the remainder gives at most ``‖g‖₁ (3/4) M2 Δ²``; the ramp, integrated by parts once
+    (its integral ``S`` vanishes at each block's ends and ``|S| <= M1 Δ² / 8``), at most
+    ``‖ġ‖₁ M1 Δ² / 8``. In a fast stretch of duration ``T`` and slope ``M1f`` (plus two blocks
+    either side, whose extrapolation straddles it) ``|e| <= 2 M1f Δ``, so it adds at most
+    ``max|g| 2 M1f Δ (T + 4 Δ)``, each stretch in full (they are summed, as if they were
+    simultaneous). Per axis, decoupled, rigid: the linearised loop (docs/design.md).
+    """
+    g1, gd1, gmax = g_norms(I_kg_m2, omega_n, zeta)
+    d = delta_s
+    smooth = g1 * 0.75 * M2 * d * d + gd1 * M1 * d * d / 8.0
+    return smooth + sum(gmax * 2.0 * m1 * d * (T + 4.0 * d) for T, m1 in fast)
+
+
+def torque_rates(t, L, nu=None):
+    """``(M1, M2, fast)`` of :func:`hold_bound_rad` from a sampled torque ``L`` (N, 3) [N m] at
+    times ``t`` (N,) [s]: finite differences where the shadow fraction ``nu`` is 0 or 1 (both
+    neighbours too), the penumbra stretches (``0 < nu < 1``) as ``fast`` with their largest
+    first difference. Sampling finer than the block length is the caller's part (the
+    differences see nothing between samples)."""
+    t, L = np.asarray(t, float), np.asarray(L, float)
+    dt = np.diff(t)
+    d1 = np.diff(L, axis=0) / dt[:, None]
+    d2 = np.diff(d1, axis=0) / (0.5 * (dt[1:] + dt[:-1]))[:, None]
+    if nu is None:
+        return float(np.abs(d1).max()), float(np.abs(d2).max()), []
+    pen = (np.asarray(nu) > 1e-12) & (np.asarray(nu) < 1 - 1e-12)
+    bad = pen.copy()
+    bad[1:] |= pen[:-1]
+    bad[:-1] |= pen[1:]
+    ok1 = ~(bad[1:] | bad[:-1])
+    ok2 = ok1[1:] & ok1[:-1]
+    fast = []
+    i = 0
+    while i < len(pen):
+        if pen[i]:
+            j = i
+            while j + 1 < len(pen) and pen[j + 1]:
+                j += 1
+            a, b = max(i - 1, 0), min(j + 1, len(t) - 1)
+            fast.append((float(t[b] - t[a]), float(np.abs(d1[a:b]).max())))
+            i = j + 1
+        else:
+            i += 1
+    return float(np.abs(d1[ok1]).max()), float(np.abs(d2[ok2]).max()), fast

@@ -1,0 +1,102 @@
+"""``[knowledge]``: what flight software believes of the plant, apart from the truth being flown
+(docs/design.md "Knowledge is not truth").
+
+A controller designs on a :class:`~stationbed.run.controller.Plant` built from the *knowledge
+scene* (:func:`knowledge_scene`): the scene with what flight software believes substituted, in
+this order:
+
+1. ``cmg.failed = []``: a failed CMG unit is unknown to the law unless the scene says so;
+2. ``[knowledge.values]``: any key path -> value (the Monte Carlo writes here the nominal value
+   of every dispersion not marked ``known``, and the drawn value of those that are);
+3. the named keys: ``inertia``, ``mass``, ``cm`` (the ``[body]``'s), ``failed_units`` (->
+   ``cmg.failed``), ``[knowledge.cmg]`` (the cluster's limits) and ``[knowledge.orbit]`` (a whole
+   orbit table).
+
+The knowledge scene has no ``[knowledge]`` and no ``[montecarlo]`` table, and it is a new
+object built from values: nothing in it refers to the scene being flown.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+from pydantic import Field, field_validator
+
+from ..core.massprops import InvalidMassProperties, check_inertia
+from .base import Mat3, Strict, Vec3
+from .environment import Orbit
+
+__all__ = ["Knowledge", "KnowledgeCmg", "knowledge_scene", "knowledge_changes", "NAMED_PATHS"]
+
+
+class KnowledgeCmg(Strict):
+    """``[knowledge.cmg]``: the cluster's limits as flight software believes them (each replaces
+    the ``[cmg]`` key of the same name; capacity follows from them and the working units)."""
+
+    h_rotor: float | None = Field(default=None, gt=0.0)  # N m s per unit
+    max_momentum: float | None = Field(default=None, gt=0.0)  # N m s (ideal)
+    max_torque: float | None = Field(default=None, gt=0.0)  # N m (ideal)
+    max_gimbal_rate: float | None = Field(default=None, gt=0.0)  # rad/s
+
+
+class Knowledge(Strict):
+    """``[knowledge]``: what flight software believes (each key defaults to the scene's own value,
+    except ``failed_units``: no failure is known unless listed)."""
+
+    inertia: Mat3 | None = None  # kg m², the main body's about its own mass centre (as [body] inertia)
+    mass: float | None = Field(default=None, gt=0.0)  # kg, the main body's
+    cm: Vec3 | None = None  # m, the main body's mass centre in B
+    failed_units: list[int] | None = None  # CMG units known to have failed (1-based, as [cmg] failed)
+    cmg: KnowledgeCmg | None = None
+    orbit: Orbit | None = None  # the orbit flight software believes (a whole [orbit] table)
+    values: dict[str, Any] = {}  # any other key path -> believed value (the Monte Carlo writes here)
+
+    @field_validator("inertia")
+    @classmethod
+    def _physical(cls, J):
+        if J is None:
+            return J
+        try:
+            return check_inertia(np.array(J), "inertia").tolist()
+        except InvalidMassProperties as e:
+            raise ValueError(str(e).removeprefix("inertia: ")) from None
+
+
+#: the scene key path each named ``[knowledge]`` key stands for (a ``known`` dispersion of one of
+#: these is refused when the key is given: the scene would state two beliefs)
+NAMED_PATHS = {"inertia": "body.inertia", "mass": "body.mass", "cm": "body.cm", "failed_units": "cmg.failed",
+               "cmg": "cmg", "orbit": "orbit"}
+
+
+def knowledge_changes(scene) -> dict:
+    """The key path -> value changes that turn ``scene`` into its knowledge scene (in order)."""
+    k = scene.knowledge
+    changes: dict = {"knowledge": None, "montecarlo": None}
+    if scene.cmg is not None and scene.cmg.failed:
+        changes["cmg.failed"] = []
+    if k is None:
+        return changes
+    changes.update(k.values)
+    for name in ("inertia", "mass", "cm"):
+        v = getattr(k, name)
+        if v is not None:
+            changes[f"body.{name}"] = v
+    if k.failed_units is not None:
+        changes["cmg.failed"] = list(k.failed_units)
+    if k.cmg is not None:
+        for name, v in k.cmg.model_dump(exclude_none=True).items():
+            changes[f"cmg.{name}"] = v
+    if k.orbit is not None:
+        changes["orbit"] = k.orbit.model_dump(exclude_unset=True)
+    return changes
+
+
+def knowledge_scene(scene):
+    """What flight software believes: ``scene`` (a :class:`~stationbed.scene.Scene`) with the
+    ``[knowledge]`` substitutions of this module's docstring; raises SceneError naming
+    ``[knowledge]`` when that scene is refused (e.g. ``failed_units`` beyond the cluster)."""
+    # a deep copy: a table left at its default is one object shared by every scene built
+    # (pydantic keeps a model default as is), and nothing of the flown scene may be reachable
+    return copy.deepcopy(scene.replace(knowledge_changes(scene), source="[knowledge]"))
