@@ -159,10 +159,8 @@ class Measurement:
 
 
 class BatchMeasurement:
-    """What a batch of controllers sees at a tick (:meth:`Controller.update_batch`): the fields
-    of :class:`Measurement` with a leading sample axis, views of ``y`` (n_samples, n_y) refreshed
-    in place: ``q_BN`` (n, 4), ``omega_BN_B`` (n, 3), ..., ``C_ON`` (n, 3, 3); ``t`` is the tick's
-    time [s], the same for every sample (the samples advance in lockstep)."""
+    """:class:`Measurement` with a leading sample axis (views of ``y`` (n, n_y), refreshed in
+    place: ``q_BN`` (n, 4), ..., ``C_ON`` (n, 3, 3)); ``t`` [s] is every sample's (lockstep)."""
 
     __slots__ = Measurement.__slots__ + ("n_samples", "layout")
 
@@ -274,14 +272,11 @@ class Controller:
     # -- batch (many samples per call; stationbed/run/lockstep.py) -------------------------
     @classmethod
     def batch_of(cls, members: list["Controller"]) -> "Controller":
-        """One controller that stands for ``members`` (each reset with its own plant) in
-        :meth:`update_batch`: every number, tuple of numbers or numpy array the members set in
-        ``_reset`` (gains, ``J``...) becomes an array with a leading sample axis (a float gain:
-        shape (n,); a (3, 3) ``J``: (n, 3, 3)); strings and flags are the first member's (one
-        that differs between members becomes the list of their values); anything else (objects)
-        is the first member's; the numeric parameters are ``params_batch.<name>``, arrays (n,) (a
-        bandwidth drawn per sample). ``members`` keeps the per-sample controllers (the default
-        :meth:`update_batch` calls them; ``params`` is the first member's)."""
+        """One stand-in for ``members`` (each reset with its own plant) in :meth:`update_batch`:
+        each number, tuple of numbers or array set in ``_reset`` becomes an array with a leading
+        sample axis (a gain (n,), ``J`` (n, 3, 3)); strings and flags are the first member's (a
+        differing one: the list of values); other objects the first's; ``params_batch.<name>``:
+        the numeric parameters (n,); ``members``: the per-sample controllers (docs/design.md)."""
         b = object.__new__(cls)
         b.__dict__.update(members[0].__dict__)
         for name, v in members[0].__dict__.items():
@@ -310,18 +305,12 @@ class Controller:
         return b
 
     def update_batch(self, t: float, meas: BatchMeasurement):
-        """The commands of every sample for the period starting at ``t`` [s].
-
-        Called on :meth:`batch_of`'s controller. Every field of ``meas`` has a leading sample
-        axis; per-sample parameters are the arrays :meth:`batch_of` stacked. Returns an array
-        (n_samples, n_command); set ``self.q_ref_BN`` to an (n_samples, 4) array (or leave None).
-        A row that is not finite fails that sample alone (its reason as a single run's).
-
-        This default calls each member's :meth:`update` with its own :class:`Measurement` (the
-        row of ``meas``): correct for any law, as slow as per tick. A member that raises or
-        returns a bad command gets a NaN row and its reason in ``self.batch_failed[i]``
-        (``(reason, exception)``); the others go on.
-        """
+        """The commands (n_samples, n_command) of every sample for the period starting at ``t``
+        [s], called on :meth:`batch_of`'s stand-in; ``meas`` fields have a leading sample axis;
+        set ``self.q_ref_BN`` (n, 4) or None. A non-finite row fails that sample alone. This
+        default calls each member's :meth:`update` (correct for any law, as slow as per tick); a
+        member that raises or returns a bad command gets a NaN row and ``batch_failed[i] =
+        (reason, exception)``; the others go on."""
         per = self.__dict__.get("_member_meas")
         if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
             per = self._member_meas = (meas.y, [(m.update, m, Measurement(meas.y[i], meas.layout))
