@@ -284,3 +284,31 @@ def test_noise_has_the_stated_sigma():
     dw = w - w_true
     assert_allclose(dw.std(axis=0) / NOISE_RATE_RAD_S, 1.0, atol=0.1)
     assert np.all(np.abs(dw.mean(axis=0)) < 4 * NOISE_RATE_RAD_S / math.sqrt(len(dw)))
+
+
+class LvlhRecorder(Recorder):
+    """Records the LVLH fields of the measurement (deep space: their documented constants)."""
+
+    name = "lvlh_recorder"
+
+    def _reset(self, plant):
+        super()._reset(plant)
+        self.fields = []
+
+    def _update(self, t, meas):
+        self.fields.append(np.concatenate([meas.C_ON.ravel(), meas.q_ON, meas.omega_ON_O, meas.sun_N, meas.r_N]))
+        return super()._update(t, meas)
+
+
+@pytest.mark.parametrize("integrator", [RK4, RK4Generic], ids=["fused_tick", "generic"])
+def test_deep_space_measurement_has_its_documented_lvlh_fields(integrator):
+    """Without an orbit the measurement's LVLH outputs are structural constants (C_ON = E,
+    q_ON = (1, 0, 0, 0), ω_ON_O = 0, sun_N = 0, r_N = 0): casadi stores them sparse, and a buffer
+    reads only nonzeros, so before the dense FastCall a law read C_ON = [1, 1, 1, 0, ...] and q_ON
+    shifted. The values are exact constants: compared exactly."""
+    rec = LvlhRecorder(period=PERIOD_S)
+    simulate(scene_from_dict(loop_scene(**{"simulation.duration": 1.0})), integrator=integrator, controller=rec)
+    expect = np.concatenate([np.eye(3).ravel(), [1.0, 0.0, 0.0, 0.0], np.zeros(9)])
+    assert len(rec.fields) >= 10
+    for f in rec.fields:
+        assert np.array_equal(f, expect)

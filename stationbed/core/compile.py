@@ -207,6 +207,23 @@ def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "")
     return vm  # pragma: no cover - the loop returns
 
 
+def _dense(f: ca.Function) -> ca.Function:
+    """``f`` itself when every input and output is dense, else a wrapper with dense ones.
+
+    A casadi buffer reads and writes only the *nonzeros* of an argument or result: an output
+    with structural zeros (the LVLH outputs of a deep-space measurement, say) fills the first
+    nnz entries of a dense numpy array, every value after the first zero shifted. The wrapper
+    (an MX call of ``f``, same compiled code, densified results) keeps the dense layout every
+    reader of :attr:`FastCall.res` assumes."""
+    dense = all(f.sparsity_in(i).is_dense() for i in range(f.n_in())) and all(
+        f.sparsity_out(j).is_dense() for j in range(f.n_out()))
+    if dense:
+        return f
+    xs = [ca.MX.sym(f.name_in(i), f.size_in(i)) for i in range(f.n_in())]
+    ys = f.call(xs)
+    return ca.Function(f.name() + "_dense", xs, [ca.densify(y) for y in ys], f.name_in(), f.name_out())
+
+
 class FastCall:
     """Zero-copy repeated calls of a casadi Function with dense inputs/outputs.
 
@@ -218,7 +235,7 @@ class FastCall:
         self.f = f
         self.args = [np.zeros(f.numel_in(i)) for i in range(f.n_in())]
         self.res = [np.zeros(f.numel_out(i)) for i in range(f.n_out())]
-        self._buf, self._trigger = f.buffer()
+        self._buf, self._trigger = _dense(f).buffer()
         for i, a in enumerate(self.args):
             self._buf.set_arg(i, memoryview(a))
         for j, r in enumerate(self.res):

@@ -206,10 +206,9 @@ class _Lockstep:
         self.CMD = fc.args[3].reshape(n, -1)
         self.UEXT = fc.args[4].reshape(n, 3)
         self.P = fc.args[5].reshape(n, -1)
-        # an output buffer holds its nonzeros, sample after sample: a sparse output (structural
-        # zeros, e.g. C_ON's off-diagonal in deep space) fills the first nnz values of a sample's
-        # row, as the per-tick loop's buffer of the same function holds them
-        nnz = [f.sparsity_out(j).nnz() for j in range(3)]
+        # FastCall densifies a sparse output (structural zeros, e.g. C_ON's off-diagonal in deep
+        # space): each sample's row holds every entry, as the per-tick loop's buffer does
+        nnz = [f.numel_out(j) for j in range(3)]
         self.X1 = fc.res[0][: n * nnz[0]].reshape(n, nnz[0])
         self.Y1 = fc.res[1][: n * nnz[1]].reshape(n, nnz[1])
         self.ACT = fc.res[2][: n * nnz[2]].reshape(n, nnz[2])
