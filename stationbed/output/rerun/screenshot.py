@@ -15,19 +15,19 @@ says so and exits 1.
 
 from __future__ import annotations
 
-import base64
 import json
 import os
-import shutil
-import socket
-import subprocess
-import tempfile
 import time
-import urllib.parse
-import urllib.request
 from pathlib import Path
 
-__all__ = ["find_browser", "screenshot", "BROWSER_FLAGS", "ScreenshotError"]
+# (base64, socket, subprocess, tempfile, urllib are imported where used: the command line imports
+# this module for its parser, and every import there is start-up time of every command)
+
+__all__ = ["find_browser", "screenshot", "BROWSER_FLAGS", "ScreenshotError", "add_parser", "main", "NO_BROWSER_EXIT"]
+
+#: exit status of ``stationbed screenshot`` when no browser is installed (nothing was made: the
+#: same status as a viewer that is missing in ``stationbed replay``)
+NO_BROWSER_EXIT = 1
 
 #: browsers looked for on PATH, in order (``STATIONBED_CHROMIUM`` overrides)
 BROWSER_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -51,6 +51,8 @@ class ScreenshotError(RuntimeError):
 def find_browser() -> str | None:
     """The Chromium to use: ``$STATIONBED_CHROMIUM``, else the first of :data:`BROWSER_NAMES` on
     PATH; None when there is none."""
+    import shutil
+
     env = os.environ.get("STATIONBED_CHROMIUM")
     if env:
         return env if shutil.which(env) else None
@@ -62,12 +64,16 @@ def find_browser() -> str | None:
 
 
 def _free_port() -> int:
+    import socket
+
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
 
 def _wait_http(url: str, timeout: float, proc) -> None:
+    import urllib.request
+
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         if proc.poll() is not None:
@@ -162,7 +168,12 @@ def screenshot(rrd, out, *, width: int = 1600, height: int = 1000, settle_s: flo
     if browser is None:
         raise ScreenshotError("no Chromium found (install the 'chromium' package: make screenshots does; "
                               "or set STATIONBED_CHROMIUM)")
+    import base64
+    import shutil
+    import subprocess
     import sys
+    import tempfile
+    import urllib.parse
 
     rerun_bin = rerun_bin or os.environ.get("STATIONBED_RERUN") or str(Path(sys.executable).with_name("rerun"))
     out = Path(out)
@@ -254,3 +265,41 @@ def _serve_file(path: Path):
                                             functools.partial(Handler, directory=str(path.resolve().parent)))
     threading.Thread(target=httpd.serve_forever, daemon=True).start()
     return httpd
+
+
+def add_parser(sub) -> None:
+    """``stationbed screenshot REC.rrd --out PNG [--width W --height H]``."""
+    p = sub.add_parser("screenshot", help="render a recording in the rerun web viewer (headless Chromium) to a PNG")
+    p.add_argument("file", type=Path, help="a .rrd recording (stationbed run --rrd, montecarlo.rrd)")
+    p.add_argument("--out", type=Path, required=True, help="the PNG to write")
+    p.add_argument("--width", type=int, default=1600, help="browser window width [px] (default 1600)")
+    p.add_argument("--height", type=int, default=1000, help="browser window height [px] (default 1000)")
+
+
+def main(args) -> int:
+    """Run ``stationbed screenshot``: 0 written, 1 no browser or the viewer failed, 2 bad input."""
+    import sys
+
+    def fail(msg, code):
+        print(f"stationbed: error: {msg}", file=sys.stderr)
+        return code
+
+    f = args.file
+    if not f.is_file():
+        return fail(f"no recording at {f}", 2)
+    with open(f, "rb") as fh:
+        if fh.read(3) != b"RRF":
+            return fail(f"{f} is not a rerun recording (.rrd)", 2)
+    if args.out.suffix.lower() != ".png":
+        return fail(f"--out {args.out}: the screenshot is a PNG (name it .png)", 2)
+    if args.width < 320 or args.height < 240:
+        return fail(f"--width {args.width} --height {args.height}: the viewer needs at least 320 x 240 px", 2)
+    if find_browser() is None:
+        return fail("no Chromium found, so no screenshot: install the 'chromium' package (make screenshots "
+                    "does: apt-get install chromium) or set STATIONBED_CHROMIUM", NO_BROWSER_EXIT)
+    try:
+        out = screenshot(f, args.out, width=args.width, height=args.height)
+    except ScreenshotError as e:
+        return fail(str(e), 1)
+    print(f"wrote {out}")
+    return 0
