@@ -184,7 +184,8 @@ def screenshot(rrd, out, *, width: int = 1600, height: int = 1000, settle_s: flo
     server = subprocess.Popen([rerun_bin, "--web-viewer", "--bind", "127.0.0.1", "--port", str(_free_port()),
                                "--web-viewer-port", str(web), "--renderer", "webgl", rrd_url],
                               stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              env={**os.environ, "BROWSER": "true"})  # serve only: open no browser of its own
+                              env={**os.environ, "BROWSER": "true"},  # serve only: open no browser of its own
+                              start_new_session=True)  # .venv/bin/rerun is a wrapper: stop its whole group
     profile = tempfile.mkdtemp(prefix="stationbed-chromium-")
     chrome = None
     try:
@@ -200,7 +201,7 @@ def screenshot(rrd, out, *, width: int = 1600, height: int = 1000, settle_s: flo
         chrome = subprocess.Popen([browser, *BROWSER_FLAGS, f"--user-data-dir={profile}",
                                    f"--window-size={width},{height}", "about:blank"],
                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                  preexec_fn=fds, pass_fds=(3, 4))  # kept open after fds() made them
+                                  preexec_fn=fds, pass_fds=(3, 4), start_new_session=True)  # kept open after fds() made them
         os.close(to_chrome_r)
         os.close(from_chrome_w)
         pipe = _Pipe(to_chrome_w, from_chrome_r)
@@ -235,16 +236,33 @@ def screenshot(rrd, out, *, width: int = 1600, height: int = 1000, settle_s: flo
             print("\n".join(pipe.console))
         return out
     finally:
-        for p in (chrome, server):
-            if p is not None and p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
+        for p in (chrome, server):  # each in a session of its own: its group is what it started
+            if p is not None:
+                _stop_group(p)
         files.shutdown()
         files.server_close()
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def _stop_group(proc) -> None:
+    """Stop ``proc`` and the processes it started (its own process group): SIGTERM, a wait, then
+    SIGKILL to whatever of the group is left."""
+    import signal
+    import subprocess
+
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+    except ProcessLookupError:
+        return
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        pass
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait()
 
 
 def _serve_file(path: Path):
