@@ -1,6 +1,6 @@
 """Blueprints (the viewer's layout), stored in the recording's file as a blueprint store.
 
-A run (issue 24): the 3-D view above the events log, beside one tab per question (attitude;
+A run (issue 24): the 3-D view above the events log (when the rows have a flag it watches), beside one tab per question (attitude;
 momentum & CMGs; environment torques; arrays; estimation; elastic modes), the most important
 panel of each tab large and the others below it, each panel only when its series are logged and
 each tab only when it has a panel; the viewer opens on the attitude tab. A check: the formulations' rates and attitudes
@@ -13,6 +13,7 @@ import numpy as np
 
 from ...model.orbit import orbit_numeric
 from ...run.trajectory import base_columns
+from .events import event_columns
 from .geometry import StationGeometry
 from .sdk import TIMELINE
 from .series import EULER_LVLH, mode_counts, telemetry_series
@@ -103,7 +104,8 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
                                               ("environment torques", environment), ("arrays", arrays),
                                               ("estimation", estimation), ("elastic modes", elastic), ("other", other))
             if views]
-    layout = rrb.Horizontal(rrb.Vertical(view3d, events, row_shares=[4, 1]),
+    left = rrb.Vertical(view3d, events, row_shares=[4, 1]) if event_columns(list(extra)) else view3d
+    layout = rrb.Horizontal(left,
                             rrb.Tabs(*(_group(rrb, name, views) for name, views in tabs), active_tab=0),
                             column_shares=[1, 1])
     return rrb.Blueprint(
