@@ -104,7 +104,7 @@ def _blueprint(scene, series, replayed: bool, worst_k, t_end: float):
                        rrb.Vertical(*right, row_shares=shares)),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline=TIMELINE, play_state="paused"),
+        rrb.TimePanel(timeline=TIMELINE, playback_speed=max(1.0, t_end / 60.0), play_state="paused"),
     )
 
 
