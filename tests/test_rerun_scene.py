@@ -157,8 +157,10 @@ def _synthetic(scene, traj):
     valid[BLIND:SEE] = 0.0
     cols.update(cmg_saturated=sat, eclipse=ecl, st_valid_st1=valid)
     err = np.outer(np.linspace(0.0, 1.0, n), [1e-3, -2e-3, 5e-4])  # deg
-    for j, a in enumerate("xyz"):
+    for j, a in enumerate("xyz"):  # the columns of issue 20's flight_columns
         cols[f"est_err_{a}_deg"] = err[:, j]
+        cols[f"est_3sigma_{a}_deg"] = np.full(n, 3e-3)
+        cols[f"est_bias_{a}"] = np.zeros(n)
     cols["nees"] = np.full(n, 6.0)
     head = StarTrackerSensor(kind="star_tracker", name="st1", period=0.5, boresight_B=[0.0, -0.6, -0.8],
                              nea_cross=1e-5, nea_about=7e-5, sun_exclusion=0.5)

@@ -138,20 +138,18 @@ def _group(rrb, name, views):
 
 def _estimation(plot, have):
     """The estimation tab (issue 20's columns, when a run has them): the estimation error against
-    its 3 sigma large, NEES and the star-tracker heads' valid flags below; under
-    ``telemetry/estimation/`` or, where the series have no entity of their own, ``telemetry/extra/``."""
-    est = [e for e in have if e.startswith("telemetry/estimation/")]
-    if est:
-        err = sorted(e for e in est if "/err_" in e)
-        views = [plot("estimation error vs 3 sigma [deg]", "telemetry/estimation", err)] if err else []
-        rest = [e for e in sorted(est) if e not in err]
-        return views + [plot(e.rsplit("/", 1)[1], e) for e in rest]
+    its 3 sigma large, NEES, bias and the star-tracker heads' valid flags below; each from
+    ``telemetry/estimation/`` or, where a series has no entity of its own, ``telemetry/extra/``."""
+    est = sorted(e for e in have if e.startswith("telemetry/estimation/"))
     extra = sorted(e for e in have if e.startswith("telemetry/extra/"))
-    err = [e for e in extra if "/est_err_" in e or "/est_3sigma_" in e]
-    heads = [e for e in extra if "/st_valid_" in e]
-    views = [plot("estimation error vs 3 sigma [deg]", "telemetry/extra", err)] if err else []
+    err = [e for e in est if "/err_" in e] + [e for e in extra if "/est_err_" in e or "/est_3sigma_" in e]
+    views = [plot("estimation error vs 3 sigma [deg]", "telemetry", err)] if err else []
+    for e in est:
+        if e not in err:
+            views.append(plot(e.rsplit("/", 1)[1], e))
     if "telemetry/extra/nees" in have:
         views.append(plot("NEES", "telemetry/extra/nees"))
+    heads = [e for e in extra if "/st_valid_" in e]
     if heads:
         views.append(plot("star trackers valid (0/1)", "telemetry/extra", heads))
     return views
