@@ -15,6 +15,7 @@ worst samples (issue 24).
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from ...output.rerun.drawing import StationDrawing
 from ...output.rerun.geometry import StationGeometry
 from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
 from ...run.metrics import METRICS
-from .samples import ID_COLUMNS
+from .samples import ID_COLUMNS, held_warnings
 from .stats import quiet_nan
 
 __all__ = ["write_recording", "worst_table", "WORST_ROWS", "REPLAY_METRIC"]
@@ -68,10 +69,17 @@ def _replay_worst(rec, scene, k: int) -> bool:
         s = sample_scene(scene, k)
     except SceneError:  # refused: nothing to replay
         return False
-    try:
-        tr = simulate(s)
-    except SimulationError as e:  # a failed sample: its rows up to the failure
-        tr = e.trajectory
+    refused = None
+    with held_warnings():  # the study has said this sample's warnings already: not twice
+        try:
+            tr = simulate(s)
+        except SimulationError as e:  # a failed sample: its rows up to the failure
+            tr = e.trajectory
+        except Exception as e:  # a law's reset or the model refused it (the study's row says why)
+            refused = e
+    if refused is not None:
+        logging.getLogger("stationbed").warning(f"montecarlo.rrd: no 3-D replay of sample {k}: {refused}")
+        return False
     if not len(tr):
         return False
     rr = import_rerun()
