@@ -188,11 +188,13 @@ def screenshot(rrd, out, *, width: int = 1600, height: int = 1000, settle_s: flo
                               start_new_session=True)  # .venv/bin/rerun is a wrapper: stop its whole group
     profile = tempfile.mkdtemp(prefix="stationbed-chromium-")
     chrome = None
+    ours = []  # this process's ends of the DevTools pipes
     try:
         _wait_http(f"http://127.0.0.1:{web}/", SERVE_TIMEOUT_S, server)
         url = f"http://127.0.0.1:{web}/?url={urllib.parse.quote(rrd_url, safe='')}&renderer=webgl"
         to_chrome_r, to_chrome_w = os.pipe()
         from_chrome_r, from_chrome_w = os.pipe()
+        ours += [to_chrome_w, from_chrome_r]
 
         def fds():  # the child's fd 3 reads commands, fd 4 writes replies
             os.dup2(to_chrome_r, 3)
@@ -239,6 +241,8 @@ def screenshot(rrd, out, *, width: int = 1600, height: int = 1000, settle_s: flo
         for p in (chrome, server):  # each in a session of its own: its group is what it started
             if p is not None:
                 _stop_group(p)
+        for fd in ours:
+            os.close(fd)
         files.shutdown()
         files.server_close()
         shutil.rmtree(profile, ignore_errors=True)
