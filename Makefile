@@ -8,7 +8,7 @@ OUT    ?= out/power_tower_free_drift
 # pytest workers: both cores of the CI machine
 JOBS   ?= 2
 
-.PHONY: run test test-fast bench bench-smoke check install clean
+.PHONY: run test test-fast bench bench-smoke check install clean screenshots
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -49,6 +49,20 @@ bench: $(STAMP)
 # through tests/test_benchmarks_smoke.py)
 bench-smoke: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b --smoke > /dev/null || { echo "$$b failed"; exit 1; }; done
+
+# the README's rerun images (issue 24): recordings rendered by the web viewer in headless Chromium
+# (stationbed screenshot); installs the Debian package chromium first when no browser is found
+SHOTS ?= out/screenshots
+screenshots: $(STAMP)
+	@command -v chromium >/dev/null || command -v chromium-browser >/dev/null || command -v google-chrome >/dev/null \
+	  || { echo "installing chromium (apt-get)"; apt-get update -qq && apt-get install -y -qq chromium; }
+	$(VENV)/bin/stationbed run scenarios/iss_lvlh_hold.toml --duration 6000 --out $(SHOTS)/hold --rrd $(SHOTS)/hold/recording.rrd
+	$(VENV)/bin/stationbed screenshot $(SHOTS)/hold/recording.rrd --out docs/img/rerun_iss_lvlh_hold.png
+	$(VENV)/bin/stationbed run scenarios/power_tower_free_drift.toml --out $(SHOTS)/tower --rrd $(SHOTS)/tower/recording.rrd
+	$(VENV)/bin/stationbed screenshot $(SHOTS)/tower/recording.rrd --out docs/img/rerun_power_tower.png
+	rm -rf $(SHOTS)/mc
+	$(VENV)/bin/stationbed montecarlo scenarios/iss_lvlh_hold_montecarlo.toml --n 40 --set simulation.duration=2000.0 --out $(SHOTS)/mc --exit-zero -q
+	$(VENV)/bin/stationbed screenshot $(SHOTS)/mc/montecarlo.rrd --out docs/img/rerun_montecarlo.png
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

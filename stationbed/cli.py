@@ -26,6 +26,7 @@ from pathlib import Path
 # a failed or interrupted run leaves its rows under PARTIAL_CSV, never over a finished result
 from .core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, BadOutput, check_outputs, default_out
 from .core.paths import partial_path as _partial
+from .output.rerun import screenshot as screenshot_cli
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -138,6 +139,7 @@ def _parser() -> argparse.ArgumentParser:
                     help=f"address the web viewer listens on (default {WEB_BIND_DEFAULT}: this machine only; "
                          "0.0.0.0 serves every network the machine is on)")
 
+    screenshot_cli.add_parser(sub)  # stationbed screenshot (issue 24)
     st = sub.add_parser("study", help="work-precision and stability studies (CSV + PNG charts)")
     ss = st.add_subparsers(dest="study", required=True, parser_class=_Parser)
     sp = ss.add_parser("precision", help="work-precision diagram of one scene: error vs wall time and RHS evaluations")
@@ -572,6 +574,8 @@ def _main(args) -> int:
 
         if args.cmd in analysis_cli.COMMANDS:
             return analysis_cli.main(args)
+        if args.cmd == "screenshot":
+            return screenshot_cli.main(args)
         return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study,
                 "plan": _cmd_plan, "montecarlo": _cmd_montecarlo}[args.cmd](args)
     except SceneError as e:

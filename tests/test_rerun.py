@@ -584,6 +584,8 @@ def test_hold_row_counts_and_times_match_trajectory(hold_run):
     _, traj, _, data = hold_run
     assert len(traj) == int(HOLD_DURATION_S / 10.0) + 1
     for ent, cols in data.items():
+        if ent in ("events", "world/sun"):  # logged when something changes (issue 24), not per row
+            continue
         assert len(cols["t"]) == len(traj), ent
         assert_allclose(cols["t"], traj.t, rtol=0, atol=TIME_TOL_S, err_msg=ent)
 

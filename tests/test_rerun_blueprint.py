@@ -16,8 +16,10 @@ rerun_chunk = pytest.importorskip("rerun.chunk")
 ROOT = Path(__file__).resolve().parents[1]
 #: ContainerKind of rerun's blueprint (rerun/blueprint/components/container_kind.py)
 TABS, HORIZONTAL, VERTICAL, GRID = 1, 2, 3, 4
-#: The smallest share of the viewer's height a panel may get (was 1/10: ten stacked panels)
-MIN_HEIGHT_SHARE = 1 / 3
+#: The smallest share of the viewer's height a panel may get (was 1/10: ten stacked panels); a
+#: tab's first panel, the one that answers its question, gets at least LARGE_HEIGHT_SHARE
+MIN_HEIGHT_SHARE = 1 / 4
+LARGE_HEIGHT_SHARE = 1 / 2
 
 
 def blueprint_tree(path):
@@ -38,7 +40,8 @@ def blueprint_tree(path):
                                "contents": one("ContainerBlueprint:contents") or [],
                                "name": (one("ContainerBlueprint:display_name") or [None])[0],
                                "active": (one("ContainerBlueprint:active_tab") or [None])[0],
-                               "grid_columns": (one("ContainerBlueprint:grid_columns") or [None])[0]}
+                               "grid_columns": (one("ContainerBlueprint:grid_columns") or [None])[0],
+                               "row_shares": one("ContainerBlueprint:row_shares")}
         if "ViewBlueprint:class_identifier" in cols:
             views[ent] = (one("ViewBlueprint:class_identifier")[0], one("ViewBlueprint:display_name")[0])
         if "ViewportBlueprint:root_container" in cols:
@@ -58,8 +61,9 @@ def height_shares(node, containers, share=1.0, out=None, tabs=None):
     c = containers[node]
     kids = c["contents"]
     if c["kind"] == VERTICAL:
-        for k in kids:
-            height_shares(k, containers, share / len(kids), out, tabs)
+        w = c["row_shares"] or [1.0] * len(kids)
+        for k, wk in zip(kids, w):
+            height_shares(k, containers, share * wk / sum(w), out, tabs)
     elif c["kind"] == GRID:
         rows = math.ceil(len(kids) / (c["grid_columns"] or math.ceil(math.sqrt(len(kids)))))
         for k in kids:
@@ -86,20 +90,29 @@ def test_hold_panels_are_grouped_in_tabs_none_too_short(hold_rrd):
     assert len(series) >= 15  # the closed loop's panels, all of them ...
     assert series <= set(shares)  # ... reachable from the viewport
     assert min(shares[v] for v in series) >= MIN_HEIGHT_SHARE
-    assert {"motion", "control", "CMG", "environment"} <= set(tabs)
+    assert ["attitude", "momentum & CMGs", "environment torques", "arrays"] == tabs[:4]
     (tab_box,) = [c for c in containers.values() if c["kind"] == TABS]
-    assert containers[tab_box["active"]]["name"] == "control"  # a closed loop opens on its control tab
-    names = {views[v][1] for v in containers[tab_box["active"]]["contents"] if v in views}
-    assert "attitude error [deg]" in names and "torque command tau_cmd_B [N m]" in names
+    assert containers[tab_box["active"]]["name"] == "attitude"  # opens on the attitude tab
+    first = {}  # tab name -> its first (large) panel
+    for k in tab_box["contents"]:
+        node = containers[k]["contents"][0]
+        first[containers[k]["name"]] = node
+        assert shares[node] >= LARGE_HEIGHT_SHARE
+    assert views[first["attitude"]][1] == "attitude error [deg]"
+    assert views[first["momentum & CMGs"]][1] == "CMG momentum h_B [N m s]"
+    assert views[first["environment torques"]][1].startswith("environment torques")
+    assert views[first["arrays"]][1] == "array angles [rad]"
+    logs = [v for v, (cls, _) in views.items() if cls == "TextLog"]
+    assert len(logs) == 1 and logs[0] in shares  # the events, always in view beside the tabs
 
 
-def test_open_loop_opens_on_its_motion_tab(tmp_path):
+def test_open_loop_opens_on_its_attitude_tab(tmp_path):
     scene = load_scene(ROOT / "scenarios" / "iss_lvlh_gravity_gradient.toml")
     path = write_recording(simulate(scene, duration=20.0), scene, tmp_path / "ol.rrd")
     root, containers, views = blueprint_tree(path)
     tabs = []
     shares = height_shares(root, containers, tabs=tabs)
-    assert tabs == ["motion"]
+    assert tabs == ["attitude", "momentum & CMGs", "arrays"]
     (tab_box,) = [c for c in containers.values() if c["kind"] == TABS]
-    assert containers[tab_box["active"]]["name"] == "motion"
+    assert containers[tab_box["active"]]["name"] == "attitude"
     assert {v for v, (cls, _) in views.items() if cls == "TimeSeries"} <= set(shares)

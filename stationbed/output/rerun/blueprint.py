@@ -1,8 +1,9 @@
 """Blueprints (the viewer's layout), stored in the recording's file as a blueprint store.
 
-A run: the 3-D view beside one tab per group of time-series panels (motion; control; CMG;
-environment and array tracking; elastic modes), each panel only when its series are logged and
-each tab only when it has a panel; a closed-loop run opens on its control tab. A check: the formulations' rates and attitudes
+A run (issue 24): the 3-D view above the events log (when the rows have a flag it watches), beside one tab per question (attitude;
+momentum & CMGs; environment torques; arrays; estimation; elastic modes), the most important
+panel of each tab large and the others below it, each panel only when its series are logged and
+each tab only when it has a panel; the viewer opens on the attitude tab. A check: the formulations' rates and attitudes
 overlaid, beside their pairwise differences and the check's tolerances.
 """
 
@@ -12,6 +13,7 @@ import numpy as np
 
 from ...model.orbit import orbit_numeric
 from ...run.trajectory import base_columns
+from .events import event_columns
 from .geometry import StationGeometry
 from .sdk import TIMELINE
 from .series import EULER_LVLH, mode_counts, telemetry_series
@@ -61,53 +63,50 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
             return rrb.TimeSeriesView(name=name, origin=origin, axis_x=whole_run)
         return rrb.TimeSeriesView(name=name, origin=origin, contents=[f"/{c}" for c in contents], axis_x=whole_run)
 
-    state = [plot("omega_BN_B [rad/s]", "telemetry/omega_BN_B")]
-    if scene.orbit is not None:
-        state.append(plot("attitude vs LVLH, 3-2-1 [deg]", EULER_LVLH))
-    state.append(plot("H_O_N [N m s]", "telemetry/H_O_N"))
-    state.append(plot("T [J]", "telemetry/T"))
-    if scene.appendage:  # the angles only, not the tracking errors below them
-        state.append(plot("array angles [rad]", "telemetry/arrays", [f"telemetry/arrays/{n}" for n in scene.appendage_names]))
-    if unknown:
-        state.append(plot("extra", "telemetry/extra"))
-
     def present(pairs):
-        return [plot(name, origin) for name, origin in pairs if origin in have]
+        return [plot(name, origin, contents) for name, origin, contents in pairs
+                if (contents is None and origin in have) or (contents is not None and contents)]
 
-    control = present((("attitude error [deg]", "telemetry/control/att_err_deg"),
-                       ("attitude error per axis (rotation vector, B) [deg]", "telemetry/control/att_err_axes_deg"),
-                       ("torque command tau_cmd_B [N m]", "telemetry/control/tau_cmd_B")))
-    cmg = present((("CMG momentum h_B [N m s]", "telemetry/cmg/h_B"),
-                   ("gimbal angles [rad]", "telemetry/cmg/gimbal/angle"),
-                   ("gimbal rates [rad/s]", "telemetry/cmg/gimbal/rate")))
-    flags = [e for e in ("telemetry/cmg/singularity", "telemetry/cmg/saturated") if e in have]
-    if flags:
-        cmg.append(plot("CMG singularity measure, saturated (0/1)", "telemetry/cmg", flags))
-    environment = []
-    env = [e for e in ("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B") if e in have]
-    if env:
-        environment.append(plot("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment", env))
-    if "telemetry/environment/eclipse" in have:
-        environment.append(plot("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse"))
-    track = [f"telemetry/arrays/{n}/track_err_deg" for n in scene.appendage_names]
-    track = [e for e in track if e in have]
-    if track:
-        environment.append(plot("array sun-tracking error [deg]", "telemetry/arrays", track))
+    def some(ents):
+        return [e for e in ents if e in have]
 
-    elastic = []
-    for name, what in (("modal coordinates eta (beam modes: tip deflection [m])", "eta"), ("modal rates etadot", "etadot")):
-        ents = [f"telemetry/modes/{n}/{what}" for n in counts if f"telemetry/modes/{n}/{what}" in have]
-        if ents:
-            elastic.append(plot(name, "telemetry/modes", ents))
-    if "telemetry/modes/U_strain" in have:
-        elastic.append(plot("strain energy U_strain [J]", "telemetry/modes/U_strain"))
+    orbit = scene.orbit is not None
+    names = scene.appendage_names
+    attitude = present((("attitude error [deg]", "telemetry/control/att_err_deg", None),
+                        ("attitude vs LVLH, 3-2-1 [deg]", EULER_LVLH, [EULER_LVLH] if orbit else []),
+                        ("omega_BN_B [rad/s]", "telemetry/omega_BN_B", None),
+                        ("attitude error per axis (rotation vector, B) [deg]", "telemetry/control/att_err_axes_deg", None)))
+    momentum = present((("CMG momentum h_B [N m s]", "telemetry/cmg/h_B", None),
+                        ("H_O_N [N m s]", "telemetry/H_O_N", None),
+                        ("torque command tau_cmd_B [N m]", "telemetry/control/tau_cmd_B", None),
+                        ("gimbal angles [rad]", "telemetry/cmg/gimbal/angle", None),
+                        ("gimbal rates [rad/s]", "telemetry/cmg/gimbal/rate", None),
+                        ("CMG singularity measure, saturated (0/1)", "telemetry/cmg",
+                         some(("telemetry/cmg/singularity", "telemetry/cmg/saturated"))),
+                        ("T [J]", "telemetry/T", None)))
+    environment = present((("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment",
+                            some(("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B"))),
+                           ("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse", None)))
+    arrays = present((("array angles [rad]", "telemetry/arrays",
+                       some(f"telemetry/arrays/{n}" for n in names)),
+                      ("array sun-tracking error [deg]", "telemetry/arrays",
+                       some(f"telemetry/arrays/{n}/track_err_deg" for n in names))))
+    estimation = _estimation(plot, have)
+    elastic = present(tuple((name, "telemetry/modes", some(f"telemetry/modes/{n}/{what}" for n in counts))
+                            for name, what in (("modal coordinates eta (beam modes: tip deflection [m])", "eta"),
+                                               ("modal rates etadot", "etadot")))
+                      + (("strain energy U_strain [J]", "telemetry/modes/U_strain", None),))
+    other = [plot("extra", "telemetry/extra")] if unknown and not estimation else []
 
     view3d = rrb.Spatial3DView(name=f"{scene.name} (N axes, CM at origin)", origin="world", eye_controls=eye)
-    tabs = [(name, views) for name, views in (("motion", state), ("control", control), ("CMG", cmg),
-                                              ("environment", environment), ("elastic modes", elastic)) if views]
-    names = [name for name, _ in tabs]
-    active = names.index("control") if control else 0  # (rerun 0.41 matches a str active_tab to views only)
-    layout = rrb.Horizontal(view3d, rrb.Tabs(*(_group(rrb, name, views) for name, views in tabs), active_tab=active),
+    events = rrb.TextLogView(name="events (saturation, eclipse, star-tracker dropouts, modes)", origin="events")
+    tabs = [(name, views) for name, views in (("attitude", attitude), ("momentum & CMGs", momentum),
+                                              ("environment torques", environment), ("arrays", arrays),
+                                              ("estimation", estimation), ("elastic modes", elastic), ("other", other))
+            if views]
+    left = rrb.Vertical(view3d, events, row_shares=[4, 1]) if event_columns(list(extra)) else view3d
+    layout = rrb.Horizontal(left,
+                            rrb.Tabs(*(_group(rrb, name, views) for name, views in tabs), active_tab=0),
                             column_shares=[1, 1])
     return rrb.Blueprint(
         layout,
@@ -117,16 +116,43 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
     )
 
 
-#: panels in one tab stacked in a column; more are laid out in a grid of two columns, so no panel
-#: is shorter than a quarter of the viewer's height (issue 19: 17 stacked panels were ~60 px each)
-MAX_STACKED = 3
+#: the panels under a tab's first (large) panel: in one row up to this many, else a grid of
+#: SMALL_GRID_COLUMNS columns; the large panel gets LARGE_SHARE of the tab's height over one
+#: row, half over two, so no panel is shorter than a quarter of the viewer's height (issue 19:
+#: 17 stacked panels were ~60 px each)
+SMALL_IN_ROW = 2
+SMALL_GRID_COLUMNS = 3
+LARGE_SHARE = 0.6
 
 
 def _group(rrb, name, views):
-    """One tab: its panels stacked (up to :data:`MAX_STACKED`), else in a two-column grid."""
-    if len(views) <= MAX_STACKED:
-        return rrb.Vertical(*views, name=name)
-    return rrb.Grid(*views, grid_columns=2, name=name)
+    """One tab: its most important panel (the first) large, the others below it."""
+    if len(views) == 1:
+        return rrb.Vertical(views[0], name=name)
+    big, small = views[0], views[1:]
+    if len(small) <= SMALL_IN_ROW:
+        return rrb.Vertical(big, rrb.Horizontal(*small), row_shares=[LARGE_SHARE, 1 - LARGE_SHARE], name=name)
+    return rrb.Vertical(big, rrb.Grid(*small, grid_columns=min(SMALL_GRID_COLUMNS, len(small) - len(small) // 2)),
+                        row_shares=[0.5, 0.5], name=name)
+
+
+def _estimation(plot, have):
+    """The estimation tab (issue 20's columns, when a run has them): the estimation error against
+    its 3 sigma large, NEES, bias and the star-tracker heads' valid flags below; each from
+    ``telemetry/estimation/`` or, where a series has no entity of its own, ``telemetry/extra/``."""
+    est = sorted(e for e in have if e.startswith("telemetry/estimation/"))
+    extra = sorted(e for e in have if e.startswith("telemetry/extra/"))
+    err = [e for e in est if "/err_" in e] + [e for e in extra if "/est_err_" in e or "/est_3sigma_" in e]
+    views = [plot("estimation error vs 3 sigma [deg]", "telemetry", err)] if err else []
+    for e in est:
+        if e not in err:
+            views.append(plot(e.rsplit("/", 1)[1], e))
+    if "telemetry/extra/nees" in have:
+        views.append(plot("NEES", "telemetry/extra/nees"))
+    heads = [e for e in extra if "/st_valid_" in e]
+    if heads:
+        views.append(plot("star trackers valid (0/1)", "telemetry/extra", heads))
+    return views
 
 
 def check_blueprint(names, pairs):

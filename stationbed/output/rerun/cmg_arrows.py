@@ -121,12 +121,13 @@ class CmgArrows:
                     origins=self.origins,
                     colors=[RGB_CMG_UNITS[i % len(RGB_CMG_UNITS)] for i in range(self.n_units)],
                     labels=[f"CMG {i + 1}" for i in range(self.n_units)],
+                    show_labels=False,  # on hover: four labels at one point pile up
                 ),
                 static=True,
             )
         rec.log(
             "world/station/cmg/h_B",
-            rr.Arrows3D.from_fields(origins=[self.center], colors=[RGB_CMG_TOTAL], labels=["h (CMG total)"]),
+            rr.Arrows3D.from_fields(origins=[self.center], colors=[RGB_CMG_TOTAL], labels=["h (CMG total)"], show_labels=False),
             static=True,
         )
 

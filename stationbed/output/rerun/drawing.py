@@ -20,9 +20,11 @@ import numpy as np
 from ...run.trajectory import Trajectory
 from .cmg_arrows import CmgArrows
 from .elastic import ElasticLines
+from .events import Events, SensorParts
 from .frames import R_N_over_a, sun_vector_N, xyzw, xyzw_C_BP, xyzw_C_NO, xyzw_of_dcm
 from .geometry import StationGeometry
-from .sdk import import_rerun
+from .sdk import TIMELINE, import_rerun
+from .surfaces import drawn_surfaces
 
 __all__ = ["StationDrawing"]
 
@@ -40,7 +42,9 @@ ORBIT_RING_POINTS = 181
 RGB_X, RGB_Y, RGB_Z = (230, 60, 60), (60, 190, 60), (70, 110, 240)
 RGB_BODY, RGB_TRUSS, RGB_ARRAY = (170, 170, 180), (120, 120, 130), (40, 70, 170)
 RGB_EARTH, RGB_H, RGB_ORBIT = (40, 150, 220), (250, 170, 20), (120, 160, 200)
-RGB_SUN = (255, 215, 0)
+RGB_SUN, RGB_SUN_SHADOW, RGB_RAM = (255, 215, 0), (90, 90, 100), (255, 120, 200)
+RGB_SURFACE_BODY, RGB_SURFACE_ARRAY = (190, 190, 200), (50, 90, 200)
+RAM_ARROW_FRACTION = 0.9
 
 
 class StationDrawing:
@@ -65,6 +69,9 @@ class StationDrawing:
         self.geom = StationGeometry(scene)
         self.cmg = CmgArrows.of(scene, columns, self.geom)
         self.elastic = ElasticLines.of(scene, columns, self.geom.extent)
+        self.surfaces = drawn_surfaces(scene, self.geom)
+        self.events = Events(columns)
+        self.sensors = SensorParts.of(scene, columns, self.geom.extent)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
 
     def log_static(self, rec) -> None:
@@ -78,21 +85,31 @@ class StationDrawing:
         rr = import_rerun()
         g, scene = self.geom, self.scene
         L = g.extent
-        rec.log("world/station/body", _boxes([(g.body_center, g.body_half, g.body_C)], RGB_BODY), static=True)
-        if g.truss is not None:
-            boxes = [(g.truss[0], g.truss[1], np.eye(3))] + ([g.mast] if g.mast is not None else [])
-            rec.log("world/station/truss", _boxes(boxes, RGB_TRUSS), static=True)
+        on = {s.on for s in self.surfaces}
+        for s in self.surfaces:  # the scene's [[surface]] tables, at their sizes and places
+            ent = "world/station/surfaces" if s.on == "body" else f"world/station/{s.on}/surfaces"
+            color = RGB_SURFACE_BODY if s.on == "body" else RGB_SURFACE_ARRAY
+            rec.log(f"{ent}/{s.name}", _boxes([(s.center, s.half_sizes, s.C)], color, labels=[s.name]), static=True)
+        if "body" not in on:  # no body surface: the equivalent box of the mass properties
+            rec.log("world/station/body", _boxes([(g.body_center, g.body_half, g.body_C)], RGB_BODY), static=True)
+            if g.truss is not None:
+                boxes = [(g.truss[0], g.truss[1], np.eye(3))] + ([g.mast] if g.mast is not None else [])
+                rec.log("world/station/truss", _boxes(boxes, RGB_TRUSS), static=True)
         rec.log(
             "world/station/axes_B",
             rr.Arrows3D(
                 vectors=AXES_B_FRACTION * L * np.eye(3),
                 colors=[RGB_X, RGB_Y, RGB_Z],
                 labels=["x_B", "y_B", "z_B"],
+                show_labels=False,
             ),
             static=True,
         )
         for name, _, half, C_PA in g.arrays:  # centred on the entity's origin, the array's mass centre
-            rec.log(f"world/station/{name}", _boxes([(None, half, C_PA)], RGB_ARRAY, labels=[name]), static=True)
+            if name not in on:  # an array without a surface: its equivalent box
+                rec.log(f"world/station/{name}", _boxes([(None, half, C_PA)], RGB_ARRAY, labels=[name]), static=True)
+        if self.sensors is not None:
+            self.sensors.log_static(rec)
         if self.elastic is not None:
             self.elastic.log_static(rec)
         if scene.orbit is not None:
@@ -102,13 +119,20 @@ class StationDrawing:
                     vectors=AXES_O_FRACTION * L * np.eye(3),
                     colors=[RGB_X, RGB_Y, RGB_Z],
                     labels=["x_O (velocity)", "y_O (-orbit normal)", "z_O (nadir)"],
+                    show_labels=False,
                     radii=0.004 * L,
                 ),
                 static=True,
             )
             rec.log(
                 "world/lvlh/earth",
-                rr.Arrows3D(vectors=[[0.0, 0.0, EARTH_ARROW_FRACTION * L]], colors=[RGB_EARTH], labels=["Earth"]),
+                rr.Arrows3D(vectors=[[0.0, 0.0, EARTH_ARROW_FRACTION * L]], colors=[RGB_EARTH], labels=["Earth"],
+                            radii=0.006 * L),
+                static=True,
+            )
+            rec.log(  # ram: the flight direction (x_O of a circular orbit), where the drag comes from
+                "world/lvlh/ram",
+                rr.Arrows3D(vectors=[[RAM_ARROW_FRACTION * L, 0.0, 0.0]], colors=[RGB_RAM], labels=["ram"], radii=0.006 * L),
                 static=True,
             )
             t_ring = np.linspace(0.0, 2.0 * math.pi / scene.orbit.mean_motion, ORBIT_RING_POINTS)  # one revolution
@@ -121,11 +145,13 @@ class StationDrawing:
         if scene.sun is not None:
             rec.log(
                 "world/sun",
-                rr.Arrows3D(vectors=[SUN_ARROW_FRACTION * L * sun_vector_N(scene)], colors=[RGB_SUN], labels=["sun"],
-                            radii=0.006 * L),
+                rr.Arrows3D(vectors=[SUN_ARROW_FRACTION * L * sun_vector_N(scene)], labels=["sun"], radii=0.006 * L),
                 static=True,
             )
-        rec.log("world/H_O_N", rr.Arrows3D.from_fields(colors=[RGB_H], labels=["H_O_N"]), static=True)
+            rec.set_time(TIMELINE, duration=0.0)  # the colour on the timeline: it greys out in the Earth's shadow
+            rec.log("world/sun", rr.Arrows3D.from_fields(colors=[RGB_SUN]))  # (static would shadow the changes)
+            rec.reset_time()
+        rec.log("world/H_O_N", rr.Arrows3D.from_fields(colors=[RGB_H], labels=["H_O_N"], show_labels=False), static=True)
         if self.cmg is not None:
             self.cmg.log_static(rec)
 
@@ -163,6 +189,13 @@ class StationDrawing:
             send("world/orbit/station", rr.Points3D.columns(positions=ORBIT_RING_FRACTION * g.extent * R_N_over_a(o, rows.t)))
         if self.cmg is not None:
             self.cmg.send(send, rows)
+        if self.sensors is not None:
+            self.sensors.send(rec, send, rows)
+        for t, _, text in self.events.send(rec, rows):  # the sun's arrow greys out in the Earth's shadow
+            if scene.sun is not None and text in ("eclipse entry", "eclipse exit"):
+                rec.set_time(TIMELINE, duration=t)
+                rec.log("world/sun", rr.Arrows3D.from_fields(colors=[RGB_SUN_SHADOW if text == "eclipse entry" else RGB_SUN]))
+                rec.reset_time()
 
 
 def _boxes(boxes, color, labels=None):
@@ -182,7 +215,7 @@ def _boxes(boxes, color, labels=None):
     rerun.Boxes3D
     """
     rr = import_rerun()
-    kw = {} if labels is None else {"labels": labels}
+    kw = {} if labels is None else {"labels": labels, "show_labels": False}  # names on hover, not piled up
     if boxes[0][0] is not None:
         kw["centers"] = [b[0] for b in boxes]
     return rr.Boxes3D(half_sizes=[b[1] for b in boxes], quaternions=[xyzw_of_dcm(b[2]) for b in boxes], colors=[color],

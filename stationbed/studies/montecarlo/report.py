@@ -10,12 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
 from ...run.metrics import METRICS
 from . import charts
 from .dispersions import TOLD
 from .samples import ID_COLUMNS
-from .stats import PERCENTILES, metric_stats, percentile_needs, quiet_nan, requirement_verdicts
+from .stats import PERCENTILES, metric_stats, percentile_needs, requirement_verdicts
 
 __all__ = ["finish", "summarise", "write_recording", "ENVELOPE_PERCENTILES", "recorded_percentiles", "table_text"]
 
@@ -101,32 +100,11 @@ def table_text(summary: dict) -> str:
 
 
 def write_recording(path: Path, scene, t, env, df) -> Path:
-    """``montecarlo/envelope/<series>`` (percentile lines over the samples) and
-    ``montecarlo/worst/<series>`` (the sample with the largest attitude error) on ``sim_time``."""
-    rr = import_rerun()
-    rec = rr.RecordingStream(APPLICATION_ID)
-    rec.save(path)
-    try:
-        rec.send_recording_name(f"{scene.name} montecarlo")
-        idx = df["index"].to_numpy()
-        for j, series in enumerate(("att_err_deg", "h_fraction")):
-            y = env[:, :, j]
-            if np.all(np.isnan(y)):
-                continue
-            shown = recorded_percentiles(len(y))
-            with quiet_nan():
-                lines = np.stack([np.nanpercentile(y, p, axis=0) for p in shown], axis=1)
-                worst = int(np.nanargmax(np.nanmax(y, axis=1)))
-            ent = f"montecarlo/envelope/{series}"
-            rec.log(ent, rr.SeriesLines(names=[f"p{p:g}" for p in shown]), static=True)
-            rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=rr.Scalars.columns(scalars=lines))
-            ent = f"montecarlo/worst/{series}"
-            rec.log(ent, rr.SeriesLines(names=[f"sample {int(idx[worst])}"]), static=True)
-            rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t)], columns=rr.Scalars.columns(scalars=y[worst]))
-        rec.flush()
-    finally:
-        rec.disconnect()
-    return path
+    """``montecarlo.rrd``: envelope, worst samples' table and the worst sample's 3-D replay
+    (:mod:`.recording`)."""
+    from .recording import write_recording as write
+
+    return write(path, scene, t, env, df, percentiles=recorded_percentiles)
 
 
 def finish(scene, result, *, wall_s: float, workers: int, chunk: int, draw_charts: bool) -> None:
