@@ -221,3 +221,22 @@ def test_moon_exclusion_flown():
     rows = a.t >= 1.0  # the heads' first samples are at t = 1 s
     assert (a.data[rows, a.columns.index("st_valid_at_moon")] == 0).all()
     assert (a.data[rows, a.columns.index("st_valid_away")] == 1).all()
+
+
+def test_the_filter_is_tuned_from_knowledge_the_sensors_fly_the_truth():
+    """The MEKF is flight software: its tuning comes from what ``[knowledge]`` says the gyro is
+    (a Monte Carlo pins the nominal tables there), while the gyro flown keeps its true noise.
+    The expected numbers are independent builds: the filter of a scene whose *truth* has the
+    believed σ_v, and the sensors of the flown scene."""
+    from stationbed.loop.flight import Flight
+    from stationbed.loop.suite import Suite
+
+    believed = 3e-5  # rad/s^0.5, the flown gyro has 1e-5
+    flown = scene_from_dict({**sphere(), "knowledge": {"values": {"sensor.g.sigma_v": believed}}})
+    as_believed = scene_from_dict(sphere()).replace({"sensor.g.sigma_v": believed})
+    layout = {"q_BN": (0, 4), "omega_BN_B": (4, 3)}
+    fl = Flight(flown, PERIOD_S, layout, seed=0)
+    mekf, gyro = fl.suite.PARAMS.slice("mekf"), fl.suite.PARAMS.slice("g")
+    assert np.array_equal(fl.params[mekf], Suite(as_believed, PERIOD_S).params[mekf])
+    assert not np.array_equal(fl.params[mekf], Suite(flown, PERIOD_S).params[mekf])  # the truth's tuning differs
+    assert np.array_equal(fl.params[gyro], Suite(flown, PERIOD_S).params[gyro])  # the sensor flies the truth

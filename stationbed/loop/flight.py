@@ -58,10 +58,13 @@ class Flight:
 
     def __init__(self, sensing, tick: float, layout: dict, seed: int, moon_R_N=None):
         self.suite = Suite(sensing, tick)
+        tuned = _filter_params(sensing, tick) if self.suite.mekf is not None else None
         #: the Moon's geocentric position [m] (N), held over the run as the Sun is (or None: no
         #: Moon, ``moon_N`` zero); the tick's parameters are the suite's, then this
         self.has_moon = moon_R_N is not None
         self.params = np.concatenate([self.suite.params, np.zeros(3) if moon_R_N is None else np.asarray(moon_R_N, float)])
+        if tuned is not None:  # the filter is flight software: tuned from what it believes
+            self.params[self.suite.PARAMS.slice("mekf")] = tuned
         self.mekf = self.suite.mekf
         self.layout = dict(layout)
         self.ny = max(o + k for o, k in self.layout.values())
@@ -240,3 +243,15 @@ def _quat_mult(p, q):
     pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
     return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
 
+
+def _filter_params(sensing, tick: float) -> np.ndarray | None:
+    """The MEKF's parameters as flight software tunes them: from the sensor tables of the
+    *knowledge* scene (:func:`stationbed.scene.knowledge_scene`: nominal in a Monte Carlo unless a
+    dispersion is ``known``), not from the sensors being flown. None for a bare
+    :class:`~stationbed.scene.Sensing` (no knowledge to apply)."""
+    if not hasattr(sensing, "replace"):  # a Sensing, not a Scene
+        return None
+    from ..scene import knowledge_scene  # noqa: PLC0415 - the scene layer, below this one
+
+    known = knowledge_scene(sensing)
+    return Suite(known, tick).mekf.params
