@@ -3,6 +3,8 @@ the floors below which a run cannot honour a tolerance or a time."""
 
 from __future__ import annotations
 
+import math
+
 from typing import Annotated
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
@@ -59,6 +61,15 @@ class FieldError(ValueError):
         super().__init__(f"{field}: {reason}")
         self.field = field
         self.reason = reason
+
+
+def unit_quaternion(q: list[float]) -> list[float]:
+    """``q`` normalised (a scene quaternion: rounding in the file is forgiven); ValueError when its
+    norm is off 1 by more than :data:`QUAT_NORM_TOL`."""
+    n = math.sqrt(sum(x * x for x in q))
+    if abs(n - 1.0) > QUAT_NORM_TOL:
+        raise ValueError(f"quaternion norm is {n:.9g}, not 1 (tolerance {QUAT_NORM_TOL:g})")
+    return [x / n for x in q]
 
 
 def _at_least(floor: float, unit: str, why: str) -> AfterValidator:

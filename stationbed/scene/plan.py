@@ -9,12 +9,11 @@ relative to ``frame`` (LVLH or inertial), as ``[initial] frame`` states them.
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from .base import QUAT_NORM_TOL, FieldError, Strict, TimeS, Vec3
+from .base import FieldError, Strict, TimeS, Vec3, unit_quaternion
 
 __all__ = ["PlanSpec", "PLAN_OBJECTIVES"]
 
@@ -59,10 +58,7 @@ class PlanSpec(Strict):
     @field_validator("q_end")
     @classmethod
     def _unit(cls, q):
-        n = math.sqrt(sum(x * x for x in q))
-        if abs(n - 1.0) > QUAT_NORM_TOL:
-            raise ValueError(f"quaternion norm is {n:.9g}, not 1 (tolerance {QUAT_NORM_TOL:g})")
-        return [x / n for x in q]
+        return unit_quaternion(q)
 
     @model_validator(mode="after")
     def _weights(self):

@@ -12,7 +12,7 @@ from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.beam import beam_inertia_derivative, beam_mode, check_participation
 from ..core.massprops import InvalidMassProperties, check_inertia
-from .base import QUAT_NORM_TOL, TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3
+from .base import TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3, unit_quaternion
 from .environment import (  # noqa: F401  (re-exported: the scene's tables are all here)
     SURFACE_FRACTIONS_DEFAULT, AeroTorque, Atmosphere, ConstantTorque, Elements, HarmonicTorque, Orbit, SrpTorque, Sun,
     Surface, Torque,
@@ -130,10 +130,7 @@ class Initial(Strict):
     @field_validator("q_BN")
     @classmethod
     def _unit(cls, q):
-        n = math.sqrt(sum(x * x for x in q))
-        if abs(n - 1.0) > QUAT_NORM_TOL:
-            raise ValueError(f"quaternion norm is {n:.9g}, not 1 (tolerance {QUAT_NORM_TOL:g})")
-        return [x / n for x in q]
+        return unit_quaternion(q)
 
 
 class Body(Strict):
