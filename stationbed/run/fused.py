@@ -31,7 +31,7 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
 from .rates import carry_width, environment_rate, held_chunk
-from .segments import held_torque_from
+from .segments import held_torque_from, tick_pieces
 from .system import environment_split as rates_split
 
 __all__ = ["fused_ok", "run_fused"]
@@ -267,19 +267,8 @@ def run_fused(loop, K: int) -> None:
             loop.rows.hold(t, x, *loop._held_row(flag | tail_flag))  # streamed in batches
             if k == K:
                 break
-            # ticks k .. k + n_act - 1 in one call (tick k's actuation is recomputed inside: same)
-            last_len = duration - (k + n_act - 1) * period  # the final period may be shorter
-            if last_len < period * (1 - 1e-12):
-                # a short last period: run the full ticks fused, the last one on its own
-                n_full = n_act - 1
-            else:
-                n_full = n_act
-            # one call per stretch of held torque: an edge on the tick grid splits the chunk, and
-            # each stretch holds the torque of the stretch that starts there (not the one before)
-            cuts = [k] + [e for e in edges if k < e < k + n_full] + [k + n_full]
-            pieces = [(a, b, period) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
-            if n_full < n_act:  # the short final period
-                pieces.append((k + n_full, k + n_act, last_len))
+            # ticks k .. k + n_act - 1 in one call per piece (tick k's actuation is recomputed inside: same)
+            pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
                 c0[0] = 0.0

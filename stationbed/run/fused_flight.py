@@ -25,7 +25,7 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
-from .segments import held_torque_from
+from .segments import held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
 
@@ -170,12 +170,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             if k == K:
                 loop.th, loop.om_prev, loop.t_prev = th, om, tp
                 break
-            last_len = duration - (k + n_act - 1) * period
-            n_full = n_act - 1 if last_len < period * (1 - 1e-12) else n_act
-            cuts = [k] + [e for e in edges if k < e < k + n_full] + [k + n_full]
-            pieces = [(a, b, period) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
-            if n_full < n_act:
-                pieces.append((k + n_full, k + n_act, last_len))
+            pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
                 c0[0] = 0.0

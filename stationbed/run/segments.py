@@ -19,6 +19,7 @@ __all__ = [
     "smooth_cuts",
     "held_torque",
     "held_torque_from",
+    "tick_pieces",
     "segment_input",
 ]
 
@@ -122,3 +123,17 @@ def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.n
     u[0:3] = held_torque(scene, t_mid)
     if model.has_steps:
         u[-1] = t_mid
+
+
+def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> list[tuple[int, int, float]]:
+    """The compiled calls that advance ticks ``k .. k + n_act - 1`` of a fused loop: ``(a, b, h)``
+    runs ticks a..b-1 of length h [s]. One call per stretch of held torque (an edge tick in
+    ``edges`` on the grid splits the chunk, each stretch holding the torque of the stretch that
+    starts there, :func:`held_torque_from`), and a final period shorter than ``period`` on its own."""
+    last_len = duration - (k + n_act - 1) * period  # the final period may be shorter
+    n_full = n_act - 1 if last_len < period * (1 - 1e-12) else n_act
+    cuts = [k] + [e for e in edges if k < e < k + n_full] + [k + n_full]
+    pieces = [(a, b, period) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    if n_full < n_act:  # the short final period
+        pieces.append((k + n_full, k + n_act, last_len))
+    return pieces
