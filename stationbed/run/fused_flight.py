@@ -93,12 +93,14 @@ def _build(loop, n: int, symbolic_params) -> dict:
     yt = meas(tt, xc, pc)
     th1, xs1, seen, _ = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
     x_new, fl_sat, _ = core(tt, xc, seen, cpc, uc, pc, hh)
-    on = i < n_act
-    c_new = ca.vertcat(i + 1, ca.if_else(on, x_new, xc),
-                       cnt + ca.if_else(on, ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), MX.zeros(2)),
-                       ca.if_else(on, tt, tp), ca.if_else(on, th1, th), ca.if_else(on, yt[o_om : o_om + 3], om),
-                       ca.if_else(on, xs1, xs))
-    step = ca.Function("ffl_step", [c, par, w], [c_new])
+    c_new = ca.vertcat(i + 1, x_new, cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), tt, th1,
+                       yt[o_om : o_om + 3], xs1)
+    # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
+    # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
+    tick = ca.Function("ffl_tick", [c, par, w], [c_new])
+    hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])
+    step = ca.Function.if_else("ffl_step", tick, hold)
+    step = ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
     acc = step.mapaccum("ffl_acc", n)
     c0, parm, wm = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nw, n)
     traj = acc(c0, ca.repmat(parm, 1, n), wm)
