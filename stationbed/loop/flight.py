@@ -39,7 +39,12 @@ from ..core.compile import FastCall, compile_functions
 from .sensor import TRUTH, noise_rng
 from .suite import Suite, SuiteNoise
 
-__all__ = ["Flight", "INIT_STREAM", "flight_columns"]
+__all__ = ["Flight", "INIT_STREAM", "READS", "SEEN", "flight_columns"]
+
+#: the fields of the executor's measurement the tick reads (the truth row is made of them)
+READS = ("q_BN", "omega_BN_B", "r_N", "sun_N")
+#: with an estimator, the fields of the law's measurement replaced by the suite's outputs
+SEEN = {"q_BN": "q_BN_hat", "omega_BN_B": "omega_hat_B"}
 
 #: first entry of the spawn key of the initial-estimate draw (sensors use 1: SENSOR_STREAM)
 INIT_STREAM = 2
@@ -116,7 +121,7 @@ class Flight:
         if self.mekf is not None:
             parts = []
             cut = 0
-            repl = {"q_BN": S.OUTPUTS.get(ys, "q_BN_hat"), "omega_BN_B": S.OUTPUTS.get(ys, "omega_hat_B")}
+            repl = {name: S.OUTPUTS.get(ys, out) for name, out in SEEN.items()}
             for name, (o, n) in sorted(self.layout.items(), key=lambda kv: kv[1][0]):
                 if name in repl:
                     if o > cut:

@@ -25,6 +25,7 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
+from ..loop.flight import READS, SEEN
 from .segments import held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
@@ -45,9 +46,20 @@ def _build(loop, n: int, symbolic_params) -> dict:
     ng = loop.ng
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
-    y = ca.SX.sym("y", flight.ny)
+    # the law's measurement is computed inside the core, as the truth-fed fused loop does (its
+    # sines and cosines shared with the RK4's first stage); with an estimator the flight's
+    # estimate replaces its SEEN fields, given as the core's input ``est``
+    y = sx["meas"](t, x, p)
+    offs = flight.layout
+    est_fields = list(SEEN) if flight.mekf is not None else []
+    est = ca.SX.sym("est", sum(offs[f][1] for f in est_fields))
+    y_seen, j = y, 0
+    for f in est_fields:
+        o, m = offs[f]
+        y_seen = ca.vertcat(y_seen[:o], est[j : j + m], y_seen[o + m :])
+        j += m
     try:
-        cmd, q_ref = ctrl.symbolic(t, y, cp)
+        cmd, q_ref = ctrl.symbolic(t, y_seen, cp)
         cmd = ca.vertcat(cmd)
     except Exception as e:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
@@ -67,18 +79,27 @@ def _build(loop, n: int, symbolic_params) -> dict:
     if model.has_steps:
         u = ca.vertcat(u, t + h / 2)
     x1 = system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p)
-    core = sx_function("ff_core", [t, x, y, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref)])
-    meas = sx["meas"]
+    core = sx_function("ff_core", [t, x, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref)])
+    # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
+    y_truth = ca.SX.zeros(flight.ny)
+    for f in READS:
+        o, m = offs[f]
+        y_truth[o : o + m] = y[o : o + m]
+    meas = sx_function("ffl_truth", [t, x, p], [y_truth])
     fl = flight.function()
-    o_om = flight.layout["omega_BN_B"][0]
+    o_om = offs["omega_BN_B"][0]
+
+    def seen(ys):
+        return ca.vertcat(*[S.OUTPUTS.get(ys, SEEN[f]) for f in est_fields]) if est_fields else ca.MX(0, 1)
+
     MX = ca.MX
     # the row tick: its command, actuation, reference and the flight's state and outputs after it
     ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
     ki, tpi, thi, omi = MX.sym("k"), MX.sym("t_prev"), MX.sym("th", 3), MX.sym("om", 3)
     xsi, wi, psi = MX.sym("xs", ns), MX.sym("w", nw), MX.sym("ps", nps)
     yi = meas(ti, xi, pi_)
-    _, xs1, seen, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
-    _, _, info_out = core(ti, xi, seen, cpi, ui, pi_, 0.0)
+    _, xs1, _, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
+    _, _, info_out = core(ti, xi, seen(ys), cpi, ui, pi_, 0.0)
     info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
     # the chunk's step
     nc = 1 + nx + 2 + 1 + 3 + 3 + ns
@@ -91,8 +112,8 @@ def _build(loop, n: int, symbolic_params) -> dict:
     pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
     tt = t0 + i * hh
     yt = meas(tt, xc, pc)
-    th1, xs1, seen, _ = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
-    x_new, fl_sat, _ = core(tt, xc, seen, cpc, uc, pc, hh)
+    th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+    x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
     c_new = ca.vertcat(i + 1, x_new, cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), tt, th1,
                        yt[o_om : o_om + 3], xs1)
     # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
