@@ -67,6 +67,7 @@ def fused_ok(loop) -> bool:
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
         and not (getattr(loop, "flight", None) is not None and loop.noisy)
+        and getattr(loop, "replan", None) is None  # a failure detected mid-run: per tick (run/detection.py)
     )
 
 

@@ -50,7 +50,8 @@ def _tick_ok(loop) -> bool:
     integ = loop.integ
     name = "tick_rates" if loop.ctrl.command == "gimbal_rates" else "tick_torque"
     # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs per tick
-    return (getattr(loop, "flight", None) is None and integ.fusable and name in integ.funcs
+    return (getattr(loop, "flight", None) is None and getattr(loop, "replan", None) is None  # (run/detection.py)
+            and integ.fusable and name in integ.funcs
             and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1)
 
 
