@@ -20,7 +20,8 @@ conventions (DESIGN §3):
   ``z = 2 vec(δq_r)/w(δq_r)``, ``δq_r = (q̂ ⊗ q_SB)⁻¹ ⊗ q̃_SN`` (S components), ``z ≈ C_SB δα + ν``,
   so ``H = [C_SB, 0]``, ``R = diag(r_cross², r_cross², r_about²)``;
   ``K = P Hᵀ (H P Hᵀ + R)⁻¹``, ``Δx̂ = K z``, ``q̂ ← q̂ ⊗ δq(δα̂)``, ``β̂ ← β̂ + Δβ̂``,
-  ``P ← (E - KH) P (E - KH)ᵀ + K R Kᵀ`` (Joseph form), each valid fresh head in turn.
+  ``P ← P − K (P Hᵀ)ᵀ`` (the Joseph form's value for this optimal gain, exactly symmetric: see
+  :func:`update`), each valid fresh head in turn.
 * A head with latency L: the sample of L ago is compared with the estimate carried back by the
   filter's own turn since then (a delay line of turns per head in the state, :attr:`Mekf.state`);
   see :func:`update` for H and the correlated noise of the turn.
@@ -127,7 +128,7 @@ def attitude_error(q_ref, q):
     return 2 * d[1:4] / d[0]
 
 
-def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0):
+def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0, joseph=False):
     """One star-tracker head: ``(q̂, β̂, P)`` after its measurement when ``gate`` is 1 (fresh and
     valid), unchanged when 0. ``r`` = (r_cross, r_cross, r_about) [rad].
 
@@ -137,7 +138,13 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     ``ε = −Δβ L − ∫η_v``: ``H = C_SB C_Dᵀ [E, L E]``, and the gyro noise over the latency,
     ``q_latency = σ_v² L + σ_u² L³/3`` [rad²], is measurement noise correlated with the state
     error (the same noise moved the attitude since the sample): ``Cov(Δx, v) = M = −[q_L Cᵀ; 0]``,
-    ``K = (P Hᵀ + M)(H P Hᵀ + H M + Mᵀ Hᵀ + R)⁻¹`` and the Joseph form with its cross terms."""
+    ``K = (P Hᵀ + M)(H P Hᵀ + H M + Mᵀ Hᵀ + R)⁻¹``.
+
+    Covariance: with this (optimal) gain the Joseph form with its cross terms,
+    ``(E − KH) P (E − KH)ᵀ + K R Kᵀ − (E − KH) M Kᵀ − K Mᵀ (E − KH)ᵀ``, equals
+    ``P − K (P Hᵀ + M)ᵀ`` (expand it with ``K S = P Hᵀ + M``); the filter uses the short form, its
+    upper triangle mirrored (exactly symmetric, a fifth of the operations). ``joseph=True`` gives
+    the Joseph form (the test's reference: the two agree to round-off)."""
     if D is None:
         q_s, C = q, dcm(q_SB)
         H = ca.horzcat(C, ca.SX.zeros(3, 3))
@@ -156,10 +163,17 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     dq = ca.vertcat(1.0, dx[0:3] / 2)
     q_new = quat_mult(q, dq / ca.norm_2(dq))
     q_new = q_new / ca.norm_2(q_new)
-    IKH = ca.SX.eye(6) - ca.mtimes(K, H)
-    cross = ca.mtimes([IKH, M, K.T])  # Joseph form with correlated noise (zero without latency)
-    P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T]) - cross - cross.T
-    P_new = 0.5 * (P_new + P_new.T)
+    if joseph:
+        IKH = ca.SX.eye(6) - ca.mtimes(K, H)
+        cross = ca.mtimes([IKH, M, K.T])  # the correlated noise's terms (zero without latency)
+        P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T]) - cross - cross.T
+        P_new = 0.5 * (P_new + P_new.T)
+    else:
+        rows = [[None] * 6 for _ in range(6)]
+        for i in range(6):
+            for j in range(i, 6):
+                rows[i][j] = rows[j][i] = P[i, j] - ca.dot(K[i, :].T, PHt[j, :].T)
+        P_new = ca.vertcat(*[ca.horzcat(*row) for row in rows])
     on = gate > 0.5
     return ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
 
