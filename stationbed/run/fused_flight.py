@@ -25,6 +25,7 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from .controller import ControllerError, one_line
+from ..loop import Layout
 from ..loop.flight import READS, SEEN
 from .segments import held_torque_from, tick_pieces
 
@@ -102,11 +103,10 @@ def _build(loop, n: int, symbolic_params) -> dict:
     _, _, info_out = core(ti, xi, seen(ys), cpi, ui, pi_, 0.0)
     info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
     # the chunk's step
-    nc = 1 + nx + 2 + 1 + 3 + 3 + ns
+    C = carry_layout(nx, ns)
     npar_all = 4 + ncp + 3 + npar + nps
-    c, par, w = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("w", nw)
-    i, xc, cnt = c[0], c[1 : 1 + nx], c[1 + nx : 3 + nx]
-    tp, th, om, xs = c[3 + nx], c[4 + nx : 7 + nx], c[7 + nx : 10 + nx], c[10 + nx :]
+    c, par, w = MX.sym("c", C.size), MX.sym("par", npar_all), MX.sym("w", nw)
+    i, xc, cnt, tp, th, om, xs = (C.get(c, f) for f in C.names)
     t0, hh, n_act, k0 = par[0], par[1], par[2], par[3]
     cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
     pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
@@ -114,21 +114,28 @@ def _build(loop, n: int, symbolic_params) -> dict:
     yt = meas(tt, xc, pc)
     th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
     x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
-    c_new = ca.vertcat(i + 1, x_new, cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), tt, th1,
-                       yt[o_om : o_om + 3], xs1)
+    c_new = C.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
+                   theta_B=th1, omega_prev=yt[o_om : o_om + 3], xs=xs1)
     # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
     # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
     tick = ca.Function("ffl_tick", [c, par, w], [c_new])
-    hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])
+    hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])  # (i first: C's order)
     step = ca.Function.if_else("ffl_step", tick, hold)
     step = ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
     acc = step.mapaccum("ffl_acc", n)
-    c0, parm, wm = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nw, n)
+    c0, parm, wm = MX.sym("c0", C.size), MX.sym("par", npar_all), MX.sym("noise", nw, n)
     traj = acc(c0, ca.repmat(parm, 1, n), wm)
     chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"])}
+
+
+def carry_layout(nx: int, ns: int) -> Layout:
+    """The chunk's carry: tick index in the chunk, state, counts of rate-limited and saturated
+    ticks, and the flight's memory (previous tick's time and true rate, ``theta_B``, the suite
+    state)."""
+    return Layout(i=1, x=nx, counts=2, t_prev=1, theta_B=3, omega_prev=3, xs=ns)
 
 
 def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
@@ -145,6 +152,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     info, chunk = fns["info"], fns["chunk"]
     nx = loop.system.formulation.nx
     S = flight.suite
+    C = carry_layout(nx, S.STATE.size)
     p, period, duration = loop.p, loop.period, loop.duration
     u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
     ia = info.args
@@ -196,20 +204,15 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
-                c0[0] = 0.0
-                c0[1 : 1 + nx] = x
-                c0[1 + nx : 3 + nx] = 0.0
-                c0[3 + nx] = tp
-                c0[4 + nx : 7 + nx], c0[7 + nx : 10 + nx], c0[10 + nx :] = th, om, xs
+                c0[:] = C.pack(i=0.0, x=x, counts=(0.0, 0.0), t_prev=tp, theta_B=th, omega_prev=om, xs=xs)
                 par[0], par[1], par[2], par[3] = a * period, h, b - a, a
                 par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
                 noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
-                x = res[1 : 1 + nx].copy()
-                counts += res[1 + nx : 3 + nx]
-                tp = float(res[3 + nx])
-                th, om, xs = res[4 + nx : 7 + nx].copy(), res[7 + nx : 10 + nx].copy(), res[10 + nx :].copy()
+                x, th, om, xs = (C.get(res, f).copy() for f in ("x", "theta_B", "omega_prev", "xs"))
+                counts += C.get(res, "counts")
+                tp = float(C.get(res, "t_prev")[0])
             ticks += n_act
             loop.n_rate_limited += int(counts[0])
             loop.n_momentum_saturated += int(counts[1])
