@@ -187,7 +187,7 @@ class Flight:
         vals = []
         if self.mekf is not None:
             if self._report is None:
-                self._report = FastCall(self.mekf.report_function())
+                self._report = FastCall.of(self.mekf.report_function())  # shared by the runs of a process
             r = self._report
             r.args[0][:] = xs[sl["mekf"]]
             r.args[1][:] = q_BN

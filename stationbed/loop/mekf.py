@@ -178,6 +178,9 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     return ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
 
 
+_REPORTS: dict = {}
+
+
 class Mekf:
     """The MEKF of one gyro and one or more star-tracker heads, tuned from their tables.
 
@@ -302,12 +305,15 @@ class Mekf:
         δα [rad] (B, ``q = q̂ ⊗ δq(δα)``), three standard deviations of the six error states
         (rad, rad/s) and ``Δxᵀ P⁻¹ Δx``."""
         if self._report is None:
+            self._report = _REPORTS.get(self.state)
+        if self._report is None:  # one per state layout (a Monte Carlo's runs share it)
             xf, q, b = self.state.symbol("xf"), ca.SX.sym("q_BN", 4), ca.SX.sym("bias_B", 3)
             X = self.state.split(xf)
             dx = ca.vertcat(attitude_error(X["q_BN"], q), b - X["bias_B"])
             nees = ca.mtimes(dx.T, ca.solve(X["P"], dx))
             self._report = ca.Function("mekf_report", [xf, q, b], [dx[0:3], 3 * ca.sqrt(ca.diag(X["P"])), nees],
                                        ["xf", "q_BN", "bias_B"], ["err_B", "sigma3", "nees"])
+            _REPORTS[self.state] = self._report
         return self._report
 
     # -- numbers --------------------------------------------------------------------------
