@@ -86,3 +86,20 @@ def test_sample_alone_gives_its_row_bit_for_bit(serial, tmp_path):
     assert set(got) >= set(EST_METRICS)
     for name, v in got.items():
         assert v == serial.iloc[k][name], name
+
+
+def test_the_filter_is_tuned_from_the_knowledge_scene_of_each_sample():
+    """The flight's fast path (the knowledge's sensor changes applied to the tables alone) gives
+    the parameters of a filter built from the whole knowledge scene, for samples whose truth
+    differs from the tables (NEA factor, biases) and for the nominal scene."""
+    from stationbed.loop import Suite
+    from stationbed.loop.flight import Flight
+    from stationbed.scene import knowledge_scene
+
+    for s, dispersed in ((sample_scene(study(), 0), True), (sample_scene(study(), 2), True),
+                         (load_scene(MC_SCENE), False)):
+        f = Flight(s, s.controller.period, {"q_BN": (0, 4)}, seed=0)
+        want = Suite(knowledge_scene(s), s.controller.period).mekf.params
+        np.testing.assert_array_equal(f.params[f.suite.PARAMS.slice("mekf")], want)
+        # the truth's tables (the heads' drawn noise) would have tuned it otherwise
+        assert np.array_equal(f.suite.mekf.params, want) is not dispersed

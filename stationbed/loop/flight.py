@@ -63,7 +63,7 @@ class Flight:
 
     def __init__(self, sensing, tick: float, layout: dict, seed: int, moon_R_N=None):
         self.suite = Suite(sensing, tick)
-        tuned = _filter_params(sensing, tick) if self.suite.mekf is not None else None
+        tuned = _filter_params(sensing, tick, self.suite) if self.suite.mekf is not None else None
         #: the Moon's geocentric position [m] (N), held over the run as the Sun is (or None: no
         #: Moon, ``moon_N`` zero); the tick's parameters are the suite's, then this
         self.has_moon = moon_R_N is not None
@@ -249,14 +249,33 @@ def _quat_mult(p, q):
     return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
 
 
-def _filter_params(sensing, tick: float) -> np.ndarray | None:
+def _filter_params(sensing, tick: float, suite: Suite | None = None) -> np.ndarray | None:
     """The MEKF's parameters as flight software tunes them: from the sensor tables of the
     *knowledge* scene (:func:`stationbed.scene.knowledge_scene`: nominal in a Monte Carlo unless a
-    dispersion is ``known``), not from the sensors being flown. None for a bare
-    :class:`~stationbed.scene.Sensing` (no knowledge to apply)."""
+    dispersion is ``known``), not from the sensors being flown (``suite``: the truth's, reused
+    when the knowledge changes no sensor table). None for a bare
+    :class:`~stationbed.scene.Sensing` (no knowledge to apply).
+
+    Only the knowledge's changes under ``sensor.<name>.<key>`` and ``estimator.<key>`` reach the
+    filter: they are applied to the sensing tables alone (validated as a :class:`Sensing`), which
+    is the knowledge scene's sensing without validating a whole scene per run; any other form of
+    change to them (a whole table, an index) takes the knowledge scene itself."""
     if not hasattr(sensing, "replace"):  # a Sensing, not a Scene
         return None
-    from ..scene import knowledge_scene  # noqa: PLC0415 - the scene layer, below this one
+    from ..scene import knowledge_scene, sensing_from_dict  # noqa: PLC0415 - the scene layer, below this one
+    from ..scene.knowledge import knowledge_changes  # noqa: PLC0415
 
-    known = knowledge_scene(sensing)
-    return Suite(known, tick).mekf.params
+    changes = {k: v for k, v in knowledge_changes(sensing).items() if k.split(".")[0] in ("sensor", "estimator")}
+    data = {"sensor": [e.model_dump(exclude_unset=True) for e in sensing.sensor],
+            "estimator": sensing.estimator.model_dump(exclude_unset=True)}
+    by_name = {e["name"]: e for e in data["sensor"]}
+    for path, value in changes.items():
+        parts = path.split(".")
+        table = by_name.get(parts[1]) if parts[0] == "sensor" and len(parts) == 3 else \
+            data["estimator"] if parts[0] == "estimator" and len(parts) == 2 else None
+        if table is None or "[" in path:
+            return Suite(knowledge_scene(sensing), tick).mekf.params
+        table[parts[-1]] = value
+    if not changes:  # the knowledge's tables are the truth's
+        return (suite or Suite(sensing, tick)).mekf.params
+    return Suite(sensing_from_dict(data, source="[knowledge]"), tick).mekf.params
