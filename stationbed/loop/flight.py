@@ -133,7 +133,7 @@ class Flight:
             seen = ca.vertcat(*parts)
         self._f = ca.Function("flight_tick", [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
                               ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
-                              ["theta", "xs_next", "y_seen", "ys"])
+                              ["theta", "xs_next", "y_seen", "ys"], _INLINE)
         _TICKS[self.key] = self._f
         return self._f
 
@@ -209,6 +209,9 @@ def flight_columns(scene) -> list[str]:
     return cols + [f"st_valid_{s.name}" for s in getattr(scene, "sensor", []) if s.kind == "star_tracker"]
 
 
+#: the tick, the suite and the filter are inlined where they are called (an MX call copies its
+#: outputs into the caller's work vector: ~90 numbers of suite state per layer and tick)
+_INLINE = {"always_inline": True}
 #: ticks of noise drawn at a time (any size gives the same numbers: SuiteNoise draws in tick order)
 NOISE_BLOCK = 4096
 _TICKS: dict = {}
@@ -218,7 +221,8 @@ _COMPILED: dict = {}
 class TickNoise:
     """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
     draws nothing: a zero row), asked in tick order (each tick once); drawn
-    :data:`NOISE_BLOCK` ticks at a time."""
+    :data:`NOISE_BLOCK` ticks at a time. The rows returned are read-only to the caller (a view
+    of the block when they lie inside it)."""
 
     def __init__(self, noise: SuiteNoise):
         self.noise = noise
@@ -231,6 +235,9 @@ class TickNoise:
         if k0 != self.next:
             raise ValueError(f"sensor noise asked for tick {k0}, the next tick is {self.next}")
         self.next = k0 + n
+        i = k0 - self.k0
+        if k0 >= 1 and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
+            return self.buf[i : i + n]
         out = np.zeros((n, self.width))
         first = max(k0, 1)
         while first < k0 + n:

@@ -288,7 +288,9 @@ class Mekf:
             heads = ca.Function(f"{name}_heads", [xm, zm, pm], [x1])
             x1 = ca.Function.if_else(f"{name}_step", heads, prop)(sum(news[1:], news[0]) > 0.5, xm, zm, pm)
             omega_hat = self.inputs.get(zm, "omega_B") - S.get(x1, "bias_B")
-            self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"])
+            # inlined where it is called (the suite's tick): no copy of the state at the call
+            self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"],
+                                  {"always_inline": True})
         return self._f
 
     def compiled(self) -> ca.Function:

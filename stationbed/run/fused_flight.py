@@ -152,7 +152,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     info, chunk = fns["info"], fns["chunk"]
     nx = loop.system.formulation.nx
     S = flight.suite
-    C = carry_layout(nx, S.STATE.size)
+    C = carry_layout(nx, S.STATE.size)  # its slices, taken once (the loop below runs per output row)
+    ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in C.names)
     p, period, duration = loop.p, loop.period, loop.duration
     u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
     ia = info.args
@@ -204,15 +205,16 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
-                c0[:] = C.pack(i=0.0, x=x, counts=(0.0, 0.0), t_prev=tp, theta_B=th, omega_prev=om, xs=xs)
+                c0[ci], c0[cc] = 0.0, 0.0
+                c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = x, tp, th, om, xs
                 par[0], par[1], par[2], par[3] = a * period, h, b - a, a
                 par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
                 noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
-                x, th, om, xs = (C.get(res, f).copy() for f in ("x", "theta_B", "omega_prev", "xs"))
-                counts += C.get(res, "counts")
-                tp = float(C.get(res, "t_prev")[0])
+                x, th, om, xs = res[cx].copy(), res[cth].copy(), res[com].copy(), res[cxs].copy()
+                counts += res[cc]
+                tp = float(res[ct][0])
             ticks += n_act
             loop.n_rate_limited += int(counts[0])
             loop.n_momentum_saturated += int(counts[1])
