@@ -171,8 +171,10 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     par[7 + ncp + p.size :] = flight.params
     nu_cmg, ncmd = loop.nu_cmg, loop.n_cmd
     nw = S.NOISE.size
-    x = np.array(loop.x, dtype=float)
-    xs, th, om, tp = loop.xs.copy(), loop.th.copy(), loop.om_prev.copy(), loop.t_prev
+    # the carry between chunk calls lives in the chunk's own input (c0): one copy per call
+    c0[:] = 0.0
+    c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = loop.x, loop.t_prev, loop.th, loop.om_prev, loop.xs
+    x = c0[cx].copy()
     tail_flag = ticks = 0
     loop.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
@@ -183,8 +185,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             draws = loop.tick_noise.rows(k, n_act)
             ia[0][0] = t
             ia[1][:] = x
-            ia[5][0], ia[6][0] = k, tp
-            ia[7][:], ia[8][:], ia[9][:] = th, om, xs
+            ia[5][0], ia[6][0] = k, c0[ct][0]
+            ia[7][:], ia[8][:], ia[9][:] = c0[cth], c0[com], c0[cxs]
             ia[10][:] = draws[0]
             info()
             r = info.res[0]
@@ -200,21 +202,20 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             loop.x, loop.xs, loop.ys = x, info.res[1].copy(), info.res[2].copy()
             loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
             if k == K:
-                loop.th, loop.om_prev, loop.t_prev = th, om, tp
+                loop.th, loop.om_prev, loop.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
                 break
             pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
                 c0[ci], c0[cc] = 0.0, 0.0
-                c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = x, tp, th, om, xs
                 par[0], par[1], par[2], par[3] = a * period, h, b - a, a
                 par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
                 noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
-                x, th, om, xs = res[cx].copy(), res[cth].copy(), res[com].copy(), res[cxs].copy()
                 counts += res[cc]
-                tp = float(res[ct][0])
+                c0[:] = res
+            x = c0[cx].copy()
             ticks += n_act
             loop.n_rate_limited += int(counts[0])
             loop.n_momentum_saturated += int(counts[1])
