@@ -36,6 +36,8 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
+from .mekf import Mekf
+from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
 from .suite import Suite, SuiteNoise
 
@@ -281,8 +283,13 @@ def _filter_params(sensing, tick: float, suite: Suite | None = None) -> np.ndarr
         table = by_name.get(parts[1]) if parts[0] == "sensor" and len(parts) == 3 else \
             data["estimator"] if parts[0] == "estimator" and len(parts) == 2 else None
         if table is None or "[" in path:
-            return Suite(knowledge_scene(sensing), tick).mekf.params
+            return _mekf_params(knowledge_scene(sensing))
         table[parts[-1]] = value
     if not changes:  # the knowledge's tables are the truth's
         return (suite or Suite(sensing, tick)).mekf.params
-    return Suite(sensing_from_dict(data, source="[knowledge]"), tick).mekf.params
+    return _mekf_params(sensing_from_dict(data, source="[knowledge]"))
+
+
+def _mekf_params(sensing) -> np.ndarray:
+    """The parameters of the filter a sensing's tables describe (its sensors built, no suite)."""
+    return Mekf.from_sensors(sensing.estimator, build_sensors(sensing.sensor)).params
