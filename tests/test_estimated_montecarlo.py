@@ -71,6 +71,7 @@ def test_same_table_in_one_chunk(serial):
     pd.testing.assert_frame_equal(montecarlo(study(), chunk=N).df, serial)
 
 
+@pytest.mark.slow  # two Dask worker processes start (~10 s)
 def test_same_table_on_two_workers(serial):
     pd.testing.assert_frame_equal(montecarlo(study(), workers=2, chunk=1).df, serial)
 
