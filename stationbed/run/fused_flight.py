@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
-from .controller import ControllerError, one_line
+from . import law_state
 from .segments import held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
@@ -44,16 +44,11 @@ def _build(loop, n: int, symbolic_params) -> dict:
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
-    x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    nls = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
+    xa, p, cp, u_ext = ca.SX.sym("x", nx + nls), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    x, s = xa[:nx], xa[nx:]
     y = ca.SX.sym("y", flight.ny)
-    try:
-        cmd, q_ref = ctrl.symbolic(t, y, cp)
-        cmd = ca.vertcat(cmd)
-    except Exception as e:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
-    if cmd.numel() != loop.n_cmd:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, "
-                              f"expected {loop.n_cmd} ({ctrl.command})")
+    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y, cp, s, loop.n_cmd)
     if model.cmg is None:
         act, u, sat = ca.SX.zeros(0, 1), u_ext + cmd, ca.SX.zeros(2)
     else:
@@ -66,21 +61,22 @@ def _build(loop, n: int, symbolic_params) -> dict:
         sat = ca.vertcat(act[kk + 1], act[kk + 2])
     if model.has_steps:
         u = ca.vertcat(u, t + h / 2)
-    x1 = system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p)
-    core = sx_function("ff_core", [t, x, y, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref)])
+    x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
+    core = sx_function("ff_core", [t, xa, y, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref, s1)])
     meas = sx["meas"]
     fl = flight.function()
     o_om = flight.layout["omega_BN_B"][0]
     MX = ca.MX
     # the row tick: its command, actuation, reference and the flight's state and outputs after it
-    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
+    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx + nls), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
     ki, tpi, thi, omi = MX.sym("k"), MX.sym("t_prev"), MX.sym("th", 3), MX.sym("om", 3)
     xsi, wi, psi = MX.sym("xs", ns), MX.sym("w", nw), MX.sym("ps", nps)
-    yi = meas(ti, xi, pi_)
+    yi = meas(ti, xi[:nx] if nls else xi, pi_)
     _, xs1, seen, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
     _, _, info_out = core(ti, xi, seen, cpi, ui, pi_, 0.0)
     info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
     # the chunk's step
+    nx0, nx = nx, nx + nls  # the chunk carries the law's state with x
     nc = 1 + nx + 2 + 1 + 3 + 3 + ns
     npar_all = 4 + ncp + 3 + npar + nps
     c, par, w = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("w", nw)
@@ -90,7 +86,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
     pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
     tt = t0 + i * hh
-    yt = meas(tt, xc, pc)
+    yt = meas(tt, xc[:nx0] if nls else xc, pc)
     th1, xs1, seen, _ = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
     x_new, fl_sat, _ = core(tt, xc, seen, cpc, uc, pc, hh)
     on = i < n_act
@@ -105,7 +101,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
     funcs = compile_functions([info, chunk], tag)
-    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"])}
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls}
 
 
 def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
@@ -120,7 +116,9 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
         _CHUNKS[key]["build_s"] = time.perf_counter() - t_build
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
-    nx = loop.system.formulation.nx
+    nx0 = loop.system.formulation.nx
+    s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
+    nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
     p, period, duration = loop.p, loop.period, loop.duration
     u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
@@ -139,7 +137,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     par[7 + ncp + p.size :] = flight.params
     nu_cmg, ncmd = loop.nu_cmg, loop.n_cmd
     nw = S.NOISE.size
-    x = np.array(loop.x, dtype=float)
+    x, s_end = np.concatenate([loop.x, s_law]), None
     xs, th, om, tp = loop.xs.copy(), loop.th.copy(), loop.om_prev.copy(), loop.t_prev
     tail_flag = ticks = 0
     loop.used_fused = True
@@ -164,11 +162,12 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
             if ncmd == 3:
                 loop.last_cmd = tuple(cmd)
-            ctrl.q_ref_BN = tuple(r[-4:])
-            loop.x, loop.xs, loop.ys = x, info.res[1].copy(), info.res[2].copy()
-            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            ctrl.q_ref_BN = tuple(r[r.size - ls - 4 : r.size - ls])
+            loop.x, loop.xs, loop.ys = x[:nx0], info.res[1].copy(), info.res[2].copy()
+            loop.rows.hold(t, loop.x, *loop._held_row(lim | sat | tail_flag))
             if k == K:
                 loop.th, loop.om_prev, loop.t_prev = th, om, tp
+                s_end = r[r.size - ls :].copy()  # the law's update at the last tick
                 break
             pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
@@ -196,7 +195,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
     finally:
         loop.ticks = ticks
-        loop.x = x
+        loop.x = x[:nx0]
+        law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
         loop.rows.flush()
