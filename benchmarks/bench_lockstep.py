@@ -13,17 +13,24 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
 3. ``example_hold`` batch, vectorised ``update_batch``;
 4. ``example_hold`` batch with the default looping ``update_batch``;
 5. ``example_hold`` per tick (``simulate`` per sample: what the Monte Carlo did before issue 22);
-6. ``momentum_manager`` batch (vectorised; it has no symbolic form), and its per-sample set-up
-   alone (the law's design), which every executor pays.
+6. ``momentum_manager`` fused (its ``symbolic`` form with the law's state carried,
+   stationbed/run/law_state.py) and batch (vectorised ``update_batch``, ``fused=False``);
+7. each law's per-sample set-up alone (``prepare``, rows, loop, the law's design:
+   ``momentum_manager`` designs an LQR and its loop margins per sample), which every executor pays
+   once per sample, whatever its duration.
 
-Each row is extrapolated to 1000 one-orbit samples on 2 workers (CPU per sample x orbit/duration
-x 500), and said so: a measured ratio on a loaded machine, not a wall.
+Each row is extrapolated to one-orbit samples as ``set-up + (row - set-up) x orbit/duration``
+(the set-up does not grow with the duration), and to 1000 of them on 2 workers (x 500), and said
+so: a measured ratio on a loaded machine, not a wall. ``--repeats R`` interleaves R rounds of
+every row and reports the medians.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -46,7 +53,7 @@ ORBIT_S = 5553.6  # s, the Monte Carlo scene's duration
 
 def scenes(law: str, n: int, duration: float):
     params = {} if law == "momentum_manager" else None
-    s = bench_scene("pd" if law == "pd" else "example_hold")
+    s = bench_scene("pd" if law == "pd" else "example_hold")  # (noise off: same scenes as bench_montecarlo)
     ch = {"simulation.duration": duration, "montecarlo.settle_s": duration / 3, "montecarlo.n": max(n, 2)}
     if law != "pd":
         ch["controller.name"] = law
@@ -85,6 +92,7 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, default=50)
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--repeats", type=int, default=1, help="interleaved rounds of every row (medians)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
     _smoke.announce(args.smoke, "4 samples of 2 s")
@@ -101,9 +109,9 @@ def main(argv=None) -> int:
         simulate(s.replace({"simulation.duration": 1.0}), keep=False)
     run_lockstep([s.replace({"simulation.duration": 0.2}) for s in eh])
 
-    def batch(sc):
-        res = run_lockstep(sc)
-        assert all(k == "batch" and not isinstance(r, BaseException) for k, r in res), res[:1]
+    def batch(sc, kind="batch", fused=True):
+        res = run_lockstep(sc, fused=fused)
+        assert all(k == kind and not isinstance(r, BaseException) for k, r in res), res[:1]
 
     def looping_batch():
         orig = cl.build_controller
@@ -113,35 +121,62 @@ def main(argv=None) -> int:
         finally:
             cl.build_controller = orig
 
+    def setup(sc):  # a sample's set-up as every executor makes it (prepare, rows, loop, law design)
+        return lambda: cpu(lambda: [_Sample(s, None, False, False) for s in sc])[0]
+
     timings = [
-        ("floor_compiled_tick", lambda: floor_row(eh, dur)),
-        ("pd_fused", lambda: cpu(lambda: [simulate(s, keep=False) for s in pd])[0]),
-        ("example_hold_batch_vectorised", lambda: cpu(lambda: batch(eh))[0]),
-        ("example_hold_batch_default_loop", lambda: cpu(looping_batch)[0]),
-        ("example_hold_per_tick", lambda: cpu(lambda: [simulate(s, keep=False) for s in eh])[0]),
-        ("momentum_manager_batch", lambda: cpu(lambda: batch(mm))[0]),
-        # its per-sample set-up alone (the law's design: linearisation, LQR, loop margins), which
-        # a single run pays as well
-        ("momentum_manager_setup_only", lambda: cpu(lambda: [_Sample(s, None, False, False) for s in mm])[0]),
+        ("floor_compiled_tick", lambda: floor_row(eh, dur), None),
+        ("pd_fused", lambda: cpu(lambda: batch(pd, "fused"))[0], "pd"),
+        ("example_hold_batch_vectorised", lambda: cpu(lambda: batch(eh))[0], "eh"),
+        ("example_hold_batch_default_loop", lambda: cpu(looping_batch)[0], "eh"),
+        ("example_hold_per_tick", lambda: cpu(lambda: [simulate(s, keep=False) for s in eh])[0], "eh"),
+        ("momentum_manager_fused", lambda: cpu(lambda: batch(mm, "fused"))[0], "mm"),
+        ("momentum_manager_batch", lambda: cpu(lambda: batch(mm, "batch", fused=False))[0], "mm"),
+        ("setup_pd", setup(pd), None),
+        ("setup_example_hold", setup(eh), None),
+        ("setup_momentum_manager", setup(mm), None),
     ]
+    setups = {"pd": "setup_pd", "eh": "setup_example_hold", "mm": "setup_momentum_manager"}
+    samples = {name: [] for name, _, _ in timings}
+    for _ in range(args.repeats):  # interleaved rounds: the machine's load hits every row alike
+        for name, fn, _ in timings:
+            samples[name].append(fn())
     ticks = dur / 0.1
-    for name, fn in timings:
-        c = fn()
+    for name, _, law in timings:
+        c = statistics.median(samples[name])
         per = c / n
-        rows[name] = {"cpu_s": c, "per_sample_ms": 1e3 * per, "per_sample_tick_us": 1e6 * per / ticks,
-                      "extrapolated_1000_orbit_2_workers_s": per * ORBIT_S / dur * 500}
-        print(f"{name:34s} {1e6 * per / ticks:7.2f} us per sample-tick; 1000 one-orbit samples on 2 workers "
-              f"~ {per * ORBIT_S / dur * 500:6.0f} s (extrapolated from {n} x {dur:g} s)", flush=True)
+        rows[name] = {"cpu_s": c, "cpu_s_rounds": samples[name], "per_sample_ms": 1e3 * per,
+                      "per_sample_tick_us": 1e6 * per / ticks}
+    for name, _, law in timings:
+        r = rows[name]
+        if name.startswith("setup"):
+            print(f"{name:34s} {r['per_sample_ms']:7.1f} ms per sample", flush=True)
+            continue
+        su = rows[setups[law]]["per_sample_ms"] / 1e3 if law else 0.0
+        run = r["per_sample_ms"] / 1e3 - su
+        r["run_per_sample_tick_us"] = 1e6 * run / ticks
+        r["one_orbit_sample_s"] = su + run * ORBIT_S / dur
+        r["extrapolated_1000_orbit_2_workers_s"] = 500 * r["one_orbit_sample_s"]
+        print(f"{name:34s} {r['per_sample_tick_us']:7.2f} us per sample-tick (run alone {r['run_per_sample_tick_us']:6.2f}); "
+              f"one-orbit sample ~ {r['one_orbit_sample_s']:.3f} s CPU; 1000 on 2 workers ~ "
+              f"{r['extrapolated_1000_orbit_2_workers_s']:5.0f} s (extrapolated from {n} x {dur:g} s)", flush=True)
     f = rows["floor_compiled_tick"]["per_sample_tick_us"]
     for name in list(rows):
-        rows[name]["x_floor"] = rows[name]["per_sample_tick_us"] / f
-    r = rows["momentum_manager_batch"]["per_sample_tick_us"] / rows["pd_fused"]["per_sample_tick_us"]
-    run_only = rows["momentum_manager_batch"]["per_sample_tick_us"] - rows["momentum_manager_setup_only"]["per_sample_tick_us"]
-    rows["momentum_manager_batch"]["run_only_per_sample_tick_us"] = run_only
-    print(f"momentum_manager batch without its set-up: {run_only:.2f} us per sample-tick "
-          f"({run_only / rows['pd_fused']['per_sample_tick_us']:.2f} x pd fused)")
-    print("ratios to the compiled tick: " + ", ".join(f"{k} {v['x_floor']:.2f}" for k, v in rows.items()))
-    print(f"momentum_manager batch / pd fused = {r:.2f} (target <= 1.5)")
+        if "run_per_sample_tick_us" in rows[name]:
+            rows[name]["x_floor"] = rows[name]["run_per_sample_tick_us"] / f
+    pd1 = rows["pd_fused"]["one_orbit_sample_s"]
+    print("run alone / the compiled tick: " + ", ".join(f"{k} {v['x_floor']:.2f}" for k, v in rows.items()
+                                                         if "x_floor" in v))
+    for name in ("momentum_manager_fused", "momentum_manager_batch"):
+        r = rows[name]["one_orbit_sample_s"] / pd1
+        rows[name]["x_pd_fused_one_orbit"] = r
+        print(f"{name} / pd fused, per one-orbit sample (set-up included) = {r:.2f} (target <= 1.5)")
+    for name in ("example_hold_batch_default_loop",):
+        r = rows[name]["per_sample_tick_us"] / rows["example_hold_per_tick"]["per_sample_tick_us"]
+        rows[name]["x_per_tick"] = r
+        print(f"{name} / example_hold per tick = {r:.2f} (target <= 1)")
+    rows["loadavg"] = os.getloadavg()
+    print(f"load average {rows['loadavg']} on {os.cpu_count()} cores", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0
