@@ -215,8 +215,7 @@ class _Lockstep:
         self.ny1 = nnz[1]
         ny = f.numel_out(1)
         self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
-        self.seen = np.zeros((n, ny))  # what the law sees
-        self.M = BatchMeasurement(self.seen, lp.layout)
+        self.seen = np.zeros((n, ny))  # what the law sees (the raw buffer itself when no sample is noisy)
         # sensors: per sample its own generator, noise levels and delay
         sens = [s.loop.sensor for s in samples]
         self.noisy = np.array([s.loop.noisy for s in samples])
@@ -227,6 +226,9 @@ class _Lockstep:
         self.z = np.zeros((n, DRAW_BLOCK, 6))
         self.layout = lp.layout
         self.any_noisy = bool(self.noisy.any())
+        if not self.any_noisy:
+            self.seen = self.raw
+        self.M = BatchMeasurement(self.seen, lp.layout)
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
@@ -249,8 +251,7 @@ class _Lockstep:
     def _sense(self, k: int) -> None:
         """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
         seen, raw = self.seen, self.raw
-        if not self.any_noisy:
-            seen[:] = raw
+        if not self.any_noisy:  # (seen is raw)
             return
         rows = np.arange(self.n)
         D = self.delay
@@ -319,6 +320,7 @@ class _Lockstep:
         wall0 = time.perf_counter()
 
         n_upd = np.zeros(n, dtype=int)
+        n_all = [0, 0, 0]  # updates, ticks, fast ticks counted for every sample (no numpy add per tick)
         n_alive = n
         h_set = -1.0
 
@@ -362,7 +364,10 @@ class _Lockstep:
                                 S[i].loop._check_command(t, cmd[i])
                             except ControllerFailure as e:
                                 fail(i, e)
-                    n_upd += alive if n_alive < n else 1
+                    if n_alive < n:
+                        n_upd += alive
+                    else:
+                        n_all[0] += 1
                     q_ref = ctrl.q_ref_BN
                 if not alive.any():
                     break
@@ -419,14 +424,17 @@ class _Lockstep:
                         satrow[i] = False
                 if k == K:
                     break
-                ticks += alive if n_alive < n else 1
+                if n_alive < n:
+                    ticks += alive
+                else:
+                    n_all[1] += 1
                 v = self.X1[:, 4]
                 # the per-tick loop's test of a finite state, -1e300 < v < 1e300, for all at once
                 # (NaN fails both: the max of an array with a NaN is NaN)
                 if all_smooth and np.abs(v).max() < 1e300:
                     self.X[:] = self.X1
                     self.raw[:, : self.ny1] = self.Y1
-                    n_fast += 1
+                    n_all[2] += 1
                 else:
                     ok = (v > -1e300) & (v < 1e300)
                     for i in np.flatnonzero(smooth & ~ok):
@@ -452,11 +460,11 @@ class _Lockstep:
             results = []
             for i, s in enumerate(S):
                 lo = s.loop
-                lo.ticks = int(ticks[i])
-                lo.ctrl.n_updates += int(n_upd[i])
+                lo.ticks = int(ticks[i]) + n_all[1]
+                lo.ctrl.n_updates += int(n_upd[i]) + n_all[0]
                 lo.n_rate_limited += int(lim_n[i])
                 lo.n_momentum_saturated += int(sat_n[i])
-                lo.integ.count_steps(int(n_fast[i]))
+                lo.integ.count_steps(int(n_fast[i]) + n_all[2])
                 lo.x[:] = self.X[i]
                 s.rows.flush()
                 e = errors.get(i)
