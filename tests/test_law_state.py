@@ -172,3 +172,23 @@ def test_a_broken_state_contract_names_the_controller(law, match):
     d["controller"] = {"name": law.name, "period": PERIOD_S}
     with pytest.raises(ControllerError, match=match):
         simulate(scene_from_dict(d), controller=law(period=PERIOD_S), fused=True)
+
+
+def test_the_readmes_law_with_a_state_flies_fused_as_per_tick(tmp_path):
+    """The README's RateIntegral, as printed: fused (its state carried) and per tick give the
+    same rows and the same final integral, on the rate-damped sphere of the balance tests."""
+    import re  # noqa: PLC0415
+
+    readme = (ROOT / "README.md").read_text()
+    section = readme.split("### A law with a state, compiled", 1)[1].split("\n## ", 1)[0]
+    (tmp_path / "rate_integral.py").write_text(re.search(r"```python\n(.*?)```", section, re.S).group(1))
+    d = sphere_scene([(2.0, 6.0)], cmg=True, duration=20.0)
+    d["initial"]["omega_BN_B"] = [2e-3, -1e-3, 5e-4]
+    d["controller"] = {"name": f"{tmp_path / 'rate_integral.py'}:RateIntegral", "period": PERIOD_S}
+    scene = scene_from_dict(d)
+    laws = [build(scene) for _ in range(2)]
+    fused, tick = (simulate(scene, fused=f, controller=c) for f, c in zip((True, False), laws))
+    assert fused.meta["summary"]["fused"] is True and tick.meta["summary"]["fused"] is False
+    _same_to_round_off(fused, tick)
+    assert np.abs(laws[1].z).max() > 1e-4
+    assert_allclose(laws[0].z, laws[1].z, rtol=FUSED_RTOL)
