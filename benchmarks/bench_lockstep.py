@@ -9,7 +9,8 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
 
 1. ``floor``: the compiled tick alone, mapped over the n samples (one call per tick, no law, no
    rows): what any executor pays for the physics;
-2. ``pd`` fused (per sample, the fused loop; the shipped law with a ``symbolic`` form);
+2. ``pd`` fused (per sample, the fused loop; the shipped law with a ``symbolic`` form); each
+   row times the samples' set-up and their run apart (CPU of this process);
 3. ``example_hold`` batch, vectorised ``update_batch``;
 4. ``example_hold`` batch with the default looping ``update_batch``;
 5. ``example_hold`` per tick (``simulate`` per sample: what the Monte Carlo did before issue 22);
@@ -44,6 +45,7 @@ import numpy as np  # noqa: E402
 import _smoke  # noqa: E402
 from bench_montecarlo import bench_scene  # noqa: E402
 from stationbed import simulate  # noqa: E402
+from stationbed.run.simulation import SimulationError  # noqa: E402
 from stationbed.run.controller import Controller  # noqa: E402
 from stationbed.run.lockstep import _Lockstep, _Sample, run_lockstep  # noqa: E402
 from stationbed.studies.montecarlo.replay import sample_scene  # noqa: E402
@@ -109,72 +111,64 @@ def main(argv=None) -> int:
         simulate(s.replace({"simulation.duration": 1.0}), keep=False)
     run_lockstep([s.replace({"simulation.duration": 0.2}) for s in eh])
 
-    def batch(sc, kind="batch", fused=True):
-        res = run_lockstep(sc, fused=fused)
-        assert all(k == kind and not isinstance(r, BaseException) for k, r in res), res[:1]
-
-    def looping_batch():
+    def timed_rows(sc, kind, fused=True, cls=None):
+        """(set-up CPU, run CPU) of the samples ``sc``: each sample set up as every executor sets
+        it up (prepare, rows, loop, the law's design), then run by ``kind``'s executor."""
         orig = cl.build_controller
-        cl.build_controller = lambda spec, base_dir=None: looping(period=spec.period, **spec.params)
+        if cls is not None:
+            cl.build_controller = lambda spec, base_dir=None: cls(period=spec.period, **spec.params)
         try:
-            batch(eh)
+            su, smp = cpu(lambda: [_Sample(s, None, False, fused) for s in sc])
         finally:
             cl.build_controller = orig
-
-    def setup(sc):  # a sample's set-up as every executor makes it (prepare, rows, loop, law design)
-        return lambda: cpu(lambda: [_Sample(s, None, False, False) for s in sc])[0]
+        if kind == "batch":
+            assert all(s.kind == "batch" for s in smp)
+            run, res = cpu(lambda: _Lockstep(smp).run(SimulationError))
+            assert not any(isinstance(r, BaseException) for r in res), res[:1]
+        else:
+            assert kind == "per-tick" or all(s.kind == kind for s in smp), [s.kind for s in smp]
+            run, _ = cpu(lambda: [s.loop.run() for s in smp])
+        return su, run
 
     timings = [
-        ("floor_compiled_tick", lambda: floor_row(eh, dur), None),
-        ("pd_fused", lambda: cpu(lambda: batch(pd, "fused"))[0], "pd"),
-        ("example_hold_batch_vectorised", lambda: cpu(lambda: batch(eh))[0], "eh"),
-        ("example_hold_batch_default_loop", lambda: cpu(looping_batch)[0], "eh"),
-        ("example_hold_per_tick", lambda: cpu(lambda: [simulate(s, keep=False) for s in eh])[0], "eh"),
-        ("momentum_manager_fused", lambda: cpu(lambda: batch(mm, "fused"))[0], "mm"),
-        ("momentum_manager_batch", lambda: cpu(lambda: batch(mm, "batch", fused=False))[0], "mm"),
-        ("setup_pd", setup(pd), None),
-        ("setup_example_hold", setup(eh), None),
-        ("setup_momentum_manager", setup(mm), None),
+        ("floor_compiled_tick", lambda: (0.0, floor_row(eh, dur))),
+        ("pd_fused", lambda: timed_rows(pd, "fused")),
+        ("example_hold_batch_vectorised", lambda: timed_rows(eh, "batch")),
+        ("example_hold_batch_default_loop", lambda: timed_rows(eh, "batch", cls=looping)),
+        ("example_hold_per_tick", lambda: timed_rows(eh, "per-tick", fused=False)),
+        ("momentum_manager_fused", lambda: timed_rows(mm, "fused")),
+        ("momentum_manager_batch", lambda: timed_rows(mm, "batch", fused=False)),
     ]
-    setups = {"pd": "setup_pd", "eh": "setup_example_hold", "mm": "setup_momentum_manager"}
-    samples = {name: [] for name, _, _ in timings}
+    samples = {name: [] for name, _ in timings}
     for _ in range(args.repeats):  # interleaved rounds: the machine's load hits every row alike
-        for name, fn, _ in timings:
+        for name, fn in timings:
             samples[name].append(fn())
     ticks = dur / 0.1
-    for name, _, law in timings:
-        c = statistics.median(samples[name])
-        per = c / n
-        rows[name] = {"cpu_s": c, "cpu_s_rounds": samples[name], "per_sample_ms": 1e3 * per,
-                      "per_sample_tick_us": 1e6 * per / ticks}
-    for name, _, law in timings:
-        r = rows[name]
-        if name.startswith("setup"):
-            print(f"{name:34s} {r['per_sample_ms']:7.1f} ms per sample", flush=True)
-            continue
-        su = rows[setups[law]]["per_sample_ms"] / 1e3 if law else 0.0
-        run = r["per_sample_ms"] / 1e3 - su
-        r["run_per_sample_tick_us"] = 1e6 * run / ticks
+    for name, _ in timings:
+        su = statistics.median(s for s, _ in samples[name]) / n
+        run = statistics.median(r for _, r in samples[name]) / n
+        r = rows[name] = {"setup_per_sample_ms": 1e3 * su, "run_per_sample_tick_us": 1e6 * run / ticks,
+                          "rounds_setup_run_s": samples[name]}
         r["one_orbit_sample_s"] = su + run * ORBIT_S / dur
         r["extrapolated_1000_orbit_2_workers_s"] = 500 * r["one_orbit_sample_s"]
-        print(f"{name:34s} {r['per_sample_tick_us']:7.2f} us per sample-tick (run alone {r['run_per_sample_tick_us']:6.2f}); "
-              f"one-orbit sample ~ {r['one_orbit_sample_s']:.3f} s CPU; 1000 on 2 workers ~ "
+        print(f"{name:34s} run {r['run_per_sample_tick_us']:6.2f} us per sample-tick, set-up {1e3 * su:6.1f} ms "
+              f"per sample; one-orbit sample ~ {r['one_orbit_sample_s']:.3f} s CPU; 1000 on 2 workers ~ "
               f"{r['extrapolated_1000_orbit_2_workers_s']:5.0f} s (extrapolated from {n} x {dur:g} s)", flush=True)
-    f = rows["floor_compiled_tick"]["per_sample_tick_us"]
+    f = rows["floor_compiled_tick"]["run_per_sample_tick_us"]
     for name in list(rows):
-        if "run_per_sample_tick_us" in rows[name]:
-            rows[name]["x_floor"] = rows[name]["run_per_sample_tick_us"] / f
+        rows[name]["x_floor"] = rows[name]["run_per_sample_tick_us"] / f
+    print("run alone / the compiled tick: " + ", ".join(f"{k} {v['x_floor']:.2f}" for k, v in rows.items()))
     pd1 = rows["pd_fused"]["one_orbit_sample_s"]
-    print("run alone / the compiled tick: " + ", ".join(f"{k} {v['x_floor']:.2f}" for k, v in rows.items()
-                                                         if "x_floor" in v))
     for name in ("momentum_manager_fused", "momentum_manager_batch"):
         r = rows[name]["one_orbit_sample_s"] / pd1
         rows[name]["x_pd_fused_one_orbit"] = r
-        print(f"{name} / pd fused, per one-orbit sample (set-up included) = {r:.2f} (target <= 1.5)")
-    for name in ("example_hold_batch_default_loop",):
-        r = rows[name]["per_sample_tick_us"] / rows["example_hold_per_tick"]["per_sample_tick_us"]
+        rr = rows[name]["run_per_sample_tick_us"] / rows["pd_fused"]["run_per_sample_tick_us"]
+        rows[name]["x_pd_fused_run"] = rr
+        print(f"{name} / pd fused: per one-orbit sample (set-up included) {r:.2f} (target <= 1.5); run alone {rr:.2f}")
+    for name in ("example_hold_batch_default_loop", "example_hold_batch_vectorised"):
+        r = rows[name]["run_per_sample_tick_us"] / rows["example_hold_per_tick"]["run_per_sample_tick_us"]
         rows[name]["x_per_tick"] = r
-        print(f"{name} / example_hold per tick = {r:.2f} (target <= 1)")
+        print(f"{name} / example_hold per tick, run alone = {r:.2f}")
     rows["loadavg"] = os.getloadavg()
     print(f"load average {rows['loadavg']} on {os.cpu_count()} cores", flush=True)
     if args.json:
