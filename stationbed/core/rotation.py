@@ -50,7 +50,8 @@ def skew(v):
 def quat_mult(p, q):
     """Hamilton product ``p ⊗ q`` of scalar-first quaternions (component-first (4, n) arrays:
     n products at once, :mod:`.rotation_batch`)."""
-    if p.__class__ is np.ndarray and q.__class__ is np.ndarray and p.ndim == q.ndim == 2 and p.dtype == q.dtype == float:
+    if (p.__class__ is np.ndarray and q.__class__ is np.ndarray and p.ndim == q.ndim == 2
+            and p.dtype == q.dtype == float):
         return quat_mult_batch(p, q)
     pw, px, py, pz = p[0], p[1], p[2], p[3]
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]

@@ -20,7 +20,8 @@ __all__ = ["quat_mult_batch", "dcm_batch"]
 # quat_mult: component r = sum over t of sign * p[i] * q[j], terms in the formula's order
 _QI = np.array([[0, 1, 2, 3], [0, 1, 2, 3], [0, 1, 2, 3], [0, 1, 2, 3]])
 _QJ = np.array([[0, 1, 2, 3], [1, 0, 3, 2], [2, 3, 0, 1], [3, 2, 1, 0]])
-_QS = np.array([[1.0, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, -1.0], [1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0]])[:, :, None]
+_QS = np.array([[1.0, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, -1.0],
+                [1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0]])[:, :, None]
 
 # dcm: entry (r, c) in row-major order = first product + sign * second product (w=0, x=1, y=2, z=3)
 _DA = (np.array([2, 1, 1, 1, 1, 2, 1, 2, 1]), np.array([2, 2, 3, 2, 1, 3, 3, 3, 1]))

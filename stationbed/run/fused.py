@@ -177,7 +177,8 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
     if rate:  # the environment at its own rate (rates.py): same tick, environment held per block
         L_env = ca.SX.sym("L_env", 3)
         u_held = ca.substitute(u, u_ext, u_ext + L_env)
-        x1h = ca.vertcat(system.integrator_cls.explicit_step(rates_split(system)["rhs_fast"], t, x, h, u_held, p), s1)
+        x1h = system.integrator_cls.explicit_step(rates_split(system)["rhs_fast"], t, x, h, u_held, p)
+        x1h = ca.vertcat(x1h, s1)
         one_h = sx_function("one", [t, xa, cp, u_ext, p, h, L_env] + ([nz] if nn else []), [x1h, sat])
         ranges = (slice(3, 3 + ncp), slice(3 + ncp, 6 + ncp), slice(6 + ncp, 6 + ncp + npar))
         chunk = held_chunk(system, one_h, rate, n, nx, 6 + ncp + npar, nn, ranges)
@@ -203,7 +204,7 @@ def run_fused(loop, K: int) -> None:
     rate = environment_rate(loop)
     ne = carry_width(rate)  # the held environment's carry (rates.py), passed from chunk to chunk
     env_c = np.zeros(ne)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flags, rate)
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flags, rate, law_state.initial(ctrl).size)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
         _CHUNKS[key] = _build(loop, n, flags, rate)

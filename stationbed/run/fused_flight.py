@@ -109,7 +109,7 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     ctrl, flight = loop.ctrl, loop.flight
     n = loop.n_per_out
     cp = np.asarray(symbolic_params, dtype=float)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key)  # structure, not numbers
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size)  # structure
     if key not in _CHUNKS:
         t_build = time.perf_counter()
         _CHUNKS[key] = _build(loop, n, cp)
