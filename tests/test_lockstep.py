@@ -214,3 +214,19 @@ def test_the_readmes_update_batch_gives_the_guides_numbers(tmp_path):
     assert [k for k, _ in res] == ["batch", "batch"]
     for s, (_, tr) in zip(scenes, res):
         _same(tr, simulate(s, fused=False))
+
+
+def test_a_loop_with_sensors_runs_fused_or_per_tick_not_batch():
+    """A scene that flies [[sensor]] tables and an [estimator] (issue 20's suite and MEKF): a law
+    with a symbolic form runs fused (its flight inlined, run/fused_flight.py), a Python law per
+    tick (the lockstep map has no flight tick: docs/design.md); each as its single run, bit for bit."""
+    base = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace(
+        {"simulation.duration": 2.0, "simulation.output_dt": 1.0})
+    for name, params, kind in (("pd", {"reference": "lvlh"}, "fused"),
+                               ("example_hold", {"reference": "lvlh"}, "per-tick")):
+        scenes = [base.replace({"controller.name": name, "controller.params": params,
+                                "controller.sensor": {"seed": 7 + k}}) for k in range(2)]
+        res = run_lockstep(scenes, keep=True)
+        assert [k for k, _ in res] == [kind, kind]
+        for s, (_, tr) in zip(scenes, res):
+            _same(tr, simulate(s))
