@@ -6,7 +6,9 @@ leading sample axis) -> one call of the compiled tick mapped over the samples (c
 ``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
 step, measure; the map calls that very machine code once per sample, so a sample's numbers are
 its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
-delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and metrics).
+delay; or the scene's sensors and estimator, their flight tick mapped the same way:
+:mod:`.lockstep_flight`) -> rows at the output ticks (each sample's own :class:`~.rows.Rows`
+and metrics).
 
 A tick that a sample's single run integrates on the generic path (a discontinuity inside it or
 at its end, the final tick) is run for that sample alone with its own
@@ -31,6 +33,7 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
+from .lockstep_flight import FlightBatch
 from .prepare import prepare
 from .rows import Rows
 from .segments import breakpoints, held_torque_from
@@ -49,9 +52,9 @@ def vectorised(ctrl) -> bool:
 def _tick_ok(loop) -> bool:
     integ = loop.integ
     name = "tick_rates" if loop.ctrl.command == "gimbal_rates" else "tick_torque"
-    # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs per tick
-    return (getattr(loop, "flight", None) is None and integ.fusable and name in integ.funcs
-            and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1)
+    # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs its
+    # flight tick mapped too (lockstep_flight.py)
+    return integ.fusable and name in integ.funcs and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
 
 
 def executor(loop) -> str:
@@ -156,7 +159,7 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
             continue
         sim = s.simulation
         key = (id(smp.run.system), type(smp.loop.ctrl), smp.loop.ctrl.command, sim.duration, sim.output_dt,
-               smp.loop.period)
+               smp.loop.period, getattr(smp.loop.flight, "key", None))
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
@@ -226,7 +229,8 @@ class _Lockstep:
         self.z = np.zeros((n, DRAW_BLOCK, 6))
         self.layout = lp.layout
         self.any_noisy = bool(self.noisy.any())
-        if not self.any_noisy:
+        self.flight = FlightBatch(samples, lp.layout) if lp.flight is not None else None
+        if not self.any_noisy and self.flight is None:
             self.seen = self.raw
         self.M = BatchMeasurement(self.seen, lp.layout)
 
@@ -248,9 +252,12 @@ class _Lockstep:
             if r:
                 self.z[i, :, 3:6] = zi[:, w - 3 : w]
 
-    def _sense(self, k: int) -> None:
+    def _sense(self, k: int, t: float = 0.0) -> None:
         """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
         seen, raw = self.seen, self.raw
+        if self.flight is not None:  # sensors and estimator (no [controller.sensor] noise with them)
+            self.flight.fly(k, t, raw, seen)
+            return
         if not self.any_noisy:  # (seen is raw)
             return
         rows = np.arange(self.n)
@@ -331,7 +338,7 @@ class _Lockstep:
             ctrl.batch_stopped.add(i)
             errors[i] = e
 
-        self._sense(0)
+        self._sense(0, 0.0)
         M = self.M
         try:
             for k in range(K + 1):
@@ -417,6 +424,8 @@ class _Lockstep:
                         if vec:
                             lo.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
                         lo.x[:] = self.X[i]
+                        if self.flight is not None:
+                            self.flight.to_loop(i)
                         try:
                             lo.rows.hold(t, lo.x, *lo._held_row(int(satrow[i])))
                         except ControllerFailure as e:
@@ -454,7 +463,7 @@ class _Lockstep:
                     self.UEXT[i] = held_torque_from(S[i].scene, t_next, bps, duration)
                     self.X[i] = lo.x
                     self._measure(i, t_next, lo.x)
-                self._sense(k + 1)
+                self._sense(k + 1, t_next)
         finally:
             wall = (time.perf_counter() - wall0) / n
             results = []
@@ -466,6 +475,8 @@ class _Lockstep:
                 lo.n_momentum_saturated += int(sat_n[i])
                 lo.integ.count_steps(int(n_fast[i]) + n_all[2])
                 lo.x[:] = self.X[i]
+                if self.flight is not None:
+                    self.flight.to_loop(i)
                 s.rows.flush()
                 e = errors.get(i)
                 if e is None:
