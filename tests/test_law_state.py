@@ -192,3 +192,32 @@ def test_the_readmes_law_with_a_state_flies_fused_as_per_tick(tmp_path):
     _same_to_round_off(fused, tick)
     assert np.abs(laws[1].z).max() > 1e-4
     assert_allclose(laws[0].z, laws[1].z, rtol=FUSED_RTOL)
+
+
+@pytest.mark.parametrize("fused", [True, False], ids=["fused", "batch"])
+def test_a_carried_state_in_the_lockstep_executor(fused):
+    """run_lockstep of three CountedSine samples (windows shifted per sample): fused (each
+    sample's own fused loop, its state carried) or batch (the default update_batch: each
+    member's _update keeps its state); every sample meets the hand-summed hold."""
+    import stationbed.run.closed_loop as cl  # noqa: PLC0415
+
+    duration = 10.05
+    wins = [[((50 + k) * PERIOD_S, 12.0)] for k in range(3)]  # on the tick grid: the fused loop takes them
+    scenes = []
+    for w in wins:
+        d = sphere_scene(w, cmg=False, duration=duration)
+        d["controller"] = {"name": "counted_sine", "period": PERIOD_S}
+        d["simulation"]["output_dt"] = 0.5
+        scenes.append(scene_from_dict(d))
+    orig = cl.build_controller
+    cl.build_controller = lambda spec, base_dir=None: CountedSine(period=spec.period)
+    try:
+        res = run_lockstep(scenes, keep=True, fused=fused)
+    finally:
+        cl.build_controller = orig
+    for w, (kind, tr) in zip(wins, res):
+        assert kind == ("fused" if fused else "batch")
+        dH = tr.H_O_N - tr.H_O_N[0]
+        expect = held_command_impulse(tr.t, duration) + window_impulse_x(w, tr.t)
+        assert_allclose(dH[:, 0], expect, rtol=0, atol=CLOSED_FORM_ABS)
+        assert tr.meta["summary"]["controller_updates"] == math.ceil(duration / PERIOD_S - 1e-9) + 1
