@@ -221,3 +221,22 @@ def test_a_carried_state_in_the_lockstep_executor(fused):
         expect = held_command_impulse(tr.t, duration) + window_impulse_x(w, tr.t)
         assert_allclose(dH[:, 0], expect, rtol=0, atol=CLOSED_FORM_ABS)
         assert tr.meta["summary"]["controller_updates"] == math.ceil(duration / PERIOD_S - 1e-9) + 1
+
+
+def test_a_carried_state_through_the_held_environment_blocks():
+    """The fused loop with the environment at its own rate (rates.held_chunk: blocks of 7 ticks,
+    the law's state in the carry beside x): every row's commanded torque is τ(k T) of its own
+    tick k, and the count at the end is K + 1 (a state lost or shifted at a block edge breaks
+    both)."""
+    from test_closed_loop_balance import kinds_scene  # noqa: PLC0415
+
+    d = kinds_scene([])
+    d["simulation"].update(duration=12.0, environment_rate=7, output_dt=2.0)  # rows of 20 ticks: blocks 7, 7, 6
+    d["controller"] = {"name": "counted_sine", "period": PERIOD_S}
+    law = CountedSine(period=PERIOD_S)
+    tr = simulate(scene_from_dict(d), controller=law, fused=True)
+    s = tr.meta["summary"]
+    assert s["fused"] is True and s["environment_rate_ticks"] == 7
+    k_rows = np.round(tr.t / PERIOD_S)
+    assert_allclose(tr.data[:, tr.columns.index("tau_cmd_x")], [tau_x(k * PERIOD_S) for k in k_rows], rtol=0, atol=0)
+    assert law.k == round(12.0 / PERIOD_S) + 1
