@@ -24,9 +24,9 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
-from .controller import ControllerError, one_line
 from ..loop import Layout
 from ..loop.flight import READS, SEEN
+from . import law_state
 from .segments import held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
@@ -46,7 +46,9 @@ def _build(loop, n: int, symbolic_params) -> dict:
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
-    x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    nls = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
+    xa, p, cp, u_ext = ca.SX.sym("x", nx + nls), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    x, s = xa[:nx], xa[nx:]
     # the law's measurement is computed inside the core, as the truth-fed fused loop does (its
     # sines and cosines shared with the RK4's first stage); with an estimator the flight's
     # estimate replaces its SEEN fields, given as the core's input ``est``
@@ -59,14 +61,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
         o, m = offs[f]
         y_seen = ca.vertcat(y_seen[:o], est[j : j + m], y_seen[o + m :])
         j += m
-    try:
-        cmd, q_ref = ctrl.symbolic(t, y_seen, cp)
-        cmd = ca.vertcat(cmd)
-    except Exception as e:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
-    if cmd.numel() != loop.n_cmd:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, "
-                              f"expected {loop.n_cmd} ({ctrl.command})")
+    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y_seen, cp, s, loop.n_cmd)
     if model.cmg is None:
         act, u, sat = ca.SX.zeros(0, 1), u_ext + cmd, ca.SX.zeros(2)
     else:
@@ -79,8 +74,8 @@ def _build(loop, n: int, symbolic_params) -> dict:
         sat = ca.vertcat(act[kk + 1], act[kk + 2])
     if model.has_steps:
         u = ca.vertcat(u, t + h / 2)
-    x1 = system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p)
-    core = sx_function("ff_core", [t, x, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref)])
+    x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
+    core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref, s1)])
     # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
     y_truth = ca.SX.zeros(flight.ny)
     for f in READS:
@@ -95,15 +90,16 @@ def _build(loop, n: int, symbolic_params) -> dict:
 
     MX = ca.MX
     # the row tick: its command, actuation, reference and the flight's state and outputs after it
-    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
+    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx + nls), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
     ki, tpi, thi, omi = MX.sym("k"), MX.sym("t_prev"), MX.sym("th", 3), MX.sym("om", 3)
     xsi, wi, psi = MX.sym("xs", ns), MX.sym("w", nw), MX.sym("ps", nps)
-    yi = meas(ti, xi, pi_)
+    yi = meas(ti, xi[:nx] if nls else xi, pi_)
     _, xs1, _, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
     _, _, info_out = core(ti, xi, seen(ys), cpi, ui, pi_, 0.0)
     info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
-    # the chunk's step
-    C = carry_layout(nx, ns)
+    # the chunk's step: the carry holds the law's state with x
+    nx0 = nx
+    C = carry_layout(nx + nls, ns)
     npar_all = 4 + ncp + 3 + npar + nps
     c, par, w = MX.sym("c", C.size), MX.sym("par", npar_all), MX.sym("w", nw)
     i, xc, cnt, tp, th, om, xs = (C.get(c, f) for f in C.names)
@@ -111,7 +107,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
     pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
     tt = t0 + i * hh
-    yt = meas(tt, xc, pc)
+    yt = meas(tt, xc[:nx0] if nls else xc, pc)
     th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
     x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
     c_new = C.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
@@ -128,7 +124,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
     funcs = compile_functions([info, chunk], tag)
-    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"])}
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls}
 
 
 def carry_layout(nx: int, ns: int) -> Layout:
@@ -143,14 +139,16 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     ctrl, flight = loop.ctrl, loop.flight
     n = loop.n_per_out
     cp = np.asarray(symbolic_params, dtype=float)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key)  # structure, not numbers
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size)  # structure
     if key not in _CHUNKS:
         t_build = time.perf_counter()
         _CHUNKS[key] = _build(loop, n, cp)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t_build
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
-    nx = loop.system.formulation.nx
+    nx0 = loop.system.formulation.nx
+    s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
+    nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
     C = carry_layout(nx, S.STATE.size)  # its slices, taken once (the loop below runs per output row)
     ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in C.names)
@@ -173,8 +171,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     nw = S.NOISE.size
     # the carry between chunk calls lives in the chunk's own input (c0): one copy per call
     c0[:] = 0.0
-    c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = loop.x, loop.t_prev, loop.th, loop.om_prev, loop.xs
-    x = c0[cx].copy()
+    c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = np.concatenate([loop.x, s_law]), loop.t_prev, loop.th, loop.om_prev, loop.xs
+    x, s_end = c0[cx].copy(), None
     tail_flag = ticks = 0
     loop.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
@@ -198,11 +196,12 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
             if ncmd == 3:
                 loop.last_cmd = tuple(cmd)
-            ctrl.q_ref_BN = tuple(r[-4:])
-            loop.x, loop.xs, loop.ys = x, info.res[1].copy(), info.res[2].copy()
-            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            ctrl.q_ref_BN = tuple(r[r.size - ls - 4 : r.size - ls])
+            loop.x, loop.xs, loop.ys = x[:nx0], info.res[1].copy(), info.res[2].copy()
+            loop.rows.hold(t, loop.x, *loop._held_row(lim | sat | tail_flag))
             if k == K:
                 loop.th, loop.om_prev, loop.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
+                s_end = r[r.size - ls :].copy()  # the law's update at the last tick
                 break
             pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
@@ -225,7 +224,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
     finally:
         loop.ticks = ticks
-        loop.x = x
+        loop.x = x[:nx0]
+        law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
         loop.rows.flush()
