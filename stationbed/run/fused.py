@@ -33,6 +33,7 @@ from .controller import ControllerError, one_line
 from .rates import carry_width, environment_rate, held_chunk
 from .segments import held_torque_from, tick_pieces
 from .system import environment_split as rates_split
+from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
 __all__ = ["fused_ok", "run_fused"]
 
@@ -67,6 +68,7 @@ def fused_ok(loop) -> bool:
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
         and not (getattr(loop, "flight", None) is not None and loop.noisy)
+        and fused_thrust_ok(loop)  # thrusters (issue 21): their own fused chunk, or per tick
     )
 
 
@@ -198,6 +200,8 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
 def run_fused(loop, K: int) -> None:
     """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
     ctrl = loop.ctrl
+    if getattr(loop, "thrust", None) is not None:  # thrusters (issue 21)
+        return run_fused_thrust(loop, K, _symbolic_params(ctrl), _edge_ticks(loop))
     if getattr(loop, "flight", None) is not None:  # sensors and estimator (issue 20)
         from .fused_flight import run_fused_flight
 

@@ -1,0 +1,196 @@
+"""The fused closed loop with thrusters (issue 21): :mod:`.fused` with the
+:class:`~stationbed.loop.thrusters.ThrusterCluster` tick inlined.
+
+Per tick, in one compiled ``mapaccum``: ``y = meas(t, x)``; the law; the thrusters' tick (the
+same casadi function the per-tick loop compiles); the CMGs' actuation of what the thrusters
+leave; then **either** one plain RK4 step (no thruster fires this tick) **or** the tick split at
+every pulse edge (:func:`~stationbed.loop.actuator.split_step`: n + 1 RK4 pieces), chosen by a
+short-circuit ``if_else`` on MX, so the generated C evaluates only the branch taken: a tick
+that does not fire costs one step. The carry holds the tick index, the state, the saturation
+counts and the thrusters' memory (their ledger included).
+
+Taken when :func:`fused_thrust_ok` (no sensor noise or sensors, no environment rate, the
+closed-form mapping); otherwise the per-tick loop runs and the summary says why
+(``thrusters_not_fused``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions, sx_function
+from ..integrators import IntegrationError
+from ..loop.actuator import split_step
+from .controller import ControllerError, one_line
+from .rates import environment_rate
+from .segments import held_torque_from, tick_pieces
+
+__all__ = ["fused_thrust_ok", "run_fused_thrust"]
+
+_CHUNKS: dict[tuple, dict] = {}
+
+
+def fused_thrust_ok(loop) -> bool:
+    """Whether the fused loop can fly the loop's thrusters (always True without thrusters);
+    sets ``loop.thrust.fused_reason`` when it cannot."""
+    th = getattr(loop, "thrust", None)
+    if th is None:
+        return True
+    why = None
+    if th.lp:
+        why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
+    elif loop.noisy or getattr(loop, "flight", None) is not None:
+        why = "sensor noise or [[sensor]] tables with thrusters are flown per tick"
+    elif environment_rate(loop):
+        why = "an environment rate with thrusters is flown per tick"
+    th.fused_reason = why
+    return why is None
+
+
+def _build(loop, n: int, symbolic_params) -> dict:
+    system, ctrl, th = loop.system, loop.ctrl, loop.thrust
+    sx = system.sx
+    form = system.formulation
+    model = form.model
+    nx, npar = form.nx, model.layout.size
+    ncp = len(symbolic_params)
+    cl = th.cluster
+    na, npa, nch = cl.state.size, cl.params.size, cl.n_channels
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    xa, pa = ca.SX.sym("xa", na), ca.SX.sym("pa", npa)
+    y = sx["meas"](t, x, p)
+    try:
+        cmd, q_ref = ctrl.symbolic(t, y, cp)
+        cmd = ca.vertcat(cmd)
+    except Exception as e:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
+    if cmd.numel() != 3:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected 3")
+    xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd, pa)
+    act = sx["actuate"](t, x, rest, p)
+    u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
+    k = model.nu_cmg
+    sat = ca.vertcat(act[k + 1], act[k + 2])
+    if model.has_steps:
+        u = ca.vertcat(u, t + h / 2)
+    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa],
+                       [u, on_s, tq, xa1, sat, ca.vertcat(cmd, act, q_ref)])
+    step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
+    us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
+    plain = sx_function("thr_plain", [t, x, h, us, p], [step(rhs, t, x, h, us, p)])
+    split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
+                        [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch))])
+    MX = ca.MX
+    ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
+                                          MX.sym("p", npar), MX.sym("h"), MX.sym("xa", na), MX.sym("pa", npa))
+    info_out = core(ti, xi, cpi, ui, pi_, hi, xai, pai)[5]
+    info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai], [info_out])
+    nc = 1 + nx + 2 + na
+    npar_all = 3 + ncp + 3 + npar + npa
+    c, par = MX.sym("c", nc), MX.sym("par", npar_all)
+    i, xc, cnt, xac = c[0], c[1 : 1 + nx], c[1 + nx : 3 + nx], c[3 + nx :]
+    t0, hh, n_act = par[0], par[1], par[2]
+    cpc, uc = par[3 : 3 + ncp], par[3 + ncp : 6 + ncp]
+    pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
+    tt = t0 + i * hh
+    uu, on, tqq, xa_new, fl, _ = core(tt, xc, cpc, uc, pc, hh, xac, pac)
+    fires = ca.sum1(on) > 0
+    x_new = ca.if_else(fires, split(tt, xc, hh, uu, pc, on, tqq), plain(tt, xc, hh, uu, pc), True)
+    act_ = i < n_act
+    c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
+                       cnt + ca.if_else(act_, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), MX.zeros(2)),
+                       ca.if_else(act_, xa_new, xac))
+    stepf = ca.Function("thr_step", [c, par], [c_new])
+    acc = stepf.mapaccum("thr_acc", n)
+    c0, parm = MX.sym("c0", nc), MX.sym("par", npar_all)
+    chunk = ca.Function("thr_chunk", [c0, parm], [acc(c0, ca.repmat(parm, 1, n))[:, -1]])
+    tag = f"thrfused_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    funcs = compile_functions([info, chunk], tag)
+    return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
+
+
+def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
+    """Run ticks 0..K fused with the thrusters, emitting the same rows as the per-tick loop."""
+    ctrl, th = loop.ctrl, loop.thrust
+    cl = th.cluster
+    n = loop.n_per_out
+    key = (id(loop.system), type(ctrl), n, cl.key)
+    if key not in _CHUNKS:
+        t0 = time.perf_counter()
+        _CHUNKS[key] = _build(loop, n, symbolic_params)
+        _CHUNKS[key]["build_s"] = time.perf_counter() - t0
+    fns = _CHUNKS[key]
+    info, chunk = fns["info"], fns["chunk"]
+    cp = np.asarray(symbolic_params, dtype=float)
+    nx, na = loop.system.formulation.nx, cl.state.size
+    p, period, duration = loop.p, loop.period, loop.duration
+    info.args[2][:] = cp
+    info.args[4][:] = p
+    info.args[7][:] = cl.params
+    c0, par = chunk.args
+    ncp = len(cp)
+    par[3 : 3 + ncp] = cp
+    i_ext = slice(3 + ncp, 6 + ncp)
+    par[6 + ncp : 6 + ncp + len(p)] = p
+    par[6 + ncp + len(p) :] = cl.params
+    nu_cmg = loop.nu_cmg
+    x = np.array(loop.x, dtype=float)
+    xa = th.x.copy()
+    tail_flag = 0
+    ticks = 0
+    loop.used_fused = True
+    row_ks = sorted(set(range(0, K, n)) | {K})
+    try:
+        for j, k in enumerate(row_ks):
+            t = min(k * period, duration)
+            n_act = row_ks[j + 1] - k if k < K else 1
+            info.args[0][0] = t
+            info.args[1][:] = x
+            info.args[3][:] = held_torque_from(loop.scene, t, loop.bps, duration)
+            info.args[5][0] = th.tick_length(loop, t)
+            info.args[6][:] = xa
+            info()
+            r = info.res[0]
+            cmd, act, q_ref = r[:3], r[3 : 3 + nu_cmg + 3], r[-4:]
+            lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
+            loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
+            loop.last_cmd = tuple(cmd)
+            ctrl.q_ref_BN = tuple(q_ref)
+            loop.x = x
+            th.x_row = xa
+            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            if k == K:
+                break
+            counts = np.zeros(2)
+            for a, b, hp in tick_pieces(k, n_act, edges, duration, period):
+                c0[0] = 0.0
+                c0[1 : 1 + nx] = x
+                c0[1 + nx : 3 + nx] = 0.0
+                c0[3 + nx :] = xa
+                par[0] = a * period
+                par[1] = hp
+                par[2] = b - a
+                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration)
+                chunk()
+                res = chunk.res[0]
+                x = res[1 : 1 + nx].copy()
+                counts += res[1 + nx : 3 + nx]
+                xa = res[3 + nx : 3 + nx + na].copy()
+            ticks += n_act
+            loop.n_rate_limited += int(counts[0])
+            loop.n_momentum_saturated += int(counts[1])
+            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
+            if not np.all(np.isfinite(x)):
+                loop.ticks = ticks
+                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+    finally:
+        loop.ticks = ticks
+        loop.x = x
+        th.x = th.x_row = xa
+        ctrl.count_compiled_updates(ticks + 1)
+        loop.integ.count_steps(ticks)
+        loop.rows.flush()
