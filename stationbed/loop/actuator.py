@@ -63,6 +63,10 @@ class Actuator:
        ``torque_B`` a (3, n_channels) matrix.
     6. Prove it in a test against an independent truth (closed form, a hand-worked sequence,
        the momentum balance with the pulse edges inside ticks).
+    7. Optionally write ``_idle(t, x, r, tau_B, p)``: a casadi condition under which
+       ``_command`` is exactly ``(x, tau_B, 0, torque_B)``; an executor may then skip the
+       command (the fused loop does). It must be exact, not approximate: executors that do not
+       skip must give the same numbers.
     """
 
     kind: ClassVar[str] = ""
@@ -124,6 +128,16 @@ class Actuator:
             fc = Actuator._compiled[(type(self), self.key)] = FastCall(compile_functions([self.function()], self.key)[self.key])
         return fc
 
+    def idle_function(self) -> ca.Function | None:
+        """``(t, x, r, tau_B, p) -> idle`` when the plug-in writes ``_idle`` (rule 7), else None."""
+        if type(self)._idle is Actuator._idle:
+            return None
+        t = ca.SX.sym("t")
+        x, r, p = self.state.symbol("x"), self.reads.symbol("r"), self.param_layout.symbol("p")
+        tau = ca.SX.sym("tau_B", 3)
+        idle = self._idle(t, self.state.split(x), self.reads.split(r), tau, self.param_layout.split(p))
+        return ca.Function(f"{self.key}_idle", [t, x, r, tau, p], [idle])
+
     def command(self, t: float, h: float, x: np.ndarray, r: np.ndarray, tau_B: np.ndarray):
         """One tick, numerically (compiled): ``(x_next, tau_rest_B, on_s, torque_B (3, n), out)``."""
         if not 0.0 <= h:
@@ -145,6 +159,9 @@ class Actuator:
         raise NotImplementedError
 
     def _command(self, t, h, x: dict, r: dict, tau_B, p: dict):
+        raise NotImplementedError
+
+    def _idle(self, t, x: dict, r: dict, tau_B, p: dict):
         raise NotImplementedError
 
 

@@ -89,8 +89,11 @@ def mapping_matrices(D: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarr
     couple. Otherwise the torque equations alone (the net force is then whatever it is). ``v``
     is all zeros when no positive null-space vector exists: forces that come out negative are
     then clipped to 0 and the torque is not exact (use ``mapping = "lp"``, or add thrusters)."""
+    rk = np.linalg.matrix_rank
     for A, pure in ((np.vstack([D, G]), True), (D, False)):
-        if np.linalg.matrix_rank(A) < A.shape[0]:
+        # every torque with no net force: D full rank, and the force rows independent of it
+        # (a set that makes no force along some axis, e.g. no thruster along x, still qualifies)
+        if rk(D) < 3 or (pure and rk(A) < 3 + rk(G)):
             continue
         v = _positive_null(A)
         if v is not None:
@@ -248,6 +251,18 @@ class ThrusterCluster(Actuator):
                       firings=x["firings"] + sum(fired), control_s=x["control_s"] + mode * h,
                       impulse_Ns=x["impulse_Ns"] + imp, propellant_kg=x["propellant_kg"] + prop)
         return x_next, rest, on, Tq, dict(request_B=req, force_N=F)
+
+    def _idle(self, t, x, r, tau, p):
+        """True when this tick is certainly the identity (nothing fires, the request passes to
+        the CMGs whole, the memory does not change): assist mode, CMG control, not dumping, |h|
+        below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
+        exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
+        skip it (the fused loop does, behind a short-circuit ``if_else``)."""
+        f = ca.norm_2(r["h_B"]) / p["capacity"]
+        quiet = ca.logic_and(p["mode"] < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
+        quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))
+        pending = ca.sum1(ca.fabs(x["prev_on_s"])) + ca.sum1(ca.fabs(x["acc_s"]))
+        return ca.logic_and(quiet, pending == 0)
 
     def _command(self, t, h, x, r, tau, p):
         mode, dumping, inh, L_dump, req = self._request(t, x, r, tau, p)

@@ -71,15 +71,29 @@ def _build(loop, n: int, symbolic_params) -> dict:
     if cmd.numel() != 3:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected 3")
     xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd, pa)
-    act = sx["actuate"](t, x, rest, p)
-    u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
     k = model.nu_cmg
-    sat = ca.vertcat(act[k + 1], act[k + 2])
-    if model.has_steps:
-        u = ca.vertcat(u, t + h / 2)
-    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa],
-                       [u, on_s, tq, xa1, sat, ca.vertcat(cmd, act, q_ref)])
+
+    def act_u(tau):
+        a = sx["actuate"](t, x, tau, p)
+        uu = ca.vertcat(u_ext, a[0:k])
+        if model.has_steps:
+            uu = ca.vertcat(uu, t + h / 2)
+        return a, uu, ca.vertcat(a[k + 1], a[k + 2])
+
+    act, u, _ = act_u(rest)
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
+    idle_f = cl.idle_function()
+    idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
+    # the law and the idle test (every tick); the quiet tick (idle: the law's request to the
+    # CMGs, one step); the busy tick's actuation (the thrusters' command, the CMGs' share)
+    pre = sx_function("thr_pre", [t, x, cp, p, xa, pa], [cmd, idle])
+    cmd_s = ca.SX.sym("cmd", 3)
+    a_q, u_q, sat_q = act_u(cmd_s)
+    xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd_s, pa)
+    _, u_b, sat_b = act_u(rest_s)
+    quiet = sx_function("thr_quiet", [t, x, cmd_s, u_ext, p, h, xa], [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa)])
+    busy_core = sx_function("thr_busy", [t, x, cmd_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
+    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa], [ca.vertcat(cmd, act, q_ref)])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
     plain = sx_function("thr_plain", [t, x, h, us, p], [step(rhs, t, x, h, us, p)])
     split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
@@ -87,8 +101,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     MX = ca.MX
     ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
                                           MX.sym("p", npar), MX.sym("h"), MX.sym("xa", na), MX.sym("pa", npa))
-    info_out = core(ti, xi, cpi, ui, pi_, hi, xai, pai)[5]
-    info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai], [info_out])
+    info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai], [core(ti, xi, cpi, ui, pi_, hi, xai, pai)])
     nc = 1 + nx + 2 + na
     npar_all = 3 + ncp + 3 + npar + npa
     c, par = MX.sym("c", nc), MX.sym("par", npar_all)
@@ -97,9 +110,15 @@ def _build(loop, n: int, symbolic_params) -> dict:
     cpc, uc = par[3 : 3 + ncp], par[3 + ncp : 6 + ncp]
     pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
     tt = t0 + i * hh
-    uu, on, tqq, xa_new, fl, _ = core(tt, xc, cpc, uc, pc, hh, xac, pac)
-    fires = ca.sum1(on) > 0
-    x_new = ca.if_else(fires, split(tt, xc, hh, uu, pc, on, tqq), plain(tt, xc, hh, uu, pc), True)
+    cmd_c, idle_c = pre(tt, xc, cpc, pc, xac, pac)
+    # the busy tick: the thrusters' command, then a plain step or the split one (only if one fires)
+    bx, bcmd, bu, bxa = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na)
+    bt, bh, bp, bpa = MX.sym("t"), MX.sym("h"), MX.sym("p", npar), MX.sym("pa", npa)
+    uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bu, bp, bh, bxa, bpa)
+    x_b = ca.if_else(ca.sum1(on) > 0, split(bt, bx, bh, uu, bp, on, tqq), plain(bt, bx, bh, uu, bp), True)
+    busy = ca.Function("thr_busy_tick", [bt, bx, bcmd, bu, bp, bh, bxa, bpa], [ca.vertcat(x_b, fl, xa_new)])
+    res = ca.if_else(idle_c, quiet(tt, xc, cmd_c, uc, pc, hh, xac), busy(tt, xc, cmd_c, uc, pc, hh, xac, pac), True)
+    x_new, fl, xa_new = res[0:nx], res[nx : nx + 2], res[nx + 2 :]
     act_ = i < n_act
     c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
                        cnt + ca.if_else(act_, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), MX.zeros(2)),
@@ -108,7 +127,7 @@ def _build(loop, n: int, symbolic_params) -> dict:
     acc = stepf.mapaccum("thr_acc", n)
     c0, parm = MX.sym("c0", nc), MX.sym("par", npar_all)
     chunk = ca.Function("thr_chunk", [c0, parm], [acc(c0, ca.repmat(parm, 1, n))[:, -1]])
-    tag = f"thrfused_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    tag = f"thrfused2_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
