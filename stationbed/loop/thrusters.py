@@ -37,8 +37,6 @@ ISS's attitude thrusters' net impulse is a pure couple where they can make one).
 
 from __future__ import annotations
 
-import math
-
 import casadi as ca
 import numpy as np
 
@@ -307,10 +305,3 @@ class ThrusterCluster(Actuator):
         out[:3] = req
         self.n_commands += 1
         return x_next, rest, on, Tq.reshape(self.n, 3).T, out
-
-
-def propellant_per_orbit(propellant_kg: float, duration_s: float, orbit) -> float | None:
-    """Propellant per orbital period [kg] (None without an orbit)."""
-    if orbit is None or duration_s <= 0:
-        return None
-    return propellant_kg * (2.0 * math.pi / orbit.mean_motion) / duration_s

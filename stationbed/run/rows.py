@@ -8,6 +8,7 @@ its rows (``keep=False``) holds one batch in memory whatever its length.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -140,7 +141,9 @@ class Rows:
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
         cmg = system.formulation.model.cmg
         held = None if cmg is None or not scene.cmg.failed else cmg.geometry.held_momentum_B(scene.cmg)
-        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held)
+        period = None if scene.orbit is None or not scene.thruster else 2.0 * math.pi / scene.orbit.mean_motion
+        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held,
+                                  orbit_period_s=period)
         self._pending = ([], [], [])  # times, states, held values of rows not yet made
         self._q_refs = []  # the controller's reference per pending row (None: no reference)
         self._flushed_at = time.perf_counter()

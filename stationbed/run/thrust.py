@@ -13,14 +13,11 @@ import math
 import numpy as np
 
 from ..loop.actuator import pulse_pieces
-from ..loop.thrusters import ThrusterCluster, propellant_per_orbit
+from ..loop.thrusters import ThrusterCluster
 from ..scene import knowledge_scene
 from .segments import segment_input
 
-__all__ = ["ThrustLoop", "thruster_columns", "thrust_for", "THRUSTER_SUMMARY"]
-
-#: summary keys (and Monte Carlo metrics, run/metrics.py) of a run with thrusters
-THRUSTER_SUMMARY = ("propellant_kg", "thruster_firings", "thruster_control_s", "thruster_impulse_Ns")
+__all__ = ["ThrustLoop", "thruster_columns", "thrust_for", "thruster_parts"]
 
 
 def thruster_columns(scene) -> list[str]:
@@ -32,6 +29,18 @@ def thruster_columns(scene) -> list[str]:
         return []
     cols = ["thr_mode", "thr_dumping", "thr_firings", "thr_control_s", "thr_impulse_Ns", "thr_propellant_kg"]
     return cols + [f"thr_on_s_{t.name}" for t in scene.thruster]
+
+
+def thruster_parts(s: dict) -> list[str]:
+    """The run summary line's thruster parts (``stationbed run``), none without thrusters."""
+    if "propellant_kg" not in s:
+        return []
+    per = f" ({s['propellant_kg_per_orbit']:.4g} kg per orbit)" if "propellant_kg_per_orbit" in s else ""
+    out = [f"thrusters {s['thruster_firings']} firings, impulse {s['thruster_impulse_Ns']:.4g} N s, propellant "
+           f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
+    if "thrusters_not_fused" in s:
+        out.append(f"thrusters flown per tick: {s['thrusters_not_fused']}")
+    return out
 
 
 def thrust_for(loop, plant) -> "ThrustLoop | None":
@@ -101,20 +110,12 @@ class ThrustLoop:
         vals = [s.get(x, k) for k in ("mode", "dumping", "firings", "control_s", "impulse_Ns", "propellant_kg")]
         return [float(np.ravel(v)[0]) for v in vals] + list(np.ravel(s.get(x, "on_total_s")))
 
-    def summary(self, loop, x=None) -> dict:
-        """Totals over the run (the state after the last integrated tick)."""
-        s = self.cluster.state
-        x = self.x_row if x is None else x
-        prop = float(np.ravel(s.get(x, "propellant_kg"))[0])
-        out = {"propellant_kg": prop,
-               "thruster_firings": int(round(float(np.ravel(s.get(x, "firings"))[0]))),
-               "thruster_control_s": float(np.ravel(s.get(x, "control_s"))[0]),
-               "thruster_impulse_Ns": float(np.ravel(s.get(x, "impulse_Ns"))[0]),
-               "thruster_mapping": self.cluster.opt.mapping,
-               "thruster_pure_couple": bool(self.cluster.pure)}
-        per = propellant_per_orbit(prop, loop.duration, loop.scene.orbit)
-        if per is not None:
-            out["propellant_kg_per_orbit"] = per
+    def summary(self, loop) -> dict:
+        """What the summary adds to the thruster metrics (propellant_kg and the other totals are
+        :data:`~.metrics.METRICS`, reduced from the rows' thr_* columns by ``RunMetrics``)."""
+        out = {"thruster_mapping": self.cluster.opt.mapping, "thruster_pure_couple": bool(self.cluster.pure)}
+        if loop.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
+            out["orbit_period_s"] = 2.0 * math.pi / loop.scene.orbit.mean_motion
         if self.fused_reason:
             out["thrusters_not_fused"] = self.fused_reason
         return out
