@@ -25,7 +25,8 @@ from numpy.testing import assert_allclose
 from stationbed import simulate
 from stationbed.integrators import RK4
 from stationbed.loop.actuator import pulse_pieces, split_step
-from stationbed.loop.thrusters import G0_M_S2, ThrusterCluster, map_lp, map_min_norm_shift, mapping_matrices, torque_arms
+from stationbed.loop.thrusters import (G0_M_S2, ThrusterCluster, map_lp, map_min_norm_shift, mapping_matrices,
+                                       opposed_pairs, supports, torque_arms)
 from stationbed.scene import SceneError, scene_from_dict
 
 PERIOD_S = 0.1  # s
@@ -87,7 +88,9 @@ def sphere(thrusters, duration=20.0, integrator="rk4", **opts):
 def pod_geometry():
     s = sphere(pods())
     D, G = torque_arms(s)
-    M, v, pure = mapping_matrices(D, G)
+    pairs = opposed_pairs([t.position_B for t in s.thruster], [t.unit_B for t in s.thruster])
+    assert pairs is not None and len(pairs) == 8
+    M, v, pure = mapping_matrices(D, G, pairs)
     return s, D, G, M, v, pure
 
 
@@ -133,9 +136,39 @@ def test_mapping_compiled_equals_numpy(pod_geometry):
     """The casadi mapping (what the loops run) and the numpy one agree."""
     _, _, _, M, v, _ = pod_geometry
     Ls = ca.SX.sym("L", 3)
-    f = ca.Function("m", [Ls], [map_min_norm_shift(ca.DM(M), ca.DM(v), np.full(16, F_N), Ls)])
+    f = ca.Function("m", [Ls], [map_min_norm_shift(ca.DM(M), ca.DM(v), np.full(16, F_N), Ls, supports(v))])
     for L in ([300.0, -200.0, 50.0], [0.0, 0.0, 0.0], [5e4, 0.0, 0.0]):
         assert_allclose(np.ravel(f(L)), map_min_norm_shift(M, v, np.full(16, F_N), np.array(L)), rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(u=torque)
+def test_pair_shift_spends_what_the_lp_spends(pod_geometry, u):
+    """On a set of opposed pairs the closed form (shift per pair) needs the LP's least Σ F:
+    the minimum-norm solution is antisymmetric in each pair, and the shift fires one side."""
+    _, _, _, M, v, _ = pod_geometry
+    D, G = hand_arms(pods())
+    L = 1000.0 * u
+    F = map_min_norm_shift(M, v, np.full(16, F_N), L)
+    lp = map_lp(D, G, np.full(16, F_N), L, np.full(16, 1.0 / ISP_S), True)
+    assert_allclose(F.sum(), lp.sum(), rtol=1e-9, atol=1e-9)
+
+
+def test_unpaired_set_shifts_along_one_null_vector():
+    """15 of the 16 (one partner removed): no pairing, one positive null vector found by HiGHS;
+    still exact, non-negative and a pure couple."""
+    entries = pods()[1:]
+    s = sphere(entries)
+    D, G = torque_arms(s)
+    assert opposed_pairs([t.position_B for t in s.thruster], [t.unit_B for t in s.thruster]) is None
+    M, V, pure = mapping_matrices(D, G, None)
+    assert pure and V.shape == (15, 1) and (V > 0).all()
+    Dh, Gh = hand_arms(entries)
+    L = np.array([300.0, -150.0, 80.0])
+    F = map_min_norm_shift(M, V, np.full(15, F_N), L)
+    assert (F >= 0).all()
+    assert_allclose(Dh @ F, L, atol=MAP_REL * ARM_M * F_N * 16)
+    assert_allclose(Gh @ F, 0.0, atol=MAP_REL * F_N * 16)
 
 
 def test_lp_bounds_and_least_propellant(pod_geometry):
@@ -292,3 +325,14 @@ def test_bad_scene_one_line(change, field):
     with pytest.raises(SceneError) as e:
         sphere(pods()).replace(change)
     assert field in str(e.value) and "\n" not in str(e.value)
+
+
+def test_dump_events_on_the_time_line():
+    """The rerun recording's events: a dump that begins and ends is logged at its rows."""
+    from stationbed.output.rerun.events import Events
+
+    tr = simulate(sphere(pods()), fused=False)
+    d = tr.data[:, tr.columns.index("thr_dumping")]
+    texts = [e[2] for e in Events(tr.columns).changes(tr)]
+    assert d.max() == 1.0 and d[-1] == 0.0
+    assert "thruster momentum dump begins" in texts and "thruster momentum dump ends" in texts

@@ -10,8 +10,8 @@ Per tick (one casadi expression, :meth:`ThrusterCluster._command`):
    request is ``ΔH = -(|h| - h_min)/|h| h`` and its torque ``ΔH / dump_time_s``, at most
    ``max_dump_torque_Nm``. Inside an inhibit window nothing fires.
 2. **Request.** The thrusters are asked for ``mode · τ_law + dumping · L_dump``.
-3. **Mapping** (:func:`mapping_matrices`): minimum norm plus a shift along a positive
-   null-space vector, ``F = M L + s v`` with ``s = max(0, max_i(-(M L)_i / v_i))``; where the
+3. **Mapping** (:func:`mapping_matrices`): minimum norm plus the least shift along positive
+   null-space vectors (one per opposed pair of thrusters, or one for the set); where the
    geometry allows, ``M`` and ``v`` are those of the torque *and* force equations, so the
    forces are a pure couple (Σ F_i ĝ_i = 0). Scaled down as a whole when a force exceeds its
    thruster's. (The LP with bounds, :func:`map_lp`, is the per-tick alternative.)
@@ -37,6 +37,8 @@ ISS's attitude thrusters' net impulse is a pure couple where they can make one).
 
 from __future__ import annotations
 
+import hashlib
+
 import casadi as ca
 import numpy as np
 
@@ -44,7 +46,8 @@ from ..core.massprops import composite_cm
 from .actuator import Actuator, register_actuator
 from .layout import Layout
 
-__all__ = ["ThrusterCluster", "G0_M_S2", "mapping_matrices", "map_min_norm_shift", "map_lp", "MODES"]
+__all__ = ["ThrusterCluster", "G0_M_S2", "mapping_matrices", "map_min_norm_shift", "map_lp", "MODES", "opposed_pairs",
+           "supports", "torque_arms"]
 
 #: standard gravity [m/s²] for m_dot = F / (Isp g0) (CGPM 1901, exact)
 G0_M_S2 = 9.80665
@@ -80,46 +83,84 @@ def _positive_null(A: np.ndarray) -> np.ndarray | None:
     return v / v.max()
 
 
-def mapping_matrices(D: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """``(M (n, 3), v (n,), pure)`` of the minimum-norm-plus-shift mapping ``F = M L + s v``.
+def opposed_pairs(positions, directions, tol: float = 1e-9) -> list[tuple[int, int]] | None:
+    """Every thruster matched with one at the same place firing the opposite way (i < j), or
+    None when the set does not split into such pairs."""
+    P, G = np.asarray(positions, dtype=float), np.asarray(directions, dtype=float)
+    free, pairs = list(range(len(P))), []
+    while free:
+        i = free.pop(0)
+        j = next((j for j in free if np.linalg.norm(P[i] - P[j]) <= tol * max(1.0, np.linalg.norm(P[i]))
+                  and np.linalg.norm(G[i] + G[j]) <= tol), None)
+        if j is None:
+            return None
+        free.remove(j)
+        pairs.append((i, j))
+    return pairs
 
-    ``pure``: M and v solve the torque and the force equations (``[D; G] F = [L; 0]``), a pure
-    couple. Otherwise the torque equations alone (the net force is then whatever it is). ``v``
-    is all zeros when no positive null-space vector exists: forces that come out negative are
-    then clipped to 0 and the torque is not exact (use ``mapping = "lp"``, or add thrusters)."""
+
+def mapping_matrices(D: np.ndarray, G: np.ndarray, pairs=None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(M (n, 3), V (n, m), pure)`` of the minimum-norm-plus-shift mapping
+    ``F = M L + Σ_k s_k V[:, k]`` (:func:`map_min_norm_shift`).
+
+    ``pure``: M solves the torque and the force equations (``[D; G] F = [L; 0]``, a pure
+    couple); otherwise the torque equations alone (the net force is then whatever it is). The
+    columns of V are positive null-space vectors of the same rows with disjoint supports: one per
+    opposed pair (``pairs``, :func:`opposed_pairs`: ``e_i + e_j``, a pair fired together does
+    nothing), else one found by HiGHS (``v >= 1``, ``A v = 0``). V is one zero column when no
+    positive null vector exists: forces that come out negative are then clipped to 0 and the
+    torque is not exact (use ``mapping = "lp"``, or add thrusters)."""
+    n = D.shape[1]
     rk = np.linalg.matrix_rank
     for A, pure in ((np.vstack([D, G]), True), (D, False)):
         # every torque with no net force: D full rank, and the force rows independent of it
         # (a set that makes no force along some axis, e.g. no thruster along x, still qualifies)
         if rk(D) < 3 or (pure and rk(A) < 3 + rk(G)):
             continue
+        if pairs:
+            V = np.zeros((n, len(pairs)))
+            for k, (i, j) in enumerate(pairs):
+                V[i, k] = V[j, k] = 1.0
+            return np.linalg.pinv(A)[:, :3], V, pure
         v = _positive_null(A)
         if v is not None:
-            return np.linalg.pinv(A)[:, :3], v, pure
-    return np.linalg.pinv(D)[:, :3], np.zeros(D.shape[1]), False
+            return np.linalg.pinv(A)[:, :3], v[:, None], pure
+    return np.linalg.pinv(D)[:, :3], np.zeros((n, 1)), False
 
 
-def map_min_norm_shift(M, v, f_max, L):
-    """Forces >= 0 for the torque request ``L`` (casadi or numpy): ``F = M L + s v`` with the
-    least shift ``s >= 0`` that makes every force non-negative, then all scaled by
+def supports(V) -> list[list[int]]:
+    """The thrusters each shift vector (column of V) moves."""
+    V = np.asarray(V, dtype=float)
+    return [[int(i) for i in np.flatnonzero(V[:, k] > 0)] for k in range(V.shape[1])]
+
+
+def map_min_norm_shift(M, V, f_max, L, support=None):
+    """Forces >= 0 for the torque request ``L`` (casadi or numpy): ``F = M L``, then along each
+    shift vector k (a column of ``V``, disjoint supports ``support``, from ``V`` when it is
+    numeric) the least shift ``s_k = max_i (-F_i / V_ik)`` that leaves every force it moves
+    non-negative (one of them exactly 0: no propellant spent against itself); then all scaled by
     ``1 / max(1, max_i F_i / F_max,i)`` so none exceeds its thruster's (the torque's direction
-    kept). Without a positive null vector (``v = 0``) negative forces are clipped to 0."""
+    kept). Without a shift vector negative forces are clipped to 0."""
     if isinstance(L, (ca.SX, ca.MX)):
         F = ca.mtimes(M, L)
-        n = F.shape[0]
-        s = 0.0
-        for i in range(n):
-            s = ca.fmax(s, ca.if_else(v[i] > 0, -F[i] / ca.fmax(v[i], 1e-300), 0.0))
-        F = ca.fmax(F + s * v, 0.0)
-        k = 1.0
-        for i in range(n):
-            k = ca.fmax(k, F[i] / f_max[i])
-        return F / k
-    M, v, f_max, L = (np.asarray(a, dtype=float) for a in (M, v, f_max, L))
+        for k, sup in enumerate(support):
+            if sup:
+                s = -F[sup[0]] / V[sup[0], k]
+                for i in sup[1:]:
+                    s = ca.fmax(s, -F[i] / V[i, k])
+                F = F + s * V[:, k]
+        F = ca.fmax(F, 0.0)
+        kk = 1.0
+        for i in range(F.shape[0]):
+            kk = ca.fmax(kk, F[i] / f_max[i])
+        return F / kk
+    M, V, f_max, L = (np.asarray(a, dtype=float) for a in (M, V, f_max, L))
+    V = V.reshape(len(f_max), -1)
     F = M @ L
-    pos = v > 0
-    s = max(0.0, float(np.max(-F[pos] / v[pos]))) if pos.any() else 0.0
-    F = np.maximum(F + s * v, 0.0)
+    for k, sup in enumerate(supports(V) if support is None else support):
+        if sup:
+            F = F + max(-F[i] / V[i, k] for i in sup) * V[:, k]
+    F = np.maximum(F, 0.0)
     return F / max(1.0, float(np.max(F / f_max)))
 
 
@@ -159,20 +200,24 @@ class ThrusterCluster(Actuator):
         self.names = [t.name for t in scene.thruster]
         self.D, self.G = torque_arms(scene)
         self.D_known, self.G_known = torque_arms(known)
-        self.M, self.v, self.pure = mapping_matrices(self.D_known, self.G_known)
+        pairs = opposed_pairs([t.position_B for t in known.thruster], [t.unit_B for t in known.thruster])
+        self.M, self.V, self.pure = mapping_matrices(self.D_known, self.G_known, pairs)
+        self.support = supports(self.V)
         self.capacity = float(capacity_Nms)
         self.f_max = np.array([t.force_N for t in scene.thruster])
         self.isp = np.array([t.isp_s for t in scene.thruster])
         super().__init__()
 
     def _structure(self) -> tuple:
-        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder))
+        # which thrusters each shift moves (it shapes the compiled code)
+        shifts = hashlib.sha1(repr(self.support).encode()).hexdigest()[:8]
+        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts)
 
     def _layouts(self):
         n, ni = self.n, len(self.opt.inhibit)
         state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
                        impulse_Ns=1, propellant_kg=1)
-        params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), v=n, capacity=1, mode=1,
+        params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, mode=1,
                         levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1))
         outputs = Layout(request_B=3, force_N=n)
         return state, params, outputs, Layout(h_B=3)
@@ -183,7 +228,7 @@ class ThrusterCluster(Actuator):
     def _params(self) -> dict:
         o = self.opt
         return dict(f_max=self.f_max, isp=self.isp, min_on=[t.min_on_s for t in self.scene.thruster],
-                    torque_B=self.D * self.f_max, M=self.M, v=self.v, capacity=self.capacity, mode=MODES[o.mode],
+                    torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, mode=MODES[o.mode],
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
                     inhibit=[v for w in o.inhibit for v in w] or [0.0])
@@ -264,7 +309,7 @@ class ThrusterCluster(Actuator):
 
     def _command(self, t, h, x, r, tau, p):
         mode, dumping, inh, L_dump, req = self._request(t, x, r, tau, p)
-        F = map_min_norm_shift(p["M"], p["v"], p["f_max"], req)
+        F = map_min_norm_shift(p["M"], p["V"], p["f_max"], req, self.support)
         on, acc = self._fire(t, h, x, F, p, inh)
         return self._finish(h, x, tau, p, mode, dumping, inh, L_dump, req, F, on, acc)
 
@@ -300,7 +345,7 @@ class ThrusterCluster(Actuator):
                        1.0 / self.isp, self.pure)
             F = None if F is None else F * self.f_max
         if F is None:
-            F = map_min_norm_shift(self.M, self.v, self.f_max, req)
+            F = map_min_norm_shift(self.M, self.V, self.f_max, req)
         x_next, rest, on, Tq, out = (np.asarray(v).ravel() for v in fire(t, h, x, tau_B, self.params, F, aux))
         out[:3] = req
         self.n_commands += 1
