@@ -336,3 +336,33 @@ def test_dump_events_on_the_time_line():
     texts = [e[2] for e in Events(tr.columns).changes(tr)]
     assert d.max() == 1.0 and d[-1] == 0.0
     assert "thruster momentum dump begins" in texts and "thruster momentum dump ends" in texts
+
+
+def test_fused_equals_per_tick_with_sensor_noise():
+    """With [controller.sensor] noise the fused loop draws the same numbers (fused.py's order)."""
+    s = sphere(pods()).replace({"controller.sensor": {"attitude_noise": 1e-4, "rate_noise": 1e-6, "seed": 7}})
+    a, b = simulate(s, fused=False), simulate(s, fused=True)
+    assert b.meta["summary"]["fused"] and not a.meta["summary"]["fused"]
+    assert_allclose(b.data, a.data, rtol=0, atol=EXEC_ABS)
+
+
+def test_sensors_with_thrusters_fly_per_tick_and_say_so():
+    """[[sensor]] tables + thrusters: the fused loop is not taken, the summary says why, and the
+    thrusters still fire (never silently dropped)."""
+    gyro = {"kind": "gyro", "name": "g1", "period": PERIOD_S, "sigma_v": 1e-7, "sigma_u": 1e-10}
+    st = {"kind": "star_tracker", "name": "s1", "period": 0.5, "boresight_B": [0.0, 0.0, 1.0],
+          "nea_cross": 1e-5, "nea_about": 5e-5}
+    s = sphere(pods()).replace({"sensor": [gyro, st], "estimator": {"kind": "mekf"}})
+    sm = simulate(s, fused=True).meta["summary"]
+    assert not sm["fused"] and "sensor" in sm["thrusters_not_fused"]
+    assert sm["thruster_firings"] > 0
+
+
+def test_lockstep_batch_never_drops_thrusters():
+    """The Monte Carlo's lockstep executor hands thruster scenes to their own loop."""
+    from stationbed.run.lockstep import run_lockstep
+
+    s = sphere(pods())
+    res = run_lockstep([s, s], fused=False)
+    assert [kind for kind, _ in res] == ["per-tick", "per-tick"]  # not "batch": its tick has no pulses
+    assert all(tr.meta["summary"]["thruster_firings"] > 0 for _, tr in res)

@@ -9,8 +9,9 @@ short-circuit ``if_else`` on MX, so the generated C evaluates only the branch ta
 that does not fire costs one step. The carry holds the tick index, the state, the saturation
 counts and the thrusters' memory (their ledger included).
 
-Taken when :func:`fused_thrust_ok` (no sensor noise or sensors, no environment rate, the
-closed-form mapping); otherwise the per-tick loop runs and the summary says why
+Sensor noise (``[controller.sensor]``) is drawn in Python per tick and applied in the compiled
+tick as :mod:`.fused` does (same draws, same operations). Taken when :func:`fused_thrust_ok`
+(no ``[[sensor]]`` tables, no environment rate, the closed-form mapping); otherwise the per-tick loop runs and the summary says why
 (``thrusters_not_fused``).
 """
 
@@ -42,15 +43,15 @@ def fused_thrust_ok(loop) -> bool:
     why = None
     if th.lp:
         why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
-    elif loop.noisy or getattr(loop, "flight", None) is not None:
-        why = "sensor noise or [[sensor]] tables with thrusters are flown per tick"
+    elif getattr(loop, "flight", None) is not None:
+        why = "[[sensor]] tables with thrusters are flown per tick"
     elif environment_rate(loop):
         why = "an environment rate with thrusters is flown per tick"
     th.fused_reason = why
     return why is None
 
 
-def _build(loop, n: int, symbolic_params) -> dict:
+def _build(loop, n: int, symbolic_params, flags=(False, False)) -> dict:
     system, ctrl, th = loop.system, loop.ctrl, loop.thrust
     sx = system.sx
     form = system.formulation
@@ -62,7 +63,13 @@ def _build(loop, n: int, symbolic_params) -> dict:
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
     xa, pa = ca.SX.sym("xa", na), ca.SX.sym("pa", npa)
+    from .fused import _corrupt_sx, _noise_width  # (fused.py imports this module)
+
+    nn = _noise_width(flags)
+    nz = ca.SX.sym("nz", nn)
     y = sx["meas"](t, x, p)
+    if nn:  # the law sees the noisy measurement, as fused.py's tick (h_B is not corrupted)
+        y = _corrupt_sx(y, nz, flags, loop.layout)
     try:
         cmd, q_ref = ctrl.symbolic(t, y, cp)
         cmd = ca.vertcat(cmd)
@@ -86,14 +93,14 @@ def _build(loop, n: int, symbolic_params) -> dict:
     idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
     # the law and the idle test (every tick); the quiet tick (idle: the law's request to the
     # CMGs, one step); the busy tick's actuation (the thrusters' command, the CMGs' share)
-    pre = sx_function("thr_pre", [t, x, cp, p, xa, pa], [cmd, idle])
+    pre = sx_function("thr_pre", [t, x, cp, p, xa, pa, nz], [cmd, idle])
     cmd_s = ca.SX.sym("cmd", 3)
     a_q, u_q, sat_q = act_u(cmd_s)
     xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd_s, pa)
     _, u_b, sat_b = act_u(rest_s)
     quiet = sx_function("thr_quiet", [t, x, cmd_s, u_ext, p, h, xa], [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa)])
     busy_core = sx_function("thr_busy", [t, x, cmd_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
-    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa], [ca.vertcat(cmd, act, q_ref)])
+    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
     plain = sx_function("thr_plain", [t, x, h, us, p], [step(rhs, t, x, h, us, p)])
     split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
@@ -101,7 +108,9 @@ def _build(loop, n: int, symbolic_params) -> dict:
     MX = ca.MX
     ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
                                           MX.sym("p", npar), MX.sym("h"), MX.sym("xa", na), MX.sym("pa", npa))
-    info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai], [core(ti, xi, cpi, ui, pi_, hi, xai, pai)])
+    nzi = MX.sym("nz", nn)
+    info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai, nzi],
+                       [core(ti, xi, cpi, ui, pi_, hi, xai, pai, nzi)])
     nc = 1 + nx + 2 + na
     npar_all = 3 + ncp + 3 + npar + npa
     c, par = MX.sym("c", nc), MX.sym("par", npar_all)
@@ -110,7 +119,8 @@ def _build(loop, n: int, symbolic_params) -> dict:
     cpc, uc = par[3 : 3 + ncp], par[3 + ncp : 6 + ncp]
     pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
     tt = t0 + i * hh
-    cmd_c, idle_c = pre(tt, xc, cpc, pc, xac, pac)
+    nzc = MX.sym("nz", nn)
+    cmd_c, idle_c = pre(tt, xc, cpc, pc, xac, pac, nzc)
     # the busy tick: the thrusters' command, then a plain step or the split one (only if one fires)
     bx, bcmd, bu, bxa = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na)
     bt, bh, bp, bpa = MX.sym("t"), MX.sym("h"), MX.sym("p", npar), MX.sym("pa", npa)
@@ -123,11 +133,11 @@ def _build(loop, n: int, symbolic_params) -> dict:
     c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
                        cnt + ca.if_else(act_, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), MX.zeros(2)),
                        ca.if_else(act_, xa_new, xac))
-    stepf = ca.Function("thr_step", [c, par], [c_new])
+    stepf = ca.Function("thr_step", [c, par, nzc], [c_new])
     acc = stepf.mapaccum("thr_acc", n)
-    c0, parm = MX.sym("c0", nc), MX.sym("par", npar_all)
-    chunk = ca.Function("thr_chunk", [c0, parm], [acc(c0, ca.repmat(parm, 1, n))[:, -1]])
-    tag = f"thrfused2_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    c0, parm, noise = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nn, n)  # column i: tick i's draws
+    chunk = ca.Function("thr_chunk", [c0, parm, noise], [acc(c0, ca.repmat(parm, 1, n), noise)[:, -1]])
+    tag = f"thrfused3_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
@@ -136,11 +146,15 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
     """Run ticks 0..K fused with the thrusters, emitting the same rows as the per-tick loop."""
     ctrl, th = loop.ctrl, loop.thrust
     cl = th.cluster
+    from .fused import _draw, _noise_flags, _noise_width  # (fused.py imports this module)
+
     n = loop.n_per_out
-    key = (id(loop.system), type(ctrl), n, cl.key)
+    flags = _noise_flags(loop)
+    nn = _noise_width(flags)
+    key = (id(loop.system), type(ctrl), n, cl.key, flags)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n, symbolic_params)
+        _CHUNKS[key] = _build(loop, n, symbolic_params, flags)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
@@ -150,7 +164,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
     info.args[2][:] = cp
     info.args[4][:] = p
     info.args[7][:] = cl.params
-    c0, par = chunk.args
+    c0, par, noise = chunk.args
+    noise[:] = 0.0
     ncp = len(cp)
     par[3 : 3 + ncp] = cp
     i_ext = slice(3 + ncp, 6 + ncp)
@@ -167,6 +182,9 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
         for j, k in enumerate(row_ks):
             t = min(k * period, duration)
             n_act = row_ks[j + 1] - k if k < K else 1
+            if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order
+                draws = _draw(loop, n_act, flags)
+                info.args[8][:] = draws[0]
             info.args[0][0] = t
             info.args[1][:] = x
             info.args[3][:] = held_torque_from(loop.scene, t, loop.bps, duration)
@@ -194,6 +212,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
                 par[1] = hp
                 par[2] = b - a
                 par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration)
+                if nn:  # column-major (nn, n): tick by tick
+                    noise[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
                 x = res[1 : 1 + nx].copy()
