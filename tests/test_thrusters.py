@@ -38,6 +38,10 @@ J_SPHERE = 1.0e6  # kg m²
 MAP_REL = 1e-10
 #: round-off of ~200 RK4 steps on momenta of ~100 N m s (as test_closed_loop_balance.py)
 BALANCE_ABS = 1e-9  # N m s
+#: thruster-only control cycles in pulses of the minimum impulse: a couple of 2 x 100 N x 20 m
+#: for 0.02 s is 80 N m s, 8e-5 rad/s on 1e6 kg m²; the PD (0.05 rad/s) turns it round within
+#: ~ 1/0.05 s: ~1e-3 rad ~ 0.05 deg is the scale of the cycle (measured 0.013 deg)
+LIMIT_CYCLE_DEG = 0.05
 #: fused vs per tick: the same expressions, evaluated in another order (C vs casadi VM)
 EXEC_ABS = 1e-9
 
@@ -366,3 +370,32 @@ def test_lockstep_batch_never_drops_thrusters():
     res = run_lockstep([s, s], fused=False)
     assert [kind for kind, _ in res] == ["per-tick", "per-tick"]  # not "batch": its tick has no pulses
     assert all(tr.meta["summary"]["thruster_firings"] > 0 for _, tr in res)
+
+
+def test_inhibit_window_fires_nothing_inside():
+    """Dumping from t = 0 but inhibited over [0, 5) s: no on-time before 5 s, firings after."""
+    tr = simulate(sphere(pods(), inhibit=[[0.0, 5.0]]), fused=False)
+    on = tr.data[:, [tr.columns.index(f"thr_on_s_t{i}") for i in range(16)]].sum(axis=1)
+    assert (on[tr.t <= 5.0] == 0.0).all() and on[-1] > 0.0
+
+
+def test_mode_off_is_the_run_without_thrusters():
+    """``mode = "off"``: every state and shared column equal, bit for bit, to the same scene with
+    no [[thruster]] on the same (generic per-tick) path: the request passes to the CMGs whole."""
+    s = sphere(pods(), mode="off")
+    bare = s.replace({"thruster": [], "thrusters": None})
+    a, b = simulate(s, integrator=RK4Generic), simulate(bare, integrator=RK4Generic)
+    shared = [c for c in b.columns]
+    assert np.array_equal(a.data[:, [a.columns.index(c) for c in shared]], b.data)
+    assert a.meta["summary"]["thruster_firings"] == 0
+
+
+def test_thruster_only_mode_holds_attitude_on_thrusters():
+    """``mode = "thruster_only"``: the law's torque goes to the thrusters for the whole run (its
+    time counted), and the attitude stays held (the CMGs only take the dump torque)."""
+    s = sphere(pods(), mode="thruster_only")
+    tr = simulate(s, fused=False)
+    sm = tr.meta["summary"]
+    assert sm["thruster_control_s"] == pytest.approx(s.simulation.duration, rel=1e-12)
+    assert (tr.data[1:, tr.columns.index("thr_mode")] == 1.0).all()
+    assert sm["max_att_err_deg"] < LIMIT_CYCLE_DEG
