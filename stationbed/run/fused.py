@@ -201,7 +201,8 @@ def run_fused(loop, K: int) -> None:
     """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
     ctrl = loop.ctrl
     if getattr(loop, "thrust", None) is not None:  # thrusters (issue 21)
-        return run_fused_thrust(loop, K, _symbolic_params(ctrl), _edge_ticks(loop))
+        noise = {"flags": _noise_flags(loop), "width": _noise_width, "corrupt": _corrupt_sx, "draw": _draw}
+        return run_fused_thrust(loop, K, _symbolic_params(ctrl), _edge_ticks(loop), noise)
     if getattr(loop, "flight", None) is not None:  # sensors and estimator (issue 20)
         from .fused_flight import run_fused_flight
 

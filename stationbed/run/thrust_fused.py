@@ -51,7 +51,7 @@ def fused_thrust_ok(loop) -> bool:
     return why is None
 
 
-def _build(loop, n: int, symbolic_params, flags=(False, False)) -> dict:
+def _build(loop, n: int, symbolic_params, noise) -> dict:
     system, ctrl, th = loop.system, loop.ctrl, loop.thrust
     sx = system.sx
     form = system.formulation
@@ -63,13 +63,12 @@ def _build(loop, n: int, symbolic_params, flags=(False, False)) -> dict:
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
     xa, pa = ca.SX.sym("xa", na), ca.SX.sym("pa", npa)
-    from .fused import _corrupt_sx, _noise_width  # (fused.py imports this module)
-
-    nn = _noise_width(flags)
+    flags = noise["flags"]
+    nn = noise["width"](flags)
     nz = ca.SX.sym("nz", nn)
     y = sx["meas"](t, x, p)
     if nn:  # the law sees the noisy measurement, as fused.py's tick (h_B is not corrupted)
-        y = _corrupt_sx(y, nz, flags, loop.layout)
+        y = noise["corrupt"](y, nz, flags, loop.layout)
     try:
         cmd, q_ref = ctrl.symbolic(t, y, cp)
         cmd = ca.vertcat(cmd)
@@ -142,19 +141,22 @@ def _build(loop, n: int, symbolic_params, flags=(False, False)) -> dict:
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
 
-def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
-    """Run ticks 0..K fused with the thrusters, emitting the same rows as the per-tick loop."""
+def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
+    """Run ticks 0..K fused with the thrusters, emitting the same rows as the per-tick loop.
+
+    ``noise``: :mod:`.fused`'s sensor-noise helpers, ``flags`` (which corruptions apply),
+    ``width`` (draws per tick), ``corrupt`` (the compiled corruption), ``draw`` (the draws of the
+    next ticks in the per-tick loop's order); handed over by ``run_fused``, which imports this
+    module."""
     ctrl, th = loop.ctrl, loop.thrust
     cl = th.cluster
-    from .fused import _draw, _noise_flags, _noise_width  # (fused.py imports this module)
-
     n = loop.n_per_out
-    flags = _noise_flags(loop)
-    nn = _noise_width(flags)
+    flags = noise["flags"]
+    nn = noise["width"](flags)
     key = (id(loop.system), type(ctrl), n, cl.key, flags)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n, symbolic_params, flags)
+        _CHUNKS[key] = _build(loop, n, symbolic_params, noise)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
@@ -164,8 +166,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
     info.args[2][:] = cp
     info.args[4][:] = p
     info.args[7][:] = cl.params
-    c0, par, noise = chunk.args
-    noise[:] = 0.0
+    c0, par, noise_in = chunk.args
+    noise_in[:] = 0.0
     ncp = len(cp)
     par[3 : 3 + ncp] = cp
     i_ext = slice(3 + ncp, 6 + ncp)
@@ -183,7 +185,7 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
             t = min(k * period, duration)
             n_act = row_ks[j + 1] - k if k < K else 1
             if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order
-                draws = _draw(loop, n_act, flags)
+                draws = noise["draw"](loop, n_act, flags)
                 info.args[8][:] = draws[0]
             info.args[0][0] = t
             info.args[1][:] = x
@@ -213,7 +215,7 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges) -> None:
                 par[2] = b - a
                 par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration)
                 if nn:  # column-major (nn, n): tick by tick
-                    noise[: nn * (b - a)] = draws[a - k : b - k].ravel()
+                    noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
                 x = res[1 : 1 + nx].copy()
