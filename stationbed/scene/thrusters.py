@@ -115,6 +115,10 @@ def check_thrusters(scene) -> None:
         raise FieldError("thruster", "thrusters are fired by the closed loop: add a [controller] table")
     if scene.cmg is None:
         raise FieldError("thruster", "thrusters assist a CMG cluster (and take over from it): add a [cmg] table")
+    opt = scene.thrusters or ThrusterOptions()
+    if opt.mode == "assist" and scene.cmg.kind == "ideal" and scene.cmg.max_momentum is None:
+        raise FieldError("thrusters.mode", "'assist' acts on |h| as a fraction of the CMG capacity: give "
+                                           "cmg.max_momentum (kind 'ideal' has no capacity otherwise)")
     period = scene.controller.period
     for i, t in enumerate(scene.thruster):
         if t.min_on_s > period:
