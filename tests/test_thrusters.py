@@ -291,9 +291,13 @@ def test_ledger_equals_logged_on_times():
     assert G0_M_S2 == 9.80665
 
 
-def test_fused_equals_per_tick():
-    """16 thrusters in assist: the fused loop's rows equal the per-tick loop's to round-off."""
-    s = sphere(pods())
+@pytest.mark.parametrize("extra", [{}, {"simulation.duration": 20.05},
+                                   {"torque": [{"kind": "constant", "torque_B": [3.0, -2.0, 1.0], "start": 4.0, "stop": 9.0}]}],
+                         ids=["plain", "short_last_tick", "torque_window_on_grid"])
+def test_fused_equals_per_tick(extra):
+    """16 thrusters in assist: the fused loop's rows equal the per-tick loop's to round-off (also
+    with a short last period and a torque window whose edges the fused loop cuts on the grid)."""
+    s = sphere(pods()).replace(extra)
     a, b = simulate(s, fused=False), simulate(s, fused=True)
     assert b.meta["summary"]["fused"] and not a.meta["summary"]["fused"]
     assert_allclose(b.data, a.data, rtol=0, atol=EXEC_ABS)
