@@ -429,3 +429,14 @@ def test_vector_impulse_of_sixteen_thrusters(executor):
     dH = tr.H_O_N - tr.H_O_N[0]
     assert np.abs(dH[-1]).min() > 1.0  # every axis took an impulse
     assert_allclose(dH, on @ (D * F_N).T, rtol=0, atol=STIFF_BALANCE_ABS)
+
+
+def test_dump_request_on_the_working_units():
+    """A failed unit flight software knows of holds 4760 N m s: the dump law acts on h minus it."""
+    s = sphere(x_couples(), max_dump_torque_Nm=1e3)
+    held = np.array([4760.0, 0.0, 0.0])  # N m s
+    c = ThrusterCluster(s, s, 100.0, held)
+    request, _ = c.lp_functions()
+    h_work = np.array([54.0, 0.0, -72.0])  # |h| = 90 N m s of the working units
+    req, _ = request(0.0, PERIOD_S, c.x0, h_work + held, np.zeros(3), c.params)
+    assert_allclose(np.ravel(req), -(90.0 - 30.0) / 90.0 * h_work / 10.0, rtol=1e-12)

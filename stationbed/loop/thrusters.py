@@ -3,8 +3,8 @@ hand-over to thruster-only control, force mapping, Schmitt pulse modulation, pro
 
 Per tick (one casadi expression, :meth:`ThrusterCluster._command`):
 
-1. **Mode and dump law.** ``f = |h| / capacity`` (the working units' capacity as flight
-   software knows it). Thruster-only control starts at ``f >= handover`` and ends at
+1. **Mode and dump law.** ``f = |h| / capacity``, h and the capacity of the working units as
+   flight software knows them (a failed unit it knows of: its held momentum left out). Thruster-only control starts at ``f >= handover`` and ends at
    ``f <= handback`` (``mode = "assist"``; ``"thruster_only"``: always; ``"off"``: never
    fires). Dumping starts at ``f >= assist_on`` and stops at ``f <= dump_stop``; the dump
    request is ``ΔH = -(|h| - h_min)/|h| h`` and its torque ``ΔH / dump_time_s``, at most
@@ -188,11 +188,14 @@ class ThrusterCluster(Actuator):
         What flight software believes (the mapping's geometry).
     capacity_Nms : float
         The working CMG units' momentum capacity flight software knows [N m s].
+    h_held_B : array_like, shape (3,), optional
+        The rotor momentum of the CMG units flight software knows to have failed (held at their
+        gimbal angles), B [N m s]: the dump law acts on the working units' ``h - h_held_B``.
     """
 
     kind = "thrusters"
 
-    def __init__(self, scene, known, capacity_Nms: float):
+    def __init__(self, scene, known, capacity_Nms: float, h_held_B=None):
         from ..scene.thrusters import ThrusterOptions
 
         self.scene, self.opt = scene, scene.thrusters or ThrusterOptions()
@@ -204,6 +207,7 @@ class ThrusterCluster(Actuator):
         self.M, self.V, self.pure = mapping_matrices(self.D_known, self.G_known, pairs)
         self.support = supports(self.V)
         self.capacity = float(capacity_Nms)
+        self.h_held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
         self.f_max = np.array([t.force_N for t in scene.thruster])
         self.isp = np.array([t.isp_s for t in scene.thruster])
         super().__init__()
@@ -217,7 +221,7 @@ class ThrusterCluster(Actuator):
         n, ni = self.n, len(self.opt.inhibit)
         state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
                        impulse_Ns=1, propellant_kg=1)
-        params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, mode=1,
+        params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
                         levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1))
         outputs = Layout(request_B=3, force_N=n)
         return state, params, outputs, Layout(h_B=3)
@@ -228,7 +232,7 @@ class ThrusterCluster(Actuator):
     def _params(self) -> dict:
         o = self.opt
         return dict(f_max=self.f_max, isp=self.isp, min_on=[t.min_on_s for t in self.scene.thruster],
-                    torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, mode=MODES[o.mode],
+                    torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, h_held=self.h_held, mode=MODES[o.mode],
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
                     inhibit=[v for w in o.inhibit for v in w] or [0.0])
@@ -241,7 +245,7 @@ class ThrusterCluster(Actuator):
     # -- the tick ---------------------------------------------------------------------------
     def _request(self, t, x, r, tau, p):
         """(mode, dumping, inhibited, L_dump, request): steps 1-2 of the module docstring."""
-        h_B = r["h_B"]
+        h_B = r["h_B"] - p["h_held"]  # the working units' momentum, as flight software knows them
         hn = ca.norm_2(h_B)
         f = hn / p["capacity"]
         a_on, d_stop, h_min_f = p["assist"][0], p["assist"][1], p["assist"][2]
@@ -301,7 +305,7 @@ class ThrusterCluster(Actuator):
         below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
         exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
         skip it (the fused loop does, behind a short-circuit ``if_else``)."""
-        f = ca.norm_2(r["h_B"]) / p["capacity"]
+        f = ca.norm_2(r["h_B"] - p["h_held"]) / p["capacity"]
         quiet = ca.logic_and(p["mode"] < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
         quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))
         pending = ca.sum1(ca.fabs(x["prev_on_s"])) + ca.sum1(ca.fabs(x["acc_s"]))

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..loop.actuator import pulse_pieces
 from ..loop.thrusters import ThrusterCluster
+from ..model.cmg import held_momentum_B
 from ..scene import knowledge_scene
 from .segments import segment_input
 
@@ -59,7 +60,9 @@ class ThrustLoop:
     def __init__(self, loop, plant):
         scene = loop.scene
         cap = plant.h_capacity if plant.h_capacity is not None else math.inf
-        self.cluster = ThrusterCluster(scene, knowledge_scene(scene), cap)
+        known = knowledge_scene(scene)
+        held = held_momentum_B(known.cmg)  # the failed units flight software knows of
+        self.cluster = ThrusterCluster(scene, known, cap, held)
         self.lp = self.cluster.opt.mapping == "lp"
         self.x = self.cluster.x0.copy()  # the actuator's memory after the last tick
         self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
