@@ -92,13 +92,14 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
     # the law and the idle test (every tick); the quiet tick (idle: the law's request to the
     # CMGs, one step); the busy tick's actuation (the thrusters' command, the CMGs' share)
-    pre = sx_function("thr_pre", [t, x, cp, p, xa, pa, nz], [cmd, idle])
+    pre = sx_function("thr_pre", [t, x, cp, p, xa, pa, nz], [cmd, idle, y[th.h_slice]])
     cmd_s = ca.SX.sym("cmd", 3)
     a_q, u_q, sat_q = act_u(cmd_s)
-    xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd_s, pa)
+    h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_pre (not measured again)
+    xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, h_s, cmd_s, pa)
     _, u_b, sat_b = act_u(rest_s)
     quiet = sx_function("thr_quiet", [t, x, cmd_s, u_ext, p, h, xa], [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa)])
-    busy_core = sx_function("thr_busy", [t, x, cmd_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
+    busy_core = sx_function("thr_busy", [t, x, cmd_s, h_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
     core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
     plain = sx_function("thr_plain", [t, x, h, us, p], [step(rhs, t, x, h, us, p)])
@@ -119,14 +120,14 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
     tt = t0 + i * hh
     nzc = MX.sym("nz", nn)
-    cmd_c, idle_c = pre(tt, xc, cpc, pc, xac, pac, nzc)
+    cmd_c, idle_c, h_c = pre(tt, xc, cpc, pc, xac, pac, nzc)
     # the busy tick: the thrusters' command, then a plain step or the split one (only if one fires)
-    bx, bcmd, bu, bxa = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na)
+    bx, bcmd, bu, bxa, bhB = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na), MX.sym("h_B", 3)
     bt, bh, bp, bpa = MX.sym("t"), MX.sym("h"), MX.sym("p", npar), MX.sym("pa", npa)
-    uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bu, bp, bh, bxa, bpa)
+    uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa)
     x_b = ca.if_else(ca.sum1(on) > 0, split(bt, bx, bh, uu, bp, on, tqq), plain(bt, bx, bh, uu, bp), True)
-    busy = ca.Function("thr_busy_tick", [bt, bx, bcmd, bu, bp, bh, bxa, bpa], [ca.vertcat(x_b, fl, xa_new)])
-    res = ca.if_else(idle_c, quiet(tt, xc, cmd_c, uc, pc, hh, xac), busy(tt, xc, cmd_c, uc, pc, hh, xac, pac), True)
+    busy = ca.Function("thr_busy_tick", [bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa], [ca.vertcat(x_b, fl, xa_new)])
+    res = ca.if_else(idle_c, quiet(tt, xc, cmd_c, uc, pc, hh, xac), busy(tt, xc, cmd_c, h_c, uc, pc, hh, xac, pac), True)
     x_new, fl, xa_new = res[0:nx], res[nx : nx + 2], res[nx + 2 :]
     act_ = i < n_act
     c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
@@ -136,7 +137,7 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     acc = stepf.mapaccum("thr_acc", n)
     c0, parm, noise = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nn, n)  # column i: tick i's draws
     chunk = ca.Function("thr_chunk", [c0, parm, noise], [acc(c0, ca.repmat(parm, 1, n), noise)[:, -1]])
-    tag = f"thrfused3_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    tag = f"thrfused5_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
