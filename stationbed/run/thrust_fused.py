@@ -90,21 +90,25 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
     idle_f = cl.idle_function()
     idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
-    # the law and the idle test (every tick); the quiet tick (idle: the law's request to the
-    # CMGs, one step); the busy tick's actuation (the thrusters' command, the CMGs' share)
-    pre = sx_function("thr_pre", [t, x, cp, p, xa, pa, nz], [cmd, idle, y[th.h_slice]])
+    # every tick, one SX function (its common subexpressions shared, as fused.py's tick): the
+    # law, the idle test, the measured h and the quiet tick (the law's request to the CMGs, one
+    # step); the busy tick (the thrusters' command, the CMGs' share) only when not idle
+    _, u_q, sat_q = act_u(cmd)
+    quiet = sx_function("thr_quiet", [t, x, cp, u_ext, p, h, xa, pa, nz],
+                        [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa), cmd, idle, y[th.h_slice]])
     cmd_s = ca.SX.sym("cmd", 3)
-    a_q, u_q, sat_q = act_u(cmd_s)
     h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_pre (not measured again)
     xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, h_s, cmd_s, pa)
     _, u_b, sat_b = act_u(rest_s)
-    quiet = sx_function("thr_quiet", [t, x, cmd_s, u_ext, p, h, xa], [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa)])
     busy_core = sx_function("thr_busy", [t, x, cmd_s, h_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
     core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
-    plain = sx_function("thr_plain", [t, x, h, us, p], [step(rhs, t, x, h, us, p)])
+    # explicit branch functions (casadi's Function.if_else): the branch is evaluated from the
+    # inputs as given, nothing before the choice is computed again inside it
+    plain = sx_function("thr_plain", [t, x, h, us, p, ons, tqs], [step(rhs, t, x, h, us, p)])
     split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
                         [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch))])
+    pulse = ca.Function.if_else("thr_pulse", split, plain)
     MX = ca.MX
     ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
                                           MX.sym("p", npar), MX.sym("h"), MX.sym("xa", na), MX.sym("pa", npa))
@@ -120,14 +124,17 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
     tt = t0 + i * hh
     nzc = MX.sym("nz", nn)
-    cmd_c, idle_c, h_c = pre(tt, xc, cpc, pc, xac, pac, nzc)
+    quiet_c, cmd_c, idle_c, h_c = quiet(tt, xc, cpc, uc, pc, hh, xac, pac, nzc)
     # the busy tick: the thrusters' command, then a plain step or the split one (only if one fires)
     bx, bcmd, bu, bxa, bhB = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na), MX.sym("h_B", 3)
     bt, bh, bp, bpa = MX.sym("t"), MX.sym("h"), MX.sym("p", npar), MX.sym("pa", npa)
+    bq = MX.sym("q", nx + 2 + na)
     uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa)
-    x_b = ca.if_else(ca.sum1(on) > 0, split(bt, bx, bh, uu, bp, on, tqq), plain(bt, bx, bh, uu, bp), True)
-    busy = ca.Function("thr_busy_tick", [bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa], [ca.vertcat(x_b, fl, xa_new)])
-    res = ca.if_else(idle_c, quiet(tt, xc, cmd_c, uc, pc, hh, xac), busy(tt, xc, cmd_c, h_c, uc, pc, hh, xac, pac), True)
+    x_b = pulse(ca.sum1(on) > 0, bt, bx, bh, uu, bp, on, tqq)
+    b_in = [bq, bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa]
+    busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(x_b, fl, xa_new)])
+    tick = ca.Function.if_else("thr_tick", ca.Function("thr_pass", b_in, [bq]), busy)
+    res = tick(idle_c, quiet_c, tt, xc, cmd_c, h_c, uc, pc, hh, xac, pac)
     x_new, fl, xa_new = res[0:nx], res[nx : nx + 2], res[nx + 2 :]
     act_ = i < n_act
     c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
@@ -137,7 +144,7 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     acc = stepf.mapaccum("thr_acc", n)
     c0, parm, noise = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nn, n)  # column i: tick i's draws
     chunk = ca.Function("thr_chunk", [c0, parm, noise], [acc(c0, ca.repmat(parm, 1, n), noise)[:, -1]])
-    tag = f"thrfused5_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    tag = f"thrfused6_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
