@@ -304,7 +304,7 @@ class ThrusterCluster(Actuator):
         the CMGs whole, the memory does not change): assist mode, CMG control, not dumping, |h|
         below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
         exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
-        skip it (the fused loop does, behind a short-circuit ``if_else``)."""
+        skip it (the fused loop does, behind a ``Function.if_else``)."""
         f = ca.norm_2(r["h_B"] - p["h_held"]) / p["capacity"]
         quiet = ca.logic_and(p["mode"] < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
         quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))

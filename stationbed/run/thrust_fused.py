@@ -1,12 +1,15 @@
 """The fused closed loop with thrusters (issue 21): :mod:`.fused` with the
 :class:`~stationbed.loop.thrusters.ThrusterCluster` tick inlined.
 
-Per tick, in one compiled ``mapaccum``: ``y = meas(t, x)``; the law; the thrusters' tick (the
-same casadi function the per-tick loop compiles); the CMGs' actuation of what the thrusters
-leave; then **either** one plain RK4 step (no thruster fires this tick) **or** the tick split at
-every pulse edge (:func:`~stationbed.loop.actuator.split_step`: n + 1 RK4 pieces), chosen by a
-short-circuit ``if_else`` on MX, so the generated C evaluates only the branch taken: a tick
-that does not fire costs one step. The carry holds the tick index, the state, the saturation
+Per tick, in one compiled ``mapaccum``: one SX function for the law, the thrusters' exact idle
+test (:meth:`~stationbed.loop.actuator.Actuator.idle_function`) and the quiet tick (the law's
+request to the CMGs, one RK4 step); when not idle, the busy tick: the thrusters' command (the
+same casadi function the per-tick loop compiles), the CMGs' actuation of what they leave, then
+**either** one plain RK4 step (nothing fires) **or** the tick split at every pulse edge
+(:func:`~stationbed.loop.actuator.split_step`: n + 1 RK4 pieces). The choices are casadi
+``Function.if_else`` of explicit branch functions, so the generated C evaluates only the branch
+taken and computes nothing twice (an ``if_else(..., short_circuit=True)`` on expressions
+rebuilds a branch from its free symbols and recomputes inside it what came before the choice). The carry holds the tick index, the state, the saturation
 counts and the thrusters' memory (their ledger included).
 
 Sensor noise (``[controller.sensor]``) is drawn in Python per tick and applied in the compiled
