@@ -307,7 +307,8 @@ def _summary_line(s: dict) -> str:
                      f"inside 3 sigma {100 * s['est_inside_3sigma']:.1f} %, mean NEES {s['mean_nees']:.3g} (6 states)")
     if "st_dropout_rows" in s:
         parts.append(f"star-tracker dropout rows {s['st_dropout_rows']}")
-    return "; ".join(parts)
+    from .run.thrust import thruster_parts  # thrusters (issue 21)
+    return "; ".join(parts + thruster_parts(s))
 
 
 def _start_recording(args):

@@ -31,6 +31,7 @@ from .laws import build_controller
 from .rates import rate_summary
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
+from .thrust import thrust_for
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOISE_BLOCK"]
 
@@ -158,6 +159,7 @@ class ControlLoop:
         self.ticks = 0
         self.n_rate_limited = 0
         self.n_momentum_saturated = 0
+        self.thrust = thrust_for(self, plant)  # the [[thruster]] tables (issue 21), or None
 
     # -- sensing (issue 20) ---------------------------------------------------------------
     def _init_flight(self, scene) -> None:
@@ -258,6 +260,8 @@ class ControlLoop:
         """Set the held input from the command; returns the saturation flag (0/1)."""
         if self.act is None:  # no cluster: the torque request acts directly (ideal torquer)
             return 0
+        if self.thrust is not None:  # the thrusters take their share; the CMGs get the rest
+            cmd = self.thrust.command(self, t, cmd)
         a = self.act
         a.args[0][0] = t
         a.args[1][:] = self.x
@@ -267,6 +271,8 @@ class ControlLoop:
 
     def _advance(self, t0: float, t1: float, cmd) -> None:
         """Generic path: one integrator call per period, split at discontinuities inside it."""
+        if self.thrust is not None:  # and at every thruster's on/off edge
+            return self.thrust.advance(self, t0, t1)
         inner = [b for b in self.bps if t0 < b < t1]
         edges = [t0] + inner + [t1]
         for a, b in zip(edges[:-1], edges[1:]):
@@ -295,6 +301,8 @@ class ControlLoop:
         if self.flight is not None:
             q = np.asarray(self.x[:4], dtype=float)
             vals += self.flight.row(self.xs, self.ys, q / np.linalg.norm(q))
+        if self.thrust is not None:
+            vals += self.thrust.row()
         return vals, q_ref
 
     def run(self) -> None:
@@ -432,7 +440,7 @@ class ControlLoop:
         integ = self.integ
         f = integ.funcs
         name = "tick_rates" if self.ctrl.command == "gimbal_rates" else "tick_torque"
-        if not integ.fusable or name not in f:
+        if not integ.fusable or name not in f or self.thrust is not None:
             return None
         if math.ceil(self.period / integ.h_nominal - 1e-9) != 1:
             return None
@@ -479,6 +487,8 @@ class ControlLoop:
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
         out.update(rate_summary(self))  # the effect rates run (issue 25)
+        if self.thrust is not None:
+            out.update(self.thrust.summary(self))
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(self.ctrl.summary())
         except Exception as e:

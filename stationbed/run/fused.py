@@ -34,6 +34,7 @@ from .controller import ControllerError, one_line
 from .rates import carry_width, environment_rate, held_chunk
 from .segments import held_torque_from, tick_pieces
 from .system import environment_split as rates_split
+from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
 __all__ = ["fused_ok", "run_fused"]
 
@@ -69,6 +70,7 @@ def fused_ok(loop) -> bool:
         and loop.system.sx is not None
         and not (getattr(loop, "flight", None) is not None and loop.noisy)
         and getattr(loop, "replan", None) is None  # a failure detected mid-run: per tick (run/detection.py)
+        and fused_thrust_ok(loop)  # thrusters (issue 21): their own fused chunk, or per tick
     )
 
 
@@ -195,6 +197,9 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
 def run_fused(loop, K: int) -> None:
     """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
     ctrl = loop.ctrl
+    if getattr(loop, "thrust", None) is not None:  # thrusters (issue 21)
+        noise = {"flags": _noise_flags(loop), "width": _noise_width, "corrupt": _corrupt_sx, "draw": _draw}
+        return run_fused_thrust(loop, K, _symbolic_params(ctrl), _edge_ticks(loop), noise)
     if getattr(loop, "flight", None) is not None:  # sensors and estimator (issue 20)
         from .fused_flight import run_fused_flight
 

@@ -53,8 +53,9 @@ def _tick_ok(loop) -> bool:
     integ = loop.integ
     name = "tick_rates" if loop.ctrl.command == "gimbal_rates" else "tick_torque"
     # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs its
-    # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) runs per tick
-    return (getattr(loop, "replan", None) is None
+    # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) and
+    # [[thruster]] tables (loop.thrust, issue 21: the batch tick has no pulses) run per tick
+    return (getattr(loop, "replan", None) is None and getattr(loop, "thrust", None) is None
             and integ.fusable and name in integ.funcs
             and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1)
 

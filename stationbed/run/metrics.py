@@ -68,7 +68,17 @@ METRICS: dict[str, Metric] = {
     "mean_nees": Metric("1", "mean of the MEKF's NEES (6 states; consistent: 6) over the output rows"),
     "est_inside_3sigma": Metric("1", "fraction of the output rows and axes with |est_err| <= its 3 sigma", "low"),
     "st_dropout_rows": Metric("rows", "output rows at which a star-tracker head's held sample is invalid, summed over heads"),
+    # thrusters (issue 21): totals over the run, the last row's thr_* columns (run/thrust.py)
+    "propellant_kg": Metric("kg", "propellant used by the thrusters, Σ F t_on / (Isp g0), over the run"),
+    "propellant_kg_per_orbit": Metric("kg", "propellant_kg per orbital period (2π / mean motion) of the run's length"),
+    "thruster_firings": Metric("firings", "thruster pulses started (a pulse continuing the previous tick's is one)"),
+    "thruster_control_s": Metric("s", "time in thruster-only control (hand-over at CMG saturation)"),
+    "thruster_impulse_Ns": Metric("N s", "total thruster impulse Σ F t_on over the run"),
 }
+
+#: metric -> the thr_* column whose last row holds it (cumulative columns)
+_THRUSTER_TOTALS = {"propellant_kg": "thr_propellant_kg", "thruster_firings": "thr_firings",
+                    "thruster_control_s": "thr_control_s", "thruster_impulse_Ns": "thr_impulse_Ns"}
 
 
 class RunMetrics:
@@ -99,7 +109,7 @@ class RunMetrics:
     """
 
     def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None,
-                 h_held_B=None):
+                 h_held_B=None, orbit_period_s: float | None = None):
         col = {c: i for i, c in enumerate(columns)}
         self.columns = list(columns)
         self.settle_s = settle_s
@@ -114,6 +124,8 @@ class RunMetrics:
         self._s3 = [col[f"est_3sigma_{a}_deg"] for a in "xyz"] if self._est else None
         self._nees = col.get("nees")
         self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
+        self._thr = {m: col[c] for m, c in _THRUSTER_TOTALS.items() if c in col}
+        self.orbit_period_s = orbit_period_s
         self._est_red = [0.0, 0.0, 0, 0.0, 0, 0]  # max, sum err², rows, sum nees, inside, dropouts
         self.n_rows = 0
         self.last = None
@@ -210,6 +222,12 @@ class RunMetrics:
                        est_inside_3sigma=r[4] / (3 * r[2]))
         if self._st and self.n_rows:
             out["st_dropout_rows"] = r[5]
+        if self._thr and self.n_rows:
+            for m, i in self._thr.items():
+                out[m] = int(round(self.last[i])) if m == "thruster_firings" else float(self.last[i])
+            t_end = float(self.last[self._t])
+            if self.orbit_period_s and t_end > 0:
+                out["propellant_kg_per_orbit"] = out["propellant_kg"] * self.orbit_period_s / t_end
         return out
 
 
@@ -259,7 +277,8 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
     cap = summary.get("h_capacity_Nms")
     if cap is None and "max_h_fraction" in summary and summary.get("max_h_fraction"):
         cap = summary["max_h_Nms"] / summary["max_h_fraction"]
-    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap, h_held_B=summary.get("h_held_B_Nms"))
+    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap, h_held_B=summary.get("h_held_B_Nms"),
+                   orbit_period_s=summary.get("orbit_period_s"))
     if len(data):
         m.update(np.asarray(data, dtype=float))
     if "rate_limited_ticks" in summary:

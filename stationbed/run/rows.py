@@ -8,6 +8,7 @@ its rows (``keep=False``) holds one batch in memory whatever its length.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -21,6 +22,7 @@ from ..model.torques import TORQUES
 from ..scene import Scene
 from .metrics import RunMetrics
 from .system import OUT_CHUNK
+from .thrust import thruster_columns
 from .trajectory import Trajectory, base_columns
 
 __all__ = ["trajectory_columns", "ATT_ERR_AXES", "Rows", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S"]
@@ -87,6 +89,7 @@ def trajectory_columns(scene: Scene) -> list[str]:
     if scene.controller is not None:
         cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
         cols += flight_columns(scene)  # sensors and estimator (issue 20)
+        cols += thruster_columns(scene)  # thrusters (issue 21)
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
     for t in scene.torque:  # environment torques (issue 14), B components [N m]
@@ -138,7 +141,9 @@ class Rows:
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
         cmg = system.formulation.model.cmg
         held = None if cmg is None or not scene.cmg.failed else cmg.geometry.held_momentum_B(scene.cmg)
-        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held)
+        period = None if scene.orbit is None or not scene.thruster else 2.0 * math.pi / scene.orbit.mean_motion
+        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held,
+                                  orbit_period_s=period)
         self._pending = ([], [], [])  # times, states, held values of rows not yet made
         self._q_refs = []  # the controller's reference per pending row (None: no reference)
         self._flushed_at = time.perf_counter()
@@ -171,6 +176,7 @@ class Rows:
         if scene.controller is not None:
             self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
             self.held_columns += flight_columns(scene)
+            self.held_columns += thruster_columns(scene)
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
         self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []

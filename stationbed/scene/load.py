@@ -17,6 +17,7 @@ from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
 from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
+from .thrusters import Thruster, ThrusterOptions, check_thrusters
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict", "sensing_from_dict"]
@@ -44,6 +45,8 @@ class Scene(Strict):
     sensor: list[SensorEntry] = []  # issue 20: flown by the closed loop (stationbed/loop/)
     estimator: MekfEstimator | None = None
     knowledge: Knowledge | None = None
+    thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
+    thrusters: ThrusterOptions | None = None
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -80,6 +83,7 @@ class Scene(Strict):
         _check_plan(self)
         _check_sensors(self)
         _check_knowledge(self)
+        check_thrusters(self)
         return self
 
     # -- convenience -------------------------------------------------------------------

@@ -6,7 +6,9 @@
 * ``cmg_saturated`` 0 -> 1 "CMG saturation begins" (WARN), 1 -> 0 "ends";
 * ``eclipse`` (lit fraction of the sun) leaving 1: "eclipse entry", back to 1: "eclipse exit";
 * ``st_valid_<head>`` 1 -> 0: "star tracker <head> dropout" (WARN), 0 -> 1: "<head> valid again";
-* a ``mode`` or ``*_mode`` column: "<column> -> <value>" whenever its value changes.
+* a ``mode`` or ``*_mode`` column: "<column> -> <value>" whenever its value changes (``thr_mode``:
+  1 = thruster-only control, issue 21);
+* ``thr_dumping`` 0 -> 1 "thruster momentum dump begins", 1 -> 0 "ends" (issue 21).
 
 Rows come in batches (a streamed run): the last value of every flag is kept between batches, and a
 run that starts saturated, in shadow or without a valid head logs that at its first row.
@@ -42,7 +44,7 @@ RGB_VALID, RGB_BLIND, RGB_GHOST = (60, 200, 90), (230, 40, 40), (200, 200, 255)
 
 def event_columns(columns) -> list[str]:
     """The columns :class:`Events` watches, in column order."""
-    return [c for c in columns if c in ("cmg_saturated", "eclipse") or c.startswith("st_valid_")
+    return [c for c in columns if c in ("cmg_saturated", "eclipse", "thr_dumping") or c.startswith("st_valid_")
             or c == "mode" or c.endswith("_mode")]
 
 
@@ -52,7 +54,7 @@ def _state(col: str, v: float):
         return None
     if col == "eclipse":
         return v >= 1.0 - ECLIPSE_LIT_TOL  # lit
-    if col == "cmg_saturated" or col.startswith("st_valid_"):
+    if col in ("cmg_saturated", "thr_dumping") or col.startswith("st_valid_"):
         return v >= 0.5
     return v
 
@@ -63,6 +65,8 @@ def _text(col: str, state, first: bool):
         return ("WARN", "CMG saturation begins") if state else (None if first else ("INFO", "CMG saturation ends"))
     if col == "eclipse":
         return (None if first else ("INFO", "eclipse exit")) if state else ("INFO", "eclipse entry")
+    if col == "thr_dumping":
+        return ("INFO", "thruster momentum dump begins") if state else (None if first else ("INFO", "thruster momentum dump ends"))
     if col.startswith("st_valid_"):
         head = col.removeprefix("st_valid_")
         return (None if first else ("INFO", f"star tracker {head} valid again")) if state else \

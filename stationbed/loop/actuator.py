@@ -1,0 +1,228 @@
+"""The actuator plug-in: its contract (:class:`Actuator`), its registry (:data:`ACTUATORS`) and
+the integration of its pulses over a control period (:func:`pulse_pieces`, :func:`split_step`).
+
+An actuator turns the law's torque request into what acts on the plant over one control period
+``[t, t + h]``; it is written **once** as casadi expressions,
+
+``(x_next, tau_rest_B, on_s, torque_B, out) = command(t, h, x, r, tau_B, p)``
+
+* ``x`` its memory (``STATE``), ``p`` its numbers (``PARAMS``), ``r`` the measurement fields it
+  reads (``READS``, a :class:`~.layout.Layout` of the run's measurement names, e.g. ``h_B``);
+* ``tau_B`` the torque the law requests (B components [N m]);
+* ``tau_rest_B`` the part of the request it leaves to the next actuator of the chain (the last
+  one, the CMG cluster or the ideal torquer, takes all it is given);
+* ``on_s`` (``n_channels``): channel j acts over ``[t, t + on_s[j]]``, ``0 <= on_s[j] <= h``;
+* ``torque_B`` (3 x ``n_channels``, column j = channel j's torque on B while on [N m]);
+* ``out`` its reported values (``OUTPUTS``).
+
+The executors add the channels that are on to the plant's external torque and **split the
+integration at every edge** ``t + on_s[j]`` (:func:`pulse_pieces` per tick in Python,
+:func:`split_step` in the compiled tick): no averaging, so a channel's impulse is exactly
+``torque_B[:, j] * on_s[j]`` (to round-off). Both evaluate the same casadi function
+(:meth:`Actuator.function`; compiled per tick, inlined in the fused loop). There is no numpy twin.
+
+How the existing actuators read in this contract (docs/loop.md, "Actuators"): the ideal torquer
+is one channel with ``on_s = h`` and ``torque_B = tau_B`` (``tau_rest_B = 0``); the CMG cluster
+has no channel: it is an *internal* actuator whose command sets the plant's held CMG input
+(``u_cmg``, the steering law's gimbal rates), and it is the end of the chain (it takes
+``tau_rest_B``). Porting those two is issue 20's; the thrusters are the first plug-in.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions
+from .layout import Layout
+
+__all__ = ["Actuator", "ACTUATORS", "get_actuator", "register_actuator", "pulse_pieces", "split_step"]
+
+
+class Actuator:
+    """Base class of an actuator kind (one instance per scene's set of its tables).
+
+    The public methods check and count; the plug-in writes the private ones. Rules for
+    implementers:
+
+    1. Set ``kind`` (the registry key in :data:`ACTUATORS`).
+    2. Declare ``STATE``, ``PARAMS``, ``OUTPUTS`` and ``READS`` as :class:`Layout` attributes,
+       or write ``_layouts()`` when their shape depends on the scene (the number of thrusters),
+       returning the shape-setting numbers from ``_structure()``. ``READS`` names fields of
+       the run's measurement (``stationbed.run.controller.measurement_layout``); the actuator
+       sees nothing else of the plant.
+    3. Set ``n_channels`` (or write ``_n_channels()``), the pulse channels.
+    4. Write ``_params()`` (every ``PARAMS`` field by name) and ``_initial()`` (every ``STATE``
+       field at t = 0). Numbers are inputs of the compiled function, never constants in it.
+    5. Write ``_command(t, h, x, r, tau_B, p)`` with casadi only (``ca.if_else``, no Python
+       ``if`` on a symbol); ``x``, ``r``, ``p`` arrive as dicts of fields. Return
+       ``(x_next, tau_rest_B, on_s, torque_B, out)``: dicts for ``x_next`` and ``out`` by
+       ``STATE`` / ``OUTPUTS`` names, ``on_s`` a column of ``n_channels`` in ``[0, h]``,
+       ``torque_B`` a (3, n_channels) matrix.
+    6. Prove it in a test against an independent truth (closed form, a hand-worked sequence,
+       the momentum balance with the pulse edges inside ticks).
+    7. Optionally write ``_idle(t, x, r, tau_B, p)``: a casadi condition under which
+       ``_command`` is exactly ``(x, tau_B, 0, torque_B)``; an executor may then skip the
+       command (the fused loop does). It must be exact, not approximate: executors that do not
+       skip must give the same numbers.
+    """
+
+    kind: ClassVar[str] = ""
+    STATE: ClassVar[Layout | None] = None
+    PARAMS: ClassVar[Layout | None] = None
+    OUTPUTS: ClassVar[Layout | None] = None
+    READS: ClassVar[Layout | None] = None
+    n_channels: int = 0
+
+    _functions: ClassVar[dict] = {}
+    _compiled: ClassVar[dict] = {}
+
+    def __init__(self):
+        self.state, self.param_layout, self.outputs, self.reads = self._layouts()
+        self.n_channels = self._n_channels()
+        self.params = self.param_layout.pack(self._params())
+        self.x0 = self.state.pack(self._initial())
+        self.n_commands = 0
+
+    # -- declarations -------------------------------------------------------------------
+    def _layouts(self) -> tuple[Layout, Layout, Layout, Layout]:
+        return self.STATE, self.PARAMS, self.OUTPUTS, self.READS
+
+    def _n_channels(self) -> int:
+        return type(self).n_channels
+
+    def _structure(self) -> tuple:
+        return ()
+
+    @property
+    def key(self) -> str:
+        """The name of this kind's compiled function for this instance's structure."""
+        extra = "_".join(str(s) for s in self._structure())
+        return f"actuator_{self.kind}" + (f"_{extra}" if extra else "")
+
+    # -- the one expression ----------------------------------------------------------------
+    def function(self) -> ca.Function:
+        """``(t, h, x, r, tau_B, p) -> (x_next, tau_rest_B, on_s, torque_B, out)``, casadi SX
+        (``torque_B`` flattened column-major, 3 per channel); built once per kind and structure."""
+        f = Actuator._functions.get((type(self), self.key))
+        if f is None:
+            t, h = ca.SX.sym("t"), ca.SX.sym("h")
+            x, r, p = self.state.symbol("x"), self.reads.symbol("r"), self.param_layout.symbol("p")
+            tau = ca.SX.sym("tau_B", 3)
+            x_next, rest, on_s, torque_B, out = self._command(t, h, self.state.split(x), self.reads.split(r), tau,
+                                                              self.param_layout.split(p))
+            f = ca.Function(self.key, [t, h, x, r, tau, p],
+                            [self.state.pack(x_next, symbolic=True), ca.vertcat(rest), ca.vertcat(on_s),
+                             ca.reshape(torque_B, 3 * self.n_channels, 1), self.outputs.pack(out, symbolic=True)],
+                            ["t", "h", "x", "r", "tau_B", "p"], ["x_next", "tau_rest_B", "on_s", "torque_B", "out"],
+                            {"cse": True})
+            Actuator._functions[(type(self), self.key)] = f
+        return f
+
+    def compiled(self) -> FastCall:
+        """The same function generated as C, compiled, with bound buffers (one per kind and structure)."""
+        fc = Actuator._compiled.get((type(self), self.key))
+        if fc is None:
+            fc = Actuator._compiled[(type(self), self.key)] = FastCall(compile_functions([self.function()], self.key)[self.key])
+        return fc
+
+    def idle_function(self) -> ca.Function | None:
+        """``(t, x, r, tau_B, p) -> idle`` when the plug-in writes ``_idle`` (rule 7), else None."""
+        if type(self)._idle is Actuator._idle:
+            return None
+        t = ca.SX.sym("t")
+        x, r, p = self.state.symbol("x"), self.reads.symbol("r"), self.param_layout.symbol("p")
+        tau = ca.SX.sym("tau_B", 3)
+        idle = self._idle(t, self.state.split(x), self.reads.split(r), tau, self.param_layout.split(p))
+        return ca.Function(f"{self.key}_idle", [t, x, r, tau, p], [idle])
+
+    def command(self, t: float, h: float, x: np.ndarray, r: np.ndarray, tau_B: np.ndarray):
+        """One tick, numerically (compiled): ``(x_next, tau_rest_B, on_s, torque_B (3, n), out)``."""
+        if not 0.0 <= h:
+            raise ValueError(f"actuator {self.kind!r}: tick length h = {h!r} must be >= 0")
+        fc = self.compiled()
+        for arg, v in zip(fc.args, (t, h, x, r, tau_B, self.params)):
+            arg[:] = v
+        fc()
+        self.n_commands += 1
+        res = fc.res
+        return (res[0].copy(), res[1].copy(), res[2].copy(), res[3].reshape(self.n_channels, 3).T.copy(),
+                res[4].copy())
+
+    # -- written by the plug-in -----------------------------------------------------------
+    def _params(self) -> dict:
+        raise NotImplementedError
+
+    def _initial(self) -> dict:
+        raise NotImplementedError
+
+    def _command(self, t, h, x: dict, r: dict, tau_B, p: dict):
+        raise NotImplementedError
+
+    def _idle(self, t, x: dict, r: dict, tau_B, p: dict):
+        raise NotImplementedError
+
+
+#: ``kind`` -> its class; a new kind is one file in loop/ and one :func:`register_actuator` call
+ACTUATORS: dict[str, type[Actuator]] = {}
+
+
+def register_actuator(cls: type[Actuator]) -> type[Actuator]:
+    """Register ``cls`` under ``cls.kind`` (a class decorator)."""
+    if not cls.kind:
+        raise ValueError(f"{cls.__name__} declares no kind")
+    ACTUATORS[cls.kind] = cls
+    return cls
+
+
+def get_actuator(kind: str | type[Actuator]) -> type[Actuator]:
+    """The class of an actuator kind, by name or the class itself (any subclass)."""
+    if isinstance(kind, type) and issubclass(kind, Actuator):
+        return kind
+    try:
+        return ACTUATORS[kind]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown actuator kind {kind!r}; valid kinds: {', '.join(sorted(ACTUATORS))}") from None
+
+
+# -- integrating pulses exactly ----------------------------------------------------------------
+def pulse_pieces(on_s: np.ndarray, h: float) -> list[tuple[float, float, np.ndarray]]:
+    """The pieces of a tick ``[0, h]`` between the pulse edges: ``(a, b, on)`` with ``on`` the
+    mask of the channels on over ``(a, b)`` (``on_s[j] > (a + b) / 2``, the rule
+    :func:`split_step` compiles). Zero-length pieces are left out."""
+    on_s = np.minimum(np.maximum(np.asarray(on_s, dtype=float), 0.0), h)
+    edges = np.unique(np.concatenate(([0.0, h], on_s)))
+    return [(a, b, on_s > 0.5 * (a + b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _sorted(v: list) -> list:
+    """``v`` sorted ascending by an odd-even transposition network of fmin/fmax (no branch)."""
+    v = list(v)
+    n = len(v)
+    for rnd in range(n):
+        for i in range(rnd % 2, n - 1, 2):
+            lo, hi = ca.fmin(v[i], v[i + 1]), ca.fmax(v[i], v[i + 1])
+            v[i], v[i + 1] = lo, hi
+    return v
+
+
+def split_step(step, rhs, t, x, h, u, p, on_s, torque_B):
+    """One tick of ``step`` (an integrator's ``explicit_step``) split at the pulse edges, casadi.
+
+    ``on_s`` (n,) sorted (a branch-free network), pieces ``[e_j, e_j+1]`` from 0 to ``h``; over
+    each, the channels with ``on_s > (e_j + e_j+1) / 2`` add their ``torque_B`` (3, n) column to
+    ``u[0:3]`` (the held external torque). A zero-length piece is the identity (a step of 0).
+    """
+    n = on_s.numel()
+    on = [ca.fmin(ca.fmax(on_s[j], 0.0), h) for j in range(n)]
+    edges = [ca.SX(0.0) if isinstance(on_s, ca.SX) else 0.0] + _sorted(on) + [h]
+    for a, b in zip(edges[:-1], edges[1:]):
+        mid = 0.5 * (a + b)
+        tq = 0
+        for j in range(n):
+            tq = tq + ca.if_else(on[j] > mid, 1.0, 0.0) * torque_B[:, j]
+        uj = ca.vertcat(u[0:3] + tq, u[3:]) if u.numel() > 3 else u + tq
+        x = step(rhs, t + a, x, b - a, uj, p)
+    return x

@@ -1,0 +1,356 @@
+"""Thrusters (issue 21): the first :class:`~.actuator.Actuator` plug-in. CMG thruster assist,
+hand-over to thruster-only control, force mapping, Schmitt pulse modulation, propellant ledger.
+
+Per tick (one casadi expression, :meth:`ThrusterCluster._command`):
+
+1. **Mode and dump law.** ``f = |h| / capacity``, h and the capacity of the working units as
+   flight software knows them (a failed unit it knows of: its held momentum left out). Thruster-only control starts at ``f >= handover`` and ends at
+   ``f <= handback`` (``mode = "assist"``; ``"thruster_only"``: always; ``"off"``: never
+   fires). Dumping starts at ``f >= assist_on`` and stops at ``f <= dump_stop``; the dump
+   request is ``ΔH = -(|h| - h_min)/|h| h`` and its torque ``ΔH / dump_time_s``, at most
+   ``max_dump_torque_Nm``. Inside an inhibit window nothing fires.
+2. **Request.** The thrusters are asked for ``mode · τ_law + dumping · L_dump``.
+3. **Mapping** (:func:`mapping_matrices`): minimum norm plus the least shift along positive
+   null-space vectors (one per opposed pair of thrusters, or one for the set); where the
+   geometry allows, ``M`` and ``v`` are those of the torque *and* force equations, so the
+   forces are a pure couple (Σ F_i ĝ_i = 0). Scaled down as a whole when a force exceeds its
+   thruster's. (The LP with bounds, :func:`map_lp`, is the per-tick alternative.)
+4. **Pulse modulation.** A thruster's requested on-time is ``F_i / F_max,i · h`` plus its
+   remainder; below ``min_on_s`` a Schmitt trigger decides (level = requested / min_on_s:
+   fire ``min_on_s`` at ``level >= level_on``, none at ``level <= level_off``, in between
+   as the previous tick did); above, the request, at most ``h``.
+5. **What is left to the CMGs.** ``τ_law - L_thr`` (``L_thr`` the tick's average thruster
+   torque) in assist: the CMGs keep holding attitude while the thrusters unload them;
+   ``-dumping · L_dump`` in thruster-only control (the law's torque goes to the thrusters).
+6. **Ledger.** Per thruster the total on-time; the firings (a pulse that does not continue the
+   previous tick's full-length one), the time in thruster-only control, the impulse Σ F t_on
+   and the propellant Σ F t_on / (Isp g0), all exact with the on-times.
+
+The torque of thruster i is ``(r_i - c) × F_i ĝ_i`` about the composite mass centre c. The
+arrays are balanced about their rotation axes (DESIGN §4), so c does not move as they turn: it
+is the constant ``Σ m r / Σ m`` of the scene (flexible modes shift it by their modal
+displacement, neglected here: ~ m_p |η| / m_total, below a millimetre for the shipped modes).
+The executors use the truth's c; the mapping uses the knowledge scene's. The force is recorded
+(the impulse) but does not change the orbit (docs/loop.md: the orbit is prescribed, and the
+ISS's attitude thrusters' net impulse is a pure couple where they can make one).
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import casadi as ca
+import numpy as np
+
+from ..core.massprops import composite_cm
+from .actuator import Actuator, register_actuator
+from .layout import Layout
+
+__all__ = ["ThrusterCluster", "G0_M_S2", "mapping_matrices", "map_min_norm_shift", "map_lp", "MODES", "opposed_pairs",
+           "supports", "torque_arms"]
+
+#: standard gravity [m/s²] for m_dot = F / (Isp g0) (CGPM 1901, exact)
+G0_M_S2 = 9.80665
+#: ``[thrusters] mode`` -> its number in the parameters
+MODES = {"assist": 0.0, "thruster_only": 1.0, "off": 2.0}
+#: a positive null-space vector exists when the LP finds one with all entries >= 1 and the
+#: residual of A v is below this fraction of |A| |v| (round-off of HiGHS's solution)
+NULL_RESIDUAL_REL = 1e-9
+
+
+def torque_arms(scene) -> tuple[np.ndarray, np.ndarray]:
+    """(D, G), each (3, n): column i the torque per newton ``(r_i - c) × ĝ_i`` [m] and the unit
+    force direction ĝ_i of thruster i, c the scene's composite mass centre (B axes)."""
+    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
+    cms = [scene.body.cm] + [a.cm for a in scene.appendage]
+    c = composite_cm(masses, cms)
+    G = np.array([t.unit_B for t in scene.thruster], dtype=float).T
+    R = np.array([t.position_B for t in scene.thruster], dtype=float).T - c[:, None]
+    return np.cross(R.T, G.T).T, G
+
+
+def _positive_null(A: np.ndarray) -> np.ndarray | None:
+    """A vector v >= 1 with A v = 0 (scipy HiGHS LP, minimum Σ v), or None when none exists."""
+    from scipy.optimize import linprog
+
+    n = A.shape[1]
+    res = linprog(np.ones(n), A_eq=A, b_eq=np.zeros(A.shape[0]), bounds=[(1.0, None)] * n, method="highs")
+    if res.status != 0:
+        return None
+    v = res.x
+    if np.linalg.norm(A @ v) > NULL_RESIDUAL_REL * np.linalg.norm(A) * np.linalg.norm(v):
+        return None
+    return v / v.max()
+
+
+def opposed_pairs(positions, directions, tol: float = 1e-9) -> list[tuple[int, int]] | None:
+    """Every thruster matched with one at the same place firing the opposite way (i < j), or
+    None when the set does not split into such pairs."""
+    P, G = np.asarray(positions, dtype=float), np.asarray(directions, dtype=float)
+    free, pairs = list(range(len(P))), []
+    while free:
+        i = free.pop(0)
+        j = next((j for j in free if np.linalg.norm(P[i] - P[j]) <= tol * max(1.0, np.linalg.norm(P[i]))
+                  and np.linalg.norm(G[i] + G[j]) <= tol), None)
+        if j is None:
+            return None
+        free.remove(j)
+        pairs.append((i, j))
+    return pairs
+
+
+def mapping_matrices(D: np.ndarray, G: np.ndarray, pairs=None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(M (n, 3), V (n, m), pure)`` of the minimum-norm-plus-shift mapping
+    ``F = M L + Σ_k s_k V[:, k]`` (:func:`map_min_norm_shift`).
+
+    ``pure``: M solves the torque and the force equations (``[D; G] F = [L; 0]``, a pure
+    couple); otherwise the torque equations alone (the net force is then whatever it is). The
+    columns of V are positive null-space vectors of the same rows with disjoint supports: one per
+    opposed pair (``pairs``, :func:`opposed_pairs`: ``e_i + e_j``, a pair fired together does
+    nothing), else one found by HiGHS (``v >= 1``, ``A v = 0``). V is one zero column when no
+    positive null vector exists: forces that come out negative are then clipped to 0 and the
+    torque is not exact (use ``mapping = "lp"``, or add thrusters)."""
+    n = D.shape[1]
+    rk = np.linalg.matrix_rank
+    for A, pure in ((np.vstack([D, G]), True), (D, False)):
+        # every torque with no net force: D full rank, and the force rows independent of it
+        # (a set that makes no force along some axis, e.g. no thruster along x, still qualifies)
+        if rk(D) < 3 or (pure and rk(A) < 3 + rk(G)):
+            continue
+        if pairs:
+            V = np.zeros((n, len(pairs)))
+            for k, (i, j) in enumerate(pairs):
+                V[i, k] = V[j, k] = 1.0
+            return np.linalg.pinv(A)[:, :3], V, pure
+        v = _positive_null(A)
+        if v is not None:
+            return np.linalg.pinv(A)[:, :3], v[:, None], pure
+    return np.linalg.pinv(D)[:, :3], np.zeros((n, 1)), False
+
+
+def supports(V) -> list[list[int]]:
+    """The thrusters each shift vector (column of V) moves."""
+    V = np.asarray(V, dtype=float)
+    return [[int(i) for i in np.flatnonzero(V[:, k] > 0)] for k in range(V.shape[1])]
+
+
+def map_min_norm_shift(M, V, f_max, L, support=None):
+    """Forces >= 0 for the torque request ``L`` (casadi or numpy): ``F = M L``, then along each
+    shift vector k (a column of ``V``, disjoint supports ``support``, from ``V`` when it is
+    numeric) the least shift ``s_k = max_i (-F_i / V_ik)`` that leaves every force it moves
+    non-negative (one of them exactly 0: no propellant spent against itself); then all scaled by
+    ``1 / max(1, max_i F_i / F_max,i)`` so none exceeds its thruster's (the torque's direction
+    kept). Without a shift vector negative forces are clipped to 0."""
+    if isinstance(L, (ca.SX, ca.MX)):
+        F = ca.mtimes(M, L)
+        for k, sup in enumerate(support):
+            if sup:
+                s = -F[sup[0]] / V[sup[0], k]
+                for i in sup[1:]:
+                    s = ca.fmax(s, -F[i] / V[i, k])
+                F = F + s * V[:, k]
+        F = ca.fmax(F, 0.0)
+        kk = 1.0
+        for i in range(F.shape[0]):
+            kk = ca.fmax(kk, F[i] / f_max[i])
+        return F / kk
+    M, V, f_max, L = (np.asarray(a, dtype=float) for a in (M, V, f_max, L))
+    V = V.reshape(len(f_max), -1)
+    F = M @ L
+    for k, sup in enumerate(supports(V) if support is None else support):
+        if sup:
+            F = F + max(-F[i] / V[i, k] for i in sup) * V[:, k]
+    F = np.maximum(F, 0.0)
+    return F / max(1.0, float(np.max(F / f_max)))
+
+
+def map_lp(D, G, f_max, L, weights, pure: bool):
+    """Forces in ``[0, F_max]`` delivering ``L`` exactly (and no net force when ``pure``) with the
+    least ``Σ w_i F_i`` (``w = 1 / Isp``: least propellant), by scipy's HiGHS; None when
+    infeasible (the caller then uses :func:`map_min_norm_shift`)."""
+    from scipy.optimize import linprog
+
+    A = np.vstack([D, G]) if pure else D
+    b = np.concatenate([L, np.zeros(3)]) if pure else np.asarray(L, dtype=float)
+    res = linprog(weights, A_eq=A, b_eq=b, bounds=list(zip(np.zeros(len(f_max)), f_max)), method="highs")
+    return res.x if res.status == 0 else None
+
+
+@register_actuator
+class ThrusterCluster(Actuator):
+    """All the scene's ``[[thruster]]`` tables with the ``[thrusters]`` options (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        The truth flown (thruster torques about its mass centre).
+    known : Scene
+        What flight software believes (the mapping's geometry).
+    capacity_Nms : float
+        The working CMG units' momentum capacity flight software knows [N m s].
+    h_held_B : array_like, shape (3,), optional
+        The rotor momentum of the CMG units flight software knows to have failed (held at their
+        gimbal angles), B [N m s]: the dump law acts on the working units' ``h - h_held_B``.
+    """
+
+    kind = "thrusters"
+
+    def __init__(self, scene, known, capacity_Nms: float, h_held_B=None):
+        from ..scene.thrusters import ThrusterOptions
+
+        self.scene, self.opt = scene, scene.thrusters or ThrusterOptions()
+        self.n = len(scene.thruster)
+        self.names = [t.name for t in scene.thruster]
+        self.D, self.G = torque_arms(scene)
+        self.D_known, self.G_known = torque_arms(known)
+        pairs = opposed_pairs([t.position_B for t in known.thruster], [t.unit_B for t in known.thruster])
+        self.M, self.V, self.pure = mapping_matrices(self.D_known, self.G_known, pairs)
+        self.support = supports(self.V)
+        self.capacity = float(capacity_Nms)
+        self.h_held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
+        self.f_max = np.array([t.force_N for t in scene.thruster])
+        self.isp = np.array([t.isp_s for t in scene.thruster])
+        super().__init__()
+
+    def _structure(self) -> tuple:
+        # which thrusters each shift moves (it shapes the compiled code)
+        shifts = hashlib.sha1(repr(self.support).encode()).hexdigest()[:8]
+        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts)
+
+    def _layouts(self):
+        n, ni = self.n, len(self.opt.inhibit)
+        state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
+                       impulse_Ns=1, propellant_kg=1)
+        params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
+                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1))
+        outputs = Layout(request_B=3, force_N=n)
+        return state, params, outputs, Layout(h_B=3)
+
+    def _n_channels(self) -> int:
+        return self.n
+
+    def _params(self) -> dict:
+        o = self.opt
+        return dict(f_max=self.f_max, isp=self.isp, min_on=[t.min_on_s for t in self.scene.thruster],
+                    torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, h_held=self.h_held, mode=MODES[o.mode],
+                    levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
+                    dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
+                    inhibit=[v for w in o.inhibit for v in w] or [0.0])
+
+    def _initial(self) -> dict:
+        """Everything 0: CMG control, not dumping, nothing fired (``thruster_only``: its first
+        tick sets the mode)."""
+        return {k: np.zeros(self.state.shape(k)[0] * self.state.shape(k)[1]) for k in self.state.names}
+
+    # -- the tick ---------------------------------------------------------------------------
+    def _request(self, t, x, r, tau, p):
+        """(mode, dumping, inhibited, L_dump, request): steps 1-2 of the module docstring."""
+        h_B = r["h_B"] - p["h_held"]  # the working units' momentum, as flight software knows them
+        hn = ca.norm_2(h_B)
+        f = hn / p["capacity"]
+        a_on, d_stop, h_min_f = p["assist"][0], p["assist"][1], p["assist"][2]
+        mode_opt = p["mode"]
+        m_prev = x["mode"]
+        hand = ca.if_else(m_prev > 0.5, f > p["hand"][1], f >= p["hand"][0])
+        mode = ca.if_else(mode_opt > 1.5, 0.0, ca.if_else(mode_opt > 0.5, 1.0, ca.if_else(hand, 1.0, 0.0)))
+        dumping = ca.if_else(x["dumping"] > 0.5, f > d_stop, f >= a_on)
+        dumping = ca.if_else(mode_opt > 1.5, 0.0, ca.if_else(dumping, 1.0, 0.0))
+        h_min = h_min_f * p["capacity"]
+        excess = ca.fmax(hn - h_min, 0.0)
+        dH = -excess / ca.fmax(hn, 1e-300) * h_B
+        L = dH / p["dump"][0]
+        Ln = ca.norm_2(L)
+        L_dump = L * ca.fmin(1.0, p["dump"][1] / ca.fmax(Ln, 1e-300))
+        inh = 0.0
+        w = p["inhibit"]
+        for k in range(len(self.opt.inhibit)):
+            inh = ca.fmax(inh, ca.if_else(ca.logic_and(t >= w[2 * k], t < w[2 * k + 1]), 1.0, 0.0))
+        req = (1.0 - inh) * (mode * tau + dumping * L_dump)
+        return mode, dumping, inh, L_dump, req
+
+    def _fire(self, t, h, x, F, p, inh):
+        """On-times from the forces ``F`` (step 4): ``(on_s, acc_next)``."""
+        n = self.n
+        on, acc = [], []
+        lv_on, lv_off = p["levels"][0], p["levels"][1]
+        for i in range(n):
+            want = F[i] / p["f_max"][i] * h + (x["acc_s"][i] if self.opt.remainder else 0.0)
+            mn = p["min_on"][i]
+            level = want / ca.fmax(mn, 1e-300)
+            short = ca.if_else(level >= lv_on, mn, ca.if_else(level <= lv_off, 0.0,
+                                                               ca.if_else(x["prev_on_s"][i] > 0.0, mn, 0.0)))
+            t_on = ca.if_else(want >= mn, ca.fmin(want, h), short)
+            t_on = ca.fmin(ca.fmax(t_on, 0.0), h) * (1.0 - inh) * ca.if_else(p["mode"] > 1.5, 0.0, 1.0)
+            on.append(t_on)
+            keep = ca.if_else(F[i] > 0.0, 1.0, 0.0) * (1.0 - inh)
+            acc.append(ca.fmin(ca.fmax((want - t_on) * keep, -h), h) if self.opt.remainder else ca.SX(0.0))
+        return ca.vertcat(*on), ca.vertcat(*acc)
+
+    def _finish(self, h, x, tau, p, mode, dumping, inh, L_dump, req, F, on, acc):
+        """Steps 5-6: the CMGs' share, the ledger, the next state."""
+        Tq = p["torque_B"]
+        L_thr = ca.mtimes(Tq, on) / ca.fmax(h, 1e-300)
+        rest = (1.0 - mode) * (tau - L_thr) - mode * dumping * (1.0 - inh) * L_dump
+        fired = [ca.if_else(ca.logic_and(on[i] > 0.0, x["prev_on_s"][i] < h), 1.0, 0.0) for i in range(self.n)]
+        imp = ca.dot(p["f_max"], on)
+        prop = ca.dot(p["f_max"] / (p["isp"] * G0_M_S2), on)
+        x_next = dict(prev_on_s=on, acc_s=acc, dumping=dumping, mode=mode, on_total_s=x["on_total_s"] + on,
+                      firings=x["firings"] + sum(fired), control_s=x["control_s"] + mode * h,
+                      impulse_Ns=x["impulse_Ns"] + imp, propellant_kg=x["propellant_kg"] + prop)
+        return x_next, rest, on, Tq, dict(request_B=req, force_N=F)
+
+    def _idle(self, t, x, r, tau, p):
+        """True when this tick is certainly the identity (nothing fires, the request passes to
+        the CMGs whole, the memory does not change): assist mode, CMG control, not dumping, |h|
+        below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
+        exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
+        skip it (the fused loop does, behind a ``Function.if_else``)."""
+        f = ca.norm_2(r["h_B"] - p["h_held"]) / p["capacity"]
+        quiet = ca.logic_and(p["mode"] < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
+        quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))
+        pending = ca.sum1(ca.fabs(x["prev_on_s"])) + ca.sum1(ca.fabs(x["acc_s"]))
+        return ca.logic_and(quiet, pending == 0)
+
+    def _command(self, t, h, x, r, tau, p):
+        mode, dumping, inh, L_dump, req = self._request(t, x, r, tau, p)
+        F = map_min_norm_shift(p["M"], p["V"], p["f_max"], req, self.support)
+        on, acc = self._fire(t, h, x, F, p, inh)
+        return self._finish(h, x, tau, p, mode, dumping, inh, L_dump, req, F, on, acc)
+
+    # -- the LP path (per tick, Python) -------------------------------------------------------
+    def lp_functions(self) -> tuple[ca.Function, ca.Function]:
+        """``request(t, h, x, r, tau, p) -> (req, aux)`` and ``fire(t, h, x, tau, p, F, aux) ->
+        (x_next, rest, on_s, torque_B, out)``: :meth:`_command` cut at the mapping, for
+        ``mapping = "lp"`` (the forces come from :func:`map_lp` between the two)."""
+        t, h = ca.SX.sym("t"), ca.SX.sym("h")
+        x, r, p = self.state.symbol("x"), self.reads.symbol("r"), self.param_layout.symbol("p")
+        tau, F, aux = ca.SX.sym("tau_B", 3), ca.SX.sym("F", self.n), ca.SX.sym("aux", 6)
+        xs, ps = self.state.split(x), self.param_layout.split(p)
+        mode, dumping, inh, L_dump, req = self._request(t, xs, self.reads.split(r), tau, ps)
+        request = ca.Function("thr_request", [t, h, x, r, tau, p], [req, ca.vertcat(mode, dumping, inh, L_dump)])
+        m, d, i, Ld = aux[0], aux[1], aux[2], aux[3:6]
+        on, acc = self._fire(t, h, xs, F, ps, i)
+        x_next, rest, on, Tq, out = self._finish(h, xs, tau, ps, m, d, i, Ld, ca.SX.zeros(3), F, on, acc)
+        fire = ca.Function("thr_fire", [t, h, x, tau, p, F, aux],
+                           [self.state.pack(x_next, symbolic=True), rest, on, ca.reshape(Tq, 3 * self.n, 1),
+                            self.outputs.pack(out, symbolic=True)])
+        return request, fire
+
+    def command_lp(self, t: float, h: float, x, r, tau_B):
+        """One tick with the LP mapping (numerically; falls back to min-norm-plus-shift when the
+        request is infeasible within the thrusters' forces)."""
+        if not hasattr(self, "_lp"):
+            self._lp = self.lp_functions()
+        request, fire = self._lp
+        req, aux = (np.asarray(v).ravel() for v in request(t, h, x, r, tau_B, self.params))
+        F = None
+        if np.any(req != 0.0):
+            F = map_lp(self.D_known * self.f_max, self.G_known * self.f_max, np.ones(self.n), req,
+                       1.0 / self.isp, self.pure)
+            F = None if F is None else F * self.f_max
+        if F is None:
+            F = map_min_norm_shift(self.M, self.V, self.f_max, req)
+        x_next, rest, on, Tq, out = (np.asarray(v).ravel() for v in fire(t, h, x, tau_B, self.params, F, aux))
+        out[:3] = req
+        self.n_commands += 1
+        return x_next, rest, on, Tq.reshape(self.n, 3).T, out

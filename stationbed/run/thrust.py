@@ -1,0 +1,124 @@
+"""The thrusters in the closed loop's per-tick executor (issue 21): the actuator's tick on what
+the law sees, the integration split at every pulse edge, the row values and the summary.
+
+:class:`ThrustLoop` is what :class:`~.closed_loop.ControlLoop` holds when the scene has
+``[[thruster]]`` tables; the fused loop (:mod:`.thrust_fused`) runs the same
+:class:`~stationbed.loop.thrusters.ThrusterCluster` function inlined.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..loop.actuator import pulse_pieces
+from ..loop.thrusters import ThrusterCluster
+from ..model.cmg import held_momentum_B
+from ..scene import knowledge_scene
+from .segments import segment_input
+
+__all__ = ["ThrustLoop", "thruster_columns", "thrust_for", "thruster_parts"]
+
+
+def thruster_columns(scene) -> list[str]:
+    """The CSV columns of the thrusters, values at the row's time t: the mode of the tick before
+    t (``thr_mode`` 1 = thruster-only control, ``thr_dumping`` 1 = dumping), and totals over
+    [0, t]: firings, time in thruster-only control [s], impulse Σ F t_on [N s], propellant
+    [kg], and each thruster's on-time [s]."""
+    if not scene.thruster:
+        return []
+    cols = ["thr_mode", "thr_dumping", "thr_firings", "thr_control_s", "thr_impulse_Ns", "thr_propellant_kg"]
+    return cols + [f"thr_on_s_{t.name}" for t in scene.thruster]
+
+
+def thruster_parts(s: dict) -> list[str]:
+    """The run summary line's thruster parts (``stationbed run``), none without thrusters."""
+    if "propellant_kg" not in s:
+        return []
+    per = f" ({s['propellant_kg_per_orbit']:.4g} kg per orbit)" if "propellant_kg_per_orbit" in s else ""
+    out = [f"thrusters {s['thruster_firings']} firings, impulse {s['thruster_impulse_Ns']:.4g} N s, propellant "
+           f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
+    if "thrusters_not_fused" in s:
+        out.append(f"thrusters flown per tick: {s['thrusters_not_fused']}")
+    return out
+
+
+def thrust_for(loop, plant) -> "ThrustLoop | None":
+    """The loop's thrusters (None without ``[[thruster]]``); ``plant`` is the law's knowledge."""
+    if not loop.scene.thruster:
+        return None
+    if loop.ctrl.command != "torque":
+        raise ValueError(f"controller '{loop.ctrl.name}' commands gimbal rates: thrusters share a torque request "
+                         "with the CMGs (use a torque-commanding law)")
+    return ThrustLoop(loop, plant)
+
+
+class ThrustLoop:
+    """The thrusters of one closed-loop run (per-tick executor)."""
+
+    def __init__(self, loop, plant):
+        scene = loop.scene
+        cap = plant.h_capacity if plant.h_capacity is not None else math.inf
+        known = knowledge_scene(scene)
+        held = held_momentum_B(known.cmg)  # the failed units flight software knows of
+        self.cluster = ThrusterCluster(scene, known, cap, held)
+        self.lp = self.cluster.opt.mapping == "lp"
+        self.x = self.cluster.x0.copy()  # the actuator's memory after the last tick
+        self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
+        self.on_s = np.zeros(self.cluster.n)
+        self.torque_B = np.zeros((3, self.cluster.n))
+        o, _ = loop.layout["h_B"]
+        self.h_slice = slice(o, o + 3)
+        self.fused_reason = None  # why the fused loop did not take it (summary)
+
+    def command(self, loop, t: float, cmd) -> np.ndarray:
+        """Tick at ``t``: the thrusters' on-times over ``[t, t + h]`` and the torque left to the
+        CMGs (returned, B [N m])."""
+        h = self.tick_length(loop, t)
+        y = loop.seen if (loop.noisy or loop.flight is not None) else loop.meas.res[0]
+        r = y[self.h_slice]
+        self.x_row = self.x
+        c = self.cluster
+        f = c.command_lp if self.lp else c.command
+        self.x, rest, self.on_s, self.torque_B, _ = f(t, h, self.x, r, np.asarray(cmd, dtype=float))
+        return rest
+
+    @staticmethod
+    def tick_length(loop, t: float) -> float:
+        """The tick's length [s]: the period, the remainder of the run for the last one (0 at
+        the end), as the fused loop's :func:`~.segments.tick_pieces` cuts them."""
+        rest = loop.duration - t
+        return loop.period if rest >= loop.period * (1 - 1e-12) else max(rest, 0.0)
+
+    def advance(self, loop, t0: float, t1: float) -> None:
+        """Integrate ``[t0, t1]`` split at the scene's breakpoints and the pulse edges; over each
+        piece the thrusters on add their torque to the held external torque."""
+        cuts = [(t0 + a, t0 + b, on) for a, b, on in pulse_pieces(self.on_s, t1 - t0)]
+        cuts[-1] = (cuts[-1][0], t1, cuts[-1][2])
+        inner = [b for b in loop.bps if t0 < b < t1]
+        for a, b, on in cuts:
+            edges = [a] + [e for e in inner if a < e < b] + [b]
+            tq = self.torque_B[:, on].sum(axis=1)
+            for s0, s1 in zip(edges[:-1], edges[1:]):
+                segment_input(loop.scene, loop.model, s0, s1, loop.u)
+                u = loop.u.copy()
+                u[0:3] += tq
+                loop.x[:] = loop.apply_jump(s1, loop.integ.advance(s0, s1, loop.x, u))
+
+    def row(self, x=None) -> list[float]:
+        """The row's values (:func:`thruster_columns`) from the actuator state ``x`` before the tick."""
+        s = self.cluster.state
+        x = self.x_row if x is None else x
+        vals = [s.get(x, k) for k in ("mode", "dumping", "firings", "control_s", "impulse_Ns", "propellant_kg")]
+        return [float(np.ravel(v)[0]) for v in vals] + list(np.ravel(s.get(x, "on_total_s")))
+
+    def summary(self, loop) -> dict:
+        """What the summary adds to the thruster metrics (propellant_kg and the other totals are
+        :data:`~.metrics.METRICS`, reduced from the rows' thr_* columns by ``RunMetrics``)."""
+        out = {"thruster_mapping": self.cluster.opt.mapping, "thruster_pure_couple": bool(self.cluster.pure)}
+        if loop.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
+            out["orbit_period_s"] = 2.0 * math.pi / loop.scene.orbit.mean_motion
+        if self.fused_reason:
+            out["thrusters_not_fused"] = self.fused_reason
+        return out

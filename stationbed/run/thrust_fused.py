@@ -1,0 +1,251 @@
+"""The fused closed loop with thrusters (issue 21): :mod:`.fused` with the
+:class:`~stationbed.loop.thrusters.ThrusterCluster` tick inlined.
+
+Per tick, in one compiled ``mapaccum``: one SX function for the law, the thrusters' exact idle
+test (:meth:`~stationbed.loop.actuator.Actuator.idle_function`) and the quiet tick (the law's
+request to the CMGs, one RK4 step); when not idle, the busy tick: the thrusters' command (the
+same casadi function the per-tick loop compiles), the CMGs' actuation of what they leave, then
+**either** one plain RK4 step (nothing fires) **or** the tick split at every pulse edge
+(:func:`~stationbed.loop.actuator.split_step`: n + 1 RK4 pieces). The choices are casadi
+``Function.if_else`` of explicit branch functions, so the generated C evaluates only the branch
+taken and computes nothing twice (an ``if_else(..., short_circuit=True)`` on expressions
+rebuilds a branch from its free symbols and recomputes inside it what came before the choice). The carry holds the tick index, the state, the saturation
+counts and the thrusters' memory (their ledger included).
+
+Sensor noise (``[controller.sensor]``) is drawn in Python per tick and applied in the compiled
+tick as :mod:`.fused` does (same draws, same operations). Taken when :func:`fused_thrust_ok`
+(no ``[[sensor]]`` tables, no environment rate, the closed-form mapping); otherwise the per-tick loop runs and the summary says why
+(``thrusters_not_fused``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions, sx_function
+from ..integrators import IntegrationError
+from ..loop.actuator import split_step
+from .controller import ControllerError, one_line
+from . import law_state
+from .rates import environment_rate
+from .segments import held_torque_from, tick_pieces
+
+__all__ = ["fused_thrust_ok", "run_fused_thrust"]
+
+_CHUNKS: dict[tuple, dict] = {}
+
+
+def fused_thrust_ok(loop) -> bool:
+    """Whether the fused loop can fly the loop's thrusters (always True without thrusters);
+    sets ``loop.thrust.fused_reason`` when it cannot."""
+    th = getattr(loop, "thrust", None)
+    if th is None:
+        return True
+    why = None
+    if th.lp:
+        why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
+    elif getattr(loop, "flight", None) is not None:
+        why = "[[sensor]] tables with thrusters are flown per tick"
+    elif environment_rate(loop):
+        why = "an environment rate with thrusters is flown per tick"
+    elif law_state.has_state(loop.ctrl):
+        why = "a law with a state (symbolic_state) with thrusters is flown per tick"
+    th.fused_reason = why
+    return why is None
+
+
+def _build(loop, n: int, symbolic_params, noise) -> dict:
+    system, ctrl, th = loop.system, loop.ctrl, loop.thrust
+    sx = system.sx
+    form = system.formulation
+    model = form.model
+    nx, npar = form.nx, model.layout.size
+    ncp = len(symbolic_params)
+    cl = th.cluster
+    na, npa, nch = cl.state.size, cl.params.size, cl.n_channels
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    xa, pa = ca.SX.sym("xa", na), ca.SX.sym("pa", npa)
+    flags = noise["flags"]
+    nn = noise["width"](flags)
+    nz = ca.SX.sym("nz", nn)
+    y = sx["meas"](t, x, p)
+    if nn:  # the law sees the noisy measurement, as fused.py's tick (h_B is not corrupted)
+        y = noise["corrupt"](y, nz, flags, loop.layout)
+    try:
+        cmd, q_ref = ctrl.symbolic(t, y, cp)
+        cmd = ca.vertcat(cmd)
+    except Exception as e:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
+    if cmd.numel() != 3:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected 3")
+    xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd, pa)
+    k = model.nu_cmg
+
+    def act_u(tau):
+        a = sx["actuate"](t, x, tau, p)
+        uu = ca.vertcat(u_ext, a[0:k])
+        if model.has_steps:
+            uu = ca.vertcat(uu, t + h / 2)
+        return a, uu, ca.vertcat(a[k + 1], a[k + 2])
+
+    act, u, _ = act_u(rest)
+    step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
+    idle_f = cl.idle_function()
+    idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
+    # every tick, one SX function (its common subexpressions shared, as fused.py's tick): the
+    # law, the idle test, the measured h and the quiet tick (the law's request to the CMGs, one
+    # step); the busy tick (the thrusters' command, the CMGs' share) only when not idle
+    _, u_q, sat_q = act_u(cmd)
+    quiet = sx_function("thr_quiet", [t, x, cp, u_ext, p, h, xa, pa, nz],
+                        [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa), cmd, idle, y[th.h_slice]])
+    cmd_s = ca.SX.sym("cmd", 3)
+    h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_pre (not measured again)
+    xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, h_s, cmd_s, pa)
+    _, u_b, sat_b = act_u(rest_s)
+    busy_core = sx_function("thr_busy", [t, x, cmd_s, h_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
+    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
+    us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
+    # explicit branch functions (casadi's Function.if_else): the branch is evaluated from the
+    # inputs as given, nothing before the choice is computed again inside it
+    plain = sx_function("thr_plain", [t, x, h, us, p, ons, tqs], [step(rhs, t, x, h, us, p)])
+    split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
+                        [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch))])
+    pulse = ca.Function.if_else("thr_pulse", split, plain)
+    MX = ca.MX
+    ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
+                                          MX.sym("p", npar), MX.sym("h"), MX.sym("xa", na), MX.sym("pa", npa))
+    nzi = MX.sym("nz", nn)
+    info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai, nzi],
+                       [core(ti, xi, cpi, ui, pi_, hi, xai, pai, nzi)])
+    nc = 1 + nx + 2 + na
+    npar_all = 3 + ncp + 3 + npar + npa
+    c, par = MX.sym("c", nc), MX.sym("par", npar_all)
+    i, xc, cnt, xac = c[0], c[1 : 1 + nx], c[1 + nx : 3 + nx], c[3 + nx :]
+    t0, hh, n_act = par[0], par[1], par[2]
+    cpc, uc = par[3 : 3 + ncp], par[3 + ncp : 6 + ncp]
+    pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
+    tt = t0 + i * hh
+    nzc = MX.sym("nz", nn)
+    quiet_c, cmd_c, idle_c, h_c = quiet(tt, xc, cpc, uc, pc, hh, xac, pac, nzc)
+    # the busy tick: the thrusters' command, then a plain step or the split one (only if one fires)
+    bx, bcmd, bu, bxa, bhB = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na), MX.sym("h_B", 3)
+    bt, bh, bp, bpa = MX.sym("t"), MX.sym("h"), MX.sym("p", npar), MX.sym("pa", npa)
+    bq = MX.sym("q", nx + 2 + na)
+    uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa)
+    x_b = pulse(ca.sum1(on) > 0, bt, bx, bh, uu, bp, on, tqq)
+    b_in = [bq, bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa]
+    busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(x_b, fl, xa_new)])
+    tick = ca.Function.if_else("thr_tick", ca.Function("thr_pass", b_in, [bq]), busy)
+    res = tick(idle_c, quiet_c, tt, xc, cmd_c, h_c, uc, pc, hh, xac, pac)
+    x_new, fl, xa_new = res[0:nx], res[nx : nx + 2], res[nx + 2 :]
+    act_ = i < n_act
+    c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
+                       cnt + ca.if_else(act_, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), MX.zeros(2)),
+                       ca.if_else(act_, xa_new, xac))
+    stepf = ca.Function("thr_step", [c, par, nzc], [c_new])
+    acc = stepf.mapaccum("thr_acc", n)
+    c0, parm, noise = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nn, n)  # column i: tick i's draws
+    chunk = ca.Function("thr_chunk", [c0, parm, noise], [acc(c0, ca.repmat(parm, 1, n), noise)[:, -1]])
+    tag = f"thrfused6_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    funcs = compile_functions([info, chunk], tag)
+    return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
+
+
+def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
+    """Run ticks 0..K fused with the thrusters, emitting the same rows as the per-tick loop.
+
+    ``noise``: :mod:`.fused`'s sensor-noise helpers, ``flags`` (which corruptions apply),
+    ``width`` (draws per tick), ``corrupt`` (the compiled corruption), ``draw`` (the draws of the
+    next ticks in the per-tick loop's order); handed over by ``run_fused``, which imports this
+    module."""
+    ctrl, th = loop.ctrl, loop.thrust
+    cl = th.cluster
+    n = loop.n_per_out
+    flags = noise["flags"]
+    nn = noise["width"](flags)
+    key = (id(loop.system), type(ctrl), n, cl.key, flags)
+    if key not in _CHUNKS:
+        t0 = time.perf_counter()
+        _CHUNKS[key] = _build(loop, n, symbolic_params, noise)
+        _CHUNKS[key]["build_s"] = time.perf_counter() - t0
+    fns = _CHUNKS[key]
+    info, chunk = fns["info"], fns["chunk"]
+    cp = np.asarray(symbolic_params, dtype=float)
+    nx, na = loop.system.formulation.nx, cl.state.size
+    p, period, duration = loop.p, loop.period, loop.duration
+    info.args[2][:] = cp
+    info.args[4][:] = p
+    info.args[7][:] = cl.params
+    c0, par, noise_in = chunk.args
+    noise_in[:] = 0.0
+    ncp = len(cp)
+    par[3 : 3 + ncp] = cp
+    i_ext = slice(3 + ncp, 6 + ncp)
+    par[6 + ncp : 6 + ncp + len(p)] = p
+    par[6 + ncp + len(p) :] = cl.params
+    nu_cmg = loop.nu_cmg
+    x = np.array(loop.x, dtype=float)
+    xa = th.x.copy()
+    tail_flag = 0
+    ticks = 0
+    loop.used_fused = True
+    row_ks = sorted(set(range(0, K, n)) | {K})
+    try:
+        for j, k in enumerate(row_ks):
+            t = min(k * period, duration)
+            n_act = row_ks[j + 1] - k if k < K else 1
+            if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order
+                draws = noise["draw"](loop, n_act, flags)
+                info.args[8][:] = draws[0]
+            info.args[0][0] = t
+            info.args[1][:] = x
+            info.args[3][:] = held_torque_from(loop.scene, t, loop.bps, duration)
+            info.args[5][0] = th.tick_length(loop, t)
+            info.args[6][:] = xa
+            info()
+            r = info.res[0]
+            cmd, act, q_ref = r[:3], r[3 : 3 + nu_cmg + 3], r[-4:]
+            lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
+            loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
+            loop.last_cmd = tuple(cmd)
+            ctrl.q_ref_BN = tuple(q_ref)
+            loop.x = x
+            th.x_row = xa
+            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            if k == K:
+                break
+            counts = np.zeros(2)
+            for a, b, hp in tick_pieces(k, n_act, edges, duration, period):
+                c0[0] = 0.0
+                c0[1 : 1 + nx] = x
+                c0[1 + nx : 3 + nx] = 0.0
+                c0[3 + nx :] = xa
+                par[0] = a * period
+                par[1] = hp
+                par[2] = b - a
+                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration)
+                if nn:  # column-major (nn, n): tick by tick
+                    noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
+                chunk()
+                res = chunk.res[0]
+                x = res[1 : 1 + nx].copy()
+                counts += res[1 + nx : 3 + nx]
+                xa = res[3 + nx : 3 + nx + na].copy()
+            ticks += n_act
+            loop.n_rate_limited += int(counts[0])
+            loop.n_momentum_saturated += int(counts[1])
+            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
+            if not np.all(np.isfinite(x)):
+                loop.ticks = ticks
+                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+    finally:
+        loop.ticks = ticks
+        loop.x = x
+        th.x = th.x_row = xa
+        ctrl.count_compiled_updates(ticks + 1)
+        loop.integ.count_steps(ticks)
+        loop.rows.flush()

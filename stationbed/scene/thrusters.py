@@ -1,0 +1,126 @@
+"""Scene tables of the thrusters (issue 21; physics in :mod:`stationbed.loop.thrusters`).
+
+```toml
+[[thruster]]
+name = "sm_p1"             # letters, digits, underscores: a column stem
+position_B = [-30.0, 3.0, 2.0]   # m, where the force acts, body axes (same origin as [body] cm)
+direction_B = [0.0, -1.0, 0.0]   # direction of the force ON THE STATION (the plume goes the other way)
+force_N = 130.0            # N, thrust while on
+isp_s = 280.0              # s, specific impulse
+min_on_s = 0.03            # s, shortest pulse the valve makes (0: any)
+group = "sm_aft"           # optional pod name (columns per group as well)
+
+[thrusters]                # options (all optional)
+mode = "assist"            # "assist" | "thruster_only" | "off"
+mapping = "min_norm_shift" # or "lp" (scipy HiGHS, per-tick loop only)
+```
+
+The scene holds them as ``Scene.thruster`` (list) and ``Scene.thrusters`` (options); the closed
+loop fires them (docs/loop.md, "Actuators").
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from .base import FieldError, Strict, Vec3
+
+__all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters"]
+
+#: a thruster's or group's name: it becomes a column stem (letters, digits, underscores)
+ThrusterName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
+
+
+class Thruster(Strict):
+    """``[[thruster]]``: one thruster, on or off (a valve), its force fixed in the body."""
+
+    name: ThrusterName
+    position_B: Vec3  # m, point of application, body axes, same origin as [body] cm
+    direction_B: Vec3  # direction of the force on the station (normalised here)
+    force_N: float = Field(gt=0.0)  # N, thrust while on
+    isp_s: float = Field(gt=0.0)  # s, specific impulse (m_dot = F / (isp g0))
+    min_on_s: float = Field(default=0.0, ge=0.0)  # s, minimum pulse
+    group: ThrusterName | None = None  # pod
+
+    @model_validator(mode="after")
+    def _physical(self):
+        n = math.sqrt(sum(v * v for v in self.direction_B))
+        if not n > 1e-9:
+            raise FieldError("direction_B", "must not be the zero vector")
+        return self
+
+    @property
+    def unit_B(self) -> list[float]:
+        """The force's direction, unit length, body axes."""
+        n = math.sqrt(sum(v * v for v in self.direction_B))
+        return [v / n for v in self.direction_B]
+
+
+class ThrusterOptions(Strict):
+    """``[thrusters]``: how the thrusters are commanded (every key optional).
+
+    Fractions of capacity are of the *working* CMG units' momentum capacity as flight software
+    knows it (the ``[knowledge]`` scene's cluster, :func:`stationbed.run.closed_loop.plant_facts`).
+    """
+
+    mode: Literal["assist", "thruster_only", "off"] = "assist"
+    mapping: Literal["min_norm_shift", "lp"] = "min_norm_shift"
+    #: Schmitt trigger on a pulse shorter than min_on_s: level = requested / min_on_s; fire min_on_s
+    #: at level >= level_on, none at level <= level_off, and in between as the previous tick did
+    level_on: float = Field(default=0.75, gt=0.0, le=1.0)
+    level_off: float = Field(default=0.25, ge=0.0, lt=1.0)
+    remainder: bool = True  # carry the on-time not delivered (or delivered too much) to the next tick
+    # CMG thruster assist: dump while |h| / capacity is above assist_on until it falls to dump_stop
+    assist_on: float = Field(default=0.8, gt=0.0, le=1.0)
+    dump_stop: float = Field(default=0.35, ge=0.0, lt=1.0)
+    h_min: float = Field(default=0.3, ge=0.0, lt=1.0)  # dump target |h| as a fraction of capacity
+    dump_time_s: float = Field(default=300.0, gt=0.0)  # s: dump torque = ΔH / dump_time_s ...
+    max_dump_torque_Nm: float = Field(default=200.0, gt=0.0)  # N m: ... at most this
+    # hand-over to thruster-only control at saturation, hand-back below handback
+    handover: float = Field(default=0.97, gt=0.0, le=1.5)
+    handback: float = Field(default=0.5, ge=0.0, lt=1.5)
+    inhibit: list[Annotated[list[float], Field(min_length=2, max_length=2)]] = []  # [start, stop) s: no firing
+
+    @model_validator(mode="after")
+    def _order(self):
+        if self.level_off >= self.level_on:
+            raise FieldError("level_off", f"{self.level_off:g} must be below level_on ({self.level_on:g})")
+        if self.dump_stop >= self.assist_on:
+            raise FieldError("dump_stop", f"{self.dump_stop:g} must be below assist_on ({self.assist_on:g})")
+        if self.h_min > self.dump_stop:
+            raise FieldError("h_min", f"{self.h_min:g} must not exceed dump_stop ({self.dump_stop:g}): the dump "
+                                      "would stop before reaching it, or never")
+        if self.handback >= self.handover:
+            raise FieldError("handback", f"{self.handback:g} must be below handover ({self.handover:g})")
+        for i, (a, b) in enumerate(self.inhibit):
+            if not 0.0 <= a < b:
+                raise FieldError(f"inhibit[{i}]", f"[{a:g}, {b:g}] must be a window [start, stop) with 0 <= start < stop")
+        return self
+
+
+def check_thrusters(scene) -> None:
+    """``[[thruster]]`` and ``[thrusters]`` agree with each other and the rest of the scene."""
+    if not scene.thruster:
+        if scene.thrusters is not None:
+            raise FieldError("thrusters", "options without any [[thruster]]")
+        return
+    names = [t.name for t in scene.thruster]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise FieldError("thruster", f"names must be unique, repeated: {dup}")
+    if scene.controller is None:
+        raise FieldError("thruster", "thrusters are fired by the closed loop: add a [controller] table")
+    if scene.cmg is None:
+        raise FieldError("thruster", "thrusters assist a CMG cluster (and take over from it): add a [cmg] table")
+    opt = scene.thrusters or ThrusterOptions()
+    if opt.mode == "assist" and scene.cmg.kind == "ideal" and scene.cmg.max_momentum is None:
+        raise FieldError("thrusters.mode", "'assist' acts on |h| as a fraction of the CMG capacity: give "
+                                           "cmg.max_momentum (kind 'ideal' has no capacity otherwise)")
+    period = scene.controller.period
+    for i, t in enumerate(scene.thruster):
+        if t.min_on_s > period:
+            raise FieldError(f"thruster[{i}].min_on_s", f"{t.min_on_s:g} s is longer than the controller period "
+                                                        f"({period:g} s): a pulse is cut at the period")
