@@ -6,7 +6,8 @@ Claims:
   and the same counts of ticks, rate-limited and saturated ticks, on a stretch of
   ``iss_lvlh_hold`` where the CMGs' gimbal-rate limit switches on and off between rows (the
   flags a row carries from the ticks after the previous row), with the environment at every
-  stage and held over blocks (its carry passed from call to call);
+  stage and held over blocks (its carry passed from call to call), and with sensor noise (the
+  draws of many rows taken in one call: the same stream);
 * the bulk path ran (the test would otherwise compare the row-by-row loop with itself);
 * a run that ends in a non-finite state inside a bulk call stops where the row-by-row loop
   stops: the same time, the same rows handed over before it.
@@ -58,16 +59,22 @@ def _spy(monkeypatch) -> list:
     return seen
 
 
-def _slew_scene(rate: int):
+#: sensor noise of the noisy case: attitude [rad], rate [rad/s] (the MC scenario's order)
+NOISE = {"attitude_noise": 1.0e-4, "rate_noise": 1.0e-6, "seed": 7}
+
+
+def _slew_scene(rate: int, noisy: bool):
     a = math.radians(SLEW_DEG) / 2
-    return load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace(
+    s = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml")
+    return s.replace(
         {"initial.q_BN": [math.cos(a), math.sin(a), 0.0, 0.0], "simulation.output_dt": 1.0,
-         "simulation.environment_rate": rate})
+         "simulation.environment_rate": rate, "controller.sensor": NOISE if noisy else {}})
 
 
-@pytest.mark.parametrize("rate", [0, 20], ids=["every_stage", "environment_20"])
-def test_bulk_rows_give_the_row_by_row_loops_bits(monkeypatch, rate):
-    scene = _slew_scene(rate)
+@pytest.mark.parametrize("rate, noisy", [(0, False), (20, False), (20, True)],
+                         ids=["every_stage", "environment_20", "environment_20_noise"])
+def test_bulk_rows_give_the_row_by_row_loops_bits(monkeypatch, rate, noisy):
+    scene = _slew_scene(rate, noisy)
     seen = _spy(monkeypatch)
     bulk = simulate(scene, duration=DURATION_S)
     with monkeypatch.context() as m:

@@ -192,7 +192,7 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
         tag += f"_env{rate}"
     if nn:
         tag += f"_noise{int(flags[0])}{int(flags[1])}"
-    many = [] if nn else rows_functions(info, chunk, n, nx, carry_width(rate), ncp, npar)  # many rows per call
+    many = rows_functions(info, chunk, n, nx, carry_width(rate), ncp, npar, nn)  # many rows per call (fused_rows.py)
     funcs = compile_functions([info, chunk] + many, tag)
     rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
     return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp, "rows": rows}
@@ -245,8 +245,9 @@ def run_fused(loop, K: int) -> None:
     row_ks = sorted(set(range(0, K, n)) | {K})  # the row ticks, as in the per-tick loop
     try:
         j0 = 0
-        if not nn and not edges:  # the leading full rows, many per compiled call (fused_rows.py)
-            j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p)
+        if not edges:  # the leading full rows, many per compiled call (fused_rows.py)
+            draw = (lambda k: _draw(loop, k, flags)) if nn else None
+            j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p, draw)
             if stop is not None:
                 raise IntegrationError(stop, "state is not finite (NaN or inf)")
         for j, k in enumerate(row_ks):

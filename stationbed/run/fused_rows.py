@@ -15,7 +15,9 @@ operations: the same numbers as the row-by-row loop, bit for bit (tests/test_fus
 
 Where it applies (else the row-by-row loop runs, as before): rows whose stretch is ``n`` full
 ticks of one held torque (no torque-window edge inside the run, not the short last period), no
-sensor draws (they are drawn per row in Python), no flight loop. :func:`run_rows` does the
+flight loop. Sensor noise: the draws of the R rows' ticks are drawn in one call, in the
+row-by-row loop's order (one generator fills an array element by element: the same numbers as
+R calls of one row each), and passed as a per-row input. :func:`run_rows` does the
 leading run of such rows and hands the executor back its state to go on row by row.
 The first row's held values are checked against the executor's own (``_held_row``): a loop
 whose rows hold other columns runs row by row.
@@ -37,45 +39,53 @@ __all__ = ["ROW_CALLS", "rows_functions", "run_rows"]
 ROW_CALLS = (64, 8)
 
 
-def rows_functions(info: ca.Function, chunk: ca.Function, n: int, nx: int, ne: int, ncp: int, npar: int) -> list:
+def rows_functions(info: ca.Function, chunk: ca.Function, n: int, nx: int, ne: int, ncp: int, npar: int, nn: int = 0) -> list:
     """``fused_rows_<R>`` for each R of :data:`ROW_CALLS`.
 
     Parameters
     ----------
-    info : Function  ``fused_info(t, x, cp, u_ext, p) -> (cmd, act, q_ref)`` (no sensor draws).
-    chunk : Function  ``fused_chunk(c0, par) -> carry`` of ``n`` ticks: ``c0 = (i, x, counts(2),
-        env(ne))``, ``par = (t0, h, n_act, cp, u_ext, p)``.
+    info : Function  ``fused_info(t, x, cp, u_ext, p[, nz]) -> (cmd, act, q_ref)``.
+    chunk : Function  ``fused_chunk(c0, par[, noise]) -> carry`` of ``n`` ticks: ``c0 = (i, x,
+        counts(2), env(ne))``, ``par = (t0, h, n_act, cp, u_ext, p)``, ``noise`` (nn, >= n)
+        column i tick i's sensor draws.
     n : int  Ticks per row.
-    nx, ne, ncp, npar : int  Sizes of the state, of the held environment's carry, of the
-        controller's and of the model's parameters.
+    nx, ne, ncp, npar, nn : int  Sizes of the state, of the held environment's carry, of the
+        controller's and of the model's parameters, sensor draws per tick.
 
     Returns
     -------
-    list of Function  ``fused_rows_R(c[nx + ne], a[1 x R], par[1 + ncp + 3 + npar]) ->
-    (carries[(nx + ne) x R], out[(nx + ninfo + 2) x R])``: ``a`` the rows' first ticks, ``par``
-    = ``(h, cp, u_ext, p)``; column r of ``out`` is row r's state, its ``info`` and the chunk's
-    counts of rate-limited and saturated ticks; of ``carries``, the carry after row r.
+    list of Function  ``fused_rows_R(c[nx + ne], a[1 x R], par[1 + ncp + 3 + npar][, nz[nn n x R]])
+    -> (carries[(nx + ne) x R], out[(nx + ninfo + 2) x R])``: ``a`` the rows' first ticks, ``par``
+    = ``(h, cp, u_ext, p)``, column r of ``nz`` row r's draws tick by tick; column r of ``out``
+    is row r's state, its ``info`` and the chunk's counts of rate-limited and saturated ticks;
+    of ``carries``, the carry after row r.
     """
     c = ca.MX.sym("c", nx + ne)
     a = ca.MX.sym("a")
     par = ca.MX.sym("par", 1 + ncp + 3 + npar)
+    nz = [ca.MX.sym("nz", nn * n)] if nn else []
     h = par[0]
     rest = par[1:]
     x = c[:nx]
     t = a * h  # as the executor: k * period, one IEEE product
     cp, u_ext, p = rest[:ncp], rest[ncp : ncp + 3], rest[ncp + 3 :]
-    inf = info(t, x, cp, u_ext, p)
+    inf = info(t, x, cp, u_ext, p, *([nz[0][:nn]] if nn else []))
     c0 = ca.vertcat(0.0, x, 0.0, 0.0, c[nx:])
-    res = chunk(c0, ca.vertcat(t, h, float(n), rest))
+    noise = []
+    if nn:  # the chunk's (nn, n_max) draws: this row's n ticks, the rest unused (masked ticks)
+        cols = chunk.size_in(2)[1]
+        noise = [ca.horzcat(ca.reshape(nz[0], nn, n), ca.MX.zeros(nn, cols - n))]
+    res = chunk(c0, ca.vertcat(t, h, float(n), rest), *noise)
     carry = ca.vertcat(res[1 : 1 + nx], res[3 + nx :])
     out = ca.vertcat(x, inf, res[1 + nx : 3 + nx])
-    row = ca.Function("fused_row", [c, a, par], [carry, out])
+    row = ca.Function("fused_row", [c, a, par] + nz, [carry, out])
     fns = []
     for R in ROW_CALLS:
         acc = row.mapaccum(f"fused_rows_acc_{R}", R)
         cs, as_, ps = ca.MX.sym("c", nx + ne), ca.MX.sym("a", 1, R), ca.MX.sym("par", par.numel())
-        carries, outs = acc(cs, as_, ca.repmat(ps, 1, R))
-        fns.append(ca.Function(f"fused_rows_{R}", [cs, as_, ps], [carries, outs]))
+        nzs = [ca.MX.sym("nz", nn * n, R)] if nn else []
+        carries, outs = acc(cs, as_, ca.repmat(ps, 1, R), *nzs)
+        fns.append(ca.Function(f"fused_rows_{R}", [cs, as_, ps] + nzs, [carries, outs]))
     return fns
 
 
@@ -90,7 +100,7 @@ def _full_rows(loop, row_ks, n: int, K: int) -> int:
     return j
 
 
-def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p) -> tuple:
+def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None) -> tuple:
     """Run the leading full rows of a fused run in calls of :data:`ROW_CALLS` rows.
 
     Parameters
@@ -101,6 +111,8 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p) -> tuple:
     row_ks : list of int  The row ticks; K the last tick.
     x, env_c : ndarray  The state and the held environment's carry at tick 0.
     cp, u_ext, p : ndarray  The controller's parameters, the held external torque, the model's.
+    draw : callable or None  ``draw(k)`` -> the sensor draws of the next k ticks, (k, nn), from
+        the loop's generator in the row-by-row loop's order (None: no sensor noise).
 
     Returns
     -------
@@ -131,6 +143,8 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p) -> tuple:
             ks = np.asarray(row_ks[j : j + R], dtype=float)
             fc.args[0][:] = np.concatenate((x, env_c))
             fc.args[1][:] = ks
+            if draw is not None:  # the R rows' ticks in order: column r = row r's ticks, tick by tick
+                fc.args[3][:] = draw(R * n).ravel()
             fc()
             carries = fc.res[0].reshape(R, -1)  # column-major (nx + ne, R): row r's carry is a row here
             out = fc.res[1].reshape(R, -1)
