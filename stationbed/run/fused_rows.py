@@ -133,6 +133,8 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
     n_act = nu_cmg + 3 if loop.act is not None else 0
     has_cmg = loop.model.cmg is not None
     torque = loop.ctrl.command == "torque"
+    # the generator's state before the first draw: a fallback to row by row draws the same again
+    rng_state = loop.rng.bit_generator.state if draw is not None else None
     j = 0
     tail_flag = 0
     ticks = 0
@@ -166,6 +168,8 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
             held += [tau, np.full((m, 4), math.nan)]
             held = np.hstack(held)
             if j == 0 and not _held_matches(loop, held[0], act[0, :nu_cmg] if loop.act is not None else None, cmd[0], q_ref[0], int(flag[0])):
+                if rng_state is not None:
+                    loop.rng.bit_generator.state = rng_state
                 return 0, x, env_c, 0, 0, None  # the executor's row has other columns: row by row
             ts = np.minimum(ks[:m] * period, duration)
             loop.rows.hold_many(ts, xs[:m], held, q_ref[:m])
