@@ -249,7 +249,7 @@ def run_fused(loop, K: int) -> None:
             draw = (lambda k: _draw(loop, k, flags)) if nn else None
             j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p, draw)
             if stop is not None:
-                raise IntegrationError(stop, "state is not finite (NaN or inf)")
+                raise stop
         for j, k in enumerate(row_ks):
             if j < j0:
                 continue

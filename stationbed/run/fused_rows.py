@@ -30,6 +30,8 @@ import math
 import casadi as ca
 import numpy as np
 
+from ..integrators import IntegrationError
+
 
 __all__ = ["ROW_CALLS", "rows_functions", "run_rows"]
 
@@ -117,10 +119,10 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
     Returns
     -------
     (j, x, env_c, tail_flag, ticks, stop) : the first row left to the row-by-row loop, and its
-    state, carry, saturation flag carried from the rows before, ticks run; ``stop`` the time [s]
-    where a row's stretch ended in a non-finite state (the rows up to it handed to the sink; the
-    executor raises, as its own loop does), else None. ``(0, x, env_c, 0, 0, None)`` when
-    nothing was run here.
+    state, carry, saturation flag carried from the rows before, ticks run; ``stop`` an
+    IntegrationError for the executor to raise (with its own bookkeeping, as its loop does) when
+    a row's stretch ended in a non-finite state (the rows up to it handed to the sink) or a row
+    came out non-finite, else None. ``(0, x, env_c, 0, 0, None)`` when nothing was run here.
     """
     calls = fns.get("rows") or {}
     n = loop.n_per_out
@@ -172,7 +174,10 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
                     loop.rng.bit_generator.state = rng_state
                 return 0, x, env_c, 0, 0, None  # the executor's row has other columns: row by row
             ts = np.minimum(ks[:m] * period, duration)
-            loop.rows.hold_many(ts, xs[:m], held, q_ref[:m])
+            try:  # (a non-finite output row: the rows before it are handed over)
+                loop.rows.hold_many(ts, xs[:m], held, q_ref[:m])
+            except IntegrationError as e:
+                return j, x, env_c, tail_flag, ticks, e
             ticks += m * n
             loop.n_rate_limited += int(counts[:m, 0].sum())
             loop.n_momentum_saturated += int(counts[:m, 1].sum())
@@ -186,7 +191,8 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
             env_c = carries[m - 1, nx:].copy()
             j += m
             if m < R:
-                return j, x, env_c, tail_flag, ticks, min((row_ks[j - 1] + n) * period, duration)
+                t_stop = min((row_ks[j - 1] + n) * period, duration)
+                return j, x, env_c, tail_flag, ticks, IntegrationError(t_stop, "state is not finite (NaN or inf)")
     return j, x, env_c, tail_flag, ticks, None
 
 
