@@ -127,8 +127,13 @@ def test_nan_in_the_second_argument_reaches_the_result(cache):
     assert np.all(np.isnan(np.asarray(f(1.0, math.nan))))
 
 
+def test_a_machine_whose_cpu_flags_are_unknown_builds_portable(monkeypatch):
+    monkeypatch.setattr(sbc, "_MACHINE", [(" arm64 arm ", False)])
+    assert sbc._native() == []
+
+
 def test_another_machine_builds_its_own_library(cache, monkeypatch):
     here = sbc.compile_functions([_min_max()], "minmax")["__lib__"]
-    monkeypatch.setattr(sbc, "_MACHINE", [" x86_64 other-cpu sse2"])
+    monkeypatch.setattr(sbc, "_MACHINE", [(" x86_64 other-cpu sse2", True)])
     there = sbc.compile_functions([_min_max()], "minmax")["__lib__"]
     assert here != there

@@ -54,7 +54,7 @@ def sx_function(name: str, inputs: list, outputs: list, *, called: bool = False)
 #: tick of iss_lvlh_hold); ``-ffp-contract=off`` forbids fused multiply-adds, so a build with
 #: the machine's own instructions gives the same bits as a portable one (and as the per-tick and
 #: lockstep paths: every test comparing paths bit for bit keeps holding); ``-fno-plt`` calls
-#: libm's sin, cos, atan2 (~60 a tick) through the GOT without the PLT's jump (5 %). Not
+#: libm's sin, cos, atan2 (~100 a tick) through the GOT without the PLT's jump (5 %). Not
 #: ``-ffast-math``: the NaN checks of the executors need IEEE semantics. ``-O3`` measured within
 #: the noise of ``-O2`` (0.96-0.99x) on the fused chunk: not taken (compile time of big functions).
 CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno", "-fno-semantic-interposition", "-ffp-contract=off", "-fno-plt"]
@@ -130,13 +130,10 @@ def compiler() -> str | None:
     return None
 
 
-_MACHINE: list[str] = []
+_MACHINE: list[tuple[str, bool]] = []  # (key, whether the CPU's flags were read), once per process
 
 
-def _machine_key() -> str:
-    """What a ``-march=native`` library depends on: the architecture and the CPU's instruction
-    set extensions (the ``flags`` line of ``/proc/cpuinfo``; elsewhere ``platform.processor()``).
-    Two machines with the same key run each other's libraries; read once per process."""
+def _machine() -> tuple[str, bool]:
     if not _MACHINE:
         flags = ""
         try:
@@ -144,8 +141,23 @@ def _machine_key() -> str:
                 flags = next((ln for ln in f if ln.startswith(("flags", "Features"))), "")
         except OSError:
             pass
-        _MACHINE.append(f" {platform.machine()} {platform.processor()} {' '.join(sorted(flags.split()))}")
+        words = sorted(flags.partition(":")[2].split())
+        _MACHINE.append((f" {platform.machine()} {platform.processor()} {' '.join(words)}", bool(words)))
     return _MACHINE[0]
+
+
+def _machine_key() -> str:
+    """What a ``-march=native`` library depends on: the architecture and the CPU's instruction
+    set extensions (the ``flags`` line of ``/proc/cpuinfo``). Two machines with the same key run
+    each other's libraries; read once per process."""
+    return _machine()[0]
+
+
+def _native() -> list[str]:
+    """:data:`NATIVE_CFLAGS` where the CPU's instruction-set flags are known (Linux
+    ``/proc/cpuinfo``): only then does the library's name tell two CPUs apart; elsewhere none
+    (a portable build)."""
+    return NATIVE_CFLAGS if _machine()[1] else []
 
 
 #: casadi's min/max helpers as generated, and as built here: casadi calls C99's ``fmax``/``fmin``
@@ -200,7 +212,7 @@ def _build(cc: str, src: str, lib: Path, sig: Path, tag: str) -> str | None:
             c_file.write_text(src)
             tmp_lib = Path(tmp) / "gen.so"
             with progress.task(f"compiling {_file_tag(tag)}", transient=True):
-                for flags in (CFLAGS + NATIVE_CFLAGS, CFLAGS, BASE_CFLAGS):  # the first the compiler takes
+                for flags in (CFLAGS + _native(), CFLAGS, BASE_CFLAGS):  # the first the compiler takes
                     res = subprocess.run([cc, *flags, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
                     if res.returncode == 0:
                         break
@@ -239,7 +251,7 @@ def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "")
     for f in functions:
         cg.add(f)
     src = inline_min_max(cg.dump()) + extra_c
-    key = " ".join(CFLAGS + NATIVE_CFLAGS) + _machine_key()
+    key = " ".join(CFLAGS + _native()) + _machine_key()
     digest = hashlib.sha256((src + key).encode()).hexdigest()[:20]
     lib = d / f"sb_{_file_tag(tag)}_{digest}.so"
     sig = lib.with_name(lib.name + ".sha256")
