@@ -9,21 +9,29 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
 
 1. ``floor``: the compiled tick alone, mapped over the n samples (one call per tick, no law, no
    rows): what any executor pays for the physics;
-2. ``pd`` fused (per sample, the fused loop; the shipped law with a ``symbolic`` form);
+2. ``pd`` fused (per sample, the fused loop; the shipped law with a ``symbolic`` form); each
+   row times the samples' set-up and their run apart (CPU of this process);
 3. ``example_hold`` batch, vectorised ``update_batch``;
 4. ``example_hold`` batch with the default looping ``update_batch``;
 5. ``example_hold`` per tick (``simulate`` per sample: what the Monte Carlo did before issue 22);
-6. ``momentum_manager`` batch (vectorised; it has no symbolic form), and its per-sample set-up
-   alone (the law's design), which every executor pays.
+6. ``momentum_manager`` fused (its ``symbolic`` form with the law's state carried,
+   stationbed/run/law_state.py) and batch (vectorised ``update_batch``, ``fused=False``);
+7. each law's per-sample set-up alone (``prepare``, rows, loop, the law's design:
+   ``momentum_manager`` designs an LQR and its loop margins per sample), which every executor pays
+   once per sample, whatever its duration.
 
-Each row is extrapolated to 1000 one-orbit samples on 2 workers (CPU per sample x orbit/duration
-x 500), and said so: a measured ratio on a loaded machine, not a wall.
+Each row is extrapolated to one-orbit samples as ``set-up + (row - set-up) x orbit/duration``
+(the set-up does not grow with the duration), and to 1000 of them on 2 workers (x 500), and said
+so: a measured ratio on a loaded machine, not a wall. ``--repeats R`` interleaves R rounds of
+every row and reports the medians.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -37,6 +45,7 @@ import numpy as np  # noqa: E402
 import _smoke  # noqa: E402
 from bench_montecarlo import bench_scene  # noqa: E402
 from stationbed import simulate  # noqa: E402
+from stationbed.run.simulation import SimulationError  # noqa: E402
 from stationbed.run.controller import Controller  # noqa: E402
 from stationbed.run.lockstep import _Lockstep, _Sample, run_lockstep  # noqa: E402
 from stationbed.studies.montecarlo.replay import sample_scene  # noqa: E402
@@ -46,7 +55,7 @@ ORBIT_S = 5553.6  # s, the Monte Carlo scene's duration
 
 def scenes(law: str, n: int, duration: float):
     params = {} if law == "momentum_manager" else None
-    s = bench_scene("pd" if law == "pd" else "example_hold")
+    s = bench_scene("pd" if law == "pd" else "example_hold")  # (noise off: same scenes as bench_montecarlo)
     ch = {"simulation.duration": duration, "montecarlo.settle_s": duration / 3, "montecarlo.n": max(n, 2)}
     if law != "pd":
         ch["controller.name"] = law
@@ -85,6 +94,7 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, default=50)
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--repeats", type=int, default=1, help="interleaved rounds of every row (medians)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
     _smoke.announce(args.smoke, "4 samples of 2 s")
@@ -101,47 +111,66 @@ def main(argv=None) -> int:
         simulate(s.replace({"simulation.duration": 1.0}), keep=False)
     run_lockstep([s.replace({"simulation.duration": 0.2}) for s in eh])
 
-    def batch(sc):
-        res = run_lockstep(sc)
-        assert all(k == "batch" and not isinstance(r, BaseException) for k, r in res), res[:1]
-
-    def looping_batch():
+    def timed_rows(sc, kind, fused=True, cls=None):
+        """(set-up CPU, run CPU) of the samples ``sc``: each sample set up as every executor sets
+        it up (prepare, rows, loop, the law's design), then run by ``kind``'s executor."""
         orig = cl.build_controller
-        cl.build_controller = lambda spec, base_dir=None: looping(period=spec.period, **spec.params)
+        if cls is not None:
+            cl.build_controller = lambda spec, base_dir=None: cls(period=spec.period, **spec.params)
         try:
-            batch(eh)
+            su, smp = cpu(lambda: [_Sample(s, None, False, fused) for s in sc])
         finally:
             cl.build_controller = orig
+        if kind == "batch":
+            assert all(s.kind == "batch" for s in smp)
+            run, res = cpu(lambda: _Lockstep(smp).run(SimulationError))
+            assert not any(isinstance(r, BaseException) for r in res), res[:1]
+        else:
+            assert kind == "per-tick" or all(s.kind == kind for s in smp), [s.kind for s in smp]
+            run, _ = cpu(lambda: [s.loop.run() for s in smp])
+        return su, run
 
     timings = [
-        ("floor_compiled_tick", lambda: floor_row(eh, dur)),
-        ("pd_fused", lambda: cpu(lambda: [simulate(s, keep=False) for s in pd])[0]),
-        ("example_hold_batch_vectorised", lambda: cpu(lambda: batch(eh))[0]),
-        ("example_hold_batch_default_loop", lambda: cpu(looping_batch)[0]),
-        ("example_hold_per_tick", lambda: cpu(lambda: [simulate(s, keep=False) for s in eh])[0]),
-        ("momentum_manager_batch", lambda: cpu(lambda: batch(mm))[0]),
-        # its per-sample set-up alone (the law's design: linearisation, LQR, loop margins), which
-        # a single run pays as well
-        ("momentum_manager_setup_only", lambda: cpu(lambda: [_Sample(s, None, False, False) for s in mm])[0]),
+        ("floor_compiled_tick", lambda: (0.0, floor_row(eh, dur))),
+        ("pd_fused", lambda: timed_rows(pd, "fused")),
+        ("example_hold_batch_vectorised", lambda: timed_rows(eh, "batch")),
+        ("example_hold_batch_default_loop", lambda: timed_rows(eh, "batch", cls=looping)),
+        ("example_hold_per_tick", lambda: timed_rows(eh, "per-tick", fused=False)),
+        ("momentum_manager_fused", lambda: timed_rows(mm, "fused")),
+        ("momentum_manager_batch", lambda: timed_rows(mm, "batch", fused=False)),
     ]
+    samples = {name: [] for name, _ in timings}
+    for _ in range(args.repeats):  # interleaved rounds: the machine's load hits every row alike
+        for name, fn in timings:
+            samples[name].append(fn())
     ticks = dur / 0.1
-    for name, fn in timings:
-        c = fn()
-        per = c / n
-        rows[name] = {"cpu_s": c, "per_sample_ms": 1e3 * per, "per_sample_tick_us": 1e6 * per / ticks,
-                      "extrapolated_1000_orbit_2_workers_s": per * ORBIT_S / dur * 500}
-        print(f"{name:34s} {1e6 * per / ticks:7.2f} us per sample-tick; 1000 one-orbit samples on 2 workers "
-              f"~ {per * ORBIT_S / dur * 500:6.0f} s (extrapolated from {n} x {dur:g} s)", flush=True)
-    f = rows["floor_compiled_tick"]["per_sample_tick_us"]
+    for name, _ in timings:
+        su = statistics.median(s for s, _ in samples[name]) / n
+        run = statistics.median(r for _, r in samples[name]) / n
+        r = rows[name] = {"setup_per_sample_ms": 1e3 * su, "run_per_sample_tick_us": 1e6 * run / ticks,
+                          "rounds_setup_run_s": samples[name]}
+        r["one_orbit_sample_s"] = su + run * ORBIT_S / dur
+        r["extrapolated_1000_orbit_2_workers_s"] = 500 * r["one_orbit_sample_s"]
+        print(f"{name:34s} run {r['run_per_sample_tick_us']:6.2f} us per sample-tick, set-up {1e3 * su:6.1f} ms "
+              f"per sample; one-orbit sample ~ {r['one_orbit_sample_s']:.3f} s CPU; 1000 on 2 workers ~ "
+              f"{r['extrapolated_1000_orbit_2_workers_s']:5.0f} s (extrapolated from {n} x {dur:g} s)", flush=True)
+    f = rows["floor_compiled_tick"]["run_per_sample_tick_us"]
     for name in list(rows):
-        rows[name]["x_floor"] = rows[name]["per_sample_tick_us"] / f
-    r = rows["momentum_manager_batch"]["per_sample_tick_us"] / rows["pd_fused"]["per_sample_tick_us"]
-    run_only = rows["momentum_manager_batch"]["per_sample_tick_us"] - rows["momentum_manager_setup_only"]["per_sample_tick_us"]
-    rows["momentum_manager_batch"]["run_only_per_sample_tick_us"] = run_only
-    print(f"momentum_manager batch without its set-up: {run_only:.2f} us per sample-tick "
-          f"({run_only / rows['pd_fused']['per_sample_tick_us']:.2f} x pd fused)")
-    print("ratios to the compiled tick: " + ", ".join(f"{k} {v['x_floor']:.2f}" for k, v in rows.items()))
-    print(f"momentum_manager batch / pd fused = {r:.2f} (target <= 1.5)")
+        rows[name]["x_floor"] = rows[name]["run_per_sample_tick_us"] / f
+    print("run alone / the compiled tick: " + ", ".join(f"{k} {v['x_floor']:.2f}" for k, v in rows.items()))
+    pd1 = rows["pd_fused"]["one_orbit_sample_s"]
+    for name in ("momentum_manager_fused", "momentum_manager_batch"):
+        r = rows[name]["one_orbit_sample_s"] / pd1
+        rows[name]["x_pd_fused_one_orbit"] = r
+        rr = rows[name]["run_per_sample_tick_us"] / rows["pd_fused"]["run_per_sample_tick_us"]
+        rows[name]["x_pd_fused_run"] = rr
+        print(f"{name} / pd fused: per one-orbit sample (set-up included) {r:.2f} (target <= 1.5); run alone {rr:.2f}")
+    for name in ("example_hold_batch_default_loop", "example_hold_batch_vectorised"):
+        r = rows[name]["run_per_sample_tick_us"] / rows["example_hold_per_tick"]["run_per_sample_tick_us"]
+        rows[name]["x_per_tick"] = r
+        print(f"{name} / example_hold per tick, run alone = {r:.2f}")
+    rows["loadavg"] = os.getloadavg()
+    print(f"load average {rows['loadavg']} on {os.cpu_count()} cores", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0

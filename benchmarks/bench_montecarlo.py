@@ -1,10 +1,13 @@
 """Monte Carlo benchmark (issue 13): closed-loop samples of one orbit on a local Dask cluster.
 
     python benchmarks/bench_montecarlo.py [--n N] [--n-python N] [--n-eff N] [--workers K]
-                                          [--environment-rate N] [--only-pd] [--json PATH] [--smoke]
+                                          [--samples N] [--rows pd,example_hold,...] [--environment-rate N]
+                                          [--only-pd] [--json PATH] [--smoke]
 
-``--n`` is the number of samples of row 1 (``--only-pd --n 1000``: the 1000-sample row alone,
-quietly, as the README's number); ``--environment-rate N`` runs every row's samples with
+``--samples N`` runs every study row (``pd``, ``example_hold``, ``momentum_manager``) with N samples,
+measured, not extrapolated (``--samples 1000``: the issues' targets); ``--rows`` picks the rows
+(default all: pd, example_hold, momentum_manager, efficiency, per_sample). ``--only-pd --n 1000``:
+the 1000-sample ``pd`` row alone, quietly. ``--environment-rate N`` runs every row's samples with
 ``[simulation] environment_rate = N`` (issue 25: 20 is the bound's choice, docs/design.md
 "Effects at their own rate"; default 0, every stage, as the scenario).
 
@@ -19,7 +22,9 @@ dynamics in one compiled loop; it now runs fused with the noise too, README "Mon
    ``update_batch`` called once per tick for all samples; ``benchmarks/bench_lockstep.py`` times
    every executor side by side), ``--n-python`` samples (default 200),
    the same way; its 1000-sample time is extrapolated linearly from the per-sample rate (and
-   said so) unless ``--n-python 1000`` (target <= 240 s);
+   said so) unless ``--n-python 1000`` (target <= 150 s, issue 22);
+2b. ``momentum_manager`` (it runs fused since issue 22: its symbolic form with the law's state
+   carried), ``--n-python`` samples, the same way (target <= 1.5x ``pd`` fused per sample);
 3. parallel efficiency 1 -> 2 workers: ``--n-eff`` samples (default 100) of ``pd`` on a cluster
    started beforehand (start-up excluded), ``T1 / (2 T2)`` (target >= 85 %);
 4. per-sample cost: the 1-worker wall / n against the median of ``stationbed.simulate`` of the
@@ -73,7 +78,8 @@ def bench_scene(controller: str = "pd", duration: float | None = None, environme
         changes.update({"simulation.duration": duration, "montecarlo.settle_s": 0.5 * duration})
     if controller != "pd":
         disperse = [d for d in disperse if not d["key"].startswith("controller.params")]
-        changes.update({"controller.name": controller, "controller.params": {"reference": "lvlh"},
+        params = {"reference": "lvlh"} if controller == "example_hold" else {}
+        changes.update({"controller.name": controller, "controller.params": params,
                         "montecarlo.disperse": disperse})
     return s.replace(changes)
 
@@ -92,12 +98,19 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--only-pd", action="store_true", help="row 1 and the driver's memory only (e.g. --n 10000)")
+    ap.add_argument("--samples", type=int, default=None, help="N samples for every study row (pd, example_hold, "
+                    "momentum_manager): measured, not extrapolated")
+    ap.add_argument("--rows", default="pd,example_hold,momentum_manager,efficiency,per_sample",
+                    help="comma-separated rows to run")
     ap.add_argument("--environment-rate", type=int, default=0,
                     help="[simulation] environment_rate of every sample (ticks; 0 = every stage, as the scenario)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
     _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s per row, {SMOKE_WORKERS} workers")
     duration = None
+    if args.samples is not None:
+        args.n = args.n_python = args.samples
+    want = set(args.rows.split(","))
     if args.smoke:
         args.n = args.n_python = args.n_eff = SMOKE_N
         args.workers, duration = SMOKE_WORKERS, _smoke.SMOKE_DURATION_S
@@ -112,27 +125,43 @@ def main(argv=None) -> int:
             res = montecarlo(pd_scene, n=args.n, client=client)
             return res, max(client.run(vm_hwm_mib).values())
 
-    wall, (res, worker_mib) = timed(study_on_new_cluster)
-    rows["pd_fused"] = {"n": args.n, "workers": args.workers, "wall_s": wall, "target_s": 45.0,
-                        "environment_rate": args.environment_rate,
-                        "failed": int((res.df["status"] != "ok").sum()), "worker_peak_mib": worker_mib}
-    rows["memory_driver_peak_mib"] = vm_hwm_mib()
-    print(f"pd fused (environment_rate {args.environment_rate}): {args.n} samples on {args.workers} workers: "
-          f"{wall:.1f} s (target 45 s); load average {os.getloadavg()[0]:.1f}; driver peak "
-          f"{rows['memory_driver_peak_mib']:.0f} MiB, worker peak {worker_mib:.0f} MiB", flush=True)
+    if "pd" in want or args.only_pd:
+        wall, (res, worker_mib) = timed(study_on_new_cluster)
+        rows["pd_fused"] = {"n": args.n, "workers": args.workers, "wall_s": wall, "target_s": 45.0,
+                            "environment_rate": args.environment_rate,
+                            "failed": int((res.df["status"] != "ok").sum()), "worker_peak_mib": worker_mib,
+                            "executors": res.summary.get("executors", {})}
+        rows["memory_driver_peak_mib"] = vm_hwm_mib()
+        print(f"pd fused (environment_rate {args.environment_rate}): {args.n} samples on {args.workers} workers: "
+              f"{wall:.1f} s (target 45 s); load average {os.getloadavg()[0]:.1f}; driver peak "
+              f"{rows['memory_driver_peak_mib']:.0f} MiB, worker peak {worker_mib:.0f} MiB", flush=True)
     if args.only_pd:
         if args.json:
             args.json.write_text(json.dumps(rows, indent=2) + "\n")
         return 0
-    # 2. example_hold, Python per tick
-    py_scene = bench_scene("example_hold", duration, args.environment_rate)
-    wall, res = timed(lambda: montecarlo(py_scene, n=args.n_python, workers=args.workers))
-    per = wall / args.n_python
-    rows["example_hold"] = {"n": args.n_python, "workers": args.workers, "wall_s": wall,
-                            "extrapolated_1000_s": per * 1000 if args.n_python != 1000 else wall, "target_s": 150.0,
-                            "executors": res.summary.get("executors", {})}
-    print(f"example_hold (batch: lockstep): {args.n_python} samples: {wall:.1f} s; 1000 samples ~ {per * 1000:.0f} s "
-          f"({'measured' if args.n_python == 1000 else 'extrapolated'}; target 150 s)", flush=True)
+    # 2. example_hold (Python, lockstep batch) and momentum_manager (fused, the law's state carried)
+    for law, key, target in (("example_hold", "example_hold", 150.0), ("momentum_manager", "momentum_manager", None)):
+        if key not in want:
+            continue
+        py_scene = bench_scene(law, duration, args.environment_rate)
+        wall, res = timed(lambda: montecarlo(py_scene, n=args.n_python, workers=args.workers))
+        per = wall / args.n_python
+        rows[key] = {"n": args.n_python, "workers": args.workers, "wall_s": wall,
+                     "extrapolated_1000_s": per * 1000 if args.n_python != 1000 else wall, "target_s": target,
+                     "executors": res.summary.get("executors", {}),
+                     "failed": int((res.df["status"] != "ok").sum())}
+        if "pd_fused" in rows:
+            rows[key]["x_pd_fused_per_sample"] = per / (rows["pd_fused"]["wall_s"] / rows["pd_fused"]["n"])
+        print(f"{law} ({res.summary.get('executors', {})}): {args.n_python} samples: {wall:.1f} s; 1000 samples ~ "
+              f"{per * 1000:.0f} s ({'measured' if args.n_python == 1000 else 'extrapolated'}"
+              f"{'; target %g s' % target if target else ''})"
+              + (f"; x{rows[key]['x_pd_fused_per_sample']:.2f} pd fused per sample" if "pd_fused" in rows else ""),
+              flush=True)
+    if not want & {"efficiency", "per_sample"}:
+        rows["loadavg_end"] = os.getloadavg()
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        return 0
     # 3. + 5. efficiency and worker memory, on clusters started beforehand
     walls, cpus = {}, {}
     for k in (1, 2):

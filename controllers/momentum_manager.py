@@ -27,8 +27,9 @@ The linearisation point (``linearize_about``):
   there is treated as a bias the momentum integral rejects.
 
 Law (every tick, on floats): ``u = -K (x - x_e)``, ``z ← z + T h`` (rectangle rule, period T).
-The law keeps a state (``z``), so it has no stateless ``symbolic`` form and runs on the per-tick
-path of the loop, not the fused one.
+The law keeps a state (``z`` and the orbit average below): its ``symbolic`` form takes it and
+returns the next (``symbolic_state``, stationbed/run/law_state.py), so the fused loop carries it
+and runs the law compiled; ``set_symbolic_state`` hands it back at the end (the TEA found).
 Reported (``summary()``, prefix ``mm_``): closed-loop poles [rad/s], per-input gain/phase margins
 (loop broken at that input), the predicted settling time ``4/|Re s_slow|`` [s], the design TEA
 and the TEA the loop actually found (the attitude averaged over the last whole orbit), both as
@@ -252,6 +253,78 @@ class MomentumManager(Controller):
         s[:, 2] += th2
         self._count += 1
         return u
+
+    # -- fused form (stationbed/run/fused.py, the law's state carried: stationbed/run/law_state.py) --
+    def symbolic_params(self):
+        return [v for row in self._k for v in row] + [*self._xe, *self.q_TO, self._vy, self._T, self._orbit_s,
+                                                      float(self.varying)]
+
+    def symbolic_state(self):
+        """``(z (3), orbit sum of theta (3), ticks in it, next orbit end [s], TEA found (3), found)``."""
+        tea = self.tea_found
+        return [*self.z, *self._sum, float(self._count), self._next_orbit, *(tea or (0.0, 0.0, 0.0)),
+                float(tea is not None)]
+
+    def set_symbolic_state(self, s):
+        s = [float(v) for v in s]
+        self.z, self._sum, self._count, self._next_orbit = s[0:3], s[3:6], int(s[6]), s[7]
+        self.tea_found = tuple(s[8:11]) if s[11] > 0.5 else None
+
+    def symbolic(self, t, y, cp, s):
+        # _update's float operations, in its order, on casadi scalars (bit for bit where gcc
+        # compiles them as CPython does: no FMA at -O2 without -march; docs/design.md)
+        import casadi as ca
+
+        from stationbed.run.controller import measurement_layout
+
+        lay = measurement_layout(self.plant.n_gimbals, len(self.plant.scene.appendage))
+
+        def part(name):
+            o, k = lay[name]
+            return [y[o + j] for j in range(k)]
+
+        ka, kb, kc = ([cp[12 * r + j] for j in range(12)] for r in range(3))  # the rows of K
+        e0, e1, e2 = cp[36], cp[37], cp[38]
+        aw, ax, ay, az = cp[39], cp[40], cp[41], cp[42]
+        vy, T, orbit_s, varying = cp[43], cp[44], cp[45], cp[46]
+        ow, ox, oy, oz = part("q_ON")
+        q_ref = ca.vertcat(
+            ow * aw - ox * ax - oy * ay - oz * az,
+            ow * ax + ox * aw + oy * az - oz * ay,
+            ow * ay - ox * az + oy * aw + oz * ax,
+            ow * az + ox * ay - oy * ax + oz * aw,
+        )
+        qw, qx, qy, qz = part("q_BN")
+        ew = ow * qw + ox * qx + oy * qy + oz * qz
+        ex = ow * qx - ox * qw - oy * qz + oz * qy
+        ey = ow * qy + ox * qz - oy * qw - oz * qx
+        ez = ow * qz - ox * qy + oy * qx - oz * qw
+        neg = ew < 0.0
+        ew, ex, ey, ez = (ca.if_else(neg, -v, v) for v in (ew, ex, ey, ez))
+        th0, th1, th2 = 2.0 * ex, 2.0 * ey, 2.0 * ez
+        tx = -2.0 * ez * vy
+        tz = 2.0 * ex * vy
+        wx, wy, wz = part("omega_BN_B")
+        r0, r1, r2 = rotate((ew, ex, ey, ez), part("omega_ON_O"))
+        on = varying > 0.5  # two-body orbit: the measured LVLH rate
+        w0 = ca.if_else(on, wx - r0, wx - (-ew * tx + ey * tz))
+        w1 = ca.if_else(on, wy - r1, wy - (vy + (ez * tx - ex * tz)))
+        w2 = ca.if_else(on, wz - r2, wz - (-ew * tz - ey * tx))
+        h0, h1, h2 = part("h_B")
+        z0, z1, z2, s0, s1, s2, c, nxt, f0, f1, f2, found = (s[j] for j in range(12))
+        x0, x1, x2 = th0 - e0, th1 - e1, th2 - e2
+        u = [-(a[0] * x0 + a[1] * x1 + a[2] * x2 + a[3] * w0 + a[4] * w1 + a[5] * w2)
+             - (a[6] * h0 + a[7] * h1 + a[8] * h2 + a[9] * z0 + a[10] * z1 + a[11] * z2) for a in (ka, kb, kc)]
+        due = t >= nxt
+        cc = ca.fmax(c, 1.0)  # (c >= 1 whenever due: the quotient is _update's)
+        s_next = ca.vertcat(
+            z0 + T * h0, z1 + T * h1, z2 + T * h2,
+            ca.if_else(due, 0.0, s0) + th0, ca.if_else(due, 0.0, s1) + th1, ca.if_else(due, 0.0, s2) + th2,
+            ca.if_else(due, 0.0, c) + 1.0, ca.if_else(due, nxt + orbit_s, nxt),
+            ca.if_else(due, s0 / cc, f0), ca.if_else(due, s1 / cc, f1), ca.if_else(due, s2 / cc, f2),
+            ca.if_else(due, 1.0, found),
+        )
+        return ca.vertcat(*u), q_ref, s_next
 
     def summary(self):
         if self.plant is None:

@@ -267,3 +267,30 @@ def test_dropped_measurements_leave_the_filter_to_the_gyro():
     for i in range(3):
         assert_allclose(P[:, i, i], expected, rtol=1e-12)
     assert_allclose(FILTER.get(xf, "q_BN"), np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("latency", [0.0, 2.0], ids=["no_latency", "latency_2s"])
+def test_short_covariance_update_equals_the_joseph_form(latency):
+    """With the optimal gain (correlated noise included) ``P − K (P Hᵀ + M)ᵀ`` is the Joseph form's
+    value: the two agree to round-off on a random covariance, mounting and carried-back turn."""
+    from stationbed.loop.mekf import update
+
+    gen = np.random.default_rng(5)
+    A = gen.normal(size=(6, 6))
+    P0 = A @ A.T * 1e-8 + np.diag([1e-6] * 3 + [1e-10] * 3)  # rad², rad²/s: SPD, correlated
+    q, b, P = ca.SX.sym("q", 4), ca.SX.sym("b", 3), ca.SX.sym("P", 6, 6)
+    z, qsb, D = ca.SX.sym("z", 4), ca.SX.sym("qsb", 4), ca.SX.sym("D", 4)
+    r = np.array([NEA_CROSS, NEA_CROSS, NEA_ABOUT])
+    extra = dict(D=D, latency=latency, q_latency=SIGMA_V**2 * latency) if latency else {}
+    outs = [ca.Function(f"u{j}", [q, b, P, z, qsb, D], list(update(q, b, P, z, 1.0, qsb, r, joseph=j, **extra)))
+            for j in (False, True)]
+    unit = lambda v: v / np.linalg.norm(v)  # noqa: E731
+    args = (unit(gen.normal(size=4)), gen.normal(0, 1e-5, 3), P0, unit(gen.normal(size=4)), unit(gen.normal(size=4)),
+            unit([1.0, 1e-3, -2e-3, 5e-4]))
+    short, joseph = (f(*args) for f in outs)
+    P_s, P_j = np.asarray(short[2]), np.asarray(joseph[2])
+    assert np.array_equal(P_s, P_s.T)
+    assert_allclose(P_s, P_j, rtol=0, atol=ROUNDOFF * np.abs(P0).max())
+    assert np.all(np.linalg.eigvalsh(P_s) > 0)
+    for a, c in zip(short[:2], joseph[:2]):
+        assert_allclose(np.asarray(a), np.asarray(c), rtol=0, atol=1e-15)

@@ -61,7 +61,17 @@ def _responses(A, B, C, s) -> np.ndarray:
     return np.matmul(C.reshape(1, n), X)[:, 0, 0]
 
 
-def gain_crossings(L) -> list[tuple[float, float]]:
+def _crossing_grid(A) -> np.ndarray:
+    """:func:`frequency_grid` with each lightly damped pole's neighbourhood sampled densely (a
+    pole turns the phase within ~|Re| of its frequency)."""
+    w = frequency_grid(A)
+    poles = np.linalg.eigvals(A)
+    dense = [p.imag + max(abs(p.real), 1e-6 * p.imag) * np.linspace(-20.0, 20.0, 81) for p in poles if p.imag > 0]
+    w = np.unique(np.concatenate([w] + dense))
+    return w[w > 0]
+
+
+def gain_crossings(L, response=None) -> list[tuple[float, float]]:
     """The gains at which the loop ``L`` (negative feedback) puts a closed-loop pole on the
     imaginary axis: ``1 + k L(jω) = 0`` with ``k > 0``, i.e. every ``ω`` where ``L(jω)`` is real
     and negative, ``k = -1 / L(jω)``. Returns ``(k, ω)`` pairs [-, rad/s], ω = 0 included.
@@ -71,22 +81,18 @@ def gain_crossings(L) -> list[tuple[float, float]]:
     python-control's ``stability_margins`` divide 0 by 0 at ω = 0, drop that crossing and warn).
     ω = 0: ``L(0⁺)`` at ``s`` six decades below :func:`frequency_grid` (the limit, as the poles
     at exactly 0 are uncontrollable or unobservable); ω > 0: sign changes of ``Im L(jω)`` on the
-    grid, refined by Brent's method.
+    grid, refined by Brent's method. ``response``: ``(w, L(jw))`` on :func:`_crossing_grid`
+    already computed (:func:`loop_margins` reuses it).
     """
     from scipy.optimize import brentq
 
     A, B, C = (np.asarray(M, float) for M in (L.A, L.B, L.C))
-    w = frequency_grid(A)
-    # a lightly damped pole turns the phase within ~|Re| of its frequency: sample it densely there
-    poles = np.linalg.eigvals(A)
-    dense = [p.imag + max(abs(p.real), 1e-6 * p.imag) * np.linspace(-20.0, 20.0, 81) for p in poles if p.imag > 0]
-    w = np.unique(np.concatenate([w] + dense))
-    w = w[w > 0]
+    w, Lw = response if response is not None else (_crossing_grid(A), None)
     out = []
     L0 = _response(A, B, C, w[0] * 1e-6)  # real s: L(0⁺) is real
     if math.isfinite(L0.real) and L0.real < 0.0:
         out.append((-1.0 / L0.real, 0.0))
-    im = _responses(A, B, C, 1j * w).imag
+    im = (_responses(A, B, C, 1j * w) if Lw is None else Lw).imag
     for i in np.nonzero(np.sign(im[:-1]) * np.sign(im[1:]) < 0)[0]:
         wc = brentq(lambda x: _response(A, B, C, 1j * x).imag, w[i], w[i + 1], xtol=1e-14 * w[i], rtol=1e-12)
         r = _response(A, B, C, 1j * wc)
@@ -95,7 +101,7 @@ def gain_crossings(L) -> list[tuple[float, float]]:
     return out
 
 
-def siso_margins(L) -> dict:
+def siso_margins(L, response=None) -> dict:
     """Gain and phase margins of a SISO loop (negative feedback).
 
     The gain interval ``(gain_margin_down, gain_margin_up)``: the loop closed as ``1 + k L``
@@ -113,7 +119,7 @@ def siso_margins(L) -> dict:
     pm, wgc = np.atleast_1d(np.asarray(pm, float)), np.atleast_1d(np.asarray(wgc, float))
     ok = np.nonzero(np.isfinite(pm))[0]
     k = ok[np.argmin(np.abs(pm[ok]))] if ok.size else None
-    cross = gain_crossings(L)
+    cross = gain_crossings(L, response)
     below = [c for c in cross if c[0] < 1.0]
     above = [c for c in cross if c[0] > 1.0]
     lo = max(below) if below else (0.0, math.nan)
@@ -146,9 +152,12 @@ def loop_margins(A, B, K) -> list[dict]:
         others = [j for j in range(m) if j != i]
         Ai = A - B[:, others] @ K[others, :]
         L = control.ss(Ai, B[:, [i]], K[[i], :], np.zeros((1, 1)))
-        mg = siso_margins(L)
-        w = frequency_grid(Ai)
-        Lw = _responses(Ai, B[:, i], K[i], 1j * w)
+        # one stacked solve for both: the crossing grid holds frequency_grid's points exactly,
+        # and each frequency's solve is its own (the same values as two solves)
+        wc = _crossing_grid(Ai)
+        Lc = _responses(Ai, B[:, i], K[i], 1j * wc)
+        mg = siso_margins(L, (wc, Lc))
+        Lw = Lc[np.searchsorted(wc, frequency_grid(Ai))]
         out.append({**mg, "stability_margin": float(np.abs(1.0 + Lw).min())})
     return out
 
@@ -237,6 +246,9 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
         controller = build_controller(spec, base_dir=scene.folder)
     if not callable(getattr(controller, "symbolic", None)):
         raise ValueError(f"margins: controller '{controller.name}' has no symbolic form (Controller.symbolic)")
+    if callable(getattr(controller, "symbolic_state", None)):  # (run/law_state.py)
+        raise ValueError(f"margins: controller '{controller.name}' keeps a state between ticks (symbolic_state): "
+                         "the loop analysis closes a stateless law only (its own design reports its margins)")
     command = controller.command
     system = build_system(Structure.of(scene), scene.simulation.formulation, scene.simulation.integrator)
     model = system.formulation.model

@@ -18,6 +18,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .rotation_batch import dcm_batch, quat_mult_batch
 from .symbolic import is_symbolic, matrix, trig, vector
 
 __all__ = [
@@ -47,7 +48,11 @@ def skew(v):
 
 
 def quat_mult(p, q):
-    """Hamilton product ``p ⊗ q`` of scalar-first quaternions."""
+    """Hamilton product ``p ⊗ q`` of scalar-first quaternions (component-first (4, n) arrays:
+    n products at once, :mod:`.rotation_batch`)."""
+    if (p.__class__ is np.ndarray and q.__class__ is np.ndarray and p.ndim == q.ndim == 2
+            and p.dtype == q.dtype == float):
+        return quat_mult_batch(p, q)
     pw, px, py, pz = p[0], p[1], p[2], p[3]
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
     return vector(
@@ -71,8 +76,11 @@ def dcm(q_BN):
     """Direction cosine matrix ``C_BN`` of the Euler parameters ``q_BN = (w, x, y, z)``.
 
     The quaternion need not be normalised: the result is divided by ``|q|²`` so that a
-    slightly off-norm integrator state still yields an orthogonal matrix.
+    slightly off-norm integrator state still yields an orthogonal matrix. A (4, n) array gives
+    (3, 3, n) (:mod:`.rotation_batch`).
     """
+    if q_BN.__class__ is np.ndarray and q_BN.ndim == 2 and q_BN.dtype == float:
+        return dcm_batch(q_BN)
     w, x, y, z = q_BN[0], q_BN[1], q_BN[2], q_BN[3]
     n2 = w * w + x * x + y * y + z * z
     s = 2.0 / n2

@@ -36,10 +36,17 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
+from .mekf import Mekf
+from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
 from .suite import Suite, SuiteNoise
 
-__all__ = ["Flight", "INIT_STREAM", "flight_columns"]
+__all__ = ["Flight", "INIT_STREAM", "READS", "SEEN", "flight_columns"]
+
+#: the fields of the executor's measurement the tick reads (the truth row is made of them)
+READS = ("q_BN", "omega_BN_B", "r_N", "sun_N")
+#: with an estimator, the fields of the law's measurement replaced by the suite's outputs
+SEEN = {"q_BN": "q_BN_hat", "omega_BN_B": "omega_hat_B"}
 
 #: first entry of the spawn key of the initial-estimate draw (sensors use 1: SENSOR_STREAM)
 INIT_STREAM = 2
@@ -58,7 +65,7 @@ class Flight:
 
     def __init__(self, sensing, tick: float, layout: dict, seed: int, moon_R_N=None):
         self.suite = Suite(sensing, tick)
-        tuned = _filter_params(sensing, tick) if self.suite.mekf is not None else None
+        tuned = _filter_params(sensing, tick, self.suite) if self.suite.mekf is not None else None
         #: the Moon's geocentric position [m] (N), held over the run as the Sun is (or None: no
         #: Moon, ``moon_N`` zero); the tick's parameters are the suite's, then this
         self.has_moon = moon_R_N is not None
@@ -116,7 +123,7 @@ class Flight:
         if self.mekf is not None:
             parts = []
             cut = 0
-            repl = {"q_BN": S.OUTPUTS.get(ys, "q_BN_hat"), "omega_BN_B": S.OUTPUTS.get(ys, "omega_hat_B")}
+            repl = {name: S.OUTPUTS.get(ys, out) for name, out in SEEN.items()}
             for name, (o, n) in sorted(self.layout.items(), key=lambda kv: kv[1][0]):
                 if name in repl:
                     if o > cut:
@@ -128,7 +135,7 @@ class Flight:
             seen = ca.vertcat(*parts)
         self._f = ca.Function("flight_tick", [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
                               ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
-                              ["theta", "xs_next", "y_seen", "ys"])
+                              ["theta", "xs_next", "y_seen", "ys"], _INLINE)
         _TICKS[self.key] = self._f
         return self._f
 
@@ -182,7 +189,7 @@ class Flight:
         vals = []
         if self.mekf is not None:
             if self._report is None:
-                self._report = FastCall(self.mekf.report_function())
+                self._report = FastCall.of(self.mekf.report_function())  # shared by the runs of a process
             r = self._report
             r.args[0][:] = xs[sl["mekf"]]
             r.args[1][:] = q_BN
@@ -204,6 +211,9 @@ def flight_columns(scene) -> list[str]:
     return cols + [f"st_valid_{s.name}" for s in getattr(scene, "sensor", []) if s.kind == "star_tracker"]
 
 
+#: the tick, the suite and the filter are inlined where they are called (an MX call copies its
+#: outputs into the caller's work vector: ~90 numbers of suite state per layer and tick)
+_INLINE = {"always_inline": True}
 #: ticks of noise drawn at a time (any size gives the same numbers: SuiteNoise draws in tick order)
 NOISE_BLOCK = 4096
 _TICKS: dict = {}
@@ -213,7 +223,8 @@ _COMPILED: dict = {}
 class TickNoise:
     """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
     draws nothing: a zero row), asked in tick order (each tick once); drawn
-    :data:`NOISE_BLOCK` ticks at a time."""
+    :data:`NOISE_BLOCK` ticks at a time. The rows returned are read-only to the caller (a view
+    of the block when they lie inside it)."""
 
     def __init__(self, noise: SuiteNoise):
         self.noise = noise
@@ -226,6 +237,9 @@ class TickNoise:
         if k0 != self.next:
             raise ValueError(f"sensor noise asked for tick {k0}, the next tick is {self.next}")
         self.next = k0 + n
+        i = k0 - self.k0
+        if k0 >= 1 and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
+            return self.buf[i : i + n]
         out = np.zeros((n, self.width))
         first = max(k0, 1)
         while first < k0 + n:
@@ -244,14 +258,38 @@ def _quat_mult(p, q):
     return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
 
 
-def _filter_params(sensing, tick: float) -> np.ndarray | None:
+def _filter_params(sensing, tick: float, suite: Suite | None = None) -> np.ndarray | None:
     """The MEKF's parameters as flight software tunes them: from the sensor tables of the
     *knowledge* scene (:func:`stationbed.scene.knowledge_scene`: nominal in a Monte Carlo unless a
-    dispersion is ``known``), not from the sensors being flown. None for a bare
-    :class:`~stationbed.scene.Sensing` (no knowledge to apply)."""
+    dispersion is ``known``), not from the sensors being flown (``suite``: the truth's, reused
+    when the knowledge changes no sensor table). None for a bare
+    :class:`~stationbed.scene.Sensing` (no knowledge to apply).
+
+    Only the knowledge's changes under ``sensor.<name>.<key>`` and ``estimator.<key>`` reach the
+    filter: they are applied to the sensing tables alone (validated as a :class:`Sensing`), which
+    is the knowledge scene's sensing without validating a whole scene per run; any other form of
+    change to them (a whole table, an index) takes the knowledge scene itself."""
     if not hasattr(sensing, "replace"):  # a Sensing, not a Scene
         return None
-    from ..scene import knowledge_scene  # noqa: PLC0415 - the scene layer, below this one
+    from ..scene import knowledge_scene, sensing_from_dict  # noqa: PLC0415 - the scene layer, below this one
+    from ..scene.knowledge import knowledge_changes  # noqa: PLC0415
 
-    known = knowledge_scene(sensing)
-    return Suite(known, tick).mekf.params
+    changes = {k: v for k, v in knowledge_changes(sensing).items() if k.split(".")[0] in ("sensor", "estimator")}
+    data = {"sensor": [e.model_dump(exclude_unset=True) for e in sensing.sensor],
+            "estimator": sensing.estimator.model_dump(exclude_unset=True)}
+    by_name = {e["name"]: e for e in data["sensor"]}
+    for path, value in changes.items():
+        parts = path.split(".")
+        table = by_name.get(parts[1]) if parts[0] == "sensor" and len(parts) == 3 else \
+            data["estimator"] if parts[0] == "estimator" and len(parts) == 2 else None
+        if table is None or "[" in path:
+            return _mekf_params(knowledge_scene(sensing))
+        table[parts[-1]] = value
+    if not changes:  # the knowledge's tables are the truth's
+        return (suite or Suite(sensing, tick)).mekf.params
+    return _mekf_params(sensing_from_dict(data, source="[knowledge]"))
+
+
+def _mekf_params(sensing) -> np.ndarray:
+    """The parameters of the filter a sensing's tables describe (its sensors built, no suite)."""
+    return Mekf.from_sensors(sensing.estimator, build_sensors(sensing.sensor)).params

@@ -20,7 +20,8 @@ conventions (DESIGN §3):
   ``z = 2 vec(δq_r)/w(δq_r)``, ``δq_r = (q̂ ⊗ q_SB)⁻¹ ⊗ q̃_SN`` (S components), ``z ≈ C_SB δα + ν``,
   so ``H = [C_SB, 0]``, ``R = diag(r_cross², r_cross², r_about²)``;
   ``K = P Hᵀ (H P Hᵀ + R)⁻¹``, ``Δx̂ = K z``, ``q̂ ← q̂ ⊗ δq(δα̂)``, ``β̂ ← β̂ + Δβ̂``,
-  ``P ← (E - KH) P (E - KH)ᵀ + K R Kᵀ`` (Joseph form), each valid fresh head in turn.
+  ``P ← P − K (P Hᵀ)ᵀ`` (the Joseph form's value for this optimal gain, exactly symmetric: see
+  :func:`update`), each valid fresh head in turn.
 * A head with latency L: the sample of L ago is compared with the estimate carried back by the
   filter's own turn since then (a delay line of turns per head in the state, :attr:`Mekf.state`);
   see :func:`update` for H and the correlated noise of the turn.
@@ -85,7 +86,13 @@ def rotation_increment(omega, dt):
 
 
 def propagate(q, b, P, omega_meas_B, dt, sigma_v, sigma_u):
-    """One gyro sample: ``(q̂, β̂, P)`` at t + Δt from the measured rate over (t, t + Δt]."""
+    """One gyro sample: ``(q̂, β̂, P)`` at t + Δt from the measured rate over (t, t + Δt].
+
+    ``P`` must be symmetric (the filter keeps it so). ``Φ P Φᵀ + Q`` is computed by blocks,
+    ``P = [[A, B], [Bᵀ, C]]`` with ``Φ₂₁ = 0``, ``Φ₂₂ = E``: ``B' = Φ₁₁ B + Φ₁₂ C + Q₁₂``,
+    ``A' = (Φ₁₁ A + Φ₁₂ Bᵀ) Φ₁₁ᵀ + (Φ₁₁ B + Φ₁₂ C) Φ₁₂ᵀ + Q₁₁`` (its upper triangle, mirrored),
+    ``C' = C + Q₂₂``: the same matrix as the full product to round-off, exactly symmetric, at
+    about a third of its operations (the filter's cost on every gyro sample, docs/loop.md)."""
     omega = omega_meas_B - b
     w = ca.norm_2(omega)
     dq = rotation_increment(omega, dt)
@@ -97,13 +104,22 @@ def propagate(q, b, P, omega_meas_B, dt, sigma_v, sigma_u):
     E = ca.SX.eye(3)
     Phi11 = E - W * a1 + W2 * a2
     Phi12 = W * a2 - E * dt - W2 * a3
-    Phi = ca.vertcat(ca.horzcat(Phi11, Phi12), ca.horzcat(ca.SX.zeros(3, 3), E))
     qv = sigma_v**2 * dt + sigma_u**2 * dt**3 / 3
     qc = -(sigma_u**2) * dt**2 / 2
     qb = sigma_u**2 * dt
-    Q = ca.vertcat(ca.horzcat(qv * E, qc * E), ca.horzcat(qc * E, qb * E))
-    P_next = ca.mtimes([Phi, P, Phi.T]) + Q
-    return q_next, b, 0.5 * (P_next + P_next.T)
+    A, B, C = P[0:3, 0:3], P[0:3, 3:6], P[3:6, 3:6]
+    T = ca.mtimes(Phi11, A) + ca.mtimes(Phi12, B.T)
+    B1 = ca.mtimes(Phi11, B) + ca.mtimes(Phi12, C)
+    A1 = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i, 3):
+            a = ca.dot(T[i, :].T, Phi11[j, :].T) + ca.dot(B1[i, :].T, Phi12[j, :].T)
+            A1[i][j] = A1[j][i] = a + qv if i == j else a
+    C1 = [[C[min(i, j), max(i, j)] + (qb if i == j else 0) for j in range(3)] for i in range(3)]
+    B1 = B1 + qc * E
+    top = ca.horzcat(ca.vertcat(*[ca.horzcat(*r) for r in A1]), B1)
+    bottom = ca.horzcat(B1.T, ca.vertcat(*[ca.horzcat(*r) for r in C1]))
+    return q_next, b, ca.vertcat(top, bottom)
 
 
 def attitude_error(q_ref, q):
@@ -112,7 +128,7 @@ def attitude_error(q_ref, q):
     return 2 * d[1:4] / d[0]
 
 
-def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0):
+def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0, joseph=False):
     """One star-tracker head: ``(q̂, β̂, P)`` after its measurement when ``gate`` is 1 (fresh and
     valid), unchanged when 0. ``r`` = (r_cross, r_cross, r_about) [rad].
 
@@ -122,7 +138,13 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     ``ε = −Δβ L − ∫η_v``: ``H = C_SB C_Dᵀ [E, L E]``, and the gyro noise over the latency,
     ``q_latency = σ_v² L + σ_u² L³/3`` [rad²], is measurement noise correlated with the state
     error (the same noise moved the attitude since the sample): ``Cov(Δx, v) = M = −[q_L Cᵀ; 0]``,
-    ``K = (P Hᵀ + M)(H P Hᵀ + H M + Mᵀ Hᵀ + R)⁻¹`` and the Joseph form with its cross terms."""
+    ``K = (P Hᵀ + M)(H P Hᵀ + H M + Mᵀ Hᵀ + R)⁻¹``.
+
+    Covariance: with this (optimal) gain the Joseph form with its cross terms,
+    ``(E − KH) P (E − KH)ᵀ + K R Kᵀ − (E − KH) M Kᵀ − K Mᵀ (E − KH)ᵀ``, equals
+    ``P − K (P Hᵀ + M)ᵀ`` (expand it with ``K S = P Hᵀ + M``); the filter uses the short form, its
+    upper triangle mirrored (exactly symmetric, a fifth of the operations). ``joseph=True`` gives
+    the Joseph form (the test's reference: the two agree to round-off)."""
     if D is None:
         q_s, C = q, dcm(q_SB)
         H = ca.horzcat(C, ca.SX.zeros(3, 3))
@@ -141,12 +163,22 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     dq = ca.vertcat(1.0, dx[0:3] / 2)
     q_new = quat_mult(q, dq / ca.norm_2(dq))
     q_new = q_new / ca.norm_2(q_new)
-    IKH = ca.SX.eye(6) - ca.mtimes(K, H)
-    cross = ca.mtimes([IKH, M, K.T])  # Joseph form with correlated noise (zero without latency)
-    P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T]) - cross - cross.T
-    P_new = 0.5 * (P_new + P_new.T)
+    if joseph:
+        IKH = ca.SX.eye(6) - ca.mtimes(K, H)
+        cross = ca.mtimes([IKH, M, K.T])  # the correlated noise's terms (zero without latency)
+        P_new = ca.mtimes([IKH, P, IKH.T]) + ca.mtimes([K, R, K.T]) - cross - cross.T
+        P_new = 0.5 * (P_new + P_new.T)
+    else:
+        rows = [[None] * 6 for _ in range(6)]
+        for i in range(6):
+            for j in range(i, 6):
+                rows[i][j] = rows[j][i] = P[i, j] - ca.dot(K[i, :].T, PHt[j, :].T)
+        P_new = ca.vertcat(*[ca.horzcat(*row) for row in rows])
     on = gate > 0.5
     return ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
+
+
+_REPORTS: dict = {}
 
 
 class Mekf:
@@ -216,7 +248,8 @@ class Mekf:
 
         An MX function of SX pieces: each head's update is a casadi ``Switch`` on its gate
         (fresh and valid), so generated code runs an update only when there is one (an SX
-        ``if_else`` computes both branches: 742 instructions to propagate, 1470 per update)."""
+        ``if_else`` computes both branches: 538 instructions to propagate, 677 per update). A tick
+        without any head sample runs the propagation alone (no head switch: no copies)."""
         if self._f is None:
             n = len(self.heads)
             name = f"mekf_{n}" + "".join(f"_{d}" for d in self.delays if any(self.delays))
@@ -231,6 +264,7 @@ class Mekf:
             skip = ca.Function(f"{name}_skip", [xf, z, p], [xf])
             xm, zm, pm = S.symbol("xf", ca.MX), self.inputs.symbol("z", ca.MX), self.param_layout.symbol("p", ca.MX)
             x1 = prop(xm, zm, pm)
+            news = []  # whether head i has something for the filter this tick
             for i, d in enumerate(self.delays):
                 lat = Pp[f"latency_{i}"]
                 extra = {}
@@ -242,14 +276,21 @@ class Mekf:
                 upd = ca.Function(f"{name}_update_{i}", [xf, z, p], [S.pack({**X, "q_BN": q, "bias_B": b, "P": P})],
                                   {"cse": True})
                 gate = self.inputs.get(zm, f"valid_{i}") * self.inputs.get(zm, f"fresh_{i}")
+                news.append(self.inputs.get(zm, f"fresh_{i}") if d else gate)
                 x1 = ca.Function.if_else(f"{name}_head_{i}", upd, skip)(gate, x1, zm, pm)
                 if d:  # a new sample leaves the head now: its turn starts at identity
                     shifted = ca.horzcat(X[f"D_{i}"][:, 1:], ca.DM([1.0, 0.0, 0.0, 0.0]))
                     shift = ca.Function(f"{name}_shift_{i}", [xf, z, p], [S.pack({**X, f"D_{i}": shifted})])
                     x1 = ca.Function.if_else(f"{name}_sample_{i}", shift, skip)(self.inputs.get(zm, f"fresh_{i}"),
                                                                                x1, zm, pm)
+            # most ticks have no head sample: then the propagation alone, with no head's switch
+            # (each would copy the state through its skip branch)
+            heads = ca.Function(f"{name}_heads", [xm, zm, pm], [x1])
+            x1 = ca.Function.if_else(f"{name}_step", heads, prop)(sum(news[1:], news[0]) > 0.5, xm, zm, pm)
             omega_hat = self.inputs.get(zm, "omega_B") - S.get(x1, "bias_B")
-            self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"])
+            # inlined where it is called (the suite's tick): no copy of the state at the call
+            self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"],
+                                  {"always_inline": True})
         return self._f
 
     def compiled(self) -> ca.Function:
@@ -266,12 +307,15 @@ class Mekf:
         δα [rad] (B, ``q = q̂ ⊗ δq(δα)``), three standard deviations of the six error states
         (rad, rad/s) and ``Δxᵀ P⁻¹ Δx``."""
         if self._report is None:
+            self._report = _REPORTS.get(self.state)
+        if self._report is None:  # one per state layout (a Monte Carlo's runs share it)
             xf, q, b = self.state.symbol("xf"), ca.SX.sym("q_BN", 4), ca.SX.sym("bias_B", 3)
             X = self.state.split(xf)
             dx = ca.vertcat(attitude_error(X["q_BN"], q), b - X["bias_B"])
             nees = ca.mtimes(dx.T, ca.solve(X["P"], dx))
             self._report = ca.Function("mekf_report", [xf, q, b], [dx[0:3], 3 * ca.sqrt(ca.diag(X["P"])), nees],
                                        ["xf", "q_BN", "bias_B"], ["err_B", "sigma3", "nees"])
+            _REPORTS[self.state] = self._report
         return self._report
 
     # -- numbers --------------------------------------------------------------------------

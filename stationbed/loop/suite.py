@@ -117,7 +117,7 @@ class Suite:
                        omega_hat_B=nxt["omega_hat_B"])
         self._f = ca.Function(f"suite_{len(self.sensors)}", [k, t, x, truth, w, p],
                               [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
-                              ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"])
+                              ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"], {"always_inline": True})
         return self._f
 
     def compiled(self) -> ca.Function:

@@ -16,6 +16,7 @@ from ..model.sun import julian_date
 from ..model import Structure
 from ..model.cmg import cluster_functions
 from ..scene import knowledge_scene
+from .detection import replan, replan_of
 from .controller import (
     ControllerError,
     Measurement,
@@ -37,15 +38,16 @@ __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOIS
 NOISE_BLOCK = 256
 
 
-def plant_facts(scene, system, period: float) -> Plant:
+def plant_facts(scene, system, period: float, known=None) -> Plant:
     """The :class:`Plant` facts a controller designs with: what flight software believes, never
     the truth being flown. Built from the *knowledge scene* of ``scene``
     (:func:`stationbed.scene.knowledge_scene`: the scene with its ``[knowledge]`` substituted,
     failed CMG units unknown unless listed there): its inertia about O at t = 0 (the compiled
     ``inertia`` of ``system`` at the knowledge's own state and parameters), orbital rate and CMG
     limits; ``plant.scene`` is the knowledge scene (also used by :mod:`stationbed.analysis`
-    and :mod:`stationbed.plan`, which design and plan on knowledge too)."""
-    known = knowledge_scene(scene)
+    and :mod:`stationbed.plan`, which design and plan on knowledge too). ``known``: another
+    belief of the same scene (:func:`~stationbed.scene.knowledge.detected_scene`)."""
+    known = knowledge_scene(scene) if known is None else known
     model = system.formulation.model
     if Structure.of(known) != model.structure:
         raise ValueError("[knowledge] changes the model's structure (e.g. a circular orbit believed two-body); "
@@ -121,6 +123,7 @@ class ControlLoop:
             raise
         except Exception as e:  # a bug in the user's _reset: name the controller, keep the traceback
             raise ControllerError(f"controller '{self.ctrl.name}' raised {type(e).__name__} in reset: {one_line(e)}") from e
+        self.replan = replan_of(scene, system, self.period, duration, plant_facts)  # fault detection
         # measurement: compiled, written into y; the controller sees views of y (or of a noisy,
         # delayed copy)
         self.meas = FastCall.of(f["meas"])
@@ -335,6 +338,8 @@ class ControlLoop:
                 t = k * period  # integer tick clock: no accumulated drift
                 if k == K:
                     t = duration
+                if self.replan is not None and k == self.replan.tick:  # a failure detected
+                    replan(ctrl, self.replan.plant())
                 M.t = t
                 try:
                     cmd = update(t, M)

@@ -21,10 +21,10 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
    logs ``att_err_deg`` (and per axis ``att_err_x/y/z_deg``) against it.
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
 5. Optionally, for the fused loop (stationbed/run/fused.py: controller and dynamics in one
-   compiled loop), write ``symbolic_params()`` (the law's numbers as a flat array, set by
-   ``_reset``) and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` with casadi ``t``, ``y`` (the
-   measurement vector, offsets from :func:`measurement_layout`) and ``cp``; it must compute
-   what ``_update`` computes (a test runs both) and keep no state between ticks.
+   compiled loop), write ``symbolic_params()`` (the law's numbers, a flat array set by ``_reset``)
+   and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the measurement, offsets
+   from :func:`measurement_layout`; ``cp``), computing what ``_update`` does (a test runs both);
+   a law that keeps a state between ticks declares it: stationbed/run/law_state.py.
 
 What ``_update`` may return (:func:`command_values` checks it, the same on every path of the
 loop): a tuple, list or 1-D numpy array of ``n`` real numbers, finite. Anything else (a (3, 1)

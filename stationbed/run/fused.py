@@ -29,6 +29,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
+from . import law_state
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
@@ -68,6 +69,7 @@ def fused_ok(loop) -> bool:
         and not (loop.noisy and loop.delay > 0)
         and loop.system.sx is not None
         and not (getattr(loop, "flight", None) is not None and loop.noisy)
+        and getattr(loop, "replan", None) is None  # a failure detected mid-run: per tick (run/detection.py)
     )
 
 
@@ -120,7 +122,9 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng
     t, t0, h = ca.SX.sym("t"), ca.SX.sym("t0"), ca.SX.sym("h")
-    x = ca.SX.sym("x", nx)
+    ns = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
+    xa = ca.SX.sym("x", nx + ns)
+    x, s = xa[:nx], xa[nx:]
     p = ca.SX.sym("p", npar)
     cp = ca.SX.sym("cp", ncp)
     u_ext = ca.SX.sym("u_ext", 3)
@@ -129,16 +133,7 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
     nz = ca.SX.sym("nz", nn)
     if nn:
         y = _corrupt_sx(y, nz, flags, loop.layout)
-    try:
-        cmd, q_ref = ctrl.symbolic(t, y, cp)
-        cmd = ca.vertcat(cmd)
-    except Exception as e:  # the user's casadi code: name the controller, keep the traceback
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
-    if cmd.numel() != loop.n_cmd:
-        raise ControllerError(
-            f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected "
-            f"{loop.n_cmd} ({ctrl.command})"
-        )
+    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y, cp, s, loop.n_cmd)
     if model.cmg is None:
         act = ca.SX.zeros(0, 1)
         u = u_ext + cmd
@@ -153,17 +148,18 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
         sat = ca.vertcat(act[k + 1], act[k + 2])
     if model.has_steps:
         u = ca.vertcat(u, t + h / 2)  # (steps lie outside a fused run; keeps u's layout)
-    ins = [t, x, cp, u_ext, p] + ([nz] if nn else [])
-    info = sx_function("fused_info", ins, [ca.vertcat(cmd, act, q_ref)])
+    ins = [t, xa, cp, u_ext, p] + ([nz] if nn else [])
+    info = sx_function("fused_info", ins, [ca.vertcat(cmd, act, q_ref, s1)])
     rhs = sx["rhs"]
-    x1 = system.integrator_cls.explicit_step(rhs, t, x, h, u, p)
+    x1 = ca.vertcat(system.integrator_cls.explicit_step(rhs, t, x, h, u, p), s1)
     # carry: tick index i (exact integer in a double: t = t0 + i h, no accumulation), state,
     # counts of rate-limited and saturated ticks; n_act masks the unused tail of the chunk
     i = ca.SX.sym("i")
     cnt = ca.SX.sym("cnt", 2)
     n_act = ca.SX.sym("n_act")
+    nx += ns
     x_i = ca.SX.sym("x_i", nx)
-    one = sx_function("one", [t, x, cp, u_ext, p, h] + ([nz] if nn else []), [x1, sat])
+    one = sx_function("one", [t, xa, cp, u_ext, p, h] + ([nz] if nn else []), [x1, sat])
     nz_i = ca.SX.sym("nz_i", nn)
     x_new, fl = one(t0 + i * h, x_i, cp, u_ext, p, h, *([nz_i] if nn else []))
     active = i < n_act
@@ -184,7 +180,8 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
         L_env = ca.SX.sym("L_env", 3)
         u_held = ca.substitute(u, u_ext, u_ext + L_env)
         x1h = system.integrator_cls.explicit_step(rates_split(system)["rhs_fast"], t, x, h, u_held, p)
-        one_h = sx_function("one", [t, x, cp, u_ext, p, h, L_env] + ([nz] if nn else []), [x1h, sat])
+        x1h = ca.vertcat(x1h, s1)
+        one_h = sx_function("one", [t, xa, cp, u_ext, p, h, L_env] + ([nz] if nn else []), [x1h, sat])
         ranges = (slice(3, 3 + ncp), slice(3 + ncp, 6 + ncp), slice(6 + ncp, 6 + ncp + npar))
         chunk = held_chunk(system, one_h, rate, n, nx, 6 + ncp + npar, nn, ranges)
     tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{loop.system.formulation.model.structure.key}"
@@ -195,7 +192,8 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
     many = rows_functions(info, chunk, n, nx, carry_width(rate), ncp, npar, nn)  # many rows per call (fused_rows.py)
     funcs = compile_functions([info, chunk] + many, tag)
     rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
-    return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp, "rows": rows}
+    return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp, "ns": ns,
+            "rows": rows}
 
 
 def run_fused(loop, K: int) -> None:
@@ -211,7 +209,7 @@ def run_fused(loop, K: int) -> None:
     rate = environment_rate(loop)
     ne = carry_width(rate)  # the held environment's carry (rates.py), passed from chunk to chunk
     env_c = np.zeros(ne)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flags, rate)
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flags, rate, law_state.initial(ctrl).size)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
         _CHUNKS[key] = _build(loop, n, flags, rate)
@@ -219,7 +217,9 @@ def run_fused(loop, K: int) -> None:
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
     cp = np.asarray(_symbolic_params(ctrl), dtype=float)
-    nx = loop.system.formulation.nx
+    nx0 = loop.system.formulation.nx
+    s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
+    nx = nx0 + s_law.size
     p, period, duration = loop.p, loop.period, loop.duration
     u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
     edges = _edge_ticks(loop)  # where the held torque may change: a chunk is split there
@@ -238,7 +238,8 @@ def run_fused(loop, K: int) -> None:
     par[6 + len(cp) :] = p
     nu_cmg = loop.nu_cmg
     ncmd = loop.n_cmd
-    x = np.array(loop.x, dtype=float)
+    x = np.concatenate([loop.x, s_law])
+    s_end = None
     tail_flag = 0
     ticks = 0
     loop.used_fused = True
@@ -247,7 +248,7 @@ def run_fused(loop, K: int) -> None:
         j0 = 0
         if not edges:  # the leading full rows, many per compiled call (fused_rows.py)
             draw = (lambda k: _draw(loop, k, flags)) if nn else None
-            j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p, draw)
+            j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p, draw, s_law.size)
             if stop is not None:
                 raise stop
         for j, k in enumerate(row_ks):
@@ -265,7 +266,7 @@ def run_fused(loop, K: int) -> None:
             r = info.res[0]
             cmd = r[:ncmd]
             act = r[ncmd : ncmd + (nu_cmg + 3 if loop.act is not None else 0)]
-            q_ref = r[-4:]
+            q_ref = r[r.size - s_law.size - 4 : r.size - s_law.size]
             lim = sat = 0
             if loop.act is not None:
                 lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
@@ -274,9 +275,10 @@ def run_fused(loop, K: int) -> None:
             if ncmd == 3:
                 loop.last_cmd = tuple(cmd)
             ctrl.q_ref_BN = tuple(q_ref)
-            loop.x = x
-            loop.rows.hold(t, x, *loop._held_row(flag | tail_flag))  # streamed in batches
+            loop.x = x[:nx0]
+            loop.rows.hold(t, loop.x, *loop._held_row(flag | tail_flag))  # streamed in batches
             if k == K:
+                s_end = r[r.size - s_law.size :].copy()  # the law's update at the last tick
                 break
             # ticks k .. k + n_act - 1 in one call per piece (tick k's actuation is recomputed inside: same)
             pieces = tick_pieces(k, n_act, edges, duration, period)
@@ -309,7 +311,8 @@ def run_fused(loop, K: int) -> None:
                 raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
     finally:
         loop.ticks = ticks
-        loop.x = x
+        loop.x = x[:nx0]
+        law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
         loop.rows.flush()

@@ -24,7 +24,9 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
-from .controller import ControllerError, one_line
+from ..loop import Layout
+from ..loop.flight import READS, SEEN
+from . import law_state
 from .segments import held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
@@ -44,16 +46,22 @@ def _build(loop, n: int, symbolic_params) -> dict:
     kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
     ng = loop.ng
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
-    x, p, cp, u_ext = ca.SX.sym("x", nx), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
-    y = ca.SX.sym("y", flight.ny)
-    try:
-        cmd, q_ref = ctrl.symbolic(t, y, cp)
-        cmd = ca.vertcat(cmd)
-    except Exception as e:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
-    if cmd.numel() != loop.n_cmd:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, "
-                              f"expected {loop.n_cmd} ({ctrl.command})")
+    nls = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
+    xa, p, cp, u_ext = ca.SX.sym("x", nx + nls), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    x, s = xa[:nx], xa[nx:]
+    # the law's measurement is computed inside the core, as the truth-fed fused loop does (its
+    # sines and cosines shared with the RK4's first stage); with an estimator the flight's
+    # estimate replaces its SEEN fields, given as the core's input ``est``
+    y = sx["meas"](t, x, p)
+    offs = flight.layout
+    est_fields = list(SEEN) if flight.mekf is not None else []
+    est = ca.SX.sym("est", sum(offs[f][1] for f in est_fields))
+    y_seen, j = y, 0
+    for f in est_fields:
+        o, m = offs[f]
+        y_seen = ca.vertcat(y_seen[:o], est[j : j + m], y_seen[o + m :])
+        j += m
+    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y_seen, cp, s, loop.n_cmd)
     if model.cmg is None:
         act, u, sat = ca.SX.zeros(0, 1), u_ext + cmd, ca.SX.zeros(2)
     else:
@@ -66,46 +74,64 @@ def _build(loop, n: int, symbolic_params) -> dict:
         sat = ca.vertcat(act[kk + 1], act[kk + 2])
     if model.has_steps:
         u = ca.vertcat(u, t + h / 2)
-    x1 = system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p)
-    core = sx_function("ff_core", [t, x, y, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref)])
-    meas = sx["meas"]
+    x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
+    core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref, s1)])
+    # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
+    y_truth = ca.SX.zeros(flight.ny)
+    for f in READS:
+        o, m = offs[f]
+        y_truth[o : o + m] = y[o : o + m]
+    meas = sx_function("ffl_truth", [t, x, p], [y_truth])
     fl = flight.function()
-    o_om = flight.layout["omega_BN_B"][0]
+    o_om = offs["omega_BN_B"][0]
+
+    def seen(ys):
+        return ca.vertcat(*[S.OUTPUTS.get(ys, SEEN[f]) for f in est_fields]) if est_fields else ca.MX(0, 1)
+
     MX = ca.MX
     # the row tick: its command, actuation, reference and the flight's state and outputs after it
-    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
+    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx + nls), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
     ki, tpi, thi, omi = MX.sym("k"), MX.sym("t_prev"), MX.sym("th", 3), MX.sym("om", 3)
     xsi, wi, psi = MX.sym("xs", ns), MX.sym("w", nw), MX.sym("ps", nps)
-    yi = meas(ti, xi, pi_)
-    _, xs1, seen, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
-    _, _, info_out = core(ti, xi, seen, cpi, ui, pi_, 0.0)
+    yi = meas(ti, xi[:nx] if nls else xi, pi_)
+    _, xs1, _, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
+    _, _, info_out = core(ti, xi, seen(ys), cpi, ui, pi_, 0.0)
     info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
-    # the chunk's step
-    nc = 1 + nx + 2 + 1 + 3 + 3 + ns
+    # the chunk's step: the carry holds the law's state with x
+    nx0 = nx
+    C = carry_layout(nx + nls, ns)
     npar_all = 4 + ncp + 3 + npar + nps
-    c, par, w = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("w", nw)
-    i, xc, cnt = c[0], c[1 : 1 + nx], c[1 + nx : 3 + nx]
-    tp, th, om, xs = c[3 + nx], c[4 + nx : 7 + nx], c[7 + nx : 10 + nx], c[10 + nx :]
+    c, par, w = MX.sym("c", C.size), MX.sym("par", npar_all), MX.sym("w", nw)
+    i, xc, cnt, tp, th, om, xs = (C.get(c, f) for f in C.names)
     t0, hh, n_act, k0 = par[0], par[1], par[2], par[3]
     cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
     pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
     tt = t0 + i * hh
-    yt = meas(tt, xc, pc)
-    th1, xs1, seen, _ = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
-    x_new, fl_sat, _ = core(tt, xc, seen, cpc, uc, pc, hh)
-    on = i < n_act
-    c_new = ca.vertcat(i + 1, ca.if_else(on, x_new, xc),
-                       cnt + ca.if_else(on, ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), MX.zeros(2)),
-                       ca.if_else(on, tt, tp), ca.if_else(on, th1, th), ca.if_else(on, yt[o_om : o_om + 3], om),
-                       ca.if_else(on, xs1, xs))
-    step = ca.Function("ffl_step", [c, par, w], [c_new])
+    yt = meas(tt, xc[:nx0] if nls else xc, pc)
+    th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+    x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
+    c_new = C.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
+                   theta_B=th1, omega_prev=yt[o_om : o_om + 3], xs=xs1)
+    # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
+    # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
+    tick = ca.Function("ffl_tick", [c, par, w], [c_new])
+    hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])  # (i first: C's order)
+    step = ca.Function.if_else("ffl_step", tick, hold)
+    step = ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
     acc = step.mapaccum("ffl_acc", n)
-    c0, parm, wm = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nw, n)
+    c0, parm, wm = MX.sym("c0", C.size), MX.sym("par", npar_all), MX.sym("noise", nw, n)
     traj = acc(c0, ca.repmat(parm, 1, n), wm)
     chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
     funcs = compile_functions([info, chunk], tag)
-    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"])}
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls}
+
+
+def carry_layout(nx: int, ns: int) -> Layout:
+    """The chunk's carry: tick index in the chunk, state, counts of rate-limited and saturated
+    ticks, and the flight's memory (previous tick's time and true rate, ``theta_B``, the suite
+    state)."""
+    return Layout(i=1, x=nx, counts=2, t_prev=1, theta_B=3, omega_prev=3, xs=ns)
 
 
 def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
@@ -113,15 +139,19 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     ctrl, flight = loop.ctrl, loop.flight
     n = loop.n_per_out
     cp = np.asarray(symbolic_params, dtype=float)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key)  # structure, not numbers
+    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size)  # structure
     if key not in _CHUNKS:
         t_build = time.perf_counter()
         _CHUNKS[key] = _build(loop, n, cp)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t_build
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
-    nx = loop.system.formulation.nx
+    nx0 = loop.system.formulation.nx
+    s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
+    nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
+    C = carry_layout(nx, S.STATE.size)  # its slices, taken once (the loop below runs per output row)
+    ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in C.names)
     p, period, duration = loop.p, loop.period, loop.duration
     u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
     ia = info.args
@@ -139,8 +169,10 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     par[7 + ncp + p.size :] = flight.params
     nu_cmg, ncmd = loop.nu_cmg, loop.n_cmd
     nw = S.NOISE.size
-    x = np.array(loop.x, dtype=float)
-    xs, th, om, tp = loop.xs.copy(), loop.th.copy(), loop.om_prev.copy(), loop.t_prev
+    # the carry between chunk calls lives in the chunk's own input (c0): one copy per call
+    c0[:] = 0.0
+    c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = np.concatenate([loop.x, s_law]), loop.t_prev, loop.th, loop.om_prev, loop.xs
+    x, s_end = c0[cx].copy(), None
     tail_flag = ticks = 0
     loop.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
@@ -151,8 +183,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             draws = loop.tick_noise.rows(k, n_act)
             ia[0][0] = t
             ia[1][:] = x
-            ia[5][0], ia[6][0] = k, tp
-            ia[7][:], ia[8][:], ia[9][:] = th, om, xs
+            ia[5][0], ia[6][0] = k, c0[ct][0]
+            ia[7][:], ia[8][:], ia[9][:] = c0[cth], c0[com], c0[cxs]
             ia[10][:] = draws[0]
             info()
             r = info.res[0]
@@ -164,29 +196,25 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
             if ncmd == 3:
                 loop.last_cmd = tuple(cmd)
-            ctrl.q_ref_BN = tuple(r[-4:])
-            loop.x, loop.xs, loop.ys = x, info.res[1].copy(), info.res[2].copy()
-            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            ctrl.q_ref_BN = tuple(r[r.size - ls - 4 : r.size - ls])
+            loop.x, loop.xs, loop.ys = x[:nx0], info.res[1].copy(), info.res[2].copy()
+            loop.rows.hold(t, loop.x, *loop._held_row(lim | sat | tail_flag))
             if k == K:
-                loop.th, loop.om_prev, loop.t_prev = th, om, tp
+                loop.th, loop.om_prev, loop.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
+                s_end = r[r.size - ls :].copy()  # the law's update at the last tick
                 break
             pieces = tick_pieces(k, n_act, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
-                c0[0] = 0.0
-                c0[1 : 1 + nx] = x
-                c0[1 + nx : 3 + nx] = 0.0
-                c0[3 + nx] = tp
-                c0[4 + nx : 7 + nx], c0[7 + nx : 10 + nx], c0[10 + nx :] = th, om, xs
+                c0[ci], c0[cc] = 0.0, 0.0
                 par[0], par[1], par[2], par[3] = a * period, h, b - a, a
                 par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
                 noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 res = chunk.res[0]
-                x = res[1 : 1 + nx].copy()
-                counts += res[1 + nx : 3 + nx]
-                tp = float(res[3 + nx])
-                th, om, xs = res[4 + nx : 7 + nx].copy(), res[7 + nx : 10 + nx].copy(), res[10 + nx :].copy()
+                counts += res[cc]
+                c0[:] = res
+            x = c0[cx].copy()
             ticks += n_act
             loop.n_rate_limited += int(counts[0])
             loop.n_momentum_saturated += int(counts[1])
@@ -196,7 +224,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
     finally:
         loop.ticks = ticks
-        loop.x = x
+        loop.x = x[:nx0]
+        law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
         ctrl.count_compiled_updates(ticks + 1)
         loop.integ.count_steps(ticks)
         loop.rows.flush()

@@ -102,7 +102,7 @@ def _full_rows(loop, row_ks, n: int, K: int) -> int:
     return j
 
 
-def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None) -> tuple:
+def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None, ns: int = 0) -> tuple:
     """Run the leading full rows of a fused run in calls of :data:`ROW_CALLS` rows.
 
     Parameters
@@ -111,7 +111,8 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
         row-by-row loop updates them).
     fns : dict  The fused build: ``"rows"`` maps R to the compiled ``fused_rows_R`` (FastCall).
     row_ks : list of int  The row ticks; K the last tick.
-    x, env_c : ndarray  The state and the held environment's carry at tick 0.
+    x, env_c : ndarray  The state (the law's own state of ``ns`` values after the plant's,
+        law_state.py) and the held environment's carry at tick 0.
     cp, u_ext, p : ndarray  The controller's parameters, the held external torque, the model's.
     draw : callable or None  ``draw(k)`` -> the sensor draws of the next k ticks, (k, nn), from
         the loop's generator in the row-by-row loop's order (None: no sensor noise).
@@ -152,8 +153,9 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None)
             fc()
             carries = fc.res[0].reshape(R, -1)  # column-major (nx + ne, R): row r's carry is a row here
             out = fc.res[1].reshape(R, -1)
-            xs, info, counts = out[:, :nx], out[:, nx:-2], out[:, -2:]
-            cmd, act, q_ref = info[:, :ncmd], info[:, ncmd : ncmd + n_act], info[:, -4:]
+            xs, info, counts = out[:, : nx - ns], out[:, nx:-2], out[:, -2:]  # (rows: the plant's state)
+            ni = info.shape[1] - ns  # info = (cmd, act, q_ref, the law's next state)
+            cmd, act, q_ref = info[:, :ncmd], info[:, ncmd : ncmd + n_act], info[:, ni - 4 : ni]
             bad = ~np.all(np.isfinite(carries[:, :nx]), axis=1)
             m = int(np.argmax(bad)) + 1 if bad.any() else R  # rows whose stretch ran (the last may end in NaN)
             lim = sat = np.zeros(m)

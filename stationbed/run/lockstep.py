@@ -6,7 +6,9 @@ leading sample axis) -> one call of the compiled tick mapped over the samples (c
 ``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
 step, measure; the map calls that very machine code once per sample, so a sample's numbers are
 its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
-delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and metrics).
+delay; or the scene's sensors and estimator, their flight tick mapped the same way:
+:mod:`.lockstep_flight`) -> rows at the output ticks (each sample's own :class:`~.rows.Rows`
+and metrics).
 
 A tick that a sample's single run integrates on the generic path (a discontinuity inside it or
 at its end, the final tick) is run for that sample alone with its own
@@ -31,6 +33,7 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
+from .lockstep_flight import FlightBatch
 from .prepare import prepare
 from .rows import Rows
 from .segments import breakpoints, held_torque_from
@@ -49,8 +52,10 @@ def vectorised(ctrl) -> bool:
 def _tick_ok(loop) -> bool:
     integ = loop.integ
     name = "tick_rates" if loop.ctrl.command == "gimbal_rates" else "tick_torque"
-    # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs per tick
-    return (getattr(loop, "flight", None) is None and integ.fusable and name in integ.funcs
+    # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs its
+    # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) runs per tick
+    return (getattr(loop, "replan", None) is None
+            and integ.fusable and name in integ.funcs
             and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1)
 
 
@@ -156,7 +161,7 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
             continue
         sim = s.simulation
         key = (id(smp.run.system), type(smp.loop.ctrl), smp.loop.ctrl.command, sim.duration, sim.output_dt,
-               smp.loop.period)
+               smp.loop.period, getattr(smp.loop.flight, "key", None))
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
@@ -215,8 +220,7 @@ class _Lockstep:
         self.ny1 = nnz[1]
         ny = f.numel_out(1)
         self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
-        self.seen = np.zeros((n, ny))  # what the law sees
-        self.M = BatchMeasurement(self.seen, lp.layout)
+        self.seen = np.zeros((n, ny))  # what the law sees (the raw buffer itself when no sample is noisy)
         # sensors: per sample its own generator, noise levels and delay
         sens = [s.loop.sensor for s in samples]
         self.noisy = np.array([s.loop.noisy for s in samples])
@@ -227,6 +231,10 @@ class _Lockstep:
         self.z = np.zeros((n, DRAW_BLOCK, 6))
         self.layout = lp.layout
         self.any_noisy = bool(self.noisy.any())
+        self.flight = FlightBatch(samples, lp.layout) if lp.flight is not None else None
+        if not self.any_noisy and self.flight is None:
+            self.seen = self.raw
+        self.M = BatchMeasurement(self.seen, lp.layout)
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
@@ -246,11 +254,13 @@ class _Lockstep:
             if r:
                 self.z[i, :, 3:6] = zi[:, w - 3 : w]
 
-    def _sense(self, k: int) -> None:
+    def _sense(self, k: int, t: float = 0.0) -> None:
         """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
         seen, raw = self.seen, self.raw
-        if not self.any_noisy:
-            seen[:] = raw
+        if self.flight is not None:  # sensors and estimator (no [controller.sensor] noise with them)
+            self.flight.fly(k, t, raw, seen)
+            return
+        if not self.any_noisy:  # (seen is raw)
             return
         rows = np.arange(self.n)
         D = self.delay
@@ -319,6 +329,7 @@ class _Lockstep:
         wall0 = time.perf_counter()
 
         n_upd = np.zeros(n, dtype=int)
+        n_all = [0, 0, 0]  # updates, ticks, fast ticks counted for every sample (no numpy add per tick)
         n_alive = n
         h_set = -1.0
 
@@ -329,7 +340,7 @@ class _Lockstep:
             ctrl.batch_stopped.add(i)
             errors[i] = e
 
-        self._sense(0)
+        self._sense(0, 0.0)
         M = self.M
         try:
             for k in range(K + 1):
@@ -362,7 +373,10 @@ class _Lockstep:
                                 S[i].loop._check_command(t, cmd[i])
                             except ControllerFailure as e:
                                 fail(i, e)
-                    n_upd += alive if n_alive < n else 1
+                    if n_alive < n:
+                        n_upd += alive
+                    else:
+                        n_all[0] += 1
                     q_ref = ctrl.q_ref_BN
                 if not alive.any():
                     break
@@ -412,6 +426,8 @@ class _Lockstep:
                         if vec:
                             lo.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
                         lo.x[:] = self.X[i]
+                        if self.flight is not None:
+                            self.flight.to_loop(i)
                         try:
                             lo.rows.hold(t, lo.x, *lo._held_row(int(satrow[i])))
                         except ControllerFailure as e:
@@ -419,14 +435,17 @@ class _Lockstep:
                         satrow[i] = False
                 if k == K:
                     break
-                ticks += alive if n_alive < n else 1
+                if n_alive < n:
+                    ticks += alive
+                else:
+                    n_all[1] += 1
                 v = self.X1[:, 4]
                 # the per-tick loop's test of a finite state, -1e300 < v < 1e300, for all at once
                 # (NaN fails both: the max of an array with a NaN is NaN)
                 if all_smooth and np.abs(v).max() < 1e300:
                     self.X[:] = self.X1
                     self.raw[:, : self.ny1] = self.Y1
-                    n_fast += 1
+                    n_all[2] += 1
                 else:
                     ok = (v > -1e300) & (v < 1e300)
                     for i in np.flatnonzero(smooth & ~ok):
@@ -446,18 +465,20 @@ class _Lockstep:
                     self.UEXT[i] = held_torque_from(S[i].scene, t_next, bps, duration)
                     self.X[i] = lo.x
                     self._measure(i, t_next, lo.x)
-                self._sense(k + 1)
+                self._sense(k + 1, t_next)
         finally:
             wall = (time.perf_counter() - wall0) / n
             results = []
             for i, s in enumerate(S):
                 lo = s.loop
-                lo.ticks = int(ticks[i])
-                lo.ctrl.n_updates += int(n_upd[i])
+                lo.ticks = int(ticks[i]) + n_all[1]
+                lo.ctrl.n_updates += int(n_upd[i]) + n_all[0]
                 lo.n_rate_limited += int(lim_n[i])
                 lo.n_momentum_saturated += int(sat_n[i])
-                lo.integ.count_steps(int(n_fast[i]))
+                lo.integ.count_steps(int(n_fast[i]) + n_all[2])
                 lo.x[:] = self.X[i]
+                if self.flight is not None:
+                    self.flight.to_loop(i)
                 s.rows.flush()
                 e = errors.get(i)
                 if e is None:

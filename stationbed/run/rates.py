@@ -93,7 +93,7 @@ def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int,
     co = ca.MX.sym("co", 1 + nx + 2 + ENV_CARRY)
     po = ca.MX.sym("po", npar_tick)
     nzo = [ca.MX.sym("nzo", nn * rate)] if nn else []
-    i, x = co[0], co[1 : 1 + nx]
+    i, x = co[0], co[1 : 1 + env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
     L_prev, t_prev, have = co[3 + nx : 6 + nx], co[6 + nx], co[7 + nx]
     t0, h, n_act = po[0], po[1], po[2]
     t_now = t0 + i * h

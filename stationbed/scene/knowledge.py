@@ -28,7 +28,7 @@ from ..core.massprops import InvalidMassProperties, check_inertia
 from .base import Mat3, Strict, Vec3
 from .environment import Orbit
 
-__all__ = ["Knowledge", "KnowledgeCmg", "knowledge_scene", "knowledge_changes", "NAMED_PATHS"]
+__all__ = ["Knowledge", "KnowledgeCmg", "knowledge_scene", "knowledge_changes", "detected_scene", "NAMED_PATHS"]
 
 
 class KnowledgeCmg(Strict):
@@ -52,6 +52,9 @@ class Knowledge(Strict):
     cmg: KnowledgeCmg | None = None
     orbit: Orbit | None = None  # the orbit flight software believes (a whole [orbit] table)
     values: dict[str, Any] = {}  # any other key path -> believed value (the Monte Carlo writes here)
+    #: s: the truth's failed CMG units ([cmg] failed, failed from t = 0) become known to the law at
+    #: this time (fault detection, isolation and recovery's delay); None: never (unless listed above)
+    failure_detected_after_s: float | None = Field(default=None, ge=0.0)
 
     @field_validator("inertia")
     @classmethod
@@ -91,6 +94,16 @@ def knowledge_changes(scene) -> dict:
     if k.orbit is not None:
         changes["orbit"] = k.orbit.model_dump(exclude_unset=True)
     return changes
+
+
+def detected_scene(scene):
+    """What flight software believes once the failure is detected
+    (``[knowledge] failure_detected_after_s``): the knowledge scene with every truly failed CMG
+    unit known (those it already believed failed stay so)."""
+    changes = knowledge_changes(scene)
+    truth = list(scene.cmg.failed) if scene.cmg is not None else []
+    changes["cmg.failed"] = sorted(set(changes.get("cmg.failed", truth)) | set(truth))
+    return copy.deepcopy(scene.replace(changes, source="[knowledge]"))
 
 
 #: the knowledge scenes of the last few scenes asked about: id -> (scene, knowledge scene). A

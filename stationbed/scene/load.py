@@ -153,7 +153,7 @@ def _check_knowledge(scene) -> None:
     k = scene.knowledge
     if k is None:
         return
-    for name in ("failed_units", "cmg"):
+    for name in ("failed_units", "cmg", "failure_detected_after_s"):
         if getattr(k, name) is not None and scene.cmg is None:
             raise FieldError(f"knowledge.{name}", "needs a [cmg] table")
     try:

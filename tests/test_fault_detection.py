@@ -1,0 +1,125 @@
+"""Fault detection's delay (issue 20): ``[knowledge] failure_detected_after_s``.
+
+The truth's failed CMG unit (``[cmg] failed``, failed from t = 0) is unknown to the law until the
+first tick at or after the stated delay; from that tick the law designs on the plant with the unit
+failed (``run/detection.py::replan``: the law's ``_replan`` hook, else its ``_reset``). Truths:
+
+* the law's plant per tick, recorded by the law itself: the four-unit capacity before the
+  detection, after it the capacity of the plant a scene stating the failure as known from the
+  start gives (``[knowledge] failed_units``, an independent path through the knowledge scene);
+  ``replan`` called exactly once, at tick ``ceil(T / h)``;
+* the rows before the detection are those of the run in which it never comes, bit for bit, and
+  after it they are not (the test law's torque scales with the capacity it believes);
+* a detection at t = 0 gives the law the failure from its first tick (the run of a scene that
+  states it known); a detection after the run's end changes nothing and the fused loop runs;
+* bad values are one-line errors naming the key.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from stationbed import load_scene, simulate
+from stationbed.controllers.pd import PD
+from stationbed.scene import SceneError
+
+SCENARIO = "scenarios/iss_lvlh_hold.toml"
+PERIOD_S = 0.1
+DETECTED_S = 2.05  # s: between ticks 20 and 21, so the first tick after it is 21
+FAILED = [2]
+
+
+class CapacityAwarePD(PD):
+    """pd whose torque is scaled by the capacity it believes (over a fixed H_REF: a replan shows
+    in the trajectory), recording that belief at every tick."""
+
+    H_REF = 2.0e4  # N m s
+
+    def _reset(self, plant):
+        super()._reset(plant)
+        if not hasattr(self, "h0"):
+            self.h0, self.seen, self.replans = plant.h_capacity, [], 0
+
+    def _replan(self, plant):  # the hook: here, count and design again
+        self.replans += 1
+        self._reset(plant)
+
+    def _update(self, t, meas):
+        self.seen.append((t, self.plant.h_capacity))
+        return tuple(self.plant.h_capacity / self.H_REF * v for v in super()._update(t, meas))
+
+
+def scene(**knowledge):
+    s = load_scene(SCENARIO).replace({"simulation.duration": 4.0, "simulation.output_dt": PERIOD_S,
+                                      "cmg.failed": FAILED})
+    return s.replace({"knowledge": knowledge}) if knowledge else s
+
+
+def fly(s, fused=False):
+    law = CapacityAwarePD(s.controller.period, **s.controller.params)
+    return simulate(s, controller=law, fused=fused), law
+
+
+@pytest.fixture(scope="module")
+def detected():
+    return fly(scene(failure_detected_after_s=DETECTED_S))
+
+
+def test_the_law_is_told_the_failure_at_the_first_tick_after_the_delay(detected):
+    _, law = detected
+    _, told = fly(scene(failed_units=FAILED))  # the failure known from the start: its plant's capacity
+    t, cap = np.array(law.seen).T
+    first = math.ceil(DETECTED_S / PERIOD_S)
+    assert law.replans == 1
+    assert np.all(cap[t < first * PERIOD_S - 1e-9] == law.h0)
+    assert np.all(cap[t >= first * PERIOD_S - 1e-9] == told.h0) and told.h0 < law.h0
+
+
+def test_rows_before_the_detection_are_the_undetected_run(detected):
+    tr, _ = detected
+    never, _ = fly(scene())
+    t = tr.cols("t").ravel()
+    before = t < math.ceil(DETECTED_S / PERIOD_S) * PERIOD_S - 1e-9  # (the detection tick's row has its command)
+    assert not tr.meta["summary"]["fused"]
+    np.testing.assert_array_equal(tr.data[before], never.data[before])
+    assert np.abs(tr.data[~before] - never.data[~before]).max() > 0
+
+
+def test_detected_at_once_is_known_from_the_first_tick():
+    tr, law = fly(scene(failure_detected_after_s=0.0))
+    known, _ = fly(scene(failed_units=FAILED))
+    assert law.replans == 1 and all(c == law.plant.h_capacity for _, c in law.seen)
+    cap = np.array(law.seen)[:, 1]
+    np.testing.assert_array_equal(cap, np.full(cap.shape, cap[0]))
+    assert cap[0] < law.h0
+    np.testing.assert_array_equal(tr.data, known.data)
+
+
+def test_a_detection_after_the_run_changes_nothing_and_the_loop_runs_fused():
+    late = scene(failure_detected_after_s=100.0)
+    tr, law = fly(late, fused=True)
+    assert law.replans == 0 and tr.meta["summary"]["fused"]
+
+
+@pytest.mark.parametrize("knowledge, cmg, message", [
+    ({"failure_detected_after_s": -1.0}, True, "knowledge.failure_detected_after_s"),
+    ({"failure_detected_after_s": 1.0}, False, "knowledge.failure_detected_after_s: needs a \\[cmg\\] table"),
+])
+def test_bad_detection_delay_is_refused_naming_the_key(knowledge, cmg, message):
+    s = load_scene(SCENARIO)
+    changes = {"knowledge": knowledge}
+    if not cmg:
+        changes.update({"cmg": None, "controller.name": "pd"})
+    with pytest.raises(SceneError, match=message):
+        s.replace(changes)
+
+
+def test_a_law_without_the_hook_designs_again_with_its_reset():
+    s = scene(failure_detected_after_s=DETECTED_S)
+    law = PD(s.controller.period, **s.controller.params)
+    simulate(s, controller=law, fused=True)
+    _, told = fly(scene(failed_units=FAILED))
+    assert law.plant.h_capacity == told.h0 and law.n_updates > 0
