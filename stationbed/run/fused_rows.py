@@ -21,6 +21,8 @@ R calls of one row each), and passed as a per-row input. :func:`run_rows` does t
 leading run of such rows and hands the executor back its state to go on row by row.
 The first row's held values are checked against the executor's own (``_held_row``): a loop
 whose rows hold other columns runs row by row.
+A law's own state (law_state.py) rides after the plant's in the carry, as in the chunk: the
+rows get the plant's state, and ``info`` ends with the law's next state, after ``q_ref``.
 """
 
 from __future__ import annotations
