@@ -2,11 +2,14 @@
 installed distribution's metadata (~4 ms), are scanned once per ``sys.path``, not once per sample.
 
 Truth: the number of metadata scans counted at ``importlib.metadata.entry_points`` itself.
+And the knowledge scene of a sample (a validated deep copy) is built once per sample, not at each
+of the three places that ask for it: counted at ``knowledge_changes``, with the memo and without.
 """
 
 from __future__ import annotations
 
 import importlib.metadata
+from pathlib import Path
 
 from stationbed.run import controller as ctl
 
@@ -37,3 +40,43 @@ def test_a_new_path_is_scanned_again(monkeypatch, tmp_path):
     monkeypatch.syspath_prepend(str(tmp_path))
     ctl.get_controller("pd")
     assert len(calls) == 2
+
+
+# ---------------------------------------------------------------------------------------------
+# the knowledge scene (what flight software believes) is built once per sample scene
+# ---------------------------------------------------------------------------------------------
+MC_SCENE = Path(__file__).resolve().parents[1] / "scenarios" / "iss_lvlh_hold_montecarlo.toml"
+
+
+def test_knowledge_scene_built_once_per_monte_carlo_sample(monkeypatch):
+    """A sample asks three times (its draw's record of what the law was told, the controller's
+    plant, the scene's own check): one validated deep copy, not three (~1-2 ms each)."""
+    from stationbed import load_scene
+    from stationbed.scene import knowledge as kn
+    from stationbed.studies.montecarlo.engine import envelope_times, study_scene
+    from stationbed.studies.montecarlo.samples import run_sample
+
+    scene = study_scene(load_scene(MC_SCENE).replace({"simulation.duration": 2.0, "montecarlo.settle_s": 1.0}), 10)
+    builds = []
+    real_changes = kn.knowledge_changes
+    monkeypatch.setattr(kn, "knowledge_changes", lambda s: builds.append(1) or real_changes(s))
+    monkeypatch.setattr(kn, "_KNOWN", {})
+    for k in range(3):
+        run_sample(scene, k, envelope_times(scene))
+    n_asked = len(builds)
+    monkeypatch.setattr(kn, "_KNOWN", type("Miss", (dict,), {"get": lambda self, key, d=None: None})())
+    builds.clear()
+    for k in range(3):
+        run_sample(scene, k, envelope_times(scene))
+    asked = len(builds)
+    assert (n_asked, asked) == (3, 9)  # one build per sample; three when every call builds anew
+
+
+def test_an_equal_scene_gets_its_own_knowledge_scene():
+    """The answer is kept per scene object: an equal but other scene (a later replace) is asked anew."""
+    from stationbed import load_scene
+    from stationbed.scene.knowledge import knowledge_scene
+
+    a = load_scene(MC_SCENE)
+    b = a.replace({})
+    assert knowledge_scene(a) is knowledge_scene(a) and knowledge_scene(b) is not knowledge_scene(a)

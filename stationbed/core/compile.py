@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import platform
 import shutil
 import stat
 import subprocess
@@ -47,7 +48,23 @@ def sx_function(name: str, inputs: list, outputs: list, *, called: bool = False)
     """
     return ca.Function(name, inputs, outputs, {"cse": True, "never_inline": called})
 
-CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno"]
+#: every build (issue 25, docs/design.md "The compiled tick: compiler flags"): ``-fno-semantic-
+#: interposition`` lets gcc inline casadi's small helpers (``casadi_sq``, ``casadi_fabs``,
+#: ``casadi_copy`` are exported, so with ``-fPIC`` alone each is a call through the PLT: ~250 per
+#: tick of iss_lvlh_hold); ``-ffp-contract=off`` forbids fused multiply-adds, so a build with
+#: the machine's own instructions gives the same bits as a portable one (and as the per-tick and
+#: lockstep paths: every test comparing paths bit for bit keeps holding); ``-fno-plt`` calls
+#: libm's sin, cos, atan2 (~100 a tick) through the GOT without the PLT's jump (5 %). Not
+#: ``-ffast-math``: the NaN checks of the executors need IEEE semantics. ``-O3``: 0.92-0.93x the
+#: held-environment fused chunk, 0.97x the every-stage one (60 interleaved repeats each), the
+#: same bits, and the same compile time for a 16-array DOP853 system (13.1 s / 13.6 s).
+CFLAGS = ["-O3", "-fPIC", "-shared", "-fno-math-errno", "-fno-semantic-interposition", "-ffp-contract=off", "-fno-plt"]
+#: tried first: the build machine's own instruction set (AVX...), 10 % of a tick; the library's
+#: name is then keyed by the machine (:func:`_machine_key`), so a cache shared with another CPU
+#: builds its own; a compiler that refuses the flag builds with :data:`CFLAGS` alone
+NATIVE_CFLAGS = ["-march=native"]
+#: the minimal flags, the last resort of a compiler that refuses the others
+BASE_CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno"]
 
 #: environment variables: the cache folder, and a switch that forces casadi's evaluator
 CACHE_ENV = "STATIONBED_CACHE"
@@ -114,6 +131,56 @@ def compiler() -> str | None:
     return None
 
 
+_MACHINE: list[tuple[str, bool]] = []  # (key, whether the CPU's flags were read), once per process
+
+
+def _machine() -> tuple[str, bool]:
+    if not _MACHINE:
+        flags = ""
+        try:
+            with open("/proc/cpuinfo") as f:
+                flags = next((ln for ln in f if ln.startswith(("flags", "Features"))), "")
+        except OSError:
+            pass
+        words = sorted(flags.partition(":")[2].split())
+        _MACHINE.append((f" {platform.machine()} {platform.processor()} {' '.join(words)}", bool(words)))
+    return _MACHINE[0]
+
+
+def _machine_key() -> str:
+    """What a ``-march=native`` library depends on: the architecture and the CPU's instruction
+    set extensions (the ``flags`` line of ``/proc/cpuinfo``). Two machines with the same key run
+    each other's libraries; read once per process."""
+    return _machine()[0]
+
+
+def _native() -> list[str]:
+    """:data:`NATIVE_CFLAGS` where the CPU's instruction-set flags are known (Linux
+    ``/proc/cpuinfo``): only then does the library's name tell two CPUs apart; elsewhere none
+    (a portable build)."""
+    return NATIVE_CFLAGS if _machine()[1] else []
+
+
+#: casadi's min/max helpers as generated, and as built here: casadi calls C99's ``fmax``/``fmin``
+#: (a libm call each, ~160 per tick of iss_lvlh_hold: 13 % of it) unless the C is older than
+#: C99, where it writes the comparison; this chooses casadi's own comparison for every standard
+_MIN_MAX_GUARD = "#if __STDC_VERSION__ < 199901L"
+
+
+def inline_min_max(src: str) -> str:
+    """``src`` with casadi's ``casadi_fmax``/``casadi_fmin`` as a comparison (``x>y ? x : y``,
+    casadi's own pre-C99 branch) instead of a call of libm's ``fmax``/``fmin``.
+
+    Same value for every pair of numbers (the sign of a zero aside: ``fmax(-0., 0.)`` may be
+    either); where one argument is NaN, libm's returns the other, the comparison returns ``y``
+    (so a NaN in ``y`` travels on to the state, where the executors' checks see it).
+    """
+    for name in ("fmax", "fmin"):
+        head = f"casadi_real casadi_{name}(casadi_real x, casadi_real y) {{\n/* Pre-c99 compatibility */\n"
+        src = src.replace(head + _MIN_MAX_GUARD, head + "#if 1 /* stationbed: the comparison, not a libm call */")
+    return src
+
+
 def _file_tag(tag: str) -> str:
     if len(tag) <= MAX_TAG_CHARS:
         return tag
@@ -146,7 +213,10 @@ def _build(cc: str, src: str, lib: Path, sig: Path, tag: str) -> str | None:
             c_file.write_text(src)
             tmp_lib = Path(tmp) / "gen.so"
             with progress.task(f"compiling {_file_tag(tag)}", transient=True):
-                res = subprocess.run([cc, *CFLAGS, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
+                for flags in (CFLAGS + _native(), CFLAGS, BASE_CFLAGS):  # the first the compiler takes
+                    res = subprocess.run([cc, *flags, "-o", str(tmp_lib), str(c_file), "-lm"], capture_output=True, text=True)
+                    if res.returncode == 0:
+                        break
             if res.returncode != 0:
                 first = (res.stderr.strip().splitlines() or ["no message"])[0]
                 return f"the C compiler {cc} failed ({first})"
@@ -181,8 +251,9 @@ def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "")
     cg = ca.CodeGenerator(f"sb_{tag}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
-    src = cg.dump() + extra_c
-    digest = hashlib.sha256((src + " ".join(CFLAGS)).encode()).hexdigest()[:20]
+    src = inline_min_max(cg.dump()) + extra_c
+    key = " ".join(CFLAGS + _native()) + _machine_key()
+    digest = hashlib.sha256((src + key).encode()).hexdigest()[:20]
     lib = d / f"sb_{_file_tag(tag)}_{digest}.so"
     sig = lib.with_name(lib.name + ".sha256")
     for attempt in range(2):

@@ -31,6 +31,7 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..integrators import IntegrationError
 from . import law_state
 from .controller import ControllerError, one_line
+from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
 from .segments import held_torque_from, tick_pieces
 from .system import environment_split as rates_split
@@ -190,8 +191,11 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
         tag += f"_env{rate}"
     if nn:
         tag += f"_noise{int(flags[0])}{int(flags[1])}"
-    funcs = compile_functions([info, chunk], tag)
-    return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp, "ns": ns}
+    many = rows_functions(info, chunk, n, nx, carry_width(rate), ncp, npar, nn)  # many rows per call (fused_rows.py)
+    funcs = compile_functions([info, chunk] + many, tag)
+    rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
+    return {"info": FastCall(funcs["fused_info"]), "chunk": FastCall(funcs["fused_chunk"]), "ncp": ncp, "ns": ns,
+            "rows": rows}
 
 
 def run_fused(loop, K: int) -> None:
@@ -246,7 +250,15 @@ def run_fused(loop, K: int) -> None:
     loop.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})  # the row ticks, as in the per-tick loop
     try:
+        j0 = 0
+        if not edges:  # the leading full rows, many per compiled call (fused_rows.py)
+            draw = (lambda k: _draw(loop, k, flags)) if nn else None
+            j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p, draw, s_law.size)
+            if stop is not None:
+                raise stop
         for j, k in enumerate(row_ks):
+            if j < j0:
+                continue
             t = min(k * period, duration)
             n_act = row_ks[j + 1] - k if k < K else 1
             if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order

@@ -247,6 +247,21 @@ class Rows:
         if len(ts) >= ROW_BATCH or time.perf_counter() - self._flushed_at >= FLUSH_S:
             self.flush()
 
+    def hold_many(self, ts, xs, held, q_refs) -> None:
+        """Rows at times ``ts`` (k,) with states ``xs`` (k, nx), the loop's ``held`` values
+        (k, len(held_columns)) and the controller's references ``q_refs`` (k, 4), all at once:
+        the rows pending first, then these in batches of :data:`ROW_BATCH` (the rows
+        :meth:`hold` one by one and :meth:`flush` would make, in bulk; issue 25)."""
+        self.flush()
+        for a in range(0, len(ts), ROW_BATCH):
+            sl = slice(a, a + ROW_BATCH)
+            rows = self.make(ts[sl], xs[sl], held[sl])
+            if self._err_col is not None:
+                q_ref, q = q_refs[sl], xs[sl, :4]
+                rows[:, self._err_col] = np.degrees(rotation_angle(q_ref, q))
+                rows[:, self._axes_cols] = np.degrees(rotation_vector(q_ref, q))
+            check_rows(rows[:, :12], lambda ok: self.emit(rows[: len(ok)]))
+
     def flush(self) -> None:
         """Make and emit the pending rows; raises IntegrationError at a non-finite core value
         (the rows before it are emitted)."""

@@ -106,10 +106,25 @@ def detected_scene(scene):
     return copy.deepcopy(scene.replace(changes, source="[knowledge]"))
 
 
+#: the knowledge scenes of the last few scenes asked about: id -> (scene, knowledge scene). A
+#: Monte Carlo sample asks three times (its draw's record, the controller's plant, the scene's
+#: check), each a validated deep copy (~1-2 ms); scenes are frozen, so one answer per scene
+_KNOWN: dict[int, tuple] = {}
+_KNOWN_MAX = 8
+
+
 def knowledge_scene(scene):
     """What flight software believes: ``scene`` (a :class:`~stationbed.scene.Scene`) with the
     ``[knowledge]`` substitutions of this module's docstring; raises SceneError naming
-    ``[knowledge]`` when that scene is refused (e.g. ``failed_units`` beyond the cluster)."""
+    ``[knowledge]`` when that scene is refused (e.g. ``failed_units`` beyond the cluster).
+    The same scene object gets the same (frozen) knowledge scene back."""
+    hit = _KNOWN.get(id(scene))
+    if hit is not None and hit[0] is scene:
+        return hit[1]
     # a deep copy: a table left at its default is one object shared by every scene built
     # (pydantic keeps a model default as is), and nothing of the flown scene may be reachable
-    return copy.deepcopy(scene.replace(knowledge_changes(scene), source="[knowledge]"))
+    known = copy.deepcopy(scene.replace(knowledge_changes(scene), source="[knowledge]"))
+    if len(_KNOWN) >= _KNOWN_MAX:
+        _KNOWN.pop(next(iter(_KNOWN)))
+    _KNOWN[id(scene)] = (scene, known)
+    return known
