@@ -16,7 +16,9 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
 5. ``example_hold`` per tick (``simulate`` per sample: what the Monte Carlo did before issue 22);
 6. ``momentum_manager`` fused (its ``symbolic`` form with the law's state carried,
    stationbed/run/law_state.py) and batch (vectorised ``update_batch``, ``fused=False``);
-7. each law's per-sample set-up alone (``prepare``, rows, loop, the law's design:
+7. ``example_hold`` on sensors and the MEKF (iss_lvlh_hold_estimated, each sample its own sensor
+   seed), batch (its flight tick mapped: stationbed/run/lockstep_flight.py) and per tick;
+8. each law's per-sample set-up alone (``prepare``, rows, loop, the law's design:
    ``momentum_manager`` designs an LQR and its loop margins per sample), which every executor pays
    once per sample, whatever its duration.
 
@@ -65,6 +67,17 @@ def scenes(law: str, n: int, duration: float):
     return [sample_scene(s, k) for k in range(n)]
 
 
+def estimated_scenes(n: int, duration: float):
+    """iss_lvlh_hold_estimated (two gyros, two star-tracker heads, the MEKF) with ``example_hold``,
+    sample k with sensor seed 7 + k (its own noise)."""
+    from stationbed import load_scene  # noqa: PLC0415
+
+    s = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace(
+        {"simulation.duration": duration, "simulation.output_dt": 1.0, "controller.name": "example_hold",
+         "controller.params": {"reference": "lvlh"}})
+    return [s.replace({"controller.sensor": {"seed": 7 + k}}) for k in range(n)]
+
+
 def cpu(fn):
     c0 = time.process_time()
     out = fn()
@@ -107,9 +120,11 @@ def main(argv=None) -> int:
     looping = type("LoopingHold", (ExampleHold,), {"update_batch": Controller.update_batch})
     rows = {}
     eh, pd, mm = scenes("example_hold", n, dur), scenes("pd", n, dur), scenes("momentum_manager", n, dur)
-    for s in (eh[0], pd[0], mm[0]):  # compile / load once, outside the timings
+    est = estimated_scenes(n, dur)
+    for s in (eh[0], pd[0], mm[0], est[0]):  # compile / load once, outside the timings
         simulate(s.replace({"simulation.duration": 1.0}), keep=False)
     run_lockstep([s.replace({"simulation.duration": 0.2}) for s in eh])
+    run_lockstep([s.replace({"simulation.duration": 0.2}) for s in est[:2]], fused=False)
 
     def timed_rows(sc, kind, fused=True, cls=None):
         """(set-up CPU, run CPU) of the samples ``sc``: each sample set up as every executor sets
@@ -138,6 +153,8 @@ def main(argv=None) -> int:
         ("example_hold_per_tick", lambda: timed_rows(eh, "per-tick", fused=False)),
         ("momentum_manager_fused", lambda: timed_rows(mm, "fused")),
         ("momentum_manager_batch", lambda: timed_rows(mm, "batch", fused=False)),
+        ("estimated_example_hold_batch", lambda: timed_rows(est, "batch")),
+        ("estimated_example_hold_per_tick", lambda: timed_rows(est, "per-tick", fused=False)),
     ]
     samples = {name: [] for name, _ in timings}
     for _ in range(args.repeats):  # interleaved rounds: the machine's load hits every row alike
@@ -165,10 +182,12 @@ def main(argv=None) -> int:
         rr = rows[name]["run_per_sample_tick_us"] / rows["pd_fused"]["run_per_sample_tick_us"]
         rows[name]["x_pd_fused_run"] = rr
         print(f"{name} / pd fused: per one-orbit sample (set-up included) {r:.2f} (target <= 1.5); run alone {rr:.2f}")
-    for name in ("example_hold_batch_default_loop", "example_hold_batch_vectorised"):
-        r = rows[name]["run_per_sample_tick_us"] / rows["example_hold_per_tick"]["run_per_sample_tick_us"]
+    for name, base in (("example_hold_batch_default_loop", "example_hold_per_tick"),
+                       ("example_hold_batch_vectorised", "example_hold_per_tick"),
+                       ("estimated_example_hold_batch", "estimated_example_hold_per_tick")):
+        r = rows[name]["run_per_sample_tick_us"] / rows[base]["run_per_sample_tick_us"]
         rows[name]["x_per_tick"] = r
-        print(f"{name} / example_hold per tick, run alone = {r:.2f}")
+        print(f"{name} / {base}, run alone = {r:.2f}")
     rows["loadavg"] = os.getloadavg()
     print(f"load average {rows['loadavg']} on {os.cpu_count()} cores", flush=True)
     if args.json:

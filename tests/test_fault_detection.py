@@ -123,3 +123,23 @@ def test_a_law_without_the_hook_designs_again_with_its_reset():
     simulate(s, controller=law, fused=True)
     _, told = fly(scene(failed_units=FAILED))
     assert law.plant.h_capacity == told.h0 and law.n_updates > 0
+
+
+
+def test_lockstep_leaves_a_detection_to_the_per_tick_loop(monkeypatch):
+    """run_lockstep (the Monte Carlo's executor) runs a sample with a detection inside it per
+    tick (the batch and fused loops hold the law's plant fixed): each sample's rows are its
+    single run's, bit for bit, and differ from the run in which the failure is never detected."""
+    import stationbed.run.closed_loop as cl
+    from stationbed.run.lockstep import run_lockstep
+
+    monkeypatch.setattr(cl, "build_controller", lambda spec, base_dir=None: CapacityAwarePD(spec.period, **spec.params))
+    inertia = np.array(load_scene(SCENARIO).body.inertia)
+    scenes = [scene(failure_detected_after_s=DETECTED_S).replace({"body.inertia": (inertia * f).tolist()})
+              for f in (1.0, 1.03)]
+    res = run_lockstep(scenes, keep=True, fused=False)
+    assert [k for k, _ in res] == ["per-tick"] * 2
+    for s, (_, tr) in zip(scenes, res):
+        np.testing.assert_array_equal(tr.data, fly(s)[0].data)
+    never, _ = fly(scenes[0].replace({"knowledge": None}))
+    assert np.abs(res[0][1].data - never.data).max() > 0

@@ -240,3 +240,13 @@ def test_a_carried_state_through_the_held_environment_blocks():
     k_rows = np.round(tr.t / PERIOD_S)
     assert_allclose(tr.data[:, tr.columns.index("tau_cmd_x")], [tau_x(k * PERIOD_S) for k in k_rows], rtol=0, atol=0)
     assert law.k == round(12.0 / PERIOD_S) + 1
+
+
+def test_margins_refuse_a_law_with_a_state_naming_it():
+    """The loop analysis closes a stateless law (u = -K x); momentum_manager's integral state is
+    outside it: a one-line error naming the controller (its own design reports its margins)."""
+    from stationbed.analysis.margins import loop_analysis  # noqa: PLC0415
+
+    with pytest.raises(ValueError, match=r"^margins: controller 'momentum_manager' keeps a state between ticks"
+                                         r" \(symbolic_state\)[^\n]*$"):
+        loop_analysis(load_scene(MM_SCENE))

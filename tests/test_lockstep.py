@@ -236,3 +236,19 @@ def test_a_loop_with_sensors_runs_in_lockstep_bit_for_bit():
             j = res[0][1].columns.index("est_err_x_deg")
             errs = [r.data[1:, j] for _, r in res]
             assert np.isfinite(errs[0]).all() and not np.array_equal(errs[0], errs[1])
+
+
+def test_sensors_without_an_estimator_and_the_ideal_sensors_noise_as_single_runs():
+    """[[sensor]] tables without an [estimator] (the truth-fed run: the sensors flown and recorded)
+    and the [controller.sensor] noise on the law's ideal path: the per-tick loop flies the sensors,
+    then corrupts what the law sees; in lockstep each sample is its single run, bit for bit (a
+    batch that flew the sensors and dropped the noise would give the law the truth)."""
+    base = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace(
+        {"simulation.duration": DURATION_S, "simulation.output_dt": 1.0, "estimator": None,
+         "controller.name": "example_hold", "controller.params": {"reference": "lvlh"}})
+    scenes = [base.replace({"controller.sensor": {**NOISE, "delay": 0.2, "seed": 7 + k}}) for k in range(N_SAMPLES)]
+    assert scenes[0].estimator is None and scenes[0].sensor
+    res = run_lockstep(scenes, keep=True)
+    assert [k for k, _ in res] == ["batch"] * N_SAMPLES
+    for s, (_, tr) in zip(scenes, res):
+        _same(tr, simulate(s, fused=False))

@@ -258,10 +258,14 @@ class _Lockstep:
     def _sense(self, k: int, t: float = 0.0) -> None:
         """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
         seen, raw = self.seen, self.raw
-        if self.flight is not None:  # sensors and estimator (no [controller.sensor] noise with them)
+        if self.flight is not None:  # [[sensor]] tables (and an [estimator]): their flight tick first
             self.flight.fly(k, t, raw, seen)
-            return
-        if not self.any_noisy:  # (seen is raw)
+            if not self.any_noisy:
+                return
+            # then the ideal path's noise and delay on what the flight gives the law, as
+            # ControlLoop._after_sense (allowed without an [estimator]: the truth-fed run)
+            raw = seen.copy()
+        elif not self.any_noisy:  # (seen is raw)
             return
         rows = np.arange(self.n)
         D = self.delay
