@@ -210,7 +210,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
                 info.args[8][:] = draws[0]
             info.args[0][0] = t
             info.args[1][:] = x
-            info.args[3][:] = held_torque_from(loop.scene, t, loop.bps, duration)
+            u_row = held_torque_from(loop.scene, t, loop.bps, duration)
+            info.args[3][:] = u_row
             info.args[5][0] = th.tick_length(loop, t)
             info.args[6][:] = xa
             info()
@@ -234,7 +235,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
                 par[0] = a * period
                 par[1] = hp
                 par[2] = b - a
-                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration)
+                ta = a * period  # the row's torque when the piece starts at the row (not looked up twice)
+                par[i_ext] = u_row if ta == t else held_torque_from(loop.scene, ta, loop.bps, duration)
                 if nn:  # column-major (nn, n): tick by tick
                     noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
