@@ -121,8 +121,13 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     cmd_s = ca.SX.sym("cmd", 3)
     h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_quiet (not measured again)
     xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, h_s, cmd_s, pa)
-    _, u_b, sat_b = act_u(rest_s)
-    busy_core = sx_function("thr_busy", [t, x, cmd_s, h_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
+    # the thrusters' command alone; `same`: nothing fires and the CMGs get the law's request
+    # exactly (rest == cmd), so the tick's step is thr_quiet's (same inputs, same operations)
+    same = ca.logic_and(ca.sum1(on_s != 0) == 0, ca.sum1(rest_s != cmd_s) == 0)
+    thr_cmd = sx_function("thr_cmd", [t, h, xa, h_s, cmd_s, pa], [xa1_s, rest_s, on_s, tq, same])
+    r_s = ca.SX.sym("rest", 3)
+    _, u_b, sat_b = act_u(r_s)
+    thr_act = sx_function("thr_act", [t, x, r_s, u_ext, p, h], [u_b, sat_b])
     core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
     # explicit branch functions (casadi's Function.if_else): the branch is evaluated from the
@@ -140,24 +145,32 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     c, par = MX.sym("c", nc), MX.sym("par", npar_all)
     nzc = MX.sym("nz", nn)
     quiet_c, busy_c, cmd_c, h_c = quiet(c, par, nzc)
-    # the busy tick (active, not idle): the thrusters' command, then a plain step or the split one
-    # (only if one fires); a quiet tick (or the unused tail) passes thr_quiet's carry on
+    # the busy tick (active, not idle): the thrusters' command; then, when nothing fires and the
+    # CMGs get the law's request (rest == cmd: dumping ticks in assist), thr_quiet's step with the
+    # thrusters' new memory; otherwise the CMGs' actuation of the rest and a plain step or the
+    # split one (only if one fires). A quiet tick (or the unused tail) passes thr_quiet's carry on.
     bc, bpar, bq, bcmd, bhB = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("q", nc), MX.sym("cmd", 3), MX.sym("h_B", 3)
     bi, bx, bcnt, bxa = bc[0], bc[1 : 1 + nx], bc[1 + nx : 3 + nx], bc[3 + nx :]
     bh, bu = bpar[1], bpar[3 + ncp : 6 + ncp]
     bt = bpar[0] + bi * bh
     bp, bpa = bpar[6 + ncp : 6 + ncp + npar], bpar[6 + ncp + npar :]
-    uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa)
-    x_b = pulse(ca.sum1(on) > 0, bt, bx, bh, uu, bp, on, tqq)
+    xa_new, rest, on, tqq, same_c = thr_cmd(bt, bh, bxa, bhB, bcmd, bpa)
+    ar, aon, atq = MX.sym("rest", 3), MX.sym("on", nch), MX.sym("tq", 3 * nch)
+    a_in = [bc, bpar, bq, ar, aon, atq]
+    uu, fl = thr_act(bt, bx, ar, bu, bp, bh)
+    x_b = pulse(ca.sum1(aon) > 0, bt, bx, bh, uu, bp, aon, atq)
+    acted = ca.Function("thr_acted", a_in, [ca.vertcat(bi + 1, x_b, bcnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
+    kept = ca.Function("thr_kept", a_in, [bq[: 3 + nx]])
+    head = ca.Function.if_else("thr_same", kept, acted)(same_c, bc, bpar, bq, rest, on, tqq)
     b_in = [bc, bpar, bq, bcmd, bhB]
-    busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(bi + 1, x_b, bcnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), xa_new)])
+    busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(head, xa_new)])
     tick = ca.Function.if_else("thr_tick", busy, ca.Function("thr_pass", b_in, [bq]))
     c_new = tick(busy_c, c, par, quiet_c, cmd_c, h_c)
     stepf = ca.Function("thr_step", [c, par, nzc], [c_new])
     acc = stepf.mapaccum("thr_acc", n)
     c0, parm, noise = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nn, n)  # column i: tick i's draws
     chunk = ca.Function("thr_chunk", [c0, parm, noise], [acc(c0, ca.repmat(parm, 1, n), noise)[:, -1]])
-    tag = f"thrfused7_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    tag = f"thrfused8_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
