@@ -1,11 +1,15 @@
 """The fused closed loop with thrusters (issue 21): :mod:`.fused` with the
 :class:`~stationbed.loop.thrusters.ThrusterCluster` tick inlined.
 
-Per tick, in one compiled ``mapaccum``: one SX function for the law, the thrusters' exact idle
-test (:meth:`~stationbed.loop.actuator.Actuator.idle_function`) and the quiet tick (the law's
-request to the CMGs, one RK4 step); when not idle, the busy tick: the thrusters' command (the
-same casadi function the per-tick loop compiles), the CMGs' actuation of what they leave, then
-**either** one plain RK4 step (nothing fires) **or** the tick split at every pulse edge
+Per tick, in one compiled ``mapaccum``: one SX function ``thr_quiet`` (as :mod:`.fused`'s whole
+tick: the law, the thrusters' exact idle test
+(:meth:`~stationbed.loop.actuator.Actuator.idle_function`), the measured h, the quiet tick (the
+law's request to the CMGs, one RK4 step) packed as the next carry, the chunk's unused tail held
+by an SX blend) and whether the tick is busy (active and not idle). A busy tick runs the
+thrusters' command (the same casadi function the per-tick loop compiles); when nothing fires and
+the CMGs get the law's request exactly (``rest == cmd``) its step is ``thr_quiet``'s (same inputs,
+same operations); otherwise the CMGs' actuation of the rest, then **either** one plain RK4 step
+(nothing fires) **or** the tick split at every pulse edge
 (:func:`~stationbed.loop.actuator.split_step`: n + 1 RK4 pieces). The choices are casadi
 ``Function.if_else`` of explicit branch functions, so the generated C evaluates only the branch
 taken and computes nothing twice (an ``if_else(..., short_circuit=True)`` on expressions
