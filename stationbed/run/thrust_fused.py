@@ -100,9 +100,6 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
     idle_f = cl.idle_function()
     idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
-    # every tick, one SX function (its common subexpressions shared, as fused.py's tick): the
-    # law, the idle test, the measured h and the quiet tick (the law's request to the CMGs, one
-    # step); the busy tick (the thrusters' command, the CMGs' share) only when not idle
     _, u_q, sat_q = act_u(cmd)
     nc = 1 + nx + 2 + na
     npar_all = 3 + ncp + 3 + npar + npa
