@@ -292,11 +292,14 @@ def test_ledger_equals_logged_on_times():
 
 
 @pytest.mark.parametrize("extra", [{}, {"simulation.duration": 20.05},
-                                   {"torque": [{"kind": "constant", "torque_B": [3.0, -2.0, 1.0], "start": 4.0, "stop": 9.0}]}],
-                         ids=["plain", "short_last_tick", "torque_window_on_grid"])
+                                   {"torque": [{"kind": "constant", "torque_B": [3.0, -2.0, 1.0], "start": 4.0, "stop": 9.0}]},
+                                   {"cmg.h0_B": [99.0, 0.0, 0.0]}, {"thrusters.mode": "thruster_only"}],
+                         ids=["plain", "short_last_tick", "torque_window_on_grid", "handover", "thruster_only"])
 def test_fused_equals_per_tick(extra):
     """16 thrusters in assist: the fused loop's rows equal the per-tick loop's to round-off (also
-    with a short last period and a torque window whose edges the fused loop cuts on the grid)."""
+    with a short last period and a torque window whose edges the fused loop cuts on the grid, and
+    through handover and in thruster-only control, where ticks that fire nothing give the CMGs a
+    rest other than the law's request: the fused tick's branch that actuates the rest)."""
     s = sphere(pods()).replace(extra)
     a, b = simulate(s, fused=False), simulate(s, fused=True)
     assert b.meta["summary"]["fused"] and not a.meta["summary"]["fused"]

@@ -108,10 +108,13 @@ class ThrustLoop:
 
     def row(self, x=None) -> list[float]:
         """The row's values (:func:`thruster_columns`) from the actuator state ``x`` before the tick."""
-        s = self.cluster.state
         x = self.x_row if x is None else x
-        vals = [s.get(x, k) for k in ("mode", "dumping", "firings", "control_s", "impulse_Ns", "propellant_kg")]
-        return [float(np.ravel(v)[0]) for v in vals] + list(np.ravel(s.get(x, "on_total_s")))
+        idx = getattr(self, "_row_idx", None)
+        if idx is None:  # the state's numbers a row reports, found once (a row per output sample)
+            s = self.cluster.state
+            idx = [s.slice(k).start for k in ("mode", "dumping", "firings", "control_s", "impulse_Ns", "propellant_kg")]
+            self._row_idx = idx = np.array(idx + list(range(s.size))[s.slice("on_total_s")])
+        return np.asarray(x, dtype=float)[idx].tolist()
 
     def summary(self, loop) -> dict:
         """What the summary adds to the thruster metrics (propellant_kg and the other totals are

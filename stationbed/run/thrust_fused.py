@@ -1,11 +1,15 @@
 """The fused closed loop with thrusters (issue 21): :mod:`.fused` with the
 :class:`~stationbed.loop.thrusters.ThrusterCluster` tick inlined.
 
-Per tick, in one compiled ``mapaccum``: one SX function for the law, the thrusters' exact idle
-test (:meth:`~stationbed.loop.actuator.Actuator.idle_function`) and the quiet tick (the law's
-request to the CMGs, one RK4 step); when not idle, the busy tick: the thrusters' command (the
-same casadi function the per-tick loop compiles), the CMGs' actuation of what they leave, then
-**either** one plain RK4 step (nothing fires) **or** the tick split at every pulse edge
+Per tick, in one compiled ``mapaccum``: one SX function ``thr_quiet`` (as :mod:`.fused`'s whole
+tick: the law, the thrusters' exact idle test
+(:meth:`~stationbed.loop.actuator.Actuator.idle_function`), the measured h, the quiet tick (the
+law's request to the CMGs, one RK4 step) packed as the next carry, the chunk's unused tail held
+by an SX blend) and whether the tick is busy (active and not idle). A busy tick runs the
+thrusters' command (the same casadi function the per-tick loop compiles); when nothing fires and
+the CMGs get the law's request exactly (``rest == cmd``) its step is ``thr_quiet``'s (same inputs,
+same operations); otherwise the CMGs' actuation of the rest, then **either** one plain RK4 step
+(nothing fires) **or** the tick split at every pulse edge
 (:func:`~stationbed.loop.actuator.split_step`: n + 1 RK4 pieces). The choices are casadi
 ``Function.if_else`` of explicit branch functions, so the generated C evaluates only the branch
 taken and computes nothing twice (an ``if_else(..., short_circuit=True)`` on expressions
@@ -96,17 +100,35 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
     idle_f = cl.idle_function()
     idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
-    # every tick, one SX function (its common subexpressions shared, as fused.py's tick): the
-    # law, the idle test, the measured h and the quiet tick (the law's request to the CMGs, one
-    # step); the busy tick (the thrusters' command, the CMGs' share) only when not idle
     _, u_q, sat_q = act_u(cmd)
-    quiet = sx_function("thr_quiet", [t, x, cp, u_ext, p, h, xa, pa, nz],
-                        [ca.vertcat(step(rhs, t, x, h, u_q, p), sat_q, xa), cmd, idle, y[th.h_slice]])
+    nc = 1 + nx + 2 + na
+    npar_all = 3 + ncp + 3 + npar + npa
+    # every tick, one SX function as fused.py's whole tick (its common subexpressions shared): the
+    # law, the idle test, the measured h, the quiet tick (the law's request to the CMGs, one step)
+    # packed as the next carry, the chunk's unused tail (i >= n_act) held by an SX blend (cheap in
+    # SX), and whether this tick is busy (active and not idle)
+    cs, ps_ = ca.SX.sym("c", nc), ca.SX.sym("par", npar_all)
+    i_s, x_s, cnt_s, xa_c = cs[0], cs[1 : 1 + nx], cs[1 + nx : 3 + nx], cs[3 + nx :]
+    t0_s, hh_s, nact_s = ps_[0], ps_[1], ps_[2]
+    sub_from = [t, x, cp, u_ext, p, h, xa, pa]
+    sub_to = [t0_s + i_s * hh_s, x_s, ps_[3 : 3 + ncp], ps_[3 + ncp : 6 + ncp], ps_[6 + ncp : 6 + ncp + npar], hh_s,
+              xa_c, ps_[6 + ncp + npar :]]
+    x_q, cmd_q, idle_q, sat_qq, hB_q = ca.substitute([step(rhs, t, x, h, u_q, p), cmd, idle, sat_q, y[th.h_slice]],
+                                                     sub_from, sub_to)
+    act_s = i_s < nact_s
+    c_quiet = ca.vertcat(i_s + 1, ca.if_else(act_s, x_q, x_s),
+                         cnt_s + ca.if_else(act_s, ca.vertcat(sat_qq[0] > 0.5, sat_qq[1] > 0.5), ca.SX.zeros(2)), xa_c)
+    quiet = sx_function("thr_quiet", [cs, ps_, nz], [c_quiet, ca.logic_and(act_s, idle_q < 0.5), cmd_q, hB_q])
     cmd_s = ca.SX.sym("cmd", 3)
-    h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_pre (not measured again)
+    h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_quiet (not measured again)
     xa1_s, rest_s, on_s, tq, _ = cl.function()(t, h, xa, h_s, cmd_s, pa)
-    _, u_b, sat_b = act_u(rest_s)
-    busy_core = sx_function("thr_busy", [t, x, cmd_s, h_s, u_ext, p, h, xa, pa], [u_b, on_s, tq, xa1_s, sat_b])
+    # the thrusters' command alone; `same`: nothing fires and the CMGs get the law's request
+    # exactly (rest == cmd), so the tick's step is thr_quiet's (same inputs, same operations)
+    same = ca.logic_and(ca.sum1(on_s != 0) == 0, ca.sum1(rest_s != cmd_s) == 0)
+    thr_cmd = sx_function("thr_cmd", [t, h, xa, h_s, cmd_s, pa], [xa1_s, rest_s, on_s, tq, same])
+    r_s = ca.SX.sym("rest", 3)
+    _, u_b, sat_b = act_u(r_s)
+    thr_act = sx_function("thr_act", [t, x, r_s, u_ext, p, h], [u_b, sat_b])
     core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
     # explicit branch functions (casadi's Function.if_else): the branch is evaluated from the
@@ -121,36 +143,35 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     nzi = MX.sym("nz", nn)
     info = ca.Function("thr_info", [ti, xi, cpi, ui, pi_, hi, xai, pai, nzi],
                        [core(ti, xi, cpi, ui, pi_, hi, xai, pai, nzi)])
-    nc = 1 + nx + 2 + na
-    npar_all = 3 + ncp + 3 + npar + npa
     c, par = MX.sym("c", nc), MX.sym("par", npar_all)
-    i, xc, cnt, xac = c[0], c[1 : 1 + nx], c[1 + nx : 3 + nx], c[3 + nx :]
-    t0, hh, n_act = par[0], par[1], par[2]
-    cpc, uc = par[3 : 3 + ncp], par[3 + ncp : 6 + ncp]
-    pc, pac = par[6 + ncp : 6 + ncp + npar], par[6 + ncp + npar :]
-    tt = t0 + i * hh
     nzc = MX.sym("nz", nn)
-    quiet_c, cmd_c, idle_c, h_c = quiet(tt, xc, cpc, uc, pc, hh, xac, pac, nzc)
-    # the busy tick: the thrusters' command, then a plain step or the split one (only if one fires)
-    bx, bcmd, bu, bxa, bhB = MX.sym("x", nx), MX.sym("cmd", 3), MX.sym("u_ext", 3), MX.sym("xa", na), MX.sym("h_B", 3)
-    bt, bh, bp, bpa = MX.sym("t"), MX.sym("h"), MX.sym("p", npar), MX.sym("pa", npa)
-    bq = MX.sym("q", nx + 2 + na)
-    uu, on, tqq, xa_new, fl = busy_core(bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa)
-    x_b = pulse(ca.sum1(on) > 0, bt, bx, bh, uu, bp, on, tqq)
-    b_in = [bq, bt, bx, bcmd, bhB, bu, bp, bh, bxa, bpa]
-    busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(x_b, fl, xa_new)])
-    tick = ca.Function.if_else("thr_tick", ca.Function("thr_pass", b_in, [bq]), busy)
-    res = tick(idle_c, quiet_c, tt, xc, cmd_c, h_c, uc, pc, hh, xac, pac)
-    x_new, fl, xa_new = res[0:nx], res[nx : nx + 2], res[nx + 2 :]
-    act_ = i < n_act
-    c_new = ca.vertcat(i + 1, ca.if_else(act_, x_new, xc),
-                       cnt + ca.if_else(act_, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), MX.zeros(2)),
-                       ca.if_else(act_, xa_new, xac))
+    quiet_c, busy_c, cmd_c, h_c = quiet(c, par, nzc)
+    # the busy tick (active, not idle): the thrusters' command; then, when nothing fires and the
+    # CMGs get the law's request (rest == cmd: dumping ticks in assist), thr_quiet's step with the
+    # thrusters' new memory; otherwise the CMGs' actuation of the rest and a plain step or the
+    # split one (only if one fires). A quiet tick (or the unused tail) passes thr_quiet's carry on.
+    bc, bpar, bq, bcmd, bhB = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("q", nc), MX.sym("cmd", 3), MX.sym("h_B", 3)
+    bi, bx, bcnt, bxa = bc[0], bc[1 : 1 + nx], bc[1 + nx : 3 + nx], bc[3 + nx :]
+    bh, bu = bpar[1], bpar[3 + ncp : 6 + ncp]
+    bt = bpar[0] + bi * bh
+    bp, bpa = bpar[6 + ncp : 6 + ncp + npar], bpar[6 + ncp + npar :]
+    xa_new, rest, on, tqq, same_c = thr_cmd(bt, bh, bxa, bhB, bcmd, bpa)
+    ar, aon, atq = MX.sym("rest", 3), MX.sym("on", nch), MX.sym("tq", 3 * nch)
+    a_in = [bc, bpar, bq, ar, aon, atq]
+    uu, fl = thr_act(bt, bx, ar, bu, bp, bh)
+    x_b = pulse(ca.sum1(aon) > 0, bt, bx, bh, uu, bp, aon, atq)
+    acted = ca.Function("thr_acted", a_in, [ca.vertcat(bi + 1, x_b, bcnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
+    kept = ca.Function("thr_kept", a_in, [bq[: 3 + nx]])
+    head = ca.Function.if_else("thr_same", kept, acted)(same_c, bc, bpar, bq, rest, on, tqq)
+    b_in = [bc, bpar, bq, bcmd, bhB]
+    busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(head, xa_new)])
+    tick = ca.Function.if_else("thr_tick", busy, ca.Function("thr_pass", b_in, [bq]))
+    c_new = tick(busy_c, c, par, quiet_c, cmd_c, h_c)
     stepf = ca.Function("thr_step", [c, par, nzc], [c_new])
     acc = stepf.mapaccum("thr_acc", n)
     c0, parm, noise = MX.sym("c0", nc), MX.sym("par", npar_all), MX.sym("noise", nn, n)  # column i: tick i's draws
     chunk = ca.Function("thr_chunk", [c0, parm, noise], [acc(c0, ca.repmat(parm, 1, n), noise)[:, -1]])
-    tag = f"thrfused6_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
+    tag = f"thrfused8_n{int(flags[0])}{int(flags[1])}_{form.name}_{type(ctrl).__name__}_{n}_{cl.key}_{model.structure.key}"
     funcs = compile_functions([info, chunk], tag)
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
@@ -203,7 +224,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
                 info.args[8][:] = draws[0]
             info.args[0][0] = t
             info.args[1][:] = x
-            info.args[3][:] = held_torque_from(loop.scene, t, loop.bps, duration)
+            u_row = held_torque_from(loop.scene, t, loop.bps, duration)
+            info.args[3][:] = u_row
             info.args[5][0] = th.tick_length(loop, t)
             info.args[6][:] = xa
             info()
@@ -227,7 +249,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
                 par[0] = a * period
                 par[1] = hp
                 par[2] = b - a
-                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration)
+                ta = a * period  # the row's torque when the piece starts at the row (not looked up twice)
+                par[i_ext] = u_row if ta == t else held_torque_from(loop.scene, ta, loop.bps, duration)
                 if nn:  # column-major (nn, n): tick by tick
                     noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
