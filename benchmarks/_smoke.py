@@ -10,8 +10,10 @@ measurements: the first line printed says so.
 from __future__ import annotations
 
 import os
+import statistics
+import time
 
-__all__ = ["ENV", "SMOKE_DURATION_S", "add_option", "announce", "verdict", "targets_exit"]
+__all__ = ["ENV", "SMOKE_DURATION_S", "add_option", "announce", "verdict", "targets_exit", "interleaved"]
 
 #: the environment variable that turns smoke mode on for every script (e.g. in CI)
 ENV = "STATIONBED_BENCH_SMOKE"
@@ -41,3 +43,27 @@ def verdict(ok: bool, smoke: bool) -> str:
 def targets_exit(ok: bool, smoke: bool) -> int:
     """The exit status of a script whose targets are ``ok``: 0 in smoke mode whatever they are."""
     return 0 if smoke or ok else 1
+
+
+def interleaved(runs: dict, repeats: int):
+    """Time the callables of ``runs`` side by side: one warm-up call each (compiles, loads), then
+    ``repeats`` rounds calling each once in turn. Returns ``(first, build_s, wall, cpu, load)``:
+    the warm-up results by name, the warm-up's wall time [s], the median wall and process-CPU
+    times [s] by name, and the load average (mean of before and after the rounds; NaN where the
+    platform has none)."""
+    t_build = time.perf_counter()
+    first = {name: f() for name, f in runs.items()}
+    build_s = time.perf_counter() - t_build
+    walls = {name: [] for name in runs}
+    cpus = {name: [] for name in runs}
+    load0 = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    for _ in range(repeats):
+        for name, f in runs.items():
+            c0, t0 = time.process_time(), time.perf_counter()
+            f()
+            walls[name].append(time.perf_counter() - t0)
+            cpus[name].append(time.process_time() - c0)
+    load = (load0 + os.getloadavg()[0]) / 2 if hasattr(os, "getloadavg") else float("nan")
+    wall = {k: statistics.median(v) for k, v in walls.items()}
+    cpu = {k: statistics.median(v) for k, v in cpus.items()}
+    return first, build_s, wall, cpu, load

@@ -19,9 +19,7 @@ import argparse
 import json
 import math
 import os
-import statistics
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,21 +52,7 @@ def main(argv=None) -> int:
         "per_tick_truth": lambda: stationbed.simulate(truth, duration=T, fused=False),
         "per_tick_estimated": lambda: stationbed.simulate(est, duration=T, fused=False),
     }
-    t_build = time.perf_counter()
-    first = {name: f() for name, f in runs.items()}
-    build_s = time.perf_counter() - t_build
-    walls = {name: [] for name in runs}
-    cpus = {name: [] for name in runs}
-    load0 = os.getloadavg()[0]
-    for _ in range(args.repeats):
-        for name, f in runs.items():
-            c0, t0 = time.process_time(), time.perf_counter()
-            f()
-            walls[name].append(time.perf_counter() - t0)
-            cpus[name].append(time.process_time() - c0)
-    load = (load0 + os.getloadavg()[0]) / 2
-    med = {k: statistics.median(v) for k, v in walls.items()}
-    cpu = {k: statistics.median(v) for k, v in cpus.items()}
+    first, build_s, med, cpu, load = _smoke.interleaved(runs, args.repeats)
     ratio = med["fused_estimated"] / med["fused_truth"]
     ratio_tick = med["per_tick_estimated"] / med["per_tick_truth"]
     ratio_cpu = cpu["fused_estimated"] / cpu["fused_truth"]

@@ -17,10 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import statistics
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,26 +48,13 @@ def main(argv=None) -> int:
         "fused_bare": lambda: stationbed.simulate(bare, duration=T, fused=True),
         "fused_thrusters": lambda: stationbed.simulate(thr, duration=T, fused=True),
     }
-    t_build = time.perf_counter()
-    first = {name: f() for name, f in runs.items()}
-    build_s = time.perf_counter() - t_build
-    walls = {name: [] for name in runs}
-    cpus = {name: [] for name in runs}
-    for _ in range(args.repeats):
-        for name, f in runs.items():
-            t0, c0 = time.perf_counter(), time.process_time()
-            f()
-            walls[name].append(time.perf_counter() - t0)
-            cpus[name].append(time.process_time() - c0)
-    med = {k: statistics.median(v) for k, v in walls.items()}
-    cpu = {k: statistics.median(v) for k, v in cpus.items()}
+    first, build_s, med, cpu, load = _smoke.interleaved(runs, args.repeats)
     ratio_wall = med["fused_thrusters"] / med["fused_bare"]
     # judged on CPU time: both runs are one thread, and on a machine shared with other jobs the
     # wall time also counts the waits for a core (the wall ratio is printed beside it)
     ratio = cpu["fused_thrusters"] / cpu["fused_bare"]
     s = first["fused_thrusters"].meta["summary"]
     assert s["fused"] and first["fused_bare"].meta["summary"]["fused"], "both runs must take the fused loop"
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
     print(f"# one orbit ({T:.1f} s) of {thr.name}, fused, 16 thrusters in assist vs none "
           f"(median of {args.repeats}, interleaved; warm-up incl. compile/load {build_s:.1f} s; load average {load:.1f})")
     print("| fused loop | no thrusters [s] | 16 thrusters, assist [s] | ratio |")
