@@ -28,12 +28,11 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
-from ..integrators import IntegrationError
 from . import law_state
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
-from .segments import held_torque_from, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
 from .system import environment_split as rates_split
 from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
@@ -306,21 +305,11 @@ def run_fused(loop, K: int) -> None:
                 env_c = res[3 + nx :].copy()
             par[1] = period
             ticks += n_act
-            loop.n_rate_limited += int(counts[0])
-            loop.n_momentum_saturated += int(counts[1])
-            # saturation in this chunk's ticks after the row tick goes into the next row (as the
-            # per-tick loop does: a row reports the ticks since the previous row)
-            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
-            if not np.all(np.isfinite(x)):
-                loop.ticks = ticks
-                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+            tail_flag = close_chunk(loop, ticks, counts, lim, sat, x, min((k + n_act) * period, duration))
     finally:
-        loop.ticks = ticks
         loop.x = x[:nx0]
         law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
-        ctrl.count_compiled_updates(ticks + 1)
-        loop.integ.count_steps(ticks)
-        loop.rows.flush()
+        finish_chunks(loop, ctrl, ticks)
 
 
 def _draw(loop, n: int, flags) -> np.ndarray:

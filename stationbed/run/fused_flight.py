@@ -23,11 +23,10 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
-from ..integrators import IntegrationError
 from ..loop import Layout
 from ..loop.flight import READS, SEEN
 from . import law_state
-from .segments import held_torque_from, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
 
@@ -216,16 +215,8 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
                 c0[:] = res
             x = c0[cx].copy()
             ticks += n_act
-            loop.n_rate_limited += int(counts[0])
-            loop.n_momentum_saturated += int(counts[1])
-            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
-            if not np.all(np.isfinite(x)):
-                loop.ticks = ticks
-                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+            tail_flag = close_chunk(loop, ticks, counts, lim, sat, x, min((k + n_act) * period, duration))
     finally:
-        loop.ticks = ticks
         loop.x = x[:nx0]
         law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
-        ctrl.count_compiled_updates(ticks + 1)
-        loop.integ.count_steps(ticks)
-        loop.rows.flush()
+        finish_chunks(loop, ctrl, ticks)

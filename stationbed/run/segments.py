@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from ..integrators import IntegrationError
 from ..model import StationModel
 from ..model.shadow_edges import shadow_edges
 from ..model.torques import held_torque_B, torque_breakpoints
@@ -20,6 +21,8 @@ __all__ = [
     "held_torque",
     "held_torque_from",
     "tick_pieces",
+    "close_chunk",
+    "finish_chunks",
     "segment_input",
 ]
 
@@ -137,3 +140,27 @@ def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> li
     if n_full < n_act:  # the short final period
         pieces.append((k + n_full, k + n_act, last_len))
     return pieces
+
+
+def close_chunk(loop, ticks: int, counts, lim: int, sat: int, x, t_end: float) -> int:
+    """After a compiled chunk of the fused loops (run/fused.py, fused_flight.py, thrust_fused.py):
+    count its rate-limited and saturated ticks (``counts``) on ``loop``, stop with
+    IntegrationError at ``t_end`` when the state ``x`` is not finite (``loop.ticks`` set to the
+    ``ticks`` run), and return the next row's flag: saturation in the chunk's ticks after the row
+    tick (whose own ``lim``/``sat`` its row reported) goes into the next row, as the per-tick loop
+    does (a row reports the ticks since the previous row)."""
+    loop.n_rate_limited += int(counts[0])
+    loop.n_momentum_saturated += int(counts[1])
+    if not np.all(np.isfinite(x)):
+        loop.ticks = ticks
+        raise IntegrationError(t_end, "state is not finite (NaN or inf)")
+    return int((counts[0] - lim) + (counts[1] - sat) > 0.5)
+
+
+def finish_chunks(loop, ctrl, ticks: int) -> None:
+    """The fused loops' end (also after a failure): ticks run, the law's compiled updates (the
+    ticks and the last row's), the integrator's steps, the rows flushed."""
+    loop.ticks = ticks
+    ctrl.count_compiled_updates(ticks + 1)
+    loop.integ.count_steps(ticks)
+    loop.rows.flush()

@@ -30,12 +30,11 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
-from ..integrators import IntegrationError
 from ..loop.actuator import split_step
 from .controller import ControllerError, one_line
 from . import law_state
 from .rates import environment_rate
-from .segments import held_torque_from, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
 
 __all__ = ["fused_thrust_ok", "run_fused_thrust"]
 
@@ -259,16 +258,8 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
                 counts += res[1 + nx : 3 + nx]
                 xa = res[3 + nx : 3 + nx + na].copy()
             ticks += n_act
-            loop.n_rate_limited += int(counts[0])
-            loop.n_momentum_saturated += int(counts[1])
-            tail_flag = int((counts[0] - lim) + (counts[1] - sat) > 0.5)
-            if not np.all(np.isfinite(x)):
-                loop.ticks = ticks
-                raise IntegrationError(min((k + n_act) * period, duration), "state is not finite (NaN or inf)")
+            tail_flag = close_chunk(loop, ticks, counts, lim, sat, x, min((k + n_act) * period, duration))
     finally:
-        loop.ticks = ticks
         loop.x = x
         th.x = th.x_row = xa
-        ctrl.count_compiled_updates(ticks + 1)
-        loop.integ.count_steps(ticks)
-        loop.rows.flush()
+        finish_chunks(loop, ctrl, ticks)
