@@ -12,8 +12,9 @@ from __future__ import annotations
 import os
 import statistics
 import time
+from typing import NamedTuple
 
-__all__ = ["ENV", "SMOKE_DURATION_S", "add_option", "announce", "verdict", "targets_exit", "interleaved"]
+__all__ = ["ENV", "SMOKE_DURATION_S", "add_option", "announce", "verdict", "targets_exit", "interleaved", "Timed"]
 
 #: the environment variable that turns smoke mode on for every script (e.g. in CI)
 ENV = "STATIONBED_BENCH_SMOKE"
@@ -45,12 +46,24 @@ def targets_exit(ok: bool, smoke: bool) -> int:
     return 0 if smoke or ok else 1
 
 
-def interleaved(runs: dict, repeats: int):
+class Timed(NamedTuple):
+    """What :func:`interleaved` measured: the warm-up results by name, the warm-up's wall time
+    [s], the median wall and process-CPU times [s] by name, the load average (mean of before and
+    after the rounds; NaN where the platform has none), every round's wall and CPU times by name."""
+
+    first: dict
+    build_s: float
+    wall: dict
+    cpu: dict
+    load: float
+    walls: dict
+    cpus: dict
+
+
+def interleaved(runs: dict, repeats: int) -> Timed:
     """Time the callables of ``runs`` side by side: one warm-up call each (compiles, loads), then
-    ``repeats`` rounds calling each once in turn. Returns ``(first, build_s, wall, cpu, load)``:
-    the warm-up results by name, the warm-up's wall time [s], the median wall and process-CPU
-    times [s] by name, and the load average (mean of before and after the rounds; NaN where the
-    platform has none)."""
+    ``repeats`` rounds calling each once in turn (interleaved: every run sees the same machine
+    load)."""
     t_build = time.perf_counter()
     first = {name: f() for name, f in runs.items()}
     build_s = time.perf_counter() - t_build
@@ -66,4 +79,4 @@ def interleaved(runs: dict, repeats: int):
     load = (load0 + os.getloadavg()[0]) / 2 if hasattr(os, "getloadavg") else float("nan")
     wall = {k: statistics.median(v) for k, v in walls.items()}
     cpu = {k: statistics.median(v) for k, v in cpus.items()}
-    return first, build_s, wall, cpu, load
+    return Timed(first, build_s, wall, cpu, load, walls, cpus)

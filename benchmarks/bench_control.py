@@ -27,7 +27,6 @@ import json
 import math
 import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -67,24 +66,14 @@ def main(argv=None) -> int:
     scene = stationbed.load_scene(args.scene)
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / scene.orbit.mean_motion
     env_scene = scene.replace({"simulation.environment_rate": ENV_RATE})
-    t_build = time.perf_counter()
     runs = {
         "python": lambda: stationbed.simulate(scene, duration=T, fused=False),
         "fused": lambda: stationbed.simulate(scene, duration=T, fused=True),
         f"fused_env{ENV_RATE}": lambda: stationbed.simulate(env_scene, duration=T, fused=True),
     }
-    first = {name: f() for name, f in runs.items()}  # warm-up: compile / load cached builds
-    build_s = time.perf_counter() - t_build
-    walls = {name: [] for name in runs}
-    cpus = {name: [] for name in runs}  # CPU time: what other work on a shared machine inflates least
-    for _ in range(args.repeats):
-        for name, f in runs.items():  # interleaved: both see the same machine load
-            t0, c0 = time.perf_counter(), time.process_time()
-            f()
-            walls[name].append(time.perf_counter() - t0)
-            cpus[name].append(time.process_time() - c0)
-    med = {k: statistics.median(v) for k, v in walls.items()}
-    med_cpu = {k: statistics.median(v) for k, v in cpus.items()}
+    # warm-up (compile / load cached builds), then interleaved rounds: all see the same machine
+    # load; CPU time is what other work on a shared machine inflates least
+    first, build_s, med, med_cpu, _, walls, cpus = _smoke.interleaved(runs, args.repeats)
 
     ref = stationbed.simulate(scene, duration=T, integrator="dop853", rtol=1e-12, atol=1e-14)
     rows = []

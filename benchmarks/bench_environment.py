@@ -23,9 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import statistics
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,14 +67,7 @@ def main(argv=None) -> int:
         kw = {"fused": True} if base.controller is not None else {}
         runs = {"before": lambda s=base: stationbed.simulate(s, duration=T, **kw),
                 "with environment": lambda s=new: stationbed.simulate(s, duration=T, **kw)}
-        first = {k: f() for k, f in runs.items()}  # warm-up (compile or load the cached build)
-        walls = {k: [] for k in runs}
-        for _ in range(args.repeats):
-            for k, f in runs.items():
-                t0 = time.perf_counter()
-                f()
-                walls[k].append(time.perf_counter() - t0)
-        med = {k: statistics.median(v) for k, v in walls.items()}
+        first, _, med, *_ = _smoke.interleaved(runs, args.repeats)  # warm-up, then interleaved rounds
         ratio = med["with environment"] / med["before"]
         target = TARGET_OPEN if label.startswith("open loop") else TARGET_CLOSED
         out[label] = {"before_s": med["before"], "env_s": med["with environment"], "ratio": ratio, "target": target,

@@ -52,7 +52,7 @@ def main(argv=None) -> int:
         "per_tick_truth": lambda: stationbed.simulate(truth, duration=T, fused=False),
         "per_tick_estimated": lambda: stationbed.simulate(est, duration=T, fused=False),
     }
-    first, build_s, med, cpu, load = _smoke.interleaved(runs, args.repeats)
+    first, build_s, med, cpu, load, *_ = _smoke.interleaved(runs, args.repeats)
     ratio = med["fused_estimated"] / med["fused_truth"]
     ratio_tick = med["per_tick_estimated"] / med["per_tick_truth"]
     ratio_cpu = cpu["fused_estimated"] / cpu["fused_truth"]

@@ -48,7 +48,7 @@ def main(argv=None) -> int:
         "fused_bare": lambda: stationbed.simulate(bare, duration=T, fused=True),
         "fused_thrusters": lambda: stationbed.simulate(thr, duration=T, fused=True),
     }
-    first, build_s, med, cpu, load = _smoke.interleaved(runs, args.repeats)
+    first, build_s, med, cpu, load, *_ = _smoke.interleaved(runs, args.repeats)
     ratio_wall = med["fused_thrusters"] / med["fused_bare"]
     # judged on CPU time: both runs are one thread, and on a machine shared with other jobs the
     # wall time also counts the waits for a core (the wall ratio is printed beside it)
