@@ -130,18 +130,18 @@ def test_a_nan_inside_a_bulk_call_stops_where_the_row_by_row_loop_stops(monkeypa
 
 def test_a_loop_whose_rows_hold_other_columns_runs_row_by_row_with_the_same_draws(monkeypatch):
     """The bulk rows check the first row's held values against the executor's own
-    (``_held_row``); a loop whose rows hold something else (here: a planted extra column) falls
+    (``RunState.held_row``); a loop whose rows hold something else (here: a planted extra column) falls
     back to row by row — after the bulk call drew its sensor noise, so the generator is put
     back: the run is the row-by-row run, draws included."""
-    from stationbed.run import closed_loop
+    from stationbed.run import composition
 
     scene = _slew_scene(20, True)
     with monkeypatch.context() as m:
         _row_by_row(m)
         one = simulate(scene, duration=50.0)
-    real = closed_loop.ControlLoop._held_row
+    real = composition.RunState.held_row
     seen = _spy(monkeypatch)
-    monkeypatch.setattr(closed_loop.ControlLoop, "_held_row", lambda self, f: (real(self, f)[0][:-1] + [0.5], real(self, f)[1]))
+    monkeypatch.setattr(composition.RunState, "held_row", lambda self, f, t=0.0: (real(self, f, t)[0][:-1] + [0.5], real(self, f, t)[1]))
     other = simulate(scene, duration=50.0)
     assert seen == [0]
     cols = [i for i, c in enumerate(one.columns) if c != "att_err_z_deg"]  # the planted column

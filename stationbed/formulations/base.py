@@ -16,6 +16,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from ..core.layout import Layout
 from ..core.linalg import inv3
 from ..core.rotation import dcm, quat_kinematics
 from ..model import StationModel
@@ -73,6 +74,26 @@ class Formulation:
     def nx(self) -> int:
         """Size of the state."""
         return len(self.state_names)
+
+    @property
+    def state_layout(self) -> Layout:
+        """The state ``x`` by name (its indices are owned here): ``q_BN`` (4), the form's rate
+        state (``omega_BN_B``, or ``H_O_B`` for the momentum form: :attr:`rate_field`), then the
+        model's extra states: ``x_cmg`` (the CMG cluster's), ``joints`` (driven array joints),
+        ``eta`` and the second modal state (those the scene has)."""
+        m = self.model
+        n_cmg = 0 if m.cmg is None else m.cmg.nx
+        fields = {"q_BN": 4, self.rate_field: 3}
+        for name, n in (("x_cmg", n_cmg), ("joints", m.n_extra - n_cmg), ("eta", m.n_modes),
+                        (self.modal_state_prefix, m.n_modes)):
+            if n:
+                fields[name] = n
+        return Layout(**fields)
+
+    @property
+    def rate_field(self) -> str:
+        """The name of the form's second core state: ``omega_BN_B`` when it is the body rate."""
+        return "omega_BN_B" if self.omega_is_state else "H_O_B"
 
     # -- helpers for implementers --------------------------------------------------------
     def arrays(self, t, x, p, omega_BN_B=None, u=None):

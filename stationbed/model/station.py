@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
+from ..core.layout import Layout
 from ..core.linalg import inv3
 from ..core.massprops import composite_cm, parallel_axis
 from ..core.rotation import dcm
@@ -110,6 +111,11 @@ class StationModel:
         #: a step for every stage (a step on a segment edge is then exact for any integrator)
         self.has_steps = any(n > 0 for a in structure.joints for _, n in a)
         self.nu = 3 + self.nu_cmg + (1 if self.has_steps else 0)
+        #: the held input ``u`` by name (its indices are owned here): ``u_ext`` the external
+        #: torque held over a segment (B, N m), ``u_cmg`` the CMG cluster's held input (its
+        #: actuator's command), ``t_step`` the segment's mid time (only with rate steps)
+        self.input_layout = Layout(u_ext=3, **({"u_cmg": self.nu_cmg} if self.nu_cmg else {}),
+                                   **({"t_step": 1} if self.has_steps else {}))
         #: whether a torque kind reads the arrays and the sun (external_torque needs ``arrays``)
         self.needs_arrays = any(k.needs_env for k in self.torques)
 

@@ -33,7 +33,7 @@ from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
 from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
-from .system import environment_split as rates_split
+from .system import chain_end_inputs, environment_split as rates_split
 from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
 __all__ = ["fused_ok", "run_fused"]
@@ -41,44 +41,44 @@ __all__ = ["fused_ok", "run_fused"]
 _CHUNKS: dict[tuple, dict] = {}
 
 
-def _edge_ticks(loop) -> list[int] | None:
+def _edge_ticks(comp) -> list[int] | None:
     """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) of the
-    discontinuities inside the run; None when one lies between ticks or the scene has array rate
-    steps (both need the per-tick loop)."""
-    inside = [b for b in loop.bps if 0.0 < b < loop.duration]
-    if inside and loop.model.has_steps:
+    discontinuities inside the run of ``comp`` (its :class:`~.composition.Composition`); None
+    when one lies between ticks or the scene has array rate steps (both need the per-tick loop)."""
+    inside = [b for b in comp.bps if 0.0 < b < comp.duration]
+    if inside and comp.model.has_steps:
         return None
-    ks = [round(b / loop.period) for b in inside]
-    if any(k * loop.period != b for k, b in zip(ks, inside)):
+    ks = [round(b / comp.period) for b in inside]
+    if any(k * comp.period != b for k, b in zip(ks, inside)):
         return None
     return sorted(set(ks))
 
 
-def fused_ok(loop) -> bool:
-    """Whether ``loop`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
+def fused_ok(comp) -> bool:
+    """Whether the run composed by ``comp`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
     integrator at one step per period, every discontinuity inside the run on the tick grid
     (:func:`_edge_ticks`), no sensor delay (sensor noise is drawn in Python and applied inside
     the compiled tick: :func:`_noise_width`)."""
-    ctrl = loop.ctrl
-    integ = loop.integ
+    ctrl = comp.ctrl
+    integ = comp.integ
     return (
         callable(getattr(ctrl, "symbolic", None))
         and integ.fusable
-        and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1
-        and _edge_ticks(loop) is not None
-        and not (loop.noisy and loop.delay > 0)
-        and loop.system.sx is not None
-        and not (getattr(loop, "flight", None) is not None and loop.noisy)
-        and getattr(loop, "replan", None) is None  # a failure detected mid-run: per tick (run/detection.py)
-        and fused_thrust_ok(loop)  # thrusters (issue 21): their own fused chunk, or per tick
+        and math.ceil(comp.period / integ.h_nominal - 1e-9) == 1
+        and _edge_ticks(comp) is not None
+        and not (comp.noisy and comp.delay > 0)
+        and comp.system.sx is not None
+        and not (comp.flight is not None and comp.noisy)
+        and comp.replan is None  # a failure detected mid-run: per tick (run/detection.py)
+        and fused_thrust_ok(comp)  # thrusters (issue 21): their own fused chunk, or per tick
     )
 
 
-def _noise_flags(loop) -> tuple[bool, bool]:
+def _noise_flags(comp) -> tuple[bool, bool]:
     """(attitude noise on, rate noise on): which corruptions of ``ControlLoop._corrupt`` apply."""
-    if not loop.noisy:
+    if not comp.noisy:
         return False, False
-    return loop.sensor.attitude_noise > 0, loop.sensor.rate_noise > 0
+    return comp.sensor.attitude_noise > 0, comp.sensor.rate_noise > 0
 
 
 def _noise_width(flags) -> int:
@@ -111,17 +111,15 @@ def _corrupt_sx(y, nz, flags, layout):
     return ca.vertcat(*parts)
 
 
-def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
+def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
     """Compiled ``info`` (one tick's command, actuation, reference) and ``chunk`` (n ticks);
     with sensor noise (``flags``), both take each tick's draws as an extra input."""
-    system, ctrl = loop.system, loop.ctrl
+    system, ctrl = comp.system, comp.ctrl
     sx = system.sx
     form = system.formulation
     model = form.model
     nx, npar = form.nx, model.layout.size
     ncp = len(_symbolic_params(ctrl))
-    kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
-    ng = loop.ng
     t, t0, h = ca.SX.sym("t"), ca.SX.sym("t0"), ca.SX.sym("h")
     ns = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
     xa = ca.SX.sym("x", nx + ns)
@@ -133,22 +131,11 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
     nn = _noise_width(flags)
     nz = ca.SX.sym("nz", nn)
     if nn:
-        y = _corrupt_sx(y, nz, flags, loop.layout)
-    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y, cp, s, loop.n_cmd)
-    if model.cmg is None:
-        act = ca.SX.zeros(0, 1)
-        u = u_ext + cmd
-        sat = ca.SX.zeros(2)
-    else:
-        if kind == "torque":
-            act = sx["actuate"](t, x, cmd, p)
-        else:
-            act = sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
-        u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
-        k = model.nu_cmg
-        sat = ca.vertcat(act[k + 1], act[k + 2])
-    if model.has_steps:
-        u = ca.vertcat(u, t + h / 2)  # (steps lie outside a fused run; keeps u's layout)
+        y = _corrupt_sx(y, nz, flags, comp.layout)
+    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y, cp, s, comp.n_cmd)
+    # the actuator chain's end (the CMG cluster or the ideal torquer), u by the input layout
+    # (t_step with rate steps: they lie outside a fused run, it keeps u's layout)
+    act, u, sat = chain_end_inputs(sx, model, comp.end, ctrl.command, t, h, x, cmd, u_ext, p)
     ins = [t, xa, cp, u_ext, p] + ([nz] if nn else [])
     info = sx_function("fused_info", ins, [ca.vertcat(cmd, act, q_ref, s1)])
     rhs = sx["rhs"]
@@ -185,7 +172,7 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
         one_h = sx_function("one", [t, xa, cp, u_ext, p, h, L_env] + ([nz] if nn else []), [x1h, sat])
         ranges = (slice(3, 3 + ncp), slice(3 + ncp, 6 + ncp), slice(6 + ncp, 6 + ncp + npar))
         chunk = held_chunk(system, one_h, rate, n, nx, 6 + ncp + npar, nn, ranges)
-    tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{loop.system.formulation.model.structure.key}"
+    tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}"
     if rate:
         tag += f"_env{rate}"
     if nn:
@@ -197,36 +184,37 @@ def _build(loop, n: int, flags=(False, False), rate: int = 0) -> dict:
             "rows": rows}
 
 
-def run_fused(loop, K: int) -> None:
-    """Run ticks 0..K with the fused loop, emitting the same rows as the per-tick loop."""
-    ctrl = loop.ctrl
-    if getattr(loop, "thrust", None) is not None:  # thrusters (issue 21)
-        noise = {"flags": _noise_flags(loop), "width": _noise_width, "corrupt": _corrupt_sx, "draw": _draw}
-        return run_fused_thrust(loop, K, _symbolic_params(ctrl), _edge_ticks(loop), noise)
-    if getattr(loop, "flight", None) is not None:  # sensors and estimator (issue 20)
+def run_fused(comp, res, K: int) -> None:
+    """Run ticks 0..K of the run composed by ``comp`` with the fused loop, handing back to
+    ``res`` (:class:`~.composition.RunState`) the same rows as the per-tick loop."""
+    ctrl = comp.ctrl
+    if comp.thrust is not None:  # thrusters (issue 21)
+        noise = {"flags": _noise_flags(comp), "width": _noise_width, "corrupt": _corrupt_sx, "draw": _draw}
+        return run_fused_thrust(comp, res, K, _symbolic_params(ctrl), _edge_ticks(comp), noise)
+    if comp.flight is not None:  # sensors and estimator (issue 20)
         from .fused_flight import run_fused_flight
 
-        return run_fused_flight(loop, K, _symbolic_params(ctrl), _edge_ticks(loop))
-    n = loop.n_per_out
-    flags = _noise_flags(loop)
+        return run_fused_flight(comp, res, K, _symbolic_params(ctrl), _edge_ticks(comp))
+    n = comp.n_per_out
+    flags = _noise_flags(comp)
     nn = _noise_width(flags)
-    rate = environment_rate(loop)
+    rate = environment_rate(comp)
     ne = carry_width(rate)  # the held environment's carry (rates.py), passed from chunk to chunk
     env_c = np.zeros(ne)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flags, rate, law_state.initial(ctrl).size)
+    key = (id(comp.system), type(ctrl), n, ctrl.command, flags, rate, law_state.initial(ctrl).size)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n, flags, rate)
+        _CHUNKS[key] = _build(comp, n, flags, rate)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
     cp = np.asarray(_symbolic_params(ctrl), dtype=float)
-    nx0 = loop.system.formulation.nx
+    nx0 = comp.system.formulation.nx
     s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
     nx = nx0 + s_law.size
-    p, period, duration = loop.p, loop.period, loop.duration
-    u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
-    edges = _edge_ticks(loop)  # where the held torque may change: a chunk is split there
+    p, period, duration = comp.p, comp.period, comp.duration
+    u_ext = held_torque_from(comp.scene, 0.0, comp.bps, duration)
+    edges = _edge_ticks(comp)  # where the held torque may change: a chunk is split there
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p
@@ -240,28 +228,31 @@ def run_fused(loop, K: int) -> None:
     i_ext = slice(3 + len(cp), 6 + len(cp))
     par[i_ext] = u_ext
     par[6 + len(cp) :] = p
-    nu_cmg = loop.nu_cmg
-    ncmd = loop.n_cmd
-    x = np.concatenate([loop.x, s_law])
+    ncmd = comp.n_cmd
+    out = comp.end.outputs  # the chain end's reported values (act): u_cmg, m, rate_limited, saturated
+    n_act = out.size if comp.has_cluster else 0
+    i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if n_act else (0, 0, 0)
+    x = np.concatenate([res.x, s_law])
     s_end = None
     tail_flag = 0
     ticks = 0
-    loop.used_fused = True
+    res.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})  # the row ticks, as in the per-tick loop
     try:
         j0 = 0
         if not edges:  # the leading full rows, many per compiled call (fused_rows.py)
-            draw = (lambda k: _draw(loop, k, flags)) if nn else None
-            j0, x, env_c, tail_flag, ticks, stop = run_rows(loop, fns, row_ks, K, x, env_c, cp, u_ext, p, draw, s_law.size)
+            draw = (lambda k: _draw(comp, k, flags)) if nn else None
+            j0, x, env_c, tail_flag, ticks, stop = run_rows(comp, res, fns, row_ks, K, x, env_c, cp, u_ext, p, draw,
+                                                            s_law.size)
             if stop is not None:
                 raise stop
         for j, k in enumerate(row_ks):
             if j < j0:
                 continue
             t = min(k * period, duration)
-            n_act = row_ks[j + 1] - k if k < K else 1
-            if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order
-                draws = _draw(loop, n_act, flags)
+            n_tick = row_ks[j + 1] - k if k < K else 1
+            if nn:  # the draws of ticks k .. k + n_tick - 1, in the per-tick loop's order
+                draws = _draw(comp, n_tick, flags)
                 info_nz[:] = draws[0]
             # the row at tick k: the command, actuation and reference of this tick
             info.args[0][0] = t
@@ -269,23 +260,19 @@ def run_fused(loop, K: int) -> None:
             info()
             r = info.res[0]
             cmd = r[:ncmd]
-            act = r[ncmd : ncmd + (nu_cmg + 3 if loop.act is not None else 0)]
+            act = r[ncmd : ncmd + n_act]
             q_ref = r[r.size - s_law.size - 4 : r.size - s_law.size]
             lim = sat = 0
-            if loop.act is not None:
-                lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
-                loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
-            flag = lim | sat
-            if ncmd == 3:
-                loop.last_cmd = tuple(cmd)
-            ctrl.q_ref_BN = tuple(q_ref)
-            loop.x = x[:nx0]
-            loop.rows.hold(t, loop.x, *loop._held_row(flag | tail_flag))  # streamed in batches
+            u_cmg = None
+            if n_act:
+                lim, sat = int(act[i_lim] > 0.5), int(act[i_sat] > 0.5)
+                u_cmg = act[i_u]
+            res.row(t, x[:nx0], lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=q_ref)  # streamed in batches
             if k == K:
                 s_end = r[r.size - s_law.size :].copy()  # the law's update at the last tick
                 break
-            # ticks k .. k + n_act - 1 in one call per piece (tick k's actuation is recomputed inside: same)
-            pieces = tick_pieces(k, n_act, edges, duration, period)
+            # ticks k .. k + n_tick - 1 in one call per piece (tick k's actuation is recomputed inside: same)
+            pieces = tick_pieces(k, n_tick, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
                 c0[0] = 0.0
@@ -295,30 +282,29 @@ def run_fused(loop, K: int) -> None:
                 par[0] = a * period
                 par[1] = h
                 par[2] = b - a
-                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
+                par[i_ext] = held_torque_from(comp.scene, a * period, comp.bps, duration) if edges else u_ext
                 if nn:  # column-major (nn, n): tick by tick
                     noise[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
-                res = chunk.res[0]
-                x = res[1 : 1 + nx].copy()
-                counts += res[1 + nx : 3 + nx]
-                env_c = res[3 + nx :].copy()
+                rc = chunk.res[0]
+                x = rc[1 : 1 + nx].copy()
+                counts += rc[1 + nx : 3 + nx]
+                env_c = rc[3 + nx :].copy()
             par[1] = period
-            ticks += n_act
-            tail_flag = close_chunk(loop, ticks, counts, lim, sat, x, min((k + n_act) * period, duration))
+            ticks += n_tick
+            tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
-        loop.x = x[:nx0]
         law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
-        finish_chunks(loop, ctrl, ticks)
+        finish_chunks(res, x[:nx0], ticks)
 
 
-def _draw(loop, n: int, flags) -> np.ndarray:
+def _draw(comp, n: int, flags) -> np.ndarray:
     """The sensor draws of the next ``n`` ticks, (n, 3 or 6): per tick ``rng.normal(0, σ_att, 3)``
     then ``rng.normal(0, σ_rate, 3)``, as ``ControlLoop._corrupt`` draws them (a Generator fills
     an array element by element from one stream, and ``normal(0, σ)`` is ``0 + σ z``: the same
     numbers from one ``standard_normal`` call, tests/test_fused_noise.py)."""
-    s = loop.sensor
-    z = loop.rng.standard_normal((n, _noise_width(flags)))
+    s = comp.sensor
+    z = comp.rng.standard_normal((n, _noise_width(flags)))
     sig = ([s.attitude_noise] * 3 if flags[0] else []) + ([s.rate_noise] * 3 if flags[1] else [])
     return 0.0 + np.asarray(sig) * z
 

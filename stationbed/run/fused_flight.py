@@ -11,8 +11,9 @@ each tick is a per-tick input, drawn in Python in tick order (:class:`~stationbe
 the same numbers as the per-tick loop's blocks).
 
 Neither executor reads the other's internals: both call the same ``Flight.function()``
-(compiled there, inlined here) and the loop's public sensing state (``xs``, ``th``, ``om_prev``,
-``t_prev``, ``tick_noise``).
+(compiled there, inlined here), read the run's composition (``comp.flight``, its noise stream
+``comp.tick_noise``) and hand the flight's memory back through the run's state
+(``res.flight``: ``t_prev``, ``theta_B``, ``omega_prev``, ``xs``, ``ys``; run/composition.py).
 """
 
 from __future__ import annotations
@@ -27,14 +28,15 @@ from ..loop import Layout
 from ..loop.flight import READS, SEEN
 from . import law_state
 from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
+from .system import chain_end_inputs
 
 __all__ = ["run_fused_flight"]
 
 _CHUNKS: dict[tuple, dict] = {}
 
 
-def _build(loop, n: int, symbolic_params) -> dict:
-    system, ctrl, flight = loop.system, loop.ctrl, loop.flight
+def _build(comp, n: int, symbolic_params) -> dict:
+    system, ctrl, flight = comp.system, comp.ctrl, comp.flight
     sx = system.sx
     form = system.formulation
     model = form.model
@@ -42,8 +44,6 @@ def _build(loop, n: int, symbolic_params) -> dict:
     ncp = len(symbolic_params)
     S = flight.suite
     ns, nw, nps = S.STATE.size, S.NOISE.size, flight.params.size
-    kind = "rates" if ctrl.command == "gimbal_rates" else "torque"
-    ng = loop.ng
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     nls = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
     xa, p, cp, u_ext = ca.SX.sym("x", nx + nls), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
@@ -60,19 +60,8 @@ def _build(loop, n: int, symbolic_params) -> dict:
         o, m = offs[f]
         y_seen = ca.vertcat(y_seen[:o], est[j : j + m], y_seen[o + m :])
         j += m
-    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y_seen, cp, s, loop.n_cmd)
-    if model.cmg is None:
-        act, u, sat = ca.SX.zeros(0, 1), u_ext + cmd, ca.SX.zeros(2)
-    else:
-        if kind == "torque":
-            act = sx["actuate"](t, x, cmd, p)
-        else:
-            act = sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
-        u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
-        kk = model.nu_cmg
-        sat = ca.vertcat(act[kk + 1], act[kk + 2])
-    if model.has_steps:
-        u = ca.vertcat(u, t + h / 2)
+    cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y_seen, cp, s, comp.n_cmd)
+    act, u, sat = chain_end_inputs(sx, model, comp.end, ctrl.command, t, h, x, cmd, u_ext, p)  # the chain's end
     x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
     core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref, s1)])
     # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
@@ -133,26 +122,27 @@ def carry_layout(nx: int, ns: int) -> Layout:
     return Layout(i=1, x=nx, counts=2, t_prev=1, theta_B=3, omega_prev=3, xs=ns)
 
 
-def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
-    """Run ticks 0..K fused with the loop's flight, emitting the per-tick loop's rows."""
-    ctrl, flight = loop.ctrl, loop.flight
-    n = loop.n_per_out
+def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
+    """Run ticks 0..K of the run composed by ``comp`` fused with its flight, handing back to
+    ``res`` the per-tick loop's rows and the flight's memory."""
+    ctrl, flight = comp.ctrl, comp.flight
+    n = comp.n_per_out
     cp = np.asarray(symbolic_params, dtype=float)
-    key = (id(loop.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size)  # structure
+    key = (id(comp.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size)  # structure
     if key not in _CHUNKS:
         t_build = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n, cp)
+        _CHUNKS[key] = _build(comp, n, cp)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t_build
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
-    nx0 = loop.system.formulation.nx
+    nx0 = comp.system.formulation.nx
     s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
     nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
     C = carry_layout(nx, S.STATE.size)  # its slices, taken once (the loop below runs per output row)
     ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in C.names)
-    p, period, duration = loop.p, loop.period, loop.duration
-    u_ext = held_torque_from(loop.scene, 0.0, loop.bps, duration)
+    p, period, duration = comp.p, comp.period, comp.duration
+    u_ext = held_torque_from(comp.scene, 0.0, comp.bps, duration)
     ia = info.args
     ia[2][:] = cp
     ia[3][:] = u_ext
@@ -166,20 +156,24 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     par[i_ext] = u_ext
     par[7 + ncp : 7 + ncp + p.size] = p
     par[7 + ncp + p.size :] = flight.params
-    nu_cmg, ncmd = loop.nu_cmg, loop.n_cmd
+    ncmd = comp.n_cmd
+    out = comp.end.outputs  # the chain end's reported values (act): u_cmg, m, rate_limited, saturated
+    n_act = out.size if comp.has_cluster else 0
+    i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if n_act else (0, 0, 0)
     nw = S.NOISE.size
+    fm = res.flight  # the flight's memory, handed back at the end
     # the carry between chunk calls lives in the chunk's own input (c0): one copy per call
     c0[:] = 0.0
-    c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = np.concatenate([loop.x, s_law]), loop.t_prev, loop.th, loop.om_prev, loop.xs
+    c0[cx], c0[ct], c0[cth], c0[com], c0[cxs] = np.concatenate([res.x, s_law]), fm.t_prev, fm.theta_B, fm.omega_prev, fm.xs
     x, s_end = c0[cx].copy(), None
     tail_flag = ticks = 0
-    loop.used_fused = True
+    res.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
     try:
         for j, k in enumerate(row_ks):
             t = min(k * period, duration)
-            n_act = row_ks[j + 1] - k if k < K else 1
-            draws = loop.tick_noise.rows(k, n_act)
+            n_tick = row_ks[j + 1] - k if k < K else 1
+            draws = comp.tick_noise.rows(k, n_tick)
             ia[0][0] = t
             ia[1][:] = x
             ia[5][0], ia[6][0] = k, c0[ct][0]
@@ -188,35 +182,32 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
             info()
             r = info.res[0]
             cmd = r[:ncmd]
-            act = r[ncmd : ncmd + (nu_cmg + 3 if loop.act is not None else 0)]
+            act = r[ncmd : ncmd + n_act]
             lim = sat = 0
-            if loop.act is not None:
-                lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
-                loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
-            if ncmd == 3:
-                loop.last_cmd = tuple(cmd)
-            ctrl.q_ref_BN = tuple(r[r.size - ls - 4 : r.size - ls])
-            loop.x, loop.xs, loop.ys = x[:nx0], info.res[1].copy(), info.res[2].copy()
-            loop.rows.hold(t, loop.x, *loop._held_row(lim | sat | tail_flag))
+            u_cmg = None
+            if n_act:
+                lim, sat = int(act[i_lim] > 0.5), int(act[i_sat] > 0.5)
+                u_cmg = act[i_u]
+            res.row(t, x[:nx0], lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=r[r.size - ls - 4 : r.size - ls],
+                    xs=info.res[1].copy(), ys=info.res[2].copy())
             if k == K:
-                loop.th, loop.om_prev, loop.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
+                fm.theta_B, fm.omega_prev, fm.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
                 s_end = r[r.size - ls :].copy()  # the law's update at the last tick
                 break
-            pieces = tick_pieces(k, n_act, edges, duration, period)
+            pieces = tick_pieces(k, n_tick, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
                 c0[ci], c0[cc] = 0.0, 0.0
                 par[0], par[1], par[2], par[3] = a * period, h, b - a, a
-                par[i_ext] = held_torque_from(loop.scene, a * period, loop.bps, duration) if edges else u_ext
+                par[i_ext] = held_torque_from(comp.scene, a * period, comp.bps, duration) if edges else u_ext
                 noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
-                res = chunk.res[0]
-                counts += res[cc]
-                c0[:] = res
+                rc = chunk.res[0]
+                counts += rc[cc]
+                c0[:] = rc
             x = c0[cx].copy()
-            ticks += n_act
-            tail_flag = close_chunk(loop, ticks, counts, lim, sat, x, min((k + n_act) * period, duration))
+            ticks += n_tick
+            tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
-        loop.x = x[:nx0]
         law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
-        finish_chunks(loop, ctrl, ticks)
+        finish_chunks(res, x[:nx0], ticks)

@@ -19,7 +19,7 @@ flight loop. Sensor noise: the draws of the R rows' ticks are drawn in one call,
 row-by-row loop's order (one generator fills an array element by element: the same numbers as
 R calls of one row each), and passed as a per-row input. :func:`run_rows` does the
 leading run of such rows and hands the executor back its state to go on row by row.
-The first row's held values are checked against the executor's own (``_held_row``): a loop
+The first row's held values are checked against the executors' own (``RunState.held_row``): a loop
 whose rows hold other columns runs row by row.
 A law's own state (law_state.py) rides after the plant's in the carry, as in the chunk: the
 rows get the plant's state, and ``info`` ends with the law's next state, after ``q_ref``.
@@ -93,9 +93,9 @@ def rows_functions(info: ca.Function, chunk: ca.Function, n: int, nx: int, ne: i
     return fns
 
 
-def _full_rows(loop, row_ks, n: int, K: int) -> int:
+def _full_rows(comp, row_ks, n: int, K: int) -> int:
     """How many leading rows run ``n`` full ticks each (the last tick's period not cut short)."""
-    period, duration = loop.period, loop.duration
+    period, duration = comp.period, comp.duration
     j = 0
     while j + 1 < len(row_ks) and row_ks[j] < K and row_ks[j + 1] - row_ks[j] == n:
         if duration - (row_ks[j] + n - 1) * period < period * (1 - 1e-12):
@@ -104,20 +104,21 @@ def _full_rows(loop, row_ks, n: int, K: int) -> int:
     return j
 
 
-def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None, ns: int = 0) -> tuple:
+def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None, ns: int = 0) -> tuple:
     """Run the leading full rows of a fused run in calls of :data:`ROW_CALLS` rows.
 
     Parameters
     ----------
-    loop : ControlLoop  The run (its rows, counters, controller and input are updated as the
-        row-by-row loop updates them).
+    comp, res : Composition, RunState  The run (:mod:`.composition`): read, and handed back its
+        rows, counts, held input and the law's last command and reference as the row-by-row
+        loop hands them back.
     fns : dict  The fused build: ``"rows"`` maps R to the compiled ``fused_rows_R`` (FastCall).
     row_ks : list of int  The row ticks; K the last tick.
     x, env_c : ndarray  The state (the law's own state of ``ns`` values after the plant's,
         law_state.py) and the held environment's carry at tick 0.
     cp, u_ext, p : ndarray  The controller's parameters, the held external torque, the model's.
     draw : callable or None  ``draw(k)`` -> the sensor draws of the next k ticks, (k, nn), from
-        the loop's generator in the row-by-row loop's order (None: no sensor noise).
+        the run's generator (``comp.rng``) in the row-by-row loop's order (None: no sensor noise).
 
     Returns
     -------
@@ -128,18 +129,21 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None,
     came out non-finite, else None. ``(0, x, env_c, 0, 0, None)`` when nothing was run here.
     """
     calls = fns.get("rows") or {}
-    n = loop.n_per_out
-    n_rows = _full_rows(loop, row_ks, n, K)
+    n = comp.n_per_out
+    n_rows = _full_rows(comp, row_ks, n, K)
     if not calls or n_rows < min(calls):
         return 0, x, env_c, 0, 0, None
     nx = len(x)
-    period, duration = loop.period, loop.duration
-    ncmd, nu_cmg, ng = loop.n_cmd, loop.nu_cmg, loop.ng
-    n_act = nu_cmg + 3 if loop.act is not None else 0
-    has_cmg = loop.model.cmg is not None
-    torque = loop.ctrl.command == "torque"
+    period, duration = comp.period, comp.duration
+    ncmd, ng = comp.n_cmd, comp.ng
+    out_l = comp.end.outputs  # the chain end's reported values: u_cmg, m, rate_limited, saturated
+    has_cmg = comp.has_cluster
+    n_act = out_l.size if has_cmg else 0
+    i_u, i_lim, i_sat = (out_l.slice("u_cmg"), out_l.slice("rate_limited").start,
+                         out_l.slice("saturated").start) if has_cmg else (slice(0, 0), 0, 0)
+    torque = comp.ctrl.command == "torque"
     # the generator's state before the first draw: a fallback to row by row draws the same again
-    rng_state = loop.rng.bit_generator.state if draw is not None else None
+    rng_state = comp.rng.bit_generator.state if draw is not None else None
     j = 0
     tail_flag = 0
     ticks = 0
@@ -161,36 +165,35 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None,
             bad = ~np.all(np.isfinite(carries[:, :nx]), axis=1)
             m = int(np.argmax(bad)) + 1 if bad.any() else R  # rows whose stretch ran (the last may end in NaN)
             lim = sat = np.zeros(m)
-            if loop.act is not None:
-                lim, sat = (act[:m, nu_cmg + 1] > 0.5).astype(float), (act[:m, nu_cmg + 2] > 0.5).astype(float)
+            if has_cmg:
+                lim, sat = (act[:m, i_lim] > 0.5).astype(float), (act[:m, i_sat] > 0.5).astype(float)
             # a row's flag: its own tick, and the ticks after the previous row's tick (its chunk)
             after = ((counts[:m, 0] - lim) + (counts[:m, 1] - sat) > 0.5).astype(float)
             prev = np.concatenate(([float(tail_flag)], after[:-1]))
             flag = np.maximum(np.maximum(lim, sat), prev)
             held = []
             if has_cmg:
-                held += [act[:m, :nu_cmg][:, :ng], flag[:, None]]
+                held += [act[:m, i_u][:, :ng], flag[:, None]]
             tau = cmd[:m] if torque else np.full((m, 3), math.nan)
             held += [tau, np.full((m, 4), math.nan)]
             held = np.hstack(held)
-            if j == 0 and not _held_matches(loop, held[0], act[0, :nu_cmg] if loop.act is not None else None, cmd[0], q_ref[0], int(flag[0])):
+            if j == 0 and not _held_matches(res, held[0], act[0, i_u] if has_cmg else None, cmd[0], q_ref[0], int(flag[0])):
                 if rng_state is not None:
-                    loop.rng.bit_generator.state = rng_state
+                    comp.rng.bit_generator.state = rng_state
                 return 0, x, env_c, 0, 0, None  # the executor's row has other columns: row by row
             ts = np.minimum(ks[:m] * period, duration)
             try:  # (a non-finite output row: the rows before it are handed over)
-                loop.rows.hold_many(ts, xs[:m], held, q_ref[:m])
+                res.rows_many(ts, xs[:m], held, q_ref[:m])
             except IntegrationError as e:
                 return j, x, env_c, tail_flag, ticks, e
             ticks += m * n
-            loop.n_rate_limited += int(counts[:m, 0].sum())
-            loop.n_momentum_saturated += int(counts[:m, 1].sum())
+            res.count(counts[:m, 0].sum(), counts[:m, 1].sum())
             tail_flag = int(after[-1])
-            if loop.act is not None:
-                loop.u[3 : 3 + nu_cmg] = act[m - 1, :nu_cmg]
+            if has_cmg:
+                res.u[comp.u_cmg] = act[m - 1, i_u]
             if ncmd == 3:
-                loop.last_cmd = tuple(cmd[m - 1])
-            loop.ctrl.q_ref_BN = tuple(q_ref[m - 1])
+                res.last_cmd = tuple(cmd[m - 1])
+            comp.ctrl.q_ref_BN = tuple(q_ref[m - 1])
             x = carries[m - 1, :nx].copy()
             env_c = carries[m - 1, nx:].copy()
             j += m
@@ -200,14 +203,15 @@ def run_rows(loop, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=None,
     return j, x, env_c, tail_flag, ticks, None
 
 
-def _held_matches(loop, held, act, cmd, q_ref, flag) -> bool:
-    """Whether the bulk held values of the first row are what the executor's own row holds
-    (:meth:`ControlLoop._held_row`, with this row's actuation, command and reference set)."""
+def _held_matches(res, held, act, cmd, q_ref, flag) -> bool:
+    """Whether the bulk held values of the first row are what the executors' own row holds
+    (:meth:`~.composition.RunState.held_row`, with this row's actuation, command and reference set)."""
+    comp = res.comp
     if act is not None:
-        loop.u[3 : 3 + loop.nu_cmg] = act
-    if loop.n_cmd == 3:
-        loop.last_cmd = tuple(cmd)
-    loop.ctrl.q_ref_BN = tuple(q_ref)
-    vals, _ = loop._held_row(flag)
+        res.u[comp.u_cmg] = act
+    if comp.n_cmd == 3:
+        res.last_cmd = tuple(cmd)
+    comp.ctrl.q_ref_BN = tuple(q_ref)
+    vals, _ = res.held_row(flag)
     vals = np.asarray(vals, dtype=float)
     return vals.shape == held.shape and bool(np.array_equal(vals, held, equal_nan=True))

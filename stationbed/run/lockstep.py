@@ -49,22 +49,23 @@ def vectorised(ctrl) -> bool:
     return type(ctrl).update_batch is not Controller.update_batch
 
 
-def _tick_ok(loop) -> bool:
-    integ = loop.integ
-    name = "tick_rates" if loop.ctrl.command == "gimbal_rates" else "tick_torque"
-    # a loop that flies [[sensor]] tables and an [estimator] (loop.flight, issue 20) runs its
+def _tick_ok(comp) -> bool:
+    integ = comp.integ
+    name = "tick_rates" if comp.ctrl.command == "gimbal_rates" else "tick_torque"
+    # a run that flies [[sensor]] tables and an [estimator] (comp.flight, issue 20) runs its
     # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) and
-    # [[thruster]] tables (loop.thrust, issue 21: the batch tick has no pulses) run per tick
-    return (getattr(loop, "replan", None) is None and getattr(loop, "thrust", None) is None
+    # [[thruster]] tables (comp.thrust, issue 21: the batch tick has no pulses) run per tick
+    return (comp.replan is None and comp.thrust is None
             and integ.fusable and name in integ.funcs
-            and math.ceil(loop.period / integ.h_nominal - 1e-9) == 1)
+            and math.ceil(comp.period / integ.h_nominal - 1e-9) == 1)
 
 
 def executor(loop) -> str:
-    """``"fused"``, ``"batch"`` or ``"per-tick"``: the executor a sample of ``loop`` runs on."""
-    if loop.fused and fused_ok(loop):
+    """``"fused"``, ``"batch"`` or ``"per-tick"``: the executor a sample of ``loop`` (a
+    :class:`~.closed_loop.ControlLoop`) runs on."""
+    if loop.fused and fused_ok(loop.comp):
         return "fused"
-    if _tick_ok(loop):
+    if _tick_ok(loop.comp):
         return "batch"
     return "per-tick"
 
@@ -109,17 +110,17 @@ class _Sample:
         self.kind = executor(self.loop)
 
 
-def _generic_ticks(loop, K: int) -> set[int]:
+def _generic_ticks(comp, K: int) -> set[int]:
     """The ticks k < K that the per-tick loop integrates on its generic path: a discontinuity
     in (t_k, t_k+1] (its ``smooth`` test, ``next_bp > t_next``)."""
     out = set()
-    for b in loop.bps:
-        if not 0.0 < b < loop.duration:
+    for b in comp.bps:
+        if not 0.0 < b < comp.duration:
             continue
-        k = max(0, int(b // loop.period) - 1)
+        k = max(0, int(b // comp.period) - 1)
         while k < K:
-            t = k * loop.period
-            t_next = min((k + 1) * loop.period, loop.duration)
+            t = k * comp.period
+            t_next = min((k + 1) * comp.period, comp.duration)
             if t < b <= t_next:
                 out.add(k)
                 break
@@ -161,8 +162,9 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
                 out[i] = (smp.kind, e)
             continue
         sim = s.simulation
-        key = (id(smp.run.system), type(smp.loop.ctrl), smp.loop.ctrl.command, sim.duration, sim.output_dt,
-               smp.loop.period, getattr(smp.loop.flight, "key", None))
+        comp = smp.loop.comp
+        key = (id(smp.run.system), type(comp.ctrl), comp.ctrl.command, sim.duration, sim.output_dt,
+               comp.period, getattr(comp.flight, "key", None))
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
@@ -189,7 +191,7 @@ def _single(smp: _Sample, SimulationError):
 
 
 def _done(smp: _Sample, wall: float):
-    integ = smp.loop.integ
+    integ = smp.loop.comp.integ
     smp.meta.update(status="ok", wall_s=wall, n_rhs=integ.n_rhs, n_steps=integ.n_steps)
     smp.meta["summary"] = smp.loop.summary()
     return smp.rows.trajectory(smp.meta)
@@ -201,8 +203,11 @@ class _Lockstep:
     def __init__(self, samples: list[_Sample]):
         self.S = samples
         n = self.n = len(samples)
-        lp = samples[0].loop
-        self.ncmd, self.nu, self.has_act = lp.n_cmd, lp.nu_cmg, lp.act is not None
+        lp = samples[0].loop.comp  # (every sample's composition has the same structure)
+        self.ncmd, self.has_act = lp.n_cmd, lp.has_cluster
+        out = lp.end.outputs  # the chain end's reported values (act)
+        self.i_u = out.slice("u_cmg") if self.has_act else None
+        self.i_flags = slice(out.slice("rate_limited").start, out.slice("saturated").stop) if self.has_act else None
         name = "tick_rates" if lp.ctrl.command == "gimbal_rates" else "tick_torque"
         f = lp.integ.funcs[name]
         fc = self.fc = mapped(f, n, 1)  # the compiled tick, called once per sample by casadi's map
@@ -223,11 +228,11 @@ class _Lockstep:
         self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
         self.seen = np.zeros((n, ny))  # what the law sees (the raw buffer itself when no sample is noisy)
         # sensors: per sample its own generator, noise levels and delay
-        sens = [s.loop.sensor for s in samples]
-        self.noisy = np.array([s.loop.noisy for s in samples])
+        sens = [s.loop.comp.sensor for s in samples]
+        self.noisy = np.array([s.loop.comp.noisy for s in samples])
         self.sig_a = np.array([x.attitude_noise for x in sens])
         self.sig_r = np.array([x.rate_noise for x in sens])
-        self.delay = np.array([s.loop.delay if s.loop.noisy else 0 for s in samples])
+        self.delay = np.array([s.loop.comp.delay for s in samples])
         self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
         self.z = np.zeros((n, DRAW_BLOCK, 6))
         self.layout = lp.layout
@@ -249,7 +254,7 @@ class _Lockstep:
             w = 3 * int(a) + 3 * int(r)
             if w == 0:
                 continue
-            zi = s.loop.rng.standard_normal((DRAW_BLOCK, w))
+            zi = s.loop.comp.rng.standard_normal((DRAW_BLOCK, w))
             if a:
                 self.z[i, :, 0:3] = zi[:, 0:3]
             if r:
@@ -300,28 +305,25 @@ class _Lockstep:
             w[rate] = (w + (0.0 + self.sig_r[:, None] * z[:, 3:6]))[rate]
 
     def _measure(self, i: int, t: float, x) -> None:
-        m = self.S[i].loop.meas
-        m.args[0][0] = t
-        m.args[1][:] = x
-        m()
-        self.raw[i] = m.res[0]
+        self.raw[i] = self.S[i].loop.measure(t, x)
 
     # -- the run -------------------------------------------------------------------------
     def run(self, SimulationError) -> list:
         S, n = self.S, self.n
-        lp = S[0].loop
+        lp = S[0].loop.comp
         period, duration, n_per_out = lp.period, lp.duration, lp.n_per_out
-        K = max(1, math.ceil(duration / period - 1e-9))
-        ctrl = type(lp.ctrl).batch_of([s.loop.ctrl for s in S])
+        K = lp.ticks()
+        ctrl = type(lp.ctrl).batch_of([s.loop.comp.ctrl for s in S])
         vec = vectorised(ctrl)
-        generic = [_generic_ticks(s.loop, K) for s in S]
+        generic = [_generic_ticks(s.loop.comp, K) for s in S]
         any_generic = set().union(*generic)
+        i_ext = lp.input_layout.slice("u_ext")
         for i, s in enumerate(S):
             self.P[i] = s.run.p
-            self.X[i] = s.loop.x
-            bps = [b for b in s.loop.bps if 0.0 < b < duration]
+            self.X[i] = s.loop.res.x
+            bps = [b for b in s.loop.comp.bps if 0.0 < b < duration]
             self.UEXT[i] = held_torque_from(s.scene, 0.0, bps, duration)
-            s.loop.u[0:3] = self.UEXT[i]
+            s.loop.res.u[i_ext] = self.UEXT[i]
             self._measure(i, 0.0, self.X[i])
         alive = np.ones(n, dtype=bool)
         errors: dict[int, BaseException] = {}
@@ -330,7 +332,7 @@ class _Lockstep:
         satrow = np.zeros(n, dtype=bool)
         lim_n = np.zeros(n, dtype=int)
         sat_n = np.zeros(n, dtype=int)
-        ncmd, nu, has_act = self.ncmd, self.nu, self.has_act
+        ncmd, has_act, i_u, i_flags = self.ncmd, self.has_act, self.i_u, self.i_flags
         wall0 = time.perf_counter()
 
         n_upd = np.zeros(n, dtype=int)
@@ -375,7 +377,7 @@ class _Lockstep:
                     if not finite.all():
                         for i in np.flatnonzero(alive & ~finite):
                             try:
-                                S[i].loop._check_command(t, cmd[i])
+                                S[i].loop.check_command(t, cmd[i])
                             except ControllerFailure as e:
                                 fail(i, e)
                     if n_alive < n:
@@ -408,9 +410,9 @@ class _Lockstep:
                         self.CMD[:] = np.where(alive[:, None], cmd, 0.0)
                     self.fc()
                     if has_act:
-                        if (self.ACT[:, nu + 1 : nu + 3] > 0.5).any():
-                            lim = self.ACT[:, nu + 1] > 0.5
-                            sat = self.ACT[:, nu + 2] > 0.5
+                        if (self.ACT[:, i_flags] > 0.5).any():
+                            lim = self.ACT[:, i_flags.start] > 0.5
+                            sat = self.ACT[:, i_flags.start + 1] > 0.5
                             lim &= smooth
                             sat &= smooth
                             lim_n += lim
@@ -419,22 +421,22 @@ class _Lockstep:
                 row = k % n_per_out == 0 or k == K
                 for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):  # the generic path, per sample
                     lo = S[i].loop
-                    lo.x[:] = self.X[i]
-                    satrow[i] |= bool(lo._actuate(t, cmd[i], count=k < K))
+                    lo.res.x[:] = self.X[i]
+                    satrow[i] |= bool(lo.actuate(t, cmd[i], count=k < K))
                 if row:
                     for i in np.flatnonzero(alive):
-                        lo = S[i].loop
+                        res = S[i].loop.res  # what this sample's run is handed back
                         if ncmd == 3:
-                            lo.last_cmd = tuple(cmd[i].tolist())
+                            res.last_cmd = tuple(cmd[i].tolist())
                         if smooth[i] and has_act:
-                            lo.u[3 : 3 + nu] = self.ACT[i, :nu]
+                            res.u[lp.u_cmg] = self.ACT[i, i_u]
                         if vec:
-                            lo.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
-                        lo.x[:] = self.X[i]
+                            res.comp.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
+                        res.x[:] = self.X[i]
                         if self.flight is not None:
                             self.flight.to_loop(i)
                         try:
-                            lo.rows.hold(t, lo.x, *lo._held_row(int(satrow[i])))
+                            res.rows.hold(t, res.x, *res.held_row(int(satrow[i]), t))
                         except ControllerFailure as e:
                             fail(i, e)
                         satrow[i] = False
@@ -462,26 +464,25 @@ class _Lockstep:
                 for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):
                     lo = S[i].loop
                     try:
-                        lo._advance(t, t_next, cmd[i])
+                        lo.advance(t, t_next, cmd[i])
                     except IntegrationError as e:
                         fail(i, e)
                         continue
-                    bps = [b for b in lo.bps if 0.0 < b < duration]
+                    bps = [b for b in lo.comp.bps if 0.0 < b < duration]
                     self.UEXT[i] = held_torque_from(S[i].scene, t_next, bps, duration)
-                    self.X[i] = lo.x
-                    self._measure(i, t_next, lo.x)
+                    self.X[i] = lo.res.x
+                    self._measure(i, t_next, lo.res.x)
                 self._sense(k + 1, t_next)
         finally:
             wall = (time.perf_counter() - wall0) / n
             results = []
             for i, s in enumerate(S):
-                lo = s.loop
-                lo.ticks = int(ticks[i]) + n_all[1]
-                lo.ctrl.n_updates += int(n_upd[i]) + n_all[0]
-                lo.n_rate_limited += int(lim_n[i])
-                lo.n_momentum_saturated += int(sat_n[i])
-                lo.integ.count_steps(int(n_fast[i]) + n_all[2])
-                lo.x[:] = self.X[i]
+                lo, res = s.loop, s.loop.res
+                res.ticks = int(ticks[i]) + n_all[1]
+                lo.comp.ctrl.n_updates += int(n_upd[i]) + n_all[0]
+                res.count(lim_n[i], sat_n[i])
+                lo.comp.integ.count_steps(int(n_fast[i]) + n_all[2])
+                res.x[:] = self.X[i]
                 if self.flight is not None:
                     self.flight.to_loop(i)
                 s.rows.flush()

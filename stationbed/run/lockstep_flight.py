@@ -7,7 +7,7 @@ and this tick's noise row in; ``theta_B``, the next suite state, what the law se
 suite's outputs out. Here the same compiled function is mapped over the samples (casadi
 ``Function.map``, ``"serial"``: the very machine code once per sample, bit for bit), each sample
 with its own parameters (its sensor tables and tuned filter), memory and noise (drawn by its own
-loop's ``_noise_row``, in tick order, the same blocks).
+loop's ``noise_row``, in tick order, the same blocks).
 """
 
 from __future__ import annotations
@@ -25,15 +25,16 @@ class FlightBatch:
     def __init__(self, samples, layout: dict):
         self.loops = [s.loop for s in samples]
         n = self.n = len(self.loops)
-        fc = self.fc = mapped(self.loops[0].flight.compiled().f, n, 1)
+        fc = self.fc = mapped(self.loops[0].comp.flight.compiled().f, n, 1)
         a, r = fc.args, fc.res
         self.k, self.t, self.t_prev = a[0], a[1], a[2]
         self.y, self.th, self.om = a[3].reshape(n, -1), a[4].reshape(n, 3), a[5].reshape(n, 3)
         self.xs, self.w = a[6].reshape(n, -1), a[7].reshape(n, -1)
         ps = a[8].reshape(n, -1)
         for i, lo in enumerate(self.loops):
-            ps[i] = lo.flight.params
-            self.th[i], self.om[i], self.xs[i], self.t_prev[i] = lo.th, lo.om_prev, lo.xs, lo.t_prev
+            ps[i] = lo.comp.flight.params
+            fm = lo.res.flight  # the sample's flight memory (run/composition.py)
+            self.th[i], self.om[i], self.xs[i], self.t_prev[i] = fm.theta_B, fm.omega_prev, fm.xs, fm.t_prev
         self.th1, self.xs1 = r[0].reshape(n, 3), r[1].reshape(n, -1)
         self.seen, self.ys = r[2].reshape(n, -1), r[3].reshape(n, -1)
         self.o_om = layout["omega_BN_B"][0]
@@ -45,7 +46,7 @@ class FlightBatch:
         self.t[:] = t
         self.y[:] = raw[:, : self.y.shape[1]]
         for i, lo in enumerate(self.loops):
-            self.w[i] = lo._noise_row(k)
+            self.w[i] = lo.noise_row(k)
         self.fc()
         self.th[:] = self.th1
         self.xs[:] = self.xs1
@@ -54,7 +55,7 @@ class FlightBatch:
         seen[:, : self.seen.shape[1]] = self.seen
 
     def to_loop(self, i: int) -> None:
-        """Sample i's flight memory and outputs into its loop (its rows read ``xs``, ``ys``)."""
-        lo = self.loops[i]
-        lo.xs[:], lo.ys[:] = self.xs[i], self.ys[i]
-        lo.th[:], lo.om_prev[:], lo.t_prev = self.th[i], self.om[i], float(self.t_prev[i])
+        """Sample i's flight memory and outputs handed back to its run (its rows read ``xs``, ``ys``)."""
+        fm = self.loops[i].res.flight
+        fm.xs[:], fm.ys[:] = self.xs[i], self.ys[i]
+        fm.theta_B[:], fm.omega_prev[:], fm.t_prev = self.th[i], self.om[i], float(self.t_prev[i])

@@ -142,25 +142,23 @@ def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> li
     return pieces
 
 
-def close_chunk(loop, ticks: int, counts, lim: int, sat: int, x, t_end: float) -> int:
+def close_chunk(res, ticks: int, counts, lim: int, sat: int, x, t_end: float) -> int:
     """After a compiled chunk of the fused loops (run/fused.py, fused_flight.py, thrust_fused.py):
-    count its rate-limited and saturated ticks (``counts``) on ``loop``, stop with
-    IntegrationError at ``t_end`` when the state ``x`` is not finite (``loop.ticks`` set to the
-    ``ticks`` run), and return the next row's flag: saturation in the chunk's ticks after the row
-    tick (whose own ``lim``/``sat`` its row reported) goes into the next row, as the per-tick loop
-    does (a row reports the ticks since the previous row)."""
-    loop.n_rate_limited += int(counts[0])
-    loop.n_momentum_saturated += int(counts[1])
+    hand its rate-limited and saturated ticks (``counts``) back to the run's
+    :class:`~.composition.RunState` ``res``, stop with IntegrationError at ``t_end`` when the
+    state ``x`` is not finite (``res.ticks`` set to the ``ticks`` run), and return the next
+    row's flag: saturation in the chunk's ticks after the row tick (whose own ``lim``/``sat``
+    its row reported) goes into the next row, as the per-tick loop does (a row reports the
+    ticks since the previous row)."""
+    res.count(counts[0], counts[1])
     if not np.all(np.isfinite(x)):
-        loop.ticks = ticks
+        res.ticks = ticks
         raise IntegrationError(t_end, "state is not finite (NaN or inf)")
     return int((counts[0] - lim) + (counts[1] - sat) > 0.5)
 
 
-def finish_chunks(loop, ctrl, ticks: int) -> None:
-    """The fused loops' end (also after a failure): ticks run, the law's compiled updates (the
-    ticks and the last row's), the integrator's steps, the rows flushed."""
-    loop.ticks = ticks
-    ctrl.count_compiled_updates(ticks + 1)
-    loop.integ.count_steps(ticks)
-    loop.rows.flush()
+def finish_chunks(res, x, ticks: int) -> None:
+    """The fused loops' end (also after a failure): the final state ``x`` and the ``ticks`` run
+    handed back (:meth:`~.composition.RunState.end`: the law's compiled updates, the ticks and
+    the last row's, the integrator's steps, the rows flushed)."""
+    res.end(x, ticks)

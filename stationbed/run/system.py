@@ -12,11 +12,12 @@ import casadi as ca
 from ..core.compile import EVALUATOR_C, compile_functions, sx_function
 from ..formulations import Formulation, get_formulation
 from ..integrators import Integrator, get_integrator
+from ..loop.cmg_cluster import chain_end
 from ..model import StationModel, Structure
 from ..model.environment import orbit_position_N, q_ON
 from .controller import measurement_layout
 
-__all__ = ["System", "build_system", "environment_split", "OUT_CHUNK"]
+__all__ = ["System", "build_system", "environment_split", "OUT_CHUNK", "chain_end_inputs"]
 
 OUT_CHUNK = 64  # output rows evaluated per compiled call
 
@@ -54,15 +55,17 @@ def _track_errors(model: StationModel, t, x, p):
     return errs
 
 
-def _tick_functions(model, rhs, fs, nx, nu, npar, ng, step) -> list[ca.Function]:
+def _tick_functions(form, end, rhs, fs, nx, npar, ng, step) -> list[ca.Function]:
     """One control period fused in one compiled call, for a fusable integrator (RK4).
 
     ``tick_<cmd>(t, h, x, cmd, u_ext, p) -> (x(t + h), y(t + h), act)``: the actuation at
-    ``(t, x)`` (steering law and limits; ``act = [u_cmg, m, rate_limited, saturated]``), one step
-    ``step(rhs, t, x, h, u, p)`` (the integrator's ``explicit_step``) of ``h`` with that input
-    held, and the measurement at the end. Same functions as the generic path (actuate, the
-    integrator's step, meas), composed, so both paths give the same numbers.
+    ``(t, x)`` (the chain's end, :func:`chain_end_inputs`: the CMG
+    cluster's steering law and limits, ``act = [u_cmg, m, rate_limited, saturated]``, or the ideal
+    torquer), one step ``step(rhs, t, x, h, u, p)`` (the integrator's ``explicit_step``) of ``h``
+    with that input held, and the measurement at the end. Same functions as the generic path
+    (the actuator's, the integrator's step, meas), composed, so both paths give the same numbers.
     """
+    model = form.model
     by_name = {f.name(): f for f in fs}
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     x, u_ext, p = ca.SX.sym("x", nx), ca.SX.sym("u_ext", 3), ca.SX.sym("p", npar)
@@ -70,19 +73,46 @@ def _tick_functions(model, rhs, fs, nx, nu, npar, ng, step) -> list[ca.Function]
     kinds = [("torque", 3)] + ([("rates", ng)] if ng else [])
     for kind, ncmd in kinds:
         cmd = ca.SX.sym("cmd", ncmd)
-        if model.cmg is None:
-            act = ca.SX.zeros(0, 1)
-            u = u_ext + cmd
-        else:
-            f_act = by_name["actuate" if kind == "torque" else "actuate_rates"]
-            act = f_act(t, x, cmd if kind == "torque" else ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
-            u = ca.vertcat(u_ext, act[0 : model.nu_cmg])
-        if model.has_steps:
-            u = ca.vertcat(u, t + h / 2)  # the segment's time for the side of a rate step
+        act, u, _ = chain_end_inputs(by_name, model, end, "gimbal_rates" if kind == "rates" else "torque", t, h, x, cmd,
+                                     u_ext, p)
         x1 = step(rhs, t, x, h, u, p)
         y1 = by_name["meas"](t + h, x1, p)
         out.append(sx_function(f"tick_{kind}", [t, h, x, cmd, u_ext, p], [x1, y1, act]))
     return out
+
+
+def chain_end_inputs(system_sx: dict, model, end, command: str, t, h, x, cmd, u_ext, p):
+    """The actuator chain's end composed into a tick (casadi): ``(act, u, sat)``.
+
+    ``end`` the chain's end (:func:`~stationbed.loop.cmg_cluster.chain_end`): the ideal torquer
+    (its one channel on the whole tick, ``FULL_TICK``: ``torque_B`` added to ``u_ext``, no
+    split) or the CMG cluster (its function at the plant's state ``x``, the system's
+    ``actuate`` / ``actuate_rates`` in ``system_sx``, reading the true body rate and the
+    cluster's state ``x_cmg``). ``act`` the end's reported values (``out``; empty for the
+    torquer), ``u`` the model's held input by name (``model.input_layout``: ``u_ext``, the
+    cluster's ``u_cmg``, the segment's time ``t_step = t + h/2`` with rate steps), ``sat``
+    (rate limited, saturated). ``cmd`` the law's command: a torque request, or gimbal rates for
+    ``command = "gimbal_rates"``."""
+    lay = model.input_layout
+    fields = {}
+    if model.cmg is None:
+        empty = ca.SX(0, 1)
+        torque_B = end.function()(t, h, empty, empty, cmd, empty)[3]
+        act, sat = ca.SX.zeros(0, 1), ca.SX.zeros(2)
+        fields["u_ext"] = u_ext + torque_B
+    else:
+        if command == "gimbal_rates":
+            ng = model.cmg.n_gimbals
+            act = system_sx["actuate_rates"](t, x, ca.vertcat(cmd, ca.SX.zeros(max(ng, 1) - ng)), p)
+        else:
+            act = system_sx["actuate"](t, x, cmd, p)
+        o = end.outputs
+        fields["u_ext"] = u_ext
+        fields["u_cmg"] = o.get(act, "u_cmg")
+        sat = ca.vertcat(o.get(act, "rate_limited"), o.get(act, "saturated"))
+    if "t_step" in lay:
+        fields["t_step"] = t + h / 2  # the segment's time for the side of a rate step
+    return act, lay.pack(fields), sat
 
 
 def build_system(structure: Structure, formulation, integrator) -> System:
@@ -152,19 +182,18 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     y = ca.vertcat(*meas)
     assert y.numel() == sum(k for _, k in lay.values())
     fs.append(sx_function("meas", [t, x, p], [y]))
-    if cmg is not None:
+    end = chain_end(model)  # the actuator chain's end: the CMG cluster or the ideal torquer
+    if cmg is not None:  # the cluster's plug-in at the plant's state: its per-tick compiled form
         cmd = ca.SX.sym("cmd", 3)
         rates = ca.SX.sym("rates", max(ng, 1))
+        r = end.reads.pack(omega_BN_B=wv, x_cmg=form.state_layout.get(x, "x_cmg"))
         pc = p[model.layout["cmg"]]
-        xc = x[7 : 7 + cmg.nx]
-        steered = cmg.actuate(t, xc, cmd, wv, pc)
-        fs.append(sx_function("actuate", [t, x, cmd, p], [ca.vertcat(*steered)]))
+        fs.append(sx_function("actuate", [t, x, cmd, p], [end.function()(t, 0.0, ca.SX(0, 1), r, cmd, pc)[4]]))
         if ng:
-            direct = cmg.actuate(t, xc, cmd, wv, pc, direct_rates=rates[0:ng])
-            fs.append(sx_function("actuate_rates", [t, x, rates, p], [ca.vertcat(*direct)]))
+            fs.append(sx_function("actuate_rates", [t, x, rates, p], [end.rates_function()(t, r, rates, pc)]))
     fs.append(sx_function("inertia", [t, x, p], [model.inertia(t, p, arrays)]))
     if integ_cls.fusable:
-        fs += _tick_functions(model, rhs, fs, nx, nu, npar, ng, integ_cls.explicit_step)
+        fs += _tick_functions(form, end, rhs, fs, nx, npar, ng, integ_cls.explicit_step)
     fs += integ_cls.build(rhs, nx, nu, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
     funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)

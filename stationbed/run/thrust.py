@@ -1,7 +1,7 @@
 """The thrusters in the closed loop's per-tick executor (issue 21): the actuator's tick on what
 the law sees, the integration split at every pulse edge, the row values and the summary.
 
-:class:`ThrustLoop` is what :class:`~.closed_loop.ControlLoop` holds when the scene has
+:class:`ThrustLoop` is what the run's composition holds (``comp.thrust``) when the scene has
 ``[[thruster]]`` tables; the fused loop (:mod:`.thrust_fused`) runs the same
 :class:`~stationbed.loop.thrusters.ThrusterCluster` function inlined.
 """
@@ -44,21 +44,23 @@ def thruster_parts(s: dict) -> list[str]:
     return out
 
 
-def thrust_for(loop, plant) -> "ThrustLoop | None":
-    """The loop's thrusters (None without ``[[thruster]]``); ``plant`` is the law's knowledge."""
-    if not loop.scene.thruster:
+def thrust_for(scene, ctrl, layout: dict, plant) -> "ThrustLoop | None":
+    """The run's thrusters (None without ``[[thruster]]``); ``plant`` is the law's knowledge,
+    ``layout`` the measurement's."""
+    if not scene.thruster:
         return None
-    if loop.ctrl.command != "torque":
-        raise ValueError(f"controller '{loop.ctrl.name}' commands gimbal rates: thrusters share a torque request "
+    if ctrl.command != "torque":
+        raise ValueError(f"controller '{ctrl.name}' commands gimbal rates: thrusters share a torque request "
                          "with the CMGs (use a torque-commanding law)")
-    return ThrustLoop(loop, plant)
+    return ThrustLoop(scene, layout, plant)
 
 
 class ThrustLoop:
-    """The thrusters of one closed-loop run (per-tick executor)."""
+    """The thrusters of one closed-loop run: the plug-in (``cluster``, part of the run's
+    composition) and its memory (``x`` after the last tick, ``x_row`` before the current one:
+    what a row reports), which every executor reads and hands back here."""
 
-    def __init__(self, loop, plant):
-        scene = loop.scene
+    def __init__(self, scene, layout: dict, plant):
         cap = plant.h_capacity if plant.h_capacity is not None else math.inf
         known = knowledge_scene(scene)
         held = held_momentum_B(known.cmg)  # the failed units flight software knows of
@@ -68,15 +70,14 @@ class ThrustLoop:
         self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
         self.on_s = np.zeros(self.cluster.n)
         self.torque_B = np.zeros((3, self.cluster.n))
-        o, _ = loop.layout["h_B"]
+        o, _ = layout["h_B"]
         self.h_slice = slice(o, o + 3)
         self.fused_reason = None  # why the fused loop did not take it (summary)
 
-    def command(self, loop, t: float, cmd) -> np.ndarray:
-        """Tick at ``t``: the thrusters' on-times over ``[t, t + h]`` and the torque left to the
-        CMGs (returned, B [N m])."""
-        h = self.tick_length(loop, t)
-        y = loop.seen if (loop.noisy or loop.flight is not None) else loop.meas.res[0]
+    def command(self, comp, t: float, y, cmd) -> np.ndarray:
+        """Tick at ``t`` on what the law sees ``y``: the thrusters' on-times over ``[t, t + h]``
+        and the torque left to the CMGs (returned, B [N m])."""
+        h = self.tick_length(comp, t)
         r = y[self.h_slice]
         self.x_row = self.x
         c = self.cluster
@@ -85,26 +86,27 @@ class ThrustLoop:
         return rest
 
     @staticmethod
-    def tick_length(loop, t: float) -> float:
+    def tick_length(comp, t: float) -> float:
         """The tick's length [s]: the period, the remainder of the run for the last one (0 at
         the end), as the fused loop's :func:`~.segments.tick_pieces` cuts them."""
-        rest = loop.duration - t
-        return loop.period if rest >= loop.period * (1 - 1e-12) else max(rest, 0.0)
+        rest = comp.duration - t
+        return comp.period if rest >= comp.period * (1 - 1e-12) else max(rest, 0.0)
 
-    def advance(self, loop, t0: float, t1: float) -> None:
+    def advance(self, comp, res, t0: float, t1: float) -> None:
         """Integrate ``[t0, t1]`` split at the scene's breakpoints and the pulse edges; over each
-        piece the thrusters on add their torque to the held external torque."""
+        piece the thrusters on add their torque to the held external torque (``res.u``, the
+        state ``res.x`` advanced in place)."""
         cuts = [(t0 + a, t0 + b, on) for a, b, on in pulse_pieces(self.on_s, t1 - t0)]
         cuts[-1] = (cuts[-1][0], t1, cuts[-1][2])
-        inner = [b for b in loop.bps if t0 < b < t1]
+        inner = [b for b in comp.bps if t0 < b < t1]
         for a, b, on in cuts:
             edges = [a] + [e for e in inner if a < e < b] + [b]
             tq = self.torque_B[:, on].sum(axis=1)
             for s0, s1 in zip(edges[:-1], edges[1:]):
-                segment_input(loop.scene, loop.model, s0, s1, loop.u)
-                u = loop.u.copy()
+                segment_input(comp.scene, comp.model, s0, s1, res.u)
+                u = res.u.copy()
                 u[0:3] += tq
-                loop.x[:] = loop.apply_jump(s1, loop.integ.advance(s0, s1, loop.x, u))
+                res.x[:] = comp.apply_jump(s1, comp.integ.advance(s0, s1, res.x, u))
 
     def row(self, x=None) -> list[float]:
         """The row's values (:func:`thruster_columns`) from the actuator state ``x`` before the tick."""
@@ -116,12 +118,12 @@ class ThrustLoop:
             self._row_idx = idx = np.array(idx + list(range(s.size))[s.slice("on_total_s")])
         return np.asarray(x, dtype=float)[idx].tolist()
 
-    def summary(self, loop) -> dict:
+    def summary(self, comp) -> dict:
         """What the summary adds to the thruster metrics (propellant_kg and the other totals are
         :data:`~.metrics.METRICS`, reduced from the rows' thr_* columns by ``RunMetrics``)."""
         out = {"thruster_mapping": self.cluster.opt.mapping, "thruster_pure_couple": bool(self.cluster.pure)}
-        if loop.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
-            out["orbit_period_s"] = 2.0 * math.pi / loop.scene.orbit.mean_motion
+        if comp.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
+            out["orbit_period_s"] = 2.0 * math.pi / comp.scene.orbit.mean_motion
         if self.fused_reason:
             out["thrusters_not_fused"] = self.fused_reason
         return out

@@ -35,33 +35,34 @@ from .controller import ControllerError, one_line
 from . import law_state
 from .rates import environment_rate
 from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
+from .system import chain_end_inputs
 
 __all__ = ["fused_thrust_ok", "run_fused_thrust"]
 
 _CHUNKS: dict[tuple, dict] = {}
 
 
-def fused_thrust_ok(loop) -> bool:
-    """Whether the fused loop can fly the loop's thrusters (always True without thrusters);
-    sets ``loop.thrust.fused_reason`` when it cannot."""
-    th = getattr(loop, "thrust", None)
+def fused_thrust_ok(comp) -> bool:
+    """Whether the fused loop can fly the run's thrusters (always True without thrusters);
+    sets ``comp.thrust.fused_reason`` when it cannot."""
+    th = comp.thrust
     if th is None:
         return True
     why = None
     if th.lp:
         why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
-    elif getattr(loop, "flight", None) is not None:
+    elif comp.flight is not None:
         why = "[[sensor]] tables with thrusters are flown per tick"
-    elif environment_rate(loop):
+    elif environment_rate(comp):
         why = "an environment rate with thrusters is flown per tick"
-    elif law_state.has_state(loop.ctrl):
+    elif law_state.has_state(comp.ctrl):
         why = "a law with a state (symbolic_state) with thrusters is flown per tick"
     th.fused_reason = why
     return why is None
 
 
-def _build(loop, n: int, symbolic_params, noise) -> dict:
-    system, ctrl, th = loop.system, loop.ctrl, loop.thrust
+def _build(comp, n: int, symbolic_params, noise) -> dict:
+    system, ctrl, th = comp.system, comp.ctrl, comp.thrust
     sx = system.sx
     form = system.formulation
     model = form.model
@@ -77,7 +78,7 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     nz = ca.SX.sym("nz", nn)
     y = sx["meas"](t, x, p)
     if nn:  # the law sees the noisy measurement, as fused.py's tick (h_B is not corrupted)
-        y = noise["corrupt"](y, nz, flags, loop.layout)
+        y = noise["corrupt"](y, nz, flags, comp.layout)
     try:
         cmd, q_ref = ctrl.symbolic(t, y, cp)
         cmd = ca.vertcat(cmd)
@@ -86,14 +87,9 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     if cmd.numel() != 3:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected 3")
     xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd, pa)
-    k = model.nu_cmg
 
-    def act_u(tau):
-        a = sx["actuate"](t, x, tau, p)
-        uu = ca.vertcat(u_ext, a[0:k])
-        if model.has_steps:
-            uu = ca.vertcat(uu, t + h / 2)
-        return a, uu, ca.vertcat(a[k + 1], a[k + 2])
+    def act_u(tau):  # the chain's end (the CMG cluster) on what the thrusters leave it
+        return chain_end_inputs(sx, model, comp.end, "torque", t, h, x, tau, u_ext, p)
 
     act, u, _ = act_u(rest)
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
@@ -175,28 +171,29 @@ def _build(loop, n: int, symbolic_params, noise) -> dict:
     return {"info": FastCall(funcs["thr_info"]), "chunk": FastCall(funcs["thr_chunk"]), "ncp": ncp}
 
 
-def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
-    """Run ticks 0..K fused with the thrusters, emitting the same rows as the per-tick loop.
+def run_fused_thrust(comp, res, K: int, symbolic_params, edges, noise) -> None:
+    """Run ticks 0..K of the run composed by ``comp`` fused with its thrusters, handing back to
+    ``res`` the same rows as the per-tick loop (and the thrusters' memory to ``comp.thrust``).
 
     ``noise``: :mod:`.fused`'s sensor-noise helpers, ``flags`` (which corruptions apply),
     ``width`` (draws per tick), ``corrupt`` (the compiled corruption), ``draw`` (the draws of the
     next ticks in the per-tick loop's order); handed over by ``run_fused``, which imports this
     module."""
-    ctrl, th = loop.ctrl, loop.thrust
+    ctrl, th = comp.ctrl, comp.thrust
     cl = th.cluster
-    n = loop.n_per_out
+    n = comp.n_per_out
     flags = noise["flags"]
     nn = noise["width"](flags)
-    key = (id(loop.system), type(ctrl), n, cl.key, flags)
+    key = (id(comp.system), type(ctrl), n, cl.key, flags)
     if key not in _CHUNKS:
         t0 = time.perf_counter()
-        _CHUNKS[key] = _build(loop, n, symbolic_params, noise)
+        _CHUNKS[key] = _build(comp, n, symbolic_params, noise)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t0
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
     cp = np.asarray(symbolic_params, dtype=float)
-    nx, na = loop.system.formulation.nx, cl.state.size
-    p, period, duration = loop.p, loop.period, loop.duration
+    nx, na = comp.system.formulation.nx, cl.state.size
+    p, period, duration = comp.p, comp.period, comp.duration
     info.args[2][:] = cp
     info.args[4][:] = p
     info.args[7][:] = cl.params
@@ -207,40 +204,37 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
     i_ext = slice(3 + ncp, 6 + ncp)
     par[6 + ncp : 6 + ncp + len(p)] = p
     par[6 + ncp + len(p) :] = cl.params
-    nu_cmg = loop.nu_cmg
-    x = np.array(loop.x, dtype=float)
+    out = comp.end.outputs  # the CMG cluster's reported values (act): u_cmg, m, rate_limited, saturated
+    i_u, i_lim, i_sat = out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start
+    x = np.array(res.x, dtype=float)
     xa = th.x.copy()
     tail_flag = 0
     ticks = 0
-    loop.used_fused = True
+    res.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
     try:
         for j, k in enumerate(row_ks):
             t = min(k * period, duration)
-            n_act = row_ks[j + 1] - k if k < K else 1
-            if nn:  # the draws of ticks k .. k + n_act - 1, in the per-tick loop's order
-                draws = noise["draw"](loop, n_act, flags)
+            n_tick = row_ks[j + 1] - k if k < K else 1
+            if nn:  # the draws of ticks k .. k + n_tick - 1, in the per-tick loop's order
+                draws = noise["draw"](comp, n_tick, flags)
                 info.args[8][:] = draws[0]
             info.args[0][0] = t
             info.args[1][:] = x
-            u_row = held_torque_from(loop.scene, t, loop.bps, duration)
+            u_row = held_torque_from(comp.scene, t, comp.bps, duration)
             info.args[3][:] = u_row
-            info.args[5][0] = th.tick_length(loop, t)
+            info.args[5][0] = th.tick_length(comp, t)
             info.args[6][:] = xa
             info()
             r = info.res[0]
-            cmd, act, q_ref = r[:3], r[3 : 3 + nu_cmg + 3], r[-4:]
-            lim, sat = int(act[nu_cmg + 1] > 0.5), int(act[nu_cmg + 2] > 0.5)
-            loop.u[3 : 3 + nu_cmg] = act[:nu_cmg]
-            loop.last_cmd = tuple(cmd)
-            ctrl.q_ref_BN = tuple(q_ref)
-            loop.x = x
+            cmd, act, q_ref = r[:3], r[3 : 3 + out.size], r[-4:]
+            lim, sat = int(act[i_lim] > 0.5), int(act[i_sat] > 0.5)
             th.x_row = xa
-            loop.rows.hold(t, x, *loop._held_row(lim | sat | tail_flag))
+            res.row(t, x, lim | sat | tail_flag, u_cmg=act[i_u], cmd=cmd, q_ref=q_ref)
             if k == K:
                 break
             counts = np.zeros(2)
-            for a, b, hp in tick_pieces(k, n_act, edges, duration, period):
+            for a, b, hp in tick_pieces(k, n_tick, edges, duration, period):
                 c0[0] = 0.0
                 c0[1 : 1 + nx] = x
                 c0[1 + nx : 3 + nx] = 0.0
@@ -249,17 +243,16 @@ def run_fused_thrust(loop, K: int, symbolic_params, edges, noise) -> None:
                 par[1] = hp
                 par[2] = b - a
                 ta = a * period  # the row's torque when the piece starts at the row (not looked up twice)
-                par[i_ext] = u_row if ta == t else held_torque_from(loop.scene, ta, loop.bps, duration)
+                par[i_ext] = u_row if ta == t else held_torque_from(comp.scene, ta, comp.bps, duration)
                 if nn:  # column-major (nn, n): tick by tick
                     noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
-                res = chunk.res[0]
-                x = res[1 : 1 + nx].copy()
-                counts += res[1 + nx : 3 + nx]
-                xa = res[3 + nx : 3 + nx + na].copy()
-            ticks += n_act
-            tail_flag = close_chunk(loop, ticks, counts, lim, sat, x, min((k + n_act) * period, duration))
+                rc = chunk.res[0]
+                x = rc[1 : 1 + nx].copy()
+                counts += rc[1 + nx : 3 + nx]
+                xa = rc[3 + nx : 3 + nx + na].copy()
+            ticks += n_tick
+            tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
-        loop.x = x
         th.x = th.x_row = xa
-        finish_chunks(loop, ctrl, ticks)
+        finish_chunks(res, x, ticks)
