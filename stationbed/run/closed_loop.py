@@ -316,11 +316,12 @@ class ControlLoop:
             return comp.thrust.advance(comp, res, t0, t1)
         inner = [b for b in comp.bps if t0 < b < t1]
         edges = [t0] + inner + [t1]
+        i_ext = comp.input_layout.slice("u_ext")
         for a, b in zip(edges[:-1], edges[1:]):
             segment_input(comp.scene, comp.model, a, b, res.u)
             u = res.u.copy()
             if self.act is None:
-                u[0:3] += self.tau_held
+                u[i_ext] += self.tau_held
             # an array rate step at b: continue from the state just after it
             self.x[:] = comp.apply_jump(b, comp.integ.advance(a, b, self.x, u))
         if self.u_ext is not None:
@@ -357,6 +358,7 @@ class ControlLoop:
         has_act = self.act is not None
         ncmd = comp.n_cmd
         noisy = comp.noisy or comp.flight is not None
+        i_fin = comp.state_layout.slice(comp.system.formulation.rate_field).start  # the finite-state probe
         M = self.M
         ticks = 0
         h_set = -1.0
@@ -421,7 +423,7 @@ class ControlLoop:
                     break
                 ticks += 1
                 if smooth:
-                    v = res_x[4]
+                    v = res_x[i_fin]
                     if not -1e300 < v < 1e300:
                         res.ticks = ticks
                         self.check_command(t, cmd)

@@ -224,6 +224,7 @@ class _Lockstep:
         self.Y1 = fc.res[1][: n * nnz[1]].reshape(n, nnz[1])
         self.ACT = fc.res[2][: n * nnz[2]].reshape(n, nnz[2])
         self.ny1 = nnz[1]
+        self.i_fin = lp.state_layout.slice(lp.system.formulation.rate_field).start  # the per-tick loop's finite probe
         ny = f.numel_out(1)
         self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
         self.seen = np.zeros((n, ny))  # what the law sees (the raw buffer itself when no sample is noisy)
@@ -446,7 +447,7 @@ class _Lockstep:
                     ticks += alive
                 else:
                     n_all[1] += 1
-                v = self.X1[:, 4]
+                v = self.X1[:, self.i_fin]
                 # the per-tick loop's test of a finite state, -1e300 < v < 1e300, for all at once
                 # (NaN fails both: the max of an array with a NaN is NaN)
                 if all_smooth and np.abs(v).max() < 1e300:

@@ -123,9 +123,10 @@ def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.n
     """Set the held input of the smooth segment [a, b] in place: the external torque held over it
     and, when the scene has array rate steps, the segment's time that decides their side."""
     t_mid = 0.5 * (a + b)
-    u[0:3] = held_torque(scene, t_mid)
-    if model.has_steps:
-        u[-1] = t_mid
+    lay = model.input_layout
+    u[lay.slice("u_ext")] = held_torque(scene, t_mid)
+    if "t_step" in lay:
+        u[lay.slice("t_step")] = t_mid
 
 
 def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> list[tuple[int, int, float]]:

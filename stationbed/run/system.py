@@ -167,7 +167,10 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     ng = 0 if cmg is None else cmg.n_gimbals
     lay = measurement_layout(ng, structure.n_app)
     wv = form.omega(t, x, p)
-    meas = [x[0:4], wv, model.h(x[7:], p), x[7 : 7 + ng]]
+    xl = form.state_layout  # the state by name: the attitude, the CMG cluster's gimbal angles
+    n_core = xl.slice(form.rate_field).stop  # the model's extra states follow the form's core
+    gimbals = xl.get(x, "x_cmg")[0:ng] if ng else ca.SX(0, 1)
+    meas = [xl.get(x, "q_BN"), wv, model.h(x[n_core:], p), gimbals]
     meas += [a.angles[0] for a in arrays] + [a.angles[1] for a in arrays]
     if structure.orbit and not structure.orbit_kind:  # circular: the expressions it has always had
         radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))

@@ -99,13 +99,14 @@ class ThrustLoop:
         cuts = [(t0 + a, t0 + b, on) for a, b, on in pulse_pieces(self.on_s, t1 - t0)]
         cuts[-1] = (cuts[-1][0], t1, cuts[-1][2])
         inner = [b for b in comp.bps if t0 < b < t1]
+        i_ext = comp.input_layout.slice("u_ext")
         for a, b, on in cuts:
             edges = [a] + [e for e in inner if a < e < b] + [b]
             tq = self.torque_B[:, on].sum(axis=1)
             for s0, s1 in zip(edges[:-1], edges[1:]):
                 segment_input(comp.scene, comp.model, s0, s1, res.u)
                 u = res.u.copy()
-                u[0:3] += tq
+                u[i_ext] += tq
                 res.x[:] = comp.apply_jump(s1, comp.integ.advance(s0, s1, res.x, u))
 
     def row(self, x=None) -> list[float]:
