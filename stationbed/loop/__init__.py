@@ -6,6 +6,7 @@ once as casadi expressions; the executors evaluate the same functions (docs/loop
 """
 
 from .actuator import ACTUATORS, Actuator, get_actuator, pulse_pieces, split_step
+from .cmg_cluster import CmgClusterActuator, IdealTorquer, chain_end
 from .flight import Flight, flight_columns
 from .gyro import RateGyro
 from .layout import Layout
@@ -19,4 +20,4 @@ from .thrusters import ThrusterCluster
 __all__ = ["Layout", "Sensor", "TRUTH", "noise_rng", "RateGyro", "StarTracker", "SENSORS", "get_sensor",
            "build_sensors", "Mekf", "FILTER", "Suite", "SuiteNoise", "Flight",
            "flight_columns", "Actuator", "ACTUATORS", "get_actuator", "pulse_pieces", "split_step",
-           "ThrusterCluster"]
+           "ThrusterCluster", "IdealTorquer", "CmgClusterActuator", "chain_end"]

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Callable
 
 import numpy as np
@@ -77,8 +78,8 @@ class Composition:
     thrust: Any = None  #: the ``[[thruster]]`` tables (:class:`~.thrust.ThrustLoop`), before the end
     extra: dict = field(default_factory=dict)
 
-    # -- derived -------------------------------------------------------------------------------
-    @property
+    # -- derived (looked up once: the executors read them per row) ------------------------------
+    @cached_property
     def model(self):
         return self.system.formulation.model
 
@@ -87,31 +88,31 @@ class Composition:
         """``"torque"`` or ``"gimbal_rates"``: what the law commands."""
         return self.ctrl.command
 
-    @property
+    @cached_property
     def n_cmd(self) -> int:
         return self.command_layout.size
 
-    @property
+    @cached_property
     def ng(self) -> int:
         """Gimbals of the CMG cluster (0 without one, or a momentum store)."""
         cmg = self.model.cmg
         return 0 if cmg is None else cmg.n_gimbals
 
-    @property
+    @cached_property
     def nu_cmg(self) -> int:
         return self.model.nu_cmg
 
-    @property
+    @cached_property
     def has_cluster(self) -> bool:
         """Whether the chain ends in a CMG cluster (else the ideal torquer)."""
         return self.model.cmg is not None
 
-    @property
+    @cached_property
     def n_act(self) -> int:
         """Values the chain's end reports per tick (``u_cmg, m, rate_limited, saturated``)."""
         return self.end.outputs.size
 
-    @property
+    @cached_property
     def u_cmg(self) -> slice:
         """The CMG cluster's held input in ``u`` (input layout)."""
         return self.input_layout.slice("u_cmg")
@@ -158,6 +159,10 @@ class RunState:
         self.n_rate_limited = 0
         self.n_momentum_saturated = 0
         self.used_fused = False
+        # what a row reads of the composition, looked up once (a row per output sample)
+        self._gimbals = slice(comp.u_cmg.start, comp.u_cmg.start + comp.ng) if comp.has_cluster else None
+        self._q = comp.state_layout.slice("q_BN")
+        self._u_cmg = comp.u_cmg if comp.has_cluster else None
 
     # -- rows ------------------------------------------------------------------------------
     def held_row(self, flag: int, t: float = math.nan):
@@ -167,8 +172,8 @@ class RunState:
         rows a batch at a time), the flight suite's and the thrusters' columns."""
         comp = self.comp
         vals = []
-        if comp.has_cluster:
-            vals += list(self.u[comp.u_cmg][: comp.ng]) if comp.ng else []
+        if self._gimbals is not None:
+            vals += list(self.u[self._gimbals])
             vals.append(float(flag))
         ctrl = comp.ctrl
         q_ref = ctrl.q_ref_BN
@@ -178,7 +183,7 @@ class RunState:
         tau = self.last_cmd if ctrl.command == "torque" else (math.nan,) * 3
         vals += list(tau) + [math.nan] * 4  # att_err_deg and its axes: from q_ref, by the rows a batch at a time
         if comp.flight is not None:
-            q = np.asarray(comp.state_layout.get(self.x, "q_BN"), dtype=float)
+            q = np.asarray(self.x[self._q], dtype=float)
             vals += comp.flight.row(self.flight.xs, self.flight.ys, q / np.linalg.norm(q))
         if comp.thrust is not None:
             vals += comp.thrust.row()
@@ -190,7 +195,7 @@ class RunState:
         reference ``q_ref``, the flight suite's state and outputs after the row's tick."""
         self.x = x
         if u_cmg is not None:
-            self.u[self.comp.u_cmg] = u_cmg
+            self.u[self._u_cmg] = u_cmg
         if cmd is not None and len(cmd) == 3:
             self.last_cmd = tuple(cmd)
         if q_ref is not None:
