@@ -25,7 +25,8 @@ How the existing actuators read in this contract (docs/loop.md, "Actuators"): th
 is one channel with ``on_s = h`` and ``torque_B = tau_B`` (``tau_rest_B = 0``); the CMG cluster
 has no channel: it is an *internal* actuator whose command sets the plant's held CMG input
 (``u_cmg``, the steering law's gimbal rates), and it is the end of the chain (it takes
-``tau_rest_B``). Porting those two is issue 20's; the thrusters are the first plug-in.
+``tau_rest_B``). Both are plug-ins (loop/cmg_cluster.py: ``IdealTorquer``, ``CmgClusterActuator``,
+declaring ``FULL_TICK`` and ``INTERNAL`` / ``HELD``); the thrusters were the first.
 """
 
 from __future__ import annotations
@@ -67,6 +68,13 @@ class Actuator:
        ``_command`` is exactly ``(x, tau_B, 0, torque_B)``; an executor may then skip the
        command (the fused loop does). It must be exact, not approximate: executors that do not
        skip must give the same numbers.
+    8. Optionally declare ``FULL_TICK = True`` when every channel is on for the whole tick
+       (``on_s = h`` identically): an executor may then add ``torque_B`` to the held torque
+       without splitting the step (no edge inside the tick; the same numbers). Declare
+       ``INTERNAL = True`` for an actuator that is part of the plant (it reads the plant's
+       truth: ``READS`` names fields of the formulation's state layout or the true rate), and
+       ``HELD = "<name>"`` when the ``OUTPUTS`` field of that name is the model's held input of
+       the same name (``model.input_layout``, e.g. the CMG cluster's ``u_cmg``).
     """
 
     kind: ClassVar[str] = ""
@@ -75,6 +83,9 @@ class Actuator:
     OUTPUTS: ClassVar[Layout | None] = None
     READS: ClassVar[Layout | None] = None
     n_channels: int = 0
+    FULL_TICK: ClassVar[bool] = False  #: rule 8: every channel on for the whole tick
+    INTERNAL: ClassVar[bool] = False  #: rule 8: part of the plant, reads its truth
+    HELD: ClassVar[str | None] = None  #: rule 8: the OUTPUTS field that is the model's held input
 
     _functions: ClassVar[dict] = {}
     _compiled: ClassVar[dict] = {}

@@ -26,6 +26,7 @@ tick (the system's ``actuate``; the torquer's :meth:`~.actuator.Actuator.compile
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from .actuator import Actuator, register_actuator
 from .layout import Layout
@@ -82,17 +83,15 @@ class CmgClusterActuator(Actuator):
         return (c.geometry.kind, c.steering, c.nx, c.n_par)
 
     def _params(self) -> dict:
-        import numpy as np  # noqa: PLC0415 - only for the numeric default
-
         return {"pc": np.zeros(self.cluster.n_par) if self._pc is None else self._pc}
 
     def _initial(self) -> dict:
         return {}
 
-    def _out(self, act) -> dict:
-        nu = self.cluster.nu
+    @staticmethod
+    def _out(act) -> dict:
+        """``CmgModel.actuate``'s ``(u_held, singularity, rate_limited, momentum_saturated)`` by name."""
         u, m, lim, sat = act
-        assert u.numel() == nu
         return {"u_cmg": u, "m": m, "rate_limited": lim, "saturated": sat}
 
     def _command(self, t, h, x, r, tau_B, p):

@@ -21,7 +21,7 @@ reads another's private attributes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Callable
 
@@ -76,7 +76,6 @@ class Composition:
     # -- the actuators -----------------------------------------------------------------------
     end: Any  #: the chain's end: the CMG cluster's or the ideal torquer's plug-in
     thrust: Any = None  #: the ``[[thruster]]`` tables (:class:`~.thrust.ThrustLoop`), before the end
-    extra: dict = field(default_factory=dict)
 
     # -- derived (looked up once: the executors read them per row) ------------------------------
     @cached_property
