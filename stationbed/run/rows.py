@@ -127,6 +127,7 @@ class Rows:
     def __init__(self, scene, system, p, sink, keep: bool = True):
         self.form = system.formulation
         self.nx = self.form.nx
+        self._q = self.form.state_layout.slice("q_BN")  # the attitude in the state, by name
         self.n_out = system.n_out
         self.out = FastCall.of(system.funcs["out_map"])
         self.out.args[2][:] = p
@@ -207,7 +208,8 @@ class Rows:
             comp[k : k + n] = o.res[0].reshape(OUT_CHUNK, self.n_out)[:n]
         rows = np.zeros((len(ts), len(self.columns)))
         rows[:, 0] = ts
-        rows[:, self.q_cols] = xs[:, :4] / np.linalg.norm(xs[:, :4], axis=1, keepdims=True)
+        q = xs[:, self._q]
+        rows[:, self.q_cols] = q / np.linalg.norm(q, axis=1, keepdims=True)
         for cols, sl, degrees in self.plan:
             rows[:, cols] = np.rad2deg(comp[:, sl]) if degrees else comp[:, sl]
         rows[:, self.gimbal_cols] = xs[:, 7 : 7 + len(self.gimbal_cols)]
@@ -272,7 +274,7 @@ class Rows:
             have = [i for i, q in enumerate(refs) if q is not None]
             if have and self._err_col is not None:
                 q_ref = np.array([refs[i] for i in have], dtype=float)
-                q = np.array([xs[i][:4] for i in have])
+                q = np.array([xs[i][self._q] for i in have])
                 rows[have, self._err_col] = np.degrees(rotation_angle(q_ref, q))
                 # per axis: the error rotation vector, B components [deg] (its norm is att_err_deg)
                 rows[np.ix_(have, self._axes_cols)] = np.degrees(rotation_vector(q_ref, q))

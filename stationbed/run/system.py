@@ -45,11 +45,20 @@ class System:
 _SYSTEMS: dict[tuple, System] = {}
 
 
-def _track_errors(model: StationModel, t, x, p):
+def _split_state(form, x):
+    """The attitude ``q_BN`` and the model's extra states (after the form's core) of the state
+    ``x``, by the form's state layout (casadi)."""
+    xl = form.state_layout
+    return xl.get(x, "q_BN"), x[xl.slice(form.rate_field).stop :]
+
+
+def _track_errors(form, t, x, p):
     """Per array: angle between its normal (+z of P) and the sun [rad] (casadi)."""
-    s_B = model.sun_B(x[0:4], p)
+    model = form.model
+    q_BN, x_extra = _split_state(form, x)
+    s_B = model.sun_B(q_BN, p)
     errs = []
-    for a in model.arrays(t, x[0:4], x[7:], p):
+    for a in model.arrays(t, q_BN, x_extra, p):
         n_B = a.C_PB[2, :].T  # P's z axis (the array normal), B components
         errs.append(ca.atan2(ca.norm_2(ca.cross(n_B, s_B)), ca.dot(n_B, s_B)))
     return errs
@@ -144,16 +153,17 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     for k, a in enumerate(arrays):
         outs += [(f"alpha{k}", a.angles[0]), (f"beta{k}", a.angles[1])]
     cmg = model.cmg
+    q_BN, x_extra = _split_state(form, x)
     if cmg is not None:
-        outs.append(("h_B", model.h(x[7:], p)))
+        outs.append(("h_B", model.h(x_extra, p)))
         if cmg.gimballed:
             pc = p[model.layout["cmg"]]
             outs.append(("cmg_singularity", cmg.singularity(x[7 : 7 + cmg.nx], pc)))
     if structure.sun:
-        outs += [(f"track_err{k}", e) for k, e in enumerate(_track_errors(model, t, x, p))]
-    outs += model.environment_outputs(t, x[0:4], x[7:], p)  # aero/SRP torques, shadow fraction
+        outs += [(f"track_err{k}", e) for k, e in enumerate(_track_errors(form, t, x, p))]
+    outs += model.environment_outputs(t, q_BN, x_extra, p)  # aero/SRP torques, shadow fraction
     if model.n_modes:
-        outs += [("eta", model.eta(x[7:])), ("etadot", form.modal_rates(t, x, p)), ("U_strain", form.strain_energy(t, x, p))]
+        outs += [("eta", model.eta(x_extra)), ("etadot", form.modal_rates(t, x, p)), ("U_strain", form.strain_energy(t, x, p))]
     out_layout, n = {}, 0
     for name, e in outs:
         out_layout[name] = slice(n, n + e.numel())
@@ -167,10 +177,8 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     ng = 0 if cmg is None else cmg.n_gimbals
     lay = measurement_layout(ng, structure.n_app)
     wv = form.omega(t, x, p)
-    xl = form.state_layout  # the state by name: the attitude, the CMG cluster's gimbal angles
-    n_core = xl.slice(form.rate_field).stop  # the model's extra states follow the form's core
-    gimbals = xl.get(x, "x_cmg")[0:ng] if ng else ca.SX(0, 1)
-    meas = [xl.get(x, "q_BN"), wv, model.h(x[n_core:], p), gimbals]
+    gimbals = form.state_layout.get(x, "x_cmg")[0:ng] if ng else ca.SX(0, 1)  # the gimbal angles, by name
+    meas = [q_BN, wv, model.h(x_extra, p), gimbals]
     meas += [a.angles[0] for a in arrays] + [a.angles[1] for a in arrays]
     if structure.orbit and not structure.orbit_kind:  # circular: the expressions it has always had
         radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))
@@ -238,10 +246,11 @@ def environment_split(system: System) -> dict | None:
     if system.sx["rhs"].n_instructions() > system.integrator_cls.RHS_INLINE_MAX_OPS:
         rhs_fast = sx_function("rhs_fast", [t, x, u, p], [fast.rhs(t, x, u, p)], called=True)
     orbit = model.orbit_at(t, p) if model.structure.orbit else None
-    env = model.environment(x[0:4], orbit, p, form.arrays(t, x, p))
+    q_BN, _ = _split_state(form, x)
+    env = model.environment(q_BN, orbit, p, form.arrays(t, x, p))
     L_B = ca.SX.zeros(3)
     for kind in env_kinds:
         p_k = p[model.layout[kind.kind]] if kind.n_par else None
-        L_B = L_B + kind.torque_B(t, x[0:4], None, p_k, orbit, env)
+        L_B = L_B + kind.torque_B(t, q_BN, None, p_k, orbit, env)
     system.split = {"rhs_fast": rhs_fast, "env_B": sx_function("env_B", [t, x, p], [L_B])}
     return system.split
