@@ -72,3 +72,4 @@ def test_composition_is_frozen():
         loop.comp.period = 1.0
     assert loop.comp.n_cmd == loop.comp.command_layout.size == 3
     assert loop.comp.u_cmg == loop.comp.input_layout.slice("u_cmg")
+    assert [a.kind for a in loop.comp.chain] == ["cmg_cluster"]  # no [[thruster]]: the cluster ends the chain alone

@@ -112,6 +112,12 @@ class Composition:
         return self.end.outputs.size
 
     @cached_property
+    def chain(self) -> tuple:
+        """The actuator chain in order, as plug-ins: the thrusters (with ``[[thruster]]``
+        tables), then the end (the CMG cluster or the ideal torquer), which takes what is left."""
+        return ((self.thrust.cluster,) if self.thrust is not None else ()) + (self.end,)
+
+    @cached_property
     def u_cmg(self) -> slice:
         """The CMG cluster's held input in ``u`` (input layout)."""
         return self.input_layout.slice("u_cmg")
