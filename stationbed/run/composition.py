@@ -6,7 +6,9 @@ integrator, parameters, discontinuities), the clock, the named layouts (state, h
 measurement, command), the law, the measurement (the ideal sensor's noise and delay, the
 ``[[sensor]]`` flight suite and estimator, their noise streams) and the actuator chain (the
 thrusters, then its end: the CMG cluster or the ideal torquer, loop/cmg_cluster.py). Every
-executor reads it and never writes it: the per-tick loop (:class:`~.closed_loop.ControlLoop`),
+executor reads it and none rebinds its fields (it is frozen; the objects it holds that a run
+advances are the noise streams, drawn in tick order, the law, whose reference ``q_ref_BN`` an
+executor sets from the compiled law's, and the thrusters' memory): the per-tick loop (:class:`~.closed_loop.ControlLoop`),
 the fused loops (:mod:`.fused`, :mod:`.fused_flight`, :mod:`.thrust_fused`, with
 :mod:`.fused_rows`) and the lockstep batch (:mod:`.lockstep`, :mod:`.lockstep_flight`).
 
@@ -14,8 +16,9 @@ An executor hands its results back through :class:`RunState` only: the state as 
 the end (``x``, the held input ``u``), each output row (:meth:`RunState.row`, or
 :meth:`RunState.rows_many` for many), the saturation counts (:meth:`RunState.count`), the ticks
 run, the law's last command, the flight suite's memory (:class:`FlightMemory`) and the
-thrusters' (``comp.thrust``). The rows and the summary are made from it alone, so no executor
-reads another's private attributes.
+thrusters' (``comp.thrust``). The rows and the summary are made from the composition and
+the run state alone, so no executor reads another's private attributes
+(tests/test_composition.py).
 """
 
 from __future__ import annotations
