@@ -30,6 +30,7 @@ import math
 import casadi as ca
 import numpy as np
 
+from .rate_auto import AUTO, auto_choice
 from .system import environment_split
 
 __all__ = ["environment_rate", "carry_width", "held_chunk", "rate_summary", "g_norms", "hold_bound_rad", "torque_rates"]
@@ -41,9 +42,15 @@ ENV_CARRY = 5
 def environment_rate(loop) -> int:
     """The environment rate the fused loop runs for ``loop`` (ticks per evaluation; 0 = every
     integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
-    environment torques, else 0. The per-tick loops evaluate every stage
+    environment torques, else 0; ``"auto"`` (the default) is the bound's choice
+    (:func:`~.rate_auto.auto_choice`). The per-tick loops evaluate every stage
     (:func:`rate_summary` reports 0 for them)."""
-    n = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
+    asked = getattr(loop.scene.simulation, "environment_rate", 0)
+    if asked == AUTO:
+        if loop.system.sx is None or environment_split(loop.system) is None:
+            return 0
+        return auto_choice(loop)["ticks"]
+    n = int(asked or 0)
     if n <= 0 or loop.system.sx is None:
         return 0
     return n if environment_split(loop.system) is not None else 0
@@ -117,11 +124,23 @@ def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int,
 
 def rate_summary(loop) -> dict:
     """What the run's summary records of the effect rates: the environment's ticks per
-    evaluation (0 = every integrator stage) as run, and as the scene asked. A block never spans
+    evaluation (0 = every integrator stage) as run, and as the scene asked; under ``"auto"``
+    also the bound of the rate run (``environment_rate_bound_rad``) or why it is every stage. A block never spans
     an output row (each chunk starts its own), so the run's rate is at most the ticks per row."""
-    asked = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
+    asked = getattr(loop.scene.simulation, "environment_rate", 0)
+    asked = asked if asked == AUTO else int(asked or 0)
     ran = min(environment_rate(loop), loop.n_per_out) if getattr(loop, "used_fused", False) else 0
-    return {"environment_rate_ticks": ran, "environment_rate_asked": asked}
+    out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
+    if asked == AUTO:  # the same keys whichever executor ran
+        if loop.system.sx is None or environment_split(loop.system) is None:
+            c = {"bound_rad": None, "why": "no environment torque"}
+        elif not getattr(loop, "used_fused", False):
+            c = {"bound_rad": None, "why": "the per-tick loop evaluates every stage"}
+        else:
+            c = auto_choice(loop)  # kept per scene: no second probe
+        out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
+        out["environment_rate_why"] = c["why"]
+    return out
 
 
 def g_norms(I_kg_m2: float, omega_n: float, zeta: float) -> tuple[float, float, float]:

@@ -1,0 +1,136 @@
+"""The default environment rate (issue 25): ``[simulation] environment_rate = "auto"`` picks the
+largest block of ticks whose proven bound (:func:`~.rates.hold_bound_rad`) on the attitude
+difference from the every-stage evaluation stays inside :data:`TARGET_RAD`
+(docs/design.md "Effects at their own rate").
+
+The bound needs the loop's shape and the environment torque's rates:
+
+* the loop: a ``pd`` law's ``bandwidth`` (ω_n) and ``damping`` (ζ, below 1: the bound's impulse
+  response is the underdamped one) and the body's smallest principal inertia (the arrays only add
+  inertia, and the bound falls as 1/I, so the body's is the conservative one);
+* the torque: ``M1``, ``M2`` and the penumbra stretches (:func:`~.rates.torque_rates`) from a
+  *probe*: the same scene flown every stage with a 1 s tick, rows at 1 s, noise off, over
+  ``min(duration, one orbit)``. The environment torque moves at orbital rate (the orbit, the sun,
+  the arrays' tracking); the probe's coarser tick moves the attitude it acts on by the loop's
+  tracking error only, a second-order change of the rates. It costs ~1/10 of an orbit's run and is
+  kept per scene content (the last :data:`KEEP`), so a scene flown again does not pay it twice.
+
+Where the loop cannot honour a rate (thrusters, ``[[sensor]]`` tables: their fused executors
+evaluate every stage) or the bound's assumptions do not hold (a law other than ``pd``, ζ >= 1, no
+environment torque), ``auto`` is every stage (0) and :func:`auto_choice` says why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+
+import numpy as np
+
+__all__ = ["AUTO", "TARGET_RAD", "CANDIDATES", "choice", "auto_choice", "scene_choice"]
+
+AUTO = "auto"
+#: the issue's accuracy: attitude difference from the every-stage evaluation per orbit [rad]
+TARGET_RAD = 1e-6
+#: the rates auto may pick (ticks per evaluation): few, so few compiled structures
+CANDIDATES = (100, 50, 20, 10, 5, 2, 1)
+#: the probe's tick and row [s]: orbital-rate torques, sampled finer than the penumbra (~10 s)
+PROBE_DT_S = 1.0
+#: probes kept (scene content -> choice)
+KEEP = 16
+
+_CHOICES: OrderedDict[str, dict] = OrderedDict()
+_BY_ID: OrderedDict[int, tuple] = OrderedDict()
+
+
+def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
+    """Why ``auto`` is every stage (None: the bound applies)."""
+    if thrust:
+        return "thrusters: their fused loop evaluates the environment every stage"
+    if flight:
+        return "[[sensor]] tables: the flight loop evaluates the environment every stage"
+    if scene.controller is None or scene.controller.name != "pd" or not (hasattr(params, "bandwidth")
+                                                                          and hasattr(params, "damping")):
+        return "the bound is proven for the pd law's loop shape"
+    if not 0.0 < float(params.damping) < 1.0:
+        return "the bound needs an underdamped loop (pd damping < 1)"
+    if scene.orbit is None:
+        return "no orbit"
+    return None
+
+
+def _probe(scene) -> tuple[float, float, list]:
+    """``(M1, M2, fast)`` of the environment torque from the 1 s every-stage probe."""
+    from .rates import torque_rates
+    from .simulation import simulate  # (simulation builds the loop that asks for this)
+
+    dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
+    changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
+               "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
+               "controller.sensor": {}}
+    tr = simulate(scene.replace(changes), keep=True)
+    L = np.zeros((tr.t.size, 3))
+    for kind in ("aero", "srp"):
+        if f"tau_{kind}_x" in tr.columns:
+            L += tr.cols(f"tau_{kind}_x", f"tau_{kind}_y", f"tau_{kind}_z")
+    nu = tr.cols("eclipse")[:, 0] if "eclipse" in tr.columns else None
+    return torque_rates(tr.t, L, nu)
+
+
+def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, flight: bool = False) -> dict:
+    """``{"ticks": N, "bound_rad": b or None, "why": reason or None}``: the largest of
+    :data:`CANDIDATES` (at most ``n_per_out``, the ticks per output row) whose bound is inside
+    :data:`TARGET_RAD` for ``scene`` flown with the pd law's ``params`` at ``period`` [s]; 0 with
+    the reason when the bound does not apply. Kept per scene content (one probe each)."""
+    why = _why_not(scene, params, thrust, flight)
+    if why is not None:
+        return {"ticks": 0, "bound_rad": None, "why": why}
+    key = scene.model_dump_json(exclude={"montecarlo"}) + f"|{period!r}|{n_per_out}"
+    if key in _CHOICES:
+        _CHOICES.move_to_end(key)
+        return _CHOICES[key]
+    from .rates import hold_bound_rad
+
+    M1, M2, fast = _probe(scene)
+    I_min = float(np.linalg.eigvalsh(np.asarray(scene.body.inertia, float)).min())
+    wn, zeta = float(params.bandwidth), float(params.damping)
+    out = {"ticks": 0, "bound_rad": None, "why": f"no rate's bound is inside {TARGET_RAD:g} rad"}
+    for n in CANDIDATES:
+        b = hold_bound_rad(n * period, M1, M2, fast, I_min, wn, zeta)
+        if n <= n_per_out and b <= TARGET_RAD:
+            out = {"ticks": n, "bound_rad": b, "why": None}
+            break
+    _CHOICES[key] = out
+    if len(_CHOICES) > KEEP:
+        _CHOICES.popitem(last=False)
+    return out
+
+
+def auto_choice(loop) -> dict:
+    """:func:`choice` for a closed loop (its law, period, rows, thrusters and sensors)."""
+    return choice(loop.scene, getattr(loop.ctrl, "params", None), loop.period, loop.n_per_out,
+                  getattr(loop, "thrust", None) is not None, getattr(loop, "flight", None) is not None)
+
+
+def scene_choice(scene) -> dict:
+    """:func:`choice` for ``scene`` as a closed loop would fly it (a Monte Carlo resolves its
+    nominal scene once and flies every sample at that rate); kept per scene object too."""
+    hit = _BY_ID.get(id(scene))
+    if hit is not None and hit[0] is scene:
+        return hit[1]
+    out = _scene_choice(scene)
+    _BY_ID[id(scene)] = (scene, out)
+    if len(_BY_ID) > KEEP:
+        _BY_ID.popitem(last=False)
+    return out
+
+
+def _scene_choice(scene) -> dict:
+    from .laws import build_controller
+
+    sim, spec = scene.simulation, scene.controller
+    if spec is None:
+        return {"ticks": 0, "bound_rad": None, "why": "no controller"}
+    params = getattr(build_controller(spec, base_dir=scene.folder), "params", None) if spec.name == "pd" else None
+    return choice(scene, params, spec.period, int(round(sim.output_dt / spec.period)), bool(scene.thruster),
+                  bool(scene.sensor))
