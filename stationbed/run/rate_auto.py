@@ -27,7 +27,8 @@ from collections import OrderedDict
 
 import numpy as np
 
-__all__ = ["AUTO", "TARGET_RAD", "CANDIDATES", "choice", "auto_choice", "scene_choice"]
+__all__ = ["AUTO", "TARGET_RAD", "CANDIDATES", "choice", "auto_choice", "scene_choice", "set_runner", "g_norms",
+           "hold_bound_rad", "torque_rates"]
 
 AUTO = "auto"
 #: the issue's accuracy: attitude difference from the every-stage evaluation per orbit [rad]
@@ -41,6 +42,13 @@ KEEP = 16
 
 _CHOICES: OrderedDict[str, dict] = OrderedDict()
 _BY_ID: OrderedDict[int, tuple] = OrderedDict()
+_RUN = None  # simulate(scene, keep=...), registered by run/simulation.py (it builds the loops that ask)
+
+
+def set_runner(run) -> None:
+    """Register ``simulate`` as the probe's runner (called once by :mod:`.simulation`)."""
+    global _RUN
+    _RUN = run
 
 
 def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
@@ -61,14 +69,13 @@ def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
 
 def _probe(scene) -> tuple[float, float, list]:
     """``(M1, M2, fast)`` of the environment torque from the 1 s every-stage probe."""
-    from .rates import torque_rates
-    from .simulation import simulate  # (simulation builds the loop that asks for this)
-
+    if _RUN is None:
+        raise RuntimeError("stationbed.run.simulation registers the probe's runner (set_runner)")
     dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
     changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
                "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
                "controller.sensor": {}}
-    tr = simulate(scene.replace(changes), keep=True)
+    tr = _RUN(scene.replace(changes), keep=True)
     L = np.zeros((tr.t.size, 3))
     for kind in ("aero", "srp"):
         if f"tau_{kind}_x" in tr.columns:
@@ -89,8 +96,6 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
     if key in _CHOICES:
         _CHOICES.move_to_end(key)
         return _CHOICES[key]
-    from .rates import hold_bound_rad
-
     M1, M2, fast = _probe(scene)
     I_min = float(np.linalg.eigvalsh(np.asarray(scene.body.inertia, float)).min())
     wn, zeta = float(params.bandwidth), float(params.damping)
@@ -134,3 +139,82 @@ def _scene_choice(scene) -> dict:
     params = getattr(build_controller(spec, base_dir=scene.folder), "params", None) if spec.name == "pd" else None
     return choice(scene, params, spec.period, int(round(sim.output_dt / spec.period)), bool(scene.thruster),
                   bool(scene.sensor))
+
+
+def g_norms(I_kg_m2: float, omega_n: float, zeta: float) -> tuple[float, float, float]:
+    """Norms of one axis of the linearised PD loop ``I θ̈ + 2 ζ ω_n I θ̇ + ω_n² I θ = e``:
+    ``(‖g‖₁, ‖ġ‖₁ bound, max |g| bound)`` of its torque-to-angle impulse response
+    ``g(t) = exp(-ζ ω_n t) sin(ω_d t) / (I ω_d)``, ``ω_d = ω_n √(1 - ζ²)`` (0 < ζ < 1).
+
+    ``‖g‖₁ = coth(π ζ / (2 √(1 - ζ²))) / (I ω_n²)`` (the integral of |e^{-at} sin bt| is
+    ``b coth(π a / 2b) / (a² + b²)``); ``|ġ| <= e^{-ζ ω_n t} / (I √(1 - ζ²))`` gives
+    ``‖ġ‖₁ <= 1 / (I ζ ω_n √(1 - ζ²))``; ``|g| <= 1 / (I ω_d)``.
+    """
+    s = math.sqrt(1.0 - zeta * zeta)
+    g1 = 1.0 / math.tanh(math.pi * zeta / (2.0 * s)) / (I_kg_m2 * omega_n**2)
+    return g1, 1.0 / (I_kg_m2 * zeta * omega_n * s), 1.0 / (I_kg_m2 * omega_n * s)
+
+
+def hold_bound_rad(delta_s: float, M1: float, M2: float, fast: list[tuple[float, float]], I_kg_m2: float,
+                   omega_n: float, zeta: float) -> float:
+    """Bound on the attitude change [rad] that holding the environment torque over blocks of
+    ``delta_s`` (extrapolated to the block's middle, module docstring) makes in a PD loop.
+
+    Parameters
+    ----------
+    delta_s : float  Block length N h [s].
+    M1, M2 : float  Largest |dL/dt| [N m/s] and |d²L/dt²| [N m/s²] of the environment torque
+        (any axis) where it is smooth.
+    fast : list of (duration [s], largest |dL/dt| [N m/s])  The stretches where it is not
+        (penumbra crossings: the shadow fraction's kinks and its fast change between them).
+    I_kg_m2, omega_n, zeta : float  Smallest principal inertia, the loop's ω_n [rad/s] and ζ.
+
+    Notes
+    -----
+    Over a block ``[t_k, t_k + Δ]`` the error ``e = L - L_hold`` is, by Taylor's theorem, a
+    zero-mean ramp ``L̇_k (s - Δ/2)`` plus a remainder ``|r| <= (3/4) M2 Δ²`` (``s²/2`` from L,
+    ``Δ²/4`` from the slope of the extrapolation). The angle is ``θ = ∫ g(t - τ) e(τ) dτ``:
+    the remainder gives at most ``‖g‖₁ (3/4) M2 Δ²``; the ramp, integrated by parts once
+    (its integral ``S`` vanishes at each block's ends and ``|S| <= M1 Δ² / 8``), at most
+    ``‖ġ‖₁ M1 Δ² / 8``. In a fast stretch of duration ``T`` and slope ``M1f`` (plus two blocks
+    either side, whose extrapolation straddles it) ``|e| <= 2 M1f Δ``, so it adds at most
+    ``max|g| 2 M1f Δ (T + 4 Δ)``, each stretch in full (they are summed, as if they were
+    simultaneous). Per axis, decoupled, rigid: the linearised loop (docs/design.md).
+    """
+    g1, gd1, gmax = g_norms(I_kg_m2, omega_n, zeta)
+    d = delta_s
+    smooth = g1 * 0.75 * M2 * d * d + gd1 * M1 * d * d / 8.0
+    return smooth + sum(gmax * 2.0 * m1 * d * (T + 4.0 * d) for T, m1 in fast)
+
+
+def torque_rates(t, L, nu=None):
+    """``(M1, M2, fast)`` of :func:`hold_bound_rad` from a sampled torque ``L`` (N, 3) [N m] at
+    times ``t`` (N,) [s]: finite differences where the shadow fraction ``nu`` is 0 or 1 (both
+    neighbours too), the penumbra stretches (``0 < nu < 1``) as ``fast`` with their largest
+    first difference. Sampling finer than the block length is the caller's part (the
+    differences see nothing between samples)."""
+    t, L = np.asarray(t, float), np.asarray(L, float)
+    dt = np.diff(t)
+    d1 = np.diff(L, axis=0) / dt[:, None]
+    d2 = np.diff(d1, axis=0) / (0.5 * (dt[1:] + dt[:-1]))[:, None]
+    if nu is None:
+        return float(np.abs(d1).max()), float(np.abs(d2).max()), []
+    pen = (np.asarray(nu) > 1e-12) & (np.asarray(nu) < 1 - 1e-12)
+    bad = pen.copy()
+    bad[1:] |= pen[:-1]
+    bad[:-1] |= pen[1:]
+    ok1 = ~(bad[1:] | bad[:-1])
+    ok2 = ok1[1:] & ok1[:-1]
+    fast = []
+    i = 0
+    while i < len(pen):
+        if pen[i]:
+            j = i
+            while j + 1 < len(pen) and pen[j + 1]:
+                j += 1
+            a, b = max(i - 1, 0), min(j + 1, len(t) - 1)
+            fast.append((float(t[b] - t[a]), float(np.abs(d1[a:b]).max())))
+            i = j + 1
+        else:
+            i += 1
+    return float(np.abs(d1[ok1]).max()), float(np.abs(d2[ok2]).max()), fast
