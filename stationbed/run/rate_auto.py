@@ -96,7 +96,14 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
     if key in _CHOICES:
         _CHOICES.move_to_end(key)
         return _CHOICES[key]
-    M1, M2, fast = _probe(scene)
+    try:
+        M1, M2, fast = _probe(scene)
+    except Exception as e:  # noqa: BLE001 - a scene the probe cannot fly runs every stage (its own run says why it fails)
+        out = {"ticks": 0, "bound_rad": None, "why": f"the probe failed: {type(e).__name__}"}
+        _CHOICES[key] = out
+        return out
+    if not all(math.isfinite(v) for v in (M1, M2, *(m for f in fast for m in f))):
+        return {"ticks": 0, "bound_rad": None, "why": "the probe's torque is not finite"}
     I_min = float(np.linalg.eigvalsh(np.asarray(scene.body.inertia, float)).min())
     wn, zeta = float(params.bandwidth), float(params.damping)
     out = {"ticks": 0, "bound_rad": None, "why": f"no rate's bound is inside {TARGET_RAD:g} rad"}
