@@ -126,6 +126,24 @@ def test_auto_says_why_it_runs_every_stage():
         assert why in s["environment_rate_why"], s["environment_rate_why"]
 
 
+def test_the_probe_is_kept_on_disk_for_the_next_process(tmp_path, monkeypatch):
+    """A scene probed once is not probed again by another process (the in-process memory
+    cleared): the choice comes back from the compile cache's ``rates`` folder, the same."""
+    from stationbed.run import rate_auto
+
+    (tmp_path / "cache").mkdir()
+    monkeypatch.setattr(rate_auto, "cache_dir", lambda: tmp_path / "cache")  # the compiled code stays shared
+    scene = load_scene(SCENE).replace({"simulation.duration": 30.0})
+    monkeypatch.setattr(rate_auto, "_CHOICES", type(rate_auto._CHOICES)())
+    monkeypatch.setattr(rate_auto, "_BY_ID", type(rate_auto._BY_ID)())
+    first = rate_auto.scene_choice(scene)
+    assert first["ticks"] > 0 and len(list((tmp_path / "cache" / "rates").glob("probe_*.json"))) == 1
+    rate_auto._CHOICES.clear()
+    rate_auto._BY_ID.clear()
+    monkeypatch.setattr(rate_auto, "_probe", lambda s: pytest.fail("probed again"))
+    assert rate_auto.scene_choice(scene) == first
+
+
 def test_monte_carlo_flies_every_sample_at_the_nominal_choice(tmp_path):
     """A study resolves ``auto`` on its nominal scene once: study.json records the choice and
     each drawn sample carries it (so a sample replayed alone flies the study's rate)."""

@@ -12,8 +12,10 @@ The bound needs the loop's shape and the environment torque's rates:
   *probe*: the same scene flown every stage with a 1 s tick, rows at 1 s, noise off, over
   ``min(duration, one orbit)``. The environment torque moves at orbital rate (the orbit, the sun,
   the arrays' tracking); the probe's coarser tick moves the attitude it acts on by the loop's
-  tracking error only, a second-order change of the rates. It costs ~1/10 of an orbit's run and is
-  kept per scene content (the last :data:`KEEP`), so a scene flown again does not pay it twice.
+  tracking error only, a second-order change of the rates. It costs ~0.06 s of CPU and is kept
+  per scene content: in the process (the last :data:`KEEP`) and on disk in the compile cache's
+  ``rates`` folder (keyed by the scene and stationbed's source files), so a scene flown again,
+  in this process or another, does not pay it twice.
 
 Where the loop cannot honour a rate (thrusters, ``[[sensor]]`` tables: their fused executors
 evaluate every stage) or the bound's assumptions do not hold (a law other than ``pd``, ζ >= 1, no
@@ -22,10 +24,16 @@ environment torque), ``auto`` is every stage (0) and :func:`auto_choice` says wh
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+import os
 from collections import OrderedDict
+from pathlib import Path
 
 import numpy as np
+
+from ..core.compile import cache_dir
 
 __all__ = ["AUTO", "TARGET_RAD", "CANDIDATES", "choice", "auto_choice", "scene_choice", "set_runner", "g_norms",
            "hold_bound_rad", "torque_rates"]
@@ -96,11 +104,21 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
     if key in _CHOICES:
         _CHOICES.move_to_end(key)
         return _CHOICES[key]
+    path = _disk_path(key)
+    if path is not None and path.is_file():  # the same scene probed by an earlier process
+        try:
+            got = json.loads(path.read_text())
+            out = {k: got[k] for k in ("ticks", "bound_rad", "why")}
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # unreadable: probe again and write it anew
+        else:
+            _remember(key, out)
+            return out
     try:
         M1, M2, fast = _probe(scene)
     except Exception as e:  # noqa: BLE001 - a scene the probe cannot fly runs every stage (its own run says why it fails)
         out = {"ticks": 0, "bound_rad": None, "why": f"the probe failed: {type(e).__name__}"}
-        _CHOICES[key] = out
+        _remember(key, out)
         return out
     if not all(math.isfinite(v) for v in (M1, M2, *(m for f in fast for m in f))):
         return {"ticks": 0, "bound_rad": None, "why": "the probe's torque is not finite"}
@@ -112,10 +130,51 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
         if n <= n_per_out and b <= TARGET_RAD:
             out = {"ticks": n, "bound_rad": b, "why": None}
             break
+    _remember(key, out)
+    if path is not None:
+        try:
+            tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps({**out, "M1": M1, "M2": M2, "fast": fast}))
+            os.replace(tmp, path)
+        except OSError:
+            pass  # a cache that cannot be written: the next process probes again
+    return out
+
+
+def _remember(key: str, out: dict) -> None:
     _CHOICES[key] = out
     if len(_CHOICES) > KEEP:
         _CHOICES.popitem(last=False)
-    return out
+
+
+_CODE: list[str] = []  # the code's fingerprint, once per process
+
+
+def _code_key() -> str:
+    """What the probe's answer depends on besides the scene: stationbed's source files (their
+    sizes and modification times: an edit or another version probes anew)."""
+    if not _CODE:
+        root = Path(__file__).resolve().parents[1]
+        h = hashlib.sha256()
+        for f in sorted(root.rglob("*.py")):
+            st = f.stat()
+            h.update(f"{f.relative_to(root)}:{st.st_size}:{st.st_mtime_ns};".encode())
+        _CODE.append(h.hexdigest())
+    return _CODE[0]
+
+
+def _disk_path(key: str) -> Path | None:
+    """Where the choice for ``key`` is kept across processes: the compile cache's ``rates``
+    folder (the compile cache's safety checks apply), None without a usable cache."""
+    d = cache_dir()
+    if d is None:
+        return None
+    try:
+        (d / "rates").mkdir(mode=0o700, exist_ok=True)
+    except OSError:
+        return None
+    name = hashlib.sha256((_code_key() + "|" + key).encode()).hexdigest()[:32]
+    return d / "rates" / f"probe_{name}.json"
 
 
 def auto_choice(loop) -> dict:
