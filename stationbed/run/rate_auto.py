@@ -25,6 +25,7 @@ environment torque), ``auto`` is every stage (0) and :func:`auto_choice` says wh
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -77,8 +78,8 @@ def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
 
 def _probe(scene) -> tuple[float, float, list]:
     """``(M1, M2, fast)`` of the environment torque from the 1 s every-stage probe."""
-    if _RUN is None:
-        raise RuntimeError("stationbed.run.simulation registers the probe's runner (set_runner)")
+    if _RUN is None:  # run/simulation.py registers simulate when imported (it imports this module)
+        importlib.import_module(f"{__package__}.simulation")
     dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
     changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
                "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
