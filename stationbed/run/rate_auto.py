@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
+import logging
 import math
 import os
 from collections import OrderedDict
@@ -35,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.compile import cache_dir
+from ..core.progress import LOGGER
 
 __all__ = ["AUTO", "TARGET_RAD", "CANDIDATES", "choice", "auto_choice", "scene_choice", "set_runner", "g_norms",
            "hold_bound_rad", "torque_rates"]
@@ -76,6 +78,11 @@ def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
     return None
 
 
+class _Quiet(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return False
+
+
 def _probe(scene) -> tuple[float, float, list]:
     """``(M1, M2, fast)`` of the environment torque from the 1 s every-stage probe."""
     if _RUN is None:  # run/simulation.py registers simulate when imported (it imports this module)
@@ -84,7 +91,13 @@ def _probe(scene) -> tuple[float, float, list]:
     changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
                "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
                "controller.sensor": {}}
-    tr = _RUN(scene.replace(changes), keep=True)
+    quiet = _Quiet()  # the probe's own notices (a saturation, a fallback) belong to the run, said there
+    log = logging.getLogger(LOGGER)
+    log.addFilter(quiet)
+    try:
+        tr = _RUN(scene.replace(changes), keep=True)
+    finally:
+        log.removeFilter(quiet)
     L = np.zeros((tr.t.size, 3))
     for kind in ("aero", "srp"):
         if f"tau_{kind}_x" in tr.columns:
