@@ -202,9 +202,10 @@ def test_split_rhs_is_the_whole_rhs():
         assert_allclose(held, whole, rtol=SPLIT_RTOL, atol=SPLIT_RTOL * np.abs(whole).max())
 
 
-def test_negative_rate_is_refused():
-    with pytest.raises((SceneError, ValueError), match="environment_rate"):
-        _with_rate(load_scene(SCENE), -1)
+@pytest.mark.parametrize("bad", [-1, 2.5, "fast", True])
+def test_a_bad_rate_is_refused_naming_the_field(bad):
+    with pytest.raises((SceneError, ValueError), match='environment_rate: must be "auto" or a whole number'):
+        _with_rate(load_scene(SCENE), bad)
 
 
 def test_rate_is_recorded_and_ignored_without_environment():
