@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import inspect
 import json
 import logging
 import math
@@ -106,15 +107,17 @@ def _probe(scene) -> tuple[float, float, list]:
     return torque_rates(tr.t, L, nu)
 
 
-def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, flight: bool = False) -> dict:
+def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, flight: bool = False,
+           law=None) -> dict:
     """``{"ticks": N, "bound_rad": b or None, "why": reason or None}``: the largest of
     :data:`CANDIDATES` (at most ``n_per_out``, the ticks per output row) whose bound is inside
     :data:`TARGET_RAD` for ``scene`` flown with the pd law's ``params`` at ``period`` [s]; 0 with
-    the reason when the bound does not apply. Kept per scene content (one probe each)."""
+    the reason when the bound does not apply. Kept per scene content and the law's class ``law``
+    (its source file keys the disk copy), one probe each."""
     why = _why_not(scene, params, thrust, flight)
     if why is not None:
         return {"ticks": 0, "bound_rad": None, "why": why}
-    key = scene.model_dump_json(exclude={"montecarlo"}) + f"|{period!r}|{n_per_out}"
+    key = scene.model_dump_json(exclude={"montecarlo"}) + f"|{period!r}|{n_per_out}|{_file_key(law)}"
     if key in _CHOICES:
         _CHOICES.move_to_end(key)
         return _CHOICES[key]
@@ -123,9 +126,10 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
         try:
             got = json.loads(path.read_text())
             out = {k: got[k] for k in ("ticks", "bound_rad", "why")}
+            ok = out["ticks"] in (0, *CANDIDATES) and out["ticks"] <= n_per_out
         except (OSError, ValueError, KeyError, TypeError):
-            pass  # unreadable: probe again and write it anew
-        else:
+            ok = False  # unreadable: probe again and write it anew
+        if ok:
             _remember(key, out)
             return out
     try:
@@ -164,6 +168,16 @@ def _remember(key: str, out: dict) -> None:
 _CODE: list[str] = []  # the code's fingerprint, once per process
 
 
+def _file_key(law) -> str:
+    """The law class's source file, its size and modification time ("" when unknown)."""
+    try:
+        f = Path(inspect.getsourcefile(law) or "")
+        st = f.stat()
+    except (TypeError, OSError):
+        return ""
+    return f"{f}:{st.st_size}:{st.st_mtime_ns}"
+
+
 def _code_key() -> str:
     """What the probe's answer depends on besides the scene: stationbed's source files (their
     sizes and modification times: an edit or another version probes anew)."""
@@ -194,7 +208,8 @@ def _disk_path(key: str) -> Path | None:
 def auto_choice(loop) -> dict:
     """:func:`choice` for a closed loop (its law, period, rows, thrusters and sensors)."""
     return choice(loop.scene, getattr(loop.ctrl, "params", None), loop.period, loop.n_per_out,
-                  getattr(loop, "thrust", None) is not None, getattr(loop, "flight", None) is not None)
+                  getattr(loop, "thrust", None) is not None, getattr(loop, "flight", None) is not None,
+                  type(loop.ctrl))
 
 
 def scene_choice(scene) -> dict:
@@ -216,9 +231,11 @@ def _scene_choice(scene) -> dict:
     sim, spec = scene.simulation, scene.controller
     if spec is None:
         return {"ticks": 0, "bound_rad": None, "why": "no controller"}
-    params = getattr(build_controller(spec, base_dir=scene.folder), "params", None) if spec.name == "pd" else None
-    return choice(scene, params, spec.period, int(round(sim.output_dt / spec.period)), bool(scene.thruster),
-                  bool(scene.sensor))
+    if spec.name != "pd":
+        return choice(scene, None, spec.period, 1, bool(scene.thruster), bool(scene.sensor))  # (says why)
+    law = build_controller(spec, base_dir=scene.folder)
+    return choice(scene, getattr(law, "params", None), spec.period, int(round(sim.output_dt / spec.period)),
+                  bool(scene.thruster), bool(scene.sensor), type(law))
 
 
 def g_norms(I_kg_m2: float, omega_n: float, zeta: float) -> tuple[float, float, float]:
