@@ -111,7 +111,7 @@ def main(argv=None) -> int:
     summ = first["fused"].meta["summary"]
     env_diff = float(np.max(rotation_angle(first[fe].q_BN, first["fused"].q_BN)))
     probe = []
-    for _ in range(PROBE_REPEATS):  # the default's probe alone (paid once per scene and process)
+    for _ in range(1 if args.smoke else PROBE_REPEATS):  # the default's probe alone (paid once per scene and process)
         t0 = time.process_time()
         rate_auto._probe(scene)
         probe.append(time.process_time() - t0)
