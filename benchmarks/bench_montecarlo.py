@@ -8,8 +8,8 @@
 measured, not extrapolated (``--samples 1000``: the issues' targets); ``--rows`` picks the rows
 (default all: pd, example_hold, momentum_manager, efficiency, per_sample). ``--only-pd --n 1000``:
 the 1000-sample ``pd`` row alone, quietly. ``--environment-rate N`` runs every row's samples with
-``[simulation] environment_rate = N`` (issue 25: 20 is the bound's choice, docs/design.md
-"Effects at their own rate"; default 0, every stage, as the scenario).
+``[simulation] environment_rate = N`` (0: every stage; default ``auto``, the scenario's: the
+bound's choice for the nominal scene, 20 ticks, docs/design.md "Effects at their own rate").
 
 Scene: ``scenarios/iss_lvlh_hold_montecarlo.toml`` (one orbit, 10 Hz, every dispersion of the
 scenario) with the sensor noise off, so the ``pd`` law runs fused (controller, steering and
@@ -68,12 +68,11 @@ def vm_hwm_mib() -> float:
 SMOKE_N, SMOKE_WORKERS = 2, 1
 
 
-def bench_scene(controller: str = "pd", duration: float | None = None, environment_rate: int = 0):
+def bench_scene(controller: str = "pd", duration: float | None = None, environment_rate: int | str = "auto"):
     s = load_scene(SCENE)
     disperse = [d.model_dump(exclude_unset=True) for d in s.montecarlo.disperse if not d.key.startswith("controller.sensor")]
     changes = {"controller.sensor": {}, "montecarlo.disperse": disperse}
-    if environment_rate:
-        changes["simulation.environment_rate"] = environment_rate
+    changes["simulation.environment_rate"] = environment_rate
     if duration is not None:  # smoke: a few seconds per sample (the settling time inside them)
         changes.update({"simulation.duration": duration, "montecarlo.settle_s": 0.5 * duration})
     if controller != "pd":
@@ -102,8 +101,9 @@ def main(argv=None) -> int:
                     "momentum_manager): measured, not extrapolated")
     ap.add_argument("--rows", default="pd,example_hold,momentum_manager,efficiency,per_sample",
                     help="comma-separated rows to run")
-    ap.add_argument("--environment-rate", type=int, default=0,
-                    help="[simulation] environment_rate of every sample (ticks; 0 = every stage, as the scenario)")
+    ap.add_argument("--environment-rate", type=lambda v: v if v == "auto" else int(v), default="auto",
+                    help="[simulation] environment_rate of every sample (ticks; 0 = every stage; default auto, "
+                         "the scenario's)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
     _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s per row, {SMOKE_WORKERS} workers")

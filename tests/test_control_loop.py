@@ -169,8 +169,10 @@ PATH_RTOL = 1e-9
 @pytest.fixture(scope="module")
 def iss_three_paths():
     """300 s of iss_lvlh_hold (PD, DGCMGs with SR steering, tracking arrays, gravity gradient,
-    aero torque) by the fused loop, the per-tick fused tick and the generic path."""
-    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml")
+    aero torque) by the fused loop, the per-tick fused tick and the generic path; every stage
+    (the paths' contract: the per-tick loops evaluate the environment at every stage, the default
+    rate is checked against that in tests/test_effect_rates.py)."""
+    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace({"simulation.environment_rate": 0})
     kw = dict(duration=300.0, output_dt=1.0)
     return {
         "fused_loop": simulate(scene, **kw),

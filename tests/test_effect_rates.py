@@ -18,6 +18,7 @@ The closed-loop momentum balance holds at every option too (tests/test_closed_lo
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -30,6 +31,7 @@ from scipy.integrate import quad
 from stationbed import load_scene, simulate
 from stationbed.core.rotation import rotation_angle
 from stationbed.model import Structure
+from stationbed.run.rate_auto import AUTO, TARGET_RAD
 from stationbed.run.rates import g_norms, hold_bound_rad, torque_rates
 from stationbed.run.system import build_system, environment_split
 from stationbed.scene import SceneError
@@ -46,6 +48,9 @@ OMEGA_N_RAD_S, ZETA = 0.005, 0.8
 #: the noisy held run against the noisy every-stage run, as a multiple of the noiseless pair's
 #: difference (the noise moves the trajectory the hold acts on, not the hold's size)
 NOISE_SAME_DRAWS = 10.0
+#: the default's bound comes from its 1 s probe, the test's from the 0.1 s loop's torque at 1 s
+#: (the same orbit and tracking; the attitude differs by the loop's tracking error only)
+PROBE_BOUND_RTOL = 0.05
 #: the split sums the same torques in another order: round-off of ~1 N m sums against ~1e3 terms
 SPLIT_RTOL = 1e-12
 
@@ -58,7 +63,7 @@ def _with_rate(scene, n):
 def orbit():
     """One orbit every stage (the reference), and the torque's rates from a 1 s sampling."""
     scene = load_scene(SCENE)
-    ref = simulate(scene, duration=ORBIT_S)
+    ref = simulate(_with_rate(scene, 0), duration=ORBIT_S)
     fine = simulate(scene, duration=ORBIT_S, fused=False, output_dt=1.0)
     L = fine.cols("tau_aero_x", "tau_aero_y", "tau_aero_z") + fine.cols("tau_srp_x", "tau_srp_y", "tau_srp_z")
     return scene, ref, torque_rates(fine.t, L, fine.cols("eclipse")[:, 0])
@@ -85,6 +90,75 @@ def test_default_choice_meets_the_target(orbit):
     ok = [n for n in (1, 2, 5, 10, 20, 50, 100)
           if hold_bound_rad(n * PERIOD_S, M1, M2, fast, I_MIN_KG_M2, OMEGA_N_RAD_S, ZETA) <= 1e-6]
     assert max(ok) == 20
+
+
+@pytest.mark.slow
+def test_default_rate_is_the_bounds_choice_and_within_it(orbit):
+    """The default (``"auto"``): the run picks 20 ticks, records the bound its own probe gave
+    (the probe's 1 s tick against the 0.1 s loop's rates: within PROBE_BOUND_RTOL), and its
+    attitude difference from every stage is inside that bound and the issue's 1e-6 rad."""
+    scene, ref, (M1, M2, fast) = orbit
+    assert scene.simulation.environment_rate == AUTO
+    tr = simulate(scene, duration=ORBIT_S)
+    s = tr.meta["summary"]
+    assert (s["environment_rate_asked"], s["environment_rate_ticks"], s["environment_rate_why"]) == (AUTO, 20, None)
+    bound = hold_bound_rad(20 * PERIOD_S, M1, M2, fast, I_MIN_KG_M2, OMEGA_N_RAD_S, ZETA)
+    assert s["environment_rate_bound_rad"] == pytest.approx(bound, rel=PROBE_BOUND_RTOL)
+    err = float(np.max(rotation_angle(ref.q_BN, tr.q_BN)))
+    assert 0.0 < err <= min(s["environment_rate_bound_rad"], TARGET_RAD)
+
+
+def test_auto_says_why_it_runs_every_stage():
+    """Where the bound does not apply, ``auto`` is every stage and the summary says why: a law
+    other than pd, the per-tick loop, thrusters; a scene without environment torques records
+    no bound."""
+    hold = load_scene(SCENE).replace({"simulation.duration": 20.0, "simulation.output_dt": 10.0})
+    tea = load_scene(ROOT / "scenarios" / "iss_tea_momentum_management.toml")
+    cases = [
+        (simulate(tea, duration=20.0), "pd"),
+        (simulate(hold, fused=False), "per-tick"),
+        (simulate(load_scene(ROOT / "scenarios" / "iss_cmg_thruster_assist.toml"), duration=20.0), "thrusters"),
+        (simulate(load_scene(ROOT / "scenarios" / "eigenaxis_slew.toml"), duration=2.0), "no environment"),
+    ]
+    for tr, why in cases:
+        s = tr.meta["summary"]
+        assert (s["environment_rate_asked"], s["environment_rate_ticks"], s["environment_rate_bound_rad"]) == (AUTO, 0, None)
+        assert why in s["environment_rate_why"], s["environment_rate_why"]
+
+
+def test_the_probe_is_kept_on_disk_for_the_next_process(tmp_path, monkeypatch):
+    """A scene probed once is not probed again by another process (the in-process memory
+    cleared): the choice comes back from the compile cache's ``rates`` folder, the same."""
+    from stationbed.run import rate_auto
+
+    (tmp_path / "cache").mkdir()
+    monkeypatch.setattr(rate_auto, "cache_dir", lambda: tmp_path / "cache")  # the compiled code stays shared
+    scene = load_scene(SCENE).replace({"simulation.duration": 30.0})
+    monkeypatch.setattr(rate_auto, "_CHOICES", type(rate_auto._CHOICES)())
+    monkeypatch.setattr(rate_auto, "_BY_ID", type(rate_auto._BY_ID)())
+    first = rate_auto.scene_choice(scene)
+    assert first["ticks"] > 0 and len(list((tmp_path / "cache" / "rates").glob("probe_*.json"))) == 1
+    rate_auto._CHOICES.clear()
+    rate_auto._BY_ID.clear()
+    monkeypatch.setattr(rate_auto, "_probe", lambda s: pytest.fail("probed again"))
+    assert rate_auto.scene_choice(scene) == first
+
+
+def test_monte_carlo_flies_every_sample_at_the_nominal_choice(tmp_path):
+    """A study resolves ``auto`` on its nominal scene once: study.json records the choice and
+    each drawn sample carries it (so a sample replayed alone flies the study's rate)."""
+    from stationbed.run.rate_auto import scene_choice
+    from stationbed.studies.montecarlo import montecarlo
+    from stationbed.studies.montecarlo.dispersions import draw
+
+    mc = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_montecarlo.toml").replace(
+        {"simulation.duration": 30.0, "montecarlo.settle_s": 10.0, "montecarlo.envelope_dt": None})
+    c = scene_choice(mc)
+    assert c["ticks"] > 0 and c["bound_rad"] <= TARGET_RAD
+    assert draw(mc, 3)[0].simulation.environment_rate == c["ticks"]
+    montecarlo(mc, n=2, out=tmp_path / "mc", charts=False)
+    rec = json.loads((tmp_path / "mc" / "study.json").read_text())["environment_rate"]
+    assert rec == {"asked": AUTO, **c}
 
 
 @pytest.mark.parametrize("zeta", [0.3, 0.707, 0.8, 0.95])
@@ -128,9 +202,10 @@ def test_split_rhs_is_the_whole_rhs():
         assert_allclose(held, whole, rtol=SPLIT_RTOL, atol=SPLIT_RTOL * np.abs(whole).max())
 
 
-def test_negative_rate_is_refused():
-    with pytest.raises((SceneError, ValueError), match="environment_rate"):
-        _with_rate(load_scene(SCENE), -1)
+@pytest.mark.parametrize("bad", [-1, 2.5, "fast", True])
+def test_a_bad_rate_is_refused_naming_the_field(bad):
+    with pytest.raises((SceneError, ValueError), match='environment_rate: must be "auto" or a whole number'):
+        _with_rate(load_scene(SCENE), bad)
 
 
 def test_rate_is_recorded_and_ignored_without_environment():
@@ -148,10 +223,10 @@ def test_held_environment_with_sensor_noise(orbit):
     run is to its own: a draw reaching another tick would move the loop by the noise's effect
     (~1e-7 rad here), not by the hold's (~1e-11 rad)."""
     scene, _, (M1, M2, fast) = orbit
-    clean = float(np.max(rotation_angle(simulate(scene, duration=600.0).q_BN,
+    clean = float(np.max(rotation_angle(simulate(_with_rate(scene, 0), duration=600.0).q_BN,
                                         simulate(_with_rate(scene, 20), duration=600.0).q_BN)))
     noisy = scene.replace({"controller.sensor": {"attitude_noise": 1e-5, "rate_noise": 1e-6, "seed": 3}})
-    every = simulate(noisy, duration=600.0)
+    every = simulate(_with_rate(noisy, 0), duration=600.0)
     held = simulate(_with_rate(noisy, 20), duration=600.0)
     assert held.meta["summary"]["environment_rate_ticks"] == 20
     err = float(np.max(rotation_angle(every.q_BN, held.q_BN)))

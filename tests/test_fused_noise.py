@@ -59,7 +59,9 @@ def test_block_draws_equal_the_per_tick_calls(att, rate):
 
 
 def _iss(sensor, duration):
-    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace({"controller.sensor": sensor})
+    # every stage: the per-tick loop's (the default rate's own test: tests/test_effect_rates.py)
+    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace(
+        {"controller.sensor": sensor, "simulation.environment_rate": 0})
     kw = dict(duration=duration, output_dt=1.0)
     return simulate(scene, **kw), simulate(scene, fused=False, **kw)
 

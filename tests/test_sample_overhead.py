@@ -56,7 +56,10 @@ def test_knowledge_scene_built_once_per_monte_carlo_sample(monkeypatch):
     from stationbed.studies.montecarlo.engine import envelope_times, study_scene
     from stationbed.studies.montecarlo.samples import run_sample
 
+    from stationbed.run.rate_auto import scene_choice
+
     scene = study_scene(load_scene(MC_SCENE).replace({"simulation.duration": 2.0, "montecarlo.settle_s": 1.0}), 10)
+    scene_choice(scene)  # the study's one environment-rate probe (run/rate_auto.py), before counting
     builds = []
     real_changes = kn.knowledge_changes
     monkeypatch.setattr(kn, "knowledge_changes", lambda s: builds.append(1) or real_changes(s))

@@ -30,6 +30,7 @@ import math
 import casadi as ca
 import numpy as np
 
+from .rate_auto import AUTO, auto_choice, g_norms, hold_bound_rad, torque_rates  # noqa: F401 (the bound: re-exported)
 from .system import environment_split
 
 __all__ = ["environment_rate", "carry_width", "held_chunk", "rate_summary", "g_norms", "hold_bound_rad", "torque_rates"]
@@ -41,9 +42,15 @@ ENV_CARRY = 5
 def environment_rate(loop) -> int:
     """The environment rate the fused loop runs for ``loop`` (ticks per evaluation; 0 = every
     integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
-    environment torques, else 0. The per-tick loops evaluate every stage
+    environment torques, else 0; ``"auto"`` (the default) is the bound's choice
+    (:func:`~.rate_auto.auto_choice`). The per-tick loops evaluate every stage
     (:func:`rate_summary` reports 0 for them)."""
-    n = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
+    asked = getattr(loop.scene.simulation, "environment_rate", 0)
+    if asked == AUTO:
+        if loop.system.sx is None or environment_split(loop.system) is None:
+            return 0
+        return auto_choice(loop)["ticks"]
+    n = int(asked or 0)
     if n <= 0 or loop.system.sx is None:
         return 0
     return n if environment_split(loop.system) is not None else 0
@@ -117,87 +124,20 @@ def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int,
 
 def rate_summary(loop) -> dict:
     """What the run's summary records of the effect rates: the environment's ticks per
-    evaluation (0 = every integrator stage) as run, and as the scene asked. A block never spans
+    evaluation (0 = every integrator stage) as run, and as the scene asked; under ``"auto"``
+    also the bound of the rate run (``environment_rate_bound_rad``) or why it is every stage. A block never spans
     an output row (each chunk starts its own), so the run's rate is at most the ticks per row."""
-    asked = int(getattr(loop.scene.simulation, "environment_rate", 0) or 0)
+    asked = getattr(loop.scene.simulation, "environment_rate", 0)
+    asked = asked if asked == AUTO else int(asked or 0)
     ran = min(environment_rate(loop), loop.n_per_out) if getattr(loop, "used_fused", False) else 0
-    return {"environment_rate_ticks": ran, "environment_rate_asked": asked}
-
-
-def g_norms(I_kg_m2: float, omega_n: float, zeta: float) -> tuple[float, float, float]:
-    """Norms of one axis of the linearised PD loop ``I θ̈ + 2 ζ ω_n I θ̇ + ω_n² I θ = e``:
-    ``(‖g‖₁, ‖ġ‖₁ bound, max |g| bound)`` of its torque-to-angle impulse response
-    ``g(t) = exp(-ζ ω_n t) sin(ω_d t) / (I ω_d)``, ``ω_d = ω_n √(1 - ζ²)`` (0 < ζ < 1).
-
-    ``‖g‖₁ = coth(π ζ / (2 √(1 - ζ²))) / (I ω_n²)`` (the integral of |e^{-at} sin bt| is
-    ``b coth(π a / 2b) / (a² + b²)``); ``|ġ| <= e^{-ζ ω_n t} / (I √(1 - ζ²))`` gives
-    ``‖ġ‖₁ <= 1 / (I ζ ω_n √(1 - ζ²))``; ``|g| <= 1 / (I ω_d)``.
-    """
-    s = math.sqrt(1.0 - zeta * zeta)
-    g1 = 1.0 / math.tanh(math.pi * zeta / (2.0 * s)) / (I_kg_m2 * omega_n**2)
-    return g1, 1.0 / (I_kg_m2 * zeta * omega_n * s), 1.0 / (I_kg_m2 * omega_n * s)
-
-
-def hold_bound_rad(delta_s: float, M1: float, M2: float, fast: list[tuple[float, float]], I_kg_m2: float,
-                   omega_n: float, zeta: float) -> float:
-    """Bound on the attitude change [rad] that holding the environment torque over blocks of
-    ``delta_s`` (extrapolated to the block's middle, module docstring) makes in a PD loop.
-
-    Parameters
-    ----------
-    delta_s : float  Block length N h [s].
-    M1, M2 : float  Largest |dL/dt| [N m/s] and |d²L/dt²| [N m/s²] of the environment torque
-        (any axis) where it is smooth.
-    fast : list of (duration [s], largest |dL/dt| [N m/s])  The stretches where it is not
-        (penumbra crossings: the shadow fraction's kinks and its fast change between them).
-    I_kg_m2, omega_n, zeta : float  Smallest principal inertia, the loop's ω_n [rad/s] and ζ.
-
-    Notes
-    -----
-    Over a block ``[t_k, t_k + Δ]`` the error ``e = L - L_hold`` is, by Taylor's theorem, a
-    zero-mean ramp ``L̇_k (s - Δ/2)`` plus a remainder ``|r| <= (3/4) M2 Δ²`` (``s²/2`` from L,
-    ``Δ²/4`` from the slope of the extrapolation). The angle is ``θ = ∫ g(t - τ) e(τ) dτ``:
-    the remainder gives at most ``‖g‖₁ (3/4) M2 Δ²``; the ramp, integrated by parts once
-    (its integral ``S`` vanishes at each block's ends and ``|S| <= M1 Δ² / 8``), at most
-    ``‖ġ‖₁ M1 Δ² / 8``. In a fast stretch of duration ``T`` and slope ``M1f`` (plus two blocks
-    either side, whose extrapolation straddles it) ``|e| <= 2 M1f Δ``, so it adds at most
-    ``max|g| 2 M1f Δ (T + 4 Δ)``, each stretch in full (they are summed, as if they were
-    simultaneous). Per axis, decoupled, rigid: the linearised loop (docs/design.md).
-    """
-    g1, gd1, gmax = g_norms(I_kg_m2, omega_n, zeta)
-    d = delta_s
-    smooth = g1 * 0.75 * M2 * d * d + gd1 * M1 * d * d / 8.0
-    return smooth + sum(gmax * 2.0 * m1 * d * (T + 4.0 * d) for T, m1 in fast)
-
-
-def torque_rates(t, L, nu=None):
-    """``(M1, M2, fast)`` of :func:`hold_bound_rad` from a sampled torque ``L`` (N, 3) [N m] at
-    times ``t`` (N,) [s]: finite differences where the shadow fraction ``nu`` is 0 or 1 (both
-    neighbours too), the penumbra stretches (``0 < nu < 1``) as ``fast`` with their largest
-    first difference. Sampling finer than the block length is the caller's part (the
-    differences see nothing between samples)."""
-    t, L = np.asarray(t, float), np.asarray(L, float)
-    dt = np.diff(t)
-    d1 = np.diff(L, axis=0) / dt[:, None]
-    d2 = np.diff(d1, axis=0) / (0.5 * (dt[1:] + dt[:-1]))[:, None]
-    if nu is None:
-        return float(np.abs(d1).max()), float(np.abs(d2).max()), []
-    pen = (np.asarray(nu) > 1e-12) & (np.asarray(nu) < 1 - 1e-12)
-    bad = pen.copy()
-    bad[1:] |= pen[:-1]
-    bad[:-1] |= pen[1:]
-    ok1 = ~(bad[1:] | bad[:-1])
-    ok2 = ok1[1:] & ok1[:-1]
-    fast = []
-    i = 0
-    while i < len(pen):
-        if pen[i]:
-            j = i
-            while j + 1 < len(pen) and pen[j + 1]:
-                j += 1
-            a, b = max(i - 1, 0), min(j + 1, len(t) - 1)
-            fast.append((float(t[b] - t[a]), float(np.abs(d1[a:b]).max())))
-            i = j + 1
+    out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
+    if asked == AUTO:  # the same keys whichever executor ran
+        if loop.system.sx is None or environment_split(loop.system) is None:
+            c = {"bound_rad": None, "why": "no environment torque"}
+        elif not getattr(loop, "used_fused", False):
+            c = {"bound_rad": None, "why": "the per-tick loop evaluates every stage"}
         else:
-            i += 1
-    return float(np.abs(d1[ok1]).max()), float(np.abs(d2[ok2]).max()), fast
+            c = auto_choice(loop)  # kept per scene: no second probe
+        out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
+        out["environment_rate_why"] = c["why"]
+    return out

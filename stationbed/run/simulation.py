@@ -26,6 +26,7 @@ from ..scene import Scene, load_scene
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import Controller
 from .prepare import prepare
+from .rate_auto import set_runner
 from .rows import FLUSH_S, ROW_BATCH, Rows, SinkError, check_rows
 from .segments import OutputTimes, breakpoints, segment_input, smooth_cuts
 from .trajectory import Trajectory
@@ -231,3 +232,6 @@ def _check_controller_argument(scene: Scene, controller) -> None:
             "[controller] table; add one (name, period, optional sensor): the object replaces the law it "
             "names, the table gives the period and the sensor"
         )
+
+
+set_runner(simulate)  # the environment-rate probe's runner (run/rate_auto.py: it may not import this module)

@@ -107,8 +107,16 @@ class Simulation(Strict):
     impulse_jump: bool = True
     # the environment torques (aero, SRP; kinds with needs_env) evaluated once every this many
     # control ticks in the fused loop, held at their extrapolated mid-block value; 0 = at every
-    # integrator stage (docs/design.md "Effects at their own rate")
-    environment_rate: Annotated[int, Field(ge=0)] = 0
+    # integrator stage; "auto" = the largest rate whose proven bound is inside 1e-6 rad
+    # (run/rate_auto.py; docs/design.md "Effects at their own rate")
+    environment_rate: Any = "auto"  # "auto" or int >= 0 (checked below: one message, not a union's two)
+
+    @field_validator("environment_rate", mode="before")
+    @classmethod
+    def _rate(cls, v):
+        if v == "auto" or (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+            return v
+        raise ValueError(f'must be "auto" or a whole number of ticks >= 0 (0: every stage), got {v!r}')
 
     @model_validator(mode="after")
     def _resolved(self):

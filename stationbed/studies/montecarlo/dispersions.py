@@ -42,11 +42,13 @@ import math
 
 import numpy as np
 
+from ...run.rate_auto import AUTO, scene_choice
 from ...scene import Scene, SceneError, knowledge_scene
 from ...scene.assign import split_path
 from ...scene.knowledge import NAMED_PATHS
 
-__all__ = ["sample_seed", "draw", "Draw", "value_at", "check_keys", "drawn_columns", "TOLD", "law_setting"]
+__all__ = ["sample_seed", "draw", "Draw", "value_at", "check_keys", "drawn_columns", "TOLD", "law_setting",
+           "nominal_rate"]
 
 #: prefix of the columns of what the law was told (``told.<column>``)
 TOLD = "told."
@@ -323,13 +325,15 @@ def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
     rng = np.random.default_rng(sample_seed(mc.seed, k))
     data = scene.model_dump()
     last = None
+    fixed = nominal_rate(scene)  # "auto": the nominal scene's environment rate for every sample
     for redraws in range(mc.max_redraws + 1):
         dr = Draw()
         for d in mc.disperse:
             _draw_one(d, data, rng, dr)
         pins = _pins(scene, data, dr)
         try:
-            s = scene.replace({**dr.changes, **({"knowledge.values": pins} if pins else {})}, source=f"sample {k}")
+            s = scene.replace({**dr.changes, **({"knowledge.values": pins} if pins else {}), **fixed},
+                              source=f"sample {k}")
         except SceneError as e:
             last = str(e)
             continue
@@ -337,6 +341,15 @@ def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
         return s, dr, redraws, None
     dr.values.update({TOLD + c: math.nan for c in list(dr.values)})
     return None, dr, mc.max_redraws, f"no valid draw in {mc.max_redraws + 1} tries; last: {last}"
+
+
+def nominal_rate(scene: Scene) -> dict:
+    """``{"simulation.environment_rate": N}`` when ``scene`` asks ``"auto"``: the bound's choice
+    for the nominal scene (run/rate_auto.py), which every sample flies (one probe per study,
+    not one per sample; docs/design.md "Effects at their own rate"); else ``{}``."""
+    if scene.simulation.environment_rate != AUTO:
+        return {}
+    return {"simulation.environment_rate": scene_choice(scene)["ticks"]}
 
 
 def drawn_columns(scene: Scene) -> list[str]:

@@ -40,9 +40,10 @@ import pandas as pd
 
 from ...core import progress
 from ...run.metrics import METRICS
+from ...run.rate_auto import AUTO, scene_choice
 from ...run.simulation import simulate
 from ...scene import Scene, SceneError, load_scene
-from .dispersions import check_keys, drawn_columns
+from .dispersions import check_keys, drawn_columns, nominal_rate
 from .folder import STUDY_JSON, ChunkFiles, StudyStop, locked, study_identity
 from .report import finish
 from .samples import ENVELOPE_SERIES, ID_COLUMNS, held_warnings, run_chunk
@@ -301,6 +302,9 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
     columns = ID_COLUMNS + drawn_columns(scene) + list(METRICS)
     check_memory(n, len(columns), n_env, _available_memory())
     study, record = study_identity(scene)
+    if scene.simulation.environment_rate == AUTO:  # resolved once here, not by each worker
+        record["environment_rate"] = {"asked": AUTO, **scene_choice(scene)}
+        scene = scene.replace(nominal_rate(scene))
     own_client = None
     if client is None and scheduler is not None:
         client = own_client = _connect(scheduler, connect_timeout_s)
