@@ -511,7 +511,7 @@ class ControlLoop:
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
-        out.update(rate_summary(self))  # the effect rates run (issue 25)
+        out.update(rate_summary(self.comp, self.res.used_fused))  # the effect rates run (issue 25)
         if comp.thrust is not None:
             out.update(comp.thrust.summary(comp))
         try:  # the user's code: a raising summary() must not hide the run's own result or failure

@@ -122,19 +122,20 @@ def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int,
     return ca.Function("fused_chunk", [c0, par0] + noise, [traj[:, -1]])
 
 
-def rate_summary(loop) -> dict:
-    """What the run's summary records of the effect rates: the environment's ticks per
+def rate_summary(loop, used_fused: bool) -> dict:
+    """What the run's summary records (``loop`` the run's composition, ``used_fused`` whether a
+    fused executor ran) of the effect rates: the environment's ticks per
     evaluation (0 = every integrator stage) as run, and as the scene asked; under ``"auto"``
     also the bound of the rate run (``environment_rate_bound_rad``) or why it is every stage. A block never spans
     an output row (each chunk starts its own), so the run's rate is at most the ticks per row."""
     asked = getattr(loop.scene.simulation, "environment_rate", 0)
     asked = asked if asked == AUTO else int(asked or 0)
-    ran = min(environment_rate(loop), loop.n_per_out) if getattr(loop, "used_fused", False) else 0
+    ran = min(environment_rate(loop), loop.n_per_out) if used_fused else 0
     out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
     if asked == AUTO:  # the same keys whichever executor ran
         if loop.system.sx is None or environment_split(loop.system) is None:
             c = {"bound_rad": None, "why": "no environment torque"}
-        elif not getattr(loop, "used_fused", False):
+        elif not used_fused:
             c = {"bound_rad": None, "why": "the per-tick loop evaluates every stage"}
         else:
             c = auto_choice(loop)  # kept per scene: no second probe
