@@ -231,6 +231,18 @@ class TickNoise:
         self.width = noise.suite.NOISE.size
         self.buf, self.k0, self.next = np.zeros((0, self.width)), 1, 0
 
+    def state(self) -> tuple:
+        """Where the stream is (its block, next tick, the generators' states): :meth:`restore`
+        puts it back, and the rows asked after it are drawn again, the same numbers."""
+        gens = {k: r.bit_generator.state for k, r in self.noise.rngs.items()}
+        return self.buf, self.k0, self.next, self.noise.next_tick, gens
+
+    def restore(self, state: tuple) -> None:
+        """Back to a :meth:`state`."""
+        self.buf, self.k0, self.next, self.noise.next_tick, gens = state
+        for k, g in gens.items():
+            self.noise.rngs[k].bit_generator.state = g
+
     def rows(self, k0: int, n: int) -> np.ndarray:
         if n <= 0:
             return np.zeros((0, self.width))

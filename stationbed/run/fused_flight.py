@@ -26,6 +26,7 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..loop import Layout
 from ..loop.flight import READS, SEEN
 from . import law_state
+from .flight_rows import flight_rows_functions, run_flight_rows
 from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
 
 __all__ = ["run_fused_flight"]
@@ -122,8 +123,10 @@ def _build(loop, n: int, symbolic_params) -> dict:
     traj = acc(c0, ca.repmat(parm, 1, n), wm)
     chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
-    funcs = compile_functions([info, chunk], tag)
-    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls}
+    many = flight_rows_functions(info, chunk, C, n, npar_all - 4, nw)  # many rows per call (flight_rows.py)
+    funcs = compile_functions([info, chunk] + many, tag)
+    rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls, "rows": rows}
 
 
 def carry_layout(nx: int, ns: int) -> Layout:
@@ -176,7 +179,15 @@ def run_fused_flight(loop, K: int, symbolic_params, edges) -> None:
     loop.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
     try:
+        j0 = 0
+        if not edges:  # the leading full rows, many per compiled call (flight_rows.py)
+            j0, tail_flag, ticks, stop = run_flight_rows(loop, fns["rows"], row_ks, K, C, c0, par[4:], ls)
+            x = c0[cx].copy()
+            if stop is not None:
+                raise stop
         for j, k in enumerate(row_ks):
+            if j < j0:
+                continue
             t = min(k * period, duration)
             n_act = row_ks[j + 1] - k if k < K else 1
             draws = loop.tick_noise.rows(k, n_act)

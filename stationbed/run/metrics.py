@@ -126,7 +126,9 @@ class RunMetrics:
         self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
         self._thr = {m: col[c] for m, c in _THRUSTER_TOTALS.items() if c in col}
         self.orbit_period_s = orbit_period_s
-        self._est_red = [0.0, 0.0, 0, 0.0, 0, 0]  # max, sum err², rows, sum nees, inside, dropouts
+        # max, sum err², rows, sum nees, inside, dropouts; the two sums as exact partials
+        # (_exact_add): the same totals whatever batches the rows came in (row by row or in bulk)
+        self._est_red = [0.0, [], 0, [], 0, 0]
         self.n_rows = 0
         self.last = None
         self.rate_limited_ticks = self.momentum_saturated_ticks = None
@@ -168,9 +170,11 @@ class RunMetrics:
             e = rows[:, self._est]
             n2 = np.einsum("ij,ij->i", e, e)
             r[0] = max(r[0], float(np.sqrt(n2.max())))
-            r[1] += float(n2.sum())
+            for v in n2.tolist():
+                _exact_add(r[1], v)
             r[2] += len(rows)
-            r[3] += float(rows[:, self._nees].sum())
+            for v in rows[:, self._nees].tolist():
+                _exact_add(r[3], v)
             r[4] += int((np.abs(e) <= rows[:, self._s3]).sum())
         if self._st:
             self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
@@ -218,7 +222,8 @@ class RunMetrics:
             out["max_torque_cmd_Nm"] = self._tau_max
         r = self._est_red
         if self._est is not None and r[2]:
-            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(r[1] / r[2]), mean_nees=r[3] / r[2],
+            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(math.fsum(r[1]) / r[2]),
+                       mean_nees=math.fsum(r[3]) / r[2],
                        est_inside_3sigma=r[4] / (3 * r[2]))
         if self._st and self.n_rows:
             out["st_dropout_rows"] = r[5]

@@ -1,0 +1,92 @@
+"""Many output rows of the fused flight loop per compiled call (issue 20; stationbed/run/flight_rows.py).
+
+Claims:
+
+* the fused loop flown on two gyros, two star-tracker heads and the MEKF with its rows in bulk
+  gives the row-by-row fused flight loop's trajectory bit for bit (the filter's report columns:
+  error, 3σ, bias estimate, NEES, each head's valid flag), and the same summary (ticks, counts
+  of rate-limited and saturated ticks, the estimation metrics), on a slew of
+  ``iss_lvlh_hold_estimated`` that drives the gimbals into their rate limit between rows (the
+  flags a row carries from the ticks after the previous row);
+* the bulk path ran (the test would otherwise compare the row-by-row loop with itself);
+* a loop whose rows hold other columns falls back to row by row with the same sensor noise
+  (the stream put back after the bulk call drew it).
+
+The loop's own truths (fused == per tick to round-off, the MEKF's NEES bands, the gyro's Allan
+variance) are in tests/test_loop_flown.py, tests/test_mekf.py and tests/test_loop_sensors.py,
+which run the bulk path too.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from stationbed import load_scene, simulate
+from stationbed.run import fused_flight
+
+ROOT = Path(__file__).resolve().parents[1]
+#: an initial attitude error that drives the gimbals into their rate limit in the first ~20 s
+SLEW_DEG = 2.5
+#: 80 rows of 10 s (the scenario's output): one call of 64 rows and two of 8 in bulk
+DURATION_S = 800.0
+
+
+def _scene():
+    a = math.radians(SLEW_DEG) / 2
+    s = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml")
+    return s.replace({"initial.q_BN": [math.cos(a), math.sin(a), 0.0, 0.0]})
+
+
+def _spy(monkeypatch) -> list:
+    """Rows run in bulk, per run."""
+    seen = []
+    real = fused_flight.run_flight_rows
+
+    def spy(*a, **k):
+        out = real(*a, **k)
+        seen.append(out[0])
+        return out
+
+    monkeypatch.setattr(fused_flight, "run_flight_rows", spy)
+    return seen
+
+
+def _row_by_row(monkeypatch):
+    """The fused flight loop without its bulk rows (no row run in bulk; same compiled build)."""
+    monkeypatch.setattr(fused_flight, "run_flight_rows", lambda *a, **k: (0, 0, 0, None))
+
+
+def test_bulk_flight_rows_give_the_row_by_row_loops_bits(monkeypatch):
+    scene = _scene()
+    with monkeypatch.context() as m:
+        seen = _spy(m)
+        bulk = simulate(scene, duration=DURATION_S, fused=True)
+    with monkeypatch.context() as m:
+        _row_by_row(m)
+        one = simulate(scene, duration=DURATION_S, fused=True)
+    assert seen == [80]  # 64 + 8 + 8 rows (the row at the run's end: row by row)
+    s_bulk, s_one = bulk.meta["summary"], one.meta["summary"]
+    assert s_bulk["rate_limited_ticks"] > 0 and s_bulk["fused"] is True
+    assert s_bulk == s_one
+    assert "nees" in bulk.columns and bulk.columns == one.columns
+    assert np.array_equal(bulk.data, one.data, equal_nan=True)
+
+
+def test_a_flight_loop_whose_rows_hold_other_columns_runs_row_by_row_with_the_same_noise(monkeypatch):
+    from stationbed.run import closed_loop
+
+    scene = _scene()
+    with monkeypatch.context() as m:
+        _row_by_row(m)
+        one = simulate(scene, duration=DURATION_S, fused=True)
+    real = closed_loop.ControlLoop._held_row
+    seen = _spy(monkeypatch)
+    monkeypatch.setattr(closed_loop.ControlLoop, "_held_row",
+                        lambda self, f: (real(self, f)[0][:-1] + [0.5], real(self, f)[1]))
+    other = simulate(scene, duration=DURATION_S, fused=True)
+    assert seen == [0]
+    cols = [i for i, c in enumerate(one.columns) if c != "st_valid_st2"]  # the planted column (the last held)
+    assert np.array_equal(other.data[:, cols], one.data[:, cols], equal_nan=True)
