@@ -165,7 +165,8 @@ def run_flight_rows(loop, calls: dict, row_ks, K: int, C: Layout, c0: np.ndarray
             if rep is not None:  # the filter's report against the truth (Flight.row's numbers)
                 q = xs_[:, :4]
                 rep.args[0][:] = fl_xs[:, sl["mekf"]].ravel()
-                rep.args[1][:] = np.concatenate([qi / np.linalg.norm(qi) for qi in q])  # (Flight.row's norm, row by row)
+                # Flight.row's q / np.linalg.norm(q), which is q / sqrt(q.dot(q)) for a vector: the same dot
+                rep.args[1][:] = (q / np.sqrt([qi.dot(qi) for qi in q])[:, None]).ravel()
                 rep.args[2][:] = fl_xs[:, sl["gyro"][0]][:, sl["gyro"][1]].ravel()
                 rep()
                 err, s3, nees = rep.res[0].reshape(R, 3), rep.res[1].reshape(R, 6), rep.res[2]
