@@ -31,6 +31,7 @@ Both executors run it, neither reads the other's internals:
 from __future__ import annotations
 
 import hashlib
+import pickle
 
 import casadi as ca
 import numpy as np
@@ -252,6 +253,9 @@ class TickNoise:
         i = k0 - self.k0
         if k0 >= 1 and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
             return self.buf[i : i + n]
+        if k0 >= 1 and i == len(self.buf):  # the block used up: the next starts here (a view of it)
+            self.k0, self.buf = k0, self.noise.draw(max(NOISE_BLOCK, n))
+            return self.buf[:n]
         out = np.zeros((n, self.width))
         first = max(k0, 1)
         while first < k0 + n:
@@ -299,7 +303,19 @@ def _filter_params(sensing, tick: float, suite: Suite | None = None) -> np.ndarr
         table[parts[-1]] = value
     if not changes:  # the knowledge's tables are the truth's
         return (suite or Suite(sensing, tick)).mekf.params
-    return _mekf_params(sensing_from_dict(data, source="[knowledge]"))
+    key = pickle.dumps(data)  # exact (floats, arrays); a Monte Carlo's samples share their knowledge: tuned once
+    hit = _TUNED.get(key)
+    if hit is None:
+        if len(_TUNED) >= _TUNED_MAX:
+            _TUNED.clear()
+        hit = _TUNED[key] = _mekf_params(sensing_from_dict(data, source="[knowledge]"))
+    return hit.copy()
+
+
+#: the filter's parameters by the knowledge's sensing tables (:func:`_filter_params`), at most
+#: this many kept
+_TUNED: dict = {}
+_TUNED_MAX = 64
 
 
 def _mekf_params(sensing) -> np.ndarray:
