@@ -1,6 +1,6 @@
 """The closed loop flown on sensors and the MEKF vs on the truth, side by side (issue 20).
 
-    python benchmarks/bench_estimated.py [--repeats N] [--json PATH] [--smoke]
+    python benchmarks/bench_estimated.py [--repeats N] [--environment-rate N] [--profile] [--json PATH] [--smoke]
 
 One orbit of ``scenarios/iss_lvlh_hold_estimated.toml`` (two 10 Hz gyros, two 1 Hz star-tracker
 heads, the MEKF; the pd law on the estimate) against the same scene with ``sensor = []`` and no
@@ -12,7 +12,9 @@ each after a warm-up run that compiles or loads the cached builds:
   other processes on a loaded machine, with the load average);
 * ``per_tick`` (info): the per-tick loop (the law in Python, one compiled flight tick per tick).
 
-``--profile``: after the rounds, each fused run once more under ``cProfile``, its time split into
+``--environment-rate N``: both sides with ``[simulation] environment_rate = N`` (aero and solar
+pressure once per N ticks, held: run/rates.py, run/flight_rates.py; the same accuracy on both
+sides, as the ratio asks). ``--profile``: after the rounds, each fused run once more under ``cProfile``, its time split into
 the compiled calls (``FastCall``), the sensor noise draws (``SuiteNoise.draw``) and the rest
 (Python: rows, reports, set-up); the profiler inflates the Python share, not the compiled one.
 """
@@ -43,6 +45,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--environment-rate", type=int, default=0, help="both sides' [simulation] environment_rate")
     ap.add_argument("--profile", action="store_true", help="split each fused run's time (compiled, noise, rest)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
@@ -50,6 +53,8 @@ def main(argv=None) -> int:
     if args.smoke:
         args.repeats = 1
     est = stationbed.load_scene(SCENE)
+    if args.environment_rate:
+        est = est.replace({"simulation.environment_rate": args.environment_rate})
     truth = est.replace({"sensor": [], "estimator": None})
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / est.orbit.mean_motion
     runs = {
@@ -65,7 +70,7 @@ def main(argv=None) -> int:
     s = first["fused_estimated"].meta["summary"]
     print(f"# one orbit ({T:.1f} s) of {est.name}, fused and per-tick, estimated vs truth-fed "
           f"(median of {args.repeats} interleaved; warm-up incl. compile/load {build_s:.1f} s; "
-          f"load average {load:.1f} on {os.cpu_count()} cores)")
+          f"load average {load:.1f} on {os.cpu_count()} cores; environment_rate {args.environment_rate})")
     print("| path | truth-fed wall [s] | estimated wall [s] | ratio | truth-fed CPU [s] | estimated CPU [s] | CPU ratio |")
     print("|---|---|---|---|---|---|---|")
     print(f"| fused | {med['fused_truth']:.3f} | {med['fused_estimated']:.3f} | {ratio:.2f} "

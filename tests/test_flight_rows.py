@@ -10,7 +10,14 @@ Claims:
   flags a row carries from the ticks after the previous row);
 * the bulk path ran (the test would otherwise compare the row-by-row loop with itself);
 * a loop whose rows hold other columns falls back to row by row with the same sensor noise
-  (the stream put back after the bulk call drew it).
+  (the stream put back after the bulk call drew it);
+* with ``environment_rate = 20`` (aero and solar pressure held over blocks of ticks,
+  stationbed/run/flight_rates.py) the flight loop runs held (its summary says so), in bulk and
+  row by row bit for bit, and moves the attitude from the every-stage flight loop by no more
+  than the hold moves the truth-fed loop of the same scene (independent truth: the truth-fed
+  pair, run/rates.py, whose hold tests/test_effect_rates.py bounds) times :data:`HOLD_SAME_DRAWS`;
+  a noise row reaching the wrong tick of a held block would move it by the noise's effect
+  (~1e-7 rad), four orders above the hold's.
 
 The loop's own truths (fused == per tick to round-off, the MEKF's NEES bands, the gyro's Allan
 variance) are in tests/test_loop_flown.py, tests/test_mekf.py and tests/test_loop_sensors.py,
@@ -25,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from stationbed import load_scene, simulate
+from stationbed.core.rotation import rotation_angle
 from stationbed.run import fused_flight
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,6 +40,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SLEW_DEG = 2.5
 #: 80 rows of 10 s (the scenario's output): one call of 64 rows and two of 8 in bulk
 DURATION_S = 800.0
+#: the held flight pair's attitude difference against the held truth-fed pair's (the filter's
+#: estimate feeds the hold's torque error through the law as the truth does: the same order)
+HOLD_SAME_DRAWS = 10.0
 
 
 def _scene():
@@ -90,3 +101,23 @@ def test_a_flight_loop_whose_rows_hold_other_columns_runs_row_by_row_with_the_sa
     assert seen == [0]
     cols = [i for i, c in enumerate(one.columns) if c != "st_valid_st2"]  # the planted column (the last held)
     assert np.array_equal(other.data[:, cols], one.data[:, cols], equal_nan=True)
+
+
+def test_the_environment_at_its_own_rate_in_the_flight_loop(monkeypatch):
+    scene = _scene()
+    held_scene = scene.replace({"simulation.environment_rate": 20})
+    with monkeypatch.context() as m:
+        seen = _spy(m)
+        held = simulate(held_scene, duration=DURATION_S, fused=True)
+    with monkeypatch.context() as m:
+        _row_by_row(m)
+        held_one = simulate(held_scene, duration=DURATION_S, fused=True)
+    assert seen == [80] and held.meta["summary"]["environment_rate_ticks"] == 20
+    assert np.array_equal(held.data, held_one.data, equal_nan=True) and held.meta["summary"] == held_one.meta["summary"]
+    every = simulate(scene, duration=DURATION_S, fused=True)
+    err = float(np.max(rotation_angle(every.q_BN, held.q_BN)))
+    truth = scene.replace({"sensor": [], "estimator": None})
+    truth_err = float(np.max(rotation_angle(simulate(truth, duration=DURATION_S).q_BN,
+                                            simulate(truth.replace({"simulation.environment_rate": 20}),
+                                                     duration=DURATION_S).q_BN)))
+    assert 0.0 < err <= HOLD_SAME_DRAWS * truth_err, f"{err:.3e} rad against the truth-fed hold's {truth_err:.3e} rad"

@@ -70,8 +70,11 @@ def flight_rows_functions(info: ca.Function, chunk: ca.Function, C: Layout, n: i
     ps = rest[ncp + 3 + info.size1_in(4) :]
     t = a * h  # as the executor: k * period, one IEEE product
     inf, xs1, ys = info(t, x, cp, u_ext, p, a, tp, th, om, xs, w[:nw], ps)
-    c0 = C.pack(i=0.0, x=x, counts=ca.MX.zeros(2), t_prev=tp, theta_B=th, omega_prev=om, xs=xs, symbolic=True)
-    res = chunk(c0, ca.vertcat(t, h, float(n), a, rest), ca.reshape(w, nw, n))
+    env = {"env": C.get(c, "env")} if "env" in C else {}  # the held environment's carry (flight_rates.py)
+    c0 = C.pack(i=0.0, x=x, counts=ca.MX.zeros(2), t_prev=tp, theta_B=th, omega_prev=om, xs=xs, **env, symbolic=True)
+    cols = chunk.size_in(2)[1]  # (a held chunk has whole blocks: the columns past n are masked ticks)
+    wn = ca.reshape(w, nw, n) if cols == n else ca.horzcat(ca.reshape(w, nw, n), ca.MX.zeros(nw, cols - n))
+    res = chunk(c0, ca.vertcat(t, h, float(n), a, rest), wn)
     out = ca.vertcat(x, inf, xs1, ys, C.get(res, "counts"))
     row = ca.Function("flight_row", [c, a, par, w], [res, out])
     fns = []
