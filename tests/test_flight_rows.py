@@ -17,7 +17,9 @@ Claims:
   than the hold moves the truth-fed loop of the same scene (independent truth: the truth-fed
   pair, run/rates.py, whose hold tests/test_effect_rates.py bounds) times :data:`HOLD_SAME_DRAWS`;
   a noise row reaching the wrong tick of a held block would move it by the noise's effect
-  (~1e-7 rad), four orders above the hold's.
+  (~1e-7 rad), four orders above the hold's;
+* a run whose state turns non-finite inside a bulk call stops where the row-by-row loop stops:
+  the same time and reason, the same rows handed over.
 
 The loop's own truths (fused == per tick to round-off, the MEKF's NEES bands, the gyro's Allan
 variance) are in tests/test_loop_flown.py, tests/test_mekf.py and tests/test_loop_sensors.py,
@@ -29,11 +31,15 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
+import pytest
 
 from stationbed import load_scene, simulate
 from stationbed.core.rotation import rotation_angle
 from stationbed.run import fused_flight
+from stationbed.run.controller import Controller
+from stationbed.run.simulation import SimulationError
 
 ROOT = Path(__file__).resolve().parents[1]
 #: an initial attitude error that drives the gimbals into their rate limit in the first ~20 s
@@ -121,3 +127,44 @@ def test_the_environment_at_its_own_rate_in_the_flight_loop(monkeypatch):
                                             simulate(truth.replace({"simulation.environment_rate": 20}),
                                                      duration=DURATION_S).q_BN)))
     assert 0.0 < err <= HOLD_SAME_DRAWS * truth_err, f"{err:.3e} rad against the truth-fed hold's {truth_err:.3e} rad"
+
+
+#: the law's command becomes NaN after this time [s]: inside the 21st row (10 s rows) of the first
+#: 64-row call
+NAN_AFTER_S = 205.05
+
+
+class NanAfter(Controller):
+    """A tiny torque until :data:`NAN_AFTER_S`, NaN after it (casadi: the square root of a negative)."""
+
+    name = "nan_after_flight"
+    command = "torque"
+
+    def _update(self, t, meas):
+        return (1e-9 * math.sqrt(NAN_AFTER_S - t) if t <= NAN_AFTER_S else math.nan, 0.0, 0.0)
+
+    def symbolic_params(self):
+        return []
+
+    def symbolic(self, t, y, cp):
+        return ca.vertcat(1e-9 * ca.sqrt(NAN_AFTER_S - t), 0.0, 0.0), ca.DM([1.0, 0.0, 0.0, 0.0])
+
+
+def _stopped(scene):
+    with pytest.raises(SimulationError) as exc:
+        simulate(scene, controller=NanAfter(), fused=True, duration=DURATION_S)
+    return exc.value
+
+
+def test_a_nan_inside_a_bulk_flight_call_stops_where_the_row_by_row_loop_stops(monkeypatch):
+    # the ideal torquer (no [cmg]: a CMG's rate limit would clip the NaN request away)
+    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace({"cmg": None})
+    with monkeypatch.context() as m:
+        seen = _spy(m)
+        bulk = _stopped(scene)
+    with monkeypatch.context() as m:
+        _row_by_row(m)
+        one = _stopped(scene)
+    assert seen == [21]  # 20 rows, then the row (t = 200 s) whose stretch ends in NaN
+    assert (bulk.t, bulk.reason) == (one.t, one.reason) and bulk.t == pytest.approx(210.0)
+    assert np.array_equal(bulk.trajectory.data, one.trajectory.data, equal_nan=True)

@@ -10,6 +10,10 @@ memory: the previous tick's time and true rate, ``theta_B`` and the suite state.
 each tick is a per-tick input, drawn in Python in tick order (:class:`~stationbed.loop.flight.TickNoise`:
 the same numbers as the per-tick loop's blocks).
 
+The leading full output rows run many per compiled call (:mod:`.flight_rows`, bit-identical);
+with ``[simulation] environment_rate`` the environment is held over blocks of ticks
+(:mod:`.flight_rates`, as :mod:`.rates` does for the truth-fed loop).
+
 Neither executor reads the other's internals: both call the same ``Flight.function()``
 (compiled there, inlined here) and the loop's public sensing state (``xs``, ``th``, ``om_prev``,
 ``t_prev``, ``tick_noise``).
