@@ -1,6 +1,6 @@
 """The closed loop flown on sensors and the MEKF vs on the truth, side by side (issue 20).
 
-    python benchmarks/bench_estimated.py [--repeats N] [--json PATH] [--smoke]
+    python benchmarks/bench_estimated.py [--repeats N] [--environment-rate N] [--profile] [--json PATH] [--smoke]
 
 One orbit of ``scenarios/iss_lvlh_hold_estimated.toml`` (two 10 Hz gyros, two 1 Hz star-tracker
 heads, the MEKF; the pd law on the estimate) against the same scene with ``sensor = []`` and no
@@ -11,11 +11,18 @@ each after a warm-up run that compiles or loads the cached builds:
   (judged on the wall medians; the process CPU times are printed beside them, less disturbed by
   other processes on a loaded machine, with the load average);
 * ``per_tick`` (info): the per-tick loop (the law in Python, one compiled flight tick per tick).
+
+``--environment-rate N``: both sides with ``[simulation] environment_rate = N`` (aero and solar
+pressure once per N ticks, held: run/rates.py, run/flight_rates.py; the same accuracy on both
+sides, as the ratio asks). ``--profile``: after the rounds, each fused run once more under ``cProfile``, its time split into
+the compiled calls (``FastCall``), the sensor noise draws (``SuiteNoise.draw``) and the rest
+(Python: rows, reports, set-up); the profiler inflates the Python share, not the compiled one.
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import json
 import math
 import os
@@ -38,12 +45,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--environment-rate", type=int, default=0, help="both sides' [simulation] environment_rate")
+    ap.add_argument("--profile", action="store_true", help="split each fused run's time (compiled, noise, rest)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
     _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
     if args.smoke:
         args.repeats = 1
     est = stationbed.load_scene(SCENE)
+    if args.environment_rate:
+        est = est.replace({"simulation.environment_rate": args.environment_rate})
     truth = est.replace({"sensor": [], "estimator": None})
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / est.orbit.mean_motion
     runs = {
@@ -52,14 +63,14 @@ def main(argv=None) -> int:
         "per_tick_truth": lambda: stationbed.simulate(truth, duration=T, fused=False),
         "per_tick_estimated": lambda: stationbed.simulate(est, duration=T, fused=False),
     }
-    first, build_s, med, cpu, load, *_ = _smoke.interleaved(runs, args.repeats)
+    first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
     ratio = med["fused_estimated"] / med["fused_truth"]
     ratio_tick = med["per_tick_estimated"] / med["per_tick_truth"]
     ratio_cpu = cpu["fused_estimated"] / cpu["fused_truth"]
     s = first["fused_estimated"].meta["summary"]
     print(f"# one orbit ({T:.1f} s) of {est.name}, fused and per-tick, estimated vs truth-fed "
           f"(median of {args.repeats} interleaved; warm-up incl. compile/load {build_s:.1f} s; "
-          f"load average {load:.1f} on {os.cpu_count()} cores)")
+          f"load average {load:.1f} on {os.cpu_count()} cores; environment_rate {args.environment_rate})")
     print("| path | truth-fed wall [s] | estimated wall [s] | ratio | truth-fed CPU [s] | estimated CPU [s] | CPU ratio |")
     print("|---|---|---|---|---|---|---|")
     print(f"| fused | {med['fused_truth']:.3f} | {med['fused_estimated']:.3f} | {ratio:.2f} "
@@ -70,6 +81,11 @@ def main(argv=None) -> int:
     print(f"estimation: max error {s.get('max_est_err_deg', math.nan):.2e} deg, RMS {s.get('rms_est_err_deg', math.nan):.2e} deg, "
           f"mean NEES {s.get('mean_nees', math.nan):.2f}, inside 3 sigma {s.get('est_inside_3sigma', math.nan):.4f}, "
           f"star-tracker dropout rows {s.get('st_dropout_rows')}")
+    if args.profile:
+        print("| fused run (profiled once) | total [s] | compiled calls [s] | noise draws [s] | rest (Python) [s] |")
+        print("|---|---|---|---|---|")
+        for name in ("fused_truth", "fused_estimated"):
+            print("| " + name + " | " + " | ".join(f"{v:.3f}" for v in _split(runs[name])) + " |")
     ok = ratio <= TARGET_RATIO
     print(f"fused estimated / truth-fed: {ratio:.2f} (target <= {TARGET_RATIO}): {_smoke.verdict(ok, args.smoke)}")
     if args.json:
@@ -77,6 +93,23 @@ def main(argv=None) -> int:
                                          "load_average": load, "ratio_fused_cpu": ratio_cpu, "ratio_fused": ratio,
                                          "ratio_per_tick": ratio_tick, "summary": s}, indent=1, default=float))
     return _smoke.targets_exit(ok, args.smoke)
+
+
+def _split(run) -> tuple[float, float, float, float]:
+    """(total, compiled, noise, rest) [s] of one call of ``run`` under cProfile."""
+    pr = cProfile.Profile()
+    pr.enable()
+    run()
+    pr.disable()
+    pr.create_stats()
+    total = compiled = noise = 0.0
+    for (path, _, fn), (_, _, tt, ct, _) in pr.stats.items():
+        total += tt
+        if fn == "__call__" and path.endswith("compile.py"):
+            compiled += tt
+        if fn == "draw" and path.endswith("suite.py"):
+            noise += ct
+    return total, compiled, noise, total - compiled - noise
 
 
 if __name__ == "__main__":

@@ -132,3 +132,30 @@ def test_a_sensor_named_as_an_estimator_output_is_refused():
     data["estimator"]["gyro"] = "mekf"
     with pytest.raises(ValueError, match="sensor 'mekf': the name is taken"):
         Suite(sensing_from_dict(data), TICK_S)
+
+
+def test_tick_noise_rows_are_one_whole_draw_however_they_are_asked(suite, monkeypatch):
+    """The executors ask :class:`TickNoise` for rows tick by tick, a row's ticks, or many rows'
+    at once (run/flight_rows.py), across its block boundaries and after a :meth:`restore`: every
+    pattern gives the numbers of one whole draw (tick 0 a zero row); the draw places each
+    sensor's samples on its own ticks (gyro every 2nd tick, heads every 10th and 20th)."""
+    from stationbed.loop import flight
+
+    monkeypatch.setattr(flight, "NOISE_BLOCK", 16)  # small blocks: every path through rows() is taken
+    n = 400
+    whole = np.vstack([np.zeros((1, suite.NOISE.size)), SuiteNoise(suite, 5).draw(n - 1)])
+    tn = flight.TickNoise(SuiteNoise(suite, 5))
+    got, k = [], 0
+    for m in (1, 3, 16, 12, 40, 7, 100, 1, 1, 219):
+        saved = tn.state()
+        first = tn.rows(k, m).copy()
+        tn.restore(saved)  # put the stream back: the same rows again
+        got.append(tn.rows(k, m).copy())
+        assert_array_equal(got[-1], first)
+        k += m
+    assert k == n
+    assert_array_equal(np.vstack(got), whole)
+    gyro = suite.NOISE.slice("rga")
+    assert np.all(whole[1::2, gyro] == 0.0) and np.all(whole[2::2, gyro] != 0.0)
+    st2 = suite.NOISE.slice("st2")
+    assert np.all(whole[np.arange(n) % 20 != 0][:, st2] == 0.0) and np.all(whole[20::20, st2] != 0.0)

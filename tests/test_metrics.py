@@ -101,3 +101,28 @@ def test_rms_is_bit_identical_however_the_rows_are_batched():
     assert len(grouped) > 1  # the naive per-batch sum does depend on the grouping
     values = {_metrics(s)["rms_att_err_deg"] for s in splits}
     assert values == {math.sqrt(math.fsum(err * err) / len(err))}
+
+
+def test_estimation_sums_are_bit_identical_however_the_rows_are_batched(monkeypatch):
+    # the fused flight loop hands its rows over in bulk, the row-by-row loop in timed batches:
+    # rms_est_err_deg and mean_nees are the correctly rounded sums whatever the grouping, also
+    # when a long run's values are folded into exact partials (here every 100 rows)
+    from stationbed.run import metrics
+
+    cols = ["t", "est_err_x_deg", "est_err_y_deg", "est_err_z_deg", "est_3sigma_x_deg", "est_3sigma_y_deg",
+            "est_3sigma_z_deg", "nees"]
+    rng = np.random.default_rng(11)
+    n = 1000
+    rows = np.column_stack([np.arange(n), rng.lognormal(0.0, 3.0, (n, 3)), np.ones((n, 3)), rng.lognormal(0.0, 3.0, n)])
+    e2 = np.einsum("ij,ij->i", rows[:, 1:4], rows[:, 1:4])
+    want = (math.sqrt(math.fsum(e2) / n), math.fsum(rows[:, -1]) / n)
+    splits = [[rows], np.array_split(rows, 7), np.array_split(rows, 333)]
+    assert len({sum(float(b[:, -1].sum()) for b in s) for s in splits}) > 1  # naive batched sums differ
+    for fold_at in (metrics._FOLD_AT, 100):
+        monkeypatch.setattr(metrics, "_FOLD_AT", fold_at)
+        for s in splits:
+            m = RunMetrics(cols)
+            for b in s:
+                m.update(b)
+            v = m.values()
+            assert (v["rms_est_err_deg"], v["mean_nees"]) == want

@@ -31,6 +31,7 @@ Both executors run it, neither reads the other's internals:
 from __future__ import annotations
 
 import hashlib
+import pickle
 
 import casadi as ca
 import numpy as np
@@ -231,6 +232,18 @@ class TickNoise:
         self.width = noise.suite.NOISE.size
         self.buf, self.k0, self.next = np.zeros((0, self.width)), 1, 0
 
+    def state(self) -> tuple:
+        """Where the stream is (its block, next tick, the generators' states): :meth:`restore`
+        puts it back, and the rows asked after it are drawn again, the same numbers."""
+        gens = {k: r.bit_generator.state for k, r in self.noise.rngs.items()}
+        return self.buf, self.k0, self.next, self.noise.next_tick, gens
+
+    def restore(self, state: tuple) -> None:
+        """Back to a :meth:`state`."""
+        self.buf, self.k0, self.next, self.noise.next_tick, gens = state
+        for k, g in gens.items():
+            self.noise.rngs[k].bit_generator.state = g
+
     def rows(self, k0: int, n: int) -> np.ndarray:
         if n <= 0:
             return np.zeros((0, self.width))
@@ -240,6 +253,9 @@ class TickNoise:
         i = k0 - self.k0
         if k0 >= 1 and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
             return self.buf[i : i + n]
+        if k0 >= 1 and i == len(self.buf):  # the block used up: the next starts here (a view of it)
+            self.k0, self.buf = k0, self.noise.draw(max(NOISE_BLOCK, n))
+            return self.buf[:n]
         out = np.zeros((n, self.width))
         first = max(k0, 1)
         while first < k0 + n:
@@ -287,7 +303,19 @@ def _filter_params(sensing, tick: float, suite: Suite | None = None) -> np.ndarr
         table[parts[-1]] = value
     if not changes:  # the knowledge's tables are the truth's
         return (suite or Suite(sensing, tick)).mekf.params
-    return _mekf_params(sensing_from_dict(data, source="[knowledge]"))
+    key = pickle.dumps(data)  # exact (floats, arrays); a Monte Carlo's samples share their knowledge: tuned once
+    hit = _TUNED.get(key)
+    if hit is None:
+        if len(_TUNED) >= _TUNED_MAX:
+            _TUNED.clear()
+        hit = _TUNED[key] = _mekf_params(sensing_from_dict(data, source="[knowledge]"))
+    return hit.copy()
+
+
+#: the filter's parameters by the knowledge's sensing tables (:func:`_filter_params`), at most
+#: this many kept
+_TUNED: dict = {}
+_TUNED_MAX = 64
 
 
 def _mekf_params(sensing) -> np.ndarray:

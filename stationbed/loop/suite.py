@@ -163,13 +163,13 @@ class SuiteNoise:
     def draw(self, n: int) -> np.ndarray:
         """The noise table of the next ``n`` ticks, shape (n, NOISE.size)."""
         k0 = self.next_tick
-        ks = np.arange(k0, k0 + n)
         out = np.zeros((n, self.suite.NOISE.size))
         for s in self.suite.sensors:
             if s.name not in self.suite.NOISE:
                 continue
-            at = np.flatnonzero(ks % self.suite.every[s.name] == 0)
-            out[at, self.suite.NOISE.slice(s.name)] = s.noise(self.rngs[s.name], at.size)
+            e = self.suite.every[s.name]
+            at = slice((-k0) % e, n, e)  # the ticks k0 + i with k % e == 0 (a strided view: no index array)
+            out[at, self.suite.NOISE.slice(s.name)] = s.noise(self.rngs[s.name], len(range(n)[at]))
         self.next_tick += n
         return out
 

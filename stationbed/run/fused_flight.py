@@ -10,6 +10,10 @@ memory: the previous tick's time and true rate, ``theta_B`` and the suite state.
 each tick is a per-tick input, drawn in Python in tick order (:class:`~stationbed.loop.flight.TickNoise`:
 the same numbers as the per-tick loop's blocks).
 
+The leading full output rows run many per compiled call (:mod:`.flight_rows`, bit-identical);
+with ``[simulation] environment_rate`` the environment is held over blocks of ticks
+(:mod:`.flight_rates`, as :mod:`.rates` does for the truth-fed loop).
+
 Neither executor reads the other's internals: both call the same ``Flight.function()``
 (compiled there, inlined here), read the run's composition (``comp.flight``, its noise stream
 ``comp.tick_noise``) and hand the flight's memory back through the run's state
@@ -27,15 +31,18 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..loop import Layout
 from ..loop.flight import READS, SEEN
 from . import law_state
+from .flight_rates import held_flight_chunk
+from .flight_rows import flight_rows_functions, run_flight_rows
+from .rates import carry_width, environment_rate
 from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
-from .system import chain_end_inputs
+from .system import chain_end_inputs, environment_split
 
 __all__ = ["run_fused_flight"]
 
 _CHUNKS: dict[tuple, dict] = {}
 
 
-def _build(comp, n: int, symbolic_params) -> dict:
+def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     system, ctrl, flight = comp.system, comp.ctrl, comp.flight
     sx = system.sx
     form = system.formulation
@@ -64,6 +71,12 @@ def _build(comp, n: int, symbolic_params) -> dict:
     act, u, sat = chain_end_inputs(sx, model, comp.end, ctrl.command, t, h, x, cmd, u_ext, p)  # the chain's end
     x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
     core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref, s1)])
+    core_h = None
+    if rate:  # the environment held over blocks (flight_rates.py): the RHS without it, u_ext + L_env
+        L_env = ca.SX.sym("L_env", 3)
+        x1h = system.integrator_cls.explicit_step(environment_split(system)["rhs_fast"], t, x, h,
+                                                  ca.substitute(u, u_ext, u_ext + L_env), p)
+        core_h = sx_function("ff_core_h", [t, xa, est, cp, u_ext, p, h, L_env], [ca.vertcat(x1h, s1), sat])
     # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
     y_truth = ca.SX.zeros(flight.ny)
     for f in READS:
@@ -87,39 +100,54 @@ def _build(comp, n: int, symbolic_params) -> dict:
     info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
     # the chunk's step: the carry holds the law's state with x
     nx0 = nx
-    C = carry_layout(nx + nls, ns)
+    C = carry_layout(nx + nls, ns, carry_width(rate))
     npar_all = 4 + ncp + 3 + npar + nps
-    c, par, w = MX.sym("c", C.size), MX.sym("par", npar_all), MX.sym("w", nw)
-    i, xc, cnt, tp, th, om, xs = (C.get(c, f) for f in C.names)
-    t0, hh, n_act, k0 = par[0], par[1], par[2], par[3]
-    cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
-    pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar :]
-    tt = t0 + i * hh
-    yt = meas(tt, xc[:nx0] if nls else xc, pc)
-    th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
-    x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
-    c_new = C.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
-                   theta_B=th1, omega_prev=yt[o_om : o_om + 3], xs=xs1)
-    # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
-    # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
-    tick = ca.Function("ffl_tick", [c, par, w], [c_new])
-    hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])  # (i first: C's order)
-    step = ca.Function.if_else("ffl_step", tick, hold)
-    step = ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
-    acc = step.mapaccum("ffl_acc", n)
-    c0, parm, wm = MX.sym("c0", C.size), MX.sym("par", npar_all), MX.sym("noise", nw, n)
-    traj = acc(c0, ca.repmat(parm, 1, n), wm)
-    chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
+    T = carry_layout(nx + nls, ns)  # one tick's carry (the held environment's, if any, is the block's)
+
+    def tick_step(held: bool) -> ca.Function:
+        """``(c, par[, L_hold]) , w -> c_next``: one tick, the tail past n_act held."""
+        c, par, w = MX.sym("c", T.size), MX.sym("par", npar_all + (3 if held else 0)), MX.sym("w", nw)
+        i, xc, cnt, tp, th, om, xs = (T.get(c, f) for f in T.names)
+        t0, hh, n_act, k0 = par[0], par[1], par[2], par[3]
+        cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
+        pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar : npar_all]
+        tt = t0 + i * hh
+        yt = meas(tt, xc[:nx0] if nls else xc, pc)
+        th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+        if held:
+            x_new, fl_sat = core_h(tt, xc, seen(ys), cpc, uc, pc, hh, par[npar_all:])
+        else:
+            x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
+        c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
+                       theta_B=th1, omega_prev=yt[o_om : o_om + 3], xs=xs1)
+        # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
+        # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
+        tick = ca.Function("ffl_tick", [c, par, w], [c_new])
+        hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])  # (i first: T's order)
+        step = ca.Function.if_else("ffl_step", tick, hold)
+        return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
+
+    if rate:
+        chunk = held_flight_chunk(system, tick_step(True), C, rate, n, npar_all, nw, slice(7 + ncp, 7 + ncp + npar))
+    else:
+        acc = tick_step(False).mapaccum("ffl_acc", n)
+        c0, parm, wm = MX.sym("c0", C.size), MX.sym("par", npar_all), MX.sym("noise", nw, n)
+        traj = acc(c0, ca.repmat(parm, 1, n), wm)
+        chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
-    funcs = compile_functions([info, chunk], tag)
-    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls}
+    if rate:
+        tag += f"_env{rate}"
+    many = flight_rows_functions(info, chunk, C, n, npar_all - 4, nw)  # many rows per call (flight_rows.py)
+    funcs = compile_functions([info, chunk] + many, tag)
+    rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls, "rows": rows}
 
 
-def carry_layout(nx: int, ns: int) -> Layout:
+def carry_layout(nx: int, ns: int, ne: int = 0) -> Layout:
     """The chunk's carry: tick index in the chunk, state, counts of rate-limited and saturated
     ticks, and the flight's memory (previous tick's time and true rate, ``theta_B``, the suite
-    state)."""
-    return Layout(i=1, x=nx, counts=2, t_prev=1, theta_B=3, omega_prev=3, xs=ns)
+    state); with the environment at its own rate, its held carry ``env`` (ne values, rates.py)."""
+    return Layout(i=1, x=nx, counts=2, t_prev=1, theta_B=3, omega_prev=3, xs=ns, **({"env": ne} if ne else {}))
 
 
 def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
@@ -128,10 +156,11 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     ctrl, flight = comp.ctrl, comp.flight
     n = comp.n_per_out
     cp = np.asarray(symbolic_params, dtype=float)
-    key = (id(comp.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size)  # structure
+    rate = environment_rate(comp)  # the environment held over blocks of ticks (flight_rates.py), 0: every stage
+    key = (id(comp.system), type(ctrl), n, ctrl.command, flight.key, law_state.initial(ctrl).size, rate)  # structure
     if key not in _CHUNKS:
         t_build = time.perf_counter()
-        _CHUNKS[key] = _build(comp, n, cp)
+        _CHUNKS[key] = _build(comp, n, cp, rate)
         _CHUNKS[key]["build_s"] = time.perf_counter() - t_build
     fns = _CHUNKS[key]
     info, chunk = fns["info"], fns["chunk"]
@@ -139,8 +168,8 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
     nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
-    C = carry_layout(nx, S.STATE.size)  # its slices, taken once (the loop below runs per output row)
-    ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in C.names)
+    C = carry_layout(nx, S.STATE.size, carry_width(rate))  # its slices, taken once (the loop below runs per output row)
+    ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in ("i", "x", "counts", "t_prev", "theta_B", "omega_prev", "xs"))
     p, period, duration = comp.p, comp.period, comp.duration
     u_ext = held_torque_from(comp.scene, 0.0, comp.bps, duration)
     ia = info.args
@@ -170,7 +199,15 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     res.used_fused = True
     row_ks = sorted(set(range(0, K, n)) | {K})
     try:
+        j0 = 0
+        if not edges:  # the leading full rows, many per compiled call (flight_rows.py)
+            j0, tail_flag, ticks, stop = run_flight_rows(comp, res, fns["rows"], row_ks, K, C, c0, par[4:], ls)
+            x = c0[cx].copy()
+            if stop is not None:
+                raise stop
         for j, k in enumerate(row_ks):
+            if j < j0:
+                continue
             t = min(k * period, duration)
             n_tick = row_ks[j + 1] - k if k < K else 1
             draws = comp.tick_noise.rows(k, n_tick)

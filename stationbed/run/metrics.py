@@ -126,7 +126,9 @@ class RunMetrics:
         self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
         self._thr = {m: col[c] for m, c in _THRUSTER_TOTALS.items() if c in col}
         self.orbit_period_s = orbit_period_s
-        self._est_red = [0.0, 0.0, 0, 0.0, 0, 0]  # max, sum err², rows, sum nees, inside, dropouts
+        # max, err² per row, rows, nees per row, inside, dropouts; the two sums taken at the end
+        # with math.fsum (correctly rounded): the same totals whatever batches the rows came in
+        self._est_red = [0.0, [], 0, [], 0, 0]
         self.n_rows = 0
         self.last = None
         self.rate_limited_ticks = self.momentum_saturated_ticks = None
@@ -168,9 +170,11 @@ class RunMetrics:
             e = rows[:, self._est]
             n2 = np.einsum("ij,ij->i", e, e)
             r[0] = max(r[0], float(np.sqrt(n2.max())))
-            r[1] += float(n2.sum())
+            r[1] += n2.tolist()
             r[2] += len(rows)
-            r[3] += float(rows[:, self._nees].sum())
+            r[3] += rows[:, self._nees].tolist()
+            if len(r[1]) > _FOLD_AT:  # a long run: kept as the exact partials of its sum
+                r[1], r[3] = _folded(r[1]), _folded(r[3])
             r[4] += int((np.abs(e) <= rows[:, self._s3]).sum())
         if self._st:
             self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
@@ -218,7 +222,8 @@ class RunMetrics:
             out["max_torque_cmd_Nm"] = self._tau_max
         r = self._est_red
         if self._est is not None and r[2]:
-            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(r[1] / r[2]), mean_nees=r[3] / r[2],
+            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(math.fsum(r[1]) / r[2]),
+                       mean_nees=math.fsum(r[3]) / r[2],
                        est_inside_3sigma=r[4] / (3 * r[2]))
         if self._st and self.n_rows:
             out["st_dropout_rows"] = r[5]
@@ -229,6 +234,19 @@ class RunMetrics:
             if self.orbit_period_s and t_end > 0:
                 out["propellant_kg_per_orbit"] = out["propellant_kg"] * self.orbit_period_s / t_end
         return out
+
+
+#: values of a per-row sum kept as they are before they are folded into exact partials
+_FOLD_AT = 65536
+
+
+def _folded(values: list[float]) -> list[float]:
+    """The non-overlapping partials of the exact sum of ``values`` (:func:`_exact_add`):
+    ``math.fsum`` of them, with values added after, is the correctly rounded sum of all."""
+    partials: list[float] = []
+    for v in values:
+        _exact_add(partials, v)
+    return partials
 
 
 def _exact_add(partials: list[float], x: float) -> None:

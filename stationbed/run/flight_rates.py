@@ -1,0 +1,69 @@
+"""The fused flight loop with the environment at its own rate (``[simulation] environment_rate``).
+
+:mod:`.rates` holds the environment torques (aero, solar pressure) of the truth-fed fused loop
+over blocks of N ticks: evaluated at a block's first tick, extrapolated to its middle, held. The
+flight loop (:mod:`.fused_flight`) does the same with its own tick (the truth row, the sensors
+and the MEKF, the law on the estimate, actuation, one RK4 step of the right-hand side without
+the environment kinds with ``u_ext + L_hold``): the same blocks, the same extrapolation
+(:func:`.rates.held_chunk`'s formulas; docs/design.md "Effects at their own rate" bounds what the
+hold changes), so a scene with ``environment_rate = N`` runs both loops at the same accuracy and
+the estimated loop's cost is compared with the truth-fed loop's like for like. Without it (the
+default) the flight loop is unchanged.
+
+The chunk's carry is the flight loop's (:func:`.fused_flight.carry_layout`) with the held
+environment's ``(L_prev, t_prev, have_prev)`` after it (``env``), passed from chunk to chunk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from ..loop import Layout
+from .rates import ENV_CARRY
+from .system import environment_split
+
+__all__ = ["held_flight_chunk"]
+
+
+def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, npar: int, nw: int, s_p: slice) -> ca.Function:
+    """``ffl_chunk(c0, par, w) -> carry`` of ``n`` ticks, the environment held over blocks of
+    ``rate`` ticks.
+
+    Parameters
+    ----------
+    system : System  Its :func:`~.system.environment_split` gives ``env_B(t, x, p)``.
+    tick_h : Function  ``(c, par_h, w) -> c_next``: one tick of the flight loop's carry (first
+        the tick index i, then ``C``'s fields; without ``env``), ``par_h = (par, L_hold)``, the
+        tail past ``n_act = par[2]`` held.
+    C : Layout  The carry with ``env`` (ENV_CARRY values) last.
+    rate, n : int  Ticks per block, ticks per chunk.
+    npar : int  Size of the chunk's ``par = (t0, h, n_act, k0, cp, u_ext, p, ps)``.
+    nw : int  Noise values per tick.
+    s_p : slice  The model's parameters in ``par``.
+    """
+    env_B = environment_split(system)["env_B"]
+    nb = math.ceil(n / rate)
+    nc = C.size - ENV_CARRY
+    acc = tick_h.mapaccum("ffl_block_acc", rate)
+    cb, pb, wb = ca.MX.sym("cb", nc), ca.MX.sym("pb", npar + 3), ca.MX.sym("wb", nw * rate)
+    block = ca.Function("ffl_block", [cb, pb, wb], [acc(cb, ca.repmat(pb, 1, rate), ca.reshape(wb, nw, rate))[:, -1]])
+    co, po, wo = ca.MX.sym("co", C.size), ca.MX.sym("po", npar), ca.MX.sym("wo", nw * rate)
+    i, x = co[0], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
+    env = C.get(co, "env")
+    L_prev, t_prev, have = env[0:3], env[3], env[4]
+    t0, h, n_act = po[0], po[1], po[2]
+    t_now = t0 + i * h
+    L_now = env_B(t_now, x, po[s_p])
+    n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
+    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
+    L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
+    c_new = block(co[:nc], ca.vertcat(po, L_hold), wo)
+    live = n_b > 0
+    outer = ca.Function("ffl_outer", [co, po, wo], [ca.vertcat(
+        c_new, ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have))])
+    acc_o = outer.mapaccum("ffl_held_acc", nb)
+    c0, par0, noise = ca.MX.sym("c0", C.size), ca.MX.sym("par", npar), ca.MX.sym("noise", nw, nb * rate)
+    traj = acc_o(c0, ca.repmat(par0, 1, nb), ca.reshape(noise, nw * rate, nb))
+    return ca.Function("ffl_chunk", [c0, par0, noise], [traj[:, -1]])
