@@ -14,7 +14,9 @@ each after a warm-up run that compiles or loads the cached builds:
 
 ``--environment-rate N``: both sides with ``[simulation] environment_rate = N`` (aero and solar
 pressure once per N ticks, held: run/rates.py, run/flight_rates.py; the same accuracy on both
-sides, as the ratio asks). ``--profile``: after the rounds, each fused run once more under ``cProfile``, its time split into
+sides, as the ratio asks). The default is both scenes' default, ``auto`` (the bound's choice,
+run/rate_auto.py: 20 ticks on both); then the every-stage pair (``environment_rate = 0`` on both)
+is timed beside it too (``fused_every``, info). ``--profile``: after the rounds, each fused run once more under ``cProfile``, its time split into
 the compiled calls (``FastCall``), the sensor noise draws (``SuiteNoise.draw``) and the rest
 (Python: rows, reports, set-up); the profiler inflates the Python share, not the compiled one.
 """
@@ -45,7 +47,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
-    ap.add_argument("--environment-rate", type=int, default=0, help="both sides' [simulation] environment_rate")
+    ap.add_argument("--environment-rate", type=lambda v: v if v == "auto" else int(v), default="auto",
+                    help="both sides' [simulation] environment_rate (default auto, the scenes' default)")
     ap.add_argument("--profile", action="store_true", help="split each fused run's time (compiled, noise, rest)")
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
@@ -53,9 +56,10 @@ def main(argv=None) -> int:
     if args.smoke:
         args.repeats = 1
     est = stationbed.load_scene(SCENE)
-    if args.environment_rate:
-        est = est.replace({"simulation.environment_rate": args.environment_rate})
+    est = est.replace({"simulation.environment_rate": args.environment_rate})
     truth = est.replace({"sensor": [], "estimator": None})
+    every = args.environment_rate == "auto"  # the every-stage pair beside the defaults
+    est0, truth0 = (s.replace({"simulation.environment_rate": 0}) for s in (est, truth))
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / est.orbit.mean_motion
     runs = {
         "fused_truth": lambda: stationbed.simulate(truth, duration=T, fused=True),
@@ -63,6 +67,9 @@ def main(argv=None) -> int:
         "per_tick_truth": lambda: stationbed.simulate(truth, duration=T, fused=False),
         "per_tick_estimated": lambda: stationbed.simulate(est, duration=T, fused=False),
     }
+    if every:
+        runs["fused_every_truth"] = lambda: stationbed.simulate(truth0, duration=T, fused=True)
+        runs["fused_every_estimated"] = lambda: stationbed.simulate(est0, duration=T, fused=True)
     first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
     ratio = med["fused_estimated"] / med["fused_truth"]
     ratio_tick = med["per_tick_estimated"] / med["per_tick_truth"]
@@ -70,7 +77,9 @@ def main(argv=None) -> int:
     s = first["fused_estimated"].meta["summary"]
     print(f"# one orbit ({T:.1f} s) of {est.name}, fused and per-tick, estimated vs truth-fed "
           f"(median of {args.repeats} interleaved; warm-up incl. compile/load {build_s:.1f} s; "
-          f"load average {load:.1f} on {os.cpu_count()} cores; environment_rate {args.environment_rate})")
+          f"load average {load:.1f} on {os.cpu_count()} cores; environment_rate {args.environment_rate}: "
+          f"{first['fused_truth'].meta['summary'].get('environment_rate_ticks')} / "
+          f"{first['fused_estimated'].meta['summary'].get('environment_rate_ticks')} ticks run)")
     print("| path | truth-fed wall [s] | estimated wall [s] | ratio | truth-fed CPU [s] | estimated CPU [s] | CPU ratio |")
     print("|---|---|---|---|---|---|---|")
     print(f"| fused | {med['fused_truth']:.3f} | {med['fused_estimated']:.3f} | {ratio:.2f} "
@@ -78,6 +87,10 @@ def main(argv=None) -> int:
     print(f"| per tick | {med['per_tick_truth']:.3f} | {med['per_tick_estimated']:.3f} | {ratio_tick:.2f} "
           f"| {cpu['per_tick_truth']:.3f} | {cpu['per_tick_estimated']:.3f} "
           f"| {cpu['per_tick_estimated'] / cpu['per_tick_truth']:.2f} |")
+    if every:
+        print(f"| fused, every stage | {med['fused_every_truth']:.3f} | {med['fused_every_estimated']:.3f} "
+              f"| {med['fused_every_estimated'] / med['fused_every_truth']:.2f} | {cpu['fused_every_truth']:.3f} "
+              f"| {cpu['fused_every_estimated']:.3f} | {cpu['fused_every_estimated'] / cpu['fused_every_truth']:.2f} |")
     print(f"estimation: max error {s.get('max_est_err_deg', math.nan):.2e} deg, RMS {s.get('rms_est_err_deg', math.nan):.2e} deg, "
           f"mean NEES {s.get('mean_nees', math.nan):.2f}, inside 3 sigma {s.get('est_inside_3sigma', math.nan):.4f}, "
           f"star-tracker dropout rows {s.get('st_dropout_rows')}")

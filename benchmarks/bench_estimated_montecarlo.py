@@ -17,8 +17,9 @@ Measured in one run, on one cluster of ``--workers`` processes:
    ``bench_montecarlo.py`` runs it): the ratio estimated / truth-fed of the walls and CPU times.
 
 ``--environment-rate N`` runs both studies' samples with ``[simulation] environment_rate = N``
-(aero and solar pressure once per N ticks, held; issue 25: 20 is the bound's choice,
-docs/design.md "Effects at their own rate"; the fused flight loop honours it: run/flight_rates.py).
+(aero and solar pressure once per N ticks, held; the fused flight loop honours it:
+run/flight_rates.py); the default ``auto`` is the scenarios' default, the bound's choice
+(docs/design.md "Effects at their own rate"): 20 ticks on both.
 
 The 1000-sample wall is ``start-up + wall(N) * 1000 / N``: measured when ``--samples 1000``, else
 extrapolated linearly (and said so). The load average is printed: on a loaded machine only the
@@ -54,16 +55,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=TARGET_N)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--environment-rate", type=int, default=0,
-                    help="[simulation] environment_rate of every sample (ticks; 0 = every stage, as the scenario)")
+    ap.add_argument("--environment-rate", type=lambda v: v if v == "auto" else int(v), default="auto",
+                    help="[simulation] environment_rate of every sample (ticks; 0 = every stage; default auto, the scenarios')")
     ap.add_argument("--json", type=Path, default=None)
     _smoke.add_option(ap)
     args = ap.parse_args(argv)
     _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, {SMOKE_WORKERS} worker")
     est = load_scene(SCENE)
     truth = bench_scene("pd", environment_rate=args.environment_rate)
-    if args.environment_rate:
-        est = est.replace({"simulation.environment_rate": args.environment_rate})
+    est = est.replace({"simulation.environment_rate": args.environment_rate})
     if args.smoke:
         args.samples, args.workers = SMOKE_N, SMOKE_WORKERS
         short = {"simulation.duration": _smoke.SMOKE_DURATION_S, "montecarlo.settle_s": _smoke.SMOKE_DURATION_S / 2}

@@ -11,11 +11,14 @@ Claims:
 * the bulk path ran (the test would otherwise compare the row-by-row loop with itself);
 * a loop whose rows hold other columns falls back to row by row with the same sensor noise
   (the stream put back after the bulk call drew it);
-* with ``environment_rate = 20`` (aero and solar pressure held over blocks of ticks,
-  stationbed/run/flight_rates.py) the flight loop runs held (its summary says so), in bulk and
-  row by row bit for bit, and moves the attitude from the every-stage flight loop by no more
-  than the hold moves the truth-fed loop of the same scene (independent truth: the truth-fed
-  pair, run/rates.py, whose hold tests/test_effect_rates.py bounds) times :data:`HOLD_SAME_DRAWS`;
+* at the default ``environment_rate = "auto"`` the flight loop runs held at the bound's choice,
+  20 ticks (aero and solar pressure held over blocks of ticks, stationbed/run/flight_rates.py;
+  its summary says so, with the bound), in bulk and row by row bit for bit, and moves the
+  attitude from the every-stage flight loop (the same noise stream) by no more than the stated
+  bound (run/rate_auto.py: the MEKF is kinematic, so the law on the estimate moves the truth
+  through the same PD loop; docs/design.md "Effects at their own rate"), and no more than the
+  hold moves the truth-fed loop of the same scene (independent truth: the truth-fed pair,
+  run/rates.py, whose hold tests/test_effect_rates.py bounds) times :data:`HOLD_SAME_DRAWS`;
   a noise row reaching the wrong tick of a held block would move it by the noise's effect
   (~1e-7 rad), four orders above the hold's;
 * a run whose state turns non-finite inside a bulk call stops where the row-by-row loop stops:
@@ -39,6 +42,7 @@ from stationbed import load_scene, simulate
 from stationbed.core.rotation import rotation_angle
 from stationbed.run import fused_flight
 from stationbed.run.controller import Controller
+from stationbed.run.rate_auto import TARGET_RAD
 from stationbed.run.simulation import SimulationError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -111,17 +115,20 @@ def test_a_flight_loop_whose_rows_hold_other_columns_runs_row_by_row_with_the_sa
 
 def test_the_environment_at_its_own_rate_in_the_flight_loop(monkeypatch):
     scene = _scene()
-    held_scene = scene.replace({"simulation.environment_rate": 20})
+    held_scene = scene  # the default: "auto"
     with monkeypatch.context() as m:
         seen = _spy(m)
         held = simulate(held_scene, duration=DURATION_S, fused=True)
     with monkeypatch.context() as m:
         _row_by_row(m)
         held_one = simulate(held_scene, duration=DURATION_S, fused=True)
-    assert seen == [80] and held.meta["summary"]["environment_rate_ticks"] == 20
+    summary = held.meta["summary"]
+    assert seen == [80] and (summary["environment_rate_asked"], summary["environment_rate_ticks"]) == ("auto", 20)
+    assert summary["environment_rate_why"] is None and 0.0 < summary["environment_rate_bound_rad"] <= TARGET_RAD
     assert np.array_equal(held.data, held_one.data, equal_nan=True) and held.meta["summary"] == held_one.meta["summary"]
     every = simulate(scene.replace({"simulation.environment_rate": 0}), duration=DURATION_S, fused=True)
     err = float(np.max(rotation_angle(every.q_BN, held.q_BN)))
+    assert err <= summary["environment_rate_bound_rad"], f"{err:.3e} rad against the bound's {summary['environment_rate_bound_rad']:.3e}"
     truth = scene.replace({"sensor": [], "estimator": None, "simulation.environment_rate": 0})  # every stage
     truth_err = float(np.max(rotation_angle(simulate(truth, duration=DURATION_S).q_BN,
                                             simulate(truth.replace({"simulation.environment_rate": 20}),

@@ -17,8 +17,15 @@ The bound needs the loop's shape and the environment torque's rates:
   ``rates`` folder (keyed by the scene and stationbed's source files), so a scene flown again,
   in this process or another, does not pay it twice.
 
-Where the loop cannot honour a rate (thrusters, ``[[sensor]]`` tables: their fused executors
-evaluate every stage) or the bound's assumptions do not hold (a law other than ``pd``, ζ >= 1, no
+A loop flown on ``[[sensor]]`` tables and the MEKF (issue 20) takes the same choice: the filter is
+kinematic (it propagates with the gyro, never with a torque model), so its estimation error does
+not depend on the environment torque to first order (the separation of estimation and control),
+and the law on the estimate moves the truth's attitude through the same PD loop as the truth-fed
+law; the probe flies the scene truth-fed (sensors and estimator off: the environment torque is
+the same to the tracking error). docs/design.md "Effects at their own rate" argues it in full.
+
+Where the loop cannot honour a rate (thrusters: their fused executor evaluates every stage) or
+the bound's assumptions do not hold (a law other than ``pd``, ζ >= 1, no
 environment torque), ``auto`` is every stage (0) and :func:`auto_choice` says why.
 """
 
@@ -67,8 +74,8 @@ def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
     """Why ``auto`` is every stage (None: the bound applies)."""
     if thrust:
         return "thrusters: their fused loop evaluates the environment every stage"
-    if flight:
-        return "[[sensor]] tables: the flight loop evaluates the environment every stage"
+    # [[sensor]] tables (``flight``): the flight loop honours the rate (flight_rates.py) and the
+    # bound holds on the estimate's loop (module docstring)
     if scene.controller is None or scene.controller.name != "pd" or not (hasattr(params, "bandwidth")
                                                                           and hasattr(params, "damping")):
         return "the bound is proven for the pd law's loop shape"
@@ -91,7 +98,7 @@ def _probe(scene) -> tuple[float, float, list]:
     dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
     changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
                "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
-               "controller.sensor": {}}
+               "controller.sensor": {}, "sensor": [], "estimator": None}  # truth-fed: the same torque
     quiet = _Quiet()  # the probe's own notices (a saturation, a fallback) belong to the run, said there
     log = logging.getLogger(LOGGER)
     log.addFilter(quiet)
