@@ -510,3 +510,16 @@ def test_every_torque_kind_balance_at_each_environment_rate(rate, case):
     assert tr.meta["summary"]["fused"] and tr.meta["summary"]["environment_rate_ticks"] == (5 if rate == "auto" else rate)
     expect = smooth_integral_N(tr) + window_integral_N(tr, windows)
     assert_allclose(tr.H_O_N - tr.H_O_N[0], expect, rtol=0, atol=KIND_ABS)
+
+
+def test_torque_kind_balance_on_sensors_and_mekf_at_the_default_rate():
+    """The fused flight loop (the pd law on the MEKF's estimate) with aero and SRP held at the
+    default rate (``auto``: the bound holds on the estimate's loop, run/rate_auto.py; here the
+    row's 5 ticks) keeps the balance: the same integral of the logged torque columns."""
+    windows = KIND_WINDOWS["whole"]
+    d = {**kinds_scene(windows), **SENSED}
+    tr = simulate(scene_from_dict(d), fused=True)
+    s = tr.meta["summary"]
+    assert s["fused"] and "nees" in tr.columns and (s["environment_rate_asked"], s["environment_rate_ticks"]) == ("auto", 5)
+    expect = smooth_integral_N(tr) + window_integral_N(tr, windows)
+    assert_allclose(tr.H_O_N - tr.H_O_N[0], expect, rtol=0, atol=KIND_ABS)
