@@ -7,8 +7,9 @@ and the MEKF, the law on the estimate, actuation, one RK4 step of the right-hand
 the environment kinds with ``u_ext + L_hold``): the same blocks, the same extrapolation
 (:func:`.rates.held_chunk`'s formulas; docs/design.md "Effects at their own rate" bounds what the
 hold changes), so a scene with ``environment_rate = N`` runs both loops at the same accuracy and
-the estimated loop's cost is compared with the truth-fed loop's like for like. Without it (the
-default) the flight loop is unchanged.
+the estimated loop's cost is compared with the truth-fed loop's like for like. The default
+``"auto"`` is the bound's choice here too (run/rate_auto.py: the MEKF is kinematic, so the
+hold's bound holds on the estimate's loop); ``environment_rate = 0`` is the every-stage loop.
 
 The chunk's carry is the flight loop's (:func:`.fused_flight.carry_layout`) with the held
 environment's ``(L_prev, t_prev, have_prev)`` after it (``env``), passed from chunk to chunk.
