@@ -52,8 +52,9 @@ class Actuator:
     2. Declare ``STATE``, ``PARAMS``, ``OUTPUTS`` and ``READS`` as :class:`Layout` attributes,
        or write ``_layouts()`` when their shape depends on the scene (the number of thrusters),
        returning the shape-setting numbers from ``_structure()``. ``READS`` names fields of
-       the run's measurement (``stationbed.run.controller.measurement_layout``); the actuator
-       sees nothing else of the plant.
+       the run's measurement (the Layout ``stationbed.run.measurement.measurement_fields``;
+       :meth:`Actuator.reads_in` finds them there by name); the actuator sees nothing else of
+       the plant.
     3. Set ``n_channels`` (or write ``_n_channels()``), the pulse channels.
     4. Write ``_params()`` (every ``PARAMS`` field by name) and ``_initial()`` (every ``STATE``
        field at t = 0). Numbers are inputs of the compiled function, never constants in it.
@@ -112,6 +113,23 @@ class Actuator:
         """The name of this kind's compiled function for this instance's structure."""
         extra = "_".join(str(s) for s in self._structure())
         return f"actuator_{self.kind}" + (f"_{extra}" if extra else "")
+
+    def reads_in(self, layout: Layout) -> slice | np.ndarray:
+        """Where this actuator's ``READS`` fields lie in a vector of ``layout`` (the run's
+        measurement), in ``READS`` order, by name: a slice when they are contiguous there, else
+        the indices. KeyError naming a field the layout lacks; ValueError on a size mismatch."""
+        at = np.arange(layout.size)
+        parts = []
+        for name in self.reads.names:
+            idx = at[layout.slice(name)]
+            if idx.size != self.reads.slice(name).stop - self.reads.slice(name).start:
+                raise ValueError(f"actuator {self.kind!r} reads {name!r} of size {self.reads.shape(name)}, "
+                                 f"the measurement's has {idx.size}")
+            parts.append(idx)
+        idx = np.concatenate(parts) if parts else np.zeros(0, dtype=int)
+        if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+            return slice(int(idx[0]), int(idx[0]) + idx.size)
+        return idx
 
     # -- the one expression ----------------------------------------------------------------
     def function(self) -> ca.Function:

@@ -236,12 +236,12 @@ class _Lockstep:
         self.delay = np.array([s.loop.comp.delay for s in samples])
         self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
         self.z = np.zeros((n, DRAW_BLOCK, 6))
-        self.layout = lp.layout
+        self.layout = lp.meas_layout
         self.any_noisy = bool(self.noisy.any())
-        self.flight = FlightBatch(samples, lp.layout) if lp.flight is not None else None
+        self.flight = FlightBatch(samples, lp.meas_layout) if lp.flight is not None else None
         if not self.any_noisy and self.flight is None:
             self.seen = self.raw
-        self.M = BatchMeasurement(self.seen, lp.layout)
+        self.M = BatchMeasurement(self.seen, lp.meas_layout)
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
@@ -287,8 +287,7 @@ class _Lockstep:
         z = self.z[:, kb]
         att = self.noisy & (self.sig_a > 0)
         if att.any():
-            o = self.layout["q_BN"][0]
-            q = seen[:, o : o + 4]
+            q = seen[:, self.layout.slice("q_BN")]
             d = 0.5 * (0.0 + self.sig_a[:, None] * z[:, 0:3])
             qn = np.stack([
                 q[:, 0] - q[:, 1] * d[:, 0] - q[:, 2] * d[:, 1] - q[:, 3] * d[:, 2],
@@ -301,8 +300,7 @@ class _Lockstep:
             q[att] = (qn / norm[:, None])[att]
         rate = self.noisy & (self.sig_r > 0)
         if rate.any():
-            o = self.layout["omega_BN_B"][0]
-            w = seen[:, o : o + 3]
+            w = seen[:, self.layout.slice("omega_BN_B")]
             w[rate] = (w + (0.0 + self.sig_r[:, None] * z[:, 3:6]))[rate]
 
     def _measure(self, i: int, t: float, x) -> None:

@@ -78,7 +78,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     nz = ca.SX.sym("nz", nn)
     y = sx["meas"](t, x, p)
     if nn:  # the law sees the noisy measurement, as fused.py's tick (h_B is not corrupted)
-        y = noise["corrupt"](y, nz, flags, comp.layout)
+        y = noise["corrupt"](y, nz, flags, comp.meas_layout)
     try:
         cmd, q_ref = ctrl.symbolic(t, y, cp)
         cmd = ca.vertcat(cmd)
@@ -86,7 +86,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
     if cmd.numel() != 3:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected 3")
-    xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd, pa)
+    xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.reads_at], cmd, pa)
 
     def act_u(tau):  # the chain's end (the CMG cluster) on what the thrusters leave it
         return chain_end_inputs(sx, model, comp.end, "torque", t, h, x, tau, u_ext, p)
@@ -94,7 +94,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     act, u, _ = act_u(rest)
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
     idle_f = cl.idle_function()
-    idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
+    idle = idle_f(t, xa, y[th.reads_at], cmd, pa) if idle_f is not None else ca.SX(0)
     _, u_q, sat_q = act_u(cmd)
     nc = 1 + nx + 2 + na
     npar_all = 3 + ncp + 3 + npar + npa
@@ -108,7 +108,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     sub_from = [t, x, cp, u_ext, p, h, xa, pa]
     sub_to = [t0_s + i_s * hh_s, x_s, ps_[3 : 3 + ncp], ps_[3 + ncp : 6 + ncp], ps_[6 + ncp : 6 + ncp + npar], hh_s,
               xa_c, ps_[6 + ncp + npar :]]
-    x_q, cmd_q, idle_q, sat_qq, hB_q = ca.substitute([step(rhs, t, x, h, u_q, p), cmd, idle, sat_q, y[th.h_slice]],
+    x_q, cmd_q, idle_q, sat_qq, hB_q = ca.substitute([step(rhs, t, x, h, u_q, p), cmd, idle, sat_q, y[th.reads_at]],
                                                      sub_from, sub_to)
     act_s = i_s < nact_s
     c_quiet = ca.vertcat(i_s + 1, ca.if_else(act_s, x_q, x_s),
