@@ -237,13 +237,15 @@ def _sorted(v: list) -> list:
     return v
 
 
-def split_step(step, rhs, t, x, h, u, p, on_s, torque_B):
+def split_step(step, rhs, t, x, h, u, p, on_s, torque_B, u_layout: Layout | None = None):
     """One tick of ``step`` (an integrator's ``explicit_step``) split at the pulse edges, casadi.
 
     ``on_s`` (n,) sorted (a branch-free network), pieces ``[e_j, e_j+1]`` from 0 to ``h``; over
     each, the channels with ``on_s > (e_j + e_j+1) / 2`` add their ``torque_B`` (3, n) column to
-    ``u[0:3]`` (the held external torque). A zero-length piece is the identity (a step of 0).
+    the held external torque ``u_ext`` of ``u`` (by ``u_layout``, the model's ``input_layout``;
+    None: ``u`` is ``u_ext`` alone). A zero-length piece is the identity (a step of 0).
     """
+    lay = Layout(u_ext=3) if u_layout is None else u_layout
     n = on_s.numel()
     on = [ca.fmin(ca.fmax(on_s[j], 0.0), h) for j in range(n)]
     edges = [ca.SX(0.0) if isinstance(on_s, ca.SX) else 0.0] + _sorted(on) + [h]
@@ -252,6 +254,6 @@ def split_step(step, rhs, t, x, h, u, p, on_s, torque_B):
         tq = 0
         for j in range(n):
             tq = tq + ca.if_else(on[j] > mid, 1.0, 0.0) * torque_B[:, j]
-        uj = ca.vertcat(u[0:3] + tq, u[3:]) if u.numel() > 3 else u + tq
+        uj = lay.pack({**lay.split(u), "u_ext": lay.get(u, "u_ext") + tq})
         x = step(rhs, t + a, x, b - a, uj, p)
     return x

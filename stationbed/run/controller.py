@@ -309,10 +309,10 @@ SHOWN_CHARS = 80
 def _shown(obj) -> str:
     """A one-line, bounded ``repr`` of what a controller returned (never raises)."""
     try:
-        r = " ".join(repr(obj).split())
+        text = " ".join(repr(obj).split())
     except Exception:  # a user's object with a broken __repr__
-        r = f"<{type(obj).__name__}>"
-    return r if len(r) <= SHOWN_CHARS else r[: SHOWN_CHARS - 3] + "..."
+        text = f"<{type(obj).__name__}>"
+    return text if len(text) <= SHOWN_CHARS else text[: SHOWN_CHARS - 3] + "..."
 
 
 def _what(obj) -> str:

@@ -94,8 +94,8 @@ def _corrupt_sx(y, nz, flags, layout):
     parts = [y[i] for i in range(y.numel())]
     j = 0
     if att:
-        o = layout.slice("q_BN").start
-        q = parts[o : o + 4]
+        iq = layout.slice("q_BN")
+        q = parts[iq]
         d = [0.5 * nz[j + i] for i in range(3)]
         qn = [
             q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
@@ -104,11 +104,11 @@ def _corrupt_sx(y, nz, flags, layout):
             q[3] + q[0] * d[2] + q[1] * d[1] - q[2] * d[0],
         ]
         norm = ca.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
-        parts[o : o + 4] = [c / norm for c in qn]
+        parts[iq] = [c / norm for c in qn]
         j = 3
     if rate:
-        o = layout.slice("omega_BN_B").start
-        parts[o : o + 3] = [parts[o + i] + nz[j + i] for i in range(3)]
+        iw = layout.slice("omega_BN_B")
+        parts[iw] = [w + nz[j + i] for i, w in enumerate(parts[iw])]
     return ca.vertcat(*parts)
 
 

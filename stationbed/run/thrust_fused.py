@@ -131,7 +131,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     # inputs as given, nothing before the choice is computed again inside it
     plain = sx_function("thr_plain", [t, x, h, us, p, ons, tqs], [step(rhs, t, x, h, us, p)])
     split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
-                        [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch))])
+                        [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch), model.input_layout)])
     pulse = ca.Function.if_else("thr_pulse", split, plain)
     MX = ca.MX
     ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
