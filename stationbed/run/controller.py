@@ -67,7 +67,7 @@ import numpy as np
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
-from .measurement import BatchMeasurement, Measurement, measurement_fields, measurement_layout
+from .measurement import BatchMeasurement, Measurement, command_fields, measurement_fields, measurement_layout
 
 __all__ = [
     "Controller",
@@ -251,7 +251,7 @@ class Controller:
         if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
             per = self._member_meas = (meas.y, [(m.update, m, Measurement(meas.y[i], meas.layout))
                                                 for i, m in enumerate(self.members)])
-        ncmd = 3 if self.command == "torque" else self.members[0].plant.n_gimbals
+        ncmd = command_fields(self.command, self.members[0].plant.n_gimbals).size
         out = np.full((meas.n_samples, ncmd), np.nan)
         self.batch_failed = {}
         pack, step = _doubles(ncmd).pack_into, 8 * ncmd

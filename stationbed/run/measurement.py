@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core.layout import Layout
 
-__all__ = ["measurement_fields", "measurement_layout", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
+__all__ = ["measurement_fields", "measurement_layout", "command_fields", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
 
 #: The law's command by ``Controller.command``: its one field (the size: 3, or the gimbals).
 COMMAND_FIELDS = {"torque": "tau_B", "gimbal_rates": "gimbal_rates"}
