@@ -47,18 +47,12 @@ def command_fields(command: str, n_gimbals: int) -> Layout:
     return Layout(**{COMMAND_FIELDS[command]: 3 if command == "torque" else n_gimbals})
 
 
-def _as_layout(layout) -> Layout:
-    """A :class:`Layout`, from itself or from the older name -> (offset, size) dict."""
+def _offsets(layout) -> dict[str, tuple[int, int]]:
+    """Name -> (offset, size) of a :class:`Layout`, or the older dict itself (as it always was read)."""
     if isinstance(layout, Layout):
-        return layout
+        return layout.offsets()
     if isinstance(layout, Mapping):
-        items = sorted(layout.items(), key=lambda kv: kv[1][0])
-        at = 0
-        for name, (o, k) in items:
-            if o != at:
-                raise ValueError(f"measurement layout: field {name!r} at offset {o}, expected {at} (no gaps)")
-            at += k
-        return Layout(**{name: k for name, (o, k) in items})
+        return dict(layout)
     raise TypeError(f"measurement layout: a Layout or a name -> (offset, size) dict, got {type(layout).__name__}")
 
 
@@ -88,9 +82,8 @@ class Measurement:
     def __init__(self, y: np.ndarray, layout):
         self.t = 0.0
         self.y = y
-        lay = _as_layout(layout)
-        for name in lay.names:
-            v = y[lay.slice(name)]
+        for name, (o, k) in _offsets(layout).items():
+            v = y[o : o + k]
             setattr(self, name, v.reshape(3, 3) if name == "C_ON" else v)
 
 
@@ -103,8 +96,8 @@ class BatchMeasurement:
     def __init__(self, y: np.ndarray, layout):
         self.t = 0.0
         self.y = y
-        self.layout = lay = _as_layout(layout)
+        self.layout = layout
         self.n_samples = y.shape[0]
-        for name in lay.names:
-            v = y[:, lay.slice(name)]
+        for name, (o, k) in _offsets(layout).items():
+            v = y[:, o : o + k]
             setattr(self, name, v.reshape(-1, 3, 3) if name == "C_ON" else v)
