@@ -86,6 +86,12 @@ class Composition:
         return self.system.formulation.model
 
     @property
+    def layout(self) -> dict:
+        """The measurement's name -> (offset, size) (``meas_layout.offsets()``; the form this
+        field had before it was a Layout, for code written against it)."""
+        return self.meas_layout.offsets()
+
+    @property
     def command(self) -> str:
         """``"torque"`` or ``"gimbal_rates"``: what the law commands."""
         return self.ctrl.command
