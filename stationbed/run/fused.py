@@ -30,6 +30,7 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions, sx_function
 from . import law_state
 from .chunk_layout import chunk_carry, chunk_info, chunk_par
+from .measurement import noise_fields
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
@@ -83,20 +84,22 @@ def _noise_flags(comp) -> tuple[bool, bool]:
 
 
 def _noise_width(flags) -> int:
-    """Draws per tick: 3 for the attitude, then 3 for the rate (the per-tick loop's order)."""
-    return 3 * int(flags[0]) + 3 * int(flags[1])
+    """Draws per tick: 3 for the attitude, then 3 for the rate (the per-tick loop's order;
+    :func:`~.measurement.noise_fields`)."""
+    return noise_fields(*flags).size
 
 
 def _corrupt_sx(y, nz, flags, layout):
     """``y`` as ``ControlLoop._corrupt`` corrupts it, with this tick's draws ``nz`` (the values of
     ``rng.normal(0, sigma, 3)``): the same operations in the same order."""
     att, rate = flags
+    N = noise_fields(att, rate)  # the draws by name
     parts = [y[i] for i in range(y.numel())]
-    j = 0
     if att:
         iq = layout.slice("q_BN")
         q = parts[iq]
-        d = [0.5 * nz[j + i] for i in range(3)]
+        za = N.get(nz, "attitude")
+        d = [0.5 * za[i] for i in range(3)]
         qn = [
             q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
             q[1] + q[0] * d[0] + q[2] * d[2] - q[3] * d[1],
@@ -105,10 +108,10 @@ def _corrupt_sx(y, nz, flags, layout):
         ]
         norm = ca.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
         parts[iq] = [c / norm for c in qn]
-        j = 3
     if rate:
         iw = layout.slice("omega_BN_B")
-        parts[iw] = [w + nz[j + i] for i, w in enumerate(parts[iw])]
+        zr = N.get(nz, "rate")
+        parts[iw] = [w + zr[i] for i, w in enumerate(parts[iw])]
     return ca.vertcat(*parts)
 
 
@@ -307,9 +310,11 @@ def _draw(comp, n: int, flags) -> np.ndarray:
     an array element by element from one stream, and ``normal(0, σ)`` is ``0 + σ z``: the same
     numbers from one ``standard_normal`` call, tests/test_fused_noise.py)."""
     s = comp.sensor
-    z = comp.rng.standard_normal((n, _noise_width(flags)))
-    sig = ([s.attitude_noise] * 3 if flags[0] else []) + ([s.rate_noise] * 3 if flags[1] else [])
-    return 0.0 + np.asarray(sig) * z
+    N = noise_fields(*flags)
+    z = comp.rng.standard_normal((n, N.size))
+    sigma = {"attitude": s.attitude_noise, "rate": s.rate_noise}
+    sig = N.pack({f: [sigma[f]] * 3 for f in N.names})
+    return 0.0 + sig * z
 
 
 def _symbolic_params(ctrl):

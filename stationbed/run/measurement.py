@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core.layout import Layout
 
-__all__ = ["measurement_fields", "measurement_layout", "command_fields", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
+__all__ = ["measurement_fields", "measurement_layout", "command_fields", "noise_fields", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
 
 #: The law's command by ``Controller.command``: its one field (the size: 3, or the gimbals).
 COMMAND_FIELDS = {"torque": "tau_B", "gimbal_rates": "gimbal_rates"}
@@ -45,6 +45,14 @@ def measurement_layout(n_gimbals: int, n_app: int) -> dict[str, tuple[int, int]]
 def command_fields(command: str, n_gimbals: int) -> Layout:
     """The law's command layout: ``tau_B`` (3) [N m] or ``gimbal_rates`` (n_gimbals) [rad/s]."""
     return Layout(**{COMMAND_FIELDS[command]: 3 if command == "torque" else n_gimbals})
+
+
+@lru_cache(maxsize=None)
+def noise_fields(attitude: bool, rate: bool) -> Layout:
+    """One tick's draws of the ideal measurement's noise (``[controller.sensor]``), those on, in
+    the per-tick loop's order: ``attitude`` (3 standard normals, times its sigma: the small
+    rotation applied to ``q_BN``), then ``rate`` (3, added to ``omega_BN_B``)."""
+    return Layout(**({"attitude": 3} if attitude else {}), **({"rate": 3} if rate else {}))
 
 
 def _offsets(layout) -> dict[str, tuple[int, int]]:
