@@ -152,14 +152,13 @@ class LQR(Controller):
     def symbolic(self, t, y, cp):
         import casadi as ca
 
-        from stationbed.run.controller import measurement_layout
+        from stationbed.run.controller import measurement_fields
         from stationbed.core.rotation import dcm, quat_mult
 
-        lay = measurement_layout(self.plant.n_gimbals, len(self.plant.scene.appendage))
+        lay = measurement_fields(self.plant.n_gimbals, len(self.plant.scene.appendage))
 
-        def part(name):
-            o, k = lay[name]
-            return y[o : o + k]
+        def part(name):  # the measurement's field, by name
+            return lay.get(y, name)
 
         q, w, q_ON = part("q_BN"), part("omega_BN_B"), part("q_ON")
         K = ca.reshape(cp[0:18], 6, 3).T

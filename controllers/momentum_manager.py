@@ -275,13 +275,13 @@ class MomentumManager(Controller):
         # compiles them as CPython does: no FMA at -O2 without -march; docs/design.md)
         import casadi as ca
 
-        from stationbed.run.controller import measurement_layout
+        from stationbed.run.controller import measurement_fields
 
-        lay = measurement_layout(self.plant.n_gimbals, len(self.plant.scene.appendage))
+        lay = measurement_fields(self.plant.n_gimbals, len(self.plant.scene.appendage))
 
-        def part(name):
-            o, k = lay[name]
-            return [y[o + j] for j in range(k)]
+        def part(name):  # the measurement's field, by name, as scalars
+            v = lay.get(y, name)
+            return [v[j] for j in range(v.numel())]
 
         ka, kb, kc = ([cp[12 * r + j] for j in range(12)] for r in range(3))  # the rows of K
         e0, e1, e2 = cp[36], cp[37], cp[38]

@@ -161,15 +161,14 @@ class PD(Controller):
     def symbolic(self, t, y, cp):
         import casadi as ca
 
-        from stationbed.run.controller import measurement_layout
+        from stationbed.run.controller import measurement_fields
         from stationbed.core.rotation import dcm, quat_mult
 
         plant = self.plant
-        lay = measurement_layout(plant.n_gimbals, len(plant.scene.appendage))
+        lay = measurement_fields(plant.n_gimbals, len(plant.scene.appendage))
 
-        def part(name):
-            o, k = lay[name]
-            return y[o : o + k]
+        def part(name):  # the measurement's field, by name
+            return lay.get(y, name)
 
         q, w, q_ON = part("q_BN"), part("omega_BN_B"), part("q_ON")
         J = ca.reshape(cp[0:9], 3, 3).T

@@ -31,8 +31,9 @@ class Layout:
     Parameters
     ----------
     **fields : int or (int, int)
-        Field name -> size (a vector of that many numbers) or (rows, cols) (a matrix, stored
-        column-major). The keyword order is the order in the vector.
+        Field name -> size (a vector of that many numbers; 0 for a field a run may not have,
+        e.g. no gimbals) or (rows, cols) (a matrix, stored column-major). The keyword order is
+        the order in the vector.
 
     Examples
     --------
@@ -47,8 +48,8 @@ class Layout:
         at = 0
         for name, shape in fields.items():
             rows, cols = (shape, 1) if isinstance(shape, (int, np.integer)) else tuple(shape)
-            if rows < 1 or cols < 1:
-                raise ValueError(f"layout field {name!r}: size must be positive, got {shape!r}")
+            if rows < 0 or cols < 1:
+                raise ValueError(f"layout field {name!r}: size must not be negative, got {shape!r}")
             self._shape[name] = (int(rows), int(cols))
             self._slice[name] = slice(at, at + rows * cols)
             at += rows * cols
@@ -87,6 +88,11 @@ class Layout:
         """(rows, cols) of field ``name`` (cols = 1 for a vector)."""
         self.slice(name)
         return self._shape[name]
+
+    def offsets(self) -> dict[str, tuple[int, int]]:
+        """Field name -> (offset, size): the plain-dict form (what older code reads, e.g.
+        ``stationbed.run.controller.measurement_layout``)."""
+        return {n: (s.start, s.stop - s.start) for n, s in self._slice.items()}
 
     def columns(self, prefix: str = "") -> list[str]:
         """Column names, one per number: ``<prefix><field>_<axis>`` (``_x, _y, _z`` for a

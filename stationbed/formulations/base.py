@@ -5,7 +5,9 @@ A :class:`Formulation` adds the state layout and the equations of motion to a
 the formulation's ``omega(t, x, p)``.
 
 Conventions (every method, casadi SX): ``t`` time [s]; ``x`` the state, shape (nx, 1):
-``q_BN`` (4), the form's 3-vector, then ``x[7:]`` the model's extra states and modal states;
+``q_BN`` (4), the form's 3-vector, then the model's extra states and modal states, by the
+form's :attr:`~Formulation.state_layout` (:meth:`~Formulation.attitude`, :meth:`~Formulation.core_vector`,
+:meth:`~Formulation.extra`);
 ``u`` the held input (nu, 1); ``p`` the parameter vector (layout.size, 1).
 """
 
@@ -95,20 +97,42 @@ class Formulation:
         """The name of the form's second core state: ``omega_BN_B`` when it is the body rate."""
         return "omega_BN_B" if self.omega_is_state else "H_O_B"
 
+    # -- the state's parts, by the state layout (casadi or numpy; nobody writes x[4:7]) ----------
+    def _slices(self) -> tuple[slice, slice, slice]:
+        sl = self.__dict__.get("_state_slices")
+        if sl is None:
+            xl = self.state_layout
+            rate = xl.slice(self.rate_field)
+            sl = self.__dict__["_state_slices"] = (xl.slice("q_BN"), rate, slice(rate.stop, None))
+        return sl
+
+    def attitude(self, x):
+        """``q_BN`` of the state ``x``."""
+        return x[self._slices()[0]]
+
+    def core_vector(self, x):
+        """The form's second core state of ``x`` (:attr:`rate_field`: ``omega_BN_B`` or ``H_O_B``)."""
+        return x[self._slices()[1]]
+
+    def extra(self, x):
+        """The model's extra and modal states of ``x`` (after the core: ``x_cmg``, ``joints``,
+        ``eta`` and the second modal state, those the scene has)."""
+        return x[self._slices()[2]]
+
     # -- helpers for implementers --------------------------------------------------------
     def arrays(self, t, x, p, omega_BN_B=None, u=None):
         """The arrays' :class:`~stationbed.model.ArrayState` at state ``x`` (see
         :meth:`StationModel.arrays`)."""
-        return self.model.arrays(t, x[0:4], x[7:], p, omega_BN_B, u)
+        return self.model.arrays(t, self.attitude(x), self.extra(x), p, omega_BN_B, u)
 
     def modal_rates(self, t, x, p):
         """``η̇`` from the state (here: the second modal state itself)."""
-        return self.model.modal_state(x[7:])
+        return self.model.modal_state(self.extra(x))
 
     def physical_extra(self, t, x, p):
-        """``x[7:]`` with its second modal state replaced by ``η̇`` (what :meth:`state` takes)."""
+        """The extra states (:meth:`extra`) with the second modal state replaced by ``η̇`` (what :meth:`state` takes)."""
         m = self.model
-        xe = x[7:]
+        xe = self.extra(x)
         if not m.n_modes:
             return xe
         return ca.vertcat(xe[0 : m.n_extra + m.n_modes], self.modal_rates(t, x, p))
@@ -126,7 +150,7 @@ class Formulation:
         core_dot, omega_BN_B = out[0], out[1]
         if core_dot.shape != (7, 1):
             raise ValueError(f"{self.name}: _rhs returned shape {core_dot.shape}, expected (7, 1)")
-        parts = [core_dot, self.model.extra_dot(t, x[0:4], x[7:], u, omega_BN_B, p)]
+        parts = [core_dot, self.model.extra_dot(t, self.attitude(x), self.extra(x), u, omega_BN_B, p)]
         if self.model.n_modes:
             if len(out) < 3:
                 raise ValueError(f"formulation {self.name!r} does not model flexible arrays (elastic modes)")
@@ -182,7 +206,7 @@ class Formulation:
         ``t_plus``. For the momentum form this is the identity (H and p_η are its states).
         """
         m = self.model
-        q_BN, xe = x[0:4], x[7:]
+        q_BN, xe = self.attitude(x), self.extra(x)
         xp = self.physical_extra(t_minus, x, p)
         omega_BN_B = self._omega(t_minus, x, p)
         H_O_B = self.momentum_of(t_minus, q_BN, omega_BN_B, xp, p)
@@ -243,23 +267,23 @@ class Formulation:
 
     def H_O_B(self, t, x, p):
         """Total angular momentum about O (CMG momentum included), B components [N m s]."""
-        return self.momentum_of(t, x[0:4], self._omega(t, x, p), self.physical_extra(t, x, p), p)
+        return self.momentum_of(t, self.attitude(x), self._omega(t, x, p), self.physical_extra(t, x, p), p)
 
     def H_O_N(self, t, x, p):
         """Total angular momentum about O (CMG momentum included), N components [N m s]."""
-        return ca.mtimes(dcm(x[0:4]).T, self.H_O_B(t, x, p))
+        return ca.mtimes(dcm(self.attitude(x)).T, self.H_O_B(t, x, p))
 
     def kinetic_energy(self, t, x, p):
         """Kinetic energy about O of the structure (body, arrays and their elastic motion; CMG
         rotors excluded) [J]: :meth:`StationModel.kinetic_energy` at the state's rates."""
-        return self.model.kinetic_energy(t, x[0:4], self._omega(t, x, p), self.physical_extra(t, x, p), p)
+        return self.model.kinetic_energy(t, self.attitude(x), self._omega(t, x, p), self.physical_extra(t, x, p), p)
 
     def strain_energy(self, t, x, p):
         """Elastic strain energy of the arrays ``½ ηᵀ K η`` [J] (0 for a rigid scene)."""
         m = self.model
         if not m.n_modes:
             return ca.SX(0)
-        return m.modal(self.arrays(t, x, p), p).strain(m.eta(x[7:]))
+        return m.modal(self.arrays(t, x, p), p).strain(m.eta(self.extra(x)))
 
     # -- plug-in -------------------------------------------------------------------------
     def _rhs(self, t, x, u, p):  # pragma: no cover - abstract
@@ -293,15 +317,15 @@ class OmegaStateForm(Formulation):
     omega_is_state = True
 
     def _omega(self, t, x, p):
-        return x[4:7]
+        return self.core_vector(x)
 
     def _core(self, t, q_BN, omega_BN_B, xe, p):
         return omega_BN_B
 
     def _rhs(self, t, x, u, p):
         m = self.model
-        q_BN, omega_BN_B = x[0:4], x[4:7]
-        xe = x[7:]
+        q_BN, omega_BN_B = self.attitude(x), self.core_vector(x)
+        xe = self.extra(x)
         arrays = self.arrays(t, x, p, omega_BN_B, u)
         I_O_B = m.inertia(t, p, arrays)
         h_B = m.h(xe, p)

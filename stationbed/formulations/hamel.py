@@ -193,7 +193,7 @@ class HamelForm(Formulation):
         the hub's recoil couples the arrays' modes, so it is not diagonal)."""
         m = self.model
         N = m.n_modes
-        q_BN, omega_BN_B, xe = x[0:4], x[4:7], x[7:]
+        q_BN, omega_BN_B, xe = self.attitude(x), self.core_vector(x), self.extra(x)
         mom, Mvv, dp_dt, dp_dxe, dp_dth, dp_deta, gT, gV, dL_deta, dR = self.terms(t, q_BN, omega_BN_B, xe, p, u)
         xe_dot = m.extra_dot(t, q_BN, xe, u, omega_BN_B, p)
         eta_dot = m.modal_state(xe)
@@ -213,7 +213,7 @@ class HamelForm(Formulation):
         return ca.vertcat(quat_kinematics(q_BN, omega_BN_B), omega_dot_B), omega_BN_B, ca.vertcat(eta_dot, eta_ddot)
 
     def _omega(self, t, x, p):
-        return x[4:7]
+        return self.core_vector(x)
 
     def _core(self, t, q_BN, omega_BN_B, xe, p):
         return omega_BN_B

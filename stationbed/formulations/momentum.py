@@ -36,7 +36,7 @@ class MomentumForm(Formulation):
         arrays = self.arrays(t, x, p, u=u)
         I_O_B = m.inertia(t, p, arrays)
         modal = m.modal(arrays, p)
-        omega_BN_B, eta_dot = m.velocities(x[4:7], m.modal_state(x[7:]), arrays, modal, I_O_B, x[7:], p)
+        omega_BN_B, eta_dot = m.velocities(self.core_vector(x), m.modal_state(self.extra(x)), arrays, modal, I_O_B, self.extra(x), p)
         return omega_BN_B, eta_dot, I_O_B, modal, arrays
 
     def _omega(self, t, x, p):
@@ -48,13 +48,13 @@ class MomentumForm(Formulation):
 
     def _rhs(self, t, x, u, p):
         m = self.model
-        q_BN, H_O_B = x[0:4], x[4:7]
+        q_BN, H_O_B = self.attitude(x), self.core_vector(x)
         omega_BN_B, eta_dot, I_O_B, modal, arrays = self._velocities(t, x, p, u)
         L_B = m.external_torque(t, q_BN, u, p, I_O_B, arrays=arrays)
         core_dot = ca.vertcat(quat_kinematics(q_BN, omega_BN_B), L_B - ca.cross(omega_BN_B, H_O_B))
         if not m.n_modes:
             return core_dot, omega_BN_B
-        eta = m.eta(x[7:])
+        eta = m.eta(self.extra(x))
         p_dot = modal.momentum_rate(eta, eta_dot, omega_BN_B)
         return core_dot, omega_BN_B, ca.vertcat(eta_dot, p_dot)
 

@@ -52,8 +52,9 @@ class Actuator:
     2. Declare ``STATE``, ``PARAMS``, ``OUTPUTS`` and ``READS`` as :class:`Layout` attributes,
        or write ``_layouts()`` when their shape depends on the scene (the number of thrusters),
        returning the shape-setting numbers from ``_structure()``. ``READS`` names fields of
-       the run's measurement (``stationbed.run.controller.measurement_layout``); the actuator
-       sees nothing else of the plant.
+       the run's measurement (the Layout ``stationbed.run.measurement.measurement_fields``;
+       :meth:`Actuator.reads_in` finds them there by name); the actuator sees nothing else of
+       the plant.
     3. Set ``n_channels`` (or write ``_n_channels()``), the pulse channels.
     4. Write ``_params()`` (every ``PARAMS`` field by name) and ``_initial()`` (every ``STATE``
        field at t = 0). Numbers are inputs of the compiled function, never constants in it.
@@ -112,6 +113,23 @@ class Actuator:
         """The name of this kind's compiled function for this instance's structure."""
         extra = "_".join(str(s) for s in self._structure())
         return f"actuator_{self.kind}" + (f"_{extra}" if extra else "")
+
+    def reads_in(self, layout: Layout) -> slice | np.ndarray:
+        """Where this actuator's ``READS`` fields lie in a vector of ``layout`` (the run's
+        measurement), in ``READS`` order, by name: a slice when they are contiguous there, else
+        the indices. KeyError naming a field the layout lacks; ValueError on a size mismatch."""
+        at = np.arange(layout.size)
+        parts = []
+        for name in self.reads.names:
+            idx = at[layout.slice(name)]
+            if idx.size != self.reads.slice(name).stop - self.reads.slice(name).start:
+                raise ValueError(f"actuator {self.kind!r} reads {name!r} of size {self.reads.shape(name)}, "
+                                 f"the measurement's has {idx.size}")
+            parts.append(idx)
+        idx = np.concatenate(parts) if parts else np.zeros(0, dtype=int)
+        if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+            return slice(int(idx[0]), int(idx[0]) + idx.size)
+        return idx
 
     # -- the one expression ----------------------------------------------------------------
     def function(self) -> ca.Function:
@@ -219,13 +237,15 @@ def _sorted(v: list) -> list:
     return v
 
 
-def split_step(step, rhs, t, x, h, u, p, on_s, torque_B):
+def split_step(step, rhs, t, x, h, u, p, on_s, torque_B, u_layout: Layout | None = None):
     """One tick of ``step`` (an integrator's ``explicit_step``) split at the pulse edges, casadi.
 
     ``on_s`` (n,) sorted (a branch-free network), pieces ``[e_j, e_j+1]`` from 0 to ``h``; over
     each, the channels with ``on_s > (e_j + e_j+1) / 2`` add their ``torque_B`` (3, n) column to
-    ``u[0:3]`` (the held external torque). A zero-length piece is the identity (a step of 0).
+    the held external torque ``u_ext`` of ``u`` (by ``u_layout``, the model's ``input_layout``;
+    None: ``u`` is ``u_ext`` alone). A zero-length piece is the identity (a step of 0).
     """
+    lay = Layout(u_ext=3) if u_layout is None else u_layout
     n = on_s.numel()
     on = [ca.fmin(ca.fmax(on_s[j], 0.0), h) for j in range(n)]
     edges = [ca.SX(0.0) if isinstance(on_s, ca.SX) else 0.0] + _sorted(on) + [h]
@@ -234,6 +254,6 @@ def split_step(step, rhs, t, x, h, u, p, on_s, torque_B):
         tq = 0
         for j in range(n):
             tq = tq + ca.if_else(on[j] > mid, 1.0, 0.0) * torque_B[:, j]
-        uj = ca.vertcat(u[0:3] + tq, u[3:]) if u.numel() > 3 else u + tq
+        uj = lay.pack({**lay.split(u), "u_ext": lay.get(u, "u_ext") + tq})
         x = step(rhs, t + a, x, b - a, uj, p)
     return x

@@ -351,6 +351,6 @@ class ThrusterCluster(Actuator):
         if F is None:
             F = map_min_norm_shift(self.M, self.V, self.f_max, req)
         x_next, rest, on, Tq, out = (np.asarray(v).ravel() for v in fire(t, h, x, tau_B, self.params, F, aux))
-        out[:3] = req
+        out[self.outputs.slice("request_B")] = req
         self.n_commands += 1
         return x_next, rest, on, Tq.reshape(self.n, 3).T, out

@@ -334,7 +334,8 @@ def simulate_batch(
             X[:, idx] = xs[:, 1:][:, keep]
     omega, H, T = _outputs(funcs, t_out, X, P, threads, system)
     wall = time.perf_counter() - wall0
-    qn = X[:, :, 0:4] / np.linalg.norm(X[:, :, 0:4], axis=2, keepdims=True)
+    iq = form.state_layout.slice("q_BN")  # the attitude, by the state layout
+    qn = X[:, :, iq] / np.linalg.norm(X[:, :, iq], axis=2, keepdims=True)
     meta = dict(
         scene=scene.name,
         formulation=form.name,

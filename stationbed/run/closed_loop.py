@@ -22,10 +22,9 @@ from .controller import (
     Measurement,
     Plant,
     command_values,
-    measurement_layout,
     one_line,
 )
-from ..core.layout import Layout
+from .measurement import command_fields, measurement_fields
 from ..loop.cmg_cluster import chain_end
 from .composition import Composition, ControllerFailure, FlightMemory, RunState
 from .fused import fused_ok, run_fused
@@ -121,15 +120,15 @@ class ControlLoop:
         # delayed copy)
         self.meas = FastCall.of(f["meas"])
         self.meas.args[2][:] = p
-        layout = measurement_layout(ng, len(scene.appendage))
+        layout = measurement_fields(ng, len(scene.appendage))
         sensor = spec.sensor
         noisy = sensor.attitude_noise > 0 or sensor.rate_noise > 0 or sensor.delay > 0
-        flight = _flight(scene, period, layout, sensor.seed) if scene.sensor else None  # issue 20
+        flight = _flight(scene, period, layout.offsets(), sensor.seed) if scene.sensor else None  # issue 20
         comp = self.comp = Composition(
             scene=scene, system=system, integ=integ, p=p, bps=bps, apply_jump=apply_jump,
             period=period, duration=duration, n_per_out=int(round(output_dt / period)),
-            state_layout=form.state_layout, input_layout=model.input_layout, layout=layout,
-            command_layout=Layout(gimbal_rates=ng) if ctrl.command == "gimbal_rates" else Layout(tau_B=3),
+            state_layout=form.state_layout, input_layout=model.input_layout, meas_layout=layout,
+            command_layout=command_fields(ctrl.command, ng),
             ctrl=ctrl, replan=replan_of(scene, system, period, duration, plant_facts),  # fault detection
             sensor=sensor, noisy=noisy, delay=int(round(sensor.delay / period)) if noisy else 0,
             rng=np.random.default_rng(sensor.seed) if noisy else None,
@@ -198,8 +197,8 @@ class ControlLoop:
         comp = self.comp
         fl = comp.flight
         y0 = self.measure(0.0, self.x)
-        (oq, _), (ow, _) = comp.layout["q_BN"], comp.layout["omega_BN_B"]
-        xs = fl.initial(y0[oq : oq + 4], y0[ow : ow + 3])
+        ml = comp.meas_layout
+        xs = fl.initial(ml.get(y0, "q_BN"), ml.get(y0, "omega_BN_B"))
         self.res.flight = FlightMemory(0.0, np.zeros(3), np.zeros(3), xs, np.zeros(fl.suite.OUTPUTS.size))
         self._w, self._w_k0 = np.zeros((0, fl.suite.NOISE.size)), 0
 
@@ -232,8 +231,7 @@ class ControlLoop:
         a[7][:] = self.noise_row(k)
         fc()
         fm.theta_B[:], fm.xs[:], fm.ys[:] = fc.res[0], fc.res[1], fc.res[3]
-        o, _ = self.comp.layout["omega_BN_B"]
-        fm.omega_prev[:] = y[o : o + 3]
+        fm.omega_prev[:] = y[self.comp.meas_layout.slice("omega_BN_B")]
         fm.t_prev = t
         return fc.res[2]
 
@@ -268,8 +266,7 @@ class ControlLoop:
         self.seen[:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
         s = comp.sensor
         if s.attitude_noise > 0:
-            o = comp.layout["q_BN"][0]
-            q = self.seen[o : o + 4]
+            q = self.seen[comp.meas_layout.slice("q_BN")]
             d = 0.5 * comp.rng.normal(0.0, s.attitude_noise, 3)
             qn = np.array(
                 [
@@ -281,8 +278,7 @@ class ControlLoop:
             )
             q[:] = qn / np.linalg.norm(qn)
         if s.rate_noise > 0:
-            o = comp.layout["omega_BN_B"][0]
-            self.seen[o : o + 3] += comp.rng.normal(0.0, s.rate_noise, 3)
+            self.seen[comp.meas_layout.slice("omega_BN_B")] += comp.rng.normal(0.0, s.rate_noise, 3)
 
     def actuate(self, t: float, cmd, count: bool = True) -> int:
         """The actuator chain at tick ``t`` on the law's command: sets the held input (the CMG
@@ -473,7 +469,7 @@ class ControlLoop:
         self.u_ext = fc.args[4]
         if not comp.noisy and comp.flight is None:  # the controller reads the tick's output directly (no copy)
             self.meas_out = fc.res[1]
-            self.M = Measurement(self.meas_out, comp.layout)
+            self.M = Measurement(self.meas_out, comp.meas_layout)
         return fc, fc.args[2], fc.res[0], fc.res[1], fc.res[2]
 
     def _flags(self, r, count: bool = True) -> int:
@@ -523,7 +519,8 @@ class ControlLoop:
 
 def _flight(scene, period: float, layout: dict, seed):
     """The scene's sensors and estimator (:class:`~stationbed.loop.Flight`), the Moon held at the
-    epoch as the Sun."""
+    epoch as the Sun; ``layout`` the measurement's offsets (``Layout.offsets``: the form
+    ``Flight`` reads)."""
     moon = None
     if scene.sun is not None and scene.sun.epoch is not None:
         u, dist, _, _ = moon_position(julian_date(scene.sun.epoch))

@@ -64,7 +64,7 @@ class Composition:
     # -- the layouts -------------------------------------------------------------------------
     state_layout: Layout  #: the plant's state (formulation.state_layout)
     input_layout: Layout  #: the model's held input (u_ext, u_cmg, t_step)
-    layout: dict  #: the measurement: name -> (offset, size) (controller.measurement_layout)
+    meas_layout: Layout  #: the measurement the law sees (measurement.measurement_fields)
     command_layout: Layout  #: the law's command: ``tau_B`` (3) or ``gimbal_rates`` (n gimbals)
     # -- the law -----------------------------------------------------------------------------
     ctrl: Any  #: the :class:`~.controller.Controller`, reset on the knowledge's plant
@@ -84,6 +84,12 @@ class Composition:
     @cached_property
     def model(self):
         return self.system.formulation.model
+
+    @property
+    def layout(self) -> dict:
+        """The measurement's name -> (offset, size) (``meas_layout.offsets()``; the form this
+        field had before it was a Layout, for code written against it)."""
+        return self.meas_layout.offsets()
 
     @property
     def command(self) -> str:

@@ -22,8 +22,8 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
 5. Optionally, for the fused loop (stationbed/run/fused.py: controller and dynamics in one
    compiled loop), write ``symbolic_params()`` (the law's numbers, a flat array set by ``_reset``)
-   and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the measurement, offsets
-   from :func:`measurement_layout`; ``cp``), computing what ``_update`` does (a test runs both);
+   and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the measurement, its
+   fields by :func:`measurement_fields`, e.g. ``lay.get(y, "omega_BN_B")``; ``cp``), computing what ``_update`` does (a test runs both);
    a law that keeps a state between ticks declares it: stationbed/run/law_state.py.
 
 What ``_update`` may return (:func:`command_values` checks it, the same on every path of the
@@ -67,6 +67,8 @@ import numpy as np
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
+from .measurement import BatchMeasurement, Measurement, command_fields, measurement_fields, measurement_layout
+
 __all__ = [
     "Controller",
     "ControllerParams",
@@ -79,6 +81,7 @@ __all__ = [
     "one_line",
     "controller_registry",
     "measurement_layout",
+    "measurement_fields",
     "UnitQuaternion",
 ]
 
@@ -105,73 +108,6 @@ class ControllerParams(BaseModel):
     """Base of every controller's parameter model: unknown keys and NaN/inf are errors."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-def measurement_layout(n_gimbals: int, n_app: int) -> dict[str, tuple[int, int]]:
-    """Name -> (offset, size) of the measurement vector the compiled ``meas`` function writes."""
-    sizes = [
-        ("q_BN", 4),
-        ("omega_BN_B", 3),
-        ("h_B", 3),
-        ("gimbal", n_gimbals),
-        ("alpha", n_app),
-        ("beta", n_app),
-        ("r_N", 3),
-        ("C_ON", 9),
-        ("q_ON", 4),
-        ("omega_ON_O", 3),
-        ("sun_N", 3),
-    ]
-    out, n = {}, 0
-    for name, k in sizes:
-        out[name] = (n, k)
-        n += k
-    return out
-
-
-class Measurement:
-    """What a controller sees at a tick; every field is a numpy view refreshed in place.
-
-    Attributes
-    ----------
-    t : float  Time of the tick [s].
-    q_BN : (4,)  Attitude quaternion of B relative to N, scalar first.
-    omega_BN_B : (3,)  Body rate, B components [rad/s].
-    h_B : (3,)  CMG cluster momentum, B components [N m s] (zeros without a cluster).
-    gimbal : (n_gimbals,)  Gimbal angles [rad] (dgcmg: outer, inner per unit).
-    alpha, beta : (n_arrays,)  Array joint angles [rad].
-    r_N : (3,)  Station position, N components [m] (zeros without an orbit).
-    C_ON : (3, 3)  DCM from N to LVLH (identity without an orbit).
-    q_ON : (4,)  The same as a quaternion, continuous in time (``dcm(q_ON) = C_ON``).
-    omega_ON_O : (3,)  Angular velocity of LVLH relative to N, O components [rad/s]
-        (``(0, -n, 0)`` on a circular orbit, ``(0, -h/r², 0)`` on a two-body one; zeros without an orbit).
-    sun_N : (3,)  Unit vector to the sun, N components (zeros without a [sun] table).
-    """
-
-    __slots__ = ("t", "y", "q_BN", "omega_BN_B", "h_B", "gimbal", "alpha", "beta", "r_N", "C_ON", "q_ON", "omega_ON_O", "sun_N")
-
-    def __init__(self, y: np.ndarray, layout: dict[str, tuple[int, int]]):
-        self.t = 0.0
-        self.y = y
-        for name, (o, k) in layout.items():
-            v = y[o : o + k]
-            setattr(self, name, v.reshape(3, 3) if name == "C_ON" else v)
-
-
-class BatchMeasurement:
-    """:class:`Measurement` with a leading sample axis (views of ``y`` (n, n_y), refreshed in
-    place: ``q_BN`` (n, 4), ..., ``C_ON`` (n, 3, 3)); ``t`` [s] is every sample's (lockstep)."""
-
-    __slots__ = Measurement.__slots__ + ("n_samples", "layout")
-
-    def __init__(self, y: np.ndarray, layout: dict[str, tuple[int, int]]):
-        self.t = 0.0
-        self.y = y
-        self.layout = layout
-        self.n_samples = y.shape[0]
-        for name, (o, k) in layout.items():
-            v = y[:, o : o + k]
-            setattr(self, name, v.reshape(-1, 3, 3) if name == "C_ON" else v)
 
 
 #: attributes of a controller that stay per sample (not stacked) in :meth:`Controller.batch_of`
@@ -315,7 +251,7 @@ class Controller:
         if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
             per = self._member_meas = (meas.y, [(m.update, m, Measurement(meas.y[i], meas.layout))
                                                 for i, m in enumerate(self.members)])
-        ncmd = 3 if self.command == "torque" else self.members[0].plant.n_gimbals
+        ncmd = command_fields(self.command, self.members[0].plant.n_gimbals).size
         out = np.full((meas.n_samples, ncmd), np.nan)
         self.batch_failed = {}
         pack, step = _doubles(ncmd).pack_into, 8 * ncmd
@@ -373,10 +309,10 @@ SHOWN_CHARS = 80
 def _shown(obj) -> str:
     """A one-line, bounded ``repr`` of what a controller returned (never raises)."""
     try:
-        r = " ".join(repr(obj).split())
+        text = " ".join(repr(obj).split())
     except Exception:  # a user's object with a broken __repr__
-        r = f"<{type(obj).__name__}>"
-    return r if len(r) <= SHOWN_CHARS else r[: SHOWN_CHARS - 3] + "..."
+        text = f"<{type(obj).__name__}>"
+    return text if len(text) <= SHOWN_CHARS else text[: SHOWN_CHARS - 3] + "..."
 
 
 def _what(obj) -> str:

@@ -40,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .controller import Controller, measurement_layout, one_line
+from .controller import Controller, one_line
+from .measurement import measurement_fields
 from .fmu_unit import FmuError, FmuStepError, load_unit
 
 __all__ = ["FmuController", "FmuError", "FmuStepError", "COMMAND_OUTPUTS"]
@@ -52,7 +53,7 @@ Q_REF = "q_ref_BN"
 #: FMU parameters set from the plant facts when the scene does not give them: name -> size
 PLANT_PARAMS = {"inertia_O_B": 9, "mean_motion": 1, "period": 1}
 #: the measurement's fields (sizes of gimbal, alpha, beta: per scene)
-MEASUREMENT_FIELDS = tuple(measurement_layout(0, 0))
+MEASUREMENT_FIELDS = measurement_fields(0, 0).names
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 #: how many near names an error lists
 NEAR = 4
@@ -279,7 +280,7 @@ class FmuController(Controller):
     # -- a run -------------------------------------------------------------------------------
     def _bind(self, plant) -> None:
         ng, na = plant.n_gimbals, len(plant.scene.appendage) if plant.scene is not None else 0
-        layout = measurement_layout(ng, na)
+        layout = measurement_fields(ng, na).offsets()  # name -> (offset, size), by the one declaration
         sizes = {f: k for f, (o, k) in layout.items()}
         sizes.update(tau_cmd=3, gimbal_rate_cmd=ng, q_ref_BN=4)
         emap = self._element_map(sizes)

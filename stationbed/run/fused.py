@@ -29,6 +29,8 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
 from . import law_state
+from .chunk_layout import chunk_carry, chunk_info, chunk_par
+from .measurement import noise_fields
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
@@ -82,20 +84,22 @@ def _noise_flags(comp) -> tuple[bool, bool]:
 
 
 def _noise_width(flags) -> int:
-    """Draws per tick: 3 for the attitude, then 3 for the rate (the per-tick loop's order)."""
-    return 3 * int(flags[0]) + 3 * int(flags[1])
+    """Draws per tick: 3 for the attitude, then 3 for the rate (the per-tick loop's order;
+    :func:`~.measurement.noise_fields`)."""
+    return noise_fields(*flags).size
 
 
 def _corrupt_sx(y, nz, flags, layout):
     """``y`` as ``ControlLoop._corrupt`` corrupts it, with this tick's draws ``nz`` (the values of
     ``rng.normal(0, sigma, 3)``): the same operations in the same order."""
     att, rate = flags
+    N = noise_fields(att, rate)  # the draws by name
     parts = [y[i] for i in range(y.numel())]
-    j = 0
     if att:
-        o = layout["q_BN"][0]
-        q = parts[o : o + 4]
-        d = [0.5 * nz[j + i] for i in range(3)]
+        iq = layout.slice("q_BN")
+        q = parts[iq]
+        za = N.get(nz, "attitude")
+        d = [0.5 * za[i] for i in range(3)]
         qn = [
             q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
             q[1] + q[0] * d[0] + q[2] * d[2] - q[3] * d[1],
@@ -103,11 +107,11 @@ def _corrupt_sx(y, nz, flags, layout):
             q[3] + q[0] * d[2] + q[1] * d[1] - q[2] * d[0],
         ]
         norm = ca.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
-        parts[o : o + 4] = [c / norm for c in qn]
-        j = 3
+        parts[iq] = [c / norm for c in qn]
     if rate:
-        o = layout["omega_BN_B"][0]
-        parts[o : o + 3] = [parts[o + i] + nz[j + i] for i in range(3)]
+        iw = layout.slice("omega_BN_B")
+        zr = N.get(nz, "rate")
+        parts[iw] = [w + zr[i] for i, w in enumerate(parts[iw])]
     return ca.vertcat(*parts)
 
 
@@ -131,13 +135,13 @@ def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
     nn = _noise_width(flags)
     nz = ca.SX.sym("nz", nn)
     if nn:
-        y = _corrupt_sx(y, nz, flags, comp.layout)
+        y = _corrupt_sx(y, nz, flags, comp.meas_layout)
     cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y, cp, s, comp.n_cmd)
     # the actuator chain's end (the CMG cluster or the ideal torquer), u by the input layout
     # (t_step with rate steps: they lie outside a fused run, it keeps u's layout)
     act, u, sat = chain_end_inputs(sx, model, comp.end, ctrl.command, t, h, x, cmd, u_ext, p)
     ins = [t, xa, cp, u_ext, p] + ([nz] if nn else [])
-    info = sx_function("fused_info", ins, [ca.vertcat(cmd, act, q_ref, s1)])
+    info = sx_function("fused_info", ins, [chunk_info(comp.n_cmd, act.numel(), ns).pack(cmd=cmd, act=act, q_ref=q_ref, s=s1)])
     rhs = sx["rhs"]
     x1 = ca.vertcat(system.integrator_cls.explicit_step(rhs, t, x, h, u, p), s1)
     # carry: tick index i (exact integer in a double: t = t0 + i h, no accumulation), state,
@@ -151,16 +155,18 @@ def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
     nz_i = ca.SX.sym("nz_i", nn)
     x_new, fl = one(t0 + i * h, x_i, cp, u_ext, p, h, *([nz_i] if nn else []))
     active = i < n_act
-    carry = ca.vertcat(i, x_i, cnt)
-    carry_new = ca.vertcat(
-        i + 1,
-        ca.if_else(active, x_new, x_i),
-        cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2)),
+    C, P = chunk_carry(nx), chunk_par(ncp, npar)  # the carry and the parameters, by name (chunk_layout.py)
+    carry = C.pack(i=i, x=x_i, counts=cnt)
+    carry_new = C.pack(
+        i=i + 1,
+        x=ca.if_else(active, x_new, x_i),
+        counts=cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2)),
     )
-    step = sx_function("fused_step", [carry, ca.vertcat(t0, h, n_act, cp, u_ext, p)] + ([nz_i] if nn else []), [carry_new])
+    step = sx_function("fused_step", [carry, P.pack(t0=t0, h=h, n_act=n_act, cp=cp, u_ext=u_ext, p=p)] + ([nz_i] if nn else []),
+                       [carry_new])
     acc = step.mapaccum("fused_acc", n)
-    c0 = ca.MX.sym("c0", 1 + nx + 2)
-    par = ca.MX.sym("par", 3 + ncp + 3 + npar)
+    c0 = ca.MX.sym("c0", C.size)
+    par = ca.MX.sym("par", P.size)
     noise = [ca.MX.sym("noise", nn, n)] if nn else []  # column i: tick i's draws
     traj = acc(c0, ca.repmat(par, 1, n), *noise)
     chunk = ca.Function("fused_chunk", [c0, par] + noise, [traj[:, -1]])
@@ -222,15 +228,17 @@ def run_fused(comp, res, K: int) -> None:
     if nn:  # each tick's draws: written before each call (a chunk's columns, then the row tick's)
         noise, info_nz = chunk.args[2], info.args[5]
         noise[:] = 0.0
-    par[0] = 0.0
-    par[1] = period
-    par[3 : 3 + len(cp)] = cp
-    i_ext = slice(3 + len(cp), 6 + len(cp))
-    par[i_ext] = u_ext
-    par[6 + len(cp) :] = p
-    ncmd = comp.n_cmd
+    # the chunk's carry and parameters and the row's info, by name (chunk_layout.py: the builder's)
+    C, P = chunk_carry(nx, env=ne), chunk_par(len(cp), len(p))
+    i_t0, i_h, i_n, i_ext = P.slice("t0"), P.slice("h"), P.slice("n_act"), P.slice("u_ext")
+    c_i, c_x, c_cnt, c_env = C.slice("i"), C.slice("x"), C.slice("counts"), C.slice("env")
+    par[:] = P.pack(t0=0.0, h=period, n_act=0.0, cp=cp, u_ext=u_ext, p=p)
     out = comp.end.outputs  # the chain end's reported values (act): u_cmg, m, rate_limited, saturated
     n_act = out.size if comp.has_cluster else 0
+    IL = chunk_info(comp.n_cmd, n_act, s_law.size)
+    if IL.size != info.res[0].size:
+        raise AssertionError(f"fused info has {info.res[0].size} values, its layout {IL!r} {IL.size}")
+    r_cmd, r_act, r_q, r_s = IL.slice("cmd"), IL.slice("act"), IL.slice("q_ref"), IL.slice("s")
     i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if n_act else (0, 0, 0)
     x = np.concatenate([res.x, s_law])
     s_end = None
@@ -259,9 +267,7 @@ def run_fused(comp, res, K: int) -> None:
             info.args[1][:] = x
             info()
             r = info.res[0]
-            cmd = r[:ncmd]
-            act = r[ncmd : ncmd + n_act]
-            q_ref = r[r.size - s_law.size - 4 : r.size - s_law.size]
+            cmd, act, q_ref = r[r_cmd], r[r_act], r[r_q]
             lim = sat = 0
             u_cmg = None
             if n_act:
@@ -269,28 +275,28 @@ def run_fused(comp, res, K: int) -> None:
                 u_cmg = act[i_u]
             res.row(t, x[:nx0], lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=q_ref)  # streamed in batches
             if k == K:
-                s_end = r[r.size - s_law.size :].copy()  # the law's update at the last tick
+                s_end = r[r_s].copy()  # the law's update at the last tick
                 break
             # ticks k .. k + n_tick - 1 in one call per piece (tick k's actuation is recomputed inside: same)
             pieces = tick_pieces(k, n_tick, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
-                c0[0] = 0.0
-                c0[1 : 1 + nx] = x
-                c0[1 + nx : 3 + nx] = 0.0
-                c0[3 + nx :] = env_c
-                par[0] = a * period
-                par[1] = h
-                par[2] = b - a
+                c0[c_i] = 0.0
+                c0[c_x] = x
+                c0[c_cnt] = 0.0
+                c0[c_env] = env_c
+                par[i_t0] = a * period
+                par[i_h] = h
+                par[i_n] = b - a
                 par[i_ext] = held_torque_from(comp.scene, a * period, comp.bps, duration) if edges else u_ext
                 if nn:  # column-major (nn, n): tick by tick
                     noise[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 rc = chunk.res[0]
-                x = rc[1 : 1 + nx].copy()
-                counts += rc[1 + nx : 3 + nx]
-                env_c = rc[3 + nx :].copy()
-            par[1] = period
+                x = rc[c_x].copy()
+                counts += rc[c_cnt]
+                env_c = rc[c_env].copy()
+            par[i_h] = period
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
@@ -304,9 +310,11 @@ def _draw(comp, n: int, flags) -> np.ndarray:
     an array element by element from one stream, and ``normal(0, σ)`` is ``0 + σ z``: the same
     numbers from one ``standard_normal`` call, tests/test_fused_noise.py)."""
     s = comp.sensor
-    z = comp.rng.standard_normal((n, _noise_width(flags)))
-    sig = ([s.attitude_noise] * 3 if flags[0] else []) + ([s.rate_noise] * 3 if flags[1] else [])
-    return 0.0 + np.asarray(sig) * z
+    N = noise_fields(*flags)
+    z = comp.rng.standard_normal((n, N.size))
+    sigma = {"attitude": s.attitude_noise, "rate": s.rate_noise}
+    sig = N.pack({f: [sigma[f]] * 3 for f in N.names})
+    return 0.0 + sig * z
 
 
 def _symbolic_params(ctrl):

@@ -33,6 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..integrators import IntegrationError
+from .chunk_layout import chunk_carry, chunk_info, chunk_par, rows_carry, rows_out, rows_par, vertcat_by
 
 
 __all__ = ["ROW_CALLS", "rows_functions", "run_rows"]
@@ -64,24 +65,27 @@ def rows_functions(info: ca.Function, chunk: ca.Function, n: int, nx: int, ne: i
     is row r's state, its ``info`` and the chunk's counts of rate-limited and saturated ticks;
     of ``carries``, the carry after row r.
     """
-    c = ca.MX.sym("c", nx + ne)
+    RC, RP = rows_carry(nx, ne), rows_par(ncp, npar)  # by name (chunk_layout.py), as the chunk's
+    C, P = chunk_carry(nx, env=ne), chunk_par(ncp, npar)
+    c = ca.MX.sym("c", RC.size)
     a = ca.MX.sym("a")
-    par = ca.MX.sym("par", 1 + ncp + 3 + npar)
+    par = ca.MX.sym("par", RP.size)
     nz = [ca.MX.sym("nz", nn * n)] if nn else []
-    h = par[0]
-    rest = par[1:]
-    x = c[:nx]
+    h = RP.get(par, "h")
+    x = RC.get(c, "x")
     t = a * h  # as the executor: k * period, one IEEE product
-    cp, u_ext, p = rest[:ncp], rest[ncp : ncp + 3], rest[ncp + 3 :]
+    cp, u_ext, p = RP.get(par, "cp"), RP.get(par, "u_ext"), RP.get(par, "p")
     inf = info(t, x, cp, u_ext, p, *([nz[0][:nn]] if nn else []))
-    c0 = ca.vertcat(0.0, x, 0.0, 0.0, c[nx:])
+    c0 = vertcat_by(C, i=[0.0], x=[x], counts=[0.0, 0.0], env=[RC.get(c, "env")])
     noise = []
     if nn:  # the chunk's (nn, n_max) draws: this row's n ticks, the rest unused (masked ticks)
         cols = chunk.size_in(2)[1]
         noise = [ca.horzcat(ca.reshape(nz[0], nn, n), ca.MX.zeros(nn, cols - n))]
+    rest = par[RP.slice("cp").start :]  # cp, u_ext, p: the chunk's parameters after n_act, in its order
+    assert P.names[3:] == RP.names[1:] and P.names[:3] == ("t0", "h", "n_act")  # (one piece: the same C)
     res = chunk(c0, ca.vertcat(t, h, float(n), rest), *noise)
-    carry = ca.vertcat(res[1 : 1 + nx], res[3 + nx :])
-    out = ca.vertcat(x, inf, res[1 + nx : 3 + nx])
+    carry = RC.pack(x=C.get(res, "x"), env=C.get(res, "env"))
+    out = rows_out(nx, inf.numel()).pack(x=x, info=inf, counts=C.get(res, "counts"))
     row = ca.Function("fused_row", [c, a, par] + nz, [carry, out])
     fns = []
     for R in ROW_CALLS:
@@ -142,6 +146,8 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
     i_u, i_lim, i_sat = (out_l.slice("u_cmg"), out_l.slice("rate_limited").start,
                          out_l.slice("saturated").start) if has_cmg else (slice(0, 0), 0, 0)
     torque = comp.ctrl.command == "torque"
+    IL = chunk_info(ncmd, n_act, ns)  # the row's info, the call's carry and output (chunk_layout.py)
+    RC, RO = rows_carry(nx, len(env_c)), rows_out(nx, IL.size)
     # the generator's state before the first draw: a fallback to row by row draws the same again
     rng_state = comp.rng.bit_generator.state if draw is not None else None
     j = 0
@@ -149,20 +155,19 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
     ticks = 0
     for R in sorted(calls, reverse=True):
         fc = calls[R]
-        fc.args[2][:] = np.concatenate(([period], cp, u_ext, p))
+        fc.args[2][:] = rows_par(len(cp), len(p)).pack(h=period, cp=cp, u_ext=u_ext, p=p)
         while n_rows - j >= R:
             ks = np.asarray(row_ks[j : j + R], dtype=float)
-            fc.args[0][:] = np.concatenate((x, env_c))
+            fc.args[0][:] = RC.pack(x=x, env=env_c)
             fc.args[1][:] = ks
             if draw is not None:  # the R rows' ticks in order: column r = row r's ticks, tick by tick
                 fc.args[3][:] = draw(R * n).ravel()
             fc()
             carries = fc.res[0].reshape(R, -1)  # column-major (nx + ne, R): row r's carry is a row here
             out = fc.res[1].reshape(R, -1)
-            xs, info, counts = out[:, : nx - ns], out[:, nx:-2], out[:, -2:]  # (rows: the plant's state)
-            ni = info.shape[1] - ns  # info = (cmd, act, q_ref, the law's next state)
-            cmd, act, q_ref = info[:, :ncmd], info[:, ncmd : ncmd + n_act], info[:, ni - 4 : ni]
-            bad = ~np.all(np.isfinite(carries[:, :nx]), axis=1)
+            xs, info, counts = RO.get(out, "x")[:, : nx - ns], RO.get(out, "info"), RO.get(out, "counts")
+            cmd, act, q_ref = IL.get(info, "cmd"), IL.get(info, "act"), IL.get(info, "q_ref")  # (rows: the plant's state)
+            bad = ~np.all(np.isfinite(RC.get(carries, "x")), axis=1)
             m = int(np.argmax(bad)) + 1 if bad.any() else R  # rows whose stretch ran (the last may end in NaN)
             lim = sat = np.zeros(m)
             if has_cmg:
@@ -194,8 +199,8 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
             if ncmd == 3:
                 res.last_cmd = tuple(cmd[m - 1])
             comp.ctrl.q_ref_BN = tuple(q_ref[m - 1])
-            x = carries[m - 1, :nx].copy()
-            env_c = carries[m - 1, nx:].copy()
+            x = RC.get(carries[m - 1], "x").copy()
+            env_c = RC.get(carries[m - 1], "env").copy()
             j += m
             if m < R:
                 t_stop = min((row_ks[j - 1] + n) * period, duration)

@@ -33,6 +33,7 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
+from .measurement import noise_fields
 from .lockstep_flight import FlightBatch
 from .prepare import prepare
 from .rows import Rows
@@ -235,13 +236,14 @@ class _Lockstep:
         self.sig_r = np.array([x.rate_noise for x in sens])
         self.delay = np.array([s.loop.comp.delay for s in samples])
         self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
-        self.z = np.zeros((n, DRAW_BLOCK, 6))
-        self.layout = lp.layout
+        self.NZ = noise_fields(True, True)  # each sample's draws by name (those off stay 0)
+        self.z = np.zeros((n, DRAW_BLOCK, self.NZ.size))
+        self.layout = lp.meas_layout
         self.any_noisy = bool(self.noisy.any())
-        self.flight = FlightBatch(samples, lp.layout) if lp.flight is not None else None
+        self.flight = FlightBatch(samples, lp.meas_layout) if lp.flight is not None else None
         if not self.any_noisy and self.flight is None:
             self.seen = self.raw
-        self.M = BatchMeasurement(self.seen, lp.layout)
+        self.M = BatchMeasurement(self.seen, lp.meas_layout)
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
@@ -251,15 +253,12 @@ class _Lockstep:
         for i, s in enumerate(self.S):
             if not self.noisy[i]:
                 continue
-            a, r = self.sig_a[i] > 0, self.sig_r[i] > 0
-            w = 3 * int(a) + 3 * int(r)
-            if w == 0:
+            Ni = noise_fields(bool(self.sig_a[i] > 0), bool(self.sig_r[i] > 0))  # its run's draws, in order
+            if Ni.size == 0:
                 continue
-            zi = s.loop.comp.rng.standard_normal((DRAW_BLOCK, w))
-            if a:
-                self.z[i, :, 0:3] = zi[:, 0:3]
-            if r:
-                self.z[i, :, 3:6] = zi[:, w - 3 : w]
+            zi = s.loop.comp.rng.standard_normal((DRAW_BLOCK, Ni.size))
+            for f in Ni.names:
+                self.z[i, :, self.NZ.slice(f)] = zi[:, Ni.slice(f)]
 
     def _sense(self, k: int, t: float = 0.0) -> None:
         """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
@@ -287,9 +286,8 @@ class _Lockstep:
         z = self.z[:, kb]
         att = self.noisy & (self.sig_a > 0)
         if att.any():
-            o = self.layout["q_BN"][0]
-            q = seen[:, o : o + 4]
-            d = 0.5 * (0.0 + self.sig_a[:, None] * z[:, 0:3])
+            q = seen[:, self.layout.slice("q_BN")]
+            d = 0.5 * (0.0 + self.sig_a[:, None] * z[:, self.NZ.slice("attitude")])
             qn = np.stack([
                 q[:, 0] - q[:, 1] * d[:, 0] - q[:, 2] * d[:, 1] - q[:, 3] * d[:, 2],
                 q[:, 1] + q[:, 0] * d[:, 0] + q[:, 2] * d[:, 2] - q[:, 3] * d[:, 1],
@@ -301,9 +299,8 @@ class _Lockstep:
             q[att] = (qn / norm[:, None])[att]
         rate = self.noisy & (self.sig_r > 0)
         if rate.any():
-            o = self.layout["omega_BN_B"][0]
-            w = seen[:, o : o + 3]
-            w[rate] = (w + (0.0 + self.sig_r[:, None] * z[:, 3:6]))[rate]
+            w = seen[:, self.layout.slice("omega_BN_B")]
+            w[rate] = (w + (0.0 + self.sig_r[:, None] * z[:, self.NZ.slice("rate")]))[rate]
 
     def _measure(self, i: int, t: float, x) -> None:
         self.raw[i] = self.S[i].loop.measure(t, x)

@@ -22,7 +22,7 @@ __all__ = ["FlightBatch"]
 class FlightBatch:
     """The flight ticks of ``samples`` (their loops fly the same suite structure, ``Flight.key``)."""
 
-    def __init__(self, samples, layout: dict):
+    def __init__(self, samples, layout):
         self.loops = [s.loop for s in samples]
         n = self.n = len(self.loops)
         fc = self.fc = mapped(self.loops[0].comp.flight.compiled().f, n, 1)
@@ -37,7 +37,7 @@ class FlightBatch:
             self.th[i], self.om[i], self.xs[i], self.t_prev[i] = fm.theta_B, fm.omega_prev, fm.xs, fm.t_prev
         self.th1, self.xs1 = r[0].reshape(n, 3), r[1].reshape(n, -1)
         self.seen, self.ys = r[2].reshape(n, -1), r[3].reshape(n, -1)
-        self.o_om = layout["omega_BN_B"][0]
+        self.i_om = layout.slice("omega_BN_B")  # the measurement's (measurement.measurement_fields)
 
     def fly(self, k: int, t: float, raw: np.ndarray, seen: np.ndarray) -> None:
         """Tick k at time t [s] of every sample from its true measurement ``raw`` (n, n_y):
@@ -50,7 +50,7 @@ class FlightBatch:
         self.fc()
         self.th[:] = self.th1
         self.xs[:] = self.xs1
-        self.om[:] = raw[:, self.o_om : self.o_om + 3]
+        self.om[:] = raw[:, self.i_om]
         self.t_prev[:] = t
         seen[:, : self.seen.shape[1]] = self.seen
 

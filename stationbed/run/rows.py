@@ -170,6 +170,8 @@ class Rows:
         ]
         self.q_cols = np.array([col[c] for c in ("qw", "qx", "qy", "qz")])
         self.gimbal_cols = np.array([col[g] for g in gimbals], dtype=int)
+        g0 = self.form.state_layout.slice("x_cmg").start if "x_cmg" in self.form.state_layout else 0
+        self._gimbals = slice(g0, g0 + len(self.gimbal_cols))  # the gimbal angles: x_cmg's first
         #: the loop's held values per row, in the order the closed loop hands them over
         self.held_columns = []
         if cmg is not None:
@@ -212,7 +214,7 @@ class Rows:
         rows[:, self.q_cols] = q / np.linalg.norm(q, axis=1, keepdims=True)
         for cols, sl, degrees in self.plan:
             rows[:, cols] = np.rad2deg(comp[:, sl]) if degrees else comp[:, sl]
-        rows[:, self.gimbal_cols] = xs[:, 7 : 7 + len(self.gimbal_cols)]
+        rows[:, self.gimbal_cols] = xs[:, self._gimbals]
         if held is not None and len(self.held_cols):
             rows[:, self.held_cols] = np.asarray(held, dtype=float).reshape(len(ts), -1)
         return rows
@@ -259,7 +261,7 @@ class Rows:
             sl = slice(a, a + ROW_BATCH)
             rows = self.make(ts[sl], xs[sl], held[sl])
             if self._err_col is not None:
-                q_ref, q = q_refs[sl], xs[sl, :4]
+                q_ref, q = q_refs[sl], xs[sl, self._q]
                 rows[:, self._err_col] = np.degrees(rotation_angle(q_ref, q))
                 rows[:, self._axes_cols] = np.degrees(rotation_vector(q_ref, q))
             check_rows(rows[:, :12], lambda ok: self.emit(rows[: len(ok)]))

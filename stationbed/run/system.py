@@ -15,7 +15,7 @@ from ..integrators import Integrator, get_integrator
 from ..loop.cmg_cluster import chain_end
 from ..model import StationModel, Structure
 from ..model.environment import orbit_position_N, q_ON
-from .controller import measurement_layout
+from .measurement import measurement_fields
 
 __all__ = ["System", "build_system", "environment_split", "OUT_CHUNK", "chain_end_inputs"]
 
@@ -158,7 +158,7 @@ def build_system(structure: Structure, formulation, integrator) -> System:
         outs.append(("h_B", model.h(x_extra, p)))
         if cmg.gimballed:
             pc = p[model.layout["cmg"]]
-            outs.append(("cmg_singularity", cmg.singularity(x[7 : 7 + cmg.nx], pc)))
+            outs.append(("cmg_singularity", cmg.singularity(form.state_layout.get(x, "x_cmg"), pc)))
     if structure.sun:
         outs += [(f"track_err{k}", e) for k, e in enumerate(_track_errors(form, t, x, p))]
     outs += model.environment_outputs(t, q_BN, x_extra, p)  # aero/SRP torques, shadow fraction
@@ -175,23 +175,23 @@ def build_system(structure: Structure, formulation, integrator) -> System:
         fs.append(sx_function("jump", [t, t2, x, p], [form.jump(t, t2, x, p)]))
     # controller side: the measurement vector, and the actuation (steering law + limits)
     ng = 0 if cmg is None else cmg.n_gimbals
-    lay = measurement_layout(ng, structure.n_app)
+    lay = measurement_fields(ng, structure.n_app)
     wv = form.omega(t, x, p)
     gimbals = form.state_layout.get(x, "x_cmg")[0:ng] if ng else ca.SX(0, 1)  # the gimbal angles, by name
-    meas = [q_BN, wv, model.h(x_extra, p), gimbals]
-    meas += [a.angles[0] for a in arrays] + [a.angles[1] for a in arrays]
+    meas = dict(q_BN=q_BN, omega_BN_B=wv, h_B=model.h(x_extra, p), gimbal=gimbals,
+                alpha=ca.vertcat(*(a.angles[0] for a in arrays)), beta=ca.vertcat(*(a.angles[1] for a in arrays)))
     if structure.orbit and not structure.orbit_kind:  # circular: the expressions it has always had
         radius, incl, u0, n = (p[model.layout["orbit"]][i] for i in range(4))
-        meas += [orbit_position_N(u0 + n * t, radius, incl), ca.reshape(model.C_ON(t, p).T, 9, 1)]
-        meas += [q_ON(u0 + n * t, incl), model.orbit_at(t, p).omega_ON_O]
+        meas.update(r_N=orbit_position_N(u0 + n * t, radius, incl), C_ON=ca.reshape(model.C_ON(t, p).T, 9, 1),
+                    q_ON=q_ON(u0 + n * t, incl), omega_ON_O=model.orbit_at(t, p).omega_ON_O)
     elif structure.orbit:
         o = model.orbit_at(t, p)
-        meas += [o.r_N, ca.reshape(o.C_ON.T, 9, 1), o.q_ON, o.omega_ON_O]
+        meas.update(r_N=o.r_N, C_ON=ca.reshape(o.C_ON.T, 9, 1), q_ON=o.q_ON, omega_ON_O=o.omega_ON_O)
     else:
-        meas += [ca.DM.zeros(3), ca.reshape(ca.DM.eye(3), 9, 1), ca.DM([1.0, 0.0, 0.0, 0.0]), ca.DM.zeros(3)]
-    meas.append(p[model.layout["sun"]] if structure.sun else ca.DM.zeros(3))
-    y = ca.vertcat(*meas)
-    assert y.numel() == sum(k for _, k in lay.values())
+        meas.update(r_N=ca.DM.zeros(3), C_ON=ca.reshape(ca.DM.eye(3), 9, 1), q_ON=ca.DM([1.0, 0.0, 0.0, 0.0]),
+                    omega_ON_O=ca.DM.zeros(3))
+    meas["sun_N"] = p[model.layout["sun"]] if structure.sun else ca.DM.zeros(3)
+    y = lay.pack(meas, symbolic=True)  # by name, in the layout's order (C_ON row by row)
     fs.append(sx_function("meas", [t, x, p], [y]))
     end = chain_end(model)  # the actuator chain's end: the CMG cluster or the ideal torquer
     if cmg is not None:  # the cluster's plug-in at the plant's state: its per-tick compiled form

@@ -44,9 +44,9 @@ def thruster_parts(s: dict) -> list[str]:
     return out
 
 
-def thrust_for(scene, ctrl, layout: dict, plant) -> "ThrustLoop | None":
+def thrust_for(scene, ctrl, layout, plant) -> "ThrustLoop | None":
     """The run's thrusters (None without ``[[thruster]]``); ``plant`` is the law's knowledge,
-    ``layout`` the measurement's."""
+    ``layout`` the measurement's (a Layout: ``measurement.measurement_fields``)."""
     if not scene.thruster:
         return None
     if ctrl.command != "torque":
@@ -60,7 +60,7 @@ class ThrustLoop:
     composition) and its memory (``x`` after the last tick, ``x_row`` before the current one:
     what a row reports), which every executor reads and hands back here."""
 
-    def __init__(self, scene, layout: dict, plant):
+    def __init__(self, scene, layout, plant):
         cap = plant.h_capacity if plant.h_capacity is not None else math.inf
         known = knowledge_scene(scene)
         held = held_momentum_B(known.cmg)  # the failed units flight software knows of
@@ -70,15 +70,14 @@ class ThrustLoop:
         self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
         self.on_s = np.zeros(self.cluster.n)
         self.torque_B = np.zeros((3, self.cluster.n))
-        o, _ = layout["h_B"]
-        self.h_slice = slice(o, o + 3)
+        self.reads_at = self.cluster.reads_in(layout)  # its READS (h_B) in the measurement, by name
         self.fused_reason = None  # why the fused loop did not take it (summary)
 
     def command(self, comp, t: float, y, cmd) -> np.ndarray:
         """Tick at ``t`` on what the law sees ``y``: the thrusters' on-times over ``[t, t + h]``
         and the torque left to the CMGs (returned, B [N m])."""
         h = self.tick_length(comp, t)
-        r = y[self.h_slice]
+        r = y[self.reads_at]
         self.x_row = self.x
         c = self.cluster
         f = c.command_lp if self.lp else c.command

@@ -33,6 +33,7 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..loop.actuator import split_step
 from .controller import ControllerError, one_line
 from . import law_state
+from .chunk_layout import chunk_carry, chunk_info, chunk_par
 from .rates import environment_rate
 from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
 from .system import chain_end_inputs
@@ -78,7 +79,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     nz = ca.SX.sym("nz", nn)
     y = sx["meas"](t, x, p)
     if nn:  # the law sees the noisy measurement, as fused.py's tick (h_B is not corrupted)
-        y = noise["corrupt"](y, nz, flags, comp.layout)
+        y = noise["corrupt"](y, nz, flags, comp.meas_layout)
     try:
         cmd, q_ref = ctrl.symbolic(t, y, cp)
         cmd = ca.vertcat(cmd)
@@ -86,7 +87,7 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() raised {type(e).__name__}: {one_line(e)}") from e
     if cmd.numel() != 3:
         raise ControllerError(f"controller '{ctrl.name}': symbolic() returned {cmd.numel()} command values, expected 3")
-    xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.h_slice], cmd, pa)
+    xa1, rest, on_s, tq, _ = cl.function()(t, h, xa, y[th.reads_at], cmd, pa)
 
     def act_u(tau):  # the chain's end (the CMG cluster) on what the thrusters leave it
         return chain_end_inputs(sx, model, comp.end, "torque", t, h, x, tau, u_ext, p)
@@ -94,25 +95,24 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     act, u, _ = act_u(rest)
     step, rhs = system.integrator_cls.explicit_step, sx["rhs"]
     idle_f = cl.idle_function()
-    idle = idle_f(t, xa, y[th.h_slice], cmd, pa) if idle_f is not None else ca.SX(0)
+    idle = idle_f(t, xa, y[th.reads_at], cmd, pa) if idle_f is not None else ca.SX(0)
     _, u_q, sat_q = act_u(cmd)
-    nc = 1 + nx + 2 + na
-    npar_all = 3 + ncp + 3 + npar + npa
+    C, P = chunk_carry(nx, xa=na), chunk_par(ncp, npar, pa=npa)  # by name (chunk_layout.py), as the executor
+    nc, npar_all = C.size, P.size
     # every tick, one SX function as fused.py's whole tick (its common subexpressions shared): the
     # law, the idle test, the measured h, the quiet tick (the law's request to the CMGs, one step)
     # packed as the next carry, the chunk's unused tail (i >= n_act) held by an SX blend (cheap in
     # SX), and whether this tick is busy (active and not idle)
     cs, ps_ = ca.SX.sym("c", nc), ca.SX.sym("par", npar_all)
-    i_s, x_s, cnt_s, xa_c = cs[0], cs[1 : 1 + nx], cs[1 + nx : 3 + nx], cs[3 + nx :]
-    t0_s, hh_s, nact_s = ps_[0], ps_[1], ps_[2]
+    i_s, x_s, cnt_s, xa_c = (C.get(cs, f) for f in ("i", "x", "counts", "xa"))
+    t0_s, hh_s, nact_s = (P.get(ps_, f) for f in ("t0", "h", "n_act"))
     sub_from = [t, x, cp, u_ext, p, h, xa, pa]
-    sub_to = [t0_s + i_s * hh_s, x_s, ps_[3 : 3 + ncp], ps_[3 + ncp : 6 + ncp], ps_[6 + ncp : 6 + ncp + npar], hh_s,
-              xa_c, ps_[6 + ncp + npar :]]
-    x_q, cmd_q, idle_q, sat_qq, hB_q = ca.substitute([step(rhs, t, x, h, u_q, p), cmd, idle, sat_q, y[th.h_slice]],
+    sub_to = [t0_s + i_s * hh_s, x_s, P.get(ps_, "cp"), P.get(ps_, "u_ext"), P.get(ps_, "p"), hh_s, xa_c, P.get(ps_, "pa")]
+    x_q, cmd_q, idle_q, sat_qq, hB_q = ca.substitute([step(rhs, t, x, h, u_q, p), cmd, idle, sat_q, y[th.reads_at]],
                                                      sub_from, sub_to)
     act_s = i_s < nact_s
-    c_quiet = ca.vertcat(i_s + 1, ca.if_else(act_s, x_q, x_s),
-                         cnt_s + ca.if_else(act_s, ca.vertcat(sat_qq[0] > 0.5, sat_qq[1] > 0.5), ca.SX.zeros(2)), xa_c)
+    c_quiet = C.pack(i=i_s + 1, x=ca.if_else(act_s, x_q, x_s),
+                     counts=cnt_s + ca.if_else(act_s, ca.vertcat(sat_qq[0] > 0.5, sat_qq[1] > 0.5), ca.SX.zeros(2)), xa=xa_c)
     quiet = sx_function("thr_quiet", [cs, ps_, nz], [c_quiet, ca.logic_and(act_s, idle_q < 0.5), cmd_q, hB_q])
     cmd_s = ca.SX.sym("cmd", 3)
     h_s = ca.SX.sym("h_B", 3)  # the measured h, from thr_quiet (not measured again)
@@ -124,13 +124,14 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     r_s = ca.SX.sym("rest", 3)
     _, u_b, sat_b = act_u(r_s)
     thr_act = sx_function("thr_act", [t, x, r_s, u_ext, p, h], [u_b, sat_b])
-    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz], [ca.vertcat(cmd, act, q_ref)])
+    core = sx_function("thr_core", [t, x, cp, u_ext, p, h, xa, pa, nz],
+                       [chunk_info(3, act.numel()).pack(cmd=cmd, act=act, q_ref=q_ref, s=ca.SX(0, 1))])
     us, ons, tqs = ca.SX.sym("u", u.numel()), ca.SX.sym("on", nch), ca.SX.sym("tq", 3 * nch)
     # explicit branch functions (casadi's Function.if_else): the branch is evaluated from the
     # inputs as given, nothing before the choice is computed again inside it
     plain = sx_function("thr_plain", [t, x, h, us, p, ons, tqs], [step(rhs, t, x, h, us, p)])
     split = sx_function("thr_split", [t, x, h, us, p, ons, tqs],
-                        [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch))])
+                        [split_step(step, rhs, t, x, h, us, p, ons, ca.reshape(tqs, 3, nch), model.input_layout)])
     pulse = ca.Function.if_else("thr_pulse", split, plain)
     MX = ca.MX
     ti, xi, cpi, ui, pi_, hi, xai, pai = (MX.sym("t"), MX.sym("x", nx), MX.sym("cp", ncp), MX.sym("u_ext", 3),
@@ -146,17 +147,18 @@ def _build(comp, n: int, symbolic_params, noise) -> dict:
     # thrusters' new memory; otherwise the CMGs' actuation of the rest and a plain step or the
     # split one (only if one fires). A quiet tick (or the unused tail) passes thr_quiet's carry on.
     bc, bpar, bq, bcmd, bhB = MX.sym("c", nc), MX.sym("par", npar_all), MX.sym("q", nc), MX.sym("cmd", 3), MX.sym("h_B", 3)
-    bi, bx, bcnt, bxa = bc[0], bc[1 : 1 + nx], bc[1 + nx : 3 + nx], bc[3 + nx :]
-    bh, bu = bpar[1], bpar[3 + ncp : 6 + ncp]
-    bt = bpar[0] + bi * bh
-    bp, bpa = bpar[6 + ncp : 6 + ncp + npar], bpar[6 + ncp + npar :]
+    # (MX: a scalar field by its index, as a plain bc[0] makes the same graph)
+    bi, bx, bcnt, bxa = bc[C.slice("i").start], bc[C.slice("x")], bc[C.slice("counts")], bc[C.slice("xa")]
+    bh, bu = bpar[P.slice("h").start], bpar[P.slice("u_ext")]
+    bt = bpar[P.slice("t0").start] + bi * bh
+    bp, bpa = bpar[P.slice("p")], bpar[P.slice("pa")]
     xa_new, rest, on, tqq, same_c = thr_cmd(bt, bh, bxa, bhB, bcmd, bpa)
     ar, aon, atq = MX.sym("rest", 3), MX.sym("on", nch), MX.sym("tq", 3 * nch)
     a_in = [bc, bpar, bq, ar, aon, atq]
     uu, fl = thr_act(bt, bx, ar, bu, bp, bh)
     x_b = pulse(ca.sum1(aon) > 0, bt, bx, bh, uu, bp, aon, atq)
-    acted = ca.Function("thr_acted", a_in, [ca.vertcat(bi + 1, x_b, bcnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
-    kept = ca.Function("thr_kept", a_in, [bq[: 3 + nx]])
+    acted = ca.Function("thr_acted", a_in, [ca.vertcat(bi + 1, x_b, bcnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])  # i, x, counts
+    kept = ca.Function("thr_kept", a_in, [bq[: C.slice("counts").stop]])  # i, x, counts of thr_quiet
     head = ca.Function.if_else("thr_same", kept, acted)(same_c, bc, bpar, bq, rest, on, tqq)
     b_in = [bc, bpar, bq, bcmd, bhB]
     busy = ca.Function("thr_busy_tick", b_in, [ca.vertcat(head, xa_new)])
@@ -199,12 +201,14 @@ def run_fused_thrust(comp, res, K: int, symbolic_params, edges, noise) -> None:
     info.args[7][:] = cl.params
     c0, par, noise_in = chunk.args
     noise_in[:] = 0.0
-    ncp = len(cp)
-    par[3 : 3 + ncp] = cp
-    i_ext = slice(3 + ncp, 6 + ncp)
-    par[6 + ncp : 6 + ncp + len(p)] = p
-    par[6 + ncp + len(p) :] = cl.params
+    # the chunk's carry and parameters and the row's info, by name (chunk_layout.py: the builder's)
+    C, P = chunk_carry(nx, xa=na), chunk_par(len(cp), len(p), pa=cl.params.size)
+    i_t0, i_h, i_n, i_ext = P.slice("t0"), P.slice("h"), P.slice("n_act"), P.slice("u_ext")
+    c_i, c_x, c_cnt, c_xa = C.slice("i"), C.slice("x"), C.slice("counts"), C.slice("xa")
+    par[:] = P.pack(t0=0.0, h=period, n_act=0.0, cp=cp, u_ext=np.zeros(3), p=p, pa=cl.params)
     out = comp.end.outputs  # the CMG cluster's reported values (act): u_cmg, m, rate_limited, saturated
+    IL = chunk_info(3, out.size)
+    r_cmd, r_act, r_q = IL.slice("cmd"), IL.slice("act"), IL.slice("q_ref")
     i_u, i_lim, i_sat = out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start
     x = np.array(res.x, dtype=float)
     xa = th.x.copy()
@@ -227,7 +231,7 @@ def run_fused_thrust(comp, res, K: int, symbolic_params, edges, noise) -> None:
             info.args[6][:] = xa
             info()
             r = info.res[0]
-            cmd, act, q_ref = r[:3], r[3 : 3 + out.size], r[-4:]
+            cmd, act, q_ref = r[r_cmd], r[r_act], r[r_q]
             lim, sat = int(act[i_lim] > 0.5), int(act[i_sat] > 0.5)
             th.x_row = xa
             res.row(t, x, lim | sat | tail_flag, u_cmg=act[i_u], cmd=cmd, q_ref=q_ref)
@@ -235,22 +239,22 @@ def run_fused_thrust(comp, res, K: int, symbolic_params, edges, noise) -> None:
                 break
             counts = np.zeros(2)
             for a, b, hp in tick_pieces(k, n_tick, edges, duration, period):
-                c0[0] = 0.0
-                c0[1 : 1 + nx] = x
-                c0[1 + nx : 3 + nx] = 0.0
-                c0[3 + nx :] = xa
-                par[0] = a * period
-                par[1] = hp
-                par[2] = b - a
+                c0[c_i] = 0.0
+                c0[c_x] = x
+                c0[c_cnt] = 0.0
+                c0[c_xa] = xa
+                par[i_t0] = a * period
+                par[i_h] = hp
+                par[i_n] = b - a
                 ta = a * period  # the row's torque when the piece starts at the row (not looked up twice)
                 par[i_ext] = u_row if ta == t else held_torque_from(comp.scene, ta, comp.bps, duration)
                 if nn:  # column-major (nn, n): tick by tick
                     noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
                 rc = chunk.res[0]
-                x = rc[1 : 1 + nx].copy()
-                counts += rc[1 + nx : 3 + nx]
-                xa = rc[3 + nx : 3 + nx + na].copy()
+                x = rc[c_x].copy()
+                counts += rc[c_cnt]
+                xa = rc[c_xa].copy()
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
