@@ -176,8 +176,7 @@ def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
         x1h = system.integrator_cls.explicit_step(rates_split(system)["rhs_fast"], t, x, h, u_held, p)
         x1h = ca.vertcat(x1h, s1)
         one_h = sx_function("one", [t, xa, cp, u_ext, p, h, L_env] + ([nz] if nn else []), [x1h, sat])
-        ranges = (slice(3, 3 + ncp), slice(3 + ncp, 6 + ncp), slice(6 + ncp, 6 + ncp + npar))
-        chunk = held_chunk(system, one_h, rate, n, nx, 6 + ncp + npar, nn, ranges)
+        chunk = held_chunk(system, one_h, rate, n, chunk_carry(nx, env=carry_width(rate)), P, nn)  # (chunk_layout.py)
     tag = f"fused_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}"
     if rate:
         tag += f"_env{rate}"

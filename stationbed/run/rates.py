@@ -30,13 +30,15 @@ import math
 import casadi as ca
 import numpy as np
 
+from ..core.layout import Layout
+from .chunk_layout import ENV, chunk_carry, vertcat_by
 from .rate_auto import AUTO, auto_choice, g_norms, hold_bound_rad, torque_rates  # noqa: F401 (the bound: re-exported)
 from .system import environment_split
 
 __all__ = ["environment_rate", "carry_width", "held_chunk", "rate_summary", "g_norms", "hold_bound_rad", "torque_rates"]
 
-#: the extra carry of a held-environment chunk: L_prev (3, B components [N m]), t_prev [s], have_prev
-ENV_CARRY = 5
+#: the extra carry of a held-environment chunk (chunk_layout.ENV: L_prev, t_prev, have_prev)
+ENV_CARRY = ENV.size
 
 
 def environment_rate(loop) -> int:
@@ -61,7 +63,7 @@ def carry_width(rate: int) -> int:
     return ENV_CARRY if rate else 0
 
 
-def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int, ranges: tuple) -> ca.Function:
+def held_chunk(system, one, rate: int, n: int, C: Layout, P: Layout, nn: int) -> ca.Function:
     """``fused_chunk(c0, par[, noise]) -> carry`` of ``n`` ticks with the environment held over
     blocks of ``rate`` ticks.
 
@@ -71,52 +73,58 @@ def held_chunk(system, one, rate: int, n: int, nx: int, npar_tick: int, nn: int,
     one : casadi Function  ``one(t, x, cp, u_ext, p, h, L_env[, nz]) -> (x1, flags)``: one tick
         with ``u_ext + L_env`` as the held external torque.
     rate, n : int  Ticks per block, ticks per chunk.
-    nx, npar_tick : int  State size; size of the chunk's ``par`` = ``(t0, h, n_act, cp, u_ext, p)``.
+    C : Layout  The chunk's carry (:func:`~.chunk_layout.chunk_carry` with ``env``: :data:`~.chunk_layout.ENV`).
+    P : Layout  The chunk's parameters (:func:`~.chunk_layout.chunk_par`: ``t0, h, n_act, cp, u_ext, p``).
     nn : int  Sensor draws per tick (0: none).
-    ranges : tuple  Slices of ``par``: ``(cp, u_ext, p)``.
     """
     env_B = environment_split(system)["env_B"]
-    s_cp, s_ext, s_p = ranges
     nb = math.ceil(n / rate)
-    # one tick in the chunk's carry: (i, x, counts); par = (t0, h, n_act, cp, u_ext, p, L_hold)
+    nx = C.shape("x")[0]
+    T = chunk_carry(nx)  # one tick's carry: (i, x, counts), the block's env apart
+    PH = Layout(**{f: P.shape(f)[0] for f in P.names}, L_hold=3)  # a tick's par: P's, then L_hold
+    # one tick in the chunk's carry
     i, x_i, cnt = ca.SX.sym("i"), ca.SX.sym("x_i", nx), ca.SX.sym("cnt", 2)
-    par = ca.SX.sym("par", npar_tick + 3)
-    t0, h, n_act = par[0], par[1], par[2]
+    par = ca.SX.sym("par", PH.size)
+    t0, h, n_act = (par[PH.slice(f).start] for f in ("t0", "h", "n_act"))
     nz_i = ca.SX.sym("nz_i", nn)
-    x_new, fl = one(t0 + i * h, x_i, par[s_cp], par[s_ext], par[s_p], h, par[npar_tick:], *([nz_i] if nn else []))
+    x_new, fl = one(t0 + i * h, x_i, PH.get(par, "cp"), PH.get(par, "u_ext"), PH.get(par, "p"), h, PH.get(par, "L_hold"),
+                    *([nz_i] if nn else []))
     active = i < n_act
     tick = ca.Function(
-        "held_tick", [ca.vertcat(i, x_i, cnt), par] + ([nz_i] if nn else []),
-        [ca.vertcat(i + 1, ca.if_else(active, x_new, x_i),
-                    cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2)))],
+        "held_tick", [vertcat_by(T, i=[i], x=[x_i], counts=[cnt]), par] + ([nz_i] if nn else []),
+        [vertcat_by(T, i=[i + 1], x=[ca.if_else(active, x_new, x_i)],
+                    counts=[cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2))])],
         {"cse": True},
     )
     acc = tick.mapaccum("held_block_acc", rate)
-    cb, pb = ca.MX.sym("cb", 1 + nx + 2), ca.MX.sym("pb", npar_tick + 3)
+    cb, pb = ca.MX.sym("cb", T.size), ca.MX.sym("pb", PH.size)
     nzb = [ca.MX.sym("nzb", nn * rate)] if nn else []
     tb = acc(cb, ca.repmat(pb, 1, rate), *([ca.reshape(nzb[0], nn, rate)] if nn else []))
     block = ca.Function("held_block", [cb, pb] + nzb, [tb[:, -1]])
     # one block: evaluate the environment at its first tick, hold the extrapolated mid value
-    co = ca.MX.sym("co", 1 + nx + 2 + ENV_CARRY)
-    po = ca.MX.sym("po", npar_tick)
+    co = ca.MX.sym("co", C.size)
+    po = ca.MX.sym("po", P.size)
     nzo = [ca.MX.sym("nzo", nn * rate)] if nn else []
-    i, x = co[0], co[1 : 1 + env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
-    L_prev, t_prev, have = co[3 + nx : 6 + nx], co[6 + nx], co[7 + nx]
-    t0, h, n_act = po[0], po[1], po[2]
+    i, x = co[C.slice("i").start], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
+    e = C.slice("env").start  # the held environment's fields, by ENV's offsets in C
+    L_prev = co[e + ENV.slice("L_prev").start : e + ENV.slice("L_prev").stop]
+    t_prev, have = co[e + ENV.slice("t_prev").start], co[e + ENV.slice("have").start]
+    t0, h, n_act = (po[P.slice(f).start] for f in ("t0", "h", "n_act"))
     t_now = t0 + i * h
-    L_now = env_B(t_now, x, po[s_p])
+    L_now = env_B(t_now, x, P.get(po, "p"))
     n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
     dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
     L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
-    c_new = block(co[0 : 3 + nx], ca.vertcat(po, L_hold), *nzo)
+    c_new = block(co[: T.size], ca.vertcat(po, L_hold), *nzo)
     live = n_b > 0
     outer = ca.Function(
         "held_outer", [co, po] + nzo,
-        [ca.vertcat(c_new, ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have))],
+        [vertcat_by(Layout(tick=T.size, env=ENV.size), tick=[c_new],  # (C's order: the tick's fields, then env)
+                    env=[ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have)])],
     )
     acc_o = outer.mapaccum("held_acc", nb)
-    c0 = ca.MX.sym("c0", 1 + nx + 2 + ENV_CARRY)
-    par0 = ca.MX.sym("par", npar_tick)
+    c0 = ca.MX.sym("c0", C.size)
+    par0 = ca.MX.sym("par", P.size)
     noise = [ca.MX.sym("noise", nn, nb * rate)] if nn else []  # column i: tick i's draws
     traj = acc_o(c0, ca.repmat(par0, 1, nb), *([ca.reshape(noise[0], nn * rate, nb)] if nn else []))
     return ca.Function("fused_chunk", [c0, par0] + noise, [traj[:, -1]])
