@@ -37,6 +37,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
+from ..core.layout import Layout
 from .mekf import Mekf
 from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
@@ -53,6 +54,19 @@ SEEN = {"q_BN": "q_BN_hat", "omega_BN_B": "omega_hat_B"}
 INIT_STREAM = 2
 
 
+def _from_offsets(offsets: dict) -> Layout:
+    """The :class:`Layout` of an offset dict name -> (offset, size): its fields in offset order,
+    a gap (numbers no field names) as a field ``_gap<offset>``."""
+    fields, at = {}, 0
+    for name, (o, n) in sorted(offsets.items(), key=lambda kv: kv[1][0]):
+        if o < at:
+            raise ValueError(f"measurement layout: field {name!r} at {o} overlaps the one before (ends at {at})")
+        if o > at:
+            fields[f"_gap{at}"] = o - at
+        fields[name], at = n, o + n
+    return Layout(**fields)
+
+
 class Flight:
     """The sensing of a scene flown on the executor's tick.
 
@@ -60,11 +74,12 @@ class Flight:
     ----------
     sensing : object with ``sensor`` and ``estimator``  The scene (or a :class:`~stationbed.scene.Sensing`).
     tick : float  The controller period [s].
-    layout : dict name -> (offset, size)  The executor's measurement vector.
+    layout : Layout  The executor's measurement vector (``measurement_fields``, run/measurement.py);
+        an offset dict name -> (offset, size) (``Layout.offsets()``, what older code passes) is read as the same.
     seed : int  The run's seed (sensor i draws from ``noise_rng(seed, i)``).
     """
 
-    def __init__(self, sensing, tick: float, layout: dict, seed: int, moon_R_N=None):
+    def __init__(self, sensing, tick: float, layout: Layout | dict, seed: int, moon_R_N=None):
         self.suite = Suite(sensing, tick)
         tuned = _filter_params(sensing, tick, self.suite) if self.suite.mekf is not None else None
         #: the Moon's geocentric position [m] (N), held over the run as the Sun is (or None: no
@@ -74,7 +89,9 @@ class Flight:
         if tuned is not None:  # the filter is flight software: tuned from what it believes
             self.params[self.suite.PARAMS.slice("mekf")] = tuned
         self.mekf = self.suite.mekf
-        self.layout = dict(layout)
+        #: the measurement's layout (``meas``) and its offset dict (``layout``: the tick's key reads it)
+        self.meas = layout if isinstance(layout, Layout) else _from_offsets(layout)
+        self.layout = self.meas.offsets() if isinstance(layout, Layout) else dict(layout)
         self.ny = max(o + k for o, k in self.layout.values())
         self.seed = int(seed)
         self.heads = [s for s in self.suite.sensors if s.kind == "star_tracker"]

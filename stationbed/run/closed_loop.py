@@ -123,7 +123,7 @@ class ControlLoop:
         layout = measurement_fields(ng, len(scene.appendage))
         sensor = spec.sensor
         noisy = sensor.attitude_noise > 0 or sensor.rate_noise > 0 or sensor.delay > 0
-        flight = _flight(scene, period, layout.offsets(), sensor.seed) if scene.sensor else None  # issue 20
+        flight = _flight(scene, period, layout, sensor.seed) if scene.sensor else None  # issue 20
         comp = self.comp = Composition(
             scene=scene, system=system, integ=integ, p=p, bps=bps, apply_jump=apply_jump,
             period=period, duration=duration, n_per_out=int(round(output_dt / period)),
@@ -517,10 +517,9 @@ class ControlLoop:
         return out
 
 
-def _flight(scene, period: float, layout: dict, seed):
+def _flight(scene, period: float, layout, seed):
     """The scene's sensors and estimator (:class:`~stationbed.loop.Flight`), the Moon held at the
-    epoch as the Sun; ``layout`` the measurement's offsets (``Layout.offsets``: the form
-    ``Flight`` reads)."""
+    epoch as the Sun; ``layout`` the measurement's :class:`~stationbed.core.layout.Layout`."""
     moon = None
     if scene.sun is not None and scene.sun.epoch is not None:
         u, dist, _, _ = moon_position(julian_date(scene.sun.epoch))

@@ -11,8 +11,9 @@ the estimated loop's cost is compared with the truth-fed loop's like for like. T
 ``"auto"`` is the bound's choice here too (run/rate_auto.py: the MEKF is kinematic, so the
 hold's bound holds on the estimate's loop); ``environment_rate = 0`` is the every-stage loop.
 
-The chunk's carry is the flight loop's (:func:`.fused_flight.carry_layout`) with the held
-environment's ``(L_prev, t_prev, have_prev)`` after it (``env``), passed from chunk to chunk.
+The chunk's carry is the flight loop's (:func:`.chunk_layout.flight_carry`) with the held
+environment's ``(L_prev, t_prev, have)`` after it (``env``: :data:`.chunk_layout.ENV`), passed
+from chunk to chunk.
 """
 
 from __future__ import annotations
@@ -22,13 +23,13 @@ import math
 import casadi as ca
 
 from ..loop import Layout
-from .rates import ENV_CARRY
+from .chunk_layout import ENV
 from .system import environment_split
 
 __all__ = ["held_flight_chunk"]
 
 
-def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, npar: int, nw: int, s_p: slice) -> ca.Function:
+def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, P: Layout, nw: int) -> ca.Function:
     """``ffl_chunk(c0, par, w) -> carry`` of ``n`` ticks, the environment held over blocks of
     ``rate`` ticks.
 
@@ -38,25 +39,24 @@ def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, npar: int, n
     tick_h : Function  ``(c, par_h, w) -> c_next``: one tick of the flight loop's carry (first
         the tick index i, then ``C``'s fields; without ``env``), ``par_h = (par, L_hold)``, the
         tail past ``n_act = par[2]`` held.
-    C : Layout  The carry with ``env`` (ENV_CARRY values) last.
+    C : Layout  The carry with ``env`` (:data:`~.chunk_layout.ENV`) last.
     rate, n : int  Ticks per block, ticks per chunk.
-    npar : int  Size of the chunk's ``par = (t0, h, n_act, k0, cp, u_ext, p, ps)``.
+    P : Layout  The chunk's ``par = (t0, h, n_act, k0, cp, u_ext, p, ps)`` (:func:`~.chunk_layout.flight_par`).
     nw : int  Noise values per tick.
-    s_p : slice  The model's parameters in ``par``.
     """
     env_B = environment_split(system)["env_B"]
     nb = math.ceil(n / rate)
-    nc = C.size - ENV_CARRY
+    nc = C.slice("env").start  # the tick's carry: C's fields before env
     acc = tick_h.mapaccum("ffl_block_acc", rate)
-    cb, pb, wb = ca.MX.sym("cb", nc), ca.MX.sym("pb", npar + 3), ca.MX.sym("wb", nw * rate)
+    cb, pb, wb = ca.MX.sym("cb", nc), ca.MX.sym("pb", P.size + 3), ca.MX.sym("wb", nw * rate)
     block = ca.Function("ffl_block", [cb, pb, wb], [acc(cb, ca.repmat(pb, 1, rate), ca.reshape(wb, nw, rate))[:, -1]])
-    co, po, wo = ca.MX.sym("co", C.size), ca.MX.sym("po", npar), ca.MX.sym("wo", nw * rate)
-    i, x = co[0], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
+    co, po, wo = ca.MX.sym("co", C.size), ca.MX.sym("po", P.size), ca.MX.sym("wo", nw * rate)
+    i, x = co[C.slice("i").start], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
     env = C.get(co, "env")
-    L_prev, t_prev, have = env[0:3], env[3], env[4]
-    t0, h, n_act = po[0], po[1], po[2]
+    L_prev, t_prev, have = ENV.get(env, "L_prev"), env[ENV.slice("t_prev").start], env[ENV.slice("have").start]
+    t0, h, n_act = (po[P.slice(f).start] for f in ("t0", "h", "n_act"))
     t_now = t0 + i * h
-    L_now = env_B(t_now, x, po[s_p])
+    L_now = env_B(t_now, x, P.get(po, "p"))
     n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
     dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
     L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
@@ -65,6 +65,6 @@ def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, npar: int, n
     outer = ca.Function("ffl_outer", [co, po, wo], [ca.vertcat(
         c_new, ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have))])
     acc_o = outer.mapaccum("ffl_held_acc", nb)
-    c0, par0, noise = ca.MX.sym("c0", C.size), ca.MX.sym("par", npar), ca.MX.sym("noise", nw, nb * rate)
+    c0, par0, noise = ca.MX.sym("c0", C.size), ca.MX.sym("par", P.size), ca.MX.sym("noise", nw, nb * rate)
     traj = acc_o(c0, ca.repmat(par0, 1, nb), ca.reshape(noise, nw * rate, nb))
     return ca.Function("ffl_chunk", [c0, par0, noise], [traj[:, -1]])

@@ -35,12 +35,13 @@ import numpy as np
 from ..core.compile import FastCall
 from ..integrators import IntegrationError
 from ..loop import Layout
+from .chunk_layout import FLIGHT_INFO_IN, chunk_info, flight_rows_out, vertcat_by
 from .fused_rows import ROW_CALLS, _full_rows, _held_matches
 
 __all__ = ["flight_rows_functions", "run_flight_rows"]
 
 
-def flight_rows_functions(info: ca.Function, chunk: ca.Function, C: Layout, n: int, npar: int, nw: int) -> list:
+def flight_rows_functions(info: ca.Function, chunk: ca.Function, C: Layout, n: int, RP: Layout, nw: int) -> list:
     """``flight_rows_<R>`` for each R of :data:`~.fused_rows.ROW_CALLS`.
 
     Parameters
@@ -48,39 +49,38 @@ def flight_rows_functions(info: ca.Function, chunk: ca.Function, C: Layout, n: i
     info : Function  ``ffl_info(t, x, cp, u_ext, p, k, t_prev, theta, omega, xs, w, ps) -> (info,
         xs_next, ys)``.
     chunk : Function  ``ffl_chunk(c0, par, w) -> carry`` of ``n`` ticks, ``c0`` laid out by ``C``
-        (:func:`.fused_flight.carry_layout`), ``par = (t0, h, n_act, k0, cp, u_ext, p, ps)``,
-        ``w`` (nw, n): column i tick i's noise row.
-    npar : int  Size of ``par`` after its first four entries (cp, u_ext, p, ps).
+        (:func:`.chunk_layout.flight_carry`), ``par = (t0, h, n_act, k0, cp, u_ext, p, ps)``
+        (:func:`.chunk_layout.flight_par`), ``w`` (nw, n): column i tick i's noise row.
+    RP : Layout  The call's ``par = (h, cp, u_ext, p, ps)`` (:func:`.chunk_layout.flight_rows_par`).
 
     Returns
     -------
-    list of Function  ``flight_rows_R(c[C.size], a[1 x R], par[1 + npar], w[nw n x R]) ->
-    (carries[C.size x R], out[(nx + ninfo + ns + ny + 2) x R])``: ``a`` the rows' first ticks,
-    ``par = (h, cp, u_ext, p, ps)``, column r of ``w`` row r's noise tick by tick; column r of
-    ``out`` is row r's state, its ``info`` outputs and the chunk's counts of rate-limited and
-    saturated ticks; of ``carries``, the carry after row r.
+    list of Function  ``flight_rows_R(c[C.size], a[1 x R], par[RP.size], w[nw n x R]) ->
+    (carries[C.size x R], out[O.size x R])``: ``a`` the rows' first ticks, column r of ``w``
+    row r's noise tick by tick; column r of ``out`` (``O``: :func:`.chunk_layout.flight_rows_out`)
+    is row r's state, its ``info`` outputs, the flight's state and outputs and the chunk's counts
+    of rate-limited and saturated ticks; of ``carries``, the carry after row r.
     """
     c, a = ca.MX.sym("c", C.size), ca.MX.sym("a")
-    par, w = ca.MX.sym("par", 1 + npar), ca.MX.sym("w", nw * n)
-    h, rest = par[0], par[1:]
+    par, w = ca.MX.sym("par", RP.size), ca.MX.sym("w", nw * n)
+    h, rest = par[RP.slice("h").start], par[RP.slice("h").stop :]  # rest: the chunk's par after t0, h, n_act, k0
     x, tp, th, om, xs = (C.get(c, f) for f in ("x", "t_prev", "theta_B", "omega_prev", "xs"))
-    ncp = info.size1_in(2)
-    cp, u_ext = rest[:ncp], rest[ncp : ncp + 3]
-    p = rest[ncp + 3 : ncp + 3 + info.size1_in(4)]
-    ps = rest[ncp + 3 + info.size1_in(4) :]
     t = a * h  # as the executor: k * period, one IEEE product
-    inf, xs1, ys = info(t, x, cp, u_ext, p, a, tp, th, om, xs, w[:nw], ps)
+    ins = dict(t=t, x=x, cp=RP.get(par, "cp"), u_ext=RP.get(par, "u_ext"), p=RP.get(par, "p"), k=a, t_prev=tp,
+               theta_B=th, omega_prev=om, xs=xs, w=w[:nw], ps=RP.get(par, "ps"))
+    inf, xs1, ys = info(*(ins[f] for f in FLIGHT_INFO_IN))
     env = {"env": C.get(c, "env")} if "env" in C else {}  # the held environment's carry (flight_rates.py)
     c0 = C.pack(i=0.0, x=x, counts=ca.MX.zeros(2), t_prev=tp, theta_B=th, omega_prev=om, xs=xs, **env, symbolic=True)
     cols = chunk.size_in(2)[1]  # (a held chunk has whole blocks: the columns past n are masked ticks)
     wn = ca.reshape(w, nw, n) if cols == n else ca.horzcat(ca.reshape(w, nw, n), ca.MX.zeros(nw, cols - n))
     res = chunk(c0, ca.vertcat(t, h, float(n), a, rest), wn)
-    out = ca.vertcat(x, inf, xs1, ys, C.get(res, "counts"))
+    O = flight_rows_out(x.numel(), inf.numel(), xs1.numel(), ys.numel())
+    out = vertcat_by(O, x=[x], info=[inf], xs=[xs1], ys=[ys], counts=[C.get(res, "counts")])
     row = ca.Function("flight_row", [c, a, par, w], [res, out])
     fns = []
     for R in ROW_CALLS:
         acc = row.mapaccum(f"flight_rows_acc_{R}", R)
-        cs, as_, ps_, ws = ca.MX.sym("c", C.size), ca.MX.sym("a", 1, R), ca.MX.sym("par", 1 + npar), ca.MX.sym("w", nw * n, R)
+        cs, as_, ps_, ws = ca.MX.sym("c", C.size), ca.MX.sym("a", 1, R), ca.MX.sym("par", RP.size), ca.MX.sym("w", nw * n, R)
         carries, outs = acc(cs, as_, ca.repmat(ps_, 1, R), ws)
         fns.append(ca.Function(f"flight_rows_{R}", [cs, as_, ps_, ws], [carries, outs]))
     return fns
@@ -137,6 +137,8 @@ def run_flight_rows(comp, res, calls: dict, row_ks, K: int, C: Layout, c0: np.nd
     i_u, i_lim, i_sat = (out_l.slice("u_cmg"), out_l.slice("rate_limited").start,
                          out_l.slice("saturated").start) if has_cmg else (slice(0, 0), 0, 0)
     torque = comp.ctrl.command == "torque"
+    IL = chunk_info(ncmd, n_act, ls)  # the row's info and output, by name (chunk_layout.py: the builder's)
+    O = flight_rows_out(nx, IL.size, ns, ny)
     sl = flight._rows
     valid = sl["valid"]
     j = tail_flag = ticks = 0
@@ -153,10 +155,9 @@ def run_flight_rows(comp, res, calls: dict, row_ks, K: int, C: Layout, c0: np.nd
             fc()
             carries = fc.res[0].reshape(R, -1)  # column-major (C.size, R): row r's carry is a row here
             out = fc.res[1].reshape(R, -1)
-            ni = out.shape[1] - nx - ns - ny - 2
-            xs_, info = out[:, :nx0], out[:, nx : nx + ni]
-            fl_xs, fl_ys, counts = out[:, nx + ni : nx + ni + ns], out[:, nx + ni + ns : -2], out[:, -2:]
-            cmd, act, q_ref = info[:, :ncmd], info[:, ncmd : ncmd + n_act], info[:, ni - ls - 4 : ni - ls]
+            xs_ = O.get(out, "x")[:, :nx0]
+            info, fl_xs, fl_ys, counts = (O.get(out, f) for f in ("info", "xs", "ys", "counts"))
+            cmd, act, q_ref = (IL.get(info, f) for f in ("cmd", "act", "q_ref"))
             bad = ~np.all(np.isfinite(carries[:, cx]), axis=1)
             m = int(np.argmax(bad)) + 1 if bad.any() else R  # rows whose stretch ran (the last may end in NaN)
             lim = sat = np.zeros(m)

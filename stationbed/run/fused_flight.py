@@ -31,6 +31,7 @@ from ..core.compile import FastCall, compile_functions, sx_function
 from ..loop import Layout
 from ..loop.flight import READS, SEEN
 from . import law_state
+from .chunk_layout import FLIGHT_INFO_IN, chunk_info, flight_carry, flight_par, flight_rows_par, law_carry, vertcat_by
 from .flight_rates import held_flight_chunk
 from .flight_rows import flight_rows_functions, run_flight_rows
 from .rates import carry_width, environment_rate
@@ -53,24 +54,26 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     ns, nw, nps = S.STATE.size, S.NOISE.size, flight.params.size
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     nls = law_state.initial(ctrl).size  # the law's own state rides after x (law_state.py)
-    xa, p, cp, u_ext = ca.SX.sym("x", nx + nls), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
-    x, s = xa[:nx], xa[nx:]
+    X = law_carry(nx, nls)  # the carried state: the plant's, then the law's (law_state.py)
+    xa, p, cp, u_ext = ca.SX.sym("x", X.size), ca.SX.sym("p", npar), ca.SX.sym("cp", ncp), ca.SX.sym("u_ext", 3)
+    x, s = X.get(xa, "x"), X.get(xa, "s")
     # the law's measurement is computed inside the core, as the truth-fed fused loop does (its
     # sines and cosines shared with the RK4's first stage); with an estimator the flight's
     # estimate replaces its SEEN fields, given as the core's input ``est``
     y = sx["meas"](t, x, p)
-    offs = flight.layout
+    M = flight.meas  # the measurement's layout (run/measurement.py)
     est_fields = list(SEEN) if flight.mekf is not None else []
-    est = ca.SX.sym("est", sum(offs[f][1] for f in est_fields))
-    y_seen, j = y, 0
+    E = Layout(**{f: M.slice(f).stop - M.slice(f).start for f in est_fields})  # the estimate's fields, in SEEN's order
+    est = ca.SX.sym("est", E.size)
+    y_seen = y
     for f in est_fields:
-        o, m = offs[f]
-        y_seen = ca.vertcat(y_seen[:o], est[j : j + m], y_seen[o + m :])
-        j += m
+        o = M.slice(f)
+        y_seen = ca.vertcat(y_seen[: o.start], est[E.slice(f)], y_seen[o.stop :])
     cmd, q_ref, s1 = law_state.symbolic(ctrl, t, y_seen, cp, s, comp.n_cmd)
     act, u, sat = chain_end_inputs(sx, model, comp.end, ctrl.command, t, h, x, cmd, u_ext, p)  # the chain's end
     x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
-    core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, ca.vertcat(cmd, act, q_ref, s1)])
+    IL = chunk_info(comp.n_cmd, act.numel(), nls)  # the row's info (chunk_layout.py)
+    core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, vertcat_by(IL, cmd=[cmd], act=[act], q_ref=[q_ref], s=[s1])])
     core_h = None
     if rate:  # the environment held over blocks (flight_rates.py): the RHS without it, u_ext + L_env
         L_env = ca.SX.sym("L_env", 3)
@@ -80,74 +83,68 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
     y_truth = ca.SX.zeros(flight.ny)
     for f in READS:
-        o, m = offs[f]
-        y_truth[o : o + m] = y[o : o + m]
+        y_truth[M.slice(f)] = y[M.slice(f)]
     meas = sx_function("ffl_truth", [t, x, p], [y_truth])
     fl = flight.function()
-    o_om = offs["omega_BN_B"][0]
 
     def seen(ys):
         return ca.vertcat(*[S.OUTPUTS.get(ys, SEEN[f]) for f in est_fields]) if est_fields else ca.MX(0, 1)
 
     MX = ca.MX
     # the row tick: its command, actuation, reference and the flight's state and outputs after it
-    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", nx + nls), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
+    ti, xi, cpi, ui, pi_ = MX.sym("t"), MX.sym("x", X.size), MX.sym("cp", ncp), MX.sym("u_ext", 3), MX.sym("p", npar)
     ki, tpi, thi, omi = MX.sym("k"), MX.sym("t_prev"), MX.sym("th", 3), MX.sym("om", 3)
     xsi, wi, psi = MX.sym("xs", ns), MX.sym("w", nw), MX.sym("ps", nps)
-    yi = meas(ti, xi[:nx] if nls else xi, pi_)
+    yi = meas(ti, X.get(xi, "x") if nls else xi, pi_)
     _, xs1, _, ys = fl(ki, ti, tpi, yi, thi, omi, xsi, wi, psi)
     _, _, info_out = core(ti, xi, seen(ys), cpi, ui, pi_, 0.0)
-    info = ca.Function("ffl_info", [ti, xi, cpi, ui, pi_, ki, tpi, thi, omi, xsi, wi, psi], [info_out, xs1, ys])
+    info_in = dict(t=ti, x=xi, cp=cpi, u_ext=ui, p=pi_, k=ki, t_prev=tpi, theta_B=thi, omega_prev=omi, xs=xsi, w=wi, ps=psi)
+    info = ca.Function("ffl_info", [info_in[a] for a in FLIGHT_INFO_IN], [info_out, xs1, ys])
     # the chunk's step: the carry holds the law's state with x
-    nx0 = nx
-    C = carry_layout(nx + nls, ns, carry_width(rate))
-    npar_all = 4 + ncp + 3 + npar + nps
-    T = carry_layout(nx + nls, ns)  # one tick's carry (the held environment's, if any, is the block's)
+    C = flight_carry(X.size, ns, carry_width(rate))
+    P = flight_par(ncp, npar, nps)
+    T = flight_carry(X.size, ns)  # one tick's carry (the held environment's, if any, is the block's)
 
     def tick_step(held: bool) -> ca.Function:
         """``(c, par[, L_hold]) , w -> c_next``: one tick, the tail past n_act held."""
-        c, par, w = MX.sym("c", T.size), MX.sym("par", npar_all + (3 if held else 0)), MX.sym("w", nw)
+        PT = flight_par(ncp, npar, nps, **({"L_hold": 3} if held else {}))
+        c, par, w = MX.sym("c", T.size), MX.sym("par", PT.size), MX.sym("w", nw)
         i, xc, cnt, tp, th, om, xs = (T.get(c, f) for f in T.names)
-        t0, hh, n_act, k0 = par[0], par[1], par[2], par[3]
-        cpc, uc = par[4 : 4 + ncp], par[4 + ncp : 7 + ncp]
-        pc, psc = par[7 + ncp : 7 + ncp + npar], par[7 + ncp + npar : npar_all]
+        t0, hh, n_act, k0 = (par[PT.slice(f).start] for f in ("t0", "h", "n_act", "k0"))
+        cpc, uc, pc, psc = (PT.get(par, f) for f in ("cp", "u_ext", "p", "ps"))
         tt = t0 + i * hh
-        yt = meas(tt, xc[:nx0] if nls else xc, pc)
+        yt = meas(tt, X.get(xc, "x") if nls else xc, pc)
         th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
         if held:
-            x_new, fl_sat = core_h(tt, xc, seen(ys), cpc, uc, pc, hh, par[npar_all:])
+            x_new, fl_sat = core_h(tt, xc, seen(ys), cpc, uc, pc, hh, PT.get(par, "L_hold"))
         else:
             x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
         c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
-                       theta_B=th1, omega_prev=yt[o_om : o_om + 3], xs=xs1)
+                       theta_B=th1, omega_prev=M.get(yt, "omega_BN_B"), xs=xs1)
         # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
         # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
         tick = ca.Function("ffl_tick", [c, par, w], [c_new])
-        hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:])])  # (i first: T's order)
+        hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[T.slice("i").stop :])])  # (i first: T's order)
         step = ca.Function.if_else("ffl_step", tick, hold)
         return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
 
     if rate:
-        chunk = held_flight_chunk(system, tick_step(True), C, rate, n, npar_all, nw, slice(7 + ncp, 7 + ncp + npar))
+        chunk = held_flight_chunk(system, tick_step(True), C, rate, n, P, nw)
     else:
         acc = tick_step(False).mapaccum("ffl_acc", n)
-        c0, parm, wm = MX.sym("c0", C.size), MX.sym("par", npar_all), MX.sym("noise", nw, n)
+        c0, parm, wm = MX.sym("c0", C.size), MX.sym("par", P.size), MX.sym("noise", nw, n)
         traj = acc(c0, ca.repmat(parm, 1, n), wm)
         chunk = ca.Function("ffl_chunk", [c0, parm, wm], [traj[:, -1]])
     tag = f"fusedflight_{form.name}_{type(ctrl).__name__}_{n}_{model.structure.key}_{flight.tag}"
     if rate:
         tag += f"_env{rate}"
-    many = flight_rows_functions(info, chunk, C, n, npar_all - 4, nw)  # many rows per call (flight_rows.py)
+    many = flight_rows_functions(info, chunk, C, n, flight_rows_par(ncp, npar, nps), nw)  # many rows per call (flight_rows.py)
     funcs = compile_functions([info, chunk] + many, tag)
     rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
     return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls, "rows": rows}
 
 
-def carry_layout(nx: int, ns: int, ne: int = 0) -> Layout:
-    """The chunk's carry: tick index in the chunk, state, counts of rate-limited and saturated
-    ticks, and the flight's memory (previous tick's time and true rate, ``theta_B``, the suite
-    state); with the environment at its own rate, its held carry ``env`` (ne values, rates.py)."""
-    return Layout(i=1, x=nx, counts=2, t_prev=1, theta_B=3, omega_prev=3, xs=ns, **({"env": ne} if ne else {}))
+carry_layout = flight_carry  # (its older name)
 
 
 def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
@@ -168,26 +165,27 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     s_law = law_state.initial(ctrl)  # the law's own state, carried after x (law_state.py)
     nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
-    C = carry_layout(nx, S.STATE.size, carry_width(rate))  # its slices, taken once (the loop below runs per output row)
+    C = flight_carry(nx, S.STATE.size, carry_width(rate))  # its slices, taken once (the loop below runs per output row)
     ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in ("i", "x", "counts", "t_prev", "theta_B", "omega_prev", "xs"))
+    X = law_carry(nx0, ls)
     p, period, duration = comp.p, comp.period, comp.duration
     u_ext = held_torque_from(comp.scene, 0.0, comp.bps, duration)
-    ia = info.args
-    ia[2][:] = cp
-    ia[3][:] = u_ext
-    ia[4][:] = p
-    ia[11][:] = flight.params
+    ia = dict(zip(FLIGHT_INFO_IN, info.args))  # the row's info inputs, by name (the builder's order)
+    ia["cp"][:], ia["u_ext"][:], ia["p"][:], ia["ps"][:] = cp, u_ext, p, flight.params
     c0, par, noise = chunk.args
-    ncp = len(cp)
-    par[1] = period
-    par[4 : 4 + ncp] = cp
-    i_ext = slice(4 + ncp, 7 + ncp)
+    P = flight_par(len(cp), p.size, flight.params.size)  # the chunk's parameters (the builder's layout)
+    pt0, ph, pn, pk = (P.slice(f).start for f in ("t0", "h", "n_act", "k0"))
+    par[ph] = period
+    par[P.slice("cp")] = cp
+    i_ext = P.slice("u_ext")
     par[i_ext] = u_ext
-    par[7 + ncp : 7 + ncp + p.size] = p
-    par[7 + ncp + p.size :] = flight.params
+    par[P.slice("p")] = p
+    par[P.slice("ps")] = flight.params
     ncmd = comp.n_cmd
     out = comp.end.outputs  # the chain end's reported values (act): u_cmg, m, rate_limited, saturated
     n_act = out.size if comp.has_cluster else 0
+    IL = chunk_info(ncmd, n_act, ls)  # the row's info (the builder's layout)
+    i_cmd, i_act, i_q, i_s = (IL.slice(f) for f in IL.names)
     i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if n_act else (0, 0, 0)
     nw = S.NOISE.size
     fm = res.flight  # the flight's memory, handed back at the end
@@ -201,7 +199,7 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     try:
         j0 = 0
         if not edges:  # the leading full rows, many per compiled call (flight_rows.py)
-            j0, tail_flag, ticks, stop = run_flight_rows(comp, res, fns["rows"], row_ks, K, C, c0, par[4:], ls)
+            j0, tail_flag, ticks, stop = run_flight_rows(comp, res, fns["rows"], row_ks, K, C, c0, par[P.slice("cp").start :], ls)
             x = c0[cx].copy()
             if stop is not None:
                 raise stop
@@ -211,31 +209,31 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
             t = min(k * period, duration)
             n_tick = row_ks[j + 1] - k if k < K else 1
             draws = comp.tick_noise.rows(k, n_tick)
-            ia[0][0] = t
-            ia[1][:] = x
-            ia[5][0], ia[6][0] = k, c0[ct][0]
-            ia[7][:], ia[8][:], ia[9][:] = c0[cth], c0[com], c0[cxs]
-            ia[10][:] = draws[0]
+            ia["t"][0] = t
+            ia["x"][:] = x
+            ia["k"][0], ia["t_prev"][0] = k, c0[ct][0]
+            ia["theta_B"][:], ia["omega_prev"][:], ia["xs"][:] = c0[cth], c0[com], c0[cxs]
+            ia["w"][:] = draws[0]
             info()
             r = info.res[0]
-            cmd = r[:ncmd]
-            act = r[ncmd : ncmd + n_act]
+            cmd = r[i_cmd]
+            act = r[i_act]
             lim = sat = 0
             u_cmg = None
             if n_act:
                 lim, sat = int(act[i_lim] > 0.5), int(act[i_sat] > 0.5)
                 u_cmg = act[i_u]
-            res.row(t, x[:nx0], lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=r[r.size - ls - 4 : r.size - ls],
+            res.row(t, X.get(x, "x"), lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=r[i_q],
                     xs=info.res[1].copy(), ys=info.res[2].copy())
             if k == K:
                 fm.theta_B, fm.omega_prev, fm.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
-                s_end = r[r.size - ls :].copy()  # the law's update at the last tick
+                s_end = r[i_s].copy()  # the law's update at the last tick
                 break
             pieces = tick_pieces(k, n_tick, edges, duration, period)
             counts = np.zeros(2)
             for a, b, h in pieces:
                 c0[ci], c0[cc] = 0.0, 0.0
-                par[0], par[1], par[2], par[3] = a * period, h, b - a, a
+                par[pt0], par[ph], par[pn], par[pk] = a * period, h, b - a, a
                 par[i_ext] = held_torque_from(comp.scene, a * period, comp.bps, duration) if edges else u_ext
                 noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
                 chunk()
@@ -246,5 +244,5 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
-        law_state.hand_back(ctrl, x[nx0:] if s_end is None else s_end)
-        finish_chunks(res, x[:nx0], ticks)
+        law_state.hand_back(ctrl, X.get(x, "s") if s_end is None else s_end)
+        finish_chunks(res, X.get(x, "x"), ticks)
