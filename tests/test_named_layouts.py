@@ -38,16 +38,13 @@ SCANNED = [LIB / "run", LIB / "formulations", LIB / "loop"]
 #: names the loop's packed vectors go by in these modules (state, input, measurement, carries,
 #: parameters, outputs)
 PACKED = {"x", "xs", "X", "x0", "x1", "x_i", "xa", "y", "y0", "yt", "seen", "raw", "parts", "u", "par", "parm",
-          "ps_", "bpar", "c", "c0", "co", "cs", "bc", "bq", "rc", "carry", "carries", "r", "info", "out", "res"}
+          "ps_", "bpar", "c", "c0", "co", "cs", "bc", "bq", "rc", "carry", "carries", "r", "info", "out", "res",
+          "xs_", "xi", "xc", "yi", "env", "rest", "po", "pb", "est", "y_seen", "y_truth"}
 #: (module, expression) -> why a literal there is not a position in a packed vector
 ALLOWED = {
     ("batch.py", "xs[:, 1:]"): "axis 1 is time (the samples after the first), not the state",
     ("simulation.py", "xs[:-1]"): "the rows' time axis (the last row dropped), not the state",
 }
-#: modules two other helpers wrote in this session (issue 20's speed: run/fused_flight.py and
-#: run/flight_rows.py; issue 25's floor: run/rates.py); their chunks move to run/chunk_layout.py's
-#: layouts next (a named follow-up, docs/loop.md "Layouts")
-PENDING = {"fused_flight.py", "flight_rows.py", "rates.py"}
 #: the measurement's fields at a state agree with their truth to round-off
 TOL = 1e-12
 
@@ -82,8 +79,7 @@ def test_the_scan_finds_a_positional_slice():
 def test_no_literal_positions_in_packed_vectors(folder):
     found = []
     for path in sorted(folder.glob("*.py")):
-        if path.name not in PENDING:
-            found += _literal_slices(path.read_text(), path.name)
+        found += _literal_slices(path.read_text(), path.name)
     assert found == []
 
 
@@ -187,6 +183,51 @@ def test_fused_chunk_vectors_are_their_layouts_sizes(hold_system):
     R = max(fns["rows"])
     assert fns["rows"][R].args[0].size == rows_carry(nx, 0).size
     assert fns["rows"][R].args[2].size == rows_par(ncp, npar).size
+
+
+def test_fused_flight_vectors_are_their_layouts_sizes(hold_system):
+    """The fused flight chunk (held environment: the default) and its rows' call are the sizes of
+    their layouts (run/chunk_layout.py), which the executor fills by name; the info's inputs are
+    FLIGHT_INFO_IN's, in order."""
+    from stationbed.loop import Flight
+    from stationbed.run import fused_flight
+    from stationbed.run.chunk_layout import (ENV, FLIGHT_INFO_IN, chunk_info, flight_carry, flight_par,
+                                             flight_rows_out, flight_rows_par)
+
+    fused_flight._CHUNKS.clear()
+    sc = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml")
+    tr = simulate(sc, duration=30.0, fused=True)
+    assert tr.meta["summary"]["environment_rate_ticks"] > 0  # the held chunk (flight_rates.py)
+    ((key, fns),) = fused_flight._CHUNKS.items()
+    form = hold_system.system.formulation
+    nx, npar, ncp = form.nx, form.model.layout.size, fns["ncp"]
+    ng, n_app = form.model.cmg.n_gimbals, form.model.structure.n_app
+    fl = Flight(sc, sc.controller.period, measurement_fields(ng, n_app), seed=0)
+    ns, nps, ny = fl.suite.STATE.size, fl.params.size, fl.suite.OUTPUTS.size
+    sizes = dict(t=1, x=nx + fns["nls"], cp=ncp, u_ext=3, p=npar, k=1, t_prev=1, theta_B=3, omega_prev=3, xs=ns,
+                 w=fl.suite.NOISE.size, ps=nps)
+    assert [a.size for a in fns["info"].args] == [sizes[f] for f in FLIGHT_INFO_IN]
+    c0, par = fns["chunk"].args[:2]
+    assert (c0.size, par.size) == (flight_carry(nx, ns, ENV.size).size, flight_par(ncp, npar, nps).size)
+    IL = chunk_info(3, form.model.nu_cmg + 3)  # (the CMG cluster's outputs; pd: no law state)
+    assert fns["info"].res[0].size == IL.size
+    R = max(fns["rows"])
+    rows = fns["rows"][R]
+    assert rows.args[2].size == flight_rows_par(ncp, npar, nps).size
+    assert rows.res[1].size == R * flight_rows_out(nx, IL.size, ns, ny).size
+
+
+def test_flight_takes_the_measurement_layout():
+    """``Flight`` reads the measurement's Layout; an offset dict (older code) is the same flight
+    (same tick key, same layout), a partial dict's gaps named apart."""
+    from stationbed.loop import Flight
+
+    sc = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml")
+    lay = measurement_fields(4, 2)
+    a, b = Flight(sc, sc.controller.period, lay, seed=0), Flight(sc, sc.controller.period, lay.offsets(), seed=0)
+    assert a.meas == b.meas == lay and a.key == b.key and a.ny == lay.size
+    part = Flight(sc, sc.controller.period, {"q_BN": (0, 4), "r_N": (7, 3)}, seed=0)
+    assert part.meas.slice("r_N") == slice(7, 10) and part.ny == 10
 
 
 @pytest.mark.parametrize("name", sorted(FORMULATIONS))

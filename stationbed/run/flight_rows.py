@@ -172,7 +172,7 @@ def run_flight_rows(comp, res, calls: dict, row_ks, K: int, C: Layout, c0: np.nd
                 held += [act[:m, i_u][:, :ng], flag[:, None]]
             held += [cmd[:m] if torque else np.full((m, 3), math.nan), np.full((m, 4), math.nan)]
             if rep is not None:  # the filter's report against the truth (Flight.row's numbers)
-                q = xs_[:, :4]
+                q = xs_[:, comp.state_layout.slice("q_BN")]
                 rep.args[0][:] = fl_xs[:, sl["mekf"]].ravel()
                 # Flight.row's q / np.linalg.norm(q), which is q / sqrt(q.dot(q)) for a vector: the same dot
                 rep.args[1][:] = (q / np.sqrt([qi.dot(qi) for qi in q])[:, None]).ravel()

@@ -141,7 +141,7 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     many = flight_rows_functions(info, chunk, C, n, flight_rows_par(ncp, npar, nps), nw)  # many rows per call (flight_rows.py)
     funcs = compile_functions([info, chunk] + many, tag)
     rows = {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}
-    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls, "rows": rows}
+    return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls, "ncp": ncp, "rows": rows}
 
 
 carry_layout = flight_carry  # (its older name)
