@@ -144,9 +144,6 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     return {"info": FastCall(funcs["ffl_info"]), "chunk": FastCall(funcs["ffl_chunk"]), "nls": nls, "ncp": ncp, "rows": rows}
 
 
-carry_layout = flight_carry  # (its older name)
-
-
 def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     """Run ticks 0..K of the run composed by ``comp`` fused with its flight, handing back to
     ``res`` the per-tick loop's rows and the flight's memory."""
