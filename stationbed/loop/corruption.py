@@ -7,7 +7,7 @@ the values of ``rng.normal(0, sigma, 3)``): ``q_BN`` turned by the small rotatio
 
 Written **once** as casadi expressions (:meth:`Corruption.symbolic`): the fused loop inlines
 them in its compiled tick, the per-tick loop calls them compiled (:meth:`Corruption.compiled`),
-the lockstep batch maps the compiled function over its samples (:meth:`Corruption.function` with
+the lockstep batch maps the compiled function over its samples (:func:`corrupt_compiled` with
 both corruptions on, each sample keeping the fields its own run corrupts). There is no numpy twin.
 
 It is not a :class:`~.sensor.Sensor`: a sensor samples the truth (:data:`~.sensor.TRUTH`) at its
@@ -29,7 +29,7 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions
 from .layout import Layout
 
-__all__ = ["Corruption", "draws_layout"]
+__all__ = ["Corruption", "draws_layout", "corrupt_symbolic", "corrupt_compiled"]
 
 
 @lru_cache(maxsize=None)
@@ -39,9 +39,10 @@ def draws_layout(attitude: bool, rate: bool) -> Layout:
     return Layout(**({"attitude": 3} if attitude else {}), **({"rate": 3} if rate else {}))
 
 
-def _symbolic(y, nz, flags, layout: Layout):
-    """``y`` corrupted by the draws ``nz`` (casadi SX or MX; scalar operations, so the compiled,
-    the mapped and the inlined forms make the same IEEE operations in the same order)."""
+def corrupt_symbolic(y, nz, flags, layout: Layout):
+    """``y`` corrupted (``flags``: attitude on, rate on) by the draws ``nz`` (casadi SX or MX;
+    scalar operations, so the compiled, the mapped and the inlined forms make the same IEEE
+    operations in the same order)."""
     att, rate = flags
     N = draws_layout(att, rate)
     parts = [y[i] for i in range(y.numel())]
@@ -69,10 +70,22 @@ def _symbolic(y, nz, flags, layout: Layout):
 def _function(flags: tuple[bool, bool], layout: Layout) -> ca.Function:
     y = ca.SX.sym("y", layout.size)
     nz = ca.SX.sym("nz", draws_layout(*flags).size)
-    return ca.Function("corrupt", [y, nz], [_symbolic(y, nz, flags, layout)], ["y", "nz"], ["y_seen"])
+    return ca.Function("corrupt", [y, nz], [corrupt_symbolic(y, nz, flags, layout)], ["y", "nz"], ["y_seen"])
 
 
 _COMPILED: dict = {}
+
+
+def corrupt_compiled(flags: tuple[bool, bool], layout: Layout) -> FastCall:
+    """``corrupt(y, nz) -> y_seen`` for ``flags`` generated as C (disk cache), bound as a
+    :class:`FastCall` shared per flags and layout (its ``.f`` is the compiled Function)."""
+    f = _function(tuple(flags), layout)
+    hit = _COMPILED.get(id(f))
+    if hit is None or hit[0] is not f:
+        tag = f"corrupt{int(flags[0])}{int(flags[1])}_{layout.size}"
+        lib = compile_functions([f], tag)[f.name()]
+        hit = _COMPILED[id(f)] = (f, FastCall(lib))
+    return hit[1]
 
 
 class Corruption:
@@ -102,23 +115,15 @@ class Corruption:
 
     def symbolic(self, y, nz):
         """The corrupted measurement as casadi expressions of ``y`` and the draws ``nz`` (inline)."""
-        return _symbolic(y, nz, self.flags, self.layout)
+        return corrupt_symbolic(y, nz, self.flags, self.layout)
 
-    def function(self, flags: tuple[bool, bool] | None = None) -> ca.Function:
-        """``corrupt(y, nz) -> y_seen`` (shared per flags and layout); ``flags`` other than this
-        run's: the lockstep batch's all-on form."""
-        return _function(self.flags if flags is None else tuple(flags), self.layout)
+    def function(self) -> ca.Function:
+        """``corrupt(y, nz) -> y_seen`` (shared per flags and layout)."""
+        return _function(self.flags, self.layout)
 
-    def compiled(self, flags: tuple[bool, bool] | None = None) -> FastCall:
+    def compiled(self) -> FastCall:
         """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall` (shared)."""
-        f = self.function(flags)
-        hit = _COMPILED.get(id(f))
-        if hit is None or hit[0] is not f:
-            flg = self.flags if flags is None else tuple(flags)
-            tag = f"corrupt{int(flg[0])}{int(flg[1])}_{self.layout.size}"
-            lib = compile_functions([f], tag)[f.name()]
-            hit = _COMPILED[id(f)] = (f, FastCall(lib))
-        return hit[1]
+        return corrupt_compiled(self.flags, self.layout)
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """The draws of the next ``n`` ticks, (n, width): per tick ``rng.normal(0, σ_att, 3)``

@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
-from ..loop.corruption import Corruption, draws_layout
+from ..loop.corruption import corrupt_symbolic, draws_layout
 from . import law_state
 from .chunk_layout import chunk_carry, chunk_info, chunk_par
 from .controller import ControllerError, one_line
@@ -78,7 +78,7 @@ def fused_ok(comp) -> bool:
 
 
 def _noise_flags(comp) -> tuple[bool, bool]:
-    """(attitude noise on, rate noise on): which corruptions of ``ControlLoop._corrupt`` apply."""
+    """(attitude noise on, rate noise on): which corruptions of the plug-in apply."""
     if not comp.noisy:
         return False, False
     return comp.sensor.attitude_noise > 0, comp.sensor.rate_noise > 0
@@ -93,7 +93,7 @@ def _noise_width(flags) -> int:
 def _corrupt_sx(y, nz, flags, layout):
     """``y`` corrupted by this tick's draws ``nz``: the corruption plug-in's expressions
     (loop/corruption.py), inlined; the per-tick loop calls the same ones compiled."""
-    return Corruption(float(flags[0]), float(flags[1]), layout).symbolic(y, nz)
+    return corrupt_symbolic(y, nz, flags, layout)
 
 
 def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:

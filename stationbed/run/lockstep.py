@@ -33,7 +33,7 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
-from ..loop.corruption import Corruption, draws_layout
+from ..loop.corruption import corrupt_compiled, draws_layout
 from .lockstep_flight import FlightBatch
 from .prepare import prepare
 from .rows import Rows
@@ -242,7 +242,7 @@ class _Lockstep:
         self.any_noisy = bool(self.noisy.any())
         self.cor = None  # the corruption plug-in, both corruptions on, mapped over the samples
         if self.any_noisy and (self.noisy & ((self.sig_a > 0) | (self.sig_r > 0))).any():
-            one = Corruption(1.0, 1.0, lp.meas_layout).compiled().f  # (its levels are the draws')
+            one = corrupt_compiled((True, True), lp.meas_layout).f
             if one.numel_in(0) != ny:
                 raise AssertionError(f"measurement of {ny} values, its layout {lp.meas_layout!r}")
             self.cor = mapped(one, n, 1)
@@ -265,7 +265,8 @@ class _Lockstep:
                 self.z[i, :, self.NZ.slice(f)] = zi[:, c.draws.slice(f)]
 
     def _sense(self, k: int, t: float = 0.0) -> None:
-        """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
+        """``seen`` from ``raw`` at tick k, as ``ControlLoop._corrupt`` per sample: each sample's delay
+        (its ring buffer), then the corruption plug-in mapped over the samples."""
         seen, raw = self.seen, self.raw
         if self.flight is not None:  # [[sensor]] tables (and an [estimator]): their flight tick first
             self.flight.fly(k, t, raw, seen)
