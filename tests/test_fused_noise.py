@@ -1,13 +1,14 @@
-"""Sensor noise in the fused closed loop (stationbed/run/fused.py, issue 13).
+"""Sensor noise in the closed loop: the corruption plug-in (stationbed/loop/corruption.py,
+issue 20) inlined in the fused tick (stationbed/run/fused.py) and called compiled by the
+per-tick loop (``ControlLoop._corrupt``). Truths, independent of the plug-in:
 
-The fused loop draws each tick's sensor noise in numpy before a compiled call and corrupts the
-measurement inside the compiled tick; the per-tick loop (``ControlLoop._corrupt``) draws and
-corrupts in Python, tick by tick. Truths, independent of the fused code:
-
+* the corruption: a hand-written numpy corruption (:func:`_numpy_corrupt`, here in the test:
+  ``q ⊗ [1, δ/2]`` renormalised, ``ω + δω``) of random measurements and draws;
 * the random stream: numpy's own ``rng.normal(0, σ, 3)`` called tick by tick, attitude then
-  rate, exactly as the per-tick loop calls it, gives the numbers the fused loop draws in blocks;
-* the trajectory: the per-tick loop (``simulate(..., fused=False)``: the controller's Python
-  ``update`` and the noise applied in numpy) flies the same noisy run as the fused loop;
+  rate, gives the numbers the executors draw in blocks;
+* the trajectory: the per-tick loop with the numpy corruption in place of the plug-in (and the
+  controller's Python ``update``) flies the same noisy run as the fused loop and the per-tick
+  loop with the plug-in;
 * the seed: the same seed gives the same run bit for bit, another seed another run.
 """
 
@@ -18,23 +19,61 @@ import pytest
 
 from scenes import ROOT
 from stationbed import load_scene, simulate
-from stationbed.run.fused import _draw
+from stationbed.loop import Corruption
+from stationbed.run.closed_loop import ControlLoop
+from stationbed.run.measurement import measurement_fields
 from stationbed.scene import scene_from_dict
 
 ATT_RAD = 1e-3  # rad, 1 sigma per axis: 10x the Monte Carlo scene's, so the noise shows
 RATE_RAD_S = 1e-5  # rad/s, 1 sigma per axis
-#: round-off: the same arithmetic compiled as two programs (the fused chunk vs the per-tick calls
-#: with the noise applied in numpy; common subexpressions and the quaternion norm's summation
-#: order differ), amplified by the closed loop over 3000 ticks; measured 7e-13 of a column's range
+#: round-off: the same arithmetic compiled as two programs (the fused chunk vs the per-tick calls;
+#: common subexpressions and the summation order differ), amplified by the closed loop over 3000
+#: ticks; measured 7e-13 of a column's range
 PATH_RTOL = 1e-9
+#: one corruption, plug-in vs numpy: a few ulps of the unit quaternion's entries (the division by
+#: the norm and its square root each round once; numpy's norm sums in another order)
+ONE_ATOL = 1e-15
 
 
-class _Loop:
-    """What :func:`_draw` reads of a ControlLoop: the sensor table and the generator."""
+def _numpy_corrupt(y, nz, att, rate, layout):
+    """The independent reference: ``q ⊗ [1, δ/2]`` renormalised (δ the attitude draws), then
+    ``ω + δω`` (the rate draws), written in numpy from the quaternion product."""
+    y = np.array(y, dtype=float)
+    i = 0
+    if att:
+        q = y[layout.slice("q_BN")]
+        dq = np.concatenate([[1.0], 0.5 * nz[i : i + 3]])
+        w0, v0, w1, v1 = q[0], q[1:], dq[0], dq[1:]
+        qn = np.concatenate([[w0 * w1 - v0 @ v1], w0 * v1 + w1 * v0 + np.cross(v0, v1)])
+        y[layout.slice("q_BN")] = qn / np.linalg.norm(qn)
+        i += 3
+    if rate:
+        y[layout.slice("omega_BN_B")] += nz[i : i + 3]
+    return y
 
-    def __init__(self, att, rate, seed):
-        self.sensor = type("S", (), {"attitude_noise": att, "rate_noise": rate})()
-        self.rng = np.random.default_rng(seed)
+
+@pytest.mark.parametrize("att,rate", [(ATT_RAD, RATE_RAD_S), (ATT_RAD, 0.0), (0.0, RATE_RAD_S)])
+def test_plugin_corrupts_as_the_quaternion_product(att, rate):
+    """The plug-in compiled (the per-tick loop's call) on random measurements and draws equals the
+    numpy reference to round-off; the fields it does not corrupt pass bit for bit."""
+    layout = measurement_fields(4, 2)
+    c = Corruption(att, rate, layout)
+    fc = c.compiled()
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        y = rng.normal(size=layout.size)
+        q = rng.normal(size=4)
+        y[layout.slice("q_BN")] = q / np.linalg.norm(q)
+        nz = c.draw(rng, 1)[0]
+        fc.args[0][:], fc.args[1][:] = y, nz
+        fc()
+        ref = _numpy_corrupt(y, nz, att, rate, layout)
+        np.testing.assert_allclose(fc.res[0], ref, rtol=0, atol=ONE_ATOL)
+        touched = np.zeros(layout.size, dtype=bool)
+        for f, on in (("q_BN", att), ("omega_BN_B", rate)):
+            touched[layout.slice(f)] = on > 0
+        assert np.array_equal(fc.res[0][~touched], y[~touched])
+        assert np.all(fc.res[0][touched] != y[touched])
 
 
 @pytest.mark.parametrize("att,rate", [(ATT_RAD, RATE_RAD_S), (ATT_RAD, 0.0), (0.0, RATE_RAD_S)])
@@ -51,19 +90,32 @@ def test_block_draws_equal_the_per_tick_calls(att, rate):
         if rate > 0:
             row += list(ref.normal(0.0, rate, 3))
         per_tick.append(row)
-    loop = _Loop(att, rate, seed)
-    flags = (att > 0, rate > 0)
+    c, rng = Corruption(att, rate, measurement_fields(0, 0)), np.random.default_rng(seed)
     sizes = [1, 100, 37, 100, 1, 761]  # sums to 1000
-    blocks = np.vstack([_draw(loop, k, flags) for k in sizes])
+    blocks = np.vstack([c.draw(rng, k) for k in sizes])
     assert np.array_equal(blocks, np.array(per_tick))
 
 
-def _iss(sensor, duration):
+def _reference_corrupt(self, k, y=None):
+    """``ControlLoop._corrupt`` with the numpy reference in place of the plug-in (no delay)."""
+    comp = self.comp
+    y = self.meas.res[0] if y is None else y
+    s = comp.sensor
+    att, rate = s.attitude_noise > 0, s.rate_noise > 0
+    nz = np.concatenate([comp.rng.normal(0.0, s.attitude_noise, 3) if att else [],
+                         comp.rng.normal(0.0, s.rate_noise, 3) if rate else []])
+    self.seen[:] = _numpy_corrupt(y, nz, att, rate, comp.meas_layout)
+
+
+def _iss(sensor, duration, monkeypatch):
     # every stage: the per-tick loop's (the default rate's own test: tests/test_effect_rates.py)
     scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace(
         {"controller.sensor": sensor, "simulation.environment_rate": 0})
     kw = dict(duration=duration, output_dt=1.0)
-    return simulate(scene, **kw), simulate(scene, fused=False, **kw)
+    runs = simulate(scene, **kw), simulate(scene, fused=False, **kw)
+    with monkeypatch.context() as m:
+        m.setattr(ControlLoop, "_corrupt", _reference_corrupt)
+        return runs + (simulate(scene, fused=False, **kw),)
 
 
 def _rel(a, b):
@@ -81,18 +133,20 @@ def _rel(a, b):
     ],
     ids=["both_300s", "attitude_short_last", "rate"],
 )
-def test_noisy_fused_loop_flies_the_per_tick_run(sensor, duration):
+def test_noisy_fused_loop_flies_the_per_tick_run(sensor, duration, monkeypatch):
     """The PD LVLH hold of iss_lvlh_hold (DGCMGs, SR steering, tracking arrays, aero) with
-    sensor noise: the fused loop is taken and every column agrees with the per-tick loop to
-    round-off; the summary counts are equal."""
-    fused, per_tick = _iss(sensor, duration)
+    sensor noise: the fused loop is taken, and it and the per-tick loop (both with the plug-in)
+    agree in every column to round-off with the per-tick loop whose corruption is the numpy
+    reference; the summary counts are equal."""
+    fused, per_tick, reference = _iss(sensor, duration, monkeypatch)
     assert fused.meta["summary"]["fused"] is True and per_tick.meta["summary"]["fused"] is False
-    assert fused.columns == per_tick.columns and np.array_equal(fused.t, per_tick.t)
-    rel = _rel(fused, per_tick)
-    worst = fused.columns[int(np.argmax(rel.max(axis=0)))]
-    assert rel.max() <= PATH_RTOL, f"column {worst} differs by {rel.max():.2e} of its range"
-    for key in ("ticks", "controller_updates", "rate_limited_ticks", "momentum_saturated_ticks"):
-        assert fused.meta["summary"][key] == per_tick.meta["summary"][key], key
+    for run in (fused, per_tick):
+        assert run.columns == reference.columns and np.array_equal(run.t, reference.t)
+        rel = _rel(run, reference)
+        worst = run.columns[int(np.argmax(rel.max(axis=0)))]
+        assert rel.max() <= PATH_RTOL, f"column {worst} differs by {rel.max():.2e} of its range"
+        for key in ("ticks", "controller_updates", "rate_limited_ticks", "momentum_saturated_ticks"):
+            assert run.meta["summary"][key] == reference.meta["summary"][key], key
 
 
 def test_noisy_fused_run_is_seeded_and_the_noise_shows():

@@ -72,6 +72,19 @@ def test_batch_row_k_is_the_single_run_k_bit_for_bit(name, params):
         _same(tr, simulate(s, fused=False))
 
 
+def test_samples_with_different_corruptions_are_their_single_runs():
+    """One batch whose samples corrupt different fields (both, attitude only, rate only, a delay
+    alone, none): the mapped corruption plug-in keeps per sample only its own run's fields, so
+    row k is single run k bit for bit."""
+    base = _samples({"reference": "lvlh", "bandwidth": 0.01}, "pd")[0]
+    sensors = [dict(NOISE), {"attitude_noise": 1e-3}, {"rate_noise": 1e-5}, {"delay": 0.2}, {}]
+    scenes = [base.replace({"controller.sensor": {**x, "seed": 3 + k}}) for k, x in enumerate(sensors)]
+    res = run_lockstep(scenes, keep=True, fused=False)
+    for s, (kind, tr) in zip(scenes, res):
+        assert kind == "batch"
+        _same(tr, simulate(s, fused=False))
+
+
 def test_the_default_update_batch_loops_and_gives_the_same_numbers():
     """A law without update_batch (a subclass of example_hold that only has _update): the base
     class's default calls each sample's update; same numbers, delay and noise included."""

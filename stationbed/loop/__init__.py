@@ -7,6 +7,7 @@ once as casadi expressions; the executors evaluate the same functions (docs/loop
 
 from .actuator import ACTUATORS, Actuator, get_actuator, pulse_pieces, split_step
 from .cmg_cluster import CmgClusterActuator, IdealTorquer, chain_end
+from .corruption import Corruption, corrupt_compiled, corrupt_symbolic, draws_layout
 from .flight import Flight, flight_columns
 from .gyro import RateGyro
 from .layout import Layout
@@ -20,4 +21,5 @@ from .thrusters import ThrusterCluster
 __all__ = ["Layout", "Sensor", "TRUTH", "noise_rng", "RateGyro", "StarTracker", "SENSORS", "get_sensor",
            "build_sensors", "Mekf", "FILTER", "Suite", "SuiteNoise", "Flight",
            "flight_columns", "Actuator", "ACTUATORS", "get_actuator", "pulse_pieces", "split_step",
-           "ThrusterCluster", "IdealTorquer", "CmgClusterActuator", "chain_end"]
+           "ThrusterCluster", "IdealTorquer", "CmgClusterActuator", "chain_end", "Corruption", "draws_layout",
+           "corrupt_symbolic", "corrupt_compiled"]

@@ -256,6 +256,8 @@ class ControlLoop:
             self._corrupt(k, y)
 
     def _corrupt(self, k: int, y=None) -> None:
+        """``seen`` at tick k: the delay (this executor's ring buffer of past measurements),
+        then the corruption plug-in (loop/corruption.py) compiled, on this tick's draws."""
         comp = self.comp
         y = self.meas.res[0] if y is None else y
         delay = comp.delay
@@ -263,22 +265,15 @@ class ControlLoop:
         if k == 0:
             self.history[:] = y
         self.history[slot] = y
-        self.seen[:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
-        s = comp.sensor
-        if s.attitude_noise > 0:
-            q = self.seen[comp.meas_layout.slice("q_BN")]
-            d = 0.5 * comp.rng.normal(0.0, s.attitude_noise, 3)
-            qn = np.array(
-                [
-                    q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
-                    q[1] + q[0] * d[0] + q[2] * d[2] - q[3] * d[1],
-                    q[2] + q[0] * d[1] + q[3] * d[0] - q[1] * d[2],
-                    q[3] + q[0] * d[2] + q[1] * d[1] - q[2] * d[0],
-                ]
-            )
-            q[:] = qn / np.linalg.norm(qn)
-        if s.rate_noise > 0:
-            self.seen[comp.meas_layout.slice("omega_BN_B")] += comp.rng.normal(0.0, s.rate_noise, 3)
+        c = comp.corruption
+        if c.width == 0:  # a delay alone
+            self.seen[:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
+            return
+        fc = c.compiled()
+        fc.args[0][:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
+        fc.args[1][:] = c.draw(comp.rng, 1)[0]
+        fc()
+        self.seen[:] = fc.res[0]
 
     def actuate(self, t: float, cmd, count: bool = True) -> int:
         """The actuator chain at tick ``t`` on the law's command: sets the held input (the CMG

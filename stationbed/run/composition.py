@@ -31,6 +31,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..core.layout import Layout
+from ..loop.corruption import Corruption
 from .controller import command_values
 
 __all__ = ["Composition", "RunState", "FlightMemory", "ControllerFailure"]
@@ -84,6 +85,14 @@ class Composition:
     @cached_property
     def model(self):
         return self.system.formulation.model
+
+    @cached_property
+    def corruption(self):
+        """The ideal measurement's noise as its plug-in (:class:`~stationbed.loop.Corruption`;
+        its delay stays the executor's ring buffer), or None when ``[controller.sensor]`` is off."""
+        if not self.noisy:
+            return None
+        return Corruption(self.sensor.attitude_noise, self.sensor.rate_noise, self.meas_layout)
 
     @property
     def layout(self) -> dict:

@@ -15,8 +15,9 @@ array rate step with them, no sensor delay, a controller with ``symbolic``.
 Sensor noise: before each compiled call Python draws the noise of its ticks from the loop's
 generator, in the per-tick loop's order (per tick: attitude, then rate; :func:`_draw`), and
 passes them as a per-tick input of the ``mapaccum``; the compiled tick corrupts the measurement
-the controller sees as ``ControlLoop._corrupt`` does (:func:`_corrupt_sx`). Same draws, same
-operations: the fused and per-tick noisy runs agree to round-off (tests/test_fused_noise.py).
+the controller sees by the corruption plug-in's expressions (loop/corruption.py, inlined: the
+per-tick loop calls them compiled). Same draws, same operations: the fused and per-tick noisy
+runs agree to round-off (tests/test_fused_noise.py).
 """
 
 from __future__ import annotations
@@ -28,9 +29,9 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions, sx_function
+from ..loop.corruption import corrupt_symbolic, draws_layout
 from . import law_state
 from .chunk_layout import chunk_carry, chunk_info, chunk_par
-from .measurement import noise_fields
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
@@ -77,7 +78,7 @@ def fused_ok(comp) -> bool:
 
 
 def _noise_flags(comp) -> tuple[bool, bool]:
-    """(attitude noise on, rate noise on): which corruptions of ``ControlLoop._corrupt`` apply."""
+    """(attitude noise on, rate noise on): which corruptions of the plug-in apply."""
     if not comp.noisy:
         return False, False
     return comp.sensor.attitude_noise > 0, comp.sensor.rate_noise > 0
@@ -85,34 +86,14 @@ def _noise_flags(comp) -> tuple[bool, bool]:
 
 def _noise_width(flags) -> int:
     """Draws per tick: 3 for the attitude, then 3 for the rate (the per-tick loop's order;
-    :func:`~.measurement.noise_fields`)."""
-    return noise_fields(*flags).size
+    :func:`~stationbed.loop.draws_layout`)."""
+    return draws_layout(*flags).size
 
 
 def _corrupt_sx(y, nz, flags, layout):
-    """``y`` as ``ControlLoop._corrupt`` corrupts it, with this tick's draws ``nz`` (the values of
-    ``rng.normal(0, sigma, 3)``): the same operations in the same order."""
-    att, rate = flags
-    N = noise_fields(att, rate)  # the draws by name
-    parts = [y[i] for i in range(y.numel())]
-    if att:
-        iq = layout.slice("q_BN")
-        q = parts[iq]
-        za = N.get(nz, "attitude")
-        d = [0.5 * za[i] for i in range(3)]
-        qn = [
-            q[0] - q[1] * d[0] - q[2] * d[1] - q[3] * d[2],
-            q[1] + q[0] * d[0] + q[2] * d[2] - q[3] * d[1],
-            q[2] + q[0] * d[1] + q[3] * d[0] - q[1] * d[2],
-            q[3] + q[0] * d[2] + q[1] * d[1] - q[2] * d[0],
-        ]
-        norm = ca.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
-        parts[iq] = [c / norm for c in qn]
-    if rate:
-        iw = layout.slice("omega_BN_B")
-        zr = N.get(nz, "rate")
-        parts[iw] = [w + zr[i] for i, w in enumerate(parts[iw])]
-    return ca.vertcat(*parts)
+    """``y`` corrupted by this tick's draws ``nz``: the corruption plug-in's expressions
+    (loop/corruption.py), inlined; the per-tick loop calls the same ones compiled."""
+    return corrupt_symbolic(y, nz, flags, layout)
 
 
 def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
@@ -304,16 +285,12 @@ def run_fused(comp, res, K: int) -> None:
 
 
 def _draw(comp, n: int, flags) -> np.ndarray:
-    """The sensor draws of the next ``n`` ticks, (n, 3 or 6): per tick ``rng.normal(0, σ_att, 3)``
-    then ``rng.normal(0, σ_rate, 3)``, as ``ControlLoop._corrupt`` draws them (a Generator fills
-    an array element by element from one stream, and ``normal(0, σ)`` is ``0 + σ z``: the same
-    numbers from one ``standard_normal`` call, tests/test_fused_noise.py)."""
-    s = comp.sensor
-    N = noise_fields(*flags)
-    z = comp.rng.standard_normal((n, N.size))
-    sigma = {"attitude": s.attitude_noise, "rate": s.rate_noise}
-    sig = N.pack({f: [sigma[f]] * 3 for f in N.names})
-    return 0.0 + sig * z
+    """The sensor draws of the next ``n`` ticks, (n, 3 or 6), from the run's generator in the
+    per-tick loop's order (the plug-in's :meth:`~stationbed.loop.Corruption.draw`)."""
+    c = comp.corruption
+    if c is None or c.flags != tuple(flags):
+        raise AssertionError(f"sensor draws {flags} asked of a run whose corruption is {c and c.flags}")
+    return c.draw(comp.rng, n)
 
 
 def _symbolic_params(ctrl):

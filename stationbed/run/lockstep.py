@@ -33,7 +33,7 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
-from .measurement import noise_fields
+from ..loop.corruption import corrupt_compiled, draws_layout
 from .lockstep_flight import FlightBatch
 from .prepare import prepare
 from .rows import Rows
@@ -236,10 +236,16 @@ class _Lockstep:
         self.sig_r = np.array([x.rate_noise for x in sens])
         self.delay = np.array([s.loop.comp.delay for s in samples])
         self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
-        self.NZ = noise_fields(True, True)  # each sample's draws by name (those off stay 0)
+        self.NZ = draws_layout(True, True)  # each sample's draws by name (those off stay 0)
         self.z = np.zeros((n, DRAW_BLOCK, self.NZ.size))
         self.layout = lp.meas_layout
         self.any_noisy = bool(self.noisy.any())
+        self.cor = None  # the corruption plug-in, both corruptions on, mapped over the samples
+        if self.any_noisy and (self.noisy & ((self.sig_a > 0) | (self.sig_r > 0))).any():
+            one = corrupt_compiled((True, True), lp.meas_layout).f
+            if one.numel_in(0) != ny:
+                raise AssertionError(f"measurement of {ny} values, its layout {lp.meas_layout!r}")
+            self.cor = mapped(one, n, 1)
         self.flight = FlightBatch(samples, lp.meas_layout) if lp.flight is not None else None
         if not self.any_noisy and self.flight is None:
             self.seen = self.raw
@@ -247,21 +253,20 @@ class _Lockstep:
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
-        """Each noisy sample's draws for ticks k .. k + DRAW_BLOCK - 1, in its single run's order
-        (per tick: attitude 3, then rate 3; ``normal(0, s, 3)`` is ``0 + s * standard_normal``)."""
+        """Each noisy sample's draws for ticks k .. k + DRAW_BLOCK - 1, from its own generator in
+        its single run's order (its plug-in's :meth:`~stationbed.loop.Corruption.draw`)."""
         self.z[:] = 0.0
         for i, s in enumerate(self.S):
-            if not self.noisy[i]:
+            c = s.loop.comp.corruption
+            if c is None or c.width == 0:
                 continue
-            Ni = noise_fields(bool(self.sig_a[i] > 0), bool(self.sig_r[i] > 0))  # its run's draws, in order
-            if Ni.size == 0:
-                continue
-            zi = s.loop.comp.rng.standard_normal((DRAW_BLOCK, Ni.size))
-            for f in Ni.names:
-                self.z[i, :, self.NZ.slice(f)] = zi[:, Ni.slice(f)]
+            zi = c.draw(s.loop.comp.rng, DRAW_BLOCK)
+            for f in c.draws.names:
+                self.z[i, :, self.NZ.slice(f)] = zi[:, c.draws.slice(f)]
 
     def _sense(self, k: int, t: float = 0.0) -> None:
-        """``seen`` from ``raw`` at tick k: ``ControlLoop._corrupt`` per sample, vectorised."""
+        """``seen`` from ``raw`` at tick k, as ``ControlLoop._corrupt`` per sample: each sample's delay
+        (its ring buffer), then the corruption plug-in mapped over the samples."""
         seen, raw = self.seen, self.raw
         if self.flight is not None:  # [[sensor]] tables (and an [estimator]): their flight tick first
             self.flight.fly(k, t, raw, seen)
@@ -280,27 +285,24 @@ class _Lockstep:
         self.hist[rows, slot] = raw
         src = np.where(k >= D, (k - D) % (D + 1), 0)
         seen[:] = self.hist[rows, src]
+        if self.cor is None:  # delays alone
+            return
         kb = k % DRAW_BLOCK
         if kb == 0:
             self._draw(k)
-        z = self.z[:, kb]
-        att = self.noisy & (self.sig_a > 0)
-        if att.any():
-            q = seen[:, self.layout.slice("q_BN")]
-            d = 0.5 * (0.0 + self.sig_a[:, None] * z[:, self.NZ.slice("attitude")])
-            qn = np.stack([
-                q[:, 0] - q[:, 1] * d[:, 0] - q[:, 2] * d[:, 1] - q[:, 3] * d[:, 2],
-                q[:, 1] + q[:, 0] * d[:, 0] + q[:, 2] * d[:, 2] - q[:, 3] * d[:, 1],
-                q[:, 2] + q[:, 0] * d[:, 1] + q[:, 3] * d[:, 0] - q[:, 1] * d[:, 2],
-                q[:, 3] + q[:, 0] * d[:, 2] + q[:, 1] * d[:, 1] - q[:, 2] * d[:, 0],
-            ], axis=1)
-            # np.linalg.norm of a (4,) is sqrt(dot): a stacked matmul makes the same dot per row
-            norm = np.sqrt(np.matmul(qn[:, None, :], qn[:, :, None])[:, 0, 0])
-            q[att] = (qn / norm[:, None])[att]
-        rate = self.noisy & (self.sig_r > 0)
-        if rate.any():
-            w = seen[:, self.layout.slice("omega_BN_B")]
-            w[rate] = (w + (0.0 + self.sig_r[:, None] * z[:, self.NZ.slice("rate")]))[rate]
+        # the corruption plug-in (loop/corruption.py), compiled, mapped over the samples; each
+        # sample keeps the fields its own run corrupts (the two corruptions touch disjoint fields
+        # with the same operations, so a row is its single run's, bit for bit)
+        cor = self.cor
+        cor.args[0][:] = seen.ravel()
+        cor.args[1][:] = self.z[:, kb].ravel()
+        cor()
+        out = cor.res[0].reshape(self.n, -1)
+        for f, sig in (("q_BN", self.sig_a), ("omega_BN_B", self.sig_r)):
+            on = self.noisy & (sig > 0)
+            if on.any():
+                sl = self.layout.slice(f)
+                seen[on, sl] = out[on, sl]
 
     def _measure(self, i: int, t: float, x) -> None:
         self.raw[i] = self.S[i].loop.measure(t, x)

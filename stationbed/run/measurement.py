@@ -18,6 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..core.layout import Layout
+from ..loop.corruption import draws_layout
 
 __all__ = ["measurement_fields", "measurement_layout", "command_fields", "noise_fields", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
 
@@ -47,12 +48,10 @@ def command_fields(command: str, n_gimbals: int) -> Layout:
     return Layout(**{COMMAND_FIELDS[command]: 3 if command == "torque" else n_gimbals})
 
 
-@lru_cache(maxsize=None)
 def noise_fields(attitude: bool, rate: bool) -> Layout:
     """One tick's draws of the ideal measurement's noise (``[controller.sensor]``), those on, in
-    the per-tick loop's order: ``attitude`` (3 standard normals, times its sigma: the small
-    rotation applied to ``q_BN``), then ``rate`` (3, added to ``omega_BN_B``)."""
-    return Layout(**({"attitude": 3} if attitude else {}), **({"rate": 3} if rate else {}))
+    the per-tick loop's order (the corruption plug-in's :func:`~stationbed.loop.draws_layout`)."""
+    return draws_layout(attitude, rate)
 
 
 def _offsets(layout) -> dict[str, tuple[int, int]]:
