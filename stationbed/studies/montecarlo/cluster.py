@@ -23,6 +23,14 @@ from contextlib import contextmanager
 __all__ = ["start_method", "local_cluster"]
 
 
+#: Dask's periodic work a batch study does not use, off on its own cluster (measured in README
+#: "Speed"): the workers' statistical profiler (a thread sampling the running task's stack every
+#: 10 ms, for the dashboard's profile page) and the scheduler's work stealing (a 100 ms
+#: callback; with one thread per worker and at most two chunks each in flight there is little
+#: to steal, and a stolen chunk gives the same rows)
+QUIET = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False}
+
+
 def start_method() -> str:
     """How local workers start: ``fork`` on Linux, else Dask's default ``spawn``."""
     return "fork" if sys.platform.startswith("linux") else "spawn"
@@ -36,7 +44,7 @@ def local_cluster(workers: int):
     import dask  # noqa: PLC0415 - dask only when asked
     from distributed import Client, LocalCluster  # noqa: PLC0415
 
-    with dask.config.set({"distributed.worker.multiprocessing-method": start_method()}), \
+    with dask.config.set({"distributed.worker.multiprocessing-method": start_method(), **QUIET}), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
             Client(cluster) as client:
         yield client
