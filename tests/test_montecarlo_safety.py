@@ -192,6 +192,33 @@ def test_a_second_study_into_a_locked_folder_is_refused(scene_file, tmp_path, ca
     assert sorted(p.name for p in out.iterdir()) == ["study.lock"]
 
 
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX fork")
+def test_a_forked_worker_does_not_keep_the_study_locked(tmp_path):
+    """Local workers are forked from the driver (.cluster): a child alive after the driver let
+    the lock go must not hold it (flock lives until every copy of the descriptor is closed)."""
+    import fcntl
+    import signal
+
+    from stationbed.studies.montecarlo.folder import locked
+
+    r, w = os.pipe()
+    with locked(tmp_path):
+        pid = os.fork()
+        if pid == 0:  # the child: says it runs, then outlives the block below, as a stray worker would
+            os.write(w, b"1")
+            time.sleep(30)
+            os._exit(0)
+        assert os.read(r, 1) == b"1"
+    os.close(r)
+    os.close(w)
+    try:
+        with open(tmp_path / "study.lock", "a+") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises while the child keeps the lock
+    finally:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+
+
 def test_resume_refuses_the_chunks_of_another_study(scene_file, tmp_path, capsys):
     a, b = tmp_path / "a", tmp_path / "b"
     other = tmp_path / "other.toml"
