@@ -11,12 +11,18 @@ Dask does by default. The driver forks with Dask's event-loop thread running, wh
 supports (``distributed.worker.multiprocessing-method``); the samples' numbers do not depend on
 how the worker started (a sample is a pure function of the scene and its index).
 
+Before forking, the driver's objects (~117 000 tracked by the garbage collector: modules,
+casadi graphs, the scene) are frozen (``gc.freeze``) so a worker's collections never walk them
+(nor copy their pages): the collector's time per sample 0.44 -> 0.10 ms (in one process, 50
+samples); the driver unfreezes its own at once.
+
 Why no dashboard: ``dashboard_address=":0"`` imports bokeh and serves pages nobody opens in a
 batch run (a user who wants one starts their own scheduler and passes ``--scheduler``).
 """
 
 from __future__ import annotations
 
+import gc
 import sys
 from contextlib import contextmanager
 
@@ -44,7 +50,11 @@ def local_cluster(workers: int):
     import dask  # noqa: PLC0415 - dask only when asked
     from distributed import Client, LocalCluster  # noqa: PLC0415
 
-    with dask.config.set({"distributed.worker.multiprocessing-method": start_method(), **QUIET}), \
-            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
-        yield client
+    with dask.config.set({"distributed.worker.multiprocessing-method": start_method(), **QUIET}):
+        gc.freeze()  # the driver's objects out of the forked workers' garbage collections (below)
+        try:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        finally:
+            gc.unfreeze()  # the driver collects its own as before; the workers keep theirs frozen
+        with cluster, Client(cluster) as client:
+            yield client
