@@ -23,8 +23,11 @@ batch run (a user who wants one starts their own scheduler and passes ``--schedu
 from __future__ import annotations
 
 import gc
+import os
 import sys
 from contextlib import contextmanager
+
+from ...core import progress
 
 __all__ = ["start_method", "local_cluster"]
 
@@ -35,6 +38,22 @@ __all__ = ["start_method", "local_cluster"]
 #: callback; with one thread per worker and at most two chunks each in flight there is little
 #: to steal, and a stolen chunk gives the same rows)
 QUIET = {"distributed.worker.profile.enabled": False, "distributed.scheduler.work-stealing": False}
+
+
+#: whether this process is starting (or keeping) a local cluster whose workers it forks
+_FORKING = [False]
+
+
+def _worker_after_fork() -> None:
+    """A worker forked by :func:`local_cluster` starts quiet (no progress lines or bars of its
+    own on the user's terminal: the driver reports the study)."""
+    if _FORKING[0]:
+        _FORKING[0] = False
+        progress.forked_quiet()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_worker_after_fork)
 
 
 def start_method() -> str:
@@ -50,11 +69,16 @@ def local_cluster(workers: int):
     import dask  # noqa: PLC0415 - dask only when asked
     from distributed import Client, LocalCluster  # noqa: PLC0415
 
-    with dask.config.set({"distributed.worker.multiprocessing-method": start_method(), **QUIET}):
-        gc.freeze()  # the driver's objects out of the forked workers' garbage collections (below)
-        try:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        finally:
-            gc.unfreeze()  # the driver collects its own as before; the workers keep theirs frozen
-        with cluster, Client(cluster) as client:
-            yield client
+    _FORKING[0] = True  # for the cluster's life: the Nanny forks a worker it restarts too
+    try:
+        with dask.config.set({"distributed.worker.multiprocessing-method": start_method(), **QUIET}):
+            gc.freeze()  # the driver's objects out of the forked workers' garbage collections
+            try:
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None)
+            finally:
+                gc.unfreeze()  # the driver collects its own as before; the workers keep theirs frozen
+            with cluster, Client(cluster) as client:
+                yield client
+    finally:
+        _FORKING[0] = False
