@@ -32,8 +32,8 @@ from ...core import progress
 __all__ = ["start_method", "local_cluster"]
 
 
-#: Dask's periodic work a batch study does not use, off on its own cluster (measured in README
-#: "Speed"): the workers' statistical profiler (a thread sampling the running task's stack every
+#: Dask's periodic work a batch study does not use, off on its own cluster (measured in docs/design.md
+#: "The floor at the default"): the workers' statistical profiler (a thread sampling the running task's stack every
 #: 10 ms, for the dashboard's profile page) and the scheduler's work stealing (a 100 ms
 #: callback; with one thread per worker and at most two chunks each in flight there is little
 #: to steal, and a stolen chunk gives the same rows)
