@@ -5,9 +5,11 @@ Work: the samples ``0 .. n-1`` are cut into chunks of ``chunk`` samples (the uni
 task overhead is amortised); a chunk is a pure function of (scene, k0, k1), submitted under a
 key naming the study and its range, so Dask re-runs a chunk whose worker died and the result
 is the same. Before dispatch the driver builds the scene's compiled system (a short run of the
-base scene), so workers load it from the disk cache instead of compiling it each.
+base scene), so workers load it from the disk cache instead of compiling it each (the workers
+of the study's own local cluster are forked after it and have it in memory: :mod:`.cluster`).
 
-Work is generated lazily (the ranges not yet on disk, cut into chunks) and at most
+Work is generated lazily (the ranges not yet on disk, cut into chunks; a default-sized study's
+last chunks shrink so the workers end together, :func:`_gaps`) and at most
 :data:`IN_FLIGHT_PER_WORKER` chunks per worker are in flight; an n whose table and envelopes
 cannot fit in this process's memory is refused before anything runs (:func:`check_memory`).
 
