@@ -16,8 +16,8 @@ scenario) with the sensor noise off, so the ``pd`` law runs fused (controller, s
 dynamics in one compiled loop; it now runs fused with the noise too, README "Monte Carlo"). Rows, in one run:
 
 1. ``pd`` fused, ``--n`` samples (default 1000) on ``--workers`` (default 2) local worker
-   processes: wall of the whole ``stationbed.montecarlo`` call, cluster start-up and the
-   driver's warm-up included (target <= 45 s, issue 25; it was 60 s);
+   processes: wall of the whole ``stationbed.montecarlo(..., workers=K)`` call, its cluster's
+   start-up (workers forked after the driver's warm-up, README "Speed") and close included (target <= 45 s, issue 25; it was 60 s);
 2. ``example_hold`` (a Python controller: since issue 22 its chunks run in lockstep, its vectorised
    ``update_batch`` called once per tick for all samples; ``benchmarks/bench_lockstep.py`` times
    every executor side by side), ``--n-python`` samples (default 200),
@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import sys
 import time
@@ -62,6 +63,13 @@ def vm_hwm_mib() -> float:
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) / 1024.0
     return float("nan")
+
+
+def children_peak_mib() -> float:
+    """The largest resident-set high-water mark among this process's finished children [MiB]
+    (the study's local workers, once its cluster closed; a forked worker counts the pages it
+    shares with the driver)."""
+    return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
 
 
 #: smoke mode: samples of each row (pd, example_hold, efficiency) and workers
@@ -119,11 +127,9 @@ def main(argv=None) -> int:
     rows = {"loadavg_start": os.getloadavg()}
     pd_scene = bench_scene("pd", duration, args.environment_rate)
     # 1. pd fused, whole call (cluster start-up included)
-    def study_on_new_cluster():  # what montecarlo(..., workers=K) does, keeping the workers to ask
-        with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=":0") as cl, Client(cl) as client:
-            res = montecarlo(pd_scene, n=args.n, client=client)
-            return res, max(client.run(vm_hwm_mib).values())
+    def study_on_new_cluster():  # montecarlo(..., workers=K): its own cluster, started after its warm-up
+        res = montecarlo(pd_scene, n=args.n, workers=args.workers)
+        return res, children_peak_mib()
 
     if "pd" in want or args.only_pd:
         wall, (res, worker_mib) = timed(study_on_new_cluster)

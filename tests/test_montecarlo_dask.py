@@ -165,3 +165,20 @@ def test_ctrl_c_keeps_finished_chunks_and_resume_completes(tmp_path):
     assert main([*args, "--resume", "--exit-zero"]) == 0
     serial = montecarlo(load_scene(path).replace({"montecarlo.n": n}), chunk=1).df
     pd.testing.assert_frame_equal(pd.read_parquet(out / "samples.parquet"), serial)
+
+
+def test_forked_workers_start_quiet_and_the_driver_keeps_its_progress():
+    """Local workers forked from a driver whose command line set progress up (plain lines, a
+    task open) start as a spawned worker does: quiet, no task of the driver's; the driver
+    keeps its mode."""
+    from stationbed.core import progress
+    from stationbed.studies.montecarlo.cluster import local_cluster
+
+    progress.configure("plain", heartbeat=False)
+    try:
+        with progress.task("a study", total=1), local_cluster(2) as client:
+            assert set(client.run(progress.mode).values()) == {"quiet"}
+            assert set(client.run(lambda: len(progress._S.open_tasks)).values()) == {0}
+            assert progress.mode() == "plain"
+    finally:
+        progress.reset()

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import errno
 import json
+import math
 import os
 import socket
 import subprocess
@@ -189,6 +190,33 @@ def test_a_second_study_into_a_locked_folder_is_refused(scene_file, tmp_path, ca
         assert _study(scene_file, out) == 2
         assert "another study is running" in one_error_line(capsys.readouterr().err)
     assert sorted(p.name for p in out.iterdir()) == ["study.lock"]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX fork")
+def test_a_forked_worker_does_not_keep_the_study_locked(tmp_path):
+    """Local workers are forked from the driver (.cluster): a child alive after the driver let
+    the lock go must not hold it (flock lives until every copy of the descriptor is closed)."""
+    import fcntl
+    import signal
+
+    from stationbed.studies.montecarlo.folder import locked
+
+    r, w = os.pipe()
+    with locked(tmp_path):
+        pid = os.fork()
+        if pid == 0:  # the child: says it runs, then outlives the block below, as a stray worker would
+            os.write(w, b"1")
+            time.sleep(30)
+            os._exit(0)
+        assert os.read(r, 1) == b"1"
+    os.close(r)
+    os.close(w)
+    try:
+        with open(tmp_path / "study.lock", "a+") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises while the child keeps the lock
+    finally:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
 
 
 def test_resume_refuses_the_chunks_of_another_study(scene_file, tmp_path, capsys):
@@ -572,8 +600,28 @@ def test_the_gaps_a_resume_runs_are_exactly_the_missing_samples():
         n, size = int(rng.integers(1, 60)), int(rng.integers(1, 10))
         edges = sorted({0, n, *(int(c) for c in rng.integers(0, n, rng.integers(0, 12)))})
         done = {a: (b, None, None) for a, b in zip(edges, edges[1:]) if rng.random() < 0.5}
-        gaps = list(_gaps(n, size, done))
+        tail_workers = int(rng.integers(0, 4))  # 0: plain chunks; else the guided tail of a default size
+        gaps = list(_gaps(n, size, done, tail_workers))
         assert all(0 < b - a <= size for a, b in gaps)
         covered = sorted([*gaps, *((a, v[0]) for a, v in done.items())])
         assert covered[0][0] == 0 and covered[-1][1] == n, (n, size, done, gaps)
         assert all(b == c for (_, b), (c, _) in zip(covered, covered[1:])), (n, size, done, gaps)  # no gap, no overlap
+
+
+def test_the_guided_tail_shrinks_the_last_chunks_and_ends_the_workers_together():
+    """A default-sized study on K workers: chunks non-increasing, full ones first, then none
+    longer than the samples left / (TAIL_SPLIT K) nor shorter than size // TAIL_MIN_DIV (bar
+    the very last, a remainder): the study ends on a short chunk, not a full one."""
+    from stationbed.studies.montecarlo.engine import TAIL_MIN_DIV, TAIL_SPLIT, _gaps
+
+    for n, size, k in ((1000, 50, 2), (1000, 50, 4), (97, 13, 2), (400, 50, 3)):
+        lens = [b - a for a, b in _gaps(n, size, {}, k)]
+        assert sum(lens) == n
+        assert lens == sorted(lens, reverse=True), lens
+        left = n
+        for i, m in enumerate(lens):
+            if i < len(lens) - 1:
+                assert m >= max(1, size // TAIL_MIN_DIV), lens
+            assert m <= max(max(1, size // TAIL_MIN_DIV), math.ceil(left / (TAIL_SPLIT * k))) or m == size, lens
+            left -= m
+        assert lens[-1] <= max(1, size // TAIL_MIN_DIV), lens  # the one that ends the study is short

@@ -194,6 +194,19 @@ def reset() -> None:
         _S.__init__()
 
 
+def forked_quiet() -> None:
+    """In a forked child (a local Dask worker, studies/montecarlo/cluster.py): quiet, as a
+    spawned one starts, with none of the parent's tasks, handler or heartbeat, and a fresh lock
+    (the parent's heartbeat may have held it at the fork; its thread does not exist here)."""
+    global _LOCK
+    _LOCK = threading.RLock()
+    if _S.handler is not None:
+        log = logging.getLogger(LOGGER)
+        log.removeHandler(_S.handler)
+        log.setLevel(_S.level)
+    _S.__init__()
+
+
 def mode() -> str:
     """The current mode: ``"tty"``, ``"plain"`` or ``"quiet"``."""
     return _S.mode

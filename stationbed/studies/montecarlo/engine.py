@@ -5,9 +5,11 @@ Work: the samples ``0 .. n-1`` are cut into chunks of ``chunk`` samples (the uni
 task overhead is amortised); a chunk is a pure function of (scene, k0, k1), submitted under a
 key naming the study and its range, so Dask re-runs a chunk whose worker died and the result
 is the same. Before dispatch the driver builds the scene's compiled system (a short run of the
-base scene), so workers load it from the disk cache instead of compiling it each.
+base scene), so workers load it from the disk cache instead of compiling it each (the workers
+of the study's own local cluster are forked after it and have it in memory: :mod:`.cluster`).
 
-Work is generated lazily (the ranges not yet on disk, cut into chunks) and at most
+Work is generated lazily (the ranges not yet on disk, cut into chunks; a default-sized study's
+last chunks shrink so the workers end together, :func:`_gaps`) and at most
 :data:`IN_FLIGHT_PER_WORKER` chunks per worker are in flight; an n whose table and envelopes
 cannot fit in this process's memory is refused before anything runs (:func:`check_memory`).
 
@@ -31,7 +33,7 @@ import os
 import signal
 import threading
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,6 +45,7 @@ from ...run.metrics import METRICS
 from ...run.rate_auto import AUTO, scene_choice
 from ...run.simulation import simulate
 from ...scene import Scene, SceneError, load_scene
+from .cluster import local_cluster
 from .dispersions import check_keys, drawn_columns, nominal_rate
 from .folder import STUDY_JSON, ChunkFiles, StudyStop, locked, study_identity
 from .report import finish
@@ -171,6 +174,10 @@ def _ctrl_c_kept():
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+#: guided tail (:func:`_gaps`): a default chunk is at most the samples left / (TAIL_SPLIT x workers) ...
+TAIL_SPLIT = 2
+#: ... and at least the default size // TAIL_MIN_DIV
+TAIL_MIN_DIV = 5
 #: chunks in flight per worker (submitted, not yet back): enough to keep every worker busy
 IN_FLIGHT_PER_WORKER = 2
 #: the study keeps its table and envelopes in this process until the statistics; an n whose
@@ -240,14 +247,25 @@ def in_flight(items, submit, wait_first, limit: int, pending: set):
                 pending.add(submit(nxt))
 
 
-def _gaps(n: int, size: int, done: dict):
+def _gaps(n: int, size: int, done: dict, tail_workers: int = 0):
     """The chunk ranges ``(k0, k1)`` of at most ``size`` samples that cover what ``done``
-    (``{k0: (k1, ...)}``) does not, in order, generated lazily."""
+    (``{k0: (k1, ...)}``) does not, in order, generated lazily.
+
+    With ``tail_workers`` (the workers of a default-sized study), the chunks shrink at the end
+    (guided scheduling): none is longer than the samples still to cut over
+    ``TAIL_SPLIT x tail_workers``, nor shorter than ``size // TAIL_MIN_DIV``; so the workers run
+    out of work within about one short chunk of each other instead of one idling while another
+    finishes a full chunk. A pure function of its arguments: the same study cuts the same
+    chunks (a sample's numbers do not depend on its chunk anyway)."""
+    left = n - sum(v[0] - a for a, v in done.items())
+    floor = max(1, size // TAIL_MIN_DIV)
     k = 0
     for a in sorted(done) + [n]:
         while k < a:
-            k1 = min(k + size, a)
+            step = size if not tail_workers else max(floor, min(size, math.ceil(left / (TAIL_SPLIT * tail_workers))))
+            k1 = min(k + step, a)
             yield k, k1
+            left -= k1 - k
             k = k1
         if a < n:
             k = done[a][0]
@@ -338,6 +356,7 @@ def _run(scene, study, record, columns, n_env, out, client, workers, chunk, resu
         else:
             files.start()
     size = chunk or recorded or chunk_size(scene, n_workers)
+    guided = not (chunk or recorded or mc.chunk)  # a default size: its tail shrinks (_gaps)
     if files is not None:
         files.write_record({**record, "scene": scene.name, "n": n, "chunk": size})
     said: set[str] = set()  # warnings said in this study (here, or by a worker): each once
@@ -345,7 +364,7 @@ def _run(scene, study, record, columns, n_env, out, client, workers, chunk, resu
     logging.getLogger(progress.LOGGER).addFilter(seen)
     try:
         return _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts,
-                           scheduler)
+                           scheduler, guided)
     finally:
         logging.getLogger(progress.LOGGER).removeFilter(seen)
 
@@ -366,7 +385,8 @@ class _Seen(logging.Filter):
         return True
 
 
-def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts, scheduler):
+def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_workers, files, done, charts, scheduler,
+                guided=False):
     mc = scene.montecarlo
     n = mc.n
 
@@ -382,7 +402,7 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
         for w in res.get("warnings", ()):  # _Seen drops the ones said before
             logging.getLogger(progress.LOGGER).warning(w)
 
-    todo = _gaps(n, size, done)
+    todo = _gaps(n, size, done, tail_workers=n_workers if guided and n_workers > 1 else 0)
     has_todo = sum(k1 - k0 for k0, (k1, _, _) in done.items()) < n
     wall0 = time.perf_counter()
     failures = sum(int((d["status"] != "ok").sum()) for _, d, _ in done.values())
@@ -400,19 +420,16 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                        + (f", ETA {eta:.0f} s" if ran else ""))
 
         show()
-        cluster = None
+        cluster = ExitStack()
+        own = False  # whether this study started its own local cluster
         try:
             if has_todo:
                 with held_warnings(log=False) as said:
                     _warm(scene)
                 for w in said:
                     logging.getLogger(progress.LOGGER).warning(w)
-            if has_todo and client is None and workers:
-                from distributed import Client, LocalCluster  # noqa: PLC0415 - dask only when asked
-
-                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0")
-                client = Client(cluster)
+            if has_todo and client is None and workers:  # workers forked after the warm-up (.cluster)
+                client, own = cluster.enter_context(local_cluster(workers)), True
             if client is None:
                 for k0, k1 in todo:
                     res = run_chunk(scene, k0, k1, n_env)
@@ -426,7 +443,7 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                 from distributed import wait  # noqa: PLC0415
 
                 where = (f"the dask scheduler at {scheduler}" if scheduler else
-                         "the local Dask cluster" if cluster is not None else
+                         "the local Dask cluster" if own else
                          f"the dask scheduler at {getattr(client.scheduler, 'address', '?')}")
                 pending: set = set()
                 with _distributed_logs_quiet():
@@ -456,10 +473,8 @@ def _run_chunks(scene, study, columns, n_env, out, client, workers, size, n_work
                             raise _lost(where, e, chunks_dir, len(done), client) from None
                         raise
         finally:
-            if cluster is not None:
-                with _distributed_logs_quiet():
-                    client.close()
-                    cluster.close()
+            with _distributed_logs_quiet():
+                cluster.close()
     wall = time.perf_counter() - wall0
     order = sorted(done)
     df = pd.concat([done[k][1] for k in order], ignore_index=True)

@@ -137,6 +137,25 @@ def _what_changed(old: dict, new: dict) -> str:
     return "it was written by another version of stationbed"
 
 
+#: the study locks this process holds: a forked child (a local Dask worker, .cluster) closes its
+#: copies at once, so a worker that outlives its driver cannot keep the folder locked (flock's
+#: lock lives until every descriptor of the open file is closed)
+_HELD: set = set()
+
+
+def _close_held_in_child() -> None:
+    for fh in list(_HELD):
+        try:
+            fh.close()
+        except OSError:  # pragma: no cover - nothing to release in this process
+            pass
+    _HELD.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_held_in_child)
+
+
 @contextmanager
 def locked(out: Path):
     """Hold ``out/study.lock`` (exclusive) for the block; SceneError when another study holds it."""
@@ -147,6 +166,7 @@ def locked(out: Path):
         return
     path = out / LOCK_NAME
     fh = open(path, "a+")
+    _HELD.add(fh)
     try:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -163,6 +183,7 @@ def locked(out: Path):
         fh.flush()
         yield
     finally:
+        _HELD.discard(fh)
         fh.close()  # releases the lock
 
 
