@@ -47,9 +47,11 @@ def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, P: Layout, n
     env_B = environment_split(system)["env_B"]
     nb = math.ceil(n / rate)
     nc = C.slice("env").start  # the tick's carry: C's fields before env
-    acc = tick_h.mapaccum("ffl_block_acc", rate)
     cb, pb, wb = ca.MX.sym("cb", nc), ca.MX.sym("pb", P.size + 3), ca.MX.sym("wb", nw * rate)
-    block = ca.Function("ffl_block", [cb, pb, wb], [acc(cb, ca.repmat(pb, 1, rate), ca.reshape(wb, nw, rate))[:, -1]])
+    c = cb
+    for j in range(rate):  # the block's ticks as calls with the block's parameters, not a mapaccum
+        c = tick_h(c, pb, wb[j * nw : (j + 1) * nw])  # (a mapaccum wants them repeated: P.size copies per tick)
+    block = ca.Function("ffl_block", [cb, pb, wb], [c])
     co, po, wo = ca.MX.sym("co", C.size), ca.MX.sym("po", P.size), ca.MX.sym("wo", nw * rate)
     i, x = co[C.slice("i").start], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
     env = C.get(co, "env")

@@ -3,7 +3,9 @@ scene's :class:`~stationbed.loop.Flight` tick inlined.
 
 Per tick, in one compiled ``mapaccum`` (as the per-tick loop does it, call by call): the true
 measurement ``y = meas(t, x)``; the flight tick (truth row, sensors, MEKF; what the law sees);
-the law on what it sees; actuation; one RK4 step. The step is an MX function around the SX
+the law on what it sees; actuation; one RK4 step (the truth row and every part of the step
+that depends on ``(t, x, p)`` alone computed once, in one SX function: ``_build``'s ``split``,
+docs/design.md "The flight loop's speed"). The step is an MX function around the SX
 dynamics, so the suite's ``Switch`` nodes stay lazy in the generated C (a sensor computes only on
 its samples). The carry holds the tick index, the state, the saturation counts and the flight's
 memory: the previous tick's time and true rate, ``theta_B`` and the suite state. The noise of
@@ -74,18 +76,33 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     x1 = ca.vertcat(system.integrator_cls.explicit_step(sx["rhs"], t, x, h, u, p), s1)
     IL = chunk_info(comp.n_cmd, act.numel(), nls)  # the row's info (chunk_layout.py)
     core = sx_function("ff_core", [t, xa, est, cp, u_ext, p, h], [x1, sat, vertcat_by(IL, cmd=[cmd], act=[act], q_ref=[q_ref], s=[s1])])
-    core_h = None
     if rate:  # the environment held over blocks (flight_rates.py): the RHS without it, u_ext + L_env
         L_env = ca.SX.sym("L_env", 3)
         x1h = system.integrator_cls.explicit_step(environment_split(system)["rhs_fast"], t, x, h,
                                                   ca.substitute(u, u_ext, u_ext + L_env), p)
-        core_h = sx_function("ff_core_h", [t, xa, est, cp, u_ext, p, h, L_env], [ca.vertcat(x1h, s1), sat])
     # the truth row: only the measurement's fields the flight reads (the rest are zeros it ignores)
     y_truth = ca.SX.zeros(flight.ny)
     for f in READS:
         y_truth[M.slice(f)] = y[M.slice(f)]
     meas = sx_function("ffl_truth", [t, x, p], [y_truth])
     fl = flight.function()
+    # the tick's step: the truth row and the core's parts that depend on (t, x, p) alone (the
+    # model's stage-1 kinematics: arrays, orbit, rate) in one SX function ``pre``, its values
+    # handed to the rest of the core (``body``): computed once per tick, the same operations
+    step_in = [t, xa, p]
+
+    def split(name: str, ins: list, outs: list) -> tuple[ca.Function, ca.Function]:
+        shared = ca.cse([y_truth] + outs)
+        rest, syms, vals = ca.extract_parametric(shared[1:], ca.vertcat(*step_in))
+        pre = sx_function(f"{name}_pre", step_in, [shared[0], ca.vertcat(*vals)])
+        body = sx_function(f"{name}_body", [ca.vertcat(*syms)] + ins, rest)
+        return pre, body
+
+    core_in = [t, xa, est, cp, u_ext, p, h]
+    if rate:
+        pre, body = split("ff_core_h", core_in + [L_env], [ca.vertcat(x1h, s1), sat])
+    else:
+        pre, body = split("ff_core", core_in, [x1, sat])
 
     def seen(ys):
         return ca.vertcat(*[S.OUTPUTS.get(ys, SEEN[f]) for f in est_fields]) if est_fields else ca.MX(0, 1)
@@ -113,12 +130,9 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
         t0, hh, n_act, k0 = (par[PT.slice(f).start] for f in ("t0", "h", "n_act", "k0"))
         cpc, uc, pc, psc = (PT.get(par, f) for f in ("cp", "u_ext", "p", "ps"))
         tt = t0 + i * hh
-        yt = meas(tt, X.get(xc, "x") if nls else xc, pc)
+        yt, vals = pre(tt, xc, pc)
         th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
-        if held:
-            x_new, fl_sat = core_h(tt, xc, seen(ys), cpc, uc, pc, hh, PT.get(par, "L_hold"))
-        else:
-            x_new, fl_sat, _ = core(tt, xc, seen(ys), cpc, uc, pc, hh)
+        x_new, fl_sat = body(vals, tt, xc, seen(ys), cpc, uc, pc, hh, *([PT.get(par, "L_hold")] if held else []))
         c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
                        theta_B=th1, omega_prev=M.get(yt, "omega_BN_B"), xs=xs1)
         # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no

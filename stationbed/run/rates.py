@@ -16,8 +16,8 @@ cancels; what is left, and how it reaches the attitude through the loop, is boun
 docs/design.md and checked against the every-stage evaluation by tests/test_effect_rates.py.
 
 Composition: the tick (``one``: actuate, one RK4 step of the right-hand side *without* the
-environment kinds, :func:`~.system.environment_split`, with ``u_ext + L_hold``) is mapped N times
-into a block (casadi ``mapaccum``), and the blocks ``ceil(n / N)`` times into the chunk of ``n``
+environment kinds, :func:`~.system.environment_split`, with ``u_ext + L_hold``) is called N times
+into a block (N calls with the block's one parameter vector), and the blocks ``ceil(n / N)`` times into the chunk of ``n``
 ticks; the tail of the last block is masked by the tick counter (``i < n_act``), as the
 every-stage chunk masks its tail. The carry gains ``(L_prev, t_prev, have_prev)``, which the
 executor passes from chunk to chunk (:func:`carry_width`).
@@ -96,11 +96,12 @@ def held_chunk(system, one, rate: int, n: int, C: Layout, P: Layout, nn: int) ->
                     counts=[cnt + ca.if_else(active, ca.vertcat(fl[0] > 0.5, fl[1] > 0.5), ca.SX.zeros(2))])],
         {"cse": True},
     )
-    acc = tick.mapaccum("held_block_acc", rate)
     cb, pb = ca.MX.sym("cb", T.size), ca.MX.sym("pb", PH.size)
     nzb = [ca.MX.sym("nzb", nn * rate)] if nn else []
-    tb = acc(cb, ca.repmat(pb, 1, rate), *([ca.reshape(nzb[0], nn, rate)] if nn else []))
-    block = ca.Function("held_block", [cb, pb] + nzb, [tb[:, -1]])
+    c = cb
+    for j in range(rate):  # the block's ticks as calls with the one parameter vector (a mapaccum
+        c = tick(c, pb, *([nzb[0][j * nn : (j + 1) * nn]] if nn else []))  # copies it per tick)
+    block = ca.Function("held_block", [cb, pb] + nzb, [c])
     # one block: evaluate the environment at its first tick, hold the extrapolated mid value
     co = ca.MX.sym("co", C.size)
     po = ca.MX.sym("po", P.size)
