@@ -27,8 +27,6 @@ loop whose rows hold other columns runs row by row (its noise stream put back fi
 
 from __future__ import annotations
 
-import math
-
 import casadi as ca
 import numpy as np
 
@@ -36,7 +34,7 @@ from ..core.compile import FastCall
 from ..integrators import IntegrationError
 from ..loop import Layout
 from .chunk_layout import FLIGHT_INFO_IN, chunk_info, flight_rows_out, vertcat_by
-from .fused_rows import ROW_CALLS, _full_rows, _held_matches
+from .fused_rows import ROW_CALLS, _full_rows, _held_matches, row_flags_and_held
 
 __all__ = ["flight_rows_functions", "run_flight_rows"]
 
@@ -160,17 +158,8 @@ def run_flight_rows(comp, res, calls: dict, row_ks, K: int, C: Layout, c0: np.nd
             cmd, act, q_ref = (IL.get(info, f) for f in ("cmd", "act", "q_ref"))
             bad = ~np.all(np.isfinite(carries[:, cx]), axis=1)
             m = int(np.argmax(bad)) + 1 if bad.any() else R  # rows whose stretch ran (the last may end in NaN)
-            lim = sat = np.zeros(m)
-            if has_cmg:
-                lim, sat = (act[:m, i_lim] > 0.5).astype(float), (act[:m, i_sat] > 0.5).astype(float)
-            # a row's flag: its own tick, and the ticks after the previous row's tick (its chunk)
-            after = ((counts[:m, 0] - lim) + (counts[:m, 1] - sat) > 0.5).astype(float)
-            prev = np.concatenate(([float(tail_flag)], after[:-1]))
-            flag = np.maximum(np.maximum(lim, sat), prev)
-            held = []
-            if has_cmg:
-                held += [act[:m, i_u][:, :ng], flag[:, None]]
-            held += [cmd[:m] if torque else np.full((m, 3), math.nan), np.full((m, 4), math.nan)]
+            flag, after, held = row_flags_and_held(m, act, cmd, counts, tail_flag, (i_u, i_lim, i_sat) if has_cmg else None,
+                                                   ng, torque)
             if rep is not None:  # the filter's report against the truth (Flight.row's numbers)
                 q = xs_[:, comp.state_layout.slice("q_BN")]
                 rep.args[0][:] = fl_xs[:, sl["mekf"]].ravel()

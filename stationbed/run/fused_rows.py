@@ -169,18 +169,8 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
             cmd, act, q_ref = IL.get(info, "cmd"), IL.get(info, "act"), IL.get(info, "q_ref")  # (rows: the plant's state)
             bad = ~np.all(np.isfinite(RC.get(carries, "x")), axis=1)
             m = int(np.argmax(bad)) + 1 if bad.any() else R  # rows whose stretch ran (the last may end in NaN)
-            lim = sat = np.zeros(m)
-            if has_cmg:
-                lim, sat = (act[:m, i_lim] > 0.5).astype(float), (act[:m, i_sat] > 0.5).astype(float)
-            # a row's flag: its own tick, and the ticks after the previous row's tick (its chunk)
-            after = ((counts[:m, 0] - lim) + (counts[:m, 1] - sat) > 0.5).astype(float)
-            prev = np.concatenate(([float(tail_flag)], after[:-1]))
-            flag = np.maximum(np.maximum(lim, sat), prev)
-            held = []
-            if has_cmg:
-                held += [act[:m, i_u][:, :ng], flag[:, None]]
-            tau = cmd[:m] if torque else np.full((m, 3), math.nan)
-            held += [tau, np.full((m, 4), math.nan)]
+            flag, after, held = row_flags_and_held(m, act, cmd, counts, tail_flag, (i_u, i_lim, i_sat) if has_cmg else None,
+                                                   ng, torque)
             held = np.hstack(held)
             if j == 0 and not _held_matches(res, held[0], act[0, i_u] if has_cmg else None, cmd[0], q_ref[0], int(flag[0])):
                 if rng_state is not None:
@@ -207,6 +197,28 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
                 return j, x, env_c, tail_flag, ticks, IntegrationError(t_stop, "state is not finite (NaN or inf)")
     return j, x, env_c, tail_flag, ticks, None
 
+
+
+def row_flags_and_held(m: int, act, cmd, counts, tail_flag: int, cmg, ng: int, torque: bool) -> tuple:
+    """The first ``m`` bulk rows' saturation flags and held columns, as the row-by-row loop makes
+    them: a row's flag is its own tick's (rate limited or saturated) or any tick after the
+    previous row's tick (its chunk: ``counts`` less the row tick's own); ``tail_flag`` carries
+    the chunk before the first row. ``cmg`` = (u_cmg slice, rate-limited index, saturated index)
+    of the chain end's ``act``, or None without a cluster. Returns (flag, after, held pieces):
+    the gimbals' held input and the flag (with a cluster), the torque command (NaN when the law
+    commands rates) and the attitude error's four NaN columns (filled by the rows)."""
+    lim = sat = np.zeros(m)
+    if cmg is not None:
+        i_u, i_lim, i_sat = cmg
+        lim, sat = (act[:m, i_lim] > 0.5).astype(float), (act[:m, i_sat] > 0.5).astype(float)
+    after = ((counts[:m, 0] - lim) + (counts[:m, 1] - sat) > 0.5).astype(float)
+    prev = np.concatenate(([float(tail_flag)], after[:-1]))
+    flag = np.maximum(np.maximum(lim, sat), prev)
+    held = []
+    if cmg is not None:
+        held += [act[:m, i_u][:, :ng], flag[:, None]]
+    held += [cmd[:m] if torque else np.full((m, 3), math.nan), np.full((m, 4), math.nan)]
+    return flag, after, held
 
 def _held_matches(res, held, act, cmd, q_ref, flag) -> bool:
     """Whether the bulk held values of the first row are what the executors' own row holds
