@@ -227,10 +227,18 @@ class RunState:
             self.flight.xs, self.flight.ys = xs, ys
         self.rows.hold(t, x, *self.held_row(flag, t))
 
-    def rows_many(self, ts, xs, held, q_ref) -> None:
+    def rows_many(self, ts, xs, held, q_ref, counts, *, u_cmg=None, cmd=None) -> None:
         """Hand back many rows at once (:meth:`~.rows.Rows.hold_many`: times, states, held values,
-        references); raises IntegrationError at a non-finite row, the rows before it kept."""
+        references; raises IntegrationError at a non-finite row, the rows before it kept), then,
+        as :meth:`row` and :meth:`count` do for one row, the rows' ``counts`` (rate limited,
+        saturated per row) and the last row's held ``u_cmg``, command ``cmd`` and reference."""
         self.rows.hold_many(ts, xs, held, q_ref)
+        self.count(counts[:, 0].sum(), counts[:, 1].sum())
+        if u_cmg is not None:
+            self.u[self._u_cmg] = u_cmg
+        if cmd is not None and len(cmd) == 3:
+            self.last_cmd = tuple(cmd)
+        self.comp.ctrl.q_ref_BN = tuple(q_ref[-1])
 
     def count(self, rate_limited: int, saturated: int) -> None:
         """Add ticks the CMGs were rate limited / momentum saturated."""

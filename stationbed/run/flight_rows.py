@@ -179,17 +179,12 @@ def run_flight_rows(comp, res, calls: dict, row_ks, K: int, C: Layout, c0: np.nd
                     return 0, 0, 0, None  # the executor's row has other columns: row by row
             ts = np.minimum(ks[:m] * period, duration)
             try:  # (a non-finite output row: the rows before it are handed over)
-                res.rows_many(ts, xs_[:m], held, q_ref[:m])
+                res.rows_many(ts, xs_[:m], held, q_ref[:m], counts[:m], u_cmg=act[m - 1, i_u] if has_cmg else None,
+                              cmd=cmd[m - 1])
             except IntegrationError as e:
                 return j, tail_flag, ticks, e
             ticks += m * n
-            res.count(counts[:m, 0].sum(), counts[:m, 1].sum())
             tail_flag = int(after[-1])
-            if has_cmg:
-                res.u[comp.u_cmg] = act[m - 1, i_u]
-            if ncmd == 3:
-                res.last_cmd = tuple(cmd[m - 1])
-            comp.ctrl.q_ref_BN = tuple(q_ref[m - 1])
             res.x, fm.xs, fm.ys = xs_[m - 1].copy(), fl_xs[m - 1].copy(), fl_ys[m - 1].copy()
             c0[:] = carries[m - 1]
             j += m

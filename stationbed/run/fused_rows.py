@@ -178,17 +178,12 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
                 return 0, x, env_c, 0, 0, None  # the executor's row has other columns: row by row
             ts = np.minimum(ks[:m] * period, duration)
             try:  # (a non-finite output row: the rows before it are handed over)
-                res.rows_many(ts, xs[:m], held, q_ref[:m])
+                res.rows_many(ts, xs[:m], held, q_ref[:m], counts[:m], u_cmg=act[m - 1, i_u] if has_cmg else None,
+                              cmd=cmd[m - 1])
             except IntegrationError as e:
                 return j, x, env_c, tail_flag, ticks, e
             ticks += m * n
-            res.count(counts[:m, 0].sum(), counts[:m, 1].sum())
             tail_flag = int(after[-1])
-            if has_cmg:
-                res.u[comp.u_cmg] = act[m - 1, i_u]
-            if ncmd == 3:
-                res.last_cmd = tuple(cmd[m - 1])
-            comp.ctrl.q_ref_BN = tuple(q_ref[m - 1])
             x = RC.get(carries[m - 1], "x").copy()
             env_c = RC.get(carries[m - 1], "env").copy()
             j += m
