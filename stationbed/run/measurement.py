@@ -18,9 +18,8 @@ from functools import lru_cache
 import numpy as np
 
 from ..core.layout import Layout
-from ..loop.corruption import draws_layout
 
-__all__ = ["measurement_fields", "measurement_layout", "command_fields", "noise_fields", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
+__all__ = ["measurement_fields", "measurement_layout", "command_fields", "Measurement", "BatchMeasurement", "COMMAND_FIELDS"]
 
 #: The law's command by ``Controller.command``: its one field (the size: 3, or the gimbals).
 COMMAND_FIELDS = {"torque": "tau_B", "gimbal_rates": "gimbal_rates"}
@@ -46,12 +45,6 @@ def measurement_layout(n_gimbals: int, n_app: int) -> dict[str, tuple[int, int]]
 def command_fields(command: str, n_gimbals: int) -> Layout:
     """The law's command layout: ``tau_B`` (3) [N m] or ``gimbal_rates`` (n_gimbals) [rad/s]."""
     return Layout(**{COMMAND_FIELDS[command]: 3 if command == "torque" else n_gimbals})
-
-
-def noise_fields(attitude: bool, rate: bool) -> Layout:
-    """One tick's draws of the ideal measurement's noise (``[controller.sensor]``), those on, in
-    the per-tick loop's order (the corruption plug-in's :func:`~stationbed.loop.draws_layout`)."""
-    return draws_layout(attitude, rate)
 
 
 def _offsets(layout) -> dict[str, tuple[int, int]]:
