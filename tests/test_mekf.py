@@ -215,8 +215,8 @@ def test_noise_free_sensors_converge_to_truth_to_round_off(latency):
     mekf = Mekf.from_sensors(sensing.estimator, sensors)
     g = sensors[0]
     gp = g.params.copy()
-    gp[g.param_layout.slice("sigma_v")] = 0.0
-    gp[g.param_layout.slice("sigma_u")] = 0.0
+    gp[g.param_layout.slice("white")] = 0.0  # the gyro's noise levels (σ_v, σ_u per sample)
+    gp[g.param_layout.slice("bias_step")] = 0.0
     hps = []
     for h in sensors[1:]:
         hp = h.params.copy()

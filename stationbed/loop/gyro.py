@@ -19,9 +19,18 @@ inputs, so quantisation adds no drift).
 
 The state keeps θ at the last sample; the initial state has θ = 0, the truth's ``theta_B`` at
 t = 0 (an executor that starts a gyro later sets ``theta_B`` of its state to the truth's then).
+
+What depends on the table alone is a parameter, computed once in :meth:`RateGyro._params`, not
+per sample (the same operations in the same order, so the same numbers as the expression gave):
+the bias step ``σ_u Δt^½`` and the white-noise level ``(σ_v²/Δt + σ_u² Δt/12)^½``. A gyro
+without quantisation (``quantum = 0``, the default) is its own structure (``_structure``),
+whose step has no counter: the quantiser's ``floor`` and divisions are computed only by a gyro
+that has one (its output is then the same number: the carry stays 0).
 """
 
 from __future__ import annotations
+
+import math
 
 import casadi as ca
 
@@ -43,17 +52,25 @@ class RateGyro(Sensor):
     #: bias β [rad/s]; θ at the last sample [rad] (to difference the truth's running integral);
     #: the quantiser's carried remainder [rad]
     STATE = Layout(bias_B=3, theta_B=3, carry_B=3)
-    PARAMS = Layout(dt=1, sigma_v=1, sigma_u=1, M=(3, 3), quantum=1, max_rate=1)
+    #: the sample period, the bias random walk's step ``σ_u Δt^½`` [rad/s] and the white noise's
+    #: standard deviation ``(σ_v²/Δt + σ_u² Δt/12)^½`` [rad/s] per sample, E + M's M, the
+    #: quantum [rad] (read only by a quantising gyro) and the saturation [rad/s]
+    PARAMS = Layout(dt=1, bias_step=1, white=1, M=(3, 3), quantum=1, max_rate=1)
     #: the rate integrated over the sample [rad/s], B axes
     OUTPUTS = Layout(omega_B=3)
     reads = ("theta_B",)
     #: N_u (3) then N_v (3)
     n_noise = 6
 
+    def _structure(self) -> tuple:
+        return ("quantised",) if self.entry.quantum > 0 else ()
+
     def _params(self) -> dict:
         e = self.entry
-        return dict(dt=e.period, sigma_v=e.sigma_v, sigma_u=e.sigma_u, M=e.M, quantum=e.quantum,
-                    max_rate=NO_SATURATION_RAD_S if e.max_rate is None else e.max_rate)
+        dt, sv, su = float(e.period), float(e.sigma_v), float(e.sigma_u)
+        # the operations (and their order) the step's expression had: the same doubles
+        return dict(dt=dt, bias_step=su * math.sqrt(dt), white=math.sqrt(sv * sv / dt + su * su * dt / 12.0), M=e.M,
+                    quantum=e.quantum, max_rate=NO_SATURATION_RAD_S if e.max_rate is None else e.max_rate)
 
     def _initial(self) -> dict:
         return dict(bias_B=self.entry.bias0, theta_B=[0.0, 0.0, 0.0], carry_B=[0.0, 0.0, 0.0])
@@ -61,13 +78,13 @@ class RateGyro(Sensor):
     def _step(self, t, x, truth, w, p):
         dt = p["dt"]
         omega_avg = (truth["theta_B"] - x["theta_B"]) / dt
-        bias_next = x["bias_B"] + p["sigma_u"] * ca.sqrt(dt) * w[0:3]
-        white = ca.sqrt(p["sigma_v"] ** 2 / dt + p["sigma_u"] ** 2 * dt / 12.0)
-        raw = omega_avg + ca.mtimes(p["M"], omega_avg) + 0.5 * (x["bias_B"] + bias_next) + white * w[3:6]
+        bias_next = x["bias_B"] + p["bias_step"] * w[0:3]
+        raw = omega_avg + ca.mtimes(p["M"], omega_avg) + 0.5 * (x["bias_B"] + bias_next) + p["white"] * w[3:6]
         sat = ca.fmin(ca.fmax(raw, -p["max_rate"]), p["max_rate"])
         angle = x["carry_B"] + sat * dt
-        q = p["quantum"]
-        q_safe = ca.if_else(q > 0, q, 1.0)
-        counted = q_safe * ca.floor(angle / q_safe + 0.5)
-        out = ca.if_else(q > 0, counted, angle)
+        if self._structure():  # the counter: whole quanta out, the remainder carried
+            q = p["quantum"]
+            out = q * ca.floor(angle / q + 0.5)
+        else:
+            out = angle
         return dict(bias_B=bias_next, theta_B=truth["theta_B"], carry_B=angle - out), dict(omega_B=out / dt)

@@ -65,8 +65,10 @@ def _coefficients(w, dt):
     x = w * dt
     ws = ca.fmax(w, _TINY_RATE)
     xs = ws * dt
-    half = ca.sin(xs / 2) / ws
-    exact = (ca.sin(xs) / ws, 2 * half * half, (xs - ca.sin(xs)) / ws**3)
+    s_half = ca.sin(xs / 2)  # the sine and cosine of the turn's half angle: rotation_increment's too
+    half = s_half / ws
+    sin_x = 2 * s_half * ca.cos(xs / 2)  # sin(wΔt) from them: no sine of its own
+    exact = (sin_x / ws, 2 * half * half, (xs - sin_x) / ws**3)
     x2 = x * x
     series = (
         dt * (1 - x2 / 6 * (1 - x2 / 20 * (1 - x2 / 42))),
@@ -221,7 +223,7 @@ class Mekf:
             raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give them in [estimator] "
                              "for noise-free sensors)")
         self.params = self.param_layout.pack(values)
-        self._f = self._report = self._compiled = None
+        self._f = self._tick = self._report = self._compiled = None
         self._records: dict = {}
 
     @classmethod
@@ -285,13 +287,35 @@ class Mekf:
                                                                                x1, zm, pm)
             # most ticks have no head sample: then the propagation alone, with no head's switch
             # (each would copy the state through its skip branch)
-            heads = ca.Function(f"{name}_heads", [xm, zm, pm], [x1])
-            x1 = ca.Function.if_else(f"{name}_step", heads, prop)(sum(news[1:], news[0]) > 0.5, xm, zm, pm)
-            omega_hat = self.inputs.get(zm, "omega_B") - S.get(x1, "bias_B")
-            # inlined where it is called (the suite's tick): no copy of the state at the call
+            heads = ca.Function(f"{name}_heads", [xm, zm, pm], [x1, self.inputs.get(zm, "omega_B") - S.get(x1, "bias_B")])
+            wm = ca.MX.sym("omega_hat_prev", 3)
+            omega = self.inputs.get(z, "omega_B")
+            xp = prop(xf, z, p)
+            # the tick's three cases as one switch (its case computed once, in MX), each writing the
+            # filter's state and ω̂ straight to the caller: 0 no gyro sample (both held), 1 the
+            # propagation alone (SX: no copy of the state between it and ω̂), 2 with the heads
+            hold = ca.Function(f"{name}_hold", [xm, wm, zm, pm], [xm, wm])
+            alone = ca.Function(f"{name}_alone", [xf, ca.SX.sym("omega_hat_prev", 3), z, p], [xp, omega - S.get(xp, "bias_B")],
+                                {"cse": True})
+            with_heads = ca.Function(f"{name}_with_heads", [xm, wm, zm, pm], heads(xm, zm, pm))
+            cases = ca.Function.conditional(f"{name}_cases", [hold, alone, with_heads], hold)
+            due = ca.MX.sym("due")
+            case = due * (1 + (sum(news[1:], news[0]) > 0.5))
+            self._tick = ca.Function(f"{name}_tick", [due, xm, wm, zm, pm], cases(case, xm, wm, zm, pm),
+                                     ["due", "xf", "omega_hat_prev", "z", "p"], ["xf_next", "omega_hat_B"],
+                                     {"always_inline": True})
+            x1, omega_hat = cases(1 + (sum(news[1:], news[0]) > 0.5), xm, ca.MX.zeros(3), zm, pm)
+            # inlined where it is called: no copy of the state at the call
             self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"],
                                   {"always_inline": True})
         return self._f
+
+    def tick_function(self) -> ca.Function:
+        """``(due, xf, omega_hat_prev, z, p) -> (xf_next, omega_hat_B)``: :meth:`function` on a
+        tick where the gyro has a sample (``due`` 1), both held where it has none (the suite's
+        tick; one switch: see :meth:`function`)."""
+        self.function()
+        return self._tick
 
     def compiled(self) -> ca.Function:
         """:meth:`function` generated as C (cached on disk; casadi's evaluator without a compiler)."""

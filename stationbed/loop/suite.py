@@ -99,7 +99,7 @@ class Suite:
         X, P = self.STATE.split(x), self.PARAMS.split(p)
         nxt, out, due = {}, {}, {}
         for s in self.sensors:
-            due[s.name] = ca.logic_and(k > 0.5, ca.fmod(k, self.every[s.name]) == 0)
+            due[s.name] = _due_on(k, self.every[s.name])
             ws = self.NOISE.get(w, s.name) if s.name in self.NOISE else MX(0, 1)
             nxt[s.name], nxt[f"{s.name}.y"] = _due(s.function(), f"{s.key}_tick")(
                 due[s.name], t, X[s.name], X[f"{s.name}.y"], truth, ws, P[s.name])
@@ -110,9 +110,8 @@ class Suite:
             for i, h in enumerate(m.heads):
                 z[f"q_SN_{i}"], z[f"valid_{i}"] = out[h.name][0:4], out[h.name][4]
                 z[f"fresh_{i}"] = due[h.name]
-            step = _due_filter(m.function())
-            nxt["mekf"], nxt["omega_hat_B"] = step(due[m.gyro.name], X["mekf"], X["omega_hat_B"],
-                                                   m.inputs.pack(z, symbolic=True), P["mekf"])
+            nxt["mekf"], nxt["omega_hat_B"] = m.tick_function()(due[m.gyro.name], X["mekf"], X["omega_hat_B"],
+                                                                m.inputs.pack(z, symbolic=True), P["mekf"])
             out.update(q_BN_hat=m.state.get(nxt["mekf"], "q_BN"), bias_B_hat=m.state.get(nxt["mekf"], "bias_B"),
                        omega_hat_B=nxt["omega_hat_B"])
         self._f = ca.Function(f"suite_{len(self.sensors)}", [k, t, x, truth, w, p],
@@ -174,6 +173,16 @@ class SuiteNoise:
         return out
 
 
+def _due_on(k, every: int):
+    """Whether a sensor of period ``every`` ticks samples on tick ``k`` (a whole number >= 0):
+    ``k > 0`` and ``every`` divides k. Every tick for ``every = 1``; else ``k == every ·
+    floor(k / every)``, exact for every k below 2^52 / every (k / every is then rounded to an
+    integer only when it is one), a floor and a product where ``fmod`` is a libm call per tick."""
+    if every == 1:
+        return k > 0.5
+    return ca.logic_and(k > 0.5, k == every * ca.floor(k / every))
+
+
 _DUE: dict = {}
 
 
@@ -190,13 +199,3 @@ def _due(f: ca.Function, name: str) -> ca.Function:
     switch = ca.Function.if_else(name, step, hold)
     _DUE[id(f)] = (f, switch)
     return switch
-
-
-def _due_filter(f: ca.Function) -> ca.Function:
-    """``(due, xf, omega_hat_prev, z, p) -> (xf_next, omega_hat)``: the filter's tick when the
-    gyro has a sample, else both held."""
-    xf, w = ca.MX.sym("xf", f.size1_in(0)), ca.MX.sym("w", 3)
-    z, p = ca.MX.sym("z", f.size1_in(1)), ca.MX.sym("p", f.size1_in(2))
-    step = ca.Function(f"{f.name()}_do", [xf, w, z, p], f(xf, z, p))
-    hold = ca.Function(f"{f.name()}_hold", [xf, w, z, p], [xf, w])
-    return ca.Function.if_else(f"{f.name()}_tick", step, hold)

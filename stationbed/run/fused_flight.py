@@ -140,7 +140,7 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
         tick = ca.Function("ffl_tick", [c, par, w], [c_new])
         hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[T.slice("i").stop :])])  # (i first: T's order)
         step = ca.Function.if_else("ffl_step", tick, hold)
-        return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)])
+        return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)], {"always_inline": True})
 
     if rate:
         chunk = held_flight_chunk(system, tick_step(True), C, rate, n, P, nw)
