@@ -14,6 +14,7 @@ outputs: a call is then ~0.1 µs of overhead instead of ~35 µs for ``f(numpy...
 from __future__ import annotations
 
 import hashlib
+import re
 import logging
 import os
 import platform
@@ -58,7 +59,13 @@ def sx_function(name: str, inputs: list, outputs: list, *, called: bool = False)
 #: ``-ffast-math``: the NaN checks of the executors need IEEE semantics. ``-O3``: 0.92-0.93x the
 #: held-environment fused chunk, 0.97x the every-stage one (60 interleaved repeats each), the
 #: same bits, and the same compile time for a 16-array DOP853 system (13.1 s / 13.6 s).
-CFLAGS = ["-O3", "-fPIC", "-shared", "-fno-math-errno", "-fno-semantic-interposition", "-ffp-contract=off", "-fno-plt"]
+#: ``-fno-tree-slp-vectorize``: gcc 12's straight-line vectoriser fuses an add/sub pair of products
+#: into ``vfmaddsub`` on AVX-512 machines even with ``-ffp-contract=off`` (4-6 fused instructions
+#: in a fused loop's library: its numbers then differed from casadi's evaluator and from a
+#: portable build at round-off, docs/design.md "The compiled tick: compiler flags"); without it
+#: no library here has a fused instruction, and loops are still vectorised.
+CFLAGS = ["-O3", "-fPIC", "-shared", "-fno-math-errno", "-fno-semantic-interposition", "-ffp-contract=off", "-fno-plt",
+          "-fno-tree-slp-vectorize"]
 #: tried first: the build machine's own instruction set (AVX...), 10 % of a tick; the library's
 #: name is then keyed by the machine (:func:`_machine_key`), so a cache shared with another CPU
 #: builds its own; a compiler that refuses the flag builds with :data:`CFLAGS` alone
@@ -181,6 +188,39 @@ def inline_min_max(src: str) -> str:
     return src
 
 
+#: a read of input k's entry j in casadi's SX code: ``arg[k]? arg[k][j] : 0`` (a null input is zeros)
+_INPUT_READ = re.compile(r"arg\[(\d+)\]\? arg\[\1\]\[(\d+)\] : 0")
+#: the first line of a generated function (its body follows, up to the next one)
+_FUNCTION_HEAD = re.compile(r"^(static int casadi_f\d+\(const casadi_real\*\* arg, [^\n]*\{\n)", re.M)
+
+
+def hoist_inputs(src: str) -> str:
+    """``src`` with each generated function's null-input test made once per input, not per read.
+
+    casadi's SX code reads input k's entry j as ``arg[k]? arg[k][j] : 0`` (a null input means
+    zeros): a branch per read, ~1100 in the flight loop's tick, and gcc then duplicates blocks
+    across those branches so that most ``sin(x)``/``cos(x)`` pairs land on different paths and
+    stay two libm calls instead of one ``sincos`` (docs/design.md "The compiled tick: compiler
+    flags"). Here each function reads ``sb_in<k>[j]`` from one pointer set at its top,
+    ``arg[k] ? arg[k] : sb_zeros``: the same numbers (the same reads, and glibc's ``sincos`` gives
+    what its ``sin`` and ``cos`` give), a null input still read as zeros.
+    """
+    parts = _FUNCTION_HEAD.split(src)
+    out, longest = [parts[0]], 0
+    for head, body in zip(parts[1::2], parts[2::2]):
+        reads = _INPUT_READ.findall(body)
+        if reads:
+            longest = max(longest, max(int(j) for _, j in reads) + 1)
+            body = _INPUT_READ.sub(lambda m: f"sb_in{m.group(1)}[{m.group(2)}]", body)
+            body = "".join(f"  const casadi_real *sb_in{k} = arg[{k}] ? arg[{k}] : sb_zeros;\n"
+                           for k in sorted({int(k) for k, _ in reads})) + body
+        out += [head, body]
+    src = "".join(out)
+    if longest:
+        src = src.replace("#include <math.h>\n", f"#include <math.h>\n\nstatic const double sb_zeros[{longest}] = {{0}};\n", 1)
+    return src
+
+
 def _file_tag(tag: str) -> str:
     if len(tag) <= MAX_TAG_CHARS:
         return tag
@@ -251,7 +291,7 @@ def compile_functions(functions: list[ca.Function], tag: str, extra_c: str = "")
     cg = ca.CodeGenerator(f"sb_{tag}.c", {"with_header": False})
     for f in functions:
         cg.add(f)
-    src = inline_min_max(cg.dump()) + extra_c
+    src = hoist_inputs(inline_min_max(cg.dump())) + extra_c
     key = " ".join(CFLAGS + _native()) + _machine_key()
     digest = hashlib.sha256((src + key).encode()).hexdigest()[:20]
     lib = d / f"sb_{_file_tag(tag)}_{digest}.so"
