@@ -136,9 +136,11 @@ def test_a_sensor_named_as_an_estimator_output_is_refused():
 
 def test_tick_noise_rows_are_one_whole_draw_however_they_are_asked(suite, monkeypatch):
     """The executors ask :class:`TickNoise` for rows tick by tick, a row's ticks, or many rows'
-    at once (run/flight_rows.py), across its block boundaries and after a :meth:`restore`: every
-    pattern gives the numbers of one whole draw (tick 0 a zero row); the draw places each
-    sensor's samples on its own ticks (gyro every 2nd tick, heads every 10th and 20th)."""
+    at once (run/flight_rows.py, straight into a compiled call's buffer: ``rows_into``), across
+    its block boundaries and after a :meth:`restore`: every pattern, the two ways mixed, gives
+    the numbers of one whole draw (tick 0 a zero row; a buffer full of NaN is overwritten
+    everywhere); the draw places each sensor's samples on its own ticks (gyro every 2nd tick,
+    heads every 10th and 20th)."""
     from stationbed.loop import flight
 
     monkeypatch.setattr(flight, "NOISE_BLOCK", 16)  # small blocks: every path through rows() is taken
@@ -146,11 +148,18 @@ def test_tick_noise_rows_are_one_whole_draw_however_they_are_asked(suite, monkey
     whole = np.vstack([np.zeros((1, suite.NOISE.size)), SuiteNoise(suite, 5).draw(n - 1)])
     tn = flight.TickNoise(SuiteNoise(suite, 5))
     got, k = [], 0
-    for m in (1, 3, 16, 12, 40, 7, 100, 1, 1, 219):
+
+    def into(k, m):
+        buf = np.full((m, suite.NOISE.size), np.nan)
+        tn.rows_into(k, m, buf)
+        return buf
+
+    for j, m in enumerate((1, 3, 16, 12, 40, 7, 100, 1, 1, 30, 60, 129)):
+        ask = (lambda k, m: tn.rows(k, m).copy()) if j % 3 == 1 else into
         saved = tn.state()
-        first = tn.rows(k, m).copy()
+        first = ask(k, m)
         tn.restore(saved)  # put the stream back: the same rows again
-        got.append(tn.rows(k, m).copy())
+        got.append(ask(k, m))
         assert_array_equal(got[-1], first)
         k += m
     assert k == n

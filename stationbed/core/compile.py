@@ -217,7 +217,9 @@ def hoist_inputs(src: str) -> str:
         out += [head, body]
     src = "".join(out)
     if longest:
-        src = src.replace("#include <math.h>\n", f"#include <math.h>\n\nstatic const double sb_zeros[{longest}] = {{0}};\n", 1)
+        zeros = f"static const double sb_zeros[{longest}] = {{0}};\n"
+        head = "#include <math.h>\n"
+        src = src.replace(head, head + "\n" + zeros, 1) if head in src else zeros + src
     return src
 
 

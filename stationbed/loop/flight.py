@@ -286,6 +286,18 @@ class TickNoise:
         return out
 
 
+    def rows_into(self, k0: int, n: int, out: np.ndarray) -> None:
+        """:meth:`rows` written into ``out`` (shape (n, width)): drawn straight into it where the
+        block drawn is used up (the same numbers: each sensor draws in tick order)."""
+        first = max(k0, 1)
+        if n > 0 and k0 == self.next and first - self.k0 == len(self.buf) and first < k0 + n:
+            out[: first - k0] = 0.0  # tick 0 draws nothing
+            self.noise.draw(k0 + n - first, out=out[first - k0 :])
+            self.next, self.k0, self.buf = k0 + n, k0 + n, np.zeros((0, self.width))
+        else:
+            out[...] = self.rows(k0, n)
+
+
 def _quat_mult(p, q):
     pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
     return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])

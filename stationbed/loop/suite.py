@@ -159,10 +159,14 @@ class SuiteNoise:
         self.rngs = {s.name: noise_rng(seed, i) for i, s in enumerate(suite.sensors)}
         self.next_tick = 1
 
-    def draw(self, n: int) -> np.ndarray:
-        """The noise table of the next ``n`` ticks, shape (n, NOISE.size)."""
+    def draw(self, n: int, out: np.ndarray | None = None) -> np.ndarray:
+        """The noise table of the next ``n`` ticks, shape (n, NOISE.size); written into ``out``
+        (that shape) when given, e.g. a compiled call's input buffer (no table in between)."""
         k0 = self.next_tick
-        out = np.zeros((n, self.suite.NOISE.size))
+        if out is None:
+            out = np.zeros((n, self.suite.NOISE.size))
+        else:
+            out[...] = 0.0
         for s in self.suite.sensors:
             if s.name not in self.suite.NOISE:
                 continue

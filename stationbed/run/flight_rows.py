@@ -149,7 +149,7 @@ def run_flight_rows(comp, res, calls: dict, row_ks, K: int, C: Layout, c0: np.nd
             ks = np.asarray(row_ks[j : j + R], dtype=float)
             fc.args[0][:] = c0
             fc.args[1][:] = ks
-            fc.args[3][:] = comp.tick_noise.rows(row_ks[j], R * n).ravel()  # row r's ticks, tick by tick
+            comp.tick_noise.rows_into(row_ks[j], R * n, fc.args[3].reshape(R * n, -1))  # row r's ticks, tick by tick
             fc()
             carries = fc.res[0].reshape(R, -1)  # column-major (C.size, R): row r's carry is a row here
             out = fc.res[1].reshape(R, -1)
