@@ -14,10 +14,10 @@ outputs: a call is then ~0.1 µs of overhead instead of ~35 µs for ``f(numpy...
 from __future__ import annotations
 
 import hashlib
-import re
 import logging
 import os
 import platform
+import re
 import shutil
 import stat
 import subprocess
@@ -63,7 +63,8 @@ def sx_function(name: str, inputs: list, outputs: list, *, called: bool = False)
 #: into ``vfmaddsub`` on AVX-512 machines even with ``-ffp-contract=off`` (4-6 fused instructions
 #: in a fused loop's library: its numbers then differed from casadi's evaluator and from a
 #: portable build at round-off, docs/design.md "The compiled tick: compiler flags"); without it
-#: no library here has a fused instruction, and loops are still vectorised.
+#: no library here has a fused instruction (tests/test_compile_flags.py disassembles the fused
+#: loops' libraries to check), and loops are still vectorised.
 CFLAGS = ["-O3", "-fPIC", "-shared", "-fno-math-errno", "-fno-semantic-interposition", "-ffp-contract=off", "-fno-plt",
           "-fno-tree-slp-vectorize"]
 #: tried first: the build machine's own instruction set (AVX...), 10 % of a tick; the library's
@@ -71,7 +72,7 @@ CFLAGS = ["-O3", "-fPIC", "-shared", "-fno-math-errno", "-fno-semantic-interposi
 #: builds its own; a compiler that refuses the flag builds with :data:`CFLAGS` alone
 NATIVE_CFLAGS = ["-march=native"]
 #: the minimal flags, the last resort of a compiler that refuses the others
-BASE_CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno"]
+BASE_CFLAGS = ["-O2", "-fPIC", "-shared", "-fno-math-errno", "-ffp-contract=off"]
 
 #: environment variables: the cache folder, and a switch that forces casadi's evaluator
 CACHE_ENV = "STATIONBED_CACHE"

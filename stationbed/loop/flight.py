@@ -285,7 +285,6 @@ class TickNoise:
             first += m
         return out
 
-
     def rows_into(self, k0: int, n: int, out: np.ndarray) -> None:
         """:meth:`rows` written into ``out`` (shape (n, width)): drawn straight into it where the
         block drawn is used up (the same numbers: each sensor draws in tick order)."""

@@ -84,7 +84,8 @@ class RateGyro(Sensor):
         angle = x["carry_B"] + sat * dt
         if self._structure():  # the counter: whole quanta out, the remainder carried
             q = p["quantum"]
-            out = q * ca.floor(angle / q + 0.5)
+            q_safe = ca.if_else(q > 0, q, 1.0)  # (parameters set to 0 by hand: no counter, no NaN)
+            out = ca.if_else(q > 0, q_safe * ca.floor(angle / q_safe + 0.5), angle)
         else:
             out = angle
         return dict(bias_B=bias_next, theta_B=truth["theta_B"], carry_B=angle - out), dict(omega_B=out / dt)

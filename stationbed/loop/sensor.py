@@ -66,7 +66,9 @@ class Sensor:
     2. Declare ``STATE``, ``PARAMS`` and ``OUTPUTS`` as :class:`Layout` class attributes
        (names own the indices). A kind whose *shape* depends on the table (e.g. a delay line
        as long as the latency) writes ``_layouts()`` instead and returns the shape-setting
-       numbers from ``_structure()``: one compiled function per kind and structure.
+       numbers from ``_structure()``: one compiled function per kind and structure. A switch of
+       the table that leaves out a whole part of the model may be a structure too (the gyro's
+       counter, only where ``quantum > 0``): a dispersion that crosses it flies two structures.
     3. Declare ``reads``, the :data:`TRUTH` fields the step uses; the step must not depend on
        any other (the contract test checks the expression).
     4. Write ``_params()``: every ``PARAMS`` field by name (numbers from the table). Numbers are
