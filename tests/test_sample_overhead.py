@@ -83,3 +83,40 @@ def test_an_equal_scene_gets_its_own_knowledge_scene():
     a = load_scene(MC_SCENE)
     b = a.replace({})
     assert knowledge_scene(a) is knowledge_scene(a) and knowledge_scene(b) is not knowledge_scene(a)
+
+
+def test_knowledge_scene_built_once_per_sample_of_a_chunk(monkeypatch):
+    """A chunk draws all its samples before it runs the first (run_batch): each sample's
+    knowledge scene is still built once (the memo keeps it while the sample scene lives; it
+    once held the last 8 scenes only, and a chunk of more samples built each one twice)."""
+    from stationbed import load_scene
+    from stationbed.scene import knowledge as kn
+    from stationbed.studies.montecarlo.engine import envelope_times, study_scene
+    from stationbed.studies.montecarlo.samples import run_chunk
+    from stationbed.run.rate_auto import scene_choice
+
+    n = 12
+    scene = study_scene(load_scene(MC_SCENE).replace({"simulation.duration": 2.0, "montecarlo.settle_s": 1.0}), n)
+    scene_choice(scene)
+    builds = []
+    real_changes = kn.knowledge_changes
+    monkeypatch.setattr(kn, "knowledge_changes", lambda s: builds.append(1) or real_changes(s))
+    res = run_chunk(scene, 0, n, envelope_times(scene))
+    assert [r["status"] for r in res["rows"]] == ["ok"] * n
+    assert len(builds) == n
+
+
+def test_knowledge_memo_lets_go_of_a_scene():
+    """An entry leaves the memo with its scene (no limit, so none may outlive it)."""
+    import gc
+
+    from stationbed import load_scene
+    from stationbed.scene import knowledge as kn
+
+    a = load_scene(MC_SCENE).replace({})
+    kn.knowledge_scene(a)
+    key = id(a)
+    assert kn._KNOWN[key][0]() is a
+    del a
+    gc.collect()
+    assert key not in kn._KNOWN

@@ -136,8 +136,9 @@ class RunMetrics:
         self._min_sing = None
         self._err_max = math.nan  # NaN-ignoring running max (np.fmax)
         self._err_finite = False  # a value that is not NaN was seen
-        # sum of err**2 over the settled, non-NaN rows, kept exactly (Shewchuk's partials, as
-        # math.fsum): the value cannot depend on how the rows were batched (timed flushes)
+        # err**2 of the settled, non-NaN rows (a long run's folded into the exact partials of their
+        # sum, Shewchuk's, as math.fsum), summed with math.fsum at the end (correctly rounded): the
+        # value cannot depend on how the rows were batched (timed flushes)
         self._sq_partials: list[float] = []
         self._sq_n = 0
         self._tau_max = math.nan
@@ -162,8 +163,9 @@ class RunMetrics:
                 use &= rows[:, self._t] >= self.settle_s
             if use.any():
                 e = err[use]
-                for x in (e * e).tolist():
-                    _exact_add(self._sq_partials, x)
+                self._sq_partials += (e * e).tolist()
+                if len(self._sq_partials) > _FOLD_AT:
+                    self._sq_partials = _folded(self._sq_partials)
                 self._sq_n += int(use.sum())
         if self._est is not None:
             r = self._est_red

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from ..core.compile import FastCall
-from ..core.rotation import rotation_angle, rotation_vector
+from ..core.rotation import rotation_angle_vector
 from ..integrators import IntegrationError
 from ..loop.flight import flight_columns
 from ..model.cmg import CmgModel
@@ -262,8 +262,9 @@ class Rows:
             rows = self.make(ts[sl], xs[sl], held[sl])
             if self._err_col is not None:
                 q_ref, q = q_refs[sl], xs[sl, self._q]
-                rows[:, self._err_col] = np.degrees(rotation_angle(q_ref, q))
-                rows[:, self._axes_cols] = np.degrees(rotation_vector(q_ref, q))
+                angle, axes = rotation_angle_vector(q_ref, q)
+                rows[:, self._err_col] = np.degrees(angle)
+                rows[:, self._axes_cols] = np.degrees(axes)
             check_rows(rows[:, :12], lambda ok: self.emit(rows[: len(ok)]))
 
     def flush(self) -> None:
@@ -277,9 +278,10 @@ class Rows:
             if have and self._err_col is not None:
                 q_ref = np.array([refs[i] for i in have], dtype=float)
                 q = np.array([xs[i][self._q] for i in have])
-                rows[have, self._err_col] = np.degrees(rotation_angle(q_ref, q))
+                angle, axes = rotation_angle_vector(q_ref, q)
+                rows[have, self._err_col] = np.degrees(angle)
                 # per axis: the error rotation vector, B components [deg] (its norm is att_err_deg)
-                rows[np.ix_(have, self._axes_cols)] = np.degrees(rotation_vector(q_ref, q))
+                rows[np.ix_(have, self._axes_cols)] = np.degrees(axes)
             ts.clear(), xs.clear(), hs.clear(), refs.clear()
             check_rows(rows[:, :12], lambda ok: self.emit(rows[: len(ok)]))
 

@@ -10,7 +10,7 @@ import typing
 from collections.abc import Mapping
 from pathlib import Path
 
-from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
+from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
@@ -30,7 +30,7 @@ class Scene(Strict):
     name: str
     description: str = ""
     simulation: Simulation
-    initial: Initial = Initial()
+    initial: Initial = Field(default_factory=Initial)  # (a table of its own per scene: knowledge.py)
     body: Body
     appendage: list[Appendage] = []
     orbit: Orbit | None = None

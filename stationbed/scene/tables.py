@@ -246,8 +246,8 @@ class Appendage(Body):
     """``[[appendage]]``: an articulated array (mass, inertia about its mass centre in P, ``cm`` in B,
     ``alpha``/``beta`` joint profiles or sun tracking, optional elastic modes)."""
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
-    alpha: Joint = Profile()
-    beta: Joint = Profile()
+    alpha: Joint = Field(default_factory=Profile)  # (a table of its own per scene: scene/knowledge.py)
+    beta: Joint = Field(default_factory=Profile)
     mode: list[Mode] = []
 
     @property
@@ -370,7 +370,7 @@ class ControllerSpec(Strict):
     variables: dict[str, str] = {}  # FMU laws: loop name -> FMU variable (stationbed/run/fmu.py)
     period: TimeS = 0.1  # s
     params: dict[str, Any] = {}
-    sensor: Sensor = Sensor()
+    sensor: Sensor = Field(default_factory=Sensor)  # (a table of its own per scene: scene/knowledge.py)
 
     @model_validator(mode="after")
     def _law(self):
