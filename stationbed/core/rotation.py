@@ -18,6 +18,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .linalg import row_norms
+
 from .rotation_batch import dcm_batch, quat_mult_batch
 from .symbolic import is_symbolic, matrix, trig, vector
 
@@ -182,9 +184,8 @@ def omega_PB_P_dot(alpha, beta, alpha_dot, beta_dot, alpha_ddot, beta_ddot):
 
 
 def _unit_rows(q: np.ndarray) -> np.ndarray:
-    """Rows of ``q`` (k, 4) divided by their norms: ``np.linalg.norm(q, axis=1, keepdims=True)``'s
-    own arithmetic (the square root of the row's sum of squares), without its Python checks."""
-    return q / np.sqrt(np.add.reduce(q * q, axis=1, keepdims=True))
+    """Rows of ``q`` (k, 4) divided by their norms (:func:`~.linalg.row_norms`: numpy's own)."""
+    return q / row_norms(q, keepdims=True)
 
 
 def _error_parts(q_a: np.ndarray, q_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -206,7 +207,7 @@ def rotation_angle(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     Robust for small angles (uses the vector part of the error quaternion).
     """
     w, v = _error_parts(_unit_rows(np.atleast_2d(q_a)), _unit_rows(np.atleast_2d(q_b)))
-    return 2.0 * np.arctan2(np.sqrt(np.add.reduce(v * v, axis=1)), np.abs(w))
+    return 2.0 * np.arctan2(row_norms(v), np.abs(w))
 
 
 def rotation_vector(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -232,7 +233,7 @@ def rotation_angle_vector(q_ref: np.ndarray, q: np.ndarray) -> tuple[np.ndarray,
     """
     w, v = _error_parts(_unit_rows(np.atleast_2d(q_ref)), _unit_rows(np.atleast_2d(q)))
     v = np.where((w < 0)[:, None], -v, v)  # the short way round (|-v| = |v|: the same angle)
-    s = np.sqrt(np.add.reduce(v * v, axis=1))
+    s = row_norms(v)
     angle = 2.0 * np.arctan2(s, np.abs(w))
     # φ/|v| → 2 as |v| → 0 (φ = 2 asin|v| ≈ 2|v|)
     scale = np.where(s > 1e-300, angle / np.where(s > 1e-300, s, 1.0), 2.0)

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.linalg import row_norms
+
 __all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics"]
 
 
@@ -149,7 +151,7 @@ class RunMetrics:
         self.last = rows[-1].copy()
         if self._h is not None:
             hb = rows[:, self._h] if self.h_held_B is None else rows[:, self._h] - self.h_held_B
-            h = float(np.linalg.norm(hb, axis=1).max())
+            h = float(row_norms(hb).max())
             self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
         if self._sing is not None:
             m = float(rows[:, self._sing].min())
@@ -181,7 +183,7 @@ class RunMetrics:
         if self._st:
             self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
         if self._tau is not None:
-            tau = np.linalg.norm(rows[:, self._tau], axis=1)
+            tau = row_norms(rows[:, self._tau])
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
 
     def count_ticks(self, rate_limited: int, momentum_saturated: int) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core.linalg import row_norms
 from ...model.cmg import capacity, held_momentum_B
 from ...run.controller import one_line
 from ...run.metrics import METRICS
@@ -69,7 +70,7 @@ class EnvelopeSink:
         if self._err is not None:
             self.values[idx, 0] = r[:, self._err]
         if self._h is not None and self._cap is not None:
-            self.values[idx, 1] = np.linalg.norm(r[:, self._h] - self._held, axis=1) / self._cap
+            self.values[idx, 1] = row_norms(r[:, self._h] - self._held) / self._cap
 
 
 def _capacity(scene) -> float | None:
