@@ -22,10 +22,9 @@ import copy
 import weakref
 from typing import Any
 
-import numpy as np
 from pydantic import Field, field_validator
 
-from ..core.massprops import InvalidMassProperties, check_inertia
+from ..core.massprops import InvalidMassProperties, checked_inertia_rows
 from .base import Mat3, Strict, Vec3
 from .environment import Orbit
 
@@ -63,7 +62,7 @@ class Knowledge(Strict):
         if J is None:
             return J
         try:
-            return check_inertia(np.array(J), "inertia").tolist()
+            return checked_inertia_rows(J, "inertia")
         except InvalidMassProperties as e:
             raise ValueError(str(e).removeprefix("inertia: ")) from None
 

@@ -11,7 +11,7 @@ from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.beam import beam_inertia_derivative, beam_mode, check_participation
-from ..core.massprops import InvalidMassProperties, check_inertia
+from ..core.massprops import InvalidMassProperties, checked_inertia_rows
 from .base import TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3, unit_quaternion
 from .environment import (  # noqa: F401  (re-exported: the scene's tables are all here)
     SURFACE_FRACTIONS_DEFAULT, AeroTorque, Atmosphere, ConstantTorque, Elements, HarmonicTorque, Orbit, SrpTorque, Sun,
@@ -151,7 +151,7 @@ class Body(Strict):
     @classmethod
     def _physical(cls, J):
         try:
-            return check_inertia(np.array(J), "inertia").tolist()
+            return checked_inertia_rows(J, "inertia")
         except InvalidMassProperties as e:
             raise ValueError(str(e).removeprefix("inertia: ")) from None
 
