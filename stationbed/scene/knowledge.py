@@ -130,7 +130,7 @@ def knowledge_scene(scene):
         return hit[1]
     known = scene.replace(knowledge_changes(scene), source="[knowledge]")
     _KNOWN[key] = (weakref.ref(scene), known)
-    weakref.finalize(scene, _forget, key, _KNOWN[key])
+    weakref.finalize(scene, _forget, key, _KNOWN[key]).atexit = False  # (nothing to drop at exit)
     return known
 
 
