@@ -146,3 +146,33 @@ def test_a_loop_whose_rows_hold_other_columns_runs_row_by_row_with_the_same_draw
     assert seen == [0]
     cols = [i for i, c in enumerate(one.columns) if c != "att_err_z_deg"]  # the planted column
     assert np.array_equal(other.data[:, cols], one.data[:, cols], equal_nan=True)
+
+
+def _full_rows_one_by_one(period, duration, row_ks, n, K):
+    """The leading full rows counted a row at a time (the first form of ``_full_rows``)."""
+    j = 0
+    while j + 1 < len(row_ks) and row_ks[j] < K and row_ks[j + 1] - row_ks[j] == n:
+        if duration - (row_ks[j] + n - 1) * period < period * (1 - 1e-12):
+            break
+        j += 1
+    return j
+
+
+def test_leading_full_rows_counted_in_numpy_as_a_row_at_a_time():
+    """Row ticks with gaps, a last row at K, a duration that cuts the last tick short or not, no
+    rows and one row: the same count as one row at a time."""
+    import types
+
+    from stationbed.run.fused_rows import _full_rows
+
+    rng = np.random.default_rng(4)
+    for _ in range(300):
+        n = int(rng.integers(1, 12))
+        m = int(rng.integers(0, 40))
+        steps = np.where(rng.uniform(size=m) < 0.9, n, rng.integers(1, 2 * n + 1, m))
+        ks = np.concatenate([[0], np.cumsum(steps)])[: m].astype(int).tolist()
+        K = int(ks[-1]) if ks and rng.uniform() < 0.5 else (int(ks[-1]) + n if ks else 0)
+        period = float(rng.choice([0.1, 0.25, 1.0]))
+        duration = (K + rng.choice([0.0, -0.5, 0.3])) * period
+        comp = types.SimpleNamespace(period=period, duration=duration)
+        assert _full_rows(comp, ks, n, K) == _full_rows_one_by_one(period, duration, ks, n, K)

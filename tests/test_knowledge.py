@@ -21,6 +21,7 @@ Truths:
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ from pydantic import BaseModel
 
 from controllers.lqr import LQR
 from controllers.pd import PD
-from stationbed import montecarlo, simulate
+from stationbed import load_scene, montecarlo, simulate
 from stationbed.run.closed_loop import plant_facts
 from stationbed.run.controller import Plant
 from stationbed.run.prepare import prepare
@@ -239,6 +240,21 @@ def test_the_law_cannot_reach_the_flown_scene():
     assert not drawn & set(numbers_in(from_plant))
     assert plant.scene.knowledge is None and plant.scene.montecarlo is None
     assert plant.scene.body.inertia == NOMINAL_I
+
+
+SCENARIOS = sorted((Path(__file__).resolve().parents[1] / "scenarios").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
+def test_no_table_of_a_shipped_scene_is_shared_with_its_knowledge_scene(path):
+    """The knowledge scene is validated anew from the scene's values (no deep copy): no table,
+    list or dict of the flown scene (a Monte Carlo sample's too) is reachable from it, tables
+    left at their defaults (``initial``, ``controller.sensor``, the joints) included."""
+    scene = load_scene(path)
+    scenes = [scene] + ([sample_scene(scene, 1)] if scene.montecarlo is not None else [])
+    for s in scenes:
+        truth = {i for i, o in reachable(s).items() if isinstance(o, (BaseModel, list, dict))}
+        assert not truth & set(reachable(knowledge_scene(s)))
 
 
 # -- failed CMG units ---------------------------------------------------------------------------

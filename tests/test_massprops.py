@@ -73,3 +73,26 @@ def test_valid_inertia_passes(rng):
 def test_nonphysical_inertia_rejected(J, words):
     with pytest.raises(InvalidMassProperties, match=words):
         check_inertia(np.array(J, dtype=float))
+
+
+def test_checked_inertia_rows_are_check_inertias_bit_for_bit_and_new_each_time():
+    """The scene's inertia check kept per matrix (issue 25): the same symmetrised rows as
+    ``check_inertia`` (a matrix seen before included, -0.0 and 0.0 told apart), new lists each
+    call (no two scenes share one), the same refusal each time."""
+    import math
+
+    from stationbed.core.massprops import checked_inertia_rows
+
+    J = [[100.0, -1.0 / 3.0, 0.0], [-1.0 / 3.0 + 1e-14, 200.0, -0.0], [0.0, 0.0, 250.0]]
+    flipped = [[v if v else -v for v in row] for row in J]  # the zeros' signs flipped
+    for K in (J, flipped, J):
+        got = checked_inertia_rows(K)
+        want = check_inertia(np.array(K)).tolist()
+        assert got == want
+        assert all(math.copysign(1.0, a) == math.copysign(1.0, b) for r, w in zip(got, want) for a, b in zip(r, w))
+    a, b = checked_inertia_rows(J), checked_inertia_rows(J)
+    assert a == b and a is not b and a[0] is not b[0]
+    bad = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 3.0]]  # I1 + I2 < I3
+    for _ in range(2):
+        with pytest.raises(InvalidMassProperties, match="triangle inequality"):
+            checked_inertia_rows(bad)

@@ -103,6 +103,22 @@ def test_rms_is_bit_identical_however_the_rows_are_batched():
     assert values == {math.sqrt(math.fsum(err * err) / len(err))}
 
 
+def test_rms_is_bit_identical_when_a_long_run_is_folded(monkeypatch):
+    """A long run's squared errors are folded into the exact partials of their sum
+    (``_FOLD_AT``): the same correctly rounded total as one ``math.fsum`` over all of them."""
+    from stationbed.run import metrics
+
+    monkeypatch.setattr(metrics, "_FOLD_AT", 50)
+    rng = np.random.default_rng(11)
+    err = rng.lognormal(0.0, 3.0, 1000)
+    rows = np.full((len(err), len(COLS)), 1.0)
+    rows[:, 0] = np.arange(len(err))
+    rows[:, -1] = err
+    splits = [[rows], np.array_split(rows, 7), np.array_split(rows, 333)]
+    values = {_metrics(s)["rms_att_err_deg"] for s in splits}
+    assert values == {math.sqrt(math.fsum(err * err) / len(err))}
+
+
 def test_estimation_sums_are_bit_identical_however_the_rows_are_batched(monkeypatch):
     # the fused flight loop hands its rows over in bulk, the row-by-row loop in timed batches:
     # rms_est_err_deg and mean_nees are the correctly rounded sums whatever the grouping, also

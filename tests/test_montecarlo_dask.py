@@ -170,15 +170,24 @@ def test_ctrl_c_keeps_finished_chunks_and_resume_completes(tmp_path):
 def test_forked_workers_start_quiet_and_the_driver_keeps_its_progress():
     """Local workers forked from a driver whose command line set progress up (plain lines, a
     task open) start as a spawned worker does: quiet, no task of the driver's; the driver
-    keeps its mode."""
-    from stationbed.core import progress
-    from stationbed.studies.montecarlo.cluster import local_cluster
+    keeps its mode; Dask's periodic work is off or slowed in them (cluster.QUIET) and the
+    driver's own Dask config is back as it was once the cluster closed."""
+    import dask
+    import distributed  # noqa: F401 - its config's defaults
 
+    from stationbed.core import progress
+    from stationbed.studies.montecarlo.cluster import QUIET, local_cluster
+
+    before = {k: dask.config.get(k) for k in QUIET}
     progress.configure("plain", heartbeat=False)
     try:
         with progress.task("a study", total=1), local_cluster(2) as client:
             assert set(client.run(progress.mode).values()) == {"quiet"}
             assert set(client.run(lambda: len(progress._S.open_tasks)).values()) == {0}
             assert progress.mode() == "plain"
+            # Dask's periodic work off or slowed in the workers (cluster.QUIET), the driver's own config as it was
+            seen = client.run(lambda: {k: dask.config.get(k) for k in QUIET})
+            assert len(seen) == 2 and all(v == QUIET for v in seen.values())
+        assert {k: dask.config.get(k) for k in QUIET} == before
     finally:
         progress.reset()

@@ -16,6 +16,8 @@ from stationbed.core.rotation import (
     quat_kinematics,
     quat_mult,
     rotation_angle,
+    rotation_angle_vector,
+    rotation_vector,
     skew,
 )
 
@@ -107,3 +109,41 @@ def test_rotation_angle_small_and_large():
         q1 = np.array([np.cos(ang / 2), 0, np.sin(ang / 2), 0])
         assert rotation_angle(q0, q1)[0] == pytest.approx(ang, rel=1e-12)
         assert rotation_angle(q0, -q1)[0] == pytest.approx(ang, rel=1e-12)  # q and -q: same attitude
+
+
+def _error_rows_with_numpy(q_ref, q):
+    """The output rows' attitude error as it was first written: ``np.linalg.norm`` and
+    ``np.cross`` (numpy's own), the angle and the vector each from its own error quaternion."""
+    q_ref = q_ref / np.linalg.norm(q_ref, axis=1, keepdims=True)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w = np.sum(q_ref * q, axis=1)
+    v = q_ref[:, :1] * q[:, 1:] - q[:, :1] * q_ref[:, 1:] - np.cross(q_ref[:, 1:], q[:, 1:])
+    angle = 2.0 * np.arctan2(np.linalg.norm(v, axis=1), np.abs(w))
+    v = np.where((w < 0)[:, None], -v, v)
+    s = np.linalg.norm(v, axis=1)
+    scale = np.where(s > 1e-300, 2.0 * np.arctan2(s, np.abs(w)) / np.where(s > 1e-300, s, 1.0), 2.0)
+    return angle, v * scale[:, None]
+
+
+def test_rotation_angle_and_vector_against_scipy_and_bit_for_bit_against_numpy(rng):
+    """The angle and rotation vector of ``conj(q_ref) ⊗ q`` (components in the frame of ``q``)
+    against scipy's ``(R_ref⁻¹ R).as_rotvec()``; and, made once for both (issue 25), bit for bit
+    the numbers of numpy's own norm and cross product (the output rows keep their values):
+    unequal norms, q and -q, equal and nearly equal attitudes, a half turn."""
+    q_ref = rng.normal(size=(400, 4)) * rng.uniform(0.5, 2.0, (400, 1))
+    q = rng.normal(size=(400, 4))
+    q[:50] = q_ref[:50]
+    q[50:100] = -3.0 * q_ref[50:100]
+    q[100:150] = q_ref[100:150] + 1e-9 * rng.normal(size=(50, 4))
+    q[150] = quat_mult(q_ref[150], [0.0, 0.0, 1.0, 0.0])
+    angle, vec = rotation_angle_vector(q_ref, q)
+    want_angle, want_vec = _error_rows_with_numpy(q_ref, q)
+    assert np.array_equal(angle, want_angle) and np.array_equal(vec, want_vec)
+    assert np.array_equal(rotation_angle(q_ref, q), want_angle) and np.array_equal(rotation_vector(q_ref, q), want_vec)
+    def sp(x):
+        return Rotation.from_quat(np.roll(x, -1, axis=1))  # scipy: scalar last
+    rotvec = (sp(q_ref).inv() * sp(q)).as_rotvec()
+    far = slice(151, None)  # (a half turn's axis sign is a choice)
+    assert_allclose(vec[far], rotvec[far], atol=ROUND_OFF)
+    assert_allclose(angle, np.linalg.norm(vec, axis=1), rtol=ROUND_OFF, atol=ROUND_OFF)
+    assert_allclose(angle[150], np.pi, rtol=ROUND_OFF)

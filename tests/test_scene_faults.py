@@ -243,6 +243,21 @@ def test_replace_sets_the_value_at_the_path(scene, case):
     assert read(scene.replace({path: value})) == value
 
 
+def test_replace_takes_values_as_toml_gives_them_and_refuses_them_nested_too_deeply(scene):
+    """A value built in Python (numpy numbers and arrays, tuples) is taken as TOML would give it,
+    a copy (the new scene shares no list with the caller's value); one nested past Python's
+    recursion is one line, as from a dict."""
+    value = [np.float64(1.0), (2.0, np.int64(3))]
+    got = scene.replace({"controller.params.kp": np.float64(2.5), "controller.params.v": value}).controller.params
+    assert got["kp"] == 2.5 and type(got["kp"]) is float and got["v"] == [1.0, [2.0, 3]] and got["v"] is not value
+    assert type(got["v"][1][1]) is int
+    deep: list = []
+    for _ in range(DEPTH):
+        deep = [deep]
+    with pytest.raises(SceneError, match=r"^s\.toml with --set: values nested too deeply$"):
+        scene.replace({"controller.params.v": deep}, source="s.toml with --set")
+
+
 def test_replace_creates_a_missing_table():
     rigid = scene_from_dict(RIGID)
     assert rigid.replace({"orbit.altitude": 4.0e5}).orbit.radius_m == R_EARTH_M + 4.0e5

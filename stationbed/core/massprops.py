@@ -6,11 +6,14 @@ with the minus sign included (``I_xy = -∫ x y dm``), so ``H = I @ omega``.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = [
     "InvalidMassProperties",
     "check_inertia",
+    "checked_inertia_rows",
     "parallel_axis",
     "composite_cm",
     "coriolis_matrix",
@@ -55,6 +58,23 @@ def check_inertia(J: np.ndarray, what: str = "inertia") -> np.ndarray:
             "I1 + I2 >= I3"
         )
     return J
+
+
+def checked_inertia_rows(J, what: str = "inertia") -> list[list[float]]:
+    """``check_inertia(np.array(J), what).tolist()``: a scene's inertia (rows of numbers) checked,
+    as new rows of floats; an inertia checked before (the same bits) is not decomposed again (a
+    Monte Carlo sample's scene and its knowledge scene validate the same few matrices: issue 25).
+    Raises as :func:`check_inertia`."""
+    a = np.array(J)
+    if a.dtype != np.float64 or a.shape != (3, 3):
+        return check_inertia(a, what).tolist()
+    return [list(row) for row in _checked(a.tobytes(), what)]
+
+
+@functools.lru_cache(maxsize=256)
+def _checked(key: bytes, what: str) -> tuple:
+    J = np.frombuffer(key, dtype=np.float64).reshape(3, 3)
+    return tuple(tuple(row) for row in check_inertia(J, what).tolist())
 
 
 def _fmt(v) -> str:

@@ -18,6 +18,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .linalg import row_norms
+
 from .rotation_batch import dcm_batch, quat_mult_batch
 from .symbolic import is_symbolic, matrix, trig, vector
 
@@ -35,6 +37,7 @@ __all__ = [
     "omega_PB_P_dot",
     "rotation_angle",
     "rotation_vector",
+    "rotation_angle_vector",
     "euler_321",
 ]
 
@@ -180,19 +183,31 @@ def omega_PB_P_dot(alpha, beta, alpha_dot, beta_dot, alpha_ddot, beta_ddot):
     )
 
 
+def _unit_rows(q: np.ndarray) -> np.ndarray:
+    """Rows of ``q`` (k, 4) divided by their norms (:func:`~.linalg.row_norms`: numpy's own)."""
+    return q / row_norms(q, keepdims=True)
+
+
+def _error_parts(q_a: np.ndarray, q_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(w, v)`` of ``conj(q_a) ⊗ q_b`` for unit rows: the scalar part, and the vector part
+    ``w_a v_b - w_b v_a - v_a × v_b`` (the cross product written out in ``np.cross``'s order of
+    operations: the same numbers)."""
+    w = np.add.reduce(q_a * q_b, axis=1)
+    a, b = q_a[:, 1:], q_b[:, 1:]
+    c = np.empty_like(a)
+    c[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    c[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    c[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return w, q_a[:, :1] * b - q_b[:, :1] * a - c
+
+
 def rotation_angle(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     """Principal angle [rad] of the rotation between attitudes ``q_a`` and ``q_b`` (rows, numpy).
 
     Robust for small angles (uses the vector part of the error quaternion).
     """
-    q_a = np.atleast_2d(q_a)
-    q_b = np.atleast_2d(q_b)
-    q_a = q_a / np.linalg.norm(q_a, axis=1, keepdims=True)
-    q_b = q_b / np.linalg.norm(q_b, axis=1, keepdims=True)
-    dot = np.abs(np.sum(q_a * q_b, axis=1))
-    # |vector part of q_a* ⊗ q_b|
-    w = q_a[:, :1] * q_b[:, 1:] - q_b[:, :1] * q_a[:, 1:] - np.cross(q_a[:, 1:], q_b[:, 1:])
-    return 2.0 * np.arctan2(np.linalg.norm(w, axis=1), dot)
+    w, v = _error_parts(_unit_rows(np.atleast_2d(q_a)), _unit_rows(np.atleast_2d(q_b)))
+    return 2.0 * np.arctan2(row_norms(v), np.abs(w))
 
 
 def rotation_vector(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -204,18 +219,25 @@ def rotation_vector(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (k, 3)
     """
-    q_ref = np.atleast_2d(q_ref)
-    q = np.atleast_2d(q)
-    q_ref = q_ref / np.linalg.norm(q_ref, axis=1, keepdims=True)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w = np.sum(q_ref * q, axis=1)
-    v = q_ref[:, :1] * q[:, 1:] - q[:, :1] * q_ref[:, 1:] - np.cross(q_ref[:, 1:], q[:, 1:])
-    v = np.where((w < 0)[:, None], -v, v)
-    s = np.linalg.norm(v, axis=1)
+    return rotation_angle_vector(q_ref, q)[1]
+
+
+def rotation_angle_vector(q_ref: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rotation_angle` and :func:`rotation_vector` of the same rows at once, bit for bit
+    the same numbers as each (the error quaternion is made once: the output rows' attitude
+    error, issue 25).
+
+    Returns
+    -------
+    (ndarray (k,), ndarray (k, 3))
+    """
+    w, v = _error_parts(_unit_rows(np.atleast_2d(q_ref)), _unit_rows(np.atleast_2d(q)))
+    v = np.where((w < 0)[:, None], -v, v)  # the short way round (|-v| = |v|: the same angle)
+    s = row_norms(v)
     angle = 2.0 * np.arctan2(s, np.abs(w))
     # φ/|v| → 2 as |v| → 0 (φ = 2 asin|v| ≈ 2|v|)
     scale = np.where(s > 1e-300, angle / np.where(s > 1e-300, s, 1.0), 2.0)
-    return v * scale[:, None]
+    return angle, v * scale[:, None]
 
 
 def euler_321(C_BO: np.ndarray) -> np.ndarray:

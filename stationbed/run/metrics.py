@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.linalg import row_norms
+
 __all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics"]
 
 
@@ -136,8 +138,9 @@ class RunMetrics:
         self._min_sing = None
         self._err_max = math.nan  # NaN-ignoring running max (np.fmax)
         self._err_finite = False  # a value that is not NaN was seen
-        # sum of err**2 over the settled, non-NaN rows, kept exactly (Shewchuk's partials, as
-        # math.fsum): the value cannot depend on how the rows were batched (timed flushes)
+        # err**2 of the settled, non-NaN rows (a long run's folded into the exact partials of their
+        # sum, Shewchuk's, as math.fsum), summed with math.fsum at the end (correctly rounded): the
+        # value cannot depend on how the rows were batched (timed flushes)
         self._sq_partials: list[float] = []
         self._sq_n = 0
         self._tau_max = math.nan
@@ -148,7 +151,7 @@ class RunMetrics:
         self.last = rows[-1].copy()
         if self._h is not None:
             hb = rows[:, self._h] if self.h_held_B is None else rows[:, self._h] - self.h_held_B
-            h = float(np.linalg.norm(hb, axis=1).max())
+            h = float(row_norms(hb).max())
             self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
         if self._sing is not None:
             m = float(rows[:, self._sing].min())
@@ -162,8 +165,9 @@ class RunMetrics:
                 use &= rows[:, self._t] >= self.settle_s
             if use.any():
                 e = err[use]
-                for x in (e * e).tolist():
-                    _exact_add(self._sq_partials, x)
+                self._sq_partials += (e * e).tolist()
+                if len(self._sq_partials) > _FOLD_AT:
+                    self._sq_partials = _folded(self._sq_partials)
                 self._sq_n += int(use.sum())
         if self._est is not None:
             r = self._est_red
@@ -179,7 +183,7 @@ class RunMetrics:
         if self._st:
             self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
         if self._tau is not None:
-            tau = np.linalg.norm(rows[:, self._tau], axis=1)
+            tau = row_norms(rows[:, self._tau])
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
 
     def count_ticks(self, rate_limited: int, momentum_saturated: int) -> None:

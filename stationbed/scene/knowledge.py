@@ -19,12 +19,12 @@ object built from values: nothing in it refers to the scene being flown.
 from __future__ import annotations
 
 import copy
+import weakref
 from typing import Any
 
-import numpy as np
 from pydantic import Field, field_validator
 
-from ..core.massprops import InvalidMassProperties, check_inertia
+from ..core.massprops import InvalidMassProperties, checked_inertia_rows
 from .base import Mat3, Strict, Vec3
 from .environment import Orbit
 
@@ -62,7 +62,7 @@ class Knowledge(Strict):
         if J is None:
             return J
         try:
-            return check_inertia(np.array(J), "inertia").tolist()
+            return checked_inertia_rows(J, "inertia")
         except InvalidMassProperties as e:
             raise ValueError(str(e).removeprefix("inertia: ")) from None
 
@@ -106,25 +106,35 @@ def detected_scene(scene):
     return copy.deepcopy(scene.replace(changes, source="[knowledge]"))
 
 
-#: the knowledge scenes of the last few scenes asked about: id -> (scene, knowledge scene). A
-#: Monte Carlo sample asks three times (its draw's record, the controller's plant, the scene's
-#: check), each a validated deep copy (~1-2 ms); scenes are frozen, so one answer per scene
+#: the knowledge scene of every scene asked about and still alive: id -> (weak reference to the
+#: scene, its knowledge scene). A Monte Carlo sample asks three times (the scene's own check, its
+#: draw's record of what the law was told, the controller's plant), and a chunk draws all its
+#: samples before it runs the first: scenes are frozen, so one answer per scene, kept as long as
+#: the scene lives (an entry leaves with its scene: no limit to evict a scene still to be run)
 _KNOWN: dict[int, tuple] = {}
-_KNOWN_MAX = 8
 
 
 def knowledge_scene(scene):
     """What flight software believes: ``scene`` (a :class:`~stationbed.scene.Scene`) with the
     ``[knowledge]`` substitutions of this module's docstring; raises SceneError naming
     ``[knowledge]`` when that scene is refused (e.g. ``failed_units`` beyond the cluster).
-    The same scene object gets the same (frozen) knowledge scene back."""
-    hit = _KNOWN.get(id(scene))
-    if hit is not None and hit[0] is scene:
+    The same scene object gets the same (frozen) knowledge scene back.
+
+    Nothing of ``scene`` is reachable from the answer: :meth:`Scene.replace` validates new
+    tables from the scene's values (dumped to plain dicts and lists), and a table left at its
+    default is made anew for each scene (``default_factory``), not one object shared by every
+    scene built (which is why an earlier version deep-copied the answer, ~0.3 ms a sample)."""
+    key = id(scene)
+    hit = _KNOWN.get(key)
+    if hit is not None and hit[0]() is scene:
         return hit[1]
-    # a deep copy: a table left at its default is one object shared by every scene built
-    # (pydantic keeps a model default as is), and nothing of the flown scene may be reachable
-    known = copy.deepcopy(scene.replace(knowledge_changes(scene), source="[knowledge]"))
-    if len(_KNOWN) >= _KNOWN_MAX:
-        _KNOWN.pop(next(iter(_KNOWN)))
-    _KNOWN[id(scene)] = (scene, known)
+    known = scene.replace(knowledge_changes(scene), source="[knowledge]")
+    _KNOWN[key] = (weakref.ref(scene), known)
+    weakref.finalize(scene, _forget, key, _KNOWN[key]).atexit = False  # (nothing to drop at exit)
     return known
+
+
+def _forget(key: int, entry: tuple) -> None:
+    """Drop the entry of a scene that is gone (unless its id was taken since by a new entry)."""
+    if _KNOWN.get(key) is entry:
+        del _KNOWN[key]

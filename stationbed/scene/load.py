@@ -10,7 +10,7 @@ import typing
 from collections.abc import Mapping
 from pathlib import Path
 
-from pydantic import BaseModel, PrivateAttr, ValidationError, model_validator
+from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_validator
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
@@ -30,7 +30,7 @@ class Scene(Strict):
     name: str
     description: str = ""
     simulation: Simulation
-    initial: Initial = Initial()
+    initial: Initial = Field(default_factory=Initial)  # (a table of its own per scene: knowledge.py)
     body: Body
     appendage: list[Appendage] = []
     orbit: Orbit | None = None
@@ -127,10 +127,12 @@ class Scene(Strict):
         data, defaults = self.model_dump(exclude_unset=True), self.model_dump()
         for path, value in {**(changes or {}), **more}.items():
             try:
-                _assign(data, defaults, path, value)
+                _assign(data, defaults, path, _plain(value))
             except KeyPathError as e:
                 raise SceneError(f"{source}: {e}") from None
-        new = scene_from_dict(data, source=source)
+            except RecursionError:
+                raise SceneError(f"{source}: values nested too deeply") from None
+        new = _validated(data, source)  # (a dump is plain already, new containers: only the values are made so)
         new._folder = self._folder
         return new
 
@@ -431,7 +433,16 @@ def scene_from_dict(data: dict, source: str = "scene") -> Scene:
     values are taken as TOML arrays and numbers); raises :class:`SceneError` with a one-line
     reason starting with ``source``."""
     try:
-        return Scene.model_validate(_plain(data))
+        data = _plain(data)
+    except RecursionError:
+        raise SceneError(f"{source}: values nested too deeply") from None
+    return _validated(data, source)
+
+
+def _validated(data: dict, source: str) -> Scene:
+    """:func:`scene_from_dict` of data already as TOML gives it (:func:`_plain`)."""
+    try:
+        return Scene.model_validate(data)
     except ValidationError as err:
         raise SceneError(f"{source}: {_one_line(err)}") from None
     except RecursionError:

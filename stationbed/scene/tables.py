@@ -11,7 +11,7 @@ from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.beam import beam_inertia_derivative, beam_mode, check_participation
-from ..core.massprops import InvalidMassProperties, check_inertia
+from ..core.massprops import InvalidMassProperties, checked_inertia_rows
 from .base import TIME_RESOLUTION, Atol, FieldError, Mat3, Rtol, Strict, TimeS, Vec3, unit_quaternion
 from .environment import (  # noqa: F401  (re-exported: the scene's tables are all here)
     SURFACE_FRACTIONS_DEFAULT, AeroTorque, Atmosphere, ConstantTorque, Elements, HarmonicTorque, Orbit, SrpTorque, Sun,
@@ -151,7 +151,7 @@ class Body(Strict):
     @classmethod
     def _physical(cls, J):
         try:
-            return check_inertia(np.array(J), "inertia").tolist()
+            return checked_inertia_rows(J, "inertia")
         except InvalidMassProperties as e:
             raise ValueError(str(e).removeprefix("inertia: ")) from None
 
@@ -246,8 +246,8 @@ class Appendage(Body):
     """``[[appendage]]``: an articulated array (mass, inertia about its mass centre in P, ``cm`` in B,
     ``alpha``/``beta`` joint profiles or sun tracking, optional elastic modes)."""
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
-    alpha: Joint = Profile()
-    beta: Joint = Profile()
+    alpha: Joint = Field(default_factory=Profile)  # (a table of its own per scene: scene/knowledge.py)
+    beta: Joint = Field(default_factory=Profile)
     mode: list[Mode] = []
 
     @property
@@ -370,7 +370,7 @@ class ControllerSpec(Strict):
     variables: dict[str, str] = {}  # FMU laws: loop name -> FMU variable (stationbed/run/fmu.py)
     period: TimeS = 0.1  # s
     params: dict[str, Any] = {}
-    sensor: Sensor = Sensor()
+    sensor: Sensor = Field(default_factory=Sensor)  # (a table of its own per scene: scene/knowledge.py)
 
     @model_validator(mode="after")
     def _law(self):

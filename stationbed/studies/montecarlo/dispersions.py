@@ -259,9 +259,11 @@ def _told_one(d, known: dict, nominal: dict, values: dict) -> None:
         values[t + key] = float(v)
 
 
-def told(scene: Scene, sample: Scene) -> dict[str, float]:
-    """The ``told.`` columns of a drawn ``sample`` of ``scene``: what its law was told."""
-    known, nominal, values = knowledge_scene(sample).model_dump(), scene.model_dump(), {}
+def told(scene: Scene, sample: Scene, nominal: dict | None = None) -> dict[str, float]:
+    """The ``told.`` columns of a drawn ``sample`` of ``scene``: what its law was told
+    (``nominal``: ``scene.model_dump()``, when the caller has it)."""
+    known, values = knowledge_scene(sample).model_dump(), {}
+    nominal = scene.model_dump() if nominal is None else nominal
     for d in scene.montecarlo.disperse:
         _told_one(d, known, nominal, values)
     return values
@@ -306,8 +308,9 @@ def _check_known(scene: Scene, d, where: str) -> None:
                 raise SceneError(f"{where}: '{key}' is given by [knowledge] {name}: the scene would state two beliefs")
 
 
-def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
-    """The scene of sample ``k``.
+def draw(scene: Scene, k: int, data: dict | None = None) -> tuple[Scene | None, Draw, int, str | None]:
+    """The scene of sample ``k`` (``data``: ``scene.model_dump()``, when the caller has it: a
+    chunk's samples share it, read only).
 
     Returns
     -------
@@ -323,7 +326,7 @@ def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
     """
     mc = scene.montecarlo
     rng = np.random.default_rng(sample_seed(mc.seed, k))
-    data = scene.model_dump()
+    data = scene.model_dump() if data is None else data
     last = None
     fixed = nominal_rate(scene)  # "auto": the nominal scene's environment rate for every sample
     for redraws in range(mc.max_redraws + 1):
@@ -337,7 +340,7 @@ def draw(scene: Scene, k: int) -> tuple[Scene | None, Draw, int, str | None]:
         except SceneError as e:
             last = str(e)
             continue
-        dr.values.update(told(scene, s))
+        dr.values.update(told(scene, s, data))
         return s, dr, redraws, None
     dr.values.update({TOLD + c: math.nan for c in list(dr.values)})
     return None, dr, mc.max_redraws, f"no valid draw in {mc.max_redraws + 1} tries; last: {last}"

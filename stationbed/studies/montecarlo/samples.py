@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core.linalg import row_norms
 from ...model.cmg import capacity, held_momentum_B
 from ...run.controller import one_line
 from ...run.metrics import METRICS
@@ -69,7 +70,7 @@ class EnvelopeSink:
         if self._err is not None:
             self.values[idx, 0] = r[:, self._err]
         if self._h is not None and self._cap is not None:
-            self.values[idx, 1] = np.linalg.norm(r[:, self._h] - self._held, axis=1) / self._cap
+            self.values[idx, 1] = row_norms(r[:, self._h] - self._held) / self._cap
 
 
 def _capacity(scene) -> float | None:
@@ -99,12 +100,13 @@ def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | No
     return _finished(row, result, sink, env_times)
 
 
-def _drawn(scene, k: int, env_times: int):
-    """Sample ``k`` drawn: its row so far, its scene (None when refused) and envelope sink."""
+def _drawn(scene, k: int, env_times: int, data: dict | None = None):
+    """Sample ``k`` drawn: its row so far, its scene (None when refused) and envelope sink
+    (``data``: ``scene.model_dump()``, shared by a chunk's samples)."""
     mc = scene.montecarlo
     row = {"index": k, "seed": sample_seed(mc.seed, k), "status": "ok", "reason": "", "redraws": 0,
            "stopped_at_s": math.nan, "executor": ""}
-    s, dr, redraws, refused = draw(scene, k)
+    s, dr, redraws, refused = draw(scene, k, data)
     row["redraws"] = redraws
     row.update(dr.values)
     sink = None
@@ -144,7 +146,8 @@ def run_batch(scene, k0: int, k1: int, env_times: int = 0) -> list[tuple[dict, n
     """Samples ``k0 .. k1-1`` drawn, then run together (:func:`~stationbed.run.lockstep.run_lockstep`:
     in lockstep where the law and scene allow, else fused or per tick, one by one); the same
     rows as :func:`run_sample` of each, with the executor that ran it."""
-    drawn = [_drawn(scene, k, env_times) for k in range(k0, k1)]
+    data = scene.model_dump()  # read only: each draw copies what it changes (Scene.replace)
+    drawn = [_drawn(scene, k, env_times, data) for k in range(k0, k1)]
     todo = [i for i, d in enumerate(drawn) if d[1] is not None]
     results = run_lockstep([drawn[i][1] for i in todo], sinks=[drawn[i][2] for i in todo])
     by = dict(zip(todo, results))
