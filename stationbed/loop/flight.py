@@ -107,7 +107,7 @@ class Flight:
             gyro=(S.STATE.slice(m.gyro.name), m.gyro.state.slice("bias_B")) if m else None,
             bias=S.OUTPUTS.slice("bias_B_hat") if m else None,
             valid=[S.OUTPUTS.slice(h.name).start + 4 for h in self.heads])
-        self._f = self._compiled = self._report = None
+        self._f = self._compiled = self._report = self._plain = None
 
     # -- the tick ---------------------------------------------------------------------------
     def function(self) -> ca.Function:
@@ -118,8 +118,23 @@ class Flight:
         if hit is not None:
             self._f = hit
             return hit
+        self._f = self._tick(ca.MX, self.suite.function(), "flight_tick", _INLINE)
+        _TICKS[self.key] = self._f
+        return self._f
+
+    def plain_function(self) -> ca.Function | None:
+        """:meth:`function` on a plain tick (:meth:`Suite.is_plain`: the every-tick sensors
+        sample, no other does) as one SX function, the suite's switches gone
+        (:meth:`Suite.plain_function`); None where the suite has none."""
+        if self._plain is None:
+            f = self.suite.plain_function()
+            self._plain = self._tick(ca.SX, f, "flight_tick_plain", {}) if f is not None else False
+        return self._plain or None
+
+    def _tick(self, cls, suite_fn: ca.Function, fname: str, opts: dict) -> ca.Function:
+        """The tick's function around ``suite_fn`` in symbols of ``cls`` (MX, or SX for a plain tick)."""
         S = self.suite
-        MX = ca.MX
+        MX = cls
         k, t, t_prev = MX.sym("k"), MX.sym("t"), MX.sym("t_prev")
         y, th0, om0 = MX.sym("y", self.ny), MX.sym("theta_prev", 3), MX.sym("omega_prev", 3)
         xs, w, ps = S.STATE.symbol("xs", MX), S.NOISE.symbol("w", MX), MX.sym("ps", S.PARAMS.size + 3)
@@ -136,7 +151,7 @@ class Flight:
             moon_N = d / ca.norm_2(d)
         truth = TRUTH.pack(q_BN=field("q_BN"), omega_BN_B=om, theta_B=th, R_N=field("r_N"), sun_N=field("sun_N"),
                            moon_N=moon_N, shadow=MX.ones(1), symbolic=True)
-        xs1, ys = S.function()(k, t, xs, truth, w, ps[: S.PARAMS.size])
+        xs1, ys = suite_fn(k, t, xs, truth, w, ps[: S.PARAMS.size])
         seen = y
         if self.mekf is not None:
             parts = []
@@ -151,11 +166,9 @@ class Flight:
             if cut < self.ny:
                 parts.append(y[cut:])
             seen = ca.vertcat(*parts)
-        self._f = ca.Function("flight_tick", [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
-                              ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
-                              ["theta", "xs_next", "y_seen", "ys"], _INLINE)
-        _TICKS[self.key] = self._f
-        return self._f
+        return ca.Function(fname, [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
+                           ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
+                           ["theta", "xs_next", "y_seen", "ys"], opts)
 
     def compiled(self) -> FastCall:
         """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall`."""

@@ -226,7 +226,7 @@ class Mekf:
             raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give them in [estimator] "
                              "for noise-free sensors)")
         self.params = self.param_layout.pack(values)
-        self._f = self._tick = self._report = self._compiled = None
+        self._f = self._tick = self._alone = self._report = self._compiled = None
         self._records: dict = {}
 
     @classmethod
@@ -300,6 +300,7 @@ class Mekf:
             hold = ca.Function(f"{name}_hold", [xm, wm, zm, pm], [xm, wm])
             alone = ca.Function(f"{name}_alone", [xf, ca.SX.sym("omega_hat_prev", 3), z, p], [xp, omega - S.get(xp, "bias_B")],
                                 {"cse": True})
+            self._alone = alone
             with_heads = ca.Function(f"{name}_with_heads", [xm, wm, zm, pm], heads(xm, zm, pm))
             cases = ca.Function.conditional(f"{name}_cases", [hold, alone, with_heads], hold)
             due = ca.MX.sym("due")
@@ -312,6 +313,13 @@ class Mekf:
             self._f = ca.Function(name, [xm, zm, pm], [x1, omega_hat], ["xf", "z", "p"], ["xf_next", "omega_hat_B"],
                                   {"always_inline": True})
         return self._f
+
+    def alone_function(self) -> ca.Function:
+        """``(xf, omega_hat_prev, z, p) -> (xf_next, omega_hat_B)`` as an SX function: the tick
+        of a gyro sample without a head's (the propagation alone; the middle case of
+        :meth:`tick_function`), for a caller that knows no head has a sample."""
+        self.function()
+        return self._alone
 
     def tick_function(self) -> ca.Function:
         """``(due, xf, omega_hat_prev, z, p) -> (xf_next, omega_hat_B)``: :meth:`function` on a

@@ -70,7 +70,7 @@ class Suite:
                               **(dict(q_BN_hat=4, bias_B_hat=3, omega_hat_B=3) if self.mekf else {}))
         self.params = self.PARAMS.pack({s.name: s.params for s in self.sensors},
                                        **({"mekf": self.mekf.params} if self.mekf else {}))
-        self._f = self._compiled = None
+        self._f = self._compiled = self._plain = None
         self._records: dict = {}
 
     # -- state ----------------------------------------------------------------------------
@@ -119,6 +119,59 @@ class Suite:
                               ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"], {"always_inline": True})
         return self._f
 
+    def plain_function(self) -> ca.Function | None:
+        """:meth:`function` on a *plain* tick, as one SX function: a tick ``k > 0`` on which the
+        sensors sampling every tick sample and no other does (a star tracker between its samples
+        holds). The same operations as :meth:`function` on such a tick, without its switches,
+        so that an executor can inline the whole tick in one SX graph (run/fused_flight.py).
+        None when a star-tracker head of the filter samples every tick (its update is the
+        filter's switch).
+
+        A tick is plain when :meth:`is_plain` says so."""
+        if self._plain is None:
+            self._plain = self._build_plain() or False
+        return self._plain or None
+
+    def is_plain(self, k):
+        """Whether tick ``k`` (a casadi symbol or number) is plain: ``k > 0`` and no sensor
+        sampling less often than every tick is due."""
+        slow = [_due_on(k, e) for e in self.every.values() if e > 1]
+        if not slow:
+            return k > 0.5
+        return ca.logic_and(k > 0.5, ca.logic_not(sum(slow[1:], slow[0]) > 0.5))
+
+    def _build_plain(self):
+        m = self.mekf
+        if m is not None and any(self.every[h.name] == 1 for h in m.heads):
+            return None
+        SX = ca.SX
+        k, t = SX.sym("k"), SX.sym("t")
+        x, truth = self.STATE.symbol("x"), TRUTH.symbol("truth")
+        w, p = self.NOISE.symbol("w"), self.PARAMS.symbol("p")
+        X, P = self.STATE.split(x), self.PARAMS.split(p)
+        nxt, out = {}, {}
+        for s in self.sensors:
+            if self.every[s.name] == 1:
+                ws = self.NOISE.get(w, s.name) if s.name in self.NOISE else SX(0, 1)
+                nxt[s.name], nxt[f"{s.name}.y"] = s.function()(t, X[s.name], truth, ws, P[s.name])
+            else:
+                nxt[s.name], nxt[f"{s.name}.y"] = X[s.name], X[f"{s.name}.y"]
+            out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], SX(float(self.every[s.name] == 1))
+        if m:
+            if self.every[m.gyro.name] == 1:
+                z = {"omega_B": out[m.gyro.name]}
+                for i, h in enumerate(m.heads):
+                    z[f"q_SN_{i}"], z[f"valid_{i}"], z[f"fresh_{i}"] = out[h.name][0:4], out[h.name][4], SX(0.0)
+                nxt["mekf"], nxt["omega_hat_B"] = m.alone_function()(X["mekf"], X["omega_hat_B"],
+                                                                     m.inputs.pack(z, symbolic=True), P["mekf"])
+            else:
+                nxt["mekf"], nxt["omega_hat_B"] = X["mekf"], X["omega_hat_B"]
+            out.update(q_BN_hat=m.state.get(nxt["mekf"], "q_BN"), bias_B_hat=m.state.get(nxt["mekf"], "bias_B"),
+                       omega_hat_B=nxt["omega_hat_B"])
+        return ca.Function(f"suite_{len(self.sensors)}_plain", [k, t, x, truth, w, p],
+                           [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
+                           ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"])
+
     def compiled(self) -> ca.Function:
         """:meth:`function` generated as C (disk cache; casadi's evaluator without a compiler)."""
         if self._compiled is None:
@@ -165,8 +218,10 @@ class SuiteNoise:
         k0 = self.next_tick
         if out is None:
             out = np.zeros((n, self.suite.NOISE.size))
-        else:
-            out[...] = 0.0
+        else:  # zeros where a sensor has no sample (one sampling every tick fills its columns)
+            for s in self.suite.sensors:
+                if s.name in self.suite.NOISE and self.suite.every[s.name] > 1:
+                    out[:, self.suite.NOISE.slice(s.name)] = 0.0
         for s in self.suite.sensors:
             if s.name not in self.suite.NOISE:
                 continue

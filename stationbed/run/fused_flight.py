@@ -101,11 +101,18 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     core_in = [t, xa, est, cp, u_ext, p, h]
     if rate:
         pre, body = split("ff_core_h", core_in + [L_env], [ca.vertcat(x1h, s1), sat])
+        whole = ca.Function("ff_core_h_whole", core_in + [L_env], [ca.vertcat(x1h, s1), sat])
     else:
         pre, body = split("ff_core", core_in, [x1, sat])
+        whole = ca.Function("ff_core_whole", core_in, [x1, sat])
+    # a plain tick (the every-tick sensors sample, no other: 9 ticks in 10 of the estimated
+    # scene) as one SX function: the truth row, the flight's sensors and the filter's
+    # propagation, the law and the step in one graph (its switches gone: nothing lazy is left
+    # to keep), the same operations on the same numbers as the general tick below
+    flp = flight.plain_function()
 
-    def seen(ys):
-        return ca.vertcat(*[S.OUTPUTS.get(ys, SEEN[f]) for f in est_fields]) if est_fields else ca.MX(0, 1)
+    def seen(ys, cls=ca.MX):
+        return ca.vertcat(*[S.OUTPUTS.get(ys, SEEN[f]) for f in est_fields]) if est_fields else cls(0, 1)
 
     MX = ca.MX
     # the row tick: its command, actuation, reference and the flight's state and outputs after it
@@ -139,8 +146,30 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
         # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
         tick = ca.Function("ffl_tick", [c, par, w], [c_new])
         hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[T.slice("i").stop :])])  # (i first: T's order)
-        step = ca.Function.if_else("ffl_step", tick, hold)
-        return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)], {"always_inline": True})
+        if flp is None:
+            step = ca.Function.if_else("ffl_step", tick, hold)
+            return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)], {"always_inline": True})
+        # three cases, one switch: 0 the unused tail (held), 1 a tick with a slower sensor's
+        # sample (the general tick), 2 a plain tick (one SX function)
+        cases = ca.Function.conditional("ffl_cases", [hold, tick, plain_tick(held, PT)], hold)
+        case = (i < n_act) * (1 + S.is_plain(k0 + i))
+        return ca.Function("ffl_step", [c, par, w], [cases(case, c, par, w)], {"always_inline": True})
+
+    def plain_tick(held: bool, PT) -> ca.Function:
+        """The general tick's numbers on a plain tick, as one SX function (``flp``: the flight's
+        plain tick; ``whole``: the core unsplit)."""
+        SX = ca.SX
+        c, par, w = SX.sym("c", T.size), SX.sym("par", PT.size), SX.sym("w", nw)
+        i, xc, cnt, tp, th, om, xs = (T.get(c, f) for f in T.names)
+        t0, hh, k0 = (par[PT.slice(f).start] for f in ("t0", "h", "k0"))
+        cpc, uc, pc, psc = (PT.get(par, f) for f in ("cp", "u_ext", "p", "ps"))
+        tt = t0 + i * hh
+        yt = meas(tt, X.get(xc, "x") if nls else xc, pc)
+        th1, xs1, _, ys = flp(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+        x_new, fl_sat = whole(tt, xc, seen(ys, SX), cpc, uc, pc, hh, *([PT.get(par, "L_hold")] if held else []))
+        c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
+                       theta_B=th1, omega_prev=M.get(yt, "omega_BN_B"), xs=xs1)
+        return ca.Function("ffl_tick_plain", [c, par, w], [c_new], {"cse": True})
 
     if rate:
         chunk = held_flight_chunk(system, tick_step(True), C, rate, n, P, nw)
