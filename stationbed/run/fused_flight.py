@@ -12,6 +12,11 @@ memory: the previous tick's time and true rate, ``theta_B`` and the suite state.
 each tick is a per-tick input, drawn in Python in tick order (:class:`~stationbed.loop.flight.TickNoise`:
 the same numbers as the per-tick loop's blocks).
 
+A *plain* tick (``Suite.is_plain``: the every-tick sensors sample, no slower one does) runs as
+one SX function instead (``Flight.plain_function``: the truth row, the sensors, the filter's
+propagation, the law and the step in one graph, nothing lazy left to keep), the general tick
+above on the others; the step is a three-case switch (held tail, general, plain).
+
 The leading full output rows run many per compiled call (:mod:`.flight_rows`, bit-identical);
 with ``[simulation] environment_rate`` the environment is held over blocks of ticks
 (:mod:`.flight_rates`, as :mod:`.rates` does for the truth-fed loop).
