@@ -96,12 +96,17 @@ def _build_with(monkeypatch, flags: list[str], native: list[str]) -> dict:
     return funcs
 
 
-def _has_fma() -> bool:
+def _cpu_has(flag: str) -> bool:
+    """Whether the CPU's ``flags`` line in /proc/cpuinfo lists ``flag`` (False where unreadable)."""
     try:
         with open("/proc/cpuinfo") as f:
-            return any(ln.startswith("flags") and " fma" in ln for ln in f)
+            return any(ln.startswith("flags") and f" {flag}" in ln for ln in f)
     except OSError:
         return False
+
+
+def _has_fma() -> bool:
+    return _cpu_has("fma")
 
 
 def test_native_build_gives_the_portable_builds_bits(cache, monkeypatch):
@@ -191,11 +196,7 @@ def test_quaternion_products_give_casadis_evaluator_bits(cache):
 
 
 def _avx512() -> bool:
-    try:
-        with open("/proc/cpuinfo") as f:
-            return any(ln.startswith("flags") and " avx512f" in ln for ln in f)
-    except OSError:
-        return False
+    return _cpu_has("avx512f")
 
 
 def _gcc_major() -> int | None:
