@@ -23,7 +23,7 @@ import math
 import casadi as ca
 
 from ..loop import Layout
-from .chunk_layout import ENV
+from .rates import held_environment
 from .system import environment_split
 
 __all__ = ["held_flight_chunk"]
@@ -53,19 +53,9 @@ def held_flight_chunk(system, tick_h, C: Layout, rate: int, n: int, P: Layout, n
         c = tick_h(c, pb, wb[j * nw : (j + 1) * nw])  # (a mapaccum wants them repeated: P.size copies per tick)
     block = ca.Function("ffl_block", [cb, pb, wb], [c])
     co, po, wo = ca.MX.sym("co", C.size), ca.MX.sym("po", P.size), ca.MX.sym("wo", nw * rate)
-    i, x = co[C.slice("i").start], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
-    env = C.get(co, "env")
-    L_prev, t_prev, have = ENV.get(env, "L_prev"), env[ENV.slice("t_prev").start], env[ENV.slice("have").start]
-    t0, h, n_act = (po[P.slice(f).start] for f in ("t0", "h", "n_act"))
-    t_now = t0 + i * h
-    L_now = env_B(t_now, x, P.get(po, "p"))
-    n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
-    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
-    L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
+    L_hold, env_next = held_environment(env_B, C, P, rate, co, po)  # as the truth-fed loop's blocks (rates.py)
     c_new = block(co[:nc], ca.vertcat(po, L_hold), wo)
-    live = n_b > 0
-    outer = ca.Function("ffl_outer", [co, po, wo], [ca.vertcat(
-        c_new, ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have))])
+    outer = ca.Function("ffl_outer", [co, po, wo], [ca.vertcat(c_new, *env_next)])
     acc_o = outer.mapaccum("ffl_held_acc", nb)
     c0, par0, noise = ca.MX.sym("c0", C.size), ca.MX.sym("par", P.size), ca.MX.sym("noise", nw, nb * rate)
     traj = acc_o(c0, ca.repmat(par0, 1, nb), ca.reshape(noise, nw * rate, nb))

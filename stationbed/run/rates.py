@@ -106,22 +106,11 @@ def held_chunk(system, one, rate: int, n: int, C: Layout, P: Layout, nn: int) ->
     co = ca.MX.sym("co", C.size)
     po = ca.MX.sym("po", P.size)
     nzo = [ca.MX.sym("nzo", nn * rate)] if nn else []
-    i, x = co[C.slice("i").start], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
-    e = C.slice("env").start  # the held environment's fields, by ENV's offsets in C
-    L_prev = co[e + ENV.slice("L_prev").start : e + ENV.slice("L_prev").stop]
-    t_prev, have = co[e + ENV.slice("t_prev").start], co[e + ENV.slice("have").start]
-    t0, h, n_act = (po[P.slice(f).start] for f in ("t0", "h", "n_act"))
-    t_now = t0 + i * h
-    L_now = env_B(t_now, x, P.get(po, "p"))
-    n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
-    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
-    L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
+    L_hold, env_next = held_environment(env_B, C, P, rate, co, po)
     c_new = block(co[: T.size], ca.vertcat(po, L_hold), *nzo)
-    live = n_b > 0
     outer = ca.Function(
         "held_outer", [co, po] + nzo,
-        [vertcat_by(Layout(tick=T.size, env=ENV.size), tick=[c_new],  # (C's order: the tick's fields, then env)
-                    env=[ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have)])],
+        [vertcat_by(Layout(tick=T.size, env=ENV.size), tick=[c_new], env=env_next)],  # (C's order: the tick's fields, then env)
     )
     acc_o = outer.mapaccum("held_acc", nb)
     c0 = ca.MX.sym("c0", C.size)
@@ -129,6 +118,26 @@ def held_chunk(system, one, rate: int, n: int, C: Layout, P: Layout, nn: int) ->
     noise = [ca.MX.sym("noise", nn, nb * rate)] if nn else []  # column i: tick i's draws
     traj = acc_o(c0, ca.repmat(par0, 1, nb), *([ca.reshape(noise[0], nn * rate, nb)] if nn else []))
     return ca.Function("fused_chunk", [c0, par0] + noise, [traj[:, -1]])
+
+
+def held_environment(env_B, C: Layout, P: Layout, rate: int, co, po) -> tuple:
+    """One block's held environment in a chunk's carry ``co`` (with ``env``: :data:`~.chunk_layout.ENV`)
+    and parameters ``po`` (``t0, h, n_act, p``): ``(L_hold, env_next)``. The environment is
+    evaluated at the block's first tick and held at its value extrapolated to the block's middle
+    from the last block's (``L_now`` alone for the first block); ``env_next`` is the carry's
+    ``(L_prev, t_prev, have)`` after the block (unchanged past the active ticks). The truth-fed
+    (:func:`held_chunk`) and the flight loop's (run/flight_rates.py) blocks both use it."""
+    i, x = co[C.slice("i").start], C.get(co, "x")[: env_B.size1_in(1)]  # (a law's state may ride after x: law_state.py)
+    env = C.get(co, "env")
+    L_prev, t_prev, have = ENV.get(env, "L_prev"), env[ENV.slice("t_prev").start], env[ENV.slice("have").start]
+    t0, h, n_act = (po[P.slice(f).start] for f in ("t0", "h", "n_act"))
+    t_now = t0 + i * h
+    L_now = env_B(t_now, x, P.get(po, "p"))
+    n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
+    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
+    L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
+    live = n_b > 0
+    return L_hold, [ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have)]
 
 
 def rate_summary(loop, used_fused: bool) -> dict:
