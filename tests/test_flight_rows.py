@@ -44,6 +44,7 @@ from stationbed.run import fused_flight
 from stationbed.run.controller import Controller
 from stationbed.run.rate_auto import TARGET_RAD
 from stationbed.run.simulation import SimulationError
+from test_fused_rows import spy_first
 
 ROOT = Path(__file__).resolve().parents[1]
 #: an initial attitude error that drives the gimbals into their rate limit in the first ~20 s
@@ -63,16 +64,7 @@ def _scene():
 
 def _spy(monkeypatch) -> list:
     """Rows run in bulk, per run."""
-    seen = []
-    real = fused_flight.run_flight_rows
-
-    def spy(*a, **k):
-        out = real(*a, **k)
-        seen.append(out[0])
-        return out
-
-    monkeypatch.setattr(fused_flight, "run_flight_rows", spy)
-    return seen
+    return spy_first(monkeypatch, fused_flight, "run_flight_rows")
 
 
 def _row_by_row(monkeypatch):
@@ -80,14 +72,19 @@ def _row_by_row(monkeypatch):
     monkeypatch.setattr(fused_flight, "run_flight_rows", lambda *a, **k: (0, 0, 0, None))
 
 
-def test_bulk_flight_rows_give_the_row_by_row_loops_bits(monkeypatch):
-    scene = _scene()
+def _bulk_and_row_by_row(monkeypatch, scene) -> tuple:
+    """``(rows run in bulk per run, the run with bulk rows, the run row by row)`` of ``scene``."""
     with monkeypatch.context() as m:
         seen = _spy(m)
         bulk = simulate(scene, duration=DURATION_S, fused=True)
     with monkeypatch.context() as m:
         _row_by_row(m)
         one = simulate(scene, duration=DURATION_S, fused=True)
+    return seen, bulk, one
+
+
+def test_bulk_flight_rows_give_the_row_by_row_loops_bits(monkeypatch):
+    seen, bulk, one = _bulk_and_row_by_row(monkeypatch, _scene())
     assert seen == [80]  # 64 + 8 + 8 rows (the row at the run's end: row by row)
     s_bulk, s_one = bulk.meta["summary"], one.meta["summary"]
     assert s_bulk["rate_limited_ticks"] > 0 and s_bulk["fused"] is True
@@ -115,13 +112,7 @@ def test_a_flight_loop_whose_rows_hold_other_columns_runs_row_by_row_with_the_sa
 
 def test_the_environment_at_its_own_rate_in_the_flight_loop(monkeypatch):
     scene = _scene()
-    held_scene = scene  # the default: "auto"
-    with monkeypatch.context() as m:
-        seen = _spy(m)
-        held = simulate(held_scene, duration=DURATION_S, fused=True)
-    with monkeypatch.context() as m:
-        _row_by_row(m)
-        held_one = simulate(held_scene, duration=DURATION_S, fused=True)
+    seen, held, held_one = _bulk_and_row_by_row(monkeypatch, scene)  # the default: "auto"
     summary = held.meta["summary"]
     assert seen == [80] and (summary["environment_rate_asked"], summary["environment_rate_ticks"]) == ("auto", 20)
     assert summary["environment_rate_why"] is None and 0.0 < summary["environment_rate_bound_rad"] <= TARGET_RAD

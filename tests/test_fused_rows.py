@@ -45,18 +45,24 @@ def _row_by_row(monkeypatch):
     monkeypatch.setattr(fused, "_CHUNKS", {})
 
 
-def _spy(monkeypatch) -> list:
-    """Rows run in bulk, per run (a list the wrapped :func:`run_rows` appends to)."""
+def spy_first(monkeypatch, module, name: str) -> list:
+    """``module.name`` wrapped: a list it appends the first value of each call's result to (a
+    bulk-rows runner's rows run in bulk, per run; also tests/test_flight_rows.py's)."""
     seen = []
-    real = fused.run_rows
+    real = getattr(module, name)
 
     def spy(*a, **k):
         out = real(*a, **k)
         seen.append(out[0])
         return out
 
-    monkeypatch.setattr(fused, "run_rows", spy)
+    monkeypatch.setattr(module, name, spy)
     return seen
+
+
+def _spy(monkeypatch) -> list:
+    """Rows run in bulk, per run (a list the wrapped :func:`run_rows` appends to)."""
+    return spy_first(monkeypatch, fused, "run_rows")
 
 
 #: sensor noise of the noisy case: attitude [rad], rate [rad/s] (the MC scenario's order)
