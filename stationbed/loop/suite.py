@@ -90,33 +90,8 @@ class Suite:
         An MX function: each sensor's step and the filter's are ``Switch`` es on their tick
         (the sensor's own SX function when due, a hold when not), so generated code computes a
         sensor only on its samples (an SX ``if_else`` would compute both branches every tick)."""
-        if self._f is not None:
-            return self._f
-        MX = ca.MX
-        k, t = MX.sym("k"), MX.sym("t")
-        x, truth = self.STATE.symbol("x", MX), TRUTH.symbol("truth", MX)
-        w, p = self.NOISE.symbol("w", MX), self.PARAMS.symbol("p", MX)
-        X, P = self.STATE.split(x), self.PARAMS.split(p)
-        nxt, out, due = {}, {}, {}
-        for s in self.sensors:
-            due[s.name] = _due_on(k, self.every[s.name])
-            ws = self.NOISE.get(w, s.name) if s.name in self.NOISE else MX(0, 1)
-            nxt[s.name], nxt[f"{s.name}.y"] = _due(s.function(), f"{s.key}_tick")(
-                due[s.name], t, X[s.name], X[f"{s.name}.y"], truth, ws, P[s.name])
-            out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], due[s.name]
-        if self.mekf:
-            m = self.mekf
-            z = {"omega_B": out[m.gyro.name]}
-            for i, h in enumerate(m.heads):
-                z[f"q_SN_{i}"], z[f"valid_{i}"] = out[h.name][0:4], out[h.name][4]
-                z[f"fresh_{i}"] = due[h.name]
-            nxt["mekf"], nxt["omega_hat_B"] = m.tick_function()(due[m.gyro.name], X["mekf"], X["omega_hat_B"],
-                                                                m.inputs.pack(z, symbolic=True), P["mekf"])
-            out.update(q_BN_hat=m.state.get(nxt["mekf"], "q_BN"), bias_B_hat=m.state.get(nxt["mekf"], "bias_B"),
-                       omega_hat_B=nxt["omega_hat_B"])
-        self._f = ca.Function(f"suite_{len(self.sensors)}", [k, t, x, truth, w, p],
-                              [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
-                              ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"], {"always_inline": True})
+        if self._f is None:
+            self._f = self._build(plain=False)
         return self._f
 
     def plain_function(self) -> ca.Function | None:
@@ -129,7 +104,7 @@ class Suite:
 
         A tick is plain when :meth:`is_plain` says so."""
         if self._plain is None:
-            self._plain = self._build_plain() or False
+            self._plain = self._build(plain=True) or False
         return self._plain or None
 
     def is_plain(self, k):
@@ -140,37 +115,48 @@ class Suite:
             return k > 0.5
         return ca.logic_and(k > 0.5, ca.logic_not(sum(slow[1:], slow[0]) > 0.5))
 
-    def _build_plain(self):
+    def _build(self, plain: bool) -> ca.Function | None:
+        """:meth:`function` (MX, each sensor and the filter behind its switch), or with ``plain``
+        :meth:`plain_function` (SX: the every-tick sensors step, the others hold, the filter
+        propagates alone; None where a filter's head samples every tick)."""
         m = self.mekf
-        if m is not None and any(self.every[h.name] == 1 for h in m.heads):
+        if plain and m is not None and any(self.every[h.name] == 1 for h in m.heads):
             return None
-        SX = ca.SX
-        k, t = SX.sym("k"), SX.sym("t")
-        x, truth = self.STATE.symbol("x"), TRUTH.symbol("truth")
-        w, p = self.NOISE.symbol("w"), self.PARAMS.symbol("p")
+        cls = ca.SX if plain else ca.MX
+        k, t = cls.sym("k"), cls.sym("t")
+        x, truth = self.STATE.symbol("x", cls), TRUTH.symbol("truth", cls)
+        w, p = self.NOISE.symbol("w", cls), self.PARAMS.symbol("p", cls)
         X, P = self.STATE.split(x), self.PARAMS.split(p)
-        nxt, out = {}, {}
+        nxt, out, due = {}, {}, {}
         for s in self.sensors:
-            if self.every[s.name] == 1:
-                ws = self.NOISE.get(w, s.name) if s.name in self.NOISE else SX(0, 1)
-                nxt[s.name], nxt[f"{s.name}.y"] = s.function()(t, X[s.name], truth, ws, P[s.name])
+            e = self.every[s.name]
+            due[s.name] = cls(float(e == 1)) if plain else _due_on(k, e)
+            ws = self.NOISE.get(w, s.name) if s.name in self.NOISE else cls(0, 1)
+            if not plain:
+                step = _due(s.function(), f"{s.key}_tick")(due[s.name], t, X[s.name], X[f"{s.name}.y"], truth, ws, P[s.name])
+            elif e == 1:
+                step = s.function()(t, X[s.name], truth, ws, P[s.name])
             else:
-                nxt[s.name], nxt[f"{s.name}.y"] = X[s.name], X[f"{s.name}.y"]
-            out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], SX(float(self.every[s.name] == 1))
+                step = X[s.name], X[f"{s.name}.y"]
+            nxt[s.name], nxt[f"{s.name}.y"] = step
+            out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], due[s.name]
         if m:
-            if self.every[m.gyro.name] == 1:
-                z = {"omega_B": out[m.gyro.name]}
-                for i, h in enumerate(m.heads):
-                    z[f"q_SN_{i}"], z[f"valid_{i}"], z[f"fresh_{i}"] = out[h.name][0:4], out[h.name][4], SX(0.0)
-                nxt["mekf"], nxt["omega_hat_B"] = m.alone_function()(X["mekf"], X["omega_hat_B"],
-                                                                     m.inputs.pack(z, symbolic=True), P["mekf"])
+            z = {"omega_B": out[m.gyro.name]}
+            for i, h in enumerate(m.heads):
+                z[f"q_SN_{i}"], z[f"valid_{i}"] = out[h.name][0:4], out[h.name][4]
+                z[f"fresh_{i}"] = due[h.name]
+            args = (X["mekf"], X["omega_hat_B"], m.inputs.pack(z, symbolic=True), P["mekf"])
+            if not plain:
+                nxt["mekf"], nxt["omega_hat_B"] = m.tick_function()(due[m.gyro.name], *args)
+            elif self.every[m.gyro.name] == 1:
+                nxt["mekf"], nxt["omega_hat_B"] = m.alone_function()(*args)
             else:
                 nxt["mekf"], nxt["omega_hat_B"] = X["mekf"], X["omega_hat_B"]
             out.update(q_BN_hat=m.state.get(nxt["mekf"], "q_BN"), bias_B_hat=m.state.get(nxt["mekf"], "bias_B"),
                        omega_hat_B=nxt["omega_hat_B"])
-        return ca.Function(f"suite_{len(self.sensors)}_plain", [k, t, x, truth, w, p],
+        return ca.Function(f"suite_{len(self.sensors)}" + ("_plain" if plain else ""), [k, t, x, truth, w, p],
                            [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
-                           ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"])
+                           ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"], {} if plain else {"always_inline": True})
 
     def compiled(self) -> ca.Function:
         """:meth:`function` generated as C (disk cache; casadi's evaluator without a compiler)."""

@@ -134,47 +134,48 @@ def _build(comp, n: int, symbolic_params, rate: int = 0) -> dict:
     P = flight_par(ncp, npar, nps)
     T = flight_carry(X.size, ns)  # one tick's carry (the held environment's, if any, is the block's)
 
+    def one_tick(held: bool, PT, plain: bool) -> ca.Function:
+        """``(c, par, w) -> c_next``, one tick: the general tick (MX: the truth row and the
+        core's first stage in ``pre``, the flight with its switches, ``body``), or with ``plain``
+        a plain tick as one SX function (``flp``: the flight's plain tick; ``whole``: the core
+        unsplit, which ``cse`` shares with the truth row): the same numbers."""
+        cls = ca.SX if plain else MX
+        c, par, w = cls.sym("c", T.size), cls.sym("par", PT.size), cls.sym("w", nw)
+        i, xc, cnt, tp, th, om, xs = (T.get(c, f) for f in T.names)
+        t0, hh, k0 = (par[PT.slice(f).start] for f in ("t0", "h", "k0"))
+        cpc, uc, pc, psc = (PT.get(par, f) for f in ("cp", "u_ext", "p", "ps"))
+        tt = t0 + i * hh
+        held_L = [PT.get(par, "L_hold")] if held else []
+        if plain:
+            yt = meas(tt, X.get(xc, "x") if nls else xc, pc)
+            th1, xs1, _, ys = flp(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+            x_new, fl_sat = whole(tt, xc, seen(ys, cls), cpc, uc, pc, hh, *held_L)
+        else:
+            yt, vals = pre(tt, xc, pc)
+            th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
+            x_new, fl_sat = body(vals, tt, xc, seen(ys), cpc, uc, pc, hh, *held_L)
+        c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
+                       theta_B=th1, omega_prev=M.get(yt, "omega_BN_B"), xs=xs1)
+        return ca.Function("ffl_tick_plain" if plain else "ffl_tick", [c, par, w], [c_new], {"cse": True} if plain else {})
+
     def tick_step(held: bool) -> ca.Function:
         """``(c, par[, L_hold]) , w -> c_next``: one tick, the tail past n_act held."""
         PT = flight_par(ncp, npar, nps, **({"L_hold": 3} if held else {}))
         c, par, w = MX.sym("c", T.size), MX.sym("par", PT.size), MX.sym("w", nw)
-        i, xc, cnt, tp, th, om, xs = (T.get(c, f) for f in T.names)
-        t0, hh, n_act, k0 = (par[PT.slice(f).start] for f in ("t0", "h", "n_act", "k0"))
-        cpc, uc, pc, psc = (PT.get(par, f) for f in ("cp", "u_ext", "p", "ps"))
-        tt = t0 + i * hh
-        yt, vals = pre(tt, xc, pc)
-        th1, xs1, _, ys = fl(k0 + i, tt, tp, yt, th, om, xs, w, psc)
-        x_new, fl_sat = body(vals, tt, xc, seen(ys), cpc, uc, pc, hh, *([PT.get(par, "L_hold")] if held else []))
-        c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
-                       theta_B=th1, omega_prev=M.get(yt, "omega_BN_B"), xs=xs1)
+        i = T.get(c, "i")
+        n_act, k0 = (par[PT.slice(f).start] for f in ("n_act", "k0"))
         # the chunk's unused tail (i >= n_act) holds the carry: a Switch, so an active tick pays no
         # blend of the ~130 carried numbers (an MX if_else computes both sides and mixes them)
-        tick = ca.Function("ffl_tick", [c, par, w], [c_new])
+        tick = one_tick(held, PT, plain=False)
         hold = ca.Function("ffl_hold", [c, par, w], [ca.vertcat(i + 1, c[T.slice("i").stop :])])  # (i first: T's order)
         if flp is None:
             step = ca.Function.if_else("ffl_step", tick, hold)
             return ca.Function("ffl_step", [c, par, w], [step(i < n_act, c, par, w)], {"always_inline": True})
         # three cases, one switch: 0 the unused tail (held), 1 a tick with a slower sensor's
         # sample (the general tick), 2 a plain tick (one SX function)
-        cases = ca.Function.conditional("ffl_cases", [hold, tick, plain_tick(held, PT)], hold)
+        cases = ca.Function.conditional("ffl_cases", [hold, tick, one_tick(held, PT, plain=True)], hold)
         case = (i < n_act) * (1 + S.is_plain(k0 + i))
         return ca.Function("ffl_step", [c, par, w], [cases(case, c, par, w)], {"always_inline": True})
-
-    def plain_tick(held: bool, PT) -> ca.Function:
-        """The general tick's numbers on a plain tick, as one SX function (``flp``: the flight's
-        plain tick; ``whole``: the core unsplit)."""
-        SX = ca.SX
-        c, par, w = SX.sym("c", T.size), SX.sym("par", PT.size), SX.sym("w", nw)
-        i, xc, cnt, tp, th, om, xs = (T.get(c, f) for f in T.names)
-        t0, hh, k0 = (par[PT.slice(f).start] for f in ("t0", "h", "k0"))
-        cpc, uc, pc, psc = (PT.get(par, f) for f in ("cp", "u_ext", "p", "ps"))
-        tt = t0 + i * hh
-        yt = meas(tt, X.get(xc, "x") if nls else xc, pc)
-        th1, xs1, _, ys = flp(k0 + i, tt, tp, yt, th, om, xs, w, psc)
-        x_new, fl_sat = whole(tt, xc, seen(ys, SX), cpc, uc, pc, hh, *([PT.get(par, "L_hold")] if held else []))
-        c_new = T.pack(i=i + 1, x=x_new, counts=cnt + ca.vertcat(fl_sat[0] > 0.5, fl_sat[1] > 0.5), t_prev=tt,
-                       theta_B=th1, omega_prev=M.get(yt, "omega_BN_B"), xs=xs1)
-        return ca.Function("ffl_tick_plain", [c, par, w], [c_new], {"cse": True})
 
     if rate:
         chunk = held_flight_chunk(system, tick_step(True), C, rate, n, P, nw)
