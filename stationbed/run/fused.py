@@ -35,7 +35,7 @@ from .chunk_layout import chunk_carry, chunk_info, chunk_par
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
-from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 from .system import chain_end_inputs, environment_split as rates_split
 from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
@@ -210,8 +210,8 @@ def run_fused(comp, res, K: int) -> None:
         noise[:] = 0.0
     # the chunk's carry and parameters and the row's info, by name (chunk_layout.py: the builder's)
     C, P = chunk_carry(nx, env=ne), chunk_par(len(cp), len(p))
-    i_t0, i_h, i_n, i_ext = P.slice("t0"), P.slice("h"), P.slice("n_act"), P.slice("u_ext")
-    c_i, c_x, c_cnt, c_env = C.slice("i"), C.slice("x"), C.slice("counts"), C.slice("env")
+    i_h = P.slice("h")
+    c_x, c_env = C.slice("x"), C.slice("env")
     par[:] = P.pack(t0=0.0, h=period, n_act=0.0, cp=cp, u_ext=u_ext, p=p)
     out = comp.end.outputs  # the chain end's reported values (act): u_cmg, m, rate_limited, saturated
     n_act = out.size if comp.has_cluster else 0
@@ -258,24 +258,11 @@ def run_fused(comp, res, K: int) -> None:
                 s_end = r[r_s].copy()  # the law's update at the last tick
                 break
             # ticks k .. k + n_tick - 1 in one call per piece (tick k's actuation is recomputed inside: same)
-            pieces = tick_pieces(k, n_tick, edges, duration, period)
-            counts = np.zeros(2)
-            for a, b, h in pieces:
-                c0[c_i] = 0.0
-                c0[c_x] = x
-                c0[c_cnt] = 0.0
-                c0[c_env] = env_c
-                par[i_t0] = a * period
-                par[i_h] = h
-                par[i_n] = b - a
-                par[i_ext] = held_torque_from(comp.scene, a * period, comp.bps, duration) if edges else u_ext
-                if nn:  # column-major (nn, n): tick by tick
-                    noise[: nn * (b - a)] = draws[a - k : b - k].ravel()
-                chunk()
-                rc = chunk.res[0]
-                x = rc[c_x].copy()
-                counts += rc[c_cnt]
-                env_c = rc[c_env].copy()
+            c0[c_x], c0[c_env] = x, env_c
+            counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period,
+                                (lambda ta: held_torque_from(comp.scene, ta, comp.bps, duration)) if edges else (lambda ta: u_ext),
+                                draws if nn else None)
+            x, env_c = c0[c_x].copy(), c0[c_env].copy()
             par[i_h] = period
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))

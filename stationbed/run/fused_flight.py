@@ -42,7 +42,7 @@ from .chunk_layout import FLIGHT_INFO_IN, chunk_info, flight_carry, flight_par, 
 from .flight_rates import held_flight_chunk
 from .flight_rows import flight_rows_functions, run_flight_rows
 from .rates import carry_width, environment_rate
-from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 from .system import chain_end_inputs, environment_split
 
 __all__ = ["run_fused_flight"]
@@ -212,16 +212,15 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     nx, ls = nx0 + s_law.size, s_law.size
     S = flight.suite
     C = flight_carry(nx, S.STATE.size, carry_width(rate))  # its slices, taken once (the loop below runs per output row)
-    ci, cx, cc, ct, cth, com, cxs = (C.slice(f) for f in ("i", "x", "counts", "t_prev", "theta_B", "omega_prev", "xs"))
+    cx, ct, cth, com, cxs = (C.slice(f) for f in ("x", "t_prev", "theta_B", "omega_prev", "xs"))
     X = law_carry(nx0, ls)
     p, period, duration = comp.p, comp.period, comp.duration
     u_ext = held_torque_from(comp.scene, 0.0, comp.bps, duration)
     ia = dict(zip(FLIGHT_INFO_IN, info.args))  # the row's info inputs, by name (the builder's order)
     ia["cp"][:], ia["u_ext"][:], ia["p"][:], ia["ps"][:] = cp, u_ext, p, flight.params
-    c0, par, noise = chunk.args
+    c0, par = chunk.args[:2]
     P = flight_par(len(cp), p.size, flight.params.size)  # the chunk's parameters (the builder's layout)
-    pt0, ph, pn, pk = (P.slice(f).start for f in ("t0", "h", "n_act", "k0"))
-    par[ph] = period
+    par[P.slice("h")] = period
     par[P.slice("cp")] = cp
     i_ext = P.slice("u_ext")
     par[i_ext] = u_ext
@@ -233,7 +232,6 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
     IL = chunk_info(ncmd, n_act, ls)  # the row's info (the builder's layout)
     i_cmd, i_act, i_q, i_s = (IL.slice(f) for f in IL.names)
     i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if n_act else (0, 0, 0)
-    nw = S.NOISE.size
     fm = res.flight  # the flight's memory, handed back at the end
     # the carry between chunk calls lives in the chunk's own input (c0): one copy per call
     c0[:] = 0.0
@@ -275,17 +273,9 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
                 fm.theta_B, fm.omega_prev, fm.t_prev = c0[cth].copy(), c0[com].copy(), float(c0[ct][0])
                 s_end = r[i_s].copy()  # the law's update at the last tick
                 break
-            pieces = tick_pieces(k, n_tick, edges, duration, period)
-            counts = np.zeros(2)
-            for a, b, h in pieces:
-                c0[ci], c0[cc] = 0.0, 0.0
-                par[pt0], par[ph], par[pn], par[pk] = a * period, h, b - a, a
-                par[i_ext] = held_torque_from(comp.scene, a * period, comp.bps, duration) if edges else u_ext
-                noise[: nw * (b - a)] = draws[a - k : b - k].ravel()
-                chunk()
-                rc = chunk.res[0]
-                counts += rc[cc]
-                c0[:] = rc
+            counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period,
+                                (lambda ta: held_torque_from(comp.scene, ta, comp.bps, duration)) if edges else (lambda ta: u_ext),
+                                draws)
             x = c0[cx].copy()
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))

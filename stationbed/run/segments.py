@@ -143,6 +143,35 @@ def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> li
     return pieces
 
 
+def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None) -> np.ndarray:
+    """Advance a fused loop's chunk over the :func:`tick_pieces` of a row starting at tick ``k``,
+    one compiled call each (run/fused.py, fused_flight.py, thrust_fused.py).
+
+    ``chunk`` is the compiled chunk (a FastCall: carry, parameters[, each tick's draws]); its carry
+    input (layout ``C``: ``i``, ``counts``, ...) holds the carry at tick ``k`` and, after, the
+    carry at the row's end. Each piece sets the parameters (layout ``P``: ``t0``, ``h``, ``n_act``,
+    ``k0`` where it has one, ``u_ext`` = ``torque_at(t0)``) and ``draws[a - k : b - k]`` (the
+    rows' ticks, tick by tick). Returns the pieces' rate-limited and saturated tick counts."""
+    c0, par = chunk.args[0], chunk.args[1]
+    ci, cc = C.slice("i"), C.slice("counts")
+    pt0, ph, pn, pu = (P.slice(f) for f in ("t0", "h", "n_act", "u_ext"))
+    pk = P.slice("k0") if "k0" in P else None
+    counts = np.zeros(2)
+    for a, b, h in pieces:
+        c0[ci], c0[cc] = 0.0, 0.0
+        par[pt0], par[ph], par[pn] = a * period, h, b - a
+        if pk is not None:
+            par[pk] = a
+        par[pu] = torque_at(a * period)
+        if draws is not None:  # column-major (width, n): tick by tick
+            chunk.args[2][: draws.shape[1] * (b - a)] = draws[a - k : b - k].ravel()
+        chunk()
+        rc = chunk.res[0]
+        counts += rc[cc]
+        c0[:] = rc
+    return counts
+
+
 def close_chunk(res, ticks: int, counts, lim: int, sat: int, x, t_end: float) -> int:
     """After a compiled chunk of the fused loops (run/fused.py, fused_flight.py, thrust_fused.py):
     hand its rate-limited and saturated ticks (``counts``) back to the run's

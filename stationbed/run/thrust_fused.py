@@ -35,7 +35,7 @@ from .controller import ControllerError, one_line
 from . import law_state
 from .chunk_layout import chunk_carry, chunk_info, chunk_par
 from .rates import environment_rate
-from .segments import close_chunk, finish_chunks, held_torque_from, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 from .system import chain_end_inputs
 
 __all__ = ["fused_thrust_ok", "run_fused_thrust"]
@@ -200,11 +200,10 @@ def run_fused_thrust(comp, res, K: int, symbolic_params, edges, noise) -> None:
     info.args[4][:] = p
     info.args[7][:] = cl.params
     c0, par, noise_in = chunk.args
-    noise_in[:] = 0.0
+    noise_in[:] = 0.0  # (run_pieces writes each piece's draws into it)
     # the chunk's carry and parameters and the row's info, by name (chunk_layout.py: the builder's)
     C, P = chunk_carry(nx, xa=na), chunk_par(len(cp), len(p), pa=cl.params.size)
-    i_t0, i_h, i_n, i_ext = P.slice("t0"), P.slice("h"), P.slice("n_act"), P.slice("u_ext")
-    c_i, c_x, c_cnt, c_xa = C.slice("i"), C.slice("x"), C.slice("counts"), C.slice("xa")
+    c_x, c_xa = C.slice("x"), C.slice("xa")
     par[:] = P.pack(t0=0.0, h=period, n_act=0.0, cp=cp, u_ext=np.zeros(3), p=p, pa=cl.params)
     out = comp.end.outputs  # the CMG cluster's reported values (act): u_cmg, m, rate_limited, saturated
     IL = chunk_info(3, out.size)
@@ -237,24 +236,12 @@ def run_fused_thrust(comp, res, K: int, symbolic_params, edges, noise) -> None:
             res.row(t, x, lim | sat | tail_flag, u_cmg=act[i_u], cmd=cmd, q_ref=q_ref)
             if k == K:
                 break
-            counts = np.zeros(2)
-            for a, b, hp in tick_pieces(k, n_tick, edges, duration, period):
-                c0[c_i] = 0.0
-                c0[c_x] = x
-                c0[c_cnt] = 0.0
-                c0[c_xa] = xa
-                par[i_t0] = a * period
-                par[i_h] = hp
-                par[i_n] = b - a
-                ta = a * period  # the row's torque when the piece starts at the row (not looked up twice)
-                par[i_ext] = u_row if ta == t else held_torque_from(comp.scene, ta, comp.bps, duration)
-                if nn:  # column-major (nn, n): tick by tick
-                    noise_in[: nn * (b - a)] = draws[a - k : b - k].ravel()
-                chunk()
-                rc = chunk.res[0]
-                x = rc[c_x].copy()
-                counts += rc[c_cnt]
-                xa = rc[c_xa].copy()
+            c0[c_x], c0[c_xa] = x, xa
+            # (the row's torque when a piece starts at the row: not looked up twice)
+            counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period,
+                                lambda ta: u_row if ta == t else held_torque_from(comp.scene, ta, comp.bps, duration),
+                                draws if nn else None)
+            x, xa = c0[c_x].copy(), c0[c_xa].copy()
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
