@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 from scipy.spatial.transform import Rotation
 
 from stationbed.analysis import compare as compare_mod
@@ -267,6 +267,22 @@ def test_plot_of_a_failed_run_draws_its_partial_rows(failed_run, monkeypatch, ca
     assert "failed run: rows to t = 100.1 s in trajectory.partial.csv" in titles[0]
 
 
+def test_plot_of_a_killed_run_drops_its_torn_last_row(hold_run, tmp_path, capsys):
+    """A run killed mid-write (SIGKILL) may leave trajectory.partial.csv ending inside a row: its
+    whole rows are drawn, the torn one is dropped and the title says so. The same cut in a
+    finished trajectory.csv stays an error (test_plot_of_a_cut_csv_names_the_file_and_line)."""
+    text = (hold_run / "trajectory.csv").read_text()
+    cut = text.index("\n", len(text) // 2) + 1 + 40  # 40 characters into a row
+    (tmp_path / "trajectory.partial.csv").write_text(text[:cut])
+    tr, meta = dash.load_run(tmp_path)
+    whole = text[:cut].count("\n") - 1
+    assert meta["partial"] and meta["torn_rows"] == 1 and len(tr) == whole
+    assert_array_equal(tr.data, Trajectory.from_csv(hold_run / "trajectory.csv").data[:whole])
+    assert "unfinished run: rows in trajectory.partial.csv, its torn last row dropped" == dash.run_state(meta)
+    assert main(["plot", str(tmp_path)]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_compare_with_a_failed_run_labels_it(failed_run, hold_run, tmp_path):
     res = run_cli("compare", hold_run, failed_run, "--png", tmp_path / "c.png")
     assert res.returncode == 0 and res.stderr == ""
@@ -280,7 +296,7 @@ def test_summary_of_another_run_is_not_used(hold_run, tmp_path):
     (tmp_path / "summary.json").write_text(json.dumps({"status": "failed", "rows_file": "trajectory.partial.csv",
                                                        "summary": {"controller": "other"}}))
     tr, meta = dash.load_run(tmp_path)
-    assert meta == {"rows_file": "trajectory.csv", "partial": False}
+    assert meta == {"rows_file": "trajectory.csv", "partial": False, "torn_rows": 0}
 
 
 def test_plot_writes_nothing_to_stderr(hold_run, tmp_path):

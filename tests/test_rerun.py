@@ -453,7 +453,7 @@ def test_killed_run_leaves_the_child_to_finish_the_recording(tmp_path):
     rrd = out / "recording.partial.rrd"  # killed: the run never ended, its outputs keep the partial names
     res = verify(rrd)
     assert res.returncode == 0, res.stderr
-    csv = Trajectory.from_csv(out / "trajectory.partial.csv")
+    csv = Trajectory.from_csv(out / "trajectory.partial.csv", torn_tail=True)  # killed mid-write: may end mid-row
     w = read_temporal(rrd)["telemetry/omega_BN_B"]
     n = len(w["t"])
     assert n_seen - ROW_BATCH <= n <= len(csv)
@@ -976,3 +976,21 @@ def test_trajectory_csv_round_trip_is_exact(tmp_path):
     back = Trajectory.from_csv(tmp_path / "t.csv")
     assert back.columns == traj.columns
     np.testing.assert_array_equal(back.data, traj.data)
+
+
+@pytest.mark.parametrize("cut", [0, 1, 37], ids=["at_a_newline", "one_char_in", "mid_row"])
+def test_trajectory_csv_torn_tail(tmp_path, cut):
+    """A file cut ``cut`` characters after a row's newline (a writer killed mid-batch): with
+    ``torn_tail`` the whole rows read bit for bit and the torn one is counted; without it, a torn
+    row is the one-line error naming its line."""
+    traj = Trajectory(["t", "a", "b"], np.array([[0.0, 1.0 / 3.0, -2.5e-300], [0.1, np.pi, 7.0], [0.2, -1.0, 1e300]]))
+    traj.to_csv(tmp_path / "t.csv")
+    text = (tmp_path / "t.csv").read_text()
+    end = text.index("\n", text.index("\n") + 1) + 1 + cut  # the header, one row, then `cut` characters
+    (tmp_path / "t.csv").write_text(text[:end])
+    back = Trajectory.from_csv(tmp_path / "t.csv", torn_tail=True)
+    np.testing.assert_array_equal(back.data, traj.data[:1])
+    assert back.meta == {"torn_rows": int(cut > 0)}
+    if cut:
+        with pytest.raises(ValueError, match=r"line 3 has \d+ values, the header 3 columns"):
+            Trajectory.from_csv(tmp_path / "t.csv")

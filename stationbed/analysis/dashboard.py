@@ -37,7 +37,8 @@ def load_run(outdir) -> tuple[Trajectory, dict]:
     The rows are the ones summary.json names (``rows_file``: the last run's, finished or not),
     else ``trajectory.csv``, else ``trajectory.partial.csv`` (a failed or interrupted run keeps its
     rows there); ``meta["rows_file"]`` says which was read and ``meta["partial"]`` whether they are
-    a failed or interrupted run's. ValueError naming the file for a folder without rows, a CSV
+    a failed or interrupted run's; a partial file's torn last row (a run killed mid-write) is
+    dropped and counted in ``meta["torn_rows"]``. ValueError naming the file for a folder without rows, a CSV
     cut mid-row or damaged, or a summary.json that is not JSON.
     """
     outdir = Path(outdir)
@@ -56,11 +57,13 @@ def load_run(outdir) -> tuple[Trajectory, dict]:
     if csv is None:
         raise ValueError(f"{outdir / ROWS_FILES[0]}: no such file, nor {ROWS_FILES[1]} "
                          "(a run folder written by 'stationbed run --out DIR')")
-    tr = Trajectory.from_csv(csv)
+    partial = csv.name != ROWS_FILES[0]
+    tr = Trajectory.from_csv(csv, torn_tail=partial)  # a killed run's last row may be torn
     meta["rows_file"] = csv.name
-    meta["partial"] = csv.name != ROWS_FILES[0]
+    meta["partial"] = partial
+    meta["torn_rows"] = tr.meta.get("torn_rows", 0)
     if named is not None and named != csv.name:  # summary.json is another run's (the file it names is gone): not these rows'
-        meta = {"rows_file": csv.name, "partial": meta["partial"]}
+        meta = {"rows_file": csv.name, "partial": partial, "torn_rows": meta["torn_rows"]}
     tr.meta.update(meta)
     return tr, meta
 
@@ -71,8 +74,9 @@ def run_state(meta: dict) -> str:
         return ""
     what = meta.get("status") if meta.get("status") in ("failed", "interrupted") else "unfinished"
     at = meta.get("stopped_at", meta.get("last_t"))
-    return f"{what} run: rows to t = {at:g} s in {meta['rows_file']}" if isinstance(at, (int, float)) else \
-        f"{what} run: rows in {meta['rows_file']}"
+    torn = ", its torn last row dropped" if meta.get("torn_rows") else ""
+    return f"{what} run: rows to t = {at:g} s in {meta['rows_file']}{torn}" if isinstance(at, (int, float)) else \
+        f"{what} run: rows in {meta['rows_file']}{torn}"
 
 
 def time_axis(t_end: float) -> tuple[float, str]:

@@ -9,6 +9,7 @@ appendage [rad], then anything else a scene adds.
 from __future__ import annotations
 
 import csv
+import io
 import warnings
 from dataclasses import dataclass, field
 
@@ -94,28 +95,44 @@ class Trajectory:
             np.savetxt(fh, np.atleast_2d(self.data), delimiter=",", fmt=CSV_FORMAT)
 
     @classmethod
-    def from_csv(cls, path) -> "Trajectory":
+    def from_csv(cls, path, *, torn_tail: bool = False) -> "Trajectory":
         """Read a trajectory CSV written by :meth:`to_csv` or ``stationbed run``.
 
         A header with no rows gives an empty trajectory. A file that is not such a table raises
         ValueError naming the file and the first bad line: empty (no header), a row of another
         width (a file cut mid-row, or damaged), a value that is not a number.
+
+        Parameters
+        ----------
+        torn_tail : bool
+            Read a run's partial rows (``trajectory.partial.csv``) as a process killed mid-write
+            (SIGKILL, power loss) leaves them: every row is written with its newline, so a file
+            that does not end in one ends in a torn row, which is dropped and counted in
+            ``meta["torn_rows"]`` (1, else 0). Lines before it are read as strictly as ever.
         """
         with open(path, newline="") as fh:
             header = next(csv.reader(fh), None)
             if not header or not all(header):
                 raise ValueError(f"{path}: no header row (an empty or damaged trajectory CSV)")
+            rows = fh
+            torn = 0
+            if torn_tail:
+                text = fh.read()
+                if text and not text.endswith("\n"):
+                    text, torn = text[: text.rfind("\n") + 1], 1
+                rows = io.StringIO(text)
             with warnings.catch_warnings():  # a header without rows is an empty trajectory, said by the caller
                 warnings.filterwarnings("ignore", message="loadtxt: input contained no data")
                 try:
-                    data = np.loadtxt(fh, delimiter=",", ndmin=2)
+                    data = np.loadtxt(rows, delimiter=",", ndmin=2)
                 except ValueError:
                     raise ValueError(f"{path}: {_bad_line(path, len(header))}") from None
+        meta = {"torn_rows": torn} if torn_tail else {}
         if data.size == 0:
-            return cls(header, np.empty((0, len(header))))
+            return cls(header, np.empty((0, len(header))), meta)
         if data.shape[1] != len(header):
             raise ValueError(f"{path}: rows have {data.shape[1]} values, the header {len(header)} columns")
-        return cls(header, data)
+        return cls(header, data, meta)
 
     def to_npz(self, path) -> None:
         """Write the columns and data to a numpy ``.npz`` file."""
