@@ -38,6 +38,7 @@ from numpy.testing import assert_allclose
 from stationbed import simulate, simulate_batch
 from stationbed.integrators import RK4
 from stationbed.run.controller import Controller
+from stationbed.core.rotation import rotation_angle
 from stationbed.scene import scene_from_dict
 
 PERIOD_S = 0.1  # s, the control period and RK4 step (10 Hz, as the shipped scenes)
@@ -498,18 +499,42 @@ def test_window_impulse_with_sensors_and_mekf(executor):
 ENV_RATES = [1, 5, "auto"]
 
 
+@pytest.mark.parametrize("fused", [True, False], ids=["fused", "fast_tick"])
 @pytest.mark.parametrize("case", ["on_grid", "whole"])
 @pytest.mark.parametrize("rate", ENV_RATES, ids=[f"env_every_{n}" for n in ENV_RATES])
-def test_every_torque_kind_balance_at_each_environment_rate(rate, case):
-    """The fused loop with aero and SRP held over blocks of ``rate`` ticks keeps the balance
-    (the integral takes the every-stage torque columns the run logs)."""
+def test_every_torque_kind_balance_at_each_environment_rate(rate, case, fused):
+    """The fused loop and the per-tick loop (its held tick, run/held_env.py) with aero and SRP
+    held over blocks of ``rate`` ticks keep the balance (the integral takes the every-stage
+    torque columns the run logs); the window's edges on the grid cut the blocks."""
     windows = KIND_WINDOWS[case]
     d = kinds_scene(windows)
     d["simulation"]["environment_rate"] = rate
-    tr = simulate(scene_from_dict(d), fused=True)
-    assert tr.meta["summary"]["fused"] and tr.meta["summary"]["environment_rate_ticks"] == (5 if rate == "auto" else rate)
+    tr = simulate(scene_from_dict(d), fused=fused)
+    assert tr.meta["summary"]["fused"] == fused and tr.meta["summary"]["environment_rate_ticks"] == (5 if rate == "auto" else rate)
     expect = smooth_integral_N(tr) + window_integral_N(tr, windows)
     assert_allclose(tr.H_O_N - tr.H_O_N[0], expect, rtol=0, atol=KIND_ABS)
+
+
+#: the per-tick tick against the fused chunk's: the same operations, a tick's time k h against
+#: t0 + i h (round-off in t, over 600 ticks)
+EXECUTOR_ROUNDOFF_RAD = 1e-12
+#: per sample, its window's edges on the grid at its own ticks: each sample's blocks are cut
+#: at its own edges (the batch evaluates the environment for the samples whose block starts)
+HELD_BATCH_WINDOWS = [[(20.0, 40.0)], [(20.3, 33.7)], [(0.0, KIND_DURATION_S)]]
+
+
+def test_every_torque_kind_balance_lockstep_at_the_default_rate():
+    """Three samples in the lockstep batch with aero and SRP held at the default (``auto``:
+    5 ticks here), each with windows on the grid at its own ticks: each sample's balance, each
+    is its single per-tick run bit for bit, and the fused run (the same blocks, cut at the same
+    edges) to round-off."""
+    scenes = [scene_from_dict(kinds_scene(w)) for w in HELD_BATCH_WINDOWS]
+    for w, tr, scene in zip(HELD_BATCH_WINDOWS, _lockstep(scenes), scenes):
+        assert tr.meta["summary"]["environment_rate_ticks"] == 5
+        np.testing.assert_array_equal(tr.data, simulate(scene, fused=False).data)
+        assert float(np.max(rotation_angle(tr.q_BN, simulate(scene, fused=True).q_BN))) <= EXECUTOR_ROUNDOFF_RAD
+        expect = smooth_integral_N(tr) + window_integral_N(tr, w)
+        assert_allclose(tr.H_O_N - tr.H_O_N[0], expect, rtol=0, atol=KIND_ABS)
 
 
 def test_torque_kind_balance_on_sensors_and_mekf_at_the_default_rate():

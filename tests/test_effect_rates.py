@@ -110,13 +110,14 @@ def test_default_rate_is_the_bounds_choice_and_within_it(orbit):
 
 def test_auto_says_why_it_runs_every_stage():
     """Where the bound does not apply, ``auto`` is every stage and the summary says why: a law
-    other than pd, the per-tick loop, thrusters; a scene without environment torques records
-    no bound."""
+    other than pd, a per-tick loop that cannot cut the run into blocks (DOP853 steps across
+    ticks), thrusters; a scene without environment torques records no bound."""
     hold = load_scene(SCENE).replace({"simulation.duration": 20.0, "simulation.output_dt": 10.0})
     tea = load_scene(ROOT / "scenarios" / "iss_tea_momentum_management.toml")
     cases = [
         (simulate(tea, duration=20.0), "pd"),
-        (simulate(hold, fused=False), "per-tick"),
+        (simulate(hold.replace({"simulation.integrator": "dop853", "simulation.step": None}), fused=False),
+         "not one RK4 step per tick"),
         (simulate(load_scene(ROOT / "scenarios" / "iss_cmg_thruster_assist.toml"), duration=20.0), "thrusters"),
         (simulate(load_scene(ROOT / "scenarios" / "eigenaxis_slew.toml"), duration=2.0), "no environment"),
     ]
@@ -124,6 +125,50 @@ def test_auto_says_why_it_runs_every_stage():
         s = tr.meta["summary"]
         assert (s["environment_rate_asked"], s["environment_rate_ticks"], s["environment_rate_bound_rad"]) == (AUTO, 0, None)
         assert why in s["environment_rate_why"], s["environment_rate_why"]
+
+
+#: the per-tick and batch executors' held tick against the fused loop's: the same blocks and
+#: operations, but a tick's time is k h there and t0 + i h in the fused chunk (round-off in t)
+EXECUTOR_ROUNDOFF_RAD = 1e-12
+#: the hold's own effect over 600 s (~1e-10 rad here): what the round-off sits under
+HOLD_EFFECT_MIN_RAD = 1e-12
+
+
+def test_per_tick_and_batch_loops_hold_the_fused_loops_blocks():
+    """A Python law flown per tick, and two samples in the lockstep batch, at the default
+    (``auto``: 100 ticks over these 600 s, no penumbra) run the fused loop's blocks: the summary records the rate and its
+    bound, the attitude is the fused run's to round-off, and the hold did act (the every-stage
+    per-tick run differs by far more); each batch sample is its single run bit for bit."""
+    from stationbed.run.lockstep import run_lockstep  # noqa: PLC0415
+
+    scene = load_scene(SCENE).replace({"simulation.duration": 600.0})
+    fused = simulate(scene)
+    per_tick = simulate(scene, fused=False)
+    every = simulate(_with_rate(scene, 0), fused=False)
+    s, f = per_tick.meta["summary"], fused.meta["summary"]
+    assert not s["fused"] and f["fused"]
+    assert s["environment_rate_ticks"] > 1 and s["environment_rate_bound_rad"] <= TARGET_RAD
+    assert (s["environment_rate_ticks"], s["environment_rate_bound_rad"]) == (f["environment_rate_ticks"], f["environment_rate_bound_rad"])
+    assert every.meta["summary"]["environment_rate_ticks"] == 0
+    assert float(np.max(rotation_angle(per_tick.q_BN, fused.q_BN))) <= EXECUTOR_ROUNDOFF_RAD
+    assert float(np.max(rotation_angle(per_tick.q_BN, every.q_BN))) > 10 * max(EXECUTOR_ROUNDOFF_RAD, HOLD_EFFECT_MIN_RAD)
+    other = scene.replace({"initial.omega_BN_B": [1e-4, -2e-4, 5e-5]})
+    res = run_lockstep([scene, other], fused=False, keep=True)
+    assert [k for k, _ in res] == ["batch", "batch"]
+    for (_, tr), single in zip(res, (per_tick, simulate(other, fused=False))):
+        assert tr.meta["summary"]["environment_rate_ticks"] == s["environment_rate_ticks"]
+        np.testing.assert_array_equal(tr.data, single.data)
+
+
+def test_per_tick_blocks_cut_at_rows_and_a_short_last_period():
+    """Blocks of 7 ticks in rows of 20 (7, 7, 6) and a run ending 0.03 s after a tick (its last
+    period a piece of its own): the per-tick loop is the fused loop to round-off."""
+    scene = load_scene(SCENE).replace({"simulation.duration": 61.23, "simulation.output_dt": 2.0,
+                                       "simulation.environment_rate": 7})
+    per_tick, fused = simulate(scene, fused=False), simulate(scene)
+    assert [tr.meta["summary"]["environment_rate_ticks"] for tr in (per_tick, fused)] == [7, 7]
+    assert per_tick.t[-1] == fused.t[-1] == 61.23
+    assert float(np.max(rotation_angle(per_tick.q_BN, fused.q_BN))) <= EXECUTOR_ROUNDOFF_RAD
 
 
 def test_the_probe_is_kept_on_disk_for_the_next_process(tmp_path, monkeypatch):

@@ -28,9 +28,9 @@ from .measurement import command_fields, measurement_fields
 from ..loop.cmg_cluster import chain_end
 from .composition import Composition, ControllerFailure, FlightMemory, RunState
 from .fused import fused_ok, run_fused
+from .held_env import HeldBlocks, held_functions, held_rate, rate_summary
 from .initial import initial_state, initial_x
 from .laws import build_controller
-from .rates import rate_summary
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
 from .thrust import thrust_for
@@ -332,7 +332,9 @@ class ControlLoop:
         sat_since_row = 0
         flush = res.rows.flush  # rows are held and streamed in batches (ROW_BATCH, FLUSH_S)
 
-        tick = self._fast_tick()
+        tick = self._fast_tick(K)
+        held = self.held  # the environment held per block (held_env.py), or None: every stage
+        blk = 0 if held is not None else -1  # the tick that starts the next block
         bps = [b for b in comp.bps if 0.0 < b < duration]
         ib = 0  # next breakpoint
         u_ext = comp.input_layout.slice("u_ext")
@@ -341,9 +343,13 @@ class ControlLoop:
             self.u_ext[:] = res.u[u_ext]
             fc, xin, res_x, res_y, res_act = tick
             a_t, a_h, a_cmd = fc.args[0], fc.args[1], fc.args[3]
-        # the loop checks commands itself; Controller.update counts the calls
+        # the loop checks commands itself, and counts the law's calls where Controller.update
+        # would have (Controller.tick_update)
         ctrl = comp.ctrl
-        update, n_per_out = ctrl.update, comp.n_per_out
+        update, counted = ctrl.tick_update()
+        n_per_out = comp.n_per_out
+        calls = 0
+        replan_at = comp.replan.tick if comp.replan is not None else -1
         out = comp.end.outputs
         i_u, i_lim, i_sat = out.slice("u_cmg") if comp.has_cluster else None, comp.nu_cmg + 1, comp.nu_cmg + 2
         has_act = self.act is not None
@@ -357,6 +363,8 @@ class ControlLoop:
         fast = tick is not None
         if fast:
             trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
+            # the tick's buffers as memoryviews: Python floats in and out, ~half numpy's cost
+            m_t, m_x, m_x1, m_act = memoryview(a_t), memoryview(xin), memoryview(res_x), memoryview(res_act)
             pack_cmd = struct.Struct(f"={ncmd}d").pack_into
             ndarray, f64 = np.ndarray, np.dtype(np.float64)
         try:
@@ -365,9 +373,10 @@ class ControlLoop:
                 t = k * period  # integer tick clock: no accumulated drift
                 if k == K:
                     t = duration
-                if comp.replan is not None and k == comp.replan.tick:  # a failure detected
+                if k == replan_at:  # a failure detected
                     replan(ctrl, comp.replan.plant())
                 M.t = t
+                calls += 1
                 try:
                     cmd = update(t, M)
                 except Exception as e:  # the user's code: report it (chained), keep the trajectory
@@ -375,9 +384,14 @@ class ControlLoop:
                 t_next = (k + 1) * period
                 if t_next > duration:
                     t_next = duration
-                smooth = fast and k < K and next_bp > t_next  # a step at t_next needs the jump
+                # a step at t_next needs the jump (held: every edge is on the grid, a block's cut)
+                smooth = fast and k < K and (next_bp > t_next or held is not None)
                 if smooth:  # fused: actuate + one RK4 step + measure, one compiled call
-                    a_t[0] = t
+                    if k == blk:  # a block's first tick: the environment evaluated, held over it
+                        if held.start(k, t, self.x):  # (and a stretch of held torque starts)
+                            self.u_ext[:] = res.u[u_ext] = held_torque_from(comp.scene, t, comp.bps, duration)
+                        blk = held.next
+                    m_t[0] = t
                     if t_next - t != h_set:
                         h_set = t_next - t
                         a_h[0] = h_set
@@ -396,7 +410,7 @@ class ControlLoop:
                         cmd = self.check_command(t, cmd)
                         a_cmd[:] = cmd
                     trigger()
-                    if has_act and (res_act[i_lim] or res_act[i_sat]):
+                    if has_act and (m_act[i_lim] or m_act[i_sat]):
                         sat_since_row |= self._flags(res_act)
                 else:
                     cmd = self.check_command(t, cmd)
@@ -414,12 +428,12 @@ class ControlLoop:
                     break
                 ticks += 1
                 if smooth:
-                    v = res_x[i_fin]
+                    v = m_x1[i_fin]
                     if not -1e300 < v < 1e300:
                         res.ticks = ticks
                         self.check_command(t, cmd)
                         raise IntegrationError(t_next, "state is not finite (NaN or inf)")
-                    xin[:] = res_x
+                    m_x[:] = m_x1
                     if noisy:
                         self.meas.res[0][:] = res_y
                         self._after_sense(k + 1, t_next, res_y)
@@ -431,6 +445,8 @@ class ControlLoop:
                     self.advance(t, t_next, cmd)
                     self._sense(k + 1, t_next)
         finally:
+            if not counted:
+                ctrl.count_compiled_updates(calls)
             res.ticks = ticks
             if tick is not None:
                 n_fast = res.ticks - self.n_slow
@@ -447,17 +463,26 @@ class ControlLoop:
         except ValueError as e:
             raise ControllerFailure(t, f"controller '{comp.ctrl.name}' returned {e}") from None
 
-    def _fast_tick(self):
-        """The fused tick when the integrator is fusable (RK4) with one step per period, else None."""
+    def _fast_tick(self, K: int):
+        """The fused tick when the integrator is fusable (RK4) with one step per period, else
+        None; with the environment held (held_env.py) the held tick, and ``self.held`` its blocks."""
         comp = self.comp
         integ = comp.integ
         f = integ.funcs
         name = "tick_rates" if comp.ctrl.command == "gimbal_rates" else "tick_torque"
+        self.held = None
         if not integ.fusable or name not in f or comp.thrust is not None:
             return None
         if math.ceil(comp.period / integ.h_nominal - 1e-9) != 1:
             return None
-        fc = FastCall.of(f[name])
+        rate = held_rate(comp)[0]
+        if rate:
+            hf = held_functions(comp.system, comp.ctrl.command)
+            fc = FastCall.of(hf["tick"])
+            self.held = HeldBlocks([comp], rate, K, FastCall.of(hf["env"]), fc.args[6], comp.p)
+            self.res.held_rate = rate
+        else:
+            fc = FastCall.of(f[name])
         fc.args[5][:] = comp.p
         fc.args[2][:] = self.x
         self.x = fc.args[2]  # the loop's state lives in the tick's input buffer
@@ -502,7 +527,7 @@ class ControlLoop:
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())
-        out.update(rate_summary(self.comp, self.res.used_fused))  # the effect rates run (issue 25)
+        out.update(rate_summary(self.comp, self.res.used_fused, self.res.held_rate))  # the effect rates run (issue 25)
         if comp.thrust is not None:
             out.update(comp.thrust.summary(comp))
         try:  # the user's code: a raising summary() must not hide the run's own result or failure

@@ -182,6 +182,7 @@ class RunState:
         self.n_rate_limited = 0
         self.n_momentum_saturated = 0
         self.used_fused = False
+        self.held_rate = 0  # a per-tick executor's environment blocks (held_env.py; 0: every stage)
         # what a row reads of the composition, looked up once (a row per output sample)
         self._gimbals = slice(comp.u_cmg.start, comp.u_cmg.start + comp.ng) if comp.has_cluster else None
         self._q = comp.state_layout.slice("q_BN")

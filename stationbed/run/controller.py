@@ -196,6 +196,15 @@ class Controller:
         self.n_updates += 1
         return self._update(t, meas)
 
+    def tick_update(self):
+        """``(call, counted)``: what a per-tick executor calls every tick with ``(t, meas)``, and
+        whether that call counts itself in ``n_updates``: :meth:`_update` (uncounted: the
+        executor adds its calls with :meth:`count_compiled_updates`, one Python call less per
+        tick) unless the law overrides :meth:`update`, which is then called as it is."""
+        if type(self).update is Controller.update:
+            return self._update, False
+        return self.update, True
+
     def count_compiled_updates(self, n: int) -> None:
         """Count ``n`` updates that the controller's :meth:`symbolic` form made inside a compiled
         loop (the fused loop of :mod:`stationbed.run.fused`), where :meth:`update` is not called."""

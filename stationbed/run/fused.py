@@ -35,7 +35,7 @@ from .chunk_layout import chunk_carry, chunk_info, chunk_par
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
-from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
+from .segments import close_chunk, edge_ticks, finish_chunks, held_torque_from, run_pieces, tick_pieces
 from .system import chain_end_inputs, environment_split as rates_split
 from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
@@ -44,23 +44,10 @@ __all__ = ["fused_ok", "run_fused"]
 _CHUNKS: dict[tuple, dict] = {}
 
 
-def _edge_ticks(comp) -> list[int] | None:
-    """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) of the
-    discontinuities inside the run of ``comp`` (its :class:`~.composition.Composition`); None
-    when one lies between ticks or the scene has array rate steps (both need the per-tick loop)."""
-    inside = [b for b in comp.bps if 0.0 < b < comp.duration]
-    if inside and comp.model.has_steps:
-        return None
-    ks = [round(b / comp.period) for b in inside]
-    if any(k * comp.period != b for k, b in zip(ks, inside)):
-        return None
-    return sorted(set(ks))
-
-
 def fused_ok(comp) -> bool:
     """Whether the run composed by ``comp`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
     integrator at one step per period, every discontinuity inside the run on the tick grid
-    (:func:`_edge_ticks`), no sensor delay (sensor noise is drawn in Python and applied inside
+    (:func:`~.segments.edge_ticks`), no sensor delay (sensor noise is drawn in Python and applied inside
     the compiled tick: :func:`_noise_width`)."""
     ctrl = comp.ctrl
     integ = comp.integ
@@ -68,7 +55,7 @@ def fused_ok(comp) -> bool:
         callable(getattr(ctrl, "symbolic", None))
         and integ.fusable
         and math.ceil(comp.period / integ.h_nominal - 1e-9) == 1
-        and _edge_ticks(comp) is not None
+        and edge_ticks(comp) is not None
         and not (comp.noisy and comp.delay > 0)
         and comp.system.sx is not None
         and not (comp.flight is not None and comp.noisy)
@@ -176,11 +163,11 @@ def run_fused(comp, res, K: int) -> None:
     ctrl = comp.ctrl
     if comp.thrust is not None:  # thrusters (issue 21)
         noise = {"flags": _noise_flags(comp), "width": _noise_width, "corrupt": _corrupt_sx, "draw": _draw}
-        return run_fused_thrust(comp, res, K, _symbolic_params(ctrl), _edge_ticks(comp), noise)
+        return run_fused_thrust(comp, res, K, _symbolic_params(ctrl), edge_ticks(comp), noise)
     if comp.flight is not None:  # sensors and estimator (issue 20)
         from .fused_flight import run_fused_flight
 
-        return run_fused_flight(comp, res, K, _symbolic_params(ctrl), _edge_ticks(comp))
+        return run_fused_flight(comp, res, K, _symbolic_params(ctrl), edge_ticks(comp))
     n = comp.n_per_out
     flags = _noise_flags(comp)
     nn = _noise_width(flags)
@@ -200,7 +187,7 @@ def run_fused(comp, res, K: int) -> None:
     nx = nx0 + s_law.size
     p, period, duration = comp.p, comp.period, comp.duration
     u_ext = held_torque_from(comp.scene, 0.0, comp.bps, duration)
-    edges = _edge_ticks(comp)  # where the held torque may change: a chunk is split there
+    edges = edge_ticks(comp)  # where the held torque may change: a chunk is split there
     info.args[2][:] = cp
     info.args[3][:] = u_ext
     info.args[4][:] = p

@@ -33,6 +33,7 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
+from .held_env import HeldBlocks, held_functions, held_rate
 from ..loop.corruption import corrupt_compiled, draws_layout
 from .lockstep_flight import FlightBatch
 from .prepare import prepare
@@ -173,7 +174,7 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
         sim = s.simulation
         comp = smp.loop.comp
         key = (id(smp.run.system), type(comp.ctrl), comp.ctrl.command, sim.duration, sim.output_dt,
-               comp.period, getattr(comp.flight, "key", None))
+               comp.period, getattr(comp.flight, "key", None), held_rate(comp)[0])  # (each sample its own blocks)
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
@@ -218,8 +219,11 @@ class _Lockstep:
         self.i_u = out.slice("u_cmg") if self.has_act else None
         self.i_flags = slice(out.slice("rate_limited").start, out.slice("saturated").stop) if self.has_act else None
         name = "tick_rates" if lp.ctrl.command == "gimbal_rates" else "tick_torque"
-        f = lp.integ.funcs[name]
-        fc = self.fc = mapped(f, n, 1)  # the compiled tick, called once per sample by casadi's map
+        self.rate = held_rate(lp)[0]  # the environment held per block (held_env.py: every sample's blocks)
+        hf = held_functions(lp.system, lp.ctrl.command) if self.rate else None
+        f = hf["tick"] if self.rate else lp.integ.funcs[name]
+        fc = self.fc = mapped(f, n, 1)
+        self.env = mapped(hf["env"], n, 1) if self.rate else None  # the compiled tick, called once per sample by casadi's map
         nx = lp.system.formulation.nx
         self.T, self.H = fc.args[0], fc.args[1]
         self.X = fc.args[2].reshape(n, nx)
@@ -323,7 +327,7 @@ class _Lockstep:
         K = lp.ticks()
         ctrl = type(lp.ctrl).batch_of([s.loop.comp.ctrl for s in S])
         vec = vectorised(ctrl)
-        generic = [_generic_ticks(s.loop.comp, K) for s in S]
+        generic = [set() if self.rate else _generic_ticks(s.loop.comp, K) for s in S]  # (held: every edge on the grid)
         any_generic = set().union(*generic)
         i_ext = lp.input_layout.slice("u_ext")
         for i, s in enumerate(S):
@@ -333,6 +337,12 @@ class _Lockstep:
             self.UEXT[i] = held_torque_from(s.scene, 0.0, bps, duration)
             s.loop.res.u[i_ext] = self.UEXT[i]
             self._measure(i, 0.0, self.X[i])
+        held = None
+        if self.rate:  # each block's first tick: every sample's environment evaluated and held
+            held = HeldBlocks([s.loop.comp for s in S], self.rate, K, self.env, self.fc.args[6], self.P.ravel())
+            for s in S:
+                s.loop.res.held_rate = self.rate
+        blk = 0 if held is not None else -1
         alive = np.ones(n, dtype=bool)
         errors: dict[int, BaseException] = {}
         ticks = np.zeros(n, dtype=int)
@@ -408,6 +418,10 @@ class _Lockstep:
                             if k in generic[i]:
                                 smooth[i] = False
                 if all_smooth or smooth.any():
+                    if k == blk:  # a block's first tick: every sample's environment, held over it
+                        for i in held.start(k, t, self.X.ravel()):  # (and a stretch of held torque starts)
+                            self.UEXT[i] = S[i].loop.res.u[i_ext] = held_torque_from(S[i].scene, t, S[i].loop.comp.bps, duration)
+                        blk = held.next
                     self.T[:] = t
                     if t_next - t != h_set:
                         h_set = t_next - t

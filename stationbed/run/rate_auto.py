@@ -97,6 +97,7 @@ def _probe(scene) -> tuple[float, float, list]:
         importlib.import_module(f"{__package__}.simulation")
     dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
     changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
+               "simulation.integrator": "rk4",  # (a DOP853 scene's probe too: the torque, not the steps)
                "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
                "controller.sensor": {}, "sensor": [], "estimator": None}  # truth-fed: the same torque
     quiet = _Quiet()  # the probe's own notices (a saturation, a fallback) belong to the run, said there

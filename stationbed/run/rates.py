@@ -35,7 +35,7 @@ from .chunk_layout import ENV, chunk_carry, vertcat_by
 from .rate_auto import AUTO, auto_choice, g_norms, hold_bound_rad, torque_rates  # noqa: F401 (the bound: re-exported)
 from .system import environment_split
 
-__all__ = ["environment_rate", "carry_width", "held_chunk", "rate_summary", "g_norms", "hold_bound_rad", "torque_rates"]
+__all__ = ["environment_rate", "carry_width", "held_chunk", "hold_value", "g_norms", "hold_bound_rad", "torque_rates"]
 
 #: the extra carry of a held-environment chunk (chunk_layout.ENV: L_prev, t_prev, have_prev)
 ENV_CARRY = ENV.size
@@ -45,8 +45,8 @@ def environment_rate(loop) -> int:
     """The environment rate the fused loop runs for ``loop`` (ticks per evaluation; 0 = every
     integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
     environment torques, else 0; ``"auto"`` (the default) is the bound's choice
-    (:func:`~.rate_auto.auto_choice`). The per-tick loops evaluate every stage
-    (:func:`rate_summary` reports 0 for them)."""
+    (:func:`~.rate_auto.auto_choice`). The per-tick executors hold it in the same blocks where
+    they can cut the run into them (:func:`~.held_env.held_rate`)."""
     asked = getattr(loop.scene.simulation, "environment_rate", 0)
     if asked == AUTO:
         if loop.system.sx is None or environment_split(loop.system) is None:
@@ -134,29 +134,16 @@ def held_environment(env_B, C: Layout, P: Layout, rate: int, co, po) -> tuple:
     t_now = t0 + i * h
     L_now = env_B(t_now, x, P.get(po, "p"))
     n_b = ca.fmin(rate, ca.fmax(n_act - i, 0))  # active ticks in this block
-    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
-    L_hold = L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), ca.MX.zeros(3))
+    L_hold = hold_value(L_now, L_prev, t_now, t_prev, have, n_b, h)
     live = n_b > 0
     return L_hold, [ca.if_else(live, L_now, L_prev), ca.if_else(live, t_now, t_prev), ca.if_else(live, 1.0, have)]
 
 
-def rate_summary(loop, used_fused: bool) -> dict:
-    """What the run's summary records (``loop`` the run's composition, ``used_fused`` whether a
-    fused executor ran) of the effect rates: the environment's ticks per
-    evaluation (0 = every integrator stage) as run, and as the scene asked; under ``"auto"``
-    also the bound of the rate run (``environment_rate_bound_rad``) or why it is every stage. A block never spans
-    an output row (each chunk starts its own), so the run's rate is at most the ticks per row."""
-    asked = getattr(loop.scene.simulation, "environment_rate", 0)
-    asked = asked if asked == AUTO else int(asked or 0)
-    ran = min(environment_rate(loop), loop.n_per_out) if used_fused else 0
-    out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
-    if asked == AUTO:  # the same keys whichever executor ran
-        if loop.system.sx is None or environment_split(loop.system) is None:
-            c = {"bound_rad": None, "why": "no environment torque"}
-        elif not used_fused:
-            c = {"bound_rad": None, "why": "the per-tick loop evaluates every stage"}
-        else:
-            c = auto_choice(loop)  # kept per scene: no second probe
-        out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
-        out["environment_rate_why"] = c["why"]
-    return out
+def hold_value(L_now, L_prev, t_now, t_prev, have, n_b, h):
+    """The block's held torque (casadi, SX or MX): ``L_now`` extrapolated to the middle of the
+    block's ``n_b`` ticks of ``h`` from the previous evaluation ``(L_prev, t_prev)`` when there
+    is one (``have``), else ``L_now``. Written once: the fused blocks (:func:`held_environment`)
+    and the per-tick ``env_block`` (:mod:`.held_env`) use it."""
+    dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
+    zero = type(L_now).zeros(3)
+    return L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), zero)

@@ -20,6 +20,7 @@ __all__ = [
     "smooth_cuts",
     "held_torque",
     "held_torque_from",
+    "edge_ticks",
     "tick_pieces",
     "close_chunk",
     "finish_chunks",
@@ -127,6 +128,19 @@ def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.n
     u[lay.slice("u_ext")] = held_torque(scene, t_mid)
     if "t_step" in lay:
         u[lay.slice("t_step")] = t_mid
+
+
+def edge_ticks(comp) -> list[int] | None:
+    """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) of the
+    discontinuities inside the run of ``comp`` (its :class:`~.composition.Composition`); None
+    when one lies between ticks or the scene has array rate steps (both need the per-tick loop)."""
+    inside = [b for b in comp.bps if 0.0 < b < comp.duration]
+    if inside and comp.model.has_steps:
+        return None
+    ks = [round(b / comp.period) for b in inside]
+    if any(k * comp.period != b for k, b in zip(ks, inside)):
+        return None
+    return sorted(set(ks))
 
 
 def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> list[tuple[int, int, float]]:
