@@ -365,6 +365,7 @@ class ControlLoop:
             trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
             # the tick's buffers as memoryviews: Python floats in and out, ~half numpy's cost
             m_t, m_x, m_x1, m_act = memoryview(a_t), memoryview(xin), memoryview(res_x), memoryview(res_act)
+            m_cmd, three = memoryview(a_cmd), ncmd == 3
             pack_cmd = struct.Struct(f"={ncmd}d").pack_into
             ndarray, f64 = np.ndarray, np.dtype(np.float64)
         try:
@@ -401,12 +402,15 @@ class ControlLoop:
                     cls = cmd.__class__
                     try:
                         if cls is tuple or cls is list:
-                            pack_cmd(a_cmd, 0, *cmd)  # exactly ncmd numbers; no strings, no None
+                            if three:  # (three numbers through the memoryview: ~1/3 of pack_into's cost)
+                                m_cmd[0], m_cmd[1], m_cmd[2] = cmd
+                            else:
+                                pack_cmd(a_cmd, 0, *cmd)  # exactly ncmd numbers; no strings, no None
                         elif cls is ndarray and cmd.dtype is f64 and len(cmd) == ncmd:
                             a_cmd[:] = cmd  # (a (ncmd, 1) array raises ValueError)
                         else:
                             raise TypeError
-                    except (TypeError, ValueError, struct.error):
+                    except (TypeError, ValueError, OverflowError, struct.error):
                         cmd = self.check_command(t, cmd)
                         a_cmd[:] = cmd
                     trigger()
