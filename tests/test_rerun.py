@@ -994,3 +994,12 @@ def test_trajectory_csv_torn_tail(tmp_path, cut):
     if cut:
         with pytest.raises(ValueError, match=r"line 3 has \d+ values, the header 3 columns"):
             Trajectory.from_csv(tmp_path / "t.csv")
+
+
+def test_trajectory_csv_torn_header(tmp_path):
+    """A header without its newline: with ``torn_tail`` no header (the run was killed writing
+    it), one-line error; read strictly it is a header without rows."""
+    (tmp_path / "t.csv").write_text("t,qw,q")
+    with pytest.raises(ValueError, match="no header row"):
+        Trajectory.from_csv(tmp_path / "t.csv", torn_tail=True)
+    assert Trajectory.from_csv(tmp_path / "t.csv").columns == ["t", "qw", "q"]

@@ -199,8 +199,11 @@ class Controller:
     def tick_update(self):
         """``(call, counted)``: what a per-tick executor calls every tick with ``(t, meas)``, and
         whether that call counts itself in ``n_updates``: :meth:`_update` (uncounted: the
-        executor adds its calls with :meth:`count_compiled_updates`, one Python call less per
-        tick) unless the law overrides :meth:`update`, which is then called as it is."""
+        executor adds its calls with :meth:`count_compiled_updates` when it hands the run back,
+        one Python call less per tick) unless the law overrides :meth:`update`, which is then
+        called as it is. So ``n_updates`` is the run's count after the run, on every executor
+        (the fused and batch loops count theirs at the end too), not a clock inside ``_update``
+        (a law that needs its tick count keeps its own)."""
         if type(self).update is Controller.update:
             return self._update, False
         return self.update, True

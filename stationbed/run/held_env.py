@@ -32,7 +32,7 @@ from .rates import environment_rate, hold_value
 from .segments import edge_ticks, tick_pieces
 from .system import chain_end_inputs, environment_split
 
-__all__ = ["held_rate", "blocks", "held_functions", "HeldBlocks", "rate_summary"]
+__all__ = ["held_rate", "has_environment", "blocks", "held_functions", "HeldBlocks", "rate_summary"]
 
 _FUNCS: dict = {}
 
@@ -52,8 +52,13 @@ def held_rate(comp) -> tuple[int, str | None]:
         why = "a discontinuity between ticks (or an array rate step): the per-tick loop evaluates every stage"
     else:
         return environment_rate(comp), None
-    has_env = comp.system.sx is not None and any(k.needs_env for k in comp.model.torques)  # (environment_split's test)
-    return 0, why if has_env else None
+    return 0, why if has_environment(comp) else None
+
+
+def has_environment(comp) -> bool:
+    """Whether the run composed by ``comp`` has environment torques to hold (aero, SRP: the
+    kinds with ``needs_env``; :func:`~.system.environment_split`'s test, without building it)."""
+    return comp.system.sx is not None and any(k.needs_env for k in comp.model.torques)
 
 
 def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
@@ -61,14 +66,15 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     fused executor ran, ``held`` the per-tick executor's ticks per block, :mod:`.held_env`) of
     the effect rates: the environment's ticks per evaluation (0 = every integrator stage) as run,
     and as the scene asked; under ``"auto"`` also the bound of the rate run
-    (``environment_rate_bound_rad``) or why it is every stage. A block never spans an output
-    row (each chunk starts its own), so the run's rate is at most the ticks per row."""
+    (``environment_rate_bound_rad``) or why it is every stage, and for a rate ``N`` asked and not
+    run, why (``environment_rate_why``). A block never spans an output row (each chunk starts
+    its own), so the run's rate is at most the ticks per row."""
     asked = getattr(loop.scene.simulation, "environment_rate", 0)
     asked = asked if asked == AUTO else int(asked or 0)
     ran = min(environment_rate(loop), loop.n_per_out) if (used_fused or held) else 0
     out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
     if asked == AUTO:  # the same keys whichever executor ran
-        if loop.system.sx is None or environment_split(loop.system) is None:
+        if not has_environment(loop):
             c = {"bound_rad": None, "why": "no environment torque"}
         elif not (used_fused or held) and held_rate(loop)[1] is not None:  # auto chose a rate the loop cannot hold
             c = {"bound_rad": None, "why": held_rate(loop)[1]}
@@ -76,6 +82,9 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
             c = auto_choice(loop)  # kept per scene: no second probe
         out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
         out["environment_rate_why"] = c["why"]
+    elif asked and not ran:  # a rate asked and every stage run: why, as under auto
+        out["environment_rate_why"] = ("no environment torque" if not has_environment(loop)
+                                       else held_rate(loop)[1] or "the executor evaluates every stage")
     return out
 
 
@@ -124,7 +133,6 @@ def held_functions(system, command: str) -> dict:
     out = {"tick": funcs["tick_held"], "env": funcs["env_block"]}
     _FUNCS[key] = (system, out)
     return out
-
 
 
 class HeldBlocks:

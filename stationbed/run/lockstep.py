@@ -222,8 +222,8 @@ class _Lockstep:
         self.rate = held_rate(lp)[0]  # the environment held per block (held_env.py: every sample's blocks)
         hf = held_functions(lp.system, lp.ctrl.command) if self.rate else None
         f = hf["tick"] if self.rate else lp.integ.funcs[name]
-        fc = self.fc = mapped(f, n, 1)
-        self.env = mapped(hf["env"], n, 1) if self.rate else None  # the compiled tick, called once per sample by casadi's map
+        fc = self.fc = mapped(f, n, 1)  # the compiled tick, called once per sample by casadi's map
+        self.env = mapped(hf["env"], n, 1) if self.rate else None  # a block's environment, the same way
         nx = lp.system.formulation.nx
         self.T, self.H = fc.args[0], fc.args[1]
         self.X = fc.args[2].reshape(n, nx)

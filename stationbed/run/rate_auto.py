@@ -91,20 +91,28 @@ class _Quiet(logging.Filter):
         return False
 
 
-def _probe(scene) -> tuple[float, float, list]:
-    """``(M1, M2, fast)`` of the environment torque from the 1 s every-stage probe."""
+def _probe_scene(scene):
+    """The probe's scene: ``scene`` flown every stage on the truth (no sensors, no estimator: the
+    same torque) with a 1 s tick and rows, by RK4 (a DOP853 scene's too: the torque, not the
+    steps), over ``min(duration, one orbit)``. The choice is kept per this scene, so samples
+    that differ only in what the probe drops (a sensor seed) share one probe."""
+    dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
+    return scene.replace({"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
+                          "simulation.integrator": "rk4", "simulation.output_dt": PROBE_DT_S,
+                          "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
+                          "controller.sensor": {}, "sensor": [], "estimator": None})
+
+
+def _probe(probe_scene) -> tuple[float, float, list]:
+    """``(M1, M2, fast)`` of the environment torque from the 1 s every-stage probe of
+    :func:`_probe_scene`'s scene."""
     if _RUN is None:  # run/simulation.py registers simulate when imported (it imports this module)
         importlib.import_module(f"{__package__}.simulation")
-    dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
-    changes = {"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
-               "simulation.integrator": "rk4",  # (a DOP853 scene's probe too: the torque, not the steps)
-               "simulation.output_dt": PROBE_DT_S, "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
-               "controller.sensor": {}, "sensor": [], "estimator": None}  # truth-fed: the same torque
     quiet = _Quiet()  # the probe's own notices (a saturation, a fallback) belong to the run, said there
     log = logging.getLogger(LOGGER)
     log.addFilter(quiet)
     try:
-        tr = _RUN(scene.replace(changes), keep=True)
+        tr = _RUN(probe_scene, keep=True)
     finally:
         log.removeFilter(quiet)
     L = np.zeros((tr.t.size, 3))
@@ -125,7 +133,11 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
     why = _why_not(scene, params, thrust, flight)
     if why is not None:
         return {"ticks": 0, "bound_rad": None, "why": why}
-    key = scene.model_dump_json(exclude={"montecarlo"}) + f"|{period!r}|{n_per_out}|{_file_key(law)}"
+    try:
+        probe_scene = _probe_scene(scene)
+    except Exception as e:  # noqa: BLE001 - a scene the probe cannot fly runs every stage
+        return {"ticks": 0, "bound_rad": None, "why": f"the probe failed: {type(e).__name__}"}
+    key = probe_scene.model_dump_json(exclude={"montecarlo"}) + f"|{period!r}|{n_per_out}|{_file_key(law)}"
     if key in _CHOICES:
         _CHOICES.move_to_end(key)
         return _CHOICES[key]
@@ -141,7 +153,7 @@ def choice(scene, params, period: float, n_per_out: int, thrust: bool = False, f
             _remember(key, out)
             return out
     try:
-        M1, M2, fast = _probe(scene)
+        M1, M2, fast = _probe(probe_scene)
     except Exception as e:  # noqa: BLE001 - a scene the probe cannot fly runs every stage (its own run says why it fails)
         out = {"ticks": 0, "bound_rad": None, "why": f"the probe failed: {type(e).__name__}"}
         _remember(key, out)

@@ -9,7 +9,6 @@ appendage [rad], then anything else a scene adds.
 from __future__ import annotations
 
 import csv
-import io
 import warnings
 from dataclasses import dataclass, field
 
@@ -106,28 +105,32 @@ class Trajectory:
         ----------
         torn_tail : bool
             Read a run's partial rows (``trajectory.partial.csv``) as a process killed mid-write
-            (SIGKILL, power loss) leaves them: every row is written with its newline, so a file
-            that does not end in one ends in a torn row, which is dropped and counted in
-            ``meta["torn_rows"]`` (1, else 0). Lines before it are read as strictly as ever.
+            (SIGKILL, power loss) leaves them: every line is written with its newline, so a last
+            line without one is a torn row, dropped and counted in ``meta["torn_rows"]`` (1,
+            else 0), and a header without one is no header (ValueError). Lines before it are
+            read as strictly as ever.
         """
         with open(path, newline="") as fh:
-            header = next(csv.reader(fh), None)
-            if not header or not all(header):
+            first = fh.readline()
+            header = next(csv.reader([first]), None)
+            if not header or not all(header) or (torn_tail and not first.endswith("\n")):
                 raise ValueError(f"{path}: no header row (an empty or damaged trajectory CSV)")
-            rows = fh
-            torn = 0
-            if torn_tail:
-                text = fh.read()
-                if text and not text.endswith("\n"):
-                    text, torn = text[: text.rfind("\n") + 1], 1
-                rows = io.StringIO(text)
+            torn = [0]
+
+            def whole(lines):  # the lines that end in a newline: all but a torn last one
+                for line in lines:
+                    if line.endswith("\n"):
+                        yield line
+                    else:
+                        torn[0] = 1
+
             with warnings.catch_warnings():  # a header without rows is an empty trajectory, said by the caller
                 warnings.filterwarnings("ignore", message="loadtxt: input contained no data")
                 try:
-                    data = np.loadtxt(rows, delimiter=",", ndmin=2)
+                    data = np.loadtxt(whole(fh) if torn_tail else fh, delimiter=",", ndmin=2)
                 except ValueError:
                     raise ValueError(f"{path}: {_bad_line(path, len(header))}") from None
-        meta = {"torn_rows": torn} if torn_tail else {}
+        meta = {"torn_rows": torn[0]} if torn_tail else {}
         if data.size == 0:
             return cls(header, np.empty((0, len(header))), meta)
         if data.shape[1] != len(header):
