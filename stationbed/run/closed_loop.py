@@ -471,13 +471,8 @@ class ControlLoop:
         """The fused tick when the integrator is fusable (RK4) with one step per period, else
         None; with the environment held (held_env.py) the held tick, and ``self.held`` its blocks."""
         comp = self.comp
-        integ = comp.integ
-        f = integ.funcs
-        name = "tick_rates" if comp.ctrl.command == "gimbal_rates" else "tick_torque"
         self.held = None
-        if not integ.fusable or name not in f or comp.thrust is not None:
-            return None
-        if math.ceil(comp.period / integ.h_nominal - 1e-9) != 1:
+        if comp.tick_name is None or comp.thrust is not None:
             return None
         rate = held_rate(comp)[0]
         if rate:
@@ -486,7 +481,7 @@ class ControlLoop:
             self.held = HeldBlocks([comp], rate, K, FastCall.of(hf["env"]), fc.args[6], comp.p)
             self.res.held_rate = rate
         else:
-            fc = FastCall.of(f[name])
+            fc = FastCall.of(comp.integ.funcs[comp.tick_name])
         fc.args[5][:] = comp.p
         fc.args[2][:] = self.x
         self.x = fc.args[2]  # the loop's state lives in the tick's input buffer

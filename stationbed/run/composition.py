@@ -106,6 +106,17 @@ class Composition:
         return self.ctrl.command
 
     @cached_property
+    def tick_name(self) -> str | None:
+        """The system's one-period tick for the law's command (``tick_torque`` or ``tick_rates``:
+        actuate, one RK4 step, measure; run/system.py) when the integrator runs one fused step per
+        control period, else None: what the per-tick loop and the lockstep batch call per tick."""
+        integ = self.integ
+        name = "tick_rates" if self.command == "gimbal_rates" else "tick_torque"
+        if integ.fusable and name in integ.funcs and math.ceil(self.period / integ.h_nominal - 1e-9) == 1:
+            return name
+        return None
+
+    @cached_property
     def n_cmd(self) -> int:
         return self.command_layout.size
 

@@ -20,8 +20,6 @@ tick; an integrator other than one RK4 step per tick), it evaluates every stage 
 
 from __future__ import annotations
 
-import math
-
 import casadi as ca
 
 from ..core.compile import compile_functions, sx_function
@@ -42,11 +40,9 @@ def held_rate(comp) -> tuple[int, str | None]:
     ``comp``: the rate the fused loop would run (:func:`.rates.environment_rate`; 0 = every stage)
     where the per-tick loop can cut the run into the fused loop's blocks, else 0 and the reason
     (None without environment torques). Asked first, so a run that cannot hold never probes."""
-    integ = comp.integ
-    name = "tick_rates" if comp.ctrl.command == "gimbal_rates" else "tick_torque"
     if comp.thrust is not None:
         why = "thrusters: their pulses cut the tick, the per-tick loop evaluates every stage"
-    elif not integ.fusable or name not in integ.funcs or math.ceil(comp.period / integ.h_nominal - 1e-9) != 1:
+    elif comp.tick_name is None:
         why = "the integrator is not one RK4 step per tick: the per-tick loop evaluates every stage"
     elif edge_ticks(comp) is None:
         why = "a discontinuity between ticks (or an array rate step): the per-tick loop evaluates every stage"

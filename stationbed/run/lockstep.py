@@ -22,7 +22,6 @@ fused loop applies), ``batch`` (an RK4 tick at one step per period) or ``per-tic
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -52,14 +51,10 @@ def vectorised(ctrl) -> bool:
 
 
 def _tick_ok(comp) -> bool:
-    integ = comp.integ
-    name = "tick_rates" if comp.ctrl.command == "gimbal_rates" else "tick_torque"
     # a run that flies [[sensor]] tables and an [estimator] (comp.flight, issue 20) runs its
     # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) and
     # [[thruster]] tables (comp.thrust, issue 21: the batch tick has no pulses) run per tick
-    return (comp.replan is None and comp.thrust is None
-            and integ.fusable and name in integ.funcs
-            and math.ceil(comp.period / integ.h_nominal - 1e-9) == 1)
+    return comp.replan is None and comp.thrust is None and comp.tick_name is not None
 
 
 def executor(loop) -> str:
@@ -218,10 +213,9 @@ class _Lockstep:
         out = lp.end.outputs  # the chain end's reported values (act)
         self.i_u = out.slice("u_cmg") if self.has_act else None
         self.i_flags = slice(out.slice("rate_limited").start, out.slice("saturated").stop) if self.has_act else None
-        name = "tick_rates" if lp.ctrl.command == "gimbal_rates" else "tick_torque"
         self.rate = held_rate(lp)[0]  # the environment held per block (held_env.py: every sample's blocks)
         hf = held_functions(lp.system, lp.ctrl.command) if self.rate else None
-        f = hf["tick"] if self.rate else lp.integ.funcs[name]
+        f = hf["tick"] if self.rate else lp.integ.funcs[lp.tick_name]
         fc = self.fc = mapped(f, n, 1)  # the compiled tick, called once per sample by casadi's map
         self.env = mapped(hf["env"], n, 1) if self.rate else None  # a block's environment, the same way
         nx = lp.system.formulation.nx
