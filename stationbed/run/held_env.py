@@ -28,9 +28,9 @@ from .chunk_layout import ENV
 from .rate_auto import AUTO, auto_choice
 from .rates import environment_rate, hold_value
 from .segments import edge_ticks, tick_pieces
-from .system import chain_end_inputs, environment_split
+from .system import chain_end_inputs, environment_split, has_environment
 
-__all__ = ["held_rate", "has_environment", "blocks", "held_functions", "HeldBlocks", "rate_summary"]
+__all__ = ["held_rate", "blocks", "held_functions", "HeldBlocks", "rate_summary"]
 
 _FUNCS: dict = {}
 
@@ -48,13 +48,7 @@ def held_rate(comp) -> tuple[int, str | None]:
         why = "a discontinuity between ticks (or an array rate step): the per-tick loop evaluates every stage"
     else:
         return environment_rate(comp), None
-    return 0, why if has_environment(comp) else None
-
-
-def has_environment(comp) -> bool:
-    """Whether the run composed by ``comp`` has environment torques to hold (aero, SRP: the
-    kinds with ``needs_env``; :func:`~.system.environment_split`'s test, without building it)."""
-    return comp.system.sx is not None and any(k.needs_env for k in comp.model.torques)
+    return 0, why if has_environment(comp.system) else None
 
 
 def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
@@ -70,7 +64,7 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     ran = min(environment_rate(loop), loop.n_per_out) if (used_fused or held) else 0
     out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
     if asked == AUTO:  # the same keys whichever executor ran
-        if not has_environment(loop):
+        if not has_environment(loop.system):
             c = {"bound_rad": None, "why": "no environment torque"}
         elif not (used_fused or held) and held_rate(loop)[1] is not None:  # auto chose a rate the loop cannot hold
             c = {"bound_rad": None, "why": held_rate(loop)[1]}
@@ -79,7 +73,7 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
         out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
         out["environment_rate_why"] = c["why"]
     elif asked and not ran:  # a rate asked and every stage run: why, as under auto
-        out["environment_rate_why"] = ("no environment torque" if not has_environment(loop)
+        out["environment_rate_why"] = ("no environment torque" if not has_environment(loop.system)
                                        else held_rate(loop)[1] or "the executor evaluates every stage")
     return out
 

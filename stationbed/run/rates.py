@@ -33,7 +33,7 @@ import numpy as np
 from ..core.layout import Layout
 from .chunk_layout import ENV, chunk_carry, vertcat_by
 from .rate_auto import AUTO, auto_choice, g_norms, hold_bound_rad, torque_rates  # noqa: F401 (the bound: re-exported)
-from .system import environment_split
+from .system import environment_split, has_environment
 
 __all__ = ["environment_rate", "carry_width", "held_chunk", "hold_value", "g_norms", "hold_bound_rad", "torque_rates"]
 
@@ -48,14 +48,11 @@ def environment_rate(loop) -> int:
     (:func:`~.rate_auto.auto_choice`). The per-tick executors hold it in the same blocks where
     they can cut the run into them (:func:`~.held_env.held_rate`)."""
     asked = getattr(loop.scene.simulation, "environment_rate", 0)
-    if asked == AUTO:
-        if loop.system.sx is None or environment_split(loop.system) is None:
-            return 0
-        return auto_choice(loop)["ticks"]
-    n = int(asked or 0)
-    if n <= 0 or loop.system.sx is None:
+    if not has_environment(loop.system):
         return 0
-    return n if environment_split(loop.system) is not None else 0
+    if asked == AUTO:
+        return auto_choice(loop)["ticks"]
+    return max(int(asked or 0), 0)
 
 
 def carry_width(rate: int) -> int:

@@ -17,7 +17,7 @@ from ..model import StationModel, Structure
 from ..model.environment import orbit_position_N, q_ON
 from .measurement import measurement_fields
 
-__all__ = ["System", "build_system", "environment_split", "OUT_CHUNK", "chain_end_inputs"]
+__all__ = ["System", "build_system", "environment_split", "has_environment", "OUT_CHUNK", "chain_end_inputs"]
 
 OUT_CHUNK = 64  # output rows evaluated per compiled call
 
@@ -231,10 +231,10 @@ def environment_split(system: System) -> dict | None:
         return system.split or None
     form = system.formulation
     model = form.model
-    env_kinds = [k for k in model.torques if k.needs_env]
-    if not env_kinds or system.sx is None:
+    if not has_environment(system):
         system.split = {}
         return None
+    env_kinds = [k for k in model.torques if k.needs_env]
     fast_model = StationModel(model.structure)
     fast_model.torques = tuple(k for k in fast_model.torques if not k.needs_env)
     fast_model.needs_arrays = False
@@ -254,3 +254,9 @@ def environment_split(system: System) -> dict | None:
         L_B = L_B + kind.torque_B(t, q_BN, None, p_k, orbit, env)
     system.split = {"rhs_fast": rhs_fast, "env_B": sx_function("env_B", [t, x, p], [L_B])}
     return system.split
+
+
+def has_environment(system: System) -> bool:
+    """Whether :func:`environment_split` has torques to split off (the kinds with ``needs_env``:
+    aero, SRP) in ``system``'s SX functions, without building the split."""
+    return system.sx is not None and any(k.needs_env for k in system.formulation.model.torques)
