@@ -389,8 +389,8 @@ class ControlLoop:
                 smooth = fast and k < K and (next_bp > t_next or held is not None)
                 if smooth:  # fused: actuate + one RK4 step + measure, one compiled call
                     if k == blk:  # a block's first tick: the environment evaluated, held over it
-                        if held.start(k, t, self.x):  # (and a stretch of held torque starts)
-                            self.u_ext[:] = res.u[u_ext] = held_torque_from(comp.scene, t, comp.bps, duration)
+                        for _, torque in held.start(k, t, self.x):  # (and a stretch of held torque starts)
+                            self.u_ext[:] = res.u[u_ext] = torque
                         blk = held.next
                     m_t[0] = t
                     if t_next - t != h_set:

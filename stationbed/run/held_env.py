@@ -21,13 +21,14 @@ tick; an integrator other than one RK4 step per tick), it evaluates every stage 
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from ..core.compile import compile_functions, sx_function
 from ..loop.cmg_cluster import chain_end
 from .chunk_layout import ENV
 from .rate_auto import AUTO, auto_choice
 from .rates import environment_rate, hold_value
-from .segments import edge_ticks, tick_pieces
+from .segments import edge_ticks, held_torque_from, tick_pieces
 from .system import chain_end_inputs, environment_split, has_environment
 
 __all__ = ["held_rate", "blocks", "held_functions", "HeldBlocks", "rate_summary"]
@@ -63,18 +64,19 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     asked = asked if asked == AUTO else int(asked or 0)
     ran = min(environment_rate(loop), loop.n_per_out) if (used_fused or held) else 0
     out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
+    cannot = None if (used_fused or held) else held_rate(loop)[1]  # why a per-tick run did not hold
     if asked == AUTO:  # the same keys whichever executor ran
         if not has_environment(loop.system):
             c = {"bound_rad": None, "why": "no environment torque"}
-        elif not (used_fused or held) and held_rate(loop)[1] is not None:  # auto chose a rate the loop cannot hold
-            c = {"bound_rad": None, "why": held_rate(loop)[1]}
+        elif cannot is not None:  # auto chose a rate the loop cannot hold
+            c = {"bound_rad": None, "why": cannot}
         else:
             c = auto_choice(loop)  # kept per scene: no second probe
         out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
         out["environment_rate_why"] = c["why"]
     elif asked and not ran:  # a rate asked and every stage run: why, as under auto
         out["environment_rate_why"] = ("no environment torque" if not has_environment(loop.system)
-                                       else held_rate(loop)[1] or "the executor evaluates every stage")
+                                       else cannot or "the executor evaluates every stage")
     return out
 
 
@@ -146,6 +148,7 @@ class HeldBlocks:
 
     def __init__(self, comps, rate: int, K: int, env, L_env, p):
         n = len(comps)
+        self.comps = comps
         self.its = [blocks(K, c.n_per_out, edge_ticks(c), c.duration, c.period, rate) for c in comps]
         self.env, self.L_env = env, L_env.reshape(n, 3)
         env.args[2][:] = p
@@ -154,10 +157,12 @@ class HeldBlocks:
         self.starts = [0] * n
         self.next = 0
 
-    def start(self, k: int, t: float, x) -> list[int]:
+    def start(self, k: int, t: float, x) -> list[tuple[int, np.ndarray]]:
         """Tick ``k`` (time ``t`` [s], states ``x``) starts a block for some samples: evaluate
-        and hold theirs; returns those that also start a stretch of held torque (a row, or an
-        edge on the grid), whose ``u_ext`` the executor sets."""
+        and hold theirs; returns ``(i, u_ext)`` of those that also start a stretch of held torque
+        (a row, or an edge on the grid): the external torque held from ``t``
+        (:func:`~.segments.held_torque_from`, as the fused loop's pieces), which the executor
+        gives its tick."""
         due, pieces = [i for i, s in enumerate(self.starts) if s == k], []
         for i in due:
             a, n_b, h, piece = next(self.its[i])
@@ -165,7 +170,8 @@ class HeldBlocks:
                 raise AssertionError(f"held environment: sample {i}'s block at tick {a}, asked at tick {k}")
             self.n_b[i], self.h[i], self.starts[i] = n_b, h, k + n_b
             if piece:
-                pieces.append(i)
+                c = self.comps[i]
+                pieces.append((i, held_torque_from(c.scene, t, c.bps, c.duration)))
         e = self.env
         e.args[0][:] = t
         e.args[1][:] = x

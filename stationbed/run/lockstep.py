@@ -413,8 +413,8 @@ class _Lockstep:
                                 smooth[i] = False
                 if all_smooth or smooth.any():
                     if k == blk:  # a block's first tick: every sample's environment, held over it
-                        for i in held.start(k, t, self.X.ravel()):  # (and a stretch of held torque starts)
-                            self.UEXT[i] = S[i].loop.res.u[i_ext] = held_torque_from(S[i].scene, t, S[i].loop.comp.bps, duration)
+                        for i, torque in held.start(k, t, self.X.ravel()):  # (and a stretch of held torque starts)
+                            self.UEXT[i] = S[i].loop.res.u[i_ext] = torque
                         blk = held.next
                     self.T[:] = t
                     if t_next - t != h_set:
