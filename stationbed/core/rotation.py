@@ -19,7 +19,6 @@ import casadi as ca
 import numpy as np
 
 from .linalg import row_norms
-
 from .rotation_batch import dcm_batch, quat_mult_batch
 from .symbolic import is_symbolic, matrix, trig, vector
 

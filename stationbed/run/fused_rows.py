@@ -194,7 +194,6 @@ def run_rows(comp, res, fns: dict, row_ks, K: int, x, env_c, cp, u_ext, p, draw=
     return j, x, env_c, tail_flag, ticks, None
 
 
-
 def row_flags_and_held(m: int, act, cmd, counts, tail_flag: int, cmg, ng: int, torque: bool) -> tuple:
     """The first ``m`` bulk rows' saturation flags and held columns, as the row-by-row loop makes
     them: a row's flag is its own tick's (rate limited or saturated) or any tick after the
@@ -215,6 +214,7 @@ def row_flags_and_held(m: int, act, cmd, counts, tail_flag: int, cmg, ng: int, t
         held += [act[:m, i_u][:, :ng], flag[:, None]]
     held += [cmd[:m] if torque else np.full((m, 3), math.nan), np.full((m, 4), math.nan)]
     return flag, after, held
+
 
 def _held_matches(res, held, act, cmd, q_ref, flag) -> bool:
     """Whether the bulk held values of the first row are what the executors' own row holds

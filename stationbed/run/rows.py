@@ -185,8 +185,9 @@ class Rows:
         self._gather = [(np.concatenate([c for c, _ in g]), np.concatenate([i for _, i in g])) if g else None
                         for g in by]
         dst = np.concatenate([cols for cols, _, _ in self.plan]) if self.plan else np.zeros(0, int)
-        if len(np.unique(dst)) != len(dst):  # pragma: no cover - a column placed twice: group by group
-            self._gather = None
+        cols, times = np.unique(dst, return_counts=True)
+        if (times > 1).any():  # two outputs claiming one column: a bug in the targets above
+            raise AssertionError(f"rows: columns placed twice: {[self.columns[c] for c in cols[times > 1]]}")
         self.q_cols = np.array([col[c] for c in ("qw", "qx", "qy", "qz")])
         self.gimbal_cols = np.array([col[g] for g in gimbals], dtype=int)
         g0 = self.form.state_layout.slice("x_cmg").start if "x_cmg" in self.form.state_layout else 0
@@ -231,15 +232,11 @@ class Rows:
         rows[:, 0] = ts
         q = xs[:, self._q]
         rows[:, self.q_cols] = q / row_norms(q, keepdims=True)
-        if self._gather is not None:
-            plain, degrees = self._gather
-            if plain is not None:
-                rows[:, plain[0]] = comp[:, plain[1]]
-            if degrees is not None:
-                rows[:, degrees[0]] = np.rad2deg(comp[:, degrees[1]])
-        else:  # pragma: no cover
-            for cols, sl, degrees in self.plan:
-                rows[:, cols] = np.rad2deg(comp[:, sl]) if degrees else comp[:, sl]
+        plain, degrees = self._gather
+        if plain is not None:
+            rows[:, plain[0]] = comp[:, plain[1]]
+        if degrees is not None:
+            rows[:, degrees[0]] = np.rad2deg(comp[:, degrees[1]])
         rows[:, self.gimbal_cols] = xs[:, self._gimbals]
         if held is not None and len(self.held_cols):
             rows[:, self.held_cols] = np.asarray(held, dtype=float).reshape(len(ts), -1)
