@@ -35,7 +35,7 @@ from .chunk_layout import chunk_carry, chunk_info, chunk_par
 from .controller import ControllerError, one_line
 from .fused_rows import rows_functions, run_rows
 from .rates import carry_width, environment_rate, held_chunk
-from .segments import close_chunk, edge_ticks, finish_chunks, held_torque_from, run_pieces, tick_pieces
+from .segments import close_chunk, edge_ticks, finish_chunks, held_torque_from, run_pieces, tick_pieces, torque_at
 from .system import chain_end_inputs, environment_split as rates_split
 from .thrust_fused import fused_thrust_ok, run_fused_thrust
 
@@ -221,6 +221,7 @@ def run_fused(comp, res, K: int) -> None:
                                                             s_law.size)
             if stop is not None:
                 raise stop
+        held_at = torque_at(comp, edges, u_ext)  # each piece's held torque
         for j, k in enumerate(row_ks):
             if j < j0:
                 continue
@@ -247,8 +248,7 @@ def run_fused(comp, res, K: int) -> None:
             # ticks k .. k + n_tick - 1 in one call per piece (tick k's actuation is recomputed inside: same)
             c0[c_x], c0[c_env] = x, env_c
             counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period,
-                                (lambda ta: held_torque_from(comp.scene, ta, comp.bps, duration)) if edges else (lambda ta: u_ext),
-                                draws if nn else None)
+                                held_at, draws if nn else None)
             x, env_c = c0[c_x].copy(), c0[c_env].copy()
             par[i_h] = period
             ticks += n_tick

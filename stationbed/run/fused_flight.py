@@ -42,7 +42,7 @@ from .chunk_layout import FLIGHT_INFO_IN, chunk_info, flight_carry, flight_par, 
 from .flight_rates import held_flight_chunk
 from .flight_rows import flight_rows_functions, run_flight_rows
 from .rates import carry_width, environment_rate
-from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces, torque_at
 from .system import chain_end_inputs, environment_split
 
 __all__ = ["run_fused_flight"]
@@ -247,6 +247,7 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
             x = c0[cx].copy()
             if stop is not None:
                 raise stop
+        held_at = torque_at(comp, edges, u_ext)  # each piece's held torque
         for j, k in enumerate(row_ks):
             if j < j0:
                 continue
@@ -274,8 +275,7 @@ def run_fused_flight(comp, res, K: int, symbolic_params, edges) -> None:
                 s_end = r[i_s].copy()  # the law's update at the last tick
                 break
             counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period,
-                                (lambda ta: held_torque_from(comp.scene, ta, comp.bps, duration)) if edges else (lambda ta: u_ext),
-                                draws)
+                                held_at, draws)
             x = c0[cx].copy()
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))

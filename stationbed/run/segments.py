@@ -22,6 +22,7 @@ __all__ = [
     "held_torque_from",
     "edge_ticks",
     "tick_pieces",
+    "torque_at",
     "close_chunk",
     "finish_chunks",
     "segment_input",
@@ -155,6 +156,15 @@ def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> li
     if n_full < n_act:  # the short final period
         pieces.append((k + n_full, k + n_act, last_len))
     return pieces
+
+
+def torque_at(comp, edges, u_ext):
+    """``torque_at(t)`` for :func:`run_pieces`: the external torque held from ``t``
+    (:func:`held_torque_from`) where the run of ``comp`` has edges on the grid (``edges``,
+    :func:`edge_ticks`), else the run's one held torque ``u_ext`` (nothing to look up)."""
+    if edges:
+        return lambda t: held_torque_from(comp.scene, t, comp.bps, comp.duration)
+    return lambda t: u_ext
 
 
 def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None) -> np.ndarray:
