@@ -113,7 +113,7 @@ def main(argv=None) -> int:
     probe = []
     for _ in range(1 if args.smoke else PROBE_REPEATS):  # the default's probe alone (paid once per scene and process)
         t0 = time.process_time()
-        rate_auto._probe(scene)
+        rate_auto._probe(rate_auto._probe_scene(scene))  # (the probe flies its own scene: 1 s tick, truth-fed)
         probe.append(time.process_time() - t0)
     probe_cpu = sorted(probe)[len(probe) // 2]
     print(f"default accuracy: environment every {summ['environment_rate_ticks']} ticks ({summ['environment_rate_asked']}; "
