@@ -369,6 +369,20 @@ BAD = {
                           "sensor[0].q_SB: must be a unit quaternion"),
     "latency": ({"sensor": [_head(latency=0.3)]}, "sensor[0].latency: 0.3 s is not a whole number of periods"),
     "exclusion_angle": ({"sensor": [_head(sun_exclusion=4.0)]}, "sensor[0].sun_exclusion: must be an angle"),
+    # units slips (issue 32), each hint's figure converted by hand: 0.005 deg/sqrt(h) x (pi/180) / 60
+    # = 1.454e-6 rad/s^0.5 (the docstring's gyro), 15 arcsec x pi/648000 = 7.272e-5 rad, 0.01
+    # deg/h/sqrt(h) x (pi/180) / 3600^1.5 = 8.08e-10 rad/s^1.5
+    "arw_in_deg_per_sqrt_h": ({"sensor": [_gyro(sigma_v=0.005)]},
+                              "sensor[0].sigma_v: 0.005 rad/s^0.5 is above 0.002 rad/s^0.5 (noisier than any rate gyro); "
+                              "did you mean 0.005 deg/sqrt(h) = 1.454e-06 rad/s^0.5?"),
+    "rrw_in_deg_per_h_sqrt_h": ({"sensor": [_gyro(sigma_u=0.01)]},
+                                "sensor[0].sigma_u: 0.01 rad/s^1.5 is above 0.0001 rad/s^1.5 (a bias walking faster "
+                                "than any rate gyro's); did you mean 0.01 deg/h/sqrt(h) = 8.08e-10 rad/s^1.5?"),
+    "nea_in_arcsec": ({"sensor": [_head(nea_about=15.0)]},
+                      "sensor[0].nea_about: 15 rad is above 0.005 rad (coarser than any star tracker); "
+                      "did you mean 15 arcsec = 7.272e-05 rad?"),
+    "estimator_arw_in_deg_per_sqrt_h": ({"sensor": [_gyro(), _head()], "estimator": {"kind": "mekf", "sigma_v": 0.005}},
+                                        "estimator.sigma_v: 0.005 rad/s^0.5 is above 0.002 rad/s^0.5"),
     "duplicate": ({"sensor": [_gyro(), _gyro()]}, "sensor: names must be unique, repeated: ['g']"),
     "bad_name": ({"sensor": [_gyro(name="rga 1")]}, "sensor[0].name: "),
     "no_gyro": ({"sensor": [_head()], "estimator": {"kind": "mekf"}}, "estimator.gyro: name the gyro"),

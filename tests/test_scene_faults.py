@@ -11,6 +11,7 @@ import pytest
 
 from scenes import RIGID
 from stationbed.core.constants import R_EARTH_M
+from stationbed.scene.environment import ALTITUDE_MIN_M
 from stationbed.integrators.dop853 import StepControl
 from stationbed.scene import (
     ATOL_MIN, MIN_TIME_S, RTOL_MIN, TIME_RESOLUTION, SceneError, load_scene, parse_assignment, parse_assignments,
@@ -138,6 +139,16 @@ OUT_OF_BOUNDS = {
                           r"controller\.period: 0\.1 s is below 1e-09 of the duration"),
     "radius_inside_earth": ({"orbit": {"radius": 6.0e6}}, r"orbit\.radius: 6000000 m is inside the Earth"),
     "radius_on_surface": ({"orbit": {"radius": R_EARTH_M}}, r"orbit\.radius: 6378137 m is inside the Earth"),
+    # a length in km (issue 32): 400 km = 400000 m, 6778 km = 6778000 m, by hand
+    "altitude_in_km": ({"orbit": {"altitude": 400.0}}, r"orbit\.altitude: 400 m is below the lowest orbit \(100000 m, "
+                                                       r"100 km: the air brings it down\); did you mean 400 km = 400000 m\?$"),
+    "radius_in_km": ({"orbit": {"radius": 6778.0}}, r"orbit\.radius: 6778 m is inside the Earth .*; did you mean 6778 km "
+                                                    r"= 6778000 m\?$"),
+    "radius_below_lowest_orbit": ({"orbit": {"radius": R_EARTH_M + 50e3}},
+                                  r"orbit\.radius: 6428137 m is 50000 m above the Earth, below the lowest orbit"),
+    "elements_a_in_km": ({"orbit": {"elements": {"a": 6778.0, "e": 0.0, "i": 0.9, "raan": 0.0, "argp": 0.0, "nu": 0.0}}},
+                         r"orbit\.elements\.e: perigee radius 6778 m is inside the Earth .*did you mean elements\.a = "
+                         r"6778 km = 6778000 m\?$"),
     "inclination_in_degrees": ({"orbit/inclination": 51.6}, r"orbit\.inclination: must be within \[0, pi\] rad"),
     "sun_beta_in_degrees": ({"sun/beta": 60.0}, r"sun\.beta: must be within \[-pi/2, pi/2\] rad"),
     "seed_negative": ({"controller/sensor/seed": -1}, r"controller\.sensor\.seed: must be greater than or equal to 0, got -1"),
@@ -162,7 +173,7 @@ def test_time_floors_sit_above_the_integrators_underflow():
 
 
 def test_floors_are_accepted():
-    d = spoilt(**{"simulation/rtol": RTOL_MIN, "simulation/atol": ATOL_MIN, "orbit": {"radius": R_EARTH_M + 1.0}})
+    d = spoilt(**{"simulation/rtol": RTOL_MIN, "simulation/atol": ATOL_MIN, "orbit": {"radius": R_EARTH_M + ALTITUDE_MIN_M}})
     d["simulation"].update(duration=MIN_TIME_S, output_dt=MIN_TIME_S, step=MIN_TIME_S, max_step=MIN_TIME_S)
     d.pop("controller")
     scene = scene_from_dict(d)

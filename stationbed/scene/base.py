@@ -12,7 +12,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 __all__ = [
     "SceneError", "FieldError", "Strict", "Vec3", "Mat3", "QUAT_NORM_TOL", "RTOL_MIN", "ATOL_MIN", "MIN_TIME_S",
-    "TIME_RESOLUTION", "Rtol", "Atol", "TimeS",
+    "TIME_RESOLUTION", "Rtol", "Atol", "TimeS", "at_most", "unit_hint",
 ]
 
 #: A quaternion typed in a file with ~8 digits is unit to ~1e-8; anything further off is a mistake.
@@ -78,6 +78,26 @@ def _at_least(floor: float, unit: str, why: str) -> AfterValidator:
     def check(value: float) -> float:
         if not value >= floor:
             raise ValueError(f"must be at least {floor:g}{unit}, got {value!r} ({why})")
+        return value
+
+    return AfterValidator(check)
+
+
+def unit_hint(value: float, unit: str, si_per_unit: float, si: str, fmt: str = ".4g") -> str:
+    """``; did you mean 15 arcsec = 7.272e-05 rad?``: ``value`` read in the ``unit`` people
+    use, converted to the scene's SI ``si`` (``si_per_unit``: one ``unit`` in ``si``), printed
+    with ``fmt``."""
+    return f"; did you mean {value:g} {unit} = {value * si_per_unit:{fmt}} {si}?"
+
+
+def at_most(limit: float, si: str, why: str, unit: str, si_per_unit: float) -> AfterValidator:
+    """A check that a number is at most ``limit`` [``si``], whose message gives the reason and
+    reads the value in the ``unit`` people type by mistake (:func:`unit_hint`)."""
+
+    def check(value: float) -> float:
+        if not value <= limit:
+            raise ValueError(f"{value:g} {si} is above {limit:g} {si} ({why})"
+                             f"{unit_hint(value, unit, si_per_unit, si)}")
         return value
 
     return AfterValidator(check)

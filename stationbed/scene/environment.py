@@ -11,12 +11,28 @@ from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.kepler import KEPLER_MAX_E, elements_from_rv
-from .base import FieldError, Strict, Vec3
+from .base import FieldError, Strict, Vec3, unit_hint
 
 __all__ = [
     "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "AeroTorque", "SrpTorque", "Torque",
-    "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT", "Sun", "SUN_EPOCH_RANGE",
+    "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT", "Sun", "SUN_EPOCH_RANGE", "ALTITUDE_MIN_M",
 ]
+
+#: Lowest circular orbit a scene may give [m] over R_EARTH_M (issue 32): the Karman line. Below it
+#: the air brings an orbit down within a revolution (the lowest flown, JAXA's SLATS, held 167 km),
+#: and the aero torque of a station's surfaces there leaves the state not finite; an altitude
+#: typed in km (400 for the ISS) lands far below it, and the message reads it in km.
+ALTITUDE_MIN_M = 100.0e3
+#: 1 km in m, for the hint
+KM_M = 1000.0
+#: the Earth's Hill sphere [m] (Sun-Earth, ~1.5 million km): no Earth orbit reaches beyond it
+HILL_SPHERE_M = 1.5e9
+
+
+def _km_hint(value_m: float, lowest_m: float) -> str:
+    """The "did you mean ... km" hint when ``value_m`` read in km is an Earth orbit's (from
+    ``lowest_m`` to the Hill sphere), else ''."""
+    return unit_hint(value_m, "km", KM_M, "m", ".10g") if lowest_m <= value_m * KM_M <= HILL_SPHERE_M else ""
 
 
 def _angle_within(angle: float, low: float, high: float, text: str) -> float:
@@ -71,9 +87,17 @@ class Orbit(Strict):
         if forms[0]:
             if self.radius is not None and self.altitude is not None:
                 raise ValueError("give exactly one of 'radius' or 'altitude'")
+            lowest = R_EARTH_M + ALTITUDE_MIN_M
             if self.radius is not None and self.radius <= R_EARTH_M:
                 raise FieldError("radius", f"{self.radius:.10g} m is inside the Earth (equatorial radius {R_EARTH_M:.10g} m): "
-                                           "give the distance from the Earth's centre, or 'altitude'")
+                                           f"give the distance from the Earth's centre, or 'altitude'{_km_hint(self.radius, lowest)}")
+            if self.radius is not None and self.radius < lowest:
+                raise FieldError("radius", f"{self.radius:.10g} m is {self.radius - R_EARTH_M:.6g} m above the Earth, below "
+                                           f"the lowest orbit ({ALTITUDE_MIN_M / KM_M:g} km up: the air brings it down)")
+            if self.altitude is not None and self.altitude < ALTITUDE_MIN_M:
+                raise FieldError("altitude", f"{self.altitude:g} m is below the lowest orbit ({ALTITUDE_MIN_M:g} m, "
+                                             f"{ALTITUDE_MIN_M / KM_M:g} km: the air brings it down)"
+                                             f"{_km_hint(self.altitude, ALTITUDE_MIN_M)}")
             if self.j2:
                 raise FieldError("j2", "needs a two-body orbit ('r_N' and 'v_N', or 'elements'), not the circular form")
             return self
@@ -92,8 +116,9 @@ class Orbit(Strict):
             a, e = self.elements.a, self.elements.e
             where = "elements.e"
         if a * (1.0 - e) <= R_EARTH_M:
+            km = _km_hint(a, R_EARTH_M / (1.0 - e)) if self.elements is not None else ""
             raise FieldError(where, f"perigee radius {a * (1.0 - e):.10g} m is inside the Earth (equatorial radius "
-                                    f"{R_EARTH_M:.10g} m)")
+                                    f"{R_EARTH_M:.10g} m){km.replace('; did you mean', '; did you mean elements.a =')}")
         if e > KEPLER_MAX_E:
             raise FieldError(where, f"eccentricity {e:.6g} above {KEPLER_MAX_E}, where the Kepler solver is proven")
         return self

@@ -35,15 +35,45 @@ import numpy as np
 from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
 
 from ..core.rotation import quat_from_dcm
-from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Vec3
+from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Vec3, at_most
 from .tables import TAGS
 
 __all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing",
-           "WHOLE_PERIODS_TOL", "SensorName", "check_sensing"]  # sensing_from_dict: in load.py
+           "WHOLE_PERIODS_TOL", "SensorName", "check_sensing", "ARW_MAX", "RRW_MAX", "NEA_MAX_RAD"]  # sensing_from_dict: in load.py
 
 #: a latency or period that is a whole number of periods to this relative tolerance is taken as
 #: one (the numbers are typed with a few digits; 1e-9 is far below any typing error)
 WHOLE_PERIODS_TOL = 1e-9
+
+
+#: 1 deg/sqrt(h) in rad/s^0.5 (sqrt(3600 s) = 60 sqrt(s)), the unit gyro datasheets quote ARW in
+DEG_SQRT_H = math.radians(1.0) / 60.0
+#: 1 deg/h/sqrt(h) in rad/s^1.5, the unit of a datasheet's rate random walk
+DEG_H_SQRT_H = math.radians(1.0) / 3600.0**1.5
+#: 1 arcsec in rad, the unit of a star tracker's noise-equivalent angle
+ARCSEC_RAD = math.radians(1.0 / 3600.0)
+
+# The noise figures' upper bounds (issue 32): each above every real sensor's datasheet, and below
+# the same figure typed in the datasheet's unit, the usual slip (the message then reads the value
+# in that unit). Where the two ranges overlap (a deg/sqrt(h) figure below ARW_MAX) nothing can
+# tell them apart.
+#: angle random walk [rad/s^0.5]: 6.9 deg/sqrt(h) (0.11 deg/s/sqrt(Hz)), above the noisiest MEMS
+#: rate gyros (Analog Devices ADXRS300: 0.1 deg/s/sqrt(Hz)); space IRUs quote 1e-4-0.3 deg/sqrt(h),
+#: so 0.005 (deg/sqrt(h)) typed as is reads 17 deg/sqrt(h)
+ARW_MAX = 2e-3
+#: rate random walk [rad/s^1.5]: 1240 deg/h/sqrt(h), decades above MEMS gyros' (a few to tens)
+RRW_MAX = 1e-4
+#: noise-equivalent angle [rad]: 1030 arcsec, above the coarsest heads' about-boresight NEA
+#: (nanosatellite trackers: a few hundred arcsec); datasheets quote 1-200 arcsec
+NEA_MAX_RAD = 5e-3
+
+#: the noise figures' types: >= 0 and at most the bound above
+Arw = Annotated[float, Field(ge=0.0), at_most(ARW_MAX, "rad/s^0.5", "noisier than any rate gyro", "deg/sqrt(h)",
+                                               DEG_SQRT_H)]
+Rrw = Annotated[float, Field(ge=0.0), at_most(RRW_MAX, "rad/s^1.5", "a bias walking faster than any rate gyro's",
+                                               "deg/h/sqrt(h)", DEG_H_SQRT_H)]
+Nea = Annotated[float, Field(ge=0.0), at_most(NEA_MAX_RAD, "rad", "coarser than any star tracker", "arcsec",
+                                               ARCSEC_RAD)]
 
 
 #: a sensor's name: it becomes a column stem and a layout field (letters, digits, underscores)
@@ -68,8 +98,8 @@ class GyroSensor(Strict):
     kind: Literal["gyro"]
     name: SensorName
     period: TimeS  # s, sample period
-    sigma_v: float = Field(ge=0.0)  # rad/s^0.5, angle random walk (ARW)
-    sigma_u: float = Field(default=0.0, ge=0.0)  # rad/s^1.5, rate random walk (bias random walk)
+    sigma_v: Arw  # rad/s^0.5, angle random walk (ARW)
+    sigma_u: Rrw = 0.0  # rad/s^1.5, rate random walk (bias random walk)
     bias0: Vec3 = [0.0, 0.0, 0.0]  # rad/s, bias at t = 0 (the truth the filter must find)
     scale_factor: Vec3 = [0.0, 0.0, 0.0]  # dimensionless, per axis (0: exact)
     misalignment: Mat3 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]  # dimensionless, zero diagonal
@@ -102,8 +132,8 @@ class StarTrackerSensor(Strict):
     q_SB: list[float] | None = Field(default=None, min_length=4, max_length=4)  # mounting, scalar first
     boresight_B: Vec3 | None = None  # unit vector in B (alternative to q_SB), with roll
     roll: float = 0.0  # rad, about the boresight (with boresight_B)
-    nea_cross: float = Field(ge=0.0)  # rad, 1 sigma per cross-boresight axis
-    nea_about: float = Field(ge=0.0)  # rad, 1 sigma about the boresight
+    nea_cross: Nea  # rad, 1 sigma per cross-boresight axis
+    nea_about: Nea  # rad, 1 sigma about the boresight
     latency: float = Field(default=0.0, ge=0.0)  # s, a whole number of periods
     sun_exclusion: float | None = None  # rad, half-cone around the Sun (none: never blinded)
     earth_exclusion: float | None = None  # rad, from the Earth's limb (none: never)
@@ -168,8 +198,8 @@ class MekfEstimator(Strict):
     kind: Literal["mekf"]
     gyro: str | None = None  # the gyro it propagates with (default: the scene's only gyro)
     star_trackers: list[str] | None = None  # the heads it updates with (default: every head)
-    sigma_v: float | None = Field(default=None, gt=0.0)  # rad/s^0.5 (default: the gyro's)
-    sigma_u: float | None = Field(default=None, gt=0.0)  # rad/s^1.5 (default: the gyro's)
+    sigma_v: Annotated[Arw, Field(gt=0.0)] | None = None  # rad/s^0.5 (default: the gyro's)
+    sigma_u: Annotated[Rrw, Field(gt=0.0)] | None = None  # rad/s^1.5 (default: the gyro's)
     sigma_attitude0: float = Field(default=1.0e-3, gt=0.0)  # rad, 1 sigma of the initial estimate per axis
     sigma_bias0: float = Field(default=1.0e-5, gt=0.0)  # rad/s, 1 sigma of the initial bias estimate per axis
 
