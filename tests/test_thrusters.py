@@ -27,6 +27,7 @@ from stationbed.integrators import RK4
 from stationbed.loop.actuator import pulse_pieces, split_step
 from stationbed.loop.thrusters import (G0_M_S2, ThrusterCluster, map_lp, map_min_norm_shift, mapping_matrices,
                                        opposed_pairs, supports, torque_arms)
+from stationbed.scene.thrusters import torque_authority
 from stationbed.scene import SceneError, scene_from_dict
 
 PERIOD_S = 0.1  # s
@@ -457,3 +458,77 @@ def test_a_law_with_a_state_and_thrusters_flies_per_tick_and_says_so():
     assert not sm["fused"] and "state" in sm["thrusters_not_fused"]
     assert sm["thruster_firings"] > 0
     assert law.k == law.n_updates == sm["ticks"] + 1
+
+
+# -- torque authority (issue 32): what the set can turn the station about -------------------------
+#: pods(), by hand: +z from the four thrusters whose arm is along x or y and force along y or x
+#: ((20, 0, 0) x (0, 1, 0) = (0, 0, 20) m, and three like it) at 100 N: 4 x 20 x 100 N m; +x and
+#: +y from two each ((0, 20, 0) x (0, 0, 1) = (20, 0, 0) m, ...): 2 x 20 x 100 N m; the set is
+#: symmetric, so the same the other way
+POD_AUTHORITY_NM = [[4000.0, 4000.0], [4000.0, 4000.0], [8000.0, 8000.0]]
+#: x_couples(), by hand: a and b make +x ((0, ±20, 0) x (0, 0, ±1) = (20, 0, 0) m), c and d -x
+X_COUPLES_AUTHORITY_NM = [[4000.0, 4000.0], [0.0, 0.0], [0.0, 0.0]]
+#: the LP's optimum is a vertex: its sums of a few products of 20 m and 100 N, to round-off
+AUTHORITY_ABS_NM = 1e-6
+
+
+def one_sided():
+    """Three thrusters making +x, +y and +z only ((0, 20, 0) x +z, (0, 0, 20) x +x, (20, 0, 0) x +y)."""
+    def t(name, pos, d):
+        return {"name": name, "position_B": pos, "direction_B": d, "force_N": F_N, "isp_s": ISP_S}
+    return [t("px", [0.0, ARM_M, 0.0], [0.0, 0.0, 1.0]), t("py", [0.0, 0.0, ARM_M], [1.0, 0.0, 0.0]),
+            t("pz", [ARM_M, 0.0, 0.0], [0.0, 1.0, 0.0])]
+
+
+@pytest.mark.parametrize("entries, expected", [(pods(), POD_AUTHORITY_NM), (x_couples(), X_COUPLES_AUTHORITY_NM)],
+                         ids=["pods", "x_couples"])
+def test_torque_authority_by_hand(entries, expected):
+    D, _ = hand_arms(entries)
+    assert_allclose(torque_authority(D, [e["force_N"] for e in entries]), expected, rtol=0, atol=AUTHORITY_ABS_NM)
+
+
+def _at(entries, where):
+    return [{**e, "position_B": list(where)} for e in entries]
+
+
+@pytest.mark.parametrize("mode", ["assist", "thruster_only"])
+@pytest.mark.parametrize("cm", [[0.0, 0.0, 0.0], [5.0, -1.0, 2.0]], ids=["origin", "offset_body_cm"])
+def test_thrusters_through_the_mass_centre_are_refused_naming_them(mode, cm):
+    """The issue's case: every thruster at the composite mass centre (with the body's mass centre
+    off the origin too: positions typed from the mass centre, not from the origin) makes no
+    torque; a run that asks for dumps or thruster-only control is refused, naming all six
+    directions and the thrusters."""
+    with pytest.raises(SceneError) as e:
+        sphere(_at(pods(), cm), mode=mode) if cm == [0.0, 0.0, 0.0] else _sphere_cm(_at(pods(), cm), cm, mode=mode)
+    msg = str(e.value)
+    assert "\n" not in msg and "thruster: the set makes no torque about -x, +x, -y, +y, -z, +z of B" in msg
+    assert f"mode '{mode}'" in msg and "t0, t1, t2, t3, t4, t5 and 10 more make no torque at all" in msg
+
+
+def _sphere_cm(entries, cm, **opts):
+    d = sphere(pods()).model_dump(exclude_none=True)  # the sphere's tables, with the body's mass centre moved
+    d["body"]["cm"] = cm
+    d["thruster"] = entries
+    d["thrusters"] = {**d["thrusters"], **opts}
+    return scene_from_dict(d)
+
+
+def test_one_sided_set_is_refused_for_thruster_only_control():
+    with pytest.raises(SceneError, match=r": thruster: the set makes no torque about -x, -y, -z of B .*mode "
+                                         r"'thruster_only' controls attitude about every axis$"):
+        sphere(one_sided(), mode="thruster_only", max_dump_torque_Nm=1e3)
+
+
+def test_mode_off_takes_any_set():
+    assert sphere(_at(pods(), [0.0, 0.0, 0.0]), mode="off").thrusters.mode == "off"
+
+
+def test_assist_set_about_one_axis_flies_and_its_summary_says_what_it_lacks():
+    """x_couples dumps about x only: flown (the dump here is about x), and the summary and the
+    run's line name the four directions it cannot turn the station about; pods() lacks none."""
+    from stationbed.run.thrust import thruster_parts
+
+    sm = simulate(sphere(x_couples(), duration=1.0), fused=False).meta["summary"]
+    assert sm["thruster_no_torque_about"] == "-y, +y, -z, +z"
+    assert any("no torque about -y, +y, -z, +z" in p for p in thruster_parts(sm))
+    assert "thruster_no_torque_about" not in simulate(sphere(pods(), duration=1.0), fused=False).meta["summary"]

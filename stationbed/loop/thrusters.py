@@ -42,7 +42,7 @@ import hashlib
 import casadi as ca
 import numpy as np
 
-from ..core.massprops import composite_cm
+from ..scene.thrusters import torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
 
@@ -56,17 +56,6 @@ MODES = {"assist": 0.0, "thruster_only": 1.0, "off": 2.0}
 #: a positive null-space vector exists when the LP finds one with all entries >= 1 and the
 #: residual of A v is below this fraction of |A| |v| (round-off of HiGHS's solution)
 NULL_RESIDUAL_REL = 1e-9
-
-
-def torque_arms(scene) -> tuple[np.ndarray, np.ndarray]:
-    """(D, G), each (3, n): column i the torque per newton ``(r_i - c) × ĝ_i`` [m] and the unit
-    force direction ĝ_i of thruster i, c the scene's composite mass centre (B axes)."""
-    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    cms = [scene.body.cm] + [a.cm for a in scene.appendage]
-    c = composite_cm(masses, cms)
-    G = np.array([t.unit_B for t in scene.thruster], dtype=float).T
-    R = np.array([t.position_B for t in scene.thruster], dtype=float).T - c[:, None]
-    return np.cross(R.T, G.T).T, G
 
 
 def _positive_null(A: np.ndarray) -> np.ndarray | None:

@@ -16,6 +16,7 @@ from ..loop.actuator import pulse_pieces
 from ..loop.thrusters import ThrusterCluster
 from ..model.cmg import held_momentum_B
 from ..scene import knowledge_scene
+from ..scene.thrusters import missing_torque
 from .segments import segment_input
 
 __all__ = ["ThrustLoop", "thruster_columns", "thrust_for", "thruster_parts"]
@@ -39,6 +40,9 @@ def thruster_parts(s: dict) -> list[str]:
     per = f" ({s['propellant_kg_per_orbit']:.4g} kg per orbit)" if "propellant_kg_per_orbit" in s else ""
     out = [f"thrusters {s['thruster_firings']} firings, impulse {s['thruster_impulse_Ns']:.4g} N s, propellant "
            f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
+    if s.get("thruster_no_torque_about"):
+        out.append(f"thrusters make no torque about {s['thruster_no_torque_about']}: a dump or hand-over "
+                   "there is not delivered")
     if "thrusters_not_fused" in s:
         out.append(f"thrusters flown per tick: {s['thrusters_not_fused']}")
     return out
@@ -126,4 +130,7 @@ class ThrustLoop:
             out["orbit_period_s"] = 2.0 * math.pi / comp.scene.orbit.mean_motion
         if self.fused_reason:
             out["thrusters_not_fused"] = self.fused_reason
+        missing = missing_torque(comp.scene) if self.cluster.opt.mode != "off" else []
+        if missing:  # an assist set that dumps about some axes only (the scene check refuses the rest)
+            out["thruster_no_torque_about"] = ", ".join(missing)
         return out

@@ -17,6 +17,14 @@ mapping = "min_norm_shift" # or "lp" (scipy HiGHS, per-tick loop only)
 
 The scene holds them as ``Scene.thruster`` (list) and ``Scene.thrusters`` (options); the closed
 loop fires them (docs/loop.md, "Actuators").
+
+Thrusters push one way only: a set turns the station about an axis when it makes torque both
+ways (:func:`torque_authority`, about the composite mass centre). ``mode = "thruster_only"``
+with a set that cannot, or ``"assist"`` with one that makes no torque at all, is refused at
+load, naming the directions and the thrusters that make no torque (the classic mistake:
+positions from the mass centre, not from the origin of ``[body] cm``); an assist set that
+dumps about some axes only is flown, and its run's summary and line say which it lacks
+(``thruster_no_torque_about``: a dump or hand-over there is not delivered).
 """
 
 from __future__ import annotations
@@ -24,11 +32,21 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import Field, model_validator
 
+from ..core.massprops import composite_cm
 from .base import FieldError, Strict, Vec3
 
-__all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters"]
+__all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "torque_arms", "torque_authority",
+           "missing_torque", "AUTHORITY_ROUNDOFF_REL"]
+
+#: a thruster's torque per newton, or the set's torque authority about an axis, below this fraction
+#: of the set's scale (the largest |r_i - c| + 1 m; Σ |(r_i - c) × ĝ_i| F_i) is round-off of the
+#: positions' differences: none (a line of action through the mass centre gives 0 to ~1e-16)
+AUTHORITY_ROUNDOFF_REL = 1e-9
+#: the thrusters a message names at most (then "and N more")
+NAMED_MAX = 6
 
 #: a thruster's or group's name: it becomes a column stem (letters, digits, underscores)
 ThrusterName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
@@ -101,6 +119,78 @@ class ThrusterOptions(Strict):
         return self
 
 
+def torque_arms(scene) -> tuple[np.ndarray, np.ndarray]:
+    """(D, G), each (3, n): column i the torque per newton ``(r_i - c) × ĝ_i`` [m] and the unit
+    force direction ĝ_i of thruster i, c the scene's composite mass centre (B axes). The arrays
+    are balanced about their rotation axes (DESIGN §4), so c is the constant ``Σ m r / Σ m`` of
+    the body and the appendages' mass centres, whatever the arrays' angles."""
+    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
+    cms = [scene.body.cm] + [a.cm for a in scene.appendage]
+    c = composite_cm(masses, cms)
+    G = np.array([t.unit_B for t in scene.thruster], dtype=float).T
+    R = np.array([t.position_B for t in scene.thruster], dtype=float).T - c[:, None]
+    return np.cross(R.T, G.T).T, G
+
+
+def torque_authority(D: np.ndarray, f_max) -> np.ndarray:
+    """(3, 2): the largest torque [N m] the thrusters make about ``-e_k`` (column 0) and ``+e_k``
+    (column 1) of B with no torque about the other two axes, each force in ``[0, f_max_i]``
+    (scipy HiGHS LP). A zero entry: no combination of firings turns the station that way.
+
+    Parameters
+    ----------
+    D : ndarray, shape (3, n)  Torque per newton of each thruster [m] (:func:`torque_arms`).
+    f_max : ndarray, shape (n,)  Thrust of each thruster while on [N].
+    """
+    from scipy.optimize import linprog  # noqa: PLC0415 - a second's import, only for scenes with thrusters
+
+    f_max = np.asarray(f_max, dtype=float)
+    out = np.zeros((3, 2))
+    for k in range(3):
+        others = [j for j in range(3) if j != k]
+        for col, sign in enumerate((-1.0, 1.0)):
+            res = linprog(-sign * D[k], A_eq=D[others], b_eq=np.zeros(2), bounds=list(zip(np.zeros_like(f_max), f_max)),
+                          method="highs")
+            out[k, col] = max(-res.fun, 0.0) if res.status == 0 else 0.0
+    return out
+
+
+def _named(names: list[str]) -> str:
+    more = len(names) - NAMED_MAX
+    return ", ".join(names[:NAMED_MAX]) + (f" and {more} more" if more > 0 else "")
+
+
+def missing_torque(scene) -> list[str]:
+    """The directions of B (``"-x"``, ``"+y"``, ...) the thrusters cannot turn the station about:
+    :func:`torque_authority` at round-off (:data:`AUTHORITY_ROUNDOFF_REL`)."""
+    D, _ = torque_arms(scene)
+    f_max = np.array([t.force_N for t in scene.thruster])
+    auth = torque_authority(D, f_max)
+    scale = float(np.linalg.norm(D, axis=0) @ f_max)
+    return [f"{'-+'[col]}{'xyz'[k]}" for k in range(3) for col in range(2) if auth[k, col] <= AUTHORITY_ROUNDOFF_REL * scale]
+
+
+def _check_authority(scene, mode: str) -> None:
+    """Refuse a set that cannot deliver what ``mode`` asks of it at every tick: thruster-only
+    control needs torque both ways about each axis; assist needs some torque to dump with (a set
+    that dumps about some axes only is flown, and its run's summary says which it lacks). The
+    message names the directions and the thrusters that make no torque at all."""
+    missing = missing_torque(scene)
+    if not missing or (mode == "assist" and len(missing) < 6):
+        return
+    D, _ = torque_arms(scene)
+    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
+    c = composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
+    size_m = 1.0 + max(np.linalg.norm(np.asarray(t.position_B) - c) for t in scene.thruster)
+    none = [t.name for t, a in zip(scene.thruster, np.linalg.norm(D, axis=0)) if a <= AUTHORITY_ROUNDOFF_REL * size_m]
+    who = (f"; {_named(none)} make no torque at all (their lines of action pass through the mass centre: "
+           "position_B is from the origin of [body] cm, not from the mass centre)") if none else ""
+    why = "dumps momentum" if mode == "assist" else "controls attitude about every axis"
+    where = ", ".join(f"{v:.6g}" for v in c)
+    raise FieldError("thruster", f"the set makes no torque about {', '.join(missing)} of B (about the composite "
+                                 f"mass centre [{where}] m), and mode '{mode}' {why}{who}")
+
+
 def check_thrusters(scene) -> None:
     """``[[thruster]]`` and ``[thrusters]`` agree with each other and the rest of the scene."""
     if not scene.thruster:
@@ -124,3 +214,5 @@ def check_thrusters(scene) -> None:
         if t.min_on_s > period:
             raise FieldError(f"thruster[{i}].min_on_s", f"{t.min_on_s:g} s is longer than the controller period "
                                                         f"({period:g} s): a pulse is cut at the period")
+    if opt.mode != "off":
+        _check_authority(scene, opt.mode)
