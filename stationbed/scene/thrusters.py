@@ -29,6 +29,7 @@ dumps about some axes only is flown, and its run's summary and line say which it
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Annotated, Literal
 
@@ -165,9 +166,19 @@ def missing_torque(scene) -> list[str]:
     :func:`torque_authority` at round-off (:data:`AUTHORITY_ROUNDOFF_REL`)."""
     D, _ = torque_arms(scene)
     f_max = np.array([t.force_N for t in scene.thruster])
+    return list(_missing(D.tobytes(), f_max.tobytes()))
+
+
+@functools.lru_cache(maxsize=64)
+def _missing(D_bytes: bytes, f_bytes: bytes) -> tuple[str, ...]:
+    """:func:`missing_torque` of the arms and forces as bytes: kept, since each scene a Monte Carlo
+    draws or ``replace`` makes is checked again (6 LPs: ~25 ms) and most share their set's."""
+    f_max = np.frombuffer(f_bytes)
+    D = np.frombuffer(D_bytes).reshape(3, len(f_max))
     auth = torque_authority(D, f_max)
     scale = float(np.linalg.norm(D, axis=0) @ f_max)
-    return [f"{'-+'[col]}{'xyz'[k]}" for k in range(3) for col in range(2) if auth[k, col] <= AUTHORITY_ROUNDOFF_REL * scale]
+    return tuple(f"{'-+'[col]}{'xyz'[k]}" for k in range(3) for col in range(2)
+                 if auth[k, col] <= AUTHORITY_ROUNDOFF_REL * scale)
 
 
 def _check_authority(scene, mode: str) -> None:
