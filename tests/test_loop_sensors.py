@@ -381,6 +381,13 @@ BAD = {
     "nea_in_arcsec": ({"sensor": [_head(nea_about=15.0)]},
                       "sensor[0].nea_about: 15 rad is above 0.005 rad (coarser than any star tracker); "
                       "did you mean 15 arcsec = 7.272e-05 rad?"),
+    # a noise-free sensor the filter weighs (issue 32): the key that gives the filter its figure
+    "noise_free_head_with_estimator": ({"sensor": [_gyro(), _head(nea_about=0.0)], "estimator": {"kind": "mekf"}},
+                                       "sensor[1].nea_about: 0: the MEKF updates with head 'st' and weighs it by its "
+                                       "noise-equivalent angles; give estimator.nea_about"),
+    "noise_free_gyro_with_estimator": ({"sensor": [_gyro(sigma_v=0.0), _head()], "estimator": {"kind": "mekf"}},
+                                       "sensor[0].sigma_v: 0: the MEKF propagates with gyro 'g' and weighs it by its "
+                                       "noise; give estimator.sigma_v"),
     "estimator_arw_in_deg_per_sqrt_h": ({"sensor": [_gyro(), _head()], "estimator": {"kind": "mekf", "sigma_v": 0.005}},
                                         "estimator.sigma_v: 0.005 rad/s^0.5 is above 0.002 rad/s^0.5"),
     "duplicate": ({"sensor": [_gyro(), _gyro()]}, "sensor: names must be unique, repeated: ['g']"),
@@ -391,6 +398,18 @@ BAD = {
     "unknown_head": ({"sensor": [_gyro(), _head()], "estimator": {"kind": "mekf", "star_trackers": ["st9"]}},
                      "estimator.star_trackers: must name one or more star trackers"),
 }
+
+
+def test_the_estimators_noise_figures_tune_the_filter_for_noise_free_sensors():
+    """Noise-free gyro and head: the filter takes estimator.sigma_v, nea_cross and nea_about (the
+    keys the refusal above names) as its own noise figures, per head (cross, cross, about)."""
+    from stationbed.loop import Mekf  # noqa: PLC0415
+
+    sensing = sensing_from_dict({"sensor": [_gyro(sigma_v=0.0), _head(nea_cross=0.0, nea_about=0.0)],
+                                 "estimator": {"kind": "mekf", "sigma_v": 1e-6, "nea_cross": 2e-5, "nea_about": 1e-4}})
+    f = Mekf.from_sensors(sensing.estimator, build_sensors(sensing.sensor))
+    assert_array_equal(f.param_layout.get(f.params, "r_0"), [2e-5, 2e-5, 1e-4])  # rad
+    assert f.param_layout.get(f.params, "sigma_v")[0] == 1e-6  # rad/s^0.5
 
 
 @pytest.mark.parametrize("case", sorted(BAD), ids=sorted(BAD))

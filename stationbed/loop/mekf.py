@@ -220,11 +220,13 @@ class Mekf:
                       sigma_u=table.sigma_u if table.sigma_u is not None else g.sigma_u)
         for i, h in enumerate(heads):
             values[f"q_SB_{i}"] = h.entry.mounting()
-            values[f"r_{i}"] = [h.entry.nea_cross, h.entry.nea_cross, h.entry.nea_about]
+            cross = table.nea_cross if table.nea_cross is not None else h.entry.nea_cross
+            about = table.nea_about if table.nea_about is not None else h.entry.nea_about
+            values[f"r_{i}"] = [cross, cross, about]
             values[f"latency_{i}"] = h.entry.latency
         if min(values["sigma_v"], min(min(values[f"r_{i}"]) for i in range(n))) <= 0:
-            raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give them in [estimator] "
-                             "for noise-free sensors)")
+            raise ValueError("the MEKF needs sigma_v > 0 and noise-equivalent angles > 0 (give estimator.sigma_v, "
+                             "nea_cross and nea_about for noise-free sensors)")
         self.params = self.param_layout.pack(values)
         self._f = self._tick = self._alone = self._report = self._compiled = None
         self._records: dict = {}

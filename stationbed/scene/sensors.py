@@ -200,6 +200,8 @@ class MekfEstimator(Strict):
     star_trackers: list[str] | None = None  # the heads it updates with (default: every head)
     sigma_v: Annotated[Arw, Field(gt=0.0)] | None = None  # rad/s^0.5 (default: the gyro's)
     sigma_u: Annotated[Rrw, Field(gt=0.0)] | None = None  # rad/s^1.5 (default: the gyro's)
+    nea_cross: Annotated[Nea, Field(gt=0.0)] | None = None  # rad, every head's it updates with (default: each head's)
+    nea_about: Annotated[Nea, Field(gt=0.0)] | None = None  # rad, every head's it updates with (default: each head's)
     sigma_attitude0: float = Field(default=1.0e-3, gt=0.0)  # rad, 1 sigma of the initial estimate per axis
     sigma_bias0: float = Field(default=1.0e-5, gt=0.0)  # rad/s, 1 sigma of the initial bias estimate per axis
 
@@ -242,6 +244,15 @@ def check_sensing(sensor: list, estimator, period: float | None = None) -> None:
         raise FieldError("estimator.star_trackers", f"must name one or more star trackers of [[sensor]] "
                                                     f"(heads: {heads}), got {bad or used}")
     gyro = next(s for s in sensor if s.name == (est.gyro or gyros[0]))
+    # the filter weighs each sample by its noise: a noise-free sensor needs the filter's own figure
+    if gyro.sigma_v == 0.0 and est.sigma_v is None:
+        raise FieldError(f"sensor[{sensor.index(gyro)}].sigma_v", f"0: the MEKF propagates with gyro '{gyro.name}' and "
+                                                                  "weighs it by its noise; give estimator.sigma_v")
+    for i, s in enumerate(sensor):
+        for key in ("nea_cross", "nea_about"):
+            if s.name in used and getattr(s, key) == 0.0 and getattr(est, key) is None:
+                raise FieldError(f"sensor[{i}].{key}", f"0: the MEKF updates with head '{s.name}' and weighs it by its "
+                                                       f"noise-equivalent angles; give estimator.{key}")
     for s in sensor:
         if s.name in used and not _whole(s.period / gyro.period):
             raise FieldError("estimator.star_trackers", f"head '{s.name}': period {s.period:g} s is not a whole "
