@@ -143,3 +143,25 @@ def test_lockstep_leaves_a_detection_to_the_per_tick_loop(monkeypatch):
         np.testing.assert_array_equal(tr.data, fly(s)[0].data)
     never, _ = fly(scenes[0].replace({"knowledge": None}))
     assert np.abs(res[0][1].data - never.data).max() > 0
+
+
+class FailsToReplan(CapacityAwarePD):
+    """Its re-design raises (a bug in a user's hook)."""
+
+    def _replan(self, plant):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+
+def test_a_replan_that_raises_is_a_failed_run_naming_the_controller():
+    """The law's ``_replan`` raising at the detection (issue 32): SimulationError naming the
+    controller, the hook, the exception and the detection's tick time, the law's exception as its
+    cause, the rows before it kept and the summary status 'failed'."""
+    from stationbed.run.simulation import SimulationError  # noqa: PLC0415
+
+    s = scene(failure_detected_after_s=DETECTED_S)
+    with pytest.raises(SimulationError) as err:
+        simulate(s, controller=FailsToReplan(s.controller.period, **s.controller.params), fused=False)
+    e, t_detect = err.value, math.ceil(DETECTED_S / PERIOD_S) * PERIOD_S
+    assert "controller 'pd' raised LinAlgError in _replan" in str(e) and "Singular matrix" in str(e)
+    assert e.t == pytest.approx(t_detect, rel=1e-12) and isinstance(e.__cause__, np.linalg.LinAlgError)
+    assert e.trajectory.meta["status"] == "failed" and e.trajectory.t[-1] < t_detect

@@ -374,8 +374,14 @@ class ControlLoop:
                 t = k * period  # integer tick clock: no accumulated drift
                 if k == K:
                     t = duration
-                if k == replan_at:  # a failure detected
-                    replan(ctrl, comp.replan.plant())
+                if k == replan_at:  # a failure detected: the law designs again (the user's code: reported as update's)
+                    plant = comp.replan.plant()
+                    try:
+                        replan(ctrl, plant)
+                    except Exception as e:
+                        hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
+                        raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
+                                                   f"plant with the failure detected: {one_line(e)}") from e
                 M.t = t
                 calls += 1
                 try:
