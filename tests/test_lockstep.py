@@ -17,6 +17,7 @@ import pytest
 
 from scenes import ROOT
 from stationbed import load_scene, simulate
+from stationbed.controllers.pd import PD
 from stationbed.run.controller import Controller
 from stationbed.run.lockstep import executor, run_lockstep, vectorised
 from stationbed.run.simulation import SimulationError
@@ -265,3 +266,22 @@ def test_sensors_without_an_estimator_and_the_ideal_sensors_noise_as_single_runs
     assert [k for k, _ in res] == ["batch"] * N_SAMPLES
     for s, (_, tr) in zip(scenes, res):
         _same(tr, simulate(s, fused=False))
+
+
+class RefTransposed(PD):
+    """pd whose update_batch sets q_ref_BN transposed, (4, n) (a user's slip)."""
+
+    def update_batch(self, t, meas):
+        out = super().update_batch(t, meas)
+        self.q_ref_BN = np.zeros((4, self.n_samples))
+        return out
+
+
+def test_a_batch_reference_of_the_wrong_shape_is_reported_with_its_shape():
+    """update_batch setting q_ref_BN (4, 3) instead of (3, 4) (issue 32): every sample fails at the
+    first tick with the shape set and the shape expected, not a sample's row's."""
+    scenes = _samples({"reference": "lvlh", "bandwidth": 0.01}, "pd")
+    res = _run_with(scenes, RefTransposed)
+    for tr in res:
+        assert isinstance(tr, SimulationError) and tr.t == 0.0
+        assert "update_batch set q_ref_BN to an array of shape (4, 3), expected (3, 4)" in tr.reason, tr.reason

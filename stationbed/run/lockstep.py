@@ -397,6 +397,13 @@ class _Lockstep:
                     else:
                         n_all[0] += 1
                     q_ref = ctrl.q_ref_BN
+                    if q_ref is not None:
+                        q_ref, why = _batch_q_ref(q_ref, n)
+                        if why is not None:  # the law's stand-in set the wrong thing: every sample, its reason
+                            for i in np.flatnonzero(alive):
+                                fail(i, ControllerFailure(t, f"controller '{lp.ctrl.name}' update_batch set q_ref_BN "
+                                                             f"to {why}"))
+                            break
                 if not alive.any():
                     break
                 t_next = min((k + 1) * period, duration)
@@ -511,3 +518,15 @@ class _Lockstep:
                     err.__cause__ = e.__cause__
                     results.append(err)
         return results
+
+
+def _batch_q_ref(q_ref, n: int) -> tuple[np.ndarray | None, str | None]:
+    """A batch law's ``q_ref_BN`` as an (n, 4) float array, or ``(None, why)``: what it set and the
+    shape expected (one reference per sample, scalar first), for "set q_ref_BN to ..."."""
+    try:
+        arr = np.asarray(q_ref, dtype=float)
+    except (TypeError, ValueError):
+        return None, f"{type(q_ref).__name__} {str(q_ref)[:40]!r}, not ({n}, 4) real numbers (one reference per sample)"
+    if arr.shape != (n, 4):
+        return None, f"an array of shape {arr.shape}, expected ({n}, 4): one reference per sample, scalar first"
+    return arr, None
