@@ -274,6 +274,20 @@ def test_a_bad_rate_is_refused_naming_the_field(bad):
         _with_rate(load_scene(SCENE), bad)
 
 
+@pytest.mark.parametrize("asked", [10**6, 10**20], ids=["1e6", "1e20"])
+def test_a_rate_longer_than_a_row_is_the_rows_rate(asked):
+    """More ticks than an output row has (issue 32: 10**6 had built a block of 10**6 calls, 1.5
+    GiB; 10**20 ended in casadi's NotImplementedError): a block never spans a row, so the run is
+    the run at the row's ticks (100 here), bit for bit, and the summary says so."""
+    scene = load_scene(SCENE).replace({"simulation.duration": 20.0, "simulation.output_dt": 10.0})
+    row = simulate(_with_rate(scene, 100), fused=True)
+    tr = simulate(_with_rate(scene, asked), fused=True)
+    assert np.array_equal(tr.data, row.data)
+    s = tr.meta["summary"]
+    assert (s["environment_rate_asked"], s["environment_rate_ticks"]) == (asked, 100)
+    assert "at most the ticks of an output row (100)" in s["environment_rate_why"]
+
+
 def test_rate_is_recorded_and_ignored_without_environment():
     """A scene with no environment torques runs every stage whatever it asks, and says so."""
     scene = load_scene(ROOT / "scenarios" / "eigenaxis_slew.toml")

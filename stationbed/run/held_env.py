@@ -77,6 +77,8 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     elif asked and not ran:  # a rate asked and every stage run: why, as under auto
         out["environment_rate_why"] = ("no environment torque" if not has_environment(loop.system)
                                        else cannot or "the executor evaluates every stage")
+    elif asked and ran < asked:  # more ticks asked than a row has: the row's (a block never spans one)
+        out["environment_rate_why"] = f"at most the ticks of an output row ({loop.n_per_out}): a block never spans one"
     return out
 
 

@@ -46,13 +46,15 @@ def environment_rate(loop) -> int:
     integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
     environment torques, else 0; ``"auto"`` (the default) is the bound's choice
     (:func:`~.rate_auto.auto_choice`). The per-tick executors hold it in the same blocks where
-    they can cut the run into them (:func:`~.held_env.held_rate`)."""
+    they can cut the run into them (:func:`~.held_env.held_rate`). At most the ticks of an
+    output row: a block never spans one (each chunk starts its own), so a longer one is the same
+    run, and a block is built as that many calls (10**6 of them took 1.5 GiB, issue 32)."""
     asked = getattr(loop.scene.simulation, "environment_rate", 0)
     if not has_environment(loop.system):
         return 0
     if asked == AUTO:
-        return auto_choice(loop)["ticks"]
-    return max(int(asked or 0), 0)
+        return min(auto_choice(loop)["ticks"], loop.n_per_out)
+    return min(max(int(asked or 0), 0), loop.n_per_out)
 
 
 def carry_width(rate: int) -> int:
