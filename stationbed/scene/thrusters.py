@@ -120,14 +120,18 @@ class ThrusterOptions(Strict):
         return self
 
 
+def _mass_centre(scene) -> np.ndarray:
+    """The composite mass centre [m], B axes (the body's and the appendages')."""
+    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
+    return composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
+
+
 def torque_arms(scene) -> tuple[np.ndarray, np.ndarray]:
     """(D, G), each (3, n): column i the torque per newton ``(r_i - c) × ĝ_i`` [m] and the unit
     force direction ĝ_i of thruster i, c the scene's composite mass centre (B axes). The arrays
     are balanced about their rotation axes (DESIGN §4), so c is the constant ``Σ m r / Σ m`` of
     the body and the appendages' mass centres, whatever the arrays' angles."""
-    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    cms = [scene.body.cm] + [a.cm for a in scene.appendage]
-    c = composite_cm(masses, cms)
+    c = _mass_centre(scene)
     G = np.array([t.unit_B for t in scene.thruster], dtype=float).T
     R = np.array([t.position_B for t in scene.thruster], dtype=float).T - c[:, None]
     return np.cross(R.T, G.T).T, G
@@ -190,8 +194,7 @@ def _check_authority(scene, mode: str) -> None:
     if not missing or (mode == "assist" and len(missing) < 6):
         return
     D, _ = torque_arms(scene)
-    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    c = composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
+    c = _mass_centre(scene)
     size_m = 1.0 + max(np.linalg.norm(np.asarray(t.position_B) - c) for t in scene.thruster)
     none = [t.name for t, a in zip(scene.thruster, np.linalg.norm(D, axis=0)) if a <= AUTHORITY_ROUNDOFF_REL * size_m]
     who = (f"; {_named(none)} make no torque at all (their lines of action pass through the mass centre: "
