@@ -229,6 +229,26 @@ def test_requirement_counts_failed_runs_as_failures():
     assert_allclose(s["std"], np.std([0.5, 1.5, 0.9], ddof=1), rtol=1e-15)
 
 
+#: coverage 95 %, confidence 95 %: 0 failures need n >= ln(0.05) / ln(0.95) = 58.4, so 59
+#: (0.95**59 = 0.0485 <= 0.05; 0.95**58 = 0.0510 is not); with 200 samples one failure is shown
+#: too: 0.95**200 + 200 * 0.05 * 0.95**199 = 4.0e-4 <= 0.05
+@pytest.mark.parametrize(
+    "n, failed, word",
+    [(20, 0, "NOT SHOWN"), (58, 0, "NOT SHOWN"), (59, 0, "PASS"), (200, 1, "PASS"), (20, 1, "FAIL"), (59, 1, "FAIL")],
+    ids=["20_none_failed", "58_none_failed", "59_none_failed", "200_one_failed", "20_one_failed", "59_one_failed"])
+def test_a_requirement_is_fail_only_when_a_sample_failed_it(n, failed, word):
+    from stationbed.scene import Requirement
+
+    err = np.full(n, 0.5)  # deg
+    err[:failed] = 2.0  # deg, above the 1-deg limit
+    df = pd.DataFrame({"index": np.arange(n), "status": ["ok"] * n, "max_att_err_deg": err})
+    (v,) = stats.requirement_verdicts(df, [Requirement(metric="max_att_err_deg", max=1.0, coverage=0.95,
+                                                       confidence=0.95)])
+    assert (v["verdict"], v["pass"], v["failures"]) == (word, word == "PASS", failed)
+    if word == "NOT SHOWN":
+        assert v["note"] == f"0 of {n} failed; needs >= 59 samples for 95 % confidence that at most 5 % fail"
+
+
 # -- scene errors ---------------------------------------------------------------------------
 @pytest.mark.parametrize(
     "changes, message",
