@@ -28,6 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from scenes import RIGID
 from stationbed import load_scene, montecarlo, simulate
+from stationbed.run.metrics import METRICS
 from stationbed.scene import SceneError, scene_from_dict
 from stationbed.studies.montecarlo import stats
 from stationbed.studies.montecarlo.replay import sample_scene
@@ -134,7 +135,8 @@ def test_a_sample_out_of_redraws_is_refused_with_its_reason():
     refused = df[df["status"] == "refused"]
     assert 0 < len(refused) < len(df)
     assert refused["reason"].str.contains("inertia").all()
-    assert refused["max_att_err_deg"].isna().all()
+    told = [c for c in df if c.startswith("told.")]  # what the law was told: nothing, it never flew
+    assert told and refused[told].isna().all().all()
 
 
 def test_a_failing_sample_is_recorded_and_the_study_goes_on():
@@ -265,6 +267,32 @@ def test_a_requirement_is_fail_only_when_a_sample_failed_it(n, failed, word):
 def test_bad_montecarlo_tables_are_one_line_errors(changes, message):
     with pytest.raises(SceneError, match=message):
         montecarlo(load_scene(MC_SCENE).replace(changes), n=1)
+
+
+@pytest.mark.parametrize(
+    "metric, needs",
+    [("propellant_kg_per_orbit", r"\[\[thruster\]\] tables and an \[orbit\]"),
+     ("max_est_err_deg", r"an \[estimator\]")],
+    ids=["propellant_without_thrusters", "estimation_without_estimator"])
+def test_a_requirement_on_a_metric_the_scene_cannot_report_is_refused_before_any_sample(metric, needs):
+    """Issue 32: such a requirement was judged, every sample NaN, so FAIL; now a one-line error
+    naming the requirement (exit 2, nothing run)."""
+    reqs = [*load_scene(MC_SCENE).model_dump()["montecarlo"]["requirement"], {"metric": metric, "max": 1.0}]
+    scene = load_scene(MC_SCENE).replace({"montecarlo.requirement": reqs})
+    with pytest.raises(SceneError, match=rf"^montecarlo.requirement\[2\].metric: '{metric}' is not reported by a run "
+                                         rf"of scene 'iss_lvlh_hold_montecarlo': it needs {needs}"):
+        montecarlo(scene, n=1)
+
+
+def test_the_table_has_the_metric_columns_a_run_of_the_scene_reports():
+    """The truth: the summary of sample 0 run alone (``simulate``) reports exactly the metric
+    columns of the table (before: every METRICS name, est_* and thruster ones all NaN here)."""
+    scene = short_study(**{"simulation.duration": 20.0, "montecarlo.envelope_dt": None, "montecarlo.settle_s": None})
+    df = montecarlo(scene, n=1).df
+    reported = [m for m in METRICS if m in simulate(sample_scene(scene, 0), keep=False).meta["summary"]]
+    assert [c for c in df.columns if c in METRICS] == reported
+    assert not df[reported].isna().any().any()
+    assert "max_est_err_deg" not in df and "propellant_kg" not in df
 
 
 def test_typo_in_the_montecarlo_table_names_the_nearest_key():
