@@ -117,6 +117,24 @@ def test_sample_scene_file_gives_row_k_bit_for_bit(tmp_path):
         assert v == row[name], name  # bit for bit (JSON keeps a double's repr exactly)
 
 
+@pytest.mark.parametrize("known", [False, True], ids=["unknown_to_the_law", "known"])
+def test_a_failed_cmg_unit_is_recorded_as_the_units_flown(known, tmp_path):
+    """Issue 32: ``cmg.failed`` was recorded as the float index of the choice (``cmg.failed.choice``
+    = 2.0); the row must name the units, as the scene does: the truth is the ``[cmg] failed`` of
+    the sample's own scene (``sample_scene``), and what the law was told that of its knowledge."""
+    choice = {"key": "cmg.failed", "kind": "choice", "choices": [[], [1], [2], [3], [4]], "known": known}
+    scene = short_study(**{"simulation.duration": 1.0, "montecarlo.envelope_dt": None, "montecarlo.settle_s": None,
+                           "montecarlo.disperse": [choice], "montecarlo.n": 6})
+    res = montecarlo(scene, out=tmp_path, charts=False)
+    df = pd.read_parquet(tmp_path / "samples.parquet")
+    assert "cmg.failed.choice" not in df
+    flown = [sample_scene(scene, k).cmg.failed for k in range(6)]
+    assert [json.loads(v) for v in df["cmg.failed"]] == flown
+    assert len({tuple(f) for f in flown}) > 1  # the draws differ
+    assert [json.loads(v) for v in df["told.cmg.failed"]] == (flown if known else [[]] * 6)
+    pd.testing.assert_frame_equal(df, res.df)
+
+
 def test_refused_draws_are_redrawn_and_counted():
     wide = [{"key": "body.inertia", "kind": "inertia", "sigma": 0.6, "sigma_products": 0.3}]
     res = montecarlo(rigid_study(wide, n=12))
