@@ -499,4 +499,5 @@ def test_an_fmu_study_writes_the_same_table_bytes_serially_and_on_two_workers(fm
     workers = montecarlo(scene, workers=2, out=tmp_path / "workers", charts=False)
     assert serial.summary["chunk"] != workers.summary["chunk"]  # the case: other chunks
     assert set(serial.df["executor"]) == {"batch"}
-    assert (tmp_path / "serial" / "samples.parquet").read_bytes() == (tmp_path / "workers" / "samples.parquet").read_bytes()
+    table = "samples.parquet"
+    assert (tmp_path / "serial" / table).read_bytes() == (tmp_path / "workers" / table).read_bytes()

@@ -24,8 +24,8 @@ from scipy import stats as sps
 
 from ...run.metrics import METRICS
 
-__all__ = ["PERCENTILES", "percentile_needs", "quiet_nan", "metric_stats", "verdict", "n_needed", "requirement_verdicts", "success_lower_bound",
-           "PASS", "FAIL", "NOT_SHOWN"]
+__all__ = ["PERCENTILES", "percentile_needs", "quiet_nan", "metric_stats", "verdict", "n_needed", "requirement_verdicts",
+           "success_lower_bound", "PASS", "FAIL", "NOT_SHOWN"]
 
 #: percentiles reported per metric (each only where the sample count supports it)
 PERCENTILES = (50.0, 90.0, 99.0, 99.73)
