@@ -41,7 +41,7 @@ from scenes import C_PB, ROOT
         ({"torque": [{"kind": "aero"}, {"kind": "aero"}]}, r"torque: kind 'aero' given 2 times"),
         ({"sun": {"epoch": "2024-13-01T00:00:00Z"}}, r"sun\.epoch: .*is not an ISO 8601 date"),
         ({"sun": {"beta": 0.1, "epoch": "2024-03-01T00:00:00Z"}}, r"give exactly one of 'beta'"),
-        ({"appendage[0].alpha": {"track": "sun", "night": "glider"}, "sun": {"beta": 0.1}}, r"appendage\[0\]\.alpha\.night: 'glider' needs \[sun\] eclipse"),
+        ({"appendage[0].alpha": {"track": "sun", "night": "glider"}, "sun": {"beta": 0.1}}, r"appendage\.stbd_pair\.alpha\.night: 'glider' needs \[sun\] eclipse"),
     ],
     ids=["plate_without_normal", "plate_and_box", "unknown_appendage", "one_fraction", "fractions_sum", "typo_key",
          "msis_without_epoch", "atmosphere_typo", "srp_without_sun", "aero_twice", "bad_epoch", "two_sun_forms", "glider_without_eclipse"],

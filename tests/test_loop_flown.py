@@ -66,8 +66,8 @@ def sphere(duration=300.0, seed=0, **over) -> dict:
 
 @pytest.mark.parametrize("change, field", [
     ({"controller": None}, "sensor"),
-    ({"sensor[0].period": 0.15}, "sensor[0].period"),
-    ({"sensor[1].moon_exclusion": 0.2}, "sensor[1].moon_exclusion"),  # no [sun] epoch: no Moon
+    ({"sensor[0].period": 0.15}, "sensor.g.period"),
+    ({"sensor[1].moon_exclusion": 0.2}, "sensor.h.moon_exclusion"),  # no [sun] epoch: no Moon
     ({"controller.sensor.attitude_noise": 1e-4}, "controller.sensor"),
     ({"estimator.gyro": "nope"}, "estimator.gyro"),
 ])

@@ -358,35 +358,35 @@ def test_star_tracker_latency_delays_measurement_and_flag():
 
 # -- the scene tables -------------------------------------------------------------------------
 BAD = {
-    "typo": ({"sensor": [_gyro(sigma_vv=1.0)]}, "sensor[0].sigma_vv: unknown key; did you mean 'sigma_v'?"),
+    "typo": ({"sensor": [_gyro(sigma_vv=1.0)]}, "sensor.g.sigma_vv: unknown key; did you mean 'sigma_v'?"),
     "unknown_kind": ({"sensor": [{"kind": "sun_sensor", "name": "c", "period": 1.0}]},
-                     "sensor[0]: unknown or missing kind; valid kinds: 'gyro', 'star_tracker'"),
-    "negative_noise": ({"sensor": [_gyro(sigma_v=-1.0)]}, "sensor[0].sigma_v: must be greater than or equal to 0"),
+                     "sensor.c.kind: unknown kind 'sun_sensor' (valid: gyro, star_tracker)"),
+    "negative_noise": ({"sensor": [_gyro(sigma_v=-1.0)]}, "sensor.g.sigma_v: must be greater than or equal to 0"),
     "misalignment_diagonal": ({"sensor": [_gyro(misalignment=[[1e-3, 0, 0], [0, 0, 0], [0, 0, 0]])]},
-                              "sensor[0].misalignment: the diagonal must be zero"),
-    "two_mountings": ({"sensor": [_head(q_SB=[1.0, 0, 0, 0])]}, "sensor[0].q_SB: give exactly one of"),
+                              "sensor.g.misalignment: the diagonal must be zero"),
+    "two_mountings": ({"sensor": [_head(q_SB=[1.0, 0, 0, 0])]}, "sensor.st.q_SB: give exactly one of"),
     "non_unit_mounting": ({"sensor": [{**_head(q_SB=[1.0, 0.1, 0, 0]), "boresight_B": None}]},
-                          "sensor[0].q_SB: must be a unit quaternion"),
-    "latency": ({"sensor": [_head(latency=0.3)]}, "sensor[0].latency: 0.3 s is not a whole number of periods"),
-    "exclusion_angle": ({"sensor": [_head(sun_exclusion=4.0)]}, "sensor[0].sun_exclusion: must be an angle"),
+                          "sensor.st.q_SB: must be a unit quaternion"),
+    "latency": ({"sensor": [_head(latency=0.3)]}, "sensor.st.latency: 0.3 s is not a whole number of periods"),
+    "exclusion_angle": ({"sensor": [_head(sun_exclusion=4.0)]}, "sensor.st.sun_exclusion: must be an angle"),
     # units slips (issue 32), each hint's figure converted by hand: 0.005 deg/sqrt(h) x (pi/180) / 60
     # = 1.454e-6 rad/s^0.5 (the docstring's gyro), 15 arcsec x pi/648000 = 7.272e-5 rad, 0.01
     # deg/h/sqrt(h) x (pi/180) / 3600^1.5 = 8.08e-10 rad/s^1.5
     "arw_in_deg_per_sqrt_h": ({"sensor": [_gyro(sigma_v=0.005)]},
-                              "sensor[0].sigma_v: 0.005 rad/s^0.5 is above 0.002 rad/s^0.5 (noisier than any rate gyro); "
+                              "sensor.g.sigma_v: 0.005 rad/s^0.5 is above 0.002 rad/s^0.5 (noisier than any rate gyro); "
                               "did you mean 0.005 deg/sqrt(h) = 1.454e-06 rad/s^0.5?"),
     "rrw_in_deg_per_h_sqrt_h": ({"sensor": [_gyro(sigma_u=0.01)]},
-                                "sensor[0].sigma_u: 0.01 rad/s^1.5 is above 0.0001 rad/s^1.5 (a bias walking faster "
+                                "sensor.g.sigma_u: 0.01 rad/s^1.5 is above 0.0001 rad/s^1.5 (a bias walking faster "
                                 "than any rate gyro's); did you mean 0.01 deg/h/sqrt(h) = 8.08e-10 rad/s^1.5?"),
     "nea_in_arcsec": ({"sensor": [_head(nea_about=15.0)]},
-                      "sensor[0].nea_about: 15 rad is above 0.005 rad (coarser than any star tracker); "
+                      "sensor.st.nea_about: 15 rad is above 0.005 rad (coarser than any star tracker); "
                       "did you mean 15 arcsec = 7.272e-05 rad?"),
     # a noise-free sensor the filter weighs (issue 32): the key that gives the filter its figure
     "noise_free_head_with_estimator": ({"sensor": [_gyro(), _head(nea_about=0.0)], "estimator": {"kind": "mekf"}},
-                                       "sensor[1].nea_about: 0: the MEKF updates with head 'st' and weighs it by its "
+                                       "sensor.st.nea_about: 0: the MEKF updates with head 'st' and weighs it by its "
                                        "noise-equivalent angles; give estimator.nea_about"),
     "noise_free_gyro_with_estimator": ({"sensor": [_gyro(sigma_v=0.0), _head()], "estimator": {"kind": "mekf"}},
-                                       "sensor[0].sigma_v: 0: the MEKF propagates with gyro 'g' and weighs it by its "
+                                       "sensor.g.sigma_v: 0: the MEKF propagates with gyro 'g' and weighs it by its "
                                        "noise; give estimator.sigma_v"),
     "estimator_arw_in_deg_per_sqrt_h": ({"sensor": [_gyro(), _head()], "estimator": {"kind": "mekf", "sigma_v": 0.005}},
                                         "estimator.sigma_v: 0.005 rad/s^0.5 is above 0.002 rad/s^0.5"),

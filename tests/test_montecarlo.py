@@ -28,6 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from scenes import RIGID
 from stationbed import load_scene, montecarlo, simulate
+from stationbed.run.metrics import METRICS
 from stationbed.scene import SceneError, scene_from_dict
 from stationbed.studies.montecarlo import stats
 from stationbed.studies.montecarlo.replay import sample_scene
@@ -116,6 +117,24 @@ def test_sample_scene_file_gives_row_k_bit_for_bit(tmp_path):
         assert v == row[name], name  # bit for bit (JSON keeps a double's repr exactly)
 
 
+@pytest.mark.parametrize("known", [False, True], ids=["unknown_to_the_law", "known"])
+def test_a_failed_cmg_unit_is_recorded_as_the_units_flown(known, tmp_path):
+    """Issue 32: ``cmg.failed`` was recorded as the float index of the choice (``cmg.failed.choice``
+    = 2.0); the row must name the units, as the scene does: the truth is the ``[cmg] failed`` of
+    the sample's own scene (``sample_scene``), and what the law was told that of its knowledge."""
+    choice = {"key": "cmg.failed", "kind": "choice", "choices": [[], [1], [2], [3], [4]], "known": known}
+    scene = short_study(**{"simulation.duration": 1.0, "montecarlo.envelope_dt": None, "montecarlo.settle_s": None,
+                           "montecarlo.disperse": [choice], "montecarlo.n": 6})
+    res = montecarlo(scene, out=tmp_path, charts=False)
+    df = pd.read_parquet(tmp_path / "samples.parquet")
+    assert "cmg.failed.choice" not in df
+    flown = [sample_scene(scene, k).cmg.failed for k in range(6)]
+    assert [json.loads(v) for v in df["cmg.failed"]] == flown
+    assert len({tuple(f) for f in flown}) > 1  # the draws differ
+    assert [json.loads(v) for v in df["told.cmg.failed"]] == (flown if known else [[]] * 6)
+    pd.testing.assert_frame_equal(df, res.df)
+
+
 def test_refused_draws_are_redrawn_and_counted():
     wide = [{"key": "body.inertia", "kind": "inertia", "sigma": 0.6, "sigma_products": 0.3}]
     res = montecarlo(rigid_study(wide, n=12))
@@ -134,7 +153,8 @@ def test_a_sample_out_of_redraws_is_refused_with_its_reason():
     refused = df[df["status"] == "refused"]
     assert 0 < len(refused) < len(df)
     assert refused["reason"].str.contains("inertia").all()
-    assert refused["max_att_err_deg"].isna().all()
+    told = [c for c in df if c.startswith("told.")]  # what the law was told: nothing, it never flew
+    assert told and refused[told].isna().all().all()
 
 
 def test_a_failing_sample_is_recorded_and_the_study_goes_on():
@@ -229,6 +249,26 @@ def test_requirement_counts_failed_runs_as_failures():
     assert_allclose(s["std"], np.std([0.5, 1.5, 0.9], ddof=1), rtol=1e-15)
 
 
+#: coverage 95 %, confidence 95 %: 0 failures need n >= ln(0.05) / ln(0.95) = 58.4, so 59
+#: (0.95**59 = 0.0485 <= 0.05; 0.95**58 = 0.0510 is not); with 200 samples one failure is shown
+#: too: 0.95**200 + 200 * 0.05 * 0.95**199 = 4.0e-4 <= 0.05
+@pytest.mark.parametrize(
+    "n, failed, word",
+    [(20, 0, "NOT SHOWN"), (58, 0, "NOT SHOWN"), (59, 0, "PASS"), (200, 1, "PASS"), (20, 1, "FAIL"), (59, 1, "FAIL")],
+    ids=["20_none_failed", "58_none_failed", "59_none_failed", "200_one_failed", "20_one_failed", "59_one_failed"])
+def test_a_requirement_is_fail_only_when_a_sample_failed_it(n, failed, word):
+    from stationbed.scene import Requirement
+
+    err = np.full(n, 0.5)  # deg
+    err[:failed] = 2.0  # deg, above the 1-deg limit
+    df = pd.DataFrame({"index": np.arange(n), "status": ["ok"] * n, "max_att_err_deg": err})
+    (v,) = stats.requirement_verdicts(df, [Requirement(metric="max_att_err_deg", max=1.0, coverage=0.95,
+                                                       confidence=0.95)])
+    assert (v["verdict"], v["pass"], v["failures"]) == (word, word == "PASS", failed)
+    if word == "NOT SHOWN":
+        assert v["note"] == f"0 of {n} failed; needs >= 59 samples for 95 % confidence that at most 5 % fail"
+
+
 # -- scene errors ---------------------------------------------------------------------------
 @pytest.mark.parametrize(
     "changes, message",
@@ -245,6 +285,32 @@ def test_requirement_counts_failed_runs_as_failures():
 def test_bad_montecarlo_tables_are_one_line_errors(changes, message):
     with pytest.raises(SceneError, match=message):
         montecarlo(load_scene(MC_SCENE).replace(changes), n=1)
+
+
+@pytest.mark.parametrize(
+    "metric, needs",
+    [("propellant_kg_per_orbit", r"\[\[thruster\]\] tables and an \[orbit\]"),
+     ("max_est_err_deg", r"an \[estimator\]")],
+    ids=["propellant_without_thrusters", "estimation_without_estimator"])
+def test_a_requirement_on_a_metric_the_scene_cannot_report_is_refused_before_any_sample(metric, needs):
+    """Issue 32: such a requirement was judged, every sample NaN, so FAIL; now a one-line error
+    naming the requirement (exit 2, nothing run)."""
+    reqs = [*load_scene(MC_SCENE).model_dump()["montecarlo"]["requirement"], {"metric": metric, "max": 1.0}]
+    scene = load_scene(MC_SCENE).replace({"montecarlo.requirement": reqs})
+    with pytest.raises(SceneError, match=rf"^montecarlo.requirement\[2\].metric: '{metric}' is not reported by a run "
+                                         rf"of scene 'iss_lvlh_hold_montecarlo': it needs {needs}"):
+        montecarlo(scene, n=1)
+
+
+def test_the_table_has_the_metric_columns_a_run_of_the_scene_reports():
+    """The truth: the summary of sample 0 run alone (``simulate``) reports exactly the metric
+    columns of the table (before: every METRICS name, est_* and thruster ones all NaN here)."""
+    scene = short_study(**{"simulation.duration": 20.0, "montecarlo.envelope_dt": None, "montecarlo.settle_s": None})
+    df = montecarlo(scene, n=1).df
+    reported = [m for m in METRICS if m in simulate(sample_scene(scene, 0), keep=False).meta["summary"]]
+    assert [c for c in df.columns if c in METRICS] == reported
+    assert not df[reported].isna().any().any()
+    assert "max_est_err_deg" not in df and "propellant_kg" not in df
 
 
 def test_typo_in_the_montecarlo_table_names_the_nearest_key():

@@ -122,6 +122,20 @@ def test_failed_requirements_exit_1_unless_exit_zero(scene_file, tmp_path, capsy
     assert main([*args, "--exit-zero"]) == 0
 
 
+def test_too_few_samples_with_none_failed_print_not_shown_and_exit_1(scene_file, tmp_path, capsys):
+    """Two samples that both meet a loose requirement: no sample failed, yet 2 samples cannot
+    show 99.73 % at 90 % confidence (852 needed): NOT SHOWN, never FAIL; still exit 1."""
+    loose = scene_file.read_text().replace("max = 3.0", "max = 1.0e9")
+    scene_file.write_text(loose.replace("max = 0.9", "max = 1.0e9"))
+    args = ["montecarlo", str(scene_file), "--n", "2", "--serial", "--no-charts", "-q", "--out", str(tmp_path / "o")]
+    assert main(args) == 1
+    out, err = capsys.readouterr()
+    lines = [x for x in out.splitlines() if x.startswith("requirement max_att_err_deg")]
+    assert len(lines) == 1 and ": NOT SHOWN (0 of 2 fail" in lines[0] and "needs >= 852 samples" in lines[0]
+    assert "FAIL" not in out
+    assert "not shown, no sample failed (too few samples): max_att_err_deg, max_h_fraction" in one_error_line(err)
+
+
 # -- item 6: one default output folder ----------------------------------------------------------
 @pytest.mark.parametrize("command", [["montecarlo", "--sample", "0"], ["linearize"], ["margins"]],
                          ids=["montecarlo", "linearize", "margins"])

@@ -44,7 +44,7 @@ CASES = {
     "zero_duration": (lambda d: d["simulation"].update(duration=0.0), r"simulation\.duration: must be at least 1e-06 s, got 0\.0"),
     "bad_profile_key": (
         lambda d: d.update(appendage=[{"name": "a", "mass": 1.0, "inertia": RIGID["body"]["inertia"], "alpha": {"ampl": 1.0}}]),
-        r"appendage\[0\]\.alpha\.ampl: unknown key; did you mean 'amp'\?",
+        r"appendage\.a\.alpha\.ampl: unknown key; did you mean 'amp'\?",
     ),
     "torque_kind": (lambda d: d.update(torque=[{"kind": "constnt", "torque_B": [1, 0, 0]}]), r"torque\[0\]"),
     "window_order": (lambda d: d.update(torque=[{"kind": "constant", "torque_B": [1, 0, 0], "start": 5.0, "stop": 1.0}]), r"torque\[0\]: stop"),

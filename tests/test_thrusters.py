@@ -328,8 +328,8 @@ def test_handover_to_thruster_only_and_back():
 
 @pytest.mark.parametrize("change, field", [
     ({"thruster[0].forse_N": 3.0}, "did you mean 'force_N'"),
-    ({"thruster[0].direction_B": [0.0, 0.0, 0.0]}, "thruster[0].direction_B"),
-    ({"thruster[0].min_on_s": 0.5}, "thruster[0].min_on_s"),
+    ({"thruster[0].direction_B": [0.0, 0.0, 0.0]}, "thruster.t0.direction_B"),
+    ({"thruster[0].min_on_s": 0.5}, "thruster.t0.min_on_s"),
     ({"thrusters.level_off": 0.9}, "thrusters.level_off"),
     ({"thrusters.mode": "sometimes"}, "thrusters.mode"),
     ({"cmg.max_momentum": None}, "thrusters.mode"),

@@ -48,6 +48,7 @@ of a run, once per process and file version): a controller file is a program, tr
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import importlib
 import importlib.metadata
@@ -534,7 +535,9 @@ def get_controller(name: str, base_dir: str | Path | None = None) -> type[Contro
             where = f"'{mod_name}'"
         cls = getattr(mod, cls_name, None)
         if cls is None:
-            raise ControllerError(f"controller '{name}': no class '{cls_name}' in {where}")
+            laws = [k for k, v in vars(mod).items() if isinstance(v, type) and issubclass(v, Controller)
+                    and v is not Controller]
+            raise ControllerError(f"controller '{name}': no class '{cls_name}' in {where}{_nearest(cls_name, laws)}")
         if not (isinstance(cls, type) and issubclass(cls, Controller)):
             raise ControllerError(f"controller '{name}': '{cls_name}' is not a Controller subclass in {where}")
         return cls
@@ -543,5 +546,12 @@ def get_controller(name: str, base_dir: str | Path | None = None) -> type[Contro
         hint = f"; to load a file, name its class: '{name}:ClassName'" if _is_file_name(name) else ""
         raise ControllerError(
             f"unknown controller '{name}'; valid: {', '.join(sorted(eps))}, module:Class or path/file.py:Class{hint}"
+            f"{_nearest(name, list(eps))}"
         )
     return _load(eps[name])
+
+
+def _nearest(name: str, names: list[str]) -> str:
+    """``; did you mean '<nearest>'?`` for a misspelt law name among ``names`` (else "")."""
+    close = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""

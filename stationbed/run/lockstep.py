@@ -131,7 +131,9 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
     """Run the closed-loop ``scenes`` (samples of one study), those that can in lockstep.
 
     Returns, per scene in order, ``(kind, result)``: the executor (``fused``, ``batch``,
-    ``per-tick``; ``open-loop`` without a ``[controller]``) and a :class:`~.trajectory.Trajectory` or the exception the single run would
+    ``per-tick``; ``open-loop`` without a ``[controller]``; :func:`executor`'s choice, so a
+    sample's kind does not depend on the others: a ``batch`` sample alone in its group runs the
+    per-tick loop, the same calls) and a :class:`~.trajectory.Trajectory` or the exception the single run would
     have raised (a :class:`~.simulation.SimulationError` with its partial trajectory).
     ``sinks``: per scene a row sink (as :func:`~.simulation.simulate`'s ``sink``) or None.
     Samples that cannot run in lockstep run one by one, each through its own loop as
@@ -173,9 +175,9 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
-        if len(idx) == 1:  # alone: the per-tick loop is the same work
-            i = idx[0]
-            out[i] = ("per-tick", _single(samples[i], SimulationError))
+        if len(idx) == 1:  # alone: the per-tick loop is the same work (the same calls, the same numbers),
+            i = idx[0]     # labelled "batch", its executor: a sample's label cannot depend on who shares its chunk
+            out[i] = ("batch", _single(samples[i], SimulationError))
             continue
         for i, res in zip(idx, _Lockstep([samples[i] for i in idx]).run(SimulationError)):
             out[i] = ("batch", res)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import re
 import tomllib
 import typing
 from collections.abc import Mapping
@@ -343,16 +344,71 @@ def _unknown_key(model: type[BaseModel], key: str) -> str:
     return f"unknown key; did you mean '{close[0]}'?" if close else f"unknown key; valid keys: {', '.join(valid)}"
 
 
-def _path(loc: tuple) -> str:
+#: an entry name that can stand in a key path for its index (``sensor.st1``; assign.split_path)
+_KEY_NAME = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _entry_name(entries, i: int) -> str | None:
+    """The name of array entry ``i`` when it can name it in a key path (a string, unique in the
+    array, a key-path word), else None."""
+    if not isinstance(entries, list) or not 0 <= i < len(entries) or not isinstance(entries[i], dict):
+        return None
+    name = entries[i].get("name")
+    names = [e.get("name") for e in entries if isinstance(e, dict)]
+    ok = isinstance(name, str) and _KEY_NAME.fullmatch(name) and names.count(name) == 1
+    return name if ok else None
+
+
+def _path(loc, data=None) -> str:
+    """The key the user wrote for ``loc`` (pydantic's location, or a check's field path split):
+    an array entry that has a name is named, as ``--set`` names it (``sensor.st1.nea``), else it
+    is indexed (``torque[0]``); pydantic's union tags are left out. ``data``: the scene's input."""
     out = ""
+    node = data
     for part in loc:
         if isinstance(part, int):
-            out += f"[{part}]"
+            name = _entry_name(node, part)
+            out += f".{name}" if name is not None else f"[{part}]"
+            node = node[part] if isinstance(node, list) and 0 <= part < len(node) else None
         elif part in TAGS:
             continue  # pydantic's discriminator tag, not a user key
         else:
             out += ("." if out else "") + str(part)
+            node = node.get(part) if isinstance(node, dict) else None
     return out
+
+
+def _field_path(loc: tuple, field: str, data) -> str:
+    """The key of a check's :class:`FieldError` ``field`` (``sensor[2].period``) below ``loc``,
+    entries named as :func:`_path` names them."""
+    try:
+        parts = split_path(field)
+    except KeyPathError:  # not a key path: as the check wrote it
+        return f"{_path(loc, data) + '.' if loc else ''}{field}"
+    return _path((*loc, *parts), data)
+
+
+def _did_you_mean(given, valid: list[str]) -> str:
+    """``; did you mean '<nearest>'?`` for a misspelt ``given`` among ``valid`` (else "")."""
+    close = difflib.get_close_matches(given, valid, n=1, cutoff=0.6) if isinstance(given, str) else []
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def _quoted(text: str) -> list[str]:
+    """The values quoted in pydantic's list of choices (``"'ideal', 'dgcmg' or 'sgcmg'"``)."""
+    return re.findall(r"'([^']*)'", text or "")
+
+
+def _unknown_kind(e, path: str) -> str | None:
+    """A table whose ``kind`` chooses no table of a union (``[[torque]]``, ``[[sensor]]``): the
+    kind the user wrote, the nearest valid one and the valid ones; None when it is not that."""
+    given = e.get("input")
+    kind = given.get("kind") if isinstance(given, dict) else None
+    valid = _quoted(e.get("ctx", {}).get("expected_tags") if e["type"] == "union_tag_invalid" else e["msg"])
+    valid = [v.removeprefix("kind=") for v in valid]
+    if not isinstance(kind, str) or not valid:
+        return None
+    return f"{path}.kind: unknown kind '{kind}'{_did_you_mean(kind, valid)} (valid: {', '.join(valid)})"
 
 
 def _given(value) -> str:
@@ -381,13 +437,19 @@ def _given(value) -> str:
     return type(value).__name__
 
 
-def _one_line(err: ValidationError, root: type[BaseModel] | None = None) -> str:
+def _one_line(err: ValidationError, root: type[BaseModel] | None = None, data=None) -> str:
+    """The first problem of ``err`` as one line starting with the key the user wrote (``data``:
+    the input, to name array entries by their names)."""
     errors = err.errors()
     # a typo'd key also makes the intended key "missing": name the typo, it is the cause
     e = next((x for x in errors if x["type"] == "extra_forbidden"), errors[0])
     loc = tuple(e["loc"])
-    path = _path(loc)
+    path = _path(loc, data)
     etype = e["type"]
+    if etype in ("union_tag_invalid", "unknown_kind"):
+        kind = _unknown_kind(e, path)
+        if kind is not None:
+            return kind
     more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
     if etype == "extra_forbidden":
         model = _model_at(loc, root)
@@ -408,12 +470,13 @@ def _one_line(err: ValidationError, root: type[BaseModel] | None = None) -> str:
         return f"{path}: must be {words} {e['ctx'][key]:g}, got {_given(given)}{more}"
     cause = e.get("ctx", {}).get("error")
     if isinstance(cause, FieldError):  # a table's cross-field check naming its field
-        return f"{path + '.' if path else ''}{cause.field}: {cause.reason}{more}"
+        return f"{_field_path(loc, cause.field, data)}: {cause.reason}{more}"
     msg = e["msg"].removeprefix("Value error, ")
     if etype in ("value_error", "unknown_kind"):  # the scene's own checks say what they found
         return f"{path or '(top level)'}: {msg}{more}"
     msg = msg.replace("Input should be", "must be", 1)
-    return f"{path or '(top level)'}: {msg}, got {_given(given)}{more}"
+    hint = _did_you_mean(given, _quoted(e.get("ctx", {}).get("expected"))) if etype == "literal_error" else ""
+    return f"{path or '(top level)'}: {msg}, got {_given(given)}{hint}{more}"
 
 
 def _plain(value):
@@ -444,7 +507,7 @@ def _validated(data: dict, source: str) -> Scene:
     try:
         return Scene.model_validate(data)
     except ValidationError as err:
-        raise SceneError(f"{source}: {_one_line(err)}") from None
+        raise SceneError(f"{source}: {_one_line(err, data=data)}") from None
     except RecursionError:
         raise SceneError(f"{source}: values nested too deeply") from None
 
@@ -475,7 +538,8 @@ def load_scene(path: str | Path) -> Scene:
 def sensing_from_dict(data: dict, source: str = "scene") -> Sensing:
     """Validate ``{"sensor": [...], "estimator": {...}}`` (the parsed TOML); raises
     :class:`SceneError` with a one-line reason starting with ``source``."""
+    data = _plain(data)
     try:
-        return Sensing.model_validate(_plain(data))
+        return Sensing.model_validate(data)
     except ValidationError as err:
-        raise SceneError(f"{source}: {_one_line(err, root=Sensing)}") from None
+        raise SceneError(f"{source}: {_one_line(err, root=Sensing, data=data)}") from None

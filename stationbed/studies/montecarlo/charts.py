@@ -135,6 +135,8 @@ def strongest_driver(df, metric: str, drawn: list[str]) -> tuple[str, float] | N
     ok = df[(df["status"] == "ok") & df[metric].notna()]
     best = None
     for c in drawn:
+        if ok[c].dtype.kind not in "biuf":  # a choice recorded as text (cmg.failed): no order to rank
+            continue
         x = ok[c].to_numpy(dtype=float)
         if len(x) < 3 or np.ptp(x) == 0 or np.ptp(ok[metric].to_numpy(dtype=float)) == 0:
             continue

@@ -12,10 +12,11 @@ samples run). ``--sample K`` writes the exact scene of sample K (``DIR/sample_K.
 DIR ``out/<scene>_montecarlo/sample_K``, never a study's folder) and runs it alone (``DIR/trajectory.csv``, ``DIR/summary.json``; a failed run keeps its rows in
 ``DIR/trajectory.partial.csv``, as ``stationbed run``).
 
-Exit status: 0 when the study ran and every requirement is shown to hold (``--exit-zero``: 0
-whatever the verdicts; they are in summary.json and printed); 1 when a requirement is not shown
-(or a ``--sample`` run failed), when interrupted, or when the disk or the scheduler failed
-mid-study (the finished chunks stay on disk: ``--resume``); 2 for bad input (nothing run).
+Exit status: 0 when the study ran and every requirement is shown to hold, PASS (``--exit-zero``: 0
+whatever the verdicts; they are in summary.json and printed); 1 when a requirement is not shown:
+FAIL (a sample failed it) or NOT SHOWN (none failed, too few samples to show it); 1 also when a
+``--sample`` run failed, when interrupted, or when the disk or the scheduler failed mid-study
+(the finished chunks stay on disk: ``--resume``); 2 for bad input (nothing run).
 """
 
 from __future__ import annotations
@@ -161,6 +162,7 @@ def main(argv=None) -> int:
     from .engine import run_study, study_scene
     from .folder import StudyStop
     from .report import table_text
+    from .stats import FAIL, NOT_SHOWN
 
     if args.quiet:
         progress.configure("quiet")
@@ -191,8 +193,12 @@ def main(argv=None) -> int:
         return _error("interrupted; the finished chunks are kept (run again with --resume)", EXIT_FAILED)
     print(table_text(res.summary))
     print(f"wrote {out}/samples.parquet, summary.json, charts and montecarlo.rrd")
-    failed = [r["metric"] for r in res.summary["requirements"] if not r["pass"]]
-    if failed and not args.exit_zero:
-        return _error(f"requirement(s) not shown to hold: {', '.join(failed)} (verdicts above and in "
-                      f"{out}/summary.json); --exit-zero exits 0 anyway", EXIT_FAILED)
+    failed = [r["metric"] for r in res.summary["requirements"] if r["verdict"] == FAIL]
+    unshown = [r["metric"] for r in res.summary["requirements"] if r["verdict"] == NOT_SHOWN]
+    if (failed or unshown) and not args.exit_zero:
+        what = "; ".join(x for x in (f"failed by a sample: {', '.join(failed)}" if failed else "",
+                                     f"not shown, no sample failed (too few samples): {', '.join(unshown)}"
+                                     if unshown else "") if x)
+        return _error(f"requirement(s) not shown to hold: {what} (verdicts above and in {out}/summary.json); "
+                      f"--exit-zero exits 0 anyway", EXIT_FAILED)
     return 0

@@ -29,15 +29,17 @@ Recorded columns (one per drawn number): a scalar key gives the column ``<key>``
 ``<key>[i]`` (a matrix ``<key>[i][j]``, the upper triangle for ``inertia``); ``attitude_normal``
 records the rotation vector of the draw, ``<key>.rotvec[i]`` [rad], and its angle
 ``<key>.angle`` [rad]; ``choice`` records the
-chosen value when every choice is a number, else its index ``<key>.choice``. Each column ``C``
-has its twin ``told.C``: the same quantity in what the law was told (the sample's knowledge
-scene): the nominal value (scale 1, rotation 0, the nominal choice's index, NaN when the nominal
-is not among the choices) unless the dispersion is known.
+chosen value ``<key>``: a number when every choice is a number, else the value as text
+(:func:`choice_value`: ``cmg.failed`` = ``"[2]"``, the failed unit as the scene names it). Each
+column ``C`` has its twin ``told.C``: the same quantity in what the law was told (the sample's
+knowledge scene): the nominal value (scale 1, rotation 0, the nominal choice) unless the
+dispersion is known.
 """
 
 from __future__ import annotations
 
 import difflib
+import json
 import math
 
 import numpy as np
@@ -48,7 +50,7 @@ from ...scene.assign import split_path
 from ...scene.knowledge import NAMED_PATHS
 
 __all__ = ["sample_seed", "draw", "Draw", "value_at", "check_keys", "drawn_columns", "TOLD", "law_setting",
-           "nominal_rate"]
+           "nominal_rate", "choice_value"]
 
 #: prefix of the columns of what the law was told (``told.<column>``)
 TOLD = "told."
@@ -112,12 +114,13 @@ class Draw:
     changes : dict
         Key path -> new value (for :meth:`Scene.replace`).
     values : dict
-        Column name -> the recorded number (:mod:`this module's <.dispersions>` column rules).
+        Column name -> the recorded number, or text for a non-numeric choice (:mod:`this module's
+        <.dispersions>` column rules).
     """
 
     def __init__(self):
         self.changes: dict = {}
-        self.values: dict[str, float] = {}
+        self.values: dict[str, float | str] = {}
 
 
 def _record_array(values: dict, key: str, arr) -> None:
@@ -189,17 +192,22 @@ def _draw_one(d, data: dict, rng: np.random.Generator, draw: Draw) -> None:
         w = None if d.weights is None else np.asarray(d.weights, float) / sum(d.weights)
         i = int(rng.choice(len(d.choices), p=w))
         draw.changes[key] = d.choices[i]
-        numeric = all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in d.choices)
-        if numeric:
-            draw.values[key] = float(d.choices[i])
-        else:
-            draw.values[f"{key}.choice"] = float(i)
+        draw.values[key] = choice_value(d.choices, d.choices[i])
     elif kind == "seed":
         s = int(rng.integers(0, 2**31 - 1))
         draw.changes[key] = s
         draw.values[key] = float(s)
     else:  # pragma: no cover - the scene's Literal refuses it
         raise ValueError(f"unknown dispersion kind {kind!r}")
+
+
+def choice_value(choices: list, value):
+    """The recorded value of a ``choice``: a number when every choice is a number, else the value
+    as text, as the scene writes it (``cmg.failed``: ``"[]"``, ``"[2]"``; a string as itself), so
+    the table names what was flown rather than its place in the list."""
+    if all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in choices):
+        return float(value)
+    return value if isinstance(value, str) else json.dumps(value)
 
 
 def law_setting(key: str) -> bool:
@@ -250,11 +258,7 @@ def _told_one(d, known: dict, nominal: dict, values: dict) -> None:
         _record_array(values, f"{t}{key}.rotvec", r)
         values[f"{t}{key}.angle"] = float(np.linalg.norm(r))
     elif kind == "choice":
-        numeric = all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in d.choices)
-        if numeric:
-            values[t + key] = float(v)
-        else:
-            values[f"{t}{key}.choice"] = float(d.choices.index(v)) if v in d.choices else math.nan
+        values[t + key] = choice_value(d.choices, v)
     elif kind == "seed":
         values[t + key] = float(v)
 

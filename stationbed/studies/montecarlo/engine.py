@@ -49,7 +49,7 @@ from .cluster import local_cluster
 from .dispersions import check_keys, drawn_columns, nominal_rate
 from .folder import STUDY_JSON, ChunkFiles, StudyStop, locked, study_identity
 from .report import finish
-from .samples import ENVELOPE_SERIES, ID_COLUMNS, held_warnings, run_chunk
+from .samples import ENVELOPE_SERIES, ID_COLUMNS, held_warnings, metric_needs, run_chunk, scene_metrics
 
 __all__ = ["MonteCarloResult", "run_study", "study_scene", "chunk_size", "envelope_times"]
 
@@ -67,7 +67,9 @@ class MonteCarloResult:
     ----------
     df : pandas.DataFrame
         One row per sample, by index: ``index, seed, status, reason, redraws, stopped_at_s``,
-        the drawn values, then every metric of :data:`stationbed.run.metrics.METRICS`.
+        the drawn values, then the metrics of :data:`stationbed.run.metrics.METRICS` a run of
+        the scene reports (:func:`.samples.scene_metrics`: no estimation column without an
+        estimator, no thruster column without thrusters).
     summary : dict
         What ``summary.json`` holds: counts, per-metric statistics, requirement verdicts.
     envelope_t : ndarray, shape (T,)
@@ -94,11 +96,15 @@ def study_scene(scene, n: int | None = None) -> Scene:
     if n is not None:
         scene = scene.replace({"montecarlo.n": n})
     check_keys(scene)
+    reported = scene_metrics(scene)
     for i, r in enumerate(scene.montecarlo.requirement):
         if r.metric not in METRICS:
             close = difflib.get_close_matches(r.metric, list(METRICS), n=1, cutoff=0.5)
             hint = f"did you mean '{close[0]}'?" if close else f"valid: {', '.join(METRICS)}"
             raise SceneError(f"montecarlo.requirement[{i}].metric: unknown metric '{r.metric}'; {hint}")
+        if r.metric not in reported:  # every sample would be NaN, so FAIL: refused before anything runs
+            raise SceneError(f"montecarlo.requirement[{i}].metric: '{r.metric}' is not reported by a run of scene "
+                             f"'{scene.name}': it needs {metric_needs(r.metric)}")
     return scene
 
 
@@ -317,7 +323,7 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
     mc = scene.montecarlo
     n = mc.n
     n_env = envelope_times(scene)
-    columns = ID_COLUMNS + drawn_columns(scene) + list(METRICS)
+    columns = ID_COLUMNS + drawn_columns(scene) + scene_metrics(scene)  # only what the scene can report
     check_memory(n, len(columns), n_env, _available_memory())
     study, record = study_identity(scene)
     if scene.simulation.environment_rate == AUTO:  # resolved once here, not by each worker

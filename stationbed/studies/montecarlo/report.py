@@ -91,7 +91,7 @@ def table_text(summary: dict) -> str:
                      f"below that it would be the largest sample under another name")
     for r in summary["requirements"]:
         op = "<=" if r["bound"] == "max" else ">="
-        word = "PASS" if r["pass"] else "FAIL"
+        word = r["verdict"]
         lines.append(f"requirement {r['metric']} {op} {r['limit']:g} in {100 * r['coverage']:g} % at "
                      f"{100 * r['confidence']:g} % confidence: {word} ({r['failures']} of {r['n']} fail; "
                      f"lower bound {r['success_lower_bound']:.4f}; 0 failures need n >= {r['n_needed_zero_failures']})"

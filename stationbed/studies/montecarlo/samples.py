@@ -21,14 +21,15 @@ import numpy as np
 from ...core.linalg import row_norms
 from ...model.cmg import capacity, held_momentum_B
 from ...run.controller import one_line
-from ...run.metrics import METRICS
+from ...run.metrics import METRICS, RunMetrics
 from ...run.rows import trajectory_columns
 from ...run.lockstep import run_lockstep
 from ...run.simulation import SimulationError, simulate
 from ...run.trajectory import Trajectory
 from .dispersions import draw, sample_seed
 
-__all__ = ["run_sample", "run_batch", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink"]
+__all__ = ["run_sample", "run_batch", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink",
+           "scene_metrics", "metric_needs"]
 
 #: the leading columns of the table
 ID_COLUMNS = ["index", "seed", "status", "reason", "redraws", "stopped_at_s", "executor"]
@@ -75,6 +76,47 @@ class EnvelopeSink:
 
 def _capacity(scene) -> float | None:
     return None if scene.cmg is None else capacity(scene.cmg)
+
+
+def scene_metrics(scene) -> list[str]:
+    """The :data:`METRICS` a run of ``scene`` reports, in their order: the run's own reduction
+    (:class:`~stationbed.run.metrics.RunMetrics` over the run's columns, with the cluster's
+    capacity, the orbit period of a thruster scene and the tick counts of a closed loop flying a
+    cluster, as the run gives them) fed one made-up row: a metric it does not report then has no
+    column, capacity or count to come from. The study's table has these columns only."""
+    columns = trajectory_columns(scene)
+    cap = _capacity(scene)
+    period = 2.0 * math.pi / scene.orbit.mean_motion if scene.orbit is not None and scene.thruster else None
+    m = RunMetrics(columns, h_capacity_Nms=cap, orbit_period_s=period)
+    row = np.zeros((1, len(columns)))
+    row[0, columns.index("t")] = 1.0  # s, after the start (a per-orbit figure needs a run length)
+    m.update(row)
+    if scene.controller is not None and scene.cmg is not None:  # the closed loop counts its ticks
+        m.count_ticks(0, 0)
+    got = m.values()
+    return [name for name in METRICS if name in got]
+
+
+#: what a scene needs for a metric to be reported (the one-line refusal of a requirement on it)
+_NEEDS = {
+    **dict.fromkeys(("max_att_err_deg", "final_att_err_deg", "rms_att_err_deg", "max_torque_cmd_Nm"),
+                    "a [controller] (its reference gives the attitude error, its command the torque)"),
+    "max_h_Nms": "a [cmg] table",
+    "max_h_fraction": "a [cmg] with a momentum capacity (an ideal one: max_momentum)",
+    "min_singularity": "a gimballed [cmg] (dgcmg or sgcmg_pyramid)",
+    **dict.fromkeys(("rate_limited_ticks", "momentum_saturated_ticks"), "a [controller] flying a [cmg]"),
+    **dict.fromkeys(("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma"),
+                    "an [estimator] (with its [[sensor]] tables)"),
+    "st_dropout_rows": "[[sensor]] star trackers",
+    **dict.fromkeys(("propellant_kg", "thruster_firings", "thruster_control_s", "thruster_impulse_Ns"),
+                    "[[thruster]] tables"),
+    "propellant_kg_per_orbit": "[[thruster]] tables and an [orbit]",
+}
+
+
+def metric_needs(name: str) -> str:
+    """What a scene needs for the metric ``name`` to be reported (words for an error message)."""
+    return _NEEDS.get(name, "columns that a run of this scene does not have")
 
 
 def run_sample(scene, k: int, env_times: int = 0) -> tuple[dict, np.ndarray | None]:

@@ -24,7 +24,8 @@ from scipy import stats as sps
 
 from ...run.metrics import METRICS
 
-__all__ = ["PERCENTILES", "percentile_needs", "quiet_nan", "metric_stats", "verdict", "n_needed", "requirement_verdicts", "success_lower_bound"]
+__all__ = ["PERCENTILES", "percentile_needs", "quiet_nan", "metric_stats", "verdict", "n_needed", "requirement_verdicts",
+           "success_lower_bound", "PASS", "FAIL", "NOT_SHOWN"]
 
 #: percentiles reported per metric (each only where the sample count supports it)
 PERCENTILES = (50.0, 90.0, 99.0, 99.73)
@@ -98,8 +99,18 @@ def metric_stats(df, metrics=None) -> dict:
     return out
 
 
+#: the three verdicts of a requirement (``summary.json`` ``verdict``, the printed word)
+PASS, FAIL, NOT_SHOWN = "PASS", "FAIL", "NOT SHOWN"
+
+
 def requirement_verdicts(df, requirements) -> list[dict]:
-    """One verdict per ``[[montecarlo.requirement]]`` over the table ``df``."""
+    """One verdict per ``[[montecarlo.requirement]]`` over the table ``df``.
+
+    ``verdict``: :data:`PASS` when the samples show the requirement (:func:`verdict`);
+    :data:`FAIL` when they do not and at least one sample failed it (a sample that did not run
+    to the end counts as failing); :data:`NOT_SHOWN` when none failed but n is too small to show
+    it at its coverage and confidence (more samples can still show it), with ``note`` saying
+    how many it needs. ``pass`` is ``verdict == PASS``."""
     out = []
     n = len(df)
     for r in requirements:
@@ -111,16 +122,18 @@ def requirement_verdicts(df, requirements) -> list[dict]:
         k = int(n - met.sum())
         need = n_needed(r.coverage, r.confidence)
         ok = verdict(n, k, r.coverage, r.confidence)
+        word = PASS if ok else (FAIL if k else NOT_SHOWN)
         d = {"metric": r.metric, "bound": "max" if r.max is not None else "min",
              "limit": r.max if r.max is not None else r.min, "coverage": r.coverage,
              "confidence": r.confidence, "n": n, "failures": k, "not_run": int(n - ran.sum()),
-             "pass": ok, "success_lower_bound": success_lower_bound(n, k, r.confidence),
+             "verdict": word, "pass": ok, "success_lower_bound": success_lower_bound(n, k, r.confidence),
              "n_needed_zero_failures": need}
-        if not ok and n < need and k == 0:
-            d["note"] = f"n = {n} is too small: 0 failures need n >= {need}"
-        elif not ok and n < need:
+        if word == NOT_SHOWN:
+            d["note"] = (f"0 of {n} failed; needs >= {need} samples for {100 * r.confidence:g} % confidence "
+                         f"that at most {100 * (1 - r.coverage):.4g} % fail")
+        elif word == FAIL and n < need:
             d["note"] = f"{k} failure(s); n = {n} is below the {need} that even 0 failures need"
-        elif not ok:
+        elif word == FAIL:
             d["note"] = f"{k} failure(s) of {n}: coverage {r.coverage:g} not shown at confidence {r.confidence:g}"
         out.append(d)
     return out
