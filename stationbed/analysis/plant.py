@@ -209,43 +209,51 @@ def plant_functions(scene, command: str = "torque"):
         "limited": ca.Function("limited", [t, z, v, q_RO, p], [limited]),
         "H_dot": ca.Function("H_dot", [t, z, v, d, q_RO, p], [H_dot]),
         "inertia": ca.Function("inertia", [t, z, q_RO, p], [system.sx["inertia"](t, x, p)]), "nz": nz, "ne": ne, "nm": nm, "model": model,
+        # the extra states with the sun-tracking joints on their tracking state at (t, q_BN(z), ω(z))
+        "track": ca.Function("track", [t, z, q_RO, p], [_tracking_extras(model, t, q_BN, w, xe[0:ne], p)]),
     }
     _PLANTS[key] = out
     return out
 
 
-def _default_z0(scene, pf, p):
-    """The analysis state at the point: θ = 0, δω = 0, the scene's extra states at t = 0 (CMG,
-    joints: the run's initial ones), η = η̇ = 0."""
+def _default_z0(scene, pf, p, t: float = 0.0, q_RO=(1.0, 0.0, 0.0, 0.0), omega=None):
+    """The analysis state at the point: θ = 0, δω (``omega``: that giving ω_BN_B, default 0), the
+    scene's CMG state and modal coordinates at t = 0, and every sun-tracking joint on its tracking
+    state at ``t`` (angle on the sun target, rate the target's: ``pf["track"]``), not on the run's
+    initial joint state, which a drive first spins up from (a transient of ~100 N m per array at
+    the drives' acceleration limit, not the holding torque of the point)."""
     model = pf["model"]
     z0 = np.zeros(pf["nz"])
+    ne = pf["ne"]
     xe = model.initial_extra(scene, np.array([1.0, 0.0, 0.0, 0.0]), p)
-    z0[6 : 6 + pf["ne"]] = xe[0 : pf["ne"]]
+    z0[6 : 6 + ne] = xe[0:ne]
+    q_RO = np.asarray(q_RO, float)
+    if omega is not None:
+        n = 0.0 if scene.orbit is None else scene.orbit.mean_motion
+        z0[3:6] = np.asarray(omega, float) - dcm(q_RO) @ np.array([0.0, -n, 0.0])
+    if model.driven:
+        z0[6 : 6 + ne] = np.array(pf["track"](t, z0, q_RO, p)).ravel()
     return z0
 
 
-def _tracking_extras(model, t, theta, ext, p, n):
-    """The extra states with every sun-tracking joint on its target (angle and rate) for a station
-    at ``θ`` relative to LVLH at rest in LVLH, at time ``t`` (casadi): what the drives follow."""
+def _tracking_extras(model, t, q_BN, w_BN_B, ext, p):
+    """The extra states ``ext`` with every sun-tracking joint on its target (angle, and the
+    target's rate as the body turns at ``w_BN_B``) for a station at ``q_BN`` at time ``t``
+    (casadi): the steady state the drives follow (their law's acceleration is then zero)."""
     ext = [ext[i] for i in range(ext.numel())]
     if not model.driven:
         return ca.vertcat(*ext) if ext else ca.SX(0, 1)
-    radius, incl, u0, _ = (p[model.layout["orbit"]][i] for i in range(4))
-    e = theta / 2
-    q_BO = ca.vertcat(ca.sqrt(1.0 - ca.dot(e, e)), e)
-    q_BN = quat_mult(q_ON(u0 + n * t, incl), q_BO)
-    w_B = ca.mtimes(dcm(q_BO), ca.vertcat(0.0, -n, 0.0))
     xe = ca.vertcat(*ext)
     for k in sorted({k for k, _, _ in model.driven}):
         offs = {j: off for kk, j, off in model.driven if kk == k}
         if "alpha" in offs:
-            ((Y, X), a_rate), _ = model._driven_targets(k, q_BN, xe, p, w_B, 0.0, 0.0)  # α* needs no α
+            ((Y, X), a_rate), _ = model._driven_targets(k, q_BN, xe, p, w_BN_B, 0.0, 0.0)  # α* needs no α
             alpha = ca.atan2(Y, X)
             ext[offs["alpha"]], ext[offs["alpha"] + 1] = alpha, a_rate
         else:
             alpha, a_rate, _ = profile(t, p[model.layout[f"alpha{k}"]], model.structure.joints[k][0][1])
         if "beta" in offs:
-            _, ((Yb, Xb), b_rate) = model._driven_targets(k, q_BN, xe, p, w_B, alpha, a_rate)
+            _, ((Yb, Xb), b_rate) = model._driven_targets(k, q_BN, xe, p, w_BN_B, alpha, a_rate)
             ext[offs["beta"]], ext[offs["beta"] + 1] = ca.atan2(Yb, Xb), b_rate
     return ca.vertcat(*ext)
 
@@ -278,7 +286,8 @@ def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
         res = 0
         for k in range(TEA_SAMPLES):
             tk = t0 + k * (2 * math.pi / TEA_SAMPLES) / n
-            zs = ca.vertcat(unk[0:3], ca.SX.zeros(3), _tracking_extras(model, tk, unk[0:3], ext0, pp, n), unk[3:], ca.SX.zeros(nm))
+            zs = ca.vertcat(unk[0:3], ca.SX.zeros(3), ext0, unk[3:], ca.SX.zeros(nm))
+            zs = ca.vertcat(zs[0:6], pf["track"](tk, zs, q_RO, pp), zs[6 + ne :])
             args = (tk, zs, ca.SX.zeros(nv), d_k[:, k], q_RO, pp)
             parts = [ca.mtimes(I_inv, pf["H_dot"](*args)) / n**2]
             if nm:
@@ -351,22 +360,19 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
             q_RO = quat_mult_np(quat_conj_np(np.asarray(q_ON(o.u0 + o.mean_motion * t, o.inclination), float)), q_BN)
         else:
             q_RO = q_BN
-        z0 = _default_z0(scene, pf, p)
+        z0 = _default_z0(scene, pf, p, t, q_RO, omega=about.omega_BN_B)
         if about.xe is not None:
             z0[6:] = np.asarray(about.xe, float)
-        n = 0.0 if scene.orbit is None else scene.orbit.mean_motion
-        z0[3:6] = np.asarray(about.omega_BN_B, float) - dcm(q_RO) @ np.array([0.0, -n, 0.0])
     elif about == "tea":
-        z0 = _default_z0(scene, pf, p)
         q_RO = np.array([1.0, 0.0, 0.0, 0.0])
+        z0 = _default_z0(scene, pf, p, t, q_RO)
         tea, eta = tea_search(pf, scene, p, z0, t)
         z0[0:3] = tea
         ne = pf["ne"]  # the sun-tracking joints on their targets at t, as in the search
-        ext = _tracking_extras(pf["model"], float(t), ca.DM(tea), ca.DM(z0[6 : 6 + ne]), ca.DM(p), scene.orbit.mean_motion)  # noqa: E501
-        z0[6 : 6 + ne] = np.array(ca.evalf(ext)).ravel() if ne else z0[6:6]
+        z0[6 : 6 + ne] = np.array(pf["track"](t, z0, q_RO, p)).ravel()
         z0[6 + pf["ne"] : 6 + pf["ne"] + pf["nm"]] = eta
     elif about == "lvlh":
-        z0 = _default_z0(scene, pf, p)
+        z0 = _default_z0(scene, pf, p, t, q_RO)
     else:
         raise ValueError(f"about = {about!r}: expected 'lvlh', 'tea' or an OperatingPoint")
     nv = len(pf["controls"])
