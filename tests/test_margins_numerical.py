@@ -87,3 +87,47 @@ def test_margins_says_what_a_sensed_scene_leaves_out(tmp_path, capsys):
 
 def test_margins_on_the_truth_leaves_nothing_out():
     assert loop_analysis(load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml")).left_out == []
+
+
+def test_an_fmu_law_is_linearised_in_place_and_gives_pds_margins(tmp_path):
+    """The pd FMU of tests/test_fmu.py (it cannot be copied: called in place, its command at the
+    point checked unchanged after the differences) gives the symbolic pd's margins."""
+    pytest.importorskip("pythonfmu", reason="pythonfmu (builds the test FMU) is not installed")
+    from test_fmu import PD_PARAMS, _build, fmu_scene, pd_scene  # noqa: PLC0415 - needs pythonfmu
+
+    fmu = loop_analysis(fmu_scene(_build(2, tmp_path)))
+    pd = loop_analysis(scene_from_dict(pd_scene({"name": "pd", "params": PD_PARAMS})))
+    assert (fmu.gain, pd.gain) == ("numerical", "symbolic")
+    for c_fmu, c_pd in zip(fmu.channels, pd.channels):
+        for key in MARGIN_KEYS:
+            assert_allclose(c_fmu[key], c_pd[key], rtol=MARGIN_RTOL, err_msg=key)
+
+
+class Counting:
+    """A Python law that keeps a state it cannot hand over (a lock: no copy) and adds it to its
+    command: a later call at the same state commands another torque."""
+
+    name, command, period, plant, q_ref_BN = "counting", "torque", 0.1, None, None
+
+    def __init__(self):
+        import threading  # noqa: PLC0415
+
+        self.lock, self.n = threading.Lock(), 0
+
+    def reset(self, plant):
+        self.plant = plant
+
+    def update(self, t, meas):
+        self.n += 1
+        return tuple(-1.0e6 * meas.omega_BN_B + self.n)  # N m
+
+
+def test_a_law_that_keeps_a_state_is_refused_naming_it():
+    with pytest.raises(ValueError, match=r"^margins: controller 'counting' gave another command at the same state"):
+        loop_analysis(load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml"), Counting())
+
+
+def test_an_open_loop_law_is_refused_naming_it():
+    """torque_command (sgcmg_singularity) commands a schedule: no loop (it failed on a reshape)."""
+    with pytest.raises(ValueError, match=r"^margins: controller 'torque_command' does not feed back the state"):
+        loop_analysis(load_scene(ROOT / "scenarios" / "sgcmg_singularity.toml"))

@@ -266,18 +266,25 @@ def numerical_gain(law, z0, step=None):
 
 
 def _python_law(ctrl, pf, p, t):
-    """``law(z, q_RO) -> (v, q_ref_BN)``: the controller's ``_update`` at ``t`` on the compiled
+    """``law(z, q_RO) -> (v, q_ref_BN)``: the controller's ``update`` at ``t`` on the compiled
     measurement of the plant state ``x(z)``, each call on a fresh copy of the law as reset (a
-    law that keeps numbers between ticks is differentiated at its state after ``reset``)."""
+    law that keeps numbers between ticks is differentiated at its state after ``reset``); a law
+    that cannot be copied (an FMU's instance) is called in place (:func:`loop_analysis` then
+    checks that its command at the point did not change)."""
     from ..run.controller import Measurement, measurement_fields
 
     model = pf["model"]
     lay = measurement_fields(0 if model.cmg is None else model.cmg.n_gimbals, model.structure.n_app)
     meas, fx = pf["system"].sx["meas"], pf["x_of_z"]
     keep = {id(ctrl.plant): ctrl.plant}  # the plant facts (casadi Functions) are shared, not copied
+    try:
+        copy.deepcopy(ctrl, dict(keep))
+        fresh = True
+    except Exception:  # noqa: BLE001 - e.g. an FMU instance (a lock, a shared library)
+        fresh = False
 
     def law(z, q_RO):
-        c = copy.deepcopy(ctrl, dict(keep))
+        c = copy.deepcopy(ctrl, dict(keep)) if fresh else ctrl
         m = Measurement(np.array(meas(t, fx(t, z, q_RO, p), p), float).ravel(), lay)
         m.t = t
         v = command_values(c.update(t, m), len(pf["controls"]), c.command)
@@ -349,11 +356,17 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0, gain: str = "auto")
         z0 = _default_z0(scene, pf, p, t, q_RO)  # the joints tracking at t, seen from the reference
         v0 = law(z0, q_RO)[0]
         K = numerical_gain(lambda z: law(z, q_RO)[0], z0)
+        if not np.array_equal(law(z0, q_RO)[0], v0):
+            raise ValueError(f"margins: controller '{controller.name}' gave another command at the same state on a later "
+                             "call: it keeps a state between ticks (the loop analysis linearises a stateless law)")
     else:
         law = _symbolic_law(controller, pf, p, t)
         q_RO = _reference_RO(scene, law(_default_z0(scene, pf, p, t, identity), identity)[2], t)
         z0 = _default_z0(scene, pf, p, t, q_RO)
         v0, K, _ = law(z0, q_RO)
+    if not np.any(K):
+        raise ValueError(f"margins: controller '{controller.name}' does not feed back the state at t = {t:g} s "
+                         "(∂command/∂state = 0): there is no loop to break")
     lin = linearization(scene, "lvlh", t=t, q_ref=q_RO, command=command, v0=v0)
     P = lin.ss
     nv = len(pf["controls"])
