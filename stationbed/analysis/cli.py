@@ -44,7 +44,8 @@ def add_parsers(sub) -> None:
     lz.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
     lz.add_argument("--dt", type=_seconds(positive=True), default=None, help="also write the zero-order-hold plant for this period [s]")
     lz.add_argument("--command", default="torque", choices=["torque", "gimbal_rates"], help="control input (default torque)")
-    mg = sub.add_parser("margins", help="loop margins of the scene's controller (its symbolic form, else finite differences of its update): table, Bode and Nichols PNGs")
+    mg = sub.add_parser("margins", help="loop margins of the scene's controller (exact, or finite differences of a Python-only law): "
+                                          "table, Bode and Nichols PNGs")
     mg.add_argument("scene", type=Path)
     mg.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene>/margins)")
     mg.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
