@@ -87,14 +87,15 @@ def test_rigid_station_gain_interval_is_where_the_closed_loop_eigenvalues_cross(
 
 @pytest.mark.slow
 def test_iss_lvlh_hold_lower_gain_margins():
-    """The shipped scene of the issue: lower margins ~0.14 (x), ~0.10 (y), ~0.005 (z), none above,
+    """The shipped scene of the issue (joints on their tracking state at t = 0): lower margins ~0.14 (x),
+    ~0.10 (y), ~0.005 (z), none above,
     by the eigenvalue sweep of each loop's own closed-loop matrix ``A_L - k B_L C_L``."""
     la = loop_analysis(load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml"))
     for L, c in zip(la.loops, la.channels):
         lo, hi = sweep_interval(lambda k: L.A - k * L.B @ L.C)
         assert_allclose(c["gain_margin_down"], lo, rtol=GAIN_RTOL)
         assert c["gain_margin_up"] == hi
-    assert [round(c["gain_margin_down"], 3) for c in la.channels] == [0.142, 0.104, 0.005]
+    assert [round(c["gain_margin_down"], 3) for c in la.channels] == [0.143, 0.102, 0.005]
 
 
 def synthetic_loop(n_fixed_zero: int):

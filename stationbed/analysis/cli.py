@@ -44,7 +44,8 @@ def add_parsers(sub) -> None:
     lz.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
     lz.add_argument("--dt", type=_seconds(positive=True), default=None, help="also write the zero-order-hold plant for this period [s]")
     lz.add_argument("--command", default="torque", choices=["torque", "gimbal_rates"], help="control input (default torque)")
-    mg = sub.add_parser("margins", help="loop margins of the scene's controller (its symbolic form): table, Bode and Nichols PNGs")
+    mg = sub.add_parser("margins", help="loop margins of the scene's controller (exact, or finite differences of a Python-only law): "
+                                          "table, Bode and Nichols PNGs")
     mg.add_argument("scene", type=Path)
     mg.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene>/margins)")
     mg.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
@@ -183,6 +184,14 @@ def _margins(args) -> int:
     ctrl = la.controller
     print(f"{scene.name}: controller '{ctrl.name}' ({ctrl.command}), loop broken at each plant input, "
           f"the others closed (t = {args.t:g} s)")
+    if la.gain == "numerical":
+        from .margins import FD_REL
+
+        print(f"  K = ∂command/∂state by central differences of the law's update (it has no symbolic form; "
+              f"step {FD_REL:.2g} x max(|state|, 1) in SI units)")
+    if la.left_out:
+        print("  the law is closed on the true state; left out: " + "; ".join(la.left_out)
+              + " (their sampling, noise, filter dynamics and delay are not in these margins)")
     head = f"  {'channel':<14}{'GM up':>9}{'GM down':>9}{'PM [deg]':>10}{'at [rad/s]':>12}{'disk':>7}{'DGM':>7}{'DPM':>7}{'BW [rad/s]':>12}{'|S|max':>8}"
     print(head)
     for c in la.channels:
@@ -217,7 +226,8 @@ def _margins(args) -> int:
     figures.nichols_png(out / "nichols.png", la.loops, labels, f"{scene.name}: Nichols chart of '{ctrl.name}' per input")
     res = {"scene": scene.name, "controller": ctrl.name, "t_s": args.t, "channels": la.channels,
            "closed_loop_poles_rad_s": [[float(p.real), float(p.imag)] for p in la.poles],
-           "structural_modes_in_band_rad_s": la.structural_in_band, "loop_states": la.loop_states}
+           "structural_modes_in_band_rad_s": la.structural_in_band, "loop_states": la.loop_states,
+           "gain": la.gain, "left_out": la.left_out}
     (out / "margins.json").write_text(json.dumps(res, indent=1, default=lambda v: None if not math.isfinite(v) else v) + "\n")
     print(f"  wrote {out}/margins.json, loop_bode.png, nichols.png")
     return 0

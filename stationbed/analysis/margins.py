@@ -1,9 +1,15 @@
-"""Loop analysis of a controller that offers a symbolic form (``Controller.symbolic``).
+"""Loop analysis of a scene's controller at an operating point.
 
 The controller's command is a function of the measurement, which is a function of the plant
-state: ``v = k(t, meas(t, x(z)))``. Its exact Jacobian ``K = ∂v/∂z`` at the operating point (casadi,
-the same ``meas`` function the simulator compiles) closes the loop ``ż = A z + B_v v`` at the plant
-input. Per input channel i the loop is broken there with the other channels closed:
+state: ``v = k(t, meas(t, x(z)))``. Its Jacobian ``K = ∂v/∂z`` at the operating point closes the
+loop ``ż = A z + B_v v`` at the plant input: exact (casadi, through the same ``meas`` function the
+simulator compiles) for a law with a symbolic form (``Controller.symbolic``); for a law written
+in Python only, by central differences of its ``_update`` on the same measurement
+(:func:`numerical_gain`: step ``h_j = FD_REL max(|z_j|, 1)`` per state, in its SI unit). The
+loop is the law on the *truth*: a scene's sensors, estimator and measurement delay are not in it
+(:func:`left_out` names them; ``margins`` prints them).
+
+Per input channel i the loop is broken there with the other channels closed:
 ``L_i(s) = -K_i (sI - A - B_o K_o)⁻¹ B_i`` (negative-feedback convention), and python-control gives
 its gain, phase and disk margins (``stability_margins``, ``disk_margins``), the bandwidth of
 ``T_i = L_i / (1 + L_i)`` (``bandwidth``: -3 dB) and the peak of ``|S_i| = |1 / (1 + L_i)|``.
@@ -16,6 +22,7 @@ A structural mode inside the control bandwidth is flagged: an array mode's open-
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 
@@ -24,16 +31,21 @@ import numpy as np
 
 from ..run.closed_loop import plant_facts
 from ..run.laws import build_controller
-from ..run.initial import initial_state
 from ..run.system import build_system
 from ..model import Structure
 from ..model.environment import q_ON
 from ..core.paths import safe_name
 from ..core.rotation import quat_mult
-from .plant import linearization, modal_poles, plant_functions
+from ..run.controller import command_values
+from .plant import _default_z0, linearization, modal_poles, plant_functions
 
-__all__ = ["LoopAnalysis", "loop_analysis", "loop_margins", "settling_time", "frequency_grid", "gain_crossings"]
+__all__ = ["LoopAnalysis", "loop_analysis", "loop_margins", "settling_time", "frequency_grid", "gain_crossings",
+           "numerical_gain", "left_out"]
 
+#: Central differences' relative step: ε^(1/3) (ε = 2.2e-16) balances their truncation error
+#: (~h² |v‴| / 6) against round-off (~ε |v| / h); a step ``FD_REL max(|z_j|, 1)`` in each state's
+#: SI unit (rad, rad/s, N m s) leaves K ~1e-10 relative off for a smooth law.
+FD_REL = float(np.finfo(float).eps ** (1.0 / 3.0))
 #: An entry of A or K is structurally zero when below this fraction of its row's largest entry
 #: (the steering law cancels the gimbal angles' effect on the body to ~1e-17 relative: round-off).
 STRUCTURAL_ZERO = 1e-12
@@ -206,20 +218,16 @@ class LoopAnalysis:
     controller: object = None
     loop_states: list = field(default_factory=list)  # the states the per-channel loops keep
     pole_states: list = field(default_factory=list)  # per pole: the state its eigenvector is largest in
+    gain: str = "symbolic"  # how K was taken: "symbolic" (exact) or "numerical" (central differences)
+    left_out: list = field(default_factory=list)  # what the scene flies that the loop leaves out (:func:`left_out`)
 
 
-def _controller_reference(ctrl, pf, scene, p, t, z_guess):
-    """``q_RO``: the controller's reference relative to LVLH (relative to N without an orbit) at t."""
-    plant = pf
-    fx = plant["x_of_z"]
-    sysm = pf["system"]
-    cp = ca.DM(np.asarray(ctrl.symbolic_params(), float))
-    q_RO_id = ca.DM([1.0, 0.0, 0.0, 0.0])
-    x0 = fx(t, z_guess, q_RO_id, p)
-    _, q_ref = ctrl.symbolic(ca.DM(t), sysm.sx["meas"](t, x0, p), cp)
-    q_ref = np.array(ca.evalf(ca.DM(q_ref) if not isinstance(q_ref, ca.SX) else q_ref)).ravel() if q_ref is not None else None
+def _reference_RO(scene, q_ref, t):
+    """``q_RO``: a law's reference ``q_ref`` (relative to N; None: N itself) relative to LVLH at
+    ``t`` (relative to N without an orbit), scalar part >= 0."""
     if q_ref is None:
         return np.array([1.0, 0.0, 0.0, 0.0])
+    q_ref = np.asarray(q_ref, float).ravel()
     if scene.orbit is None:
         return q_ref
     o = scene.orbit
@@ -228,14 +236,96 @@ def _controller_reference(ctrl, pf, scene, p, t, z_guess):
     return r if r[0] >= 0 else -r
 
 
-def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
-    """Linearise the scene's plant and its controller (``symbolic`` form) and analyse the loop.
+def _symbolic_law(ctrl, pf, p, t):
+    """``(v(z, q_RO), q_ref(z, q_RO))`` of a law with a symbolic form, and ``K(z, q_RO)``: its
+    exact Jacobian ``∂v/∂z`` (casadi), through the compiled measurement function."""
+    z, q_RO = ca.SX.sym("z", pf["nz"]), ca.SX.sym("q_RO", 4)
+    cp = ca.DM(np.asarray(ctrl.symbolic_params(), float))
+    y = pf["system"].sx["meas"](t, pf["x_of_z"](t, z, q_RO, ca.DM(p)), ca.DM(p))
+    cmd, q_ref = ctrl.symbolic(ca.SX(t), y, cp)
+    cmd = ca.vertcat(cmd)
+    q_ref = ca.DM([1.0, 0.0, 0.0, 0.0]) if q_ref is None else q_ref
+    f = ca.Function("law", [z, q_RO], [cmd, ca.jacobian(cmd, z), ca.vertcat(q_ref)])
+    return lambda zv, qv: tuple(np.array(m) for m in f(zv, qv))  # (v, K, q_ref)
+
+
+def numerical_gain(law, z0, step=None):
+    """``K = ∂v/∂z`` of ``v = law(z)`` at ``z0`` by central differences, (n_v, n_z).
+
+    ``step`` (n_z,): per state [its SI unit]; default ``FD_REL max(|z0_j|, 1)``
+    (:data:`FD_REL`). Each column ``(v(z0 + h e_j) - v(z0 - h e_j)) / 2h``: truncation error
+    ``h² ∂³v/∂z_j³ / 6``, round-off ``~ε |v| / h``."""
+    z0 = np.asarray(z0, float)
+    h = FD_REL * np.maximum(np.abs(z0), 1.0) if step is None else np.asarray(step, float)
+    cols = []
+    for j in range(z0.size):
+        e = np.zeros(z0.size)
+        e[j] = h[j]
+        cols.append((np.asarray(law(z0 + e), float) - np.asarray(law(z0 - e), float)) / (2.0 * h[j]))
+    return np.column_stack(cols)
+
+
+def _python_law(ctrl, pf, p, t):
+    """``law(z, q_RO) -> (v, q_ref_BN)``: the controller's ``update`` at ``t`` on the compiled
+    measurement of the plant state ``x(z)``, each call on a fresh copy of the law as reset (a
+    law that keeps numbers between ticks is differentiated at its state after ``reset``); a law
+    that cannot be copied (an FMU's instance) is called in place (:func:`loop_analysis` then
+    checks that its command at the point did not change)."""
+    from ..run.controller import Measurement, measurement_fields
+
+    model = pf["model"]
+    lay = measurement_fields(0 if model.cmg is None else model.cmg.n_gimbals, model.structure.n_app)
+    meas, fx = pf["system"].sx["meas"], pf["x_of_z"]
+    keep = {id(ctrl.plant): ctrl.plant}  # the plant facts (casadi Functions) are shared, not copied
+    try:
+        copy.deepcopy(ctrl, dict(keep))
+        fresh = True
+    except Exception:  # noqa: BLE001 - e.g. an FMU instance (a lock, a shared library)
+        fresh = False
+
+    def law(z, q_RO):
+        c = copy.deepcopy(ctrl, dict(keep)) if fresh else ctrl
+        m = Measurement(np.array(meas(t, fx(t, z, q_RO, p), p), float).ravel(), lay)
+        m.t = t
+        v = command_values(c.update(t, m), len(pf["controls"]), c.command)
+        return v, c.q_ref_BN
+
+    return law
+
+
+def left_out(scene) -> list[str]:
+    """What the scene flies between the truth and the law that the loop analysis leaves out
+    (the loop is the law on the true state): its ``[[sensor]]`` entries by kind, ``[estimator]``
+    and the ideal measurement's delay and noise, one phrase each (empty when the law flies on the
+    truth): their sampling, noise, filter dynamics and delay are not in the margins."""
+    out = []
+    kinds: dict = {}
+    for s in scene.sensor:
+        kinds.setdefault(s.kind, []).append(s.name)
+    for kind, names in kinds.items():
+        out.append(f"{kind} {', '.join(names)}")
+    if scene.estimator is not None:
+        out.append(f"estimator {scene.estimator.kind}")
+    sens = scene.controller.sensor if scene.controller is not None else None
+    if sens is not None and sens.delay > 0:
+        out.append(f"controller.sensor.delay = {sens.delay:g} s")
+    if sens is not None and (sens.attitude_noise > 0 or sens.rate_noise > 0):
+        out.append("controller.sensor noise")
+    return out
+
+
+def loop_analysis(scene, controller=None, *, t: float = 0.0, gain: str = "auto") -> LoopAnalysis:
+    """Linearise the scene's plant and its controller and analyse the loop.
 
     Parameters
     ----------
     scene : Scene  With a ``[controller]`` (or pass ``controller``).
     controller : Controller, optional  An instance (reset here on the scene's plant facts).
-    t : float  The instant the time-varying terms are frozen at [s].
+    t : float  The instant the time-varying terms are frozen at [s]; the sun-tracking joints are
+        on their tracking state at t (:func:`~.plant.linearization`).
+    gain : "auto", "symbolic" or "numerical"  How ``K = ∂v/∂z`` is taken: exactly from the law's
+        ``symbolic`` form, or by central differences of its ``_update`` (:func:`numerical_gain`);
+        "auto": symbolic when the law has one.
     """
     import control
 
@@ -244,8 +334,12 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
         if spec is None:
             raise ValueError("margins: the scene has no [controller]")
         controller = build_controller(spec, base_dir=scene.folder)
-    if not callable(getattr(controller, "symbolic", None)):
+    if gain not in ("auto", "symbolic", "numerical"):
+        raise ValueError(f"gain = {gain!r}: expected 'auto', 'symbolic' or 'numerical'")
+    has_symbolic = callable(getattr(controller, "symbolic", None))
+    if gain == "symbolic" and not has_symbolic:
         raise ValueError(f"margins: controller '{controller.name}' has no symbolic form (Controller.symbolic)")
+    numerical = gain == "numerical" or not has_symbolic
     if callable(getattr(controller, "symbolic_state", None)):  # (run/law_state.py)
         raise ValueError(f"margins: controller '{controller.name}' keeps a state between ticks (symbolic_state): "
                          "the loop analysis closes a stateless law only (its own design reports its margins)")
@@ -253,21 +347,26 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
     system = build_system(Structure.of(scene), scene.simulation.formulation, scene.simulation.integrator)
     model = system.formulation.model
     p = model.params(scene)
-    q0, w0 = initial_state(scene)
     controller.reset(plant_facts(scene, system, controller.period))  # the law designs on knowledge
     pf = plant_functions(scene, command)
-    z_guess = np.zeros(pf["nz"])
-    z_guess[6 : 6 + pf["ne"]] = model.initial_extra(scene, q0, p)[0 : pf["ne"]]
-    q_RO = _controller_reference(controller, pf, scene, p, t, z_guess)
-    # the controller's command and its Jacobian K = ∂v/∂z at the point, through the compiled
-    # measurement function; the plant is linearised at that command (what the loop applies there)
-    z = ca.SX.sym("z", pf["nz"])
-    cp = ca.DM(np.asarray(controller.symbolic_params(), float))
-    y = pf["system"].sx["meas"](t, pf["x_of_z"](t, z, ca.DM(q_RO), ca.DM(p)), ca.DM(p))
-    cmd, _ = controller.symbolic(ca.SX(t), y, cp)
-    cmd = ca.vertcat(cmd)
-    v_K = ca.Function("K", [z], [cmd, ca.jacobian(cmd, z)])
-    v0, K = (np.array(m) for m in v_K(z_guess))
+    identity = np.array([1.0, 0.0, 0.0, 0.0])
+    if numerical:
+        law = _python_law(controller, pf, p, t)
+        q_RO = _reference_RO(scene, law(_default_z0(scene, pf, p, t, identity), identity)[1], t)
+        z0 = _default_z0(scene, pf, p, t, q_RO)  # the joints tracking at t, seen from the reference
+        v0 = law(z0, q_RO)[0]
+        K = numerical_gain(lambda z: law(z, q_RO)[0], z0)
+        if not np.array_equal(law(z0, q_RO)[0], v0):
+            raise ValueError(f"margins: controller '{controller.name}' gave another command at the same state on a later "
+                             "call: it keeps a state between ticks (the loop analysis linearises a stateless law)")
+    else:
+        law = _symbolic_law(controller, pf, p, t)
+        q_RO = _reference_RO(scene, law(_default_z0(scene, pf, p, t, identity), identity)[2], t)
+        z0 = _default_z0(scene, pf, p, t, q_RO)
+        v0, K, _ = law(z0, q_RO)
+    if not np.any(K):
+        raise ValueError(f"margins: controller '{controller.name}' does not feed back the state at t = {t:g} s "
+                         "(∂command/∂state = 0): there is no loop to break")
     lin = linearization(scene, "lvlh", t=t, q_ref=q_RO, command=command, v0=v0)
     P = lin.ss
     nv = len(pf["controls"])
@@ -315,4 +414,4 @@ def loop_analysis(scene, controller=None, *, t: float = 0.0) -> LoopAnalysis:
             where += [pf["states"][idx[int(np.argmax(np.abs(v)))]] for v in vec.T]
     poles = np.array(poles)
     return LoopAnalysis(P, K, closed, loops, channels, poles, open_poles, flagged, controller,
-                        [pf["states"][j] for j in keep], where)
+                        [pf["states"][j] for j in keep], where, "numerical" if numerical else "symbolic", left_out(scene))

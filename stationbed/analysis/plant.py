@@ -44,11 +44,11 @@ import casadi as ca
 import numpy as np
 
 from ..core.paths import safe_name
-from ..core.rotation import dcm, quat_mult
+from ..core.rotation import Ay, dcm, quat_mult
 from ..model import Structure
-from ..model.appendages import profile
+from ..model.appendages import glider_error, profile
 from ..model.environment import q_ON
-from ..model.torques import get_torque, held_torque_B
+from ..model.torques import get_torque, held_torque_B, v_rel_B
 from ..run.system import build_system
 
 __all__ = [
@@ -179,6 +179,7 @@ def plant_functions(scene, command: str = "torque"):
     H_s = form.H_O_B(t, xs, p)
     derivs.append(ca.jtimes(H_s, xs, xdot_s) + ca.jacobian(H_s, t))  # Ḣ_B: external + gyroscopic only
     D = ca.Function("derivs", [t, xs, us, p], derivs)(t, x, u, p)
+    track = _tracking_extras(model, t, q_BN, w, xe[0:ne], p)
     xdot, w_dot, H_dot = D[0], D[1], D[-1]
     parts = [qw * dw + ca.cross(e, dw), w_dot + ca.cross(dw, w_R_B), xdot[7 : 7 + ne + nm]]
     if nm:
@@ -209,44 +210,85 @@ def plant_functions(scene, command: str = "torque"):
         "limited": ca.Function("limited", [t, z, v, q_RO, p], [limited]),
         "H_dot": ca.Function("H_dot", [t, z, v, d, q_RO, p], [H_dot]),
         "inertia": ca.Function("inertia", [t, z, q_RO, p], [system.sx["inertia"](t, x, p)]), "nz": nz, "ne": ne, "nm": nm, "model": model,
+        # the extra states with the sun-tracking joints on their targets at (t, q_BN(z), ω(z)), and
+        # their time derivative as the station moves with R (the targets' rates and accelerations)
+        "track": ca.Function("track", [t, z, q_RO, p], [track, ca.jacobian(track, t)]),
     }
     _PLANTS[key] = out
     return out
 
 
-def _default_z0(scene, pf, p):
-    """The analysis state at the point: θ = 0, δω = 0, the scene's extra states at t = 0 (CMG,
-    joints: the run's initial ones), η = η̇ = 0."""
+#: Newton iterations that put each drive on its steady tracking state (the angle lag at which its
+#: law accelerates the joint as its target accelerates): the drive laws are linear below their
+#: limits, so one step solves it and a second checks it.
+DRIVE_NEWTON = 3
+
+
+def _default_z0(scene, pf, p, t: float = 0.0, q_RO=(1.0, 0.0, 0.0, 0.0), omega=None):
+    """The analysis state at the point: θ = 0, δω (``omega``: that giving ω_BN_B, default 0), the
+    scene's CMG state and modal coordinates at t = 0, and every sun-tracking joint on its steady
+    tracking state at ``t``, not on the run's initial joint state, which a drive first spins up
+    from (a transient of ~100 N m per array at the drives' acceleration limit, not the holding
+    torque of the point). The steady tracking state: the rate the target's, the angle the
+    target's less the lag at which the drive's law accelerates the joint as the target
+    accelerates (``pf["track"]``: the targets and their time derivative as the station moves with
+    R; a Newton solve on the drives' own acceleration, :data:`DRIVE_NEWTON`). The held torque's
+    input is at zero: the drives do not read it."""
     model = pf["model"]
     z0 = np.zeros(pf["nz"])
+    ne = pf["ne"]
     xe = model.initial_extra(scene, np.array([1.0, 0.0, 0.0, 0.0]), p)
-    z0[6 : 6 + pf["ne"]] = xe[0 : pf["ne"]]
+    z0[6 : 6 + ne] = xe[0:ne]
+    q_RO = np.asarray(q_RO, float)
+    if omega is not None:
+        n = 0.0 if scene.orbit is None else scene.orbit.mean_motion
+        z0[3:6] = np.asarray(omega, float) - dcm(q_RO) @ np.array([0.0, -n, 0.0])
+    if not model.driven:
+        return z0
+    target, target_dot = (np.array(m).ravel() for m in pf["track"](t, z0, q_RO, p))
+    z0[6 : 6 + ne] = target
+    ang = np.array([6 + off for _, _, off in model.driven])  # the joints' angle, then rate, states
+    nv = len(pf["controls"])
+    for _ in range(DRIVE_NEWTON):
+        zd, A = (np.array(m) for m in pf["jac"](t, z0, np.zeros(nv), np.zeros(3), q_RO, p)[0:2])
+        res = zd.ravel()[ang + 1] - target_dot[ang - 6 + 1]  # joint acceleration - the target's
+        z0[ang] += np.linalg.lstsq(A[np.ix_(ang + 1, ang)], -res, rcond=None)[0]
     return z0
 
 
-def _tracking_extras(model, t, theta, ext, p, n):
-    """The extra states with every sun-tracking joint on its target (angle and rate) for a station
-    at ``θ`` relative to LVLH at rest in LVLH, at time ``t`` (casadi): what the drives follow."""
+def _tracking_extras(model, t, q_BN, w_BN_B, ext, p):
+    """The extra states ``ext`` with every sun-tracking joint on its target (angle, and the
+    target's rate as the body turns at ``w_BN_B``) for a station at ``q_BN`` at time ``t``
+    (casadi): the steady state the drives follow (their law's acceleration is then zero). A
+    night-glider joint in the Earth's shadow (ν < 1/2, as its drive decides) is parked instead:
+    edge-on to the flow at the angle nearer its sun target, at rest."""
     ext = [ext[i] for i in range(ext.numel())]
     if not model.driven:
         return ca.vertcat(*ext) if ext else ca.SX(0, 1)
-    radius, incl, u0, _ = (p[model.layout["orbit"]][i] for i in range(4))
-    e = theta / 2
-    q_BO = ca.vertcat(ca.sqrt(1.0 - ca.dot(e, e)), e)
-    q_BN = quat_mult(q_ON(u0 + n * t, incl), q_BO)
-    w_B = ca.mtimes(dcm(q_BO), ca.vertcat(0.0, -n, 0.0))
     xe = ca.vertcat(*ext)
+    joints = model.structure.joints
+    if any(kind == "g" for a in joints for kind, _ in a):
+        orbit = model.orbit_at(t, p)
+        dark, v_B = model.shadow(orbit, p) < 0.5, v_rel_B(dcm(q_BN), orbit)
+
+    def on_target(k, i, Y, X, rate, alpha):
+        angle = ca.atan2(Y, X)
+        if joints[k][i][0] != "g":
+            return angle, rate
+        v = v_B if i == 0 else ca.mtimes(Ay(alpha), v_B)  # the BGA's flow: in the frame the SARJ turned
+        return ca.if_else(dark, angle + glider_error(angle, v, i), angle), ca.if_else(dark, 0.0, rate)
+
     for k in sorted({k for k, _, _ in model.driven}):
         offs = {j: off for kk, j, off in model.driven if kk == k}
         if "alpha" in offs:
-            ((Y, X), a_rate), _ = model._driven_targets(k, q_BN, xe, p, w_B, 0.0, 0.0)  # α* needs no α
-            alpha = ca.atan2(Y, X)
+            ((Y, X), a_rate), _ = model._driven_targets(k, q_BN, xe, p, w_BN_B, 0.0, 0.0)  # α* needs no α
+            alpha, a_rate = on_target(k, 0, Y, X, a_rate, 0.0)
             ext[offs["alpha"]], ext[offs["alpha"] + 1] = alpha, a_rate
         else:
-            alpha, a_rate, _ = profile(t, p[model.layout[f"alpha{k}"]], model.structure.joints[k][0][1])
+            alpha, a_rate, _ = profile(t, p[model.layout[f"alpha{k}"]], joints[k][0][1])
         if "beta" in offs:
-            _, ((Yb, Xb), b_rate) = model._driven_targets(k, q_BN, xe, p, w_B, alpha, a_rate)
-            ext[offs["beta"]], ext[offs["beta"] + 1] = ca.atan2(Yb, Xb), b_rate
+            _, ((Yb, Xb), b_rate) = model._driven_targets(k, q_BN, xe, p, w_BN_B, alpha, a_rate)
+            ext[offs["beta"]], ext[offs["beta"] + 1] = on_target(k, 1, Yb, Xb, b_rate, alpha)
     return ca.vertcat(*ext)
 
 
@@ -278,7 +320,8 @@ def tea_search(pf, scene, p, z0, t, q_RO=(1.0, 0.0, 0.0, 0.0)):
         res = 0
         for k in range(TEA_SAMPLES):
             tk = t0 + k * (2 * math.pi / TEA_SAMPLES) / n
-            zs = ca.vertcat(unk[0:3], ca.SX.zeros(3), _tracking_extras(model, tk, unk[0:3], ext0, pp, n), unk[3:], ca.SX.zeros(nm))
+            zs = ca.vertcat(unk[0:3], ca.SX.zeros(3), ext0, unk[3:], ca.SX.zeros(nm))
+            zs = ca.vertcat(zs[0:6], pf["track"](tk, zs, q_RO, pp)[0], zs[6 + ne :])
             args = (tk, zs, ca.SX.zeros(nv), d_k[:, k], q_RO, pp)
             parts = [ca.mtimes(I_inv, pf["H_dot"](*args)) / n**2]
             if nm:
@@ -351,22 +394,19 @@ def linearization(scene, about="lvlh", *, t: float = 0.0, q_ref=(1.0, 0.0, 0.0, 
             q_RO = quat_mult_np(quat_conj_np(np.asarray(q_ON(o.u0 + o.mean_motion * t, o.inclination), float)), q_BN)
         else:
             q_RO = q_BN
-        z0 = _default_z0(scene, pf, p)
+        z0 = _default_z0(scene, pf, p, t, q_RO, omega=about.omega_BN_B)
         if about.xe is not None:
             z0[6:] = np.asarray(about.xe, float)
-        n = 0.0 if scene.orbit is None else scene.orbit.mean_motion
-        z0[3:6] = np.asarray(about.omega_BN_B, float) - dcm(q_RO) @ np.array([0.0, -n, 0.0])
     elif about == "tea":
-        z0 = _default_z0(scene, pf, p)
         q_RO = np.array([1.0, 0.0, 0.0, 0.0])
+        z0 = _default_z0(scene, pf, p, t, q_RO)
         tea, eta = tea_search(pf, scene, p, z0, t)
         z0[0:3] = tea
         ne = pf["ne"]  # the sun-tracking joints on their targets at t, as in the search
-        ext = _tracking_extras(pf["model"], float(t), ca.DM(tea), ca.DM(z0[6 : 6 + ne]), ca.DM(p), scene.orbit.mean_motion)  # noqa: E501
-        z0[6 : 6 + ne] = np.array(ca.evalf(ext)).ravel() if ne else z0[6:6]
+        z0[6 : 6 + ne] = np.array(pf["track"](t, z0, q_RO, p)[0]).ravel()
         z0[6 + pf["ne"] : 6 + pf["ne"] + pf["nm"]] = eta
     elif about == "lvlh":
-        z0 = _default_z0(scene, pf, p)
+        z0 = _default_z0(scene, pf, p, t, q_RO)
     else:
         raise ValueError(f"about = {about!r}: expected 'lvlh', 'tea' or an OperatingPoint")
     nv = len(pf["controls"])
