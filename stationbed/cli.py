@@ -302,11 +302,13 @@ def _summary_line(s: dict) -> str:
         parts.append(
             f"gimbal-rate limited {s['rate_limited_ticks']} ticks, momentum saturated {s['momentum_saturated_ticks']} ticks"
         )
-    if "mean_nees" in s:  # sensors and the MEKF (issue 20)
-        parts.append(f"estimation error max {s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
+    if "est_converged_s" in s:  # sensors and the MEKF (issue 20; windows issue 32)
+        parts.append(f"estimate converged at t = {s['est_converged_s']:.4g} s")
+    if "mean_nees" in s:
+        parts.append(f"estimation error after it: max {s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
                      f"inside 3 sigma {100 * s['est_inside_3sigma']:.1f} %, mean NEES {s['mean_nees']:.3g} (6 states)")
-    if "st_dropout_rows" in s:
-        parts.append(f"star-tracker dropout rows {s['st_dropout_rows']}")
+    if "st_dropout_s" in s:
+        parts.append(f"star-tracker dropouts {s['st_dropout_s']:.4g} s")
     from .run.thrust import thruster_parts  # thrusters (issue 21)
     return "; ".join(parts + thruster_parts(s))
 

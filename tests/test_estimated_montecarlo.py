@@ -25,7 +25,7 @@ from stationbed.cli import main
 from stationbed.studies.montecarlo.replay import sample_scene
 
 MC_SCENE = "scenarios/iss_lvlh_hold_estimated_montecarlo.toml"
-EST_METRICS = ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_rows")
+EST_METRICS = ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_s")
 N = 3
 DURATION_S = 60.0  # s: 600 ticks of the 10 Hz loop, 60 gyro-to-head update cycles
 
