@@ -293,6 +293,9 @@ def _summary_line(s: dict) -> str:
     parts = [f"controller {s['controller']} at {1 / s['period_s']:g} Hz, {s['ticks']} ticks"]
     if "final_att_err_deg" in s:
         parts.append(f"attitude error final {s['final_att_err_deg']:.3g} deg, max {s['max_att_err_deg']:.3g} deg")
+    if "final_cmd_err_deg" in s:  # a law whose command leads its reference (schedule: issue 32)
+        parts.append(f"command error (body vs the command, which leads it) final {s['final_cmd_err_deg']:.3g} deg, "
+                     f"max {s['max_cmd_err_deg']:.3g} deg")
     if "max_h_Nms" in s:
         frac = f" ({100 * s['max_h_fraction']:.0f} % of capacity)" if "max_h_fraction" in s else ""
         parts.append(f"max |h| {s['max_h_Nms']:.4g} N m s{frac}")
