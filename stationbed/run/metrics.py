@@ -118,61 +118,73 @@ _THRUSTER_TOTALS = {"propellant_kg": "thr_propellant_kg", "thruster_firings": "t
 
 
 class _TimeIntegral:
-    """``∫ f dt`` over consecutive output rows by the trapezoid rule, the time it spans, and the
-    largest ``f``: fed batch by batch (the interval across two batches is the same term), every
-    sum kept exact (``math.fsum``, :func:`_folded`) so the result does not depend on the batching. A NaN
-    ``f`` is a row without a value: the intervals touching it do not count."""
+    """``∫ f dt`` of ``k`` quantities over consecutive output rows by the trapezoid rule, the
+    time each spans, and each one's largest value: fed batch by batch (the interval across two
+    batches is the same term), every sum kept exact (``math.fsum`` of the terms, :func:`_folded`)
+    so the result does not depend on the batching. A NaN is a row without a value: the intervals
+    touching it add nothing (a term of 0, which leaves an exact sum as it is)."""
 
-    def __init__(self):
+    def __init__(self, k: int = 1):
+        self.k = k
         self.reset()
 
     def reset(self) -> None:
+        k = self.k
         self.prev = None  # (t, f) of the last row seen
-        self.area: list[float] = []
-        self.span: list[float] = []
-        self.plain: list[float] = []  # the values, for a window of zero length
-        self.n = 0
-        self.max = math.nan
+        self.area: list[list[float]] = [[] for _ in range(k)]
+        self.span: list[list[float]] = [[] for _ in range(k)]
+        self.n = np.zeros(k, dtype=np.int64)  # rows with a value
+        self.last = np.full(k, math.nan)  # the last value: the mean of a window of no length
+        self.max = np.full(k, math.nan)
 
     def add(self, t: np.ndarray, f: np.ndarray) -> None:
+        """Rows at times ``t`` (m,) with values ``f`` (m, k)."""
         if not len(t):
             return
         ok = ~np.isnan(f)
-        if ok.any():
-            self.plain += f[ok].tolist()
-            self.n += int(ok.sum())
-            self.max = float(np.fmax(self.max, np.fmax.reduce(f)))
+        seen = ok.any(axis=0)
+        if seen.any():
+            self.n += ok.sum(axis=0)
+            self.max = np.fmax(self.max, np.fmax.reduce(f, axis=0))
+            j = len(f) - 1 - np.argmax(ok[::-1], axis=0)  # each column's last row with a value
+            self.last[seen] = f[j[seen], np.flatnonzero(seen)]
         if self.prev is not None:
-            t, f = np.concatenate(([self.prev[0]], t)), np.concatenate(([self.prev[1]], f))
-        self.prev = (float(t[-1]), float(f[-1]))
-        dt = np.diff(t)
-        use = ~np.isnan(f[:-1]) & ~np.isnan(f[1:]) & (dt > 0.0)
-        if use.any():
-            self.area += (0.5 * (f[:-1] + f[1:]) * dt)[use].tolist()
-            self.span += dt[use].tolist()
-        if len(self.plain) > _FOLD_AT:  # a long run: kept as the exact partials of its sums
-            self.area, self.span, self.plain = _folded(self.area), _folded(self.span), _folded(self.plain)
+            t, f = np.concatenate(([self.prev[0]], t)), np.vstack((self.prev[1], f))
+            ok = np.vstack((~np.isnan(self.prev[1]), ok))
+        self.prev = (float(t[-1]), f[-1].copy())
+        if len(t) < 2:
+            return
+        dt = np.diff(t)[:, None]
+        use = ok[:-1] & ok[1:] & (dt > 0.0)
+        terms = np.where(use, 0.5 * (f[:-1] + f[1:]) * dt, 0.0)
+        spans = np.where(use, dt, 0.0)
+        for acc, new in zip(self.area, terms.T.tolist()):
+            acc += new
+        for acc, new in zip(self.span, spans.T.tolist()):
+            acc += new
+        if len(self.area[0]) > _FOLD_AT:  # a long run: kept as the exact partials of its sums
+            self.area = [_folded(v) for v in self.area]
+            self.span = [_folded(v) for v in self.span]
 
-    @property
-    def total(self) -> float:
-        return math.fsum(self.area)
+    def total(self, j: int = 0) -> float:
+        return math.fsum(self.area[j])
 
-    def mean(self) -> float | None:
-        """The time mean (a window of zero length: the mean of its rows), None without a row."""
-        if not self.n:
+    def mean(self, j: int = 0) -> float | None:
+        """Quantity ``j``'s time mean (a window of no length: its value), None without a row."""
+        if not self.n[j]:
             return None
-        span = math.fsum(self.span)
-        return math.fsum(self.area) / span if span > 0.0 else math.fsum(self.plain) / self.n
+        span = math.fsum(self.span[j])
+        return math.fsum(self.area[j]) / span if span > 0.0 else float(self.last[j])
 
 
 class _Estimation:
     """The estimation metrics' windows: ``settled`` (t >= settle_s) and ``converged`` (the
     settled rows after the last row whose |est_err| was above the convergence threshold),
-    each with |est_err|² (and its max), NEES and the fraction of axes inside 3σ."""
+    each with |est_err|² (its max too), NEES and the fraction of axes inside 3σ."""
 
     def __init__(self):
-        self.settled = [_TimeIntegral() for _ in range(4)]  # |e|², nees, inside, |e|
-        self.converged = [_TimeIntegral() for _ in range(4)]
+        self.settled = _TimeIntegral(3)  # |e|², nees, inside
+        self.converged = _TimeIntegral(3)
         self.threshold = None  # [deg]: CONVERGED_FRACTION x the first row's |est_3sigma|
         self.t_converged = None  # the first row after the last one above the threshold
         self.outside_last = False  # the last row seen was above the threshold
@@ -182,32 +194,30 @@ class _Estimation:
         if self.threshold is None:
             self.threshold = CONVERGED_FRACTION * float(np.sqrt(s3[0] @ s3[0]))
             self.t_converged = float(t[0])
-        vals = (n2, nees, (np.abs(e) <= s3).sum(axis=1) / 3.0, np.sqrt(n2))
-        above = np.flatnonzero(np.sqrt(n2) > self.threshold)
+        vals = np.column_stack((n2, nees, (np.abs(e) <= s3).sum(axis=1) / 3.0))
+        above = np.flatnonzero(n2 > self.threshold * self.threshold)
         start = 0
         if len(above):  # the converged window starts again after the last row above
             start = int(above[-1]) + 1
-            for w in self.converged:
-                w.reset()
+            self.converged.reset()
             self.outside_last = start == len(t)
             self.t_converged = None if self.outside_last else float(t[start])
         elif self.outside_last:  # the last batch ended above: its next row is the first after
             self.outside_last = False
             self.t_converged = float(t[0])
-        for k, v in enumerate(vals):
-            self.settled[k].add(t[settled], v[settled])
-            keep = settled[start:]
-            self.converged[k].add(t[start:][keep], v[start:][keep])
+        self.settled.add(t[settled], vals[settled])
+        keep = settled[start:]
+        self.converged.add(t[start:][keep], vals[start:][keep])
 
     def values(self) -> dict[str, float]:
         if self.threshold is None:
             return {}
         conv = not self.outside_last
-        w = self.converged if conv and self.converged[0].n else self.settled
+        w = self.converged if conv and self.converged.n[0] else self.settled
         out = {"est_converged_s": self.t_converged if conv else math.inf}
-        if w[0].n:
-            out.update(max_est_err_deg=w[3].max, rms_est_err_deg=math.sqrt(w[0].mean()), mean_nees=w[1].mean(),
-                       est_inside_3sigma=w[2].mean())
+        if w.n[0]:
+            out.update(max_est_err_deg=float(np.sqrt(w.max[0])), rms_est_err_deg=math.sqrt(w.mean(0)),
+                       mean_nees=w.mean(1), est_inside_3sigma=w.mean(2))
         return out
 
 
@@ -286,11 +296,11 @@ class RunMetrics:
             err = rows[:, self._err]
             self._err_finite |= bool(np.isfinite(err).any())
             self._err_max = float(np.fmax(self._err_max, np.fmax.reduce(err)))
-            self._sq.add(t[settled], err[settled] ** 2)
+            self._sq.add(t[settled], (err[settled] ** 2)[:, None])
         if self._est is not None:
             self._est_red.add(t, rows[:, self._est], rows[:, self._s3], rows[:, self._nees], settled)
         if self._st:
-            self._dropout.add(t, (rows[:, self._st] < 0.5).sum(axis=1).astype(float))
+            self._dropout.add(t, (rows[:, self._st] < 0.5).sum(axis=1, keepdims=True).astype(float))
         if self._tau is not None:
             tau = row_norms(rows[:, self._tau])
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
@@ -329,14 +339,14 @@ class RunMetrics:
         if self._err_finite:
             out["final_att_err_deg"] = float(self.last[self._err])
             out["max_att_err_deg"] = self._err_max
-            if self._sq.n:
+            if self._sq.n[0]:
                 out["rms_att_err_deg"] = math.sqrt(self._sq.mean())
         if self._tau is not None and not math.isnan(self._tau_max):
             out["max_torque_cmd_Nm"] = self._tau_max
         if self._est_red is not None:
             out.update(self._est_red.values())
         if self._st and self.n_rows:
-            out["st_dropout_s"] = self._dropout.total
+            out["st_dropout_s"] = self._dropout.total()
         if self._thr and self.n_rows:
             for m, i in self._thr.items():
                 out[m] = int(round(self.last[i])) if m == "thruster_firings" else float(self.last[i])
