@@ -117,12 +117,28 @@ _THRUSTER_TOTALS = {"propellant_kg": "thr_propellant_kg", "thruster_firings": "t
                     "thruster_control_s": "thr_control_s", "thruster_impulse_Ns": "thr_impulse_Ns"}
 
 
+def _interval_terms(t: np.ndarray, f: np.ndarray, prev) -> tuple[np.ndarray, np.ndarray]:
+    """The trapezoid terms ``(f_a + f_b) / 2 (t_b - t_a)`` and the lengths ``t_b - t_a`` of the
+    intervals ending at each row of a batch, (m, k) each; the interval ending at row 0 starts at
+    ``prev`` = (t, f) of the row before (None: no row before, a term of 0). An interval with a NaN
+    end or of no length adds 0 to both (which leaves an exact sum as it is)."""
+    t0, f0 = (t[0], f[0]) if prev is None else prev
+    tt, ff = np.concatenate(([t0], t)), np.concatenate((f0[None], f))
+    dt = np.diff(tt)[:, None]
+    terms = 0.5 * (ff[:-1] + ff[1:]) * dt
+    if np.isfinite(terms).all() and dt.min() >= 0.0:  # (the common case: the same numbers, fewer calls)
+        return terms, np.broadcast_to(dt, terms.shape)
+    ok = ~np.isnan(ff)
+    use = ok[:-1] & ok[1:] & (dt > 0.0)
+    return np.where(use, terms, 0.0), np.where(use, dt, 0.0)
+
+
 class _TimeIntegral:
     """``∫ f dt`` of ``k`` quantities over consecutive output rows by the trapezoid rule, the
     time each spans, and each one's largest value: fed batch by batch (the interval across two
     batches is the same term), every sum kept exact (``math.fsum`` of the terms, :func:`_folded`)
     so the result does not depend on the batching. A NaN is a row without a value: the intervals
-    touching it add nothing (a term of 0, which leaves an exact sum as it is)."""
+    touching it add nothing."""
 
     def __init__(self, k: int = 1):
         self.k = k
@@ -130,61 +146,70 @@ class _TimeIntegral:
 
     def reset(self) -> None:
         k = self.k
-        self.prev = None  # (t, f) of the last row seen
-        self.area: list[list[float]] = [[] for _ in range(k)]
-        self.span: list[list[float]] = [[] for _ in range(k)]
+        self.prev = None  # (t, f) of the last row taken
+        self.chunks: list[tuple[np.ndarray, np.ndarray]] = []  # (terms, spans) per batch, (m, k) each
+        self.n_terms = 0
+        self.partials = ([[] for _ in range(k)], [[] for _ in range(k)])  # a long run's, folded
         self.n = np.zeros(k, dtype=np.int64)  # rows with a value
         self.last = np.full(k, math.nan)  # the last value: the mean of a window of no length
         self.max = np.full(k, math.nan)
 
     def add(self, t: np.ndarray, f: np.ndarray) -> None:
-        """Rows at times ``t`` (m,) with values ``f`` (m, k)."""
+        """Rows at times ``t`` (m,) with values ``f`` (m, k), following the rows taken before."""
+        if len(t):
+            self.take(t, f, *_interval_terms(t, f, self.prev))
+
+    def take(self, t, f, terms, spans) -> None:
+        """Rows ``t``, ``f`` with the terms of the intervals ending at each (:func:`_interval_terms`)."""
         if not len(t):
             return
+        self.prev = (float(t[-1]), f[-1].copy())
         ok = ~np.isnan(f)
-        seen = ok.any(axis=0)
-        if seen.any():
+        if ok.all():
+            self.n += len(f)
+            self.max = np.fmax(self.max, f.max(axis=0))
+            self.last = f[-1].copy()
+        elif (seen := ok.any(axis=0)).any():
             self.n += ok.sum(axis=0)
             self.max = np.fmax(self.max, np.fmax.reduce(f, axis=0))
             j = len(f) - 1 - np.argmax(ok[::-1], axis=0)  # each column's last row with a value
             self.last[seen] = f[j[seen], np.flatnonzero(seen)]
-        if self.prev is not None:
-            t, f = np.concatenate(([self.prev[0]], t)), np.vstack((self.prev[1], f))
-            ok = np.vstack((~np.isnan(self.prev[1]), ok))
-        self.prev = (float(t[-1]), f[-1].copy())
-        if len(t) < 2:
-            return
-        dt = np.diff(t)[:, None]
-        use = ok[:-1] & ok[1:] & (dt > 0.0)
-        terms = np.where(use, 0.5 * (f[:-1] + f[1:]) * dt, 0.0)
-        spans = np.where(use, dt, 0.0)
-        for acc, new in zip(self.area, terms.T.tolist()):
-            acc += new
-        for acc, new in zip(self.span, spans.T.tolist()):
-            acc += new
-        if len(self.area[0]) > _FOLD_AT:  # a long run: kept as the exact partials of its sums
-            self.area = [_folded(v) for v in self.area]
-            self.span = [_folded(v) for v in self.span]
+        if len(terms):
+            self.chunks.append((terms, spans))
+            self.n_terms += len(terms)
+        if self.n_terms > _FOLD_AT:  # a long run: kept as the exact partials of its sums
+            for i, parts in enumerate(self.partials):
+                col = np.concatenate([c[i] for c in self.chunks]).T.tolist()
+                for j in range(self.k):
+                    parts[j] = _folded(parts[j] + col[j])
+            self.chunks, self.n_terms = [], 0
+
+    def _sum(self, i: int, j: int) -> float:
+        """The correctly rounded sum of the terms (i = 0) or lengths (i = 1) of quantity ``j``."""
+        rest = np.concatenate([c[i][:, j] for c in self.chunks]).tolist() if self.chunks else []
+        return math.fsum(self.partials[i][j] + rest)
 
     def total(self, j: int = 0) -> float:
-        return math.fsum(self.area[j])
+        return self._sum(0, j)
 
     def mean(self, j: int = 0) -> float | None:
         """Quantity ``j``'s time mean (a window of no length: its value), None without a row."""
         if not self.n[j]:
             return None
-        span = math.fsum(self.span[j])
-        return math.fsum(self.area[j]) / span if span > 0.0 else float(self.last[j])
+        span = self._sum(1, j)
+        return self._sum(0, j) / span if span > 0.0 else float(self.last[j])
 
 
 class _Estimation:
-    """The estimation metrics' windows: ``settled`` (t >= settle_s) and ``converged`` (the
-    settled rows after the last row whose |est_err| was above the convergence threshold),
-    each with |est_err|² (its max too), NEES and the fraction of axes inside 3σ."""
+    """The estimation metrics' windows, both a suffix of the rows: ``settled`` (t >= settle_s)
+    and ``converged`` (the settled rows after the last row whose |est_err| was above the
+    convergence threshold), each with |est_err|² (its max too), NEES and the fraction of axes
+    inside 3σ; the intervals' terms computed once for both."""
 
     def __init__(self):
         self.settled = _TimeIntegral(3)  # |e|², nees, inside
         self.converged = _TimeIntegral(3)
+        self.prev = None  # the last row's (t, values)
         self.threshold = None  # [deg]: CONVERGED_FRACTION x the first row's |est_3sigma|
         self.t_converged = None  # the first row after the last one above the threshold
         self.outside_last = False  # the last row seen was above the threshold
@@ -205,9 +230,14 @@ class _Estimation:
         elif self.outside_last:  # the last batch ended above: its next row is the first after
             self.outside_last = False
             self.t_converged = float(t[0])
-        self.settled.add(t[settled], vals[settled])
-        keep = settled[start:]
-        self.converged.add(t[start:][keep], vals[start:][keep])
+        terms, spans = _interval_terms(t, vals, self.prev)
+        prev, self.prev = self.prev, (float(t[-1]), vals[-1].copy())
+        first = int(np.argmax(settled)) if settled.any() else len(t)  # the settled rows: a suffix
+        for w, s in ((self.settled, first), (self.converged, max(first, start))):
+            # its intervals: those whose first row is in the window (the batch's row before the
+            # window's first is not; the last batch's last row is if the window took it)
+            k0 = 0 if s == 0 and w.prev is not None and w.prev[0] == (prev and prev[0]) else s + 1
+            w.take(t[s:], vals[s:], terms[k0:], spans[k0:])
 
     def values(self) -> dict[str, float]:
         if self.threshold is None:
