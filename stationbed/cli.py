@@ -294,8 +294,7 @@ def _summary_line(s: dict) -> str:
     if "final_att_err_deg" in s:
         parts.append(f"attitude error final {s['final_att_err_deg']:.3g} deg, max {s['max_att_err_deg']:.3g} deg")
     if "final_cmd_err_deg" in s:  # a law whose command leads its reference (schedule: issue 32)
-        parts.append(f"command error (body vs the command, which leads it) final {s['final_cmd_err_deg']:.3g} deg, "
-                     f"max {s['max_cmd_err_deg']:.3g} deg")
+        parts.append(f"command error (it leads the body) final {s['final_cmd_err_deg']:.3g} deg, max {s['max_cmd_err_deg']:.3g} deg")
     if "max_h_Nms" in s:
         frac = f" ({100 * s['max_h_fraction']:.0f} % of capacity)" if "max_h_fraction" in s else ""
         parts.append(f"max |h| {s['max_h_Nms']:.4g} N m s{frac}")
@@ -305,10 +304,9 @@ def _summary_line(s: dict) -> str:
         parts.append(
             f"gimbal-rate limited {s['rate_limited_ticks']} ticks, momentum saturated {s['momentum_saturated_ticks']} ticks"
         )
-    if "est_converged_s" in s:  # sensors and the MEKF (issue 20; windows issue 32)
-        parts.append(f"estimate converged at t = {s['est_converged_s']:.4g} s")
-    if "mean_nees" in s:
-        parts.append(f"estimation error after it: max {s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
+    if "mean_nees" in s:  # sensors and the MEKF (issue 20; the window after convergence: issue 32)
+        parts.append(f"estimate converged at t = {s['est_converged_s']:.4g} s; estimation error after it: max "
+                     f"{s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
                      f"inside 3 sigma {100 * s['est_inside_3sigma']:.1f} %, mean NEES {s['mean_nees']:.3g} (6 states)")
     if "st_dropout_s" in s:
         parts.append(f"star-tracker dropouts {s['st_dropout_s']:.4g} s")
