@@ -93,7 +93,7 @@ def main(argv=None) -> int:
               f"| {cpu['fused_every_estimated']:.3f} | {cpu['fused_every_estimated'] / cpu['fused_every_truth']:.2f} |")
     print(f"estimation: max error {s.get('max_est_err_deg', math.nan):.2e} deg, RMS {s.get('rms_est_err_deg', math.nan):.2e} deg, "
           f"mean NEES {s.get('mean_nees', math.nan):.2f}, inside 3 sigma {s.get('est_inside_3sigma', math.nan):.4f}, "
-          f"star-tracker dropout rows {s.get('st_dropout_rows')}")
+          f"star-tracker dropouts {s.get('st_dropout_s')} s")
     if args.profile:
         print("| fused run (profiled once) | total [s] | compiled calls [s] | noise draws [s] | rest (Python) [s] |")
         print("|---|---|---|---|---|")

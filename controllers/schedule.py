@@ -10,6 +10,14 @@ inertia (knowledge, as the plan had it). After the plan's end the last command i
 error's sign is taken the short way round (``ε`` from the error quaternion with a non-negative
 scalar part), which is the plan's own sign whenever the body is within 180 deg of the command.
 
+The reference it reports (``q_ref_BN``, hence ``att_err_deg`` and the run's attitude-error
+metrics) is the plan's *planned* attitude ``q_BR(t)`` (plan.csv's ``q_*``, linear between the
+points, normalised, held after the end), not the command: the command leads the body by design
+(the law needs an error to produce the planned torque), so body vs command is not a tracking
+error (issue 32). The command error is reported apart, in the run summary:
+``final_cmd_err_deg`` and ``max_cmd_err_deg``, the angle of the law's own error quaternion
+``conj(q_CN) ⊗ q_BN`` (on the attitude it measures) at the last and the largest tick.
+
 Params: ``plan``: a plan.json written by ``stationbed plan`` (absolute, or relative to the working
 directory or the scene's folder); without it the law plans from the scene's ``[plan]`` table
 when the run starts (cached per scene in the process). The gains and frame are the plan's.
@@ -17,6 +25,7 @@ when the run starts (cached per scene in the process). The gains and frame are t
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -40,8 +49,8 @@ def _planned(scene) -> dict:
     if key not in _PLANS:
         prob, sol = plan_scene(scene)
         _PLANS.clear()  # one scene at a time is what a process flies
-        _PLANS[key] = {"t": sol.t, "q_CR": sol.q_CR, "kp": prob.model.kp, "kd": prob.model.kd,
-                       "frame": scene.plan.frame}
+        _PLANS[key] = {"t": sol.t, "q_CR": sol.q_CR, "q_BR_planned": sol.q_BR, "kp": prob.model.kp,
+                       "kd": prob.model.kd, "frame": scene.plan.frame}
     return _PLANS[key]
 
 
@@ -68,30 +77,50 @@ class Schedule(Controller):
             raise ControllerError("controller 'schedule': the plan is relative to LVLH and the scene has no [orbit]")
         self.t_plan = np.asarray(plan["t"], float)
         self.q_plan = np.asarray(plan["q_CR"], float)
+        self.q_planned = np.asarray(plan["q_BR_planned"], float)  # the planned attitude q_BR
+        self.cmd_err_max_rad = 0.0
+        self.cmd_err_rad = math.nan  # the last tick's
         self.kp, self.kd = float(plan["kp"]), float(plan["kd"])
         self.lvlh = plan["frame"] == "lvlh"
         self.J = np.asarray(plant.inertia_O_B, float)
 
     def command_R(self, t):
         """``q_CR`` at ``t`` [s]: linear between the plan's points, normalised; held after the end."""
+        return self._at(self.q_plan, t)
+
+    def planned_R(self, t):
+        """The planned attitude ``q_BR`` at ``t`` [s], as :meth:`command_R` interpolates the command."""
+        return self._at(self.q_planned, t)
+
+    def _at(self, qs, t):
         tp = self.t_plan
         k = int(np.clip(np.searchsorted(tp, t, side="right") - 1, 0, len(tp) - 2))
         a = min(max((t - tp[k]) / (tp[k + 1] - tp[k]), 0.0), 1.0)
-        q = (1.0 - a) * self.q_plan[k] + a * self.q_plan[k + 1]
+        q = (1.0 - a) * qs[k] + a * qs[k + 1]
         return q / np.linalg.norm(q)
+
+    def summary(self) -> dict:
+        """The command error (body vs the command, which leads it by design) [deg]: last and largest tick."""
+        if math.isnan(self.cmd_err_rad):
+            return {}
+        return {"final_cmd_err_deg": math.degrees(self.cmd_err_rad), "max_cmd_err_deg": math.degrees(self.cmd_err_max_rad)}
 
     def _update(self, t, meas):
         q_CR = self.command_R(t)
+        q_BR = self.planned_R(t).tolist()
         if self.lvlh:
             q_CN = np.asarray(qmul(meas.q_ON.tolist(), q_CR.tolist()))
             w_RN_R = meas.omega_ON_O
+            self.q_ref_BN = qmul(meas.q_ON.tolist(), q_BR)  # the planned attitude: the tracking reference
         else:
             q_CN, w_RN_R = q_CR, np.zeros(3)
-        self.q_ref_BN = tuple(q_CN)
+            self.q_ref_BN = tuple(q_BR)
         cw, cx, cy, cz = q_CN
         e = np.asarray(qmul((cw, -cx, -cy, -cz), meas.q_BN.tolist()))
         if e[0] < 0.0:
             e = -e
+        self.cmd_err_rad = 2.0 * math.atan2(math.sqrt(e[1] ** 2 + e[2] ** 2 + e[3] ** 2), e[0])
+        self.cmd_err_max_rad = max(self.cmd_err_max_rad, self.cmd_err_rad)
         # C_CR v = v - w t + e × t, t = 2 e × v (the rotation of v into C's components)
         qv = q_CR[1:4]
         tv = 2.0 * np.cross(qv, w_RN_R)

@@ -51,7 +51,7 @@ def main(out=ROOT / "docs" / "img" / "iss_lvlh_hold_estimated.png"):
     se, st = te.meta["summary"], tt.meta["summary"]
     for k in ("max_att_err_deg", "final_att_err_deg", "max_h_fraction"):
         print(f"{k}: truth fed {st[k]:.4g}, estimated {se[k]:.4g}")
-    for k in ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_rows"):
+    for k in ("est_converged_s", "max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_s"):
         print(f"{k}: {se[k]:.4g}")
     print("wrote", out)
 

@@ -293,6 +293,8 @@ def _summary_line(s: dict) -> str:
     parts = [f"controller {s['controller']} at {1 / s['period_s']:g} Hz, {s['ticks']} ticks"]
     if "final_att_err_deg" in s:
         parts.append(f"attitude error final {s['final_att_err_deg']:.3g} deg, max {s['max_att_err_deg']:.3g} deg")
+    if "final_cmd_err_deg" in s:  # a law whose command leads its reference (schedule: issue 32)
+        parts.append(f"command error (it leads the body) final {s['final_cmd_err_deg']:.3g} deg, max {s['max_cmd_err_deg']:.3g} deg")
     if "max_h_Nms" in s:
         frac = f" ({100 * s['max_h_fraction']:.0f} % of capacity)" if "max_h_fraction" in s else ""
         parts.append(f"max |h| {s['max_h_Nms']:.4g} N m s{frac}")
@@ -302,11 +304,12 @@ def _summary_line(s: dict) -> str:
         parts.append(
             f"gimbal-rate limited {s['rate_limited_ticks']} ticks, momentum saturated {s['momentum_saturated_ticks']} ticks"
         )
-    if "mean_nees" in s:  # sensors and the MEKF (issue 20)
-        parts.append(f"estimation error max {s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
+    if "mean_nees" in s:  # sensors and the MEKF (issue 20; the window after convergence: issue 32)
+        parts.append(f"estimate converged at t = {s['est_converged_s']:.4g} s; estimation error after it: max "
+                     f"{s['max_est_err_deg']:.3g} deg, RMS {s['rms_est_err_deg']:.3g} deg, "
                      f"inside 3 sigma {100 * s['est_inside_3sigma']:.1f} %, mean NEES {s['mean_nees']:.3g} (6 states)")
-    if "st_dropout_rows" in s:
-        parts.append(f"star-tracker dropout rows {s['st_dropout_rows']}")
+    if "st_dropout_s" in s:
+        parts.append(f"star-tracker dropouts {s['st_dropout_s']:.4g} s")
     from .run.thrust import thruster_parts  # thrusters (issue 21)
     return "; ".join(parts + thruster_parts(s))
 

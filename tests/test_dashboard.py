@@ -175,6 +175,10 @@ torque_B = [20.0, 0.0, 0.0]
 
 
 # -- compare --settle -------------------------------------------------------------------------
+def _trapezoid(f, t) -> float:
+    return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(t)))
+
+
 def test_compare_settle_applies_to_every_row_metric(hold_run, capsys):
     settle = 300.0  # s
     assert main(["compare", str(hold_run), "--settle", str(settle), "--png", str(hold_run.parent / "c.png")]) == 0
@@ -184,7 +188,8 @@ def test_compare_settle_applies_to_every_row_metric(hold_run, capsys):
     late = tr.t >= settle
     truth = {
         "max_att_err_deg": np.nanmax(tr["att_err_deg"][late]),
-        "rms_att_err_deg": math.sqrt(np.nanmean(tr["att_err_deg"][late] ** 2)),
+        # a time mean (trapezoid between rows, issue 32)
+        "rms_att_err_deg": math.sqrt(_trapezoid(tr["att_err_deg"][late] ** 2, tr.t[late]) / (tr.t[-1] - tr.t[late][0])),
         "max_h_Nms": np.linalg.norm(tr.cols("hx", "hy", "hz")[late], axis=1).max(),
         "min_singularity": tr["cmg_singularity"][late].min(),
         "max_torque_cmd_Nm": np.linalg.norm(tr.cols("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")[late], axis=1).max(),

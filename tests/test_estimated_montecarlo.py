@@ -25,7 +25,7 @@ from stationbed.cli import main
 from stationbed.studies.montecarlo.replay import sample_scene
 
 MC_SCENE = "scenarios/iss_lvlh_hold_estimated_montecarlo.toml"
-EST_METRICS = ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_rows")
+EST_METRICS = ("est_converged_s", "max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_s")
 N = 3
 DURATION_S = 60.0  # s: 600 ticks of the 10 Hz loop, 60 gyro-to-head update cycles
 
@@ -65,6 +65,19 @@ def test_each_sample_flies_its_own_sensor_noise(serial):
     s1 = sample_scene(study(), 1)
     other = simulate(s1.replace({"controller.sensor.seed": int(seeds.iloc[0])})).meta["summary"]
     assert other["rms_est_err_deg"] != serial["rms_est_err_deg"].iloc[1]
+
+
+def test_the_settling_time_applies_to_the_estimation_metrics(serial):
+    """Issue 32: a sample's estimation metrics are over ``t >= max(settle_s, est_converged_s)``
+    (here settle_s = 20 s), recomputed with numpy from the sample's own rows: the largest error is
+    that of the rows at t >= 20 s, not the initial error drawn from P0 (the t = 0 row)."""
+    k = 1
+    tr = simulate(sample_scene(study(), k))
+    err = np.linalg.norm(tr.data[:, [tr.columns.index(f"est_err_{a}_deg") for a in "xyz"]], axis=1)
+    late = tr.t >= 20.0
+    assert serial.iloc[k]["est_converged_s"] < 20.0
+    assert serial.iloc[k]["max_est_err_deg"] == err[late].max()
+    assert err[0] > 10 * err[late].max()  # the P0 draw, which the settled window leaves out
 
 
 def test_same_table_in_one_chunk(serial):

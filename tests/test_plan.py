@@ -308,6 +308,46 @@ period = 0.1
     assert info["solver"]["intervals"] == 16
     assert info["flight"]["flown_vs_planned_max_attitude_deg"] < FLOWN_ATT_DEG
     assert "plan: cost" in capsys.readouterr().out
+    # the folder is a run folder for plot (issue 32): summary.json names the flown rows
+    assert main(["plot", str(out)]) == 0
+    assert (out / "dashboard.png").stat().st_size > 0
+    assert json.loads((out / "summary.json").read_text())["rows_file"] == "flown.csv"
+
+
+#: the rows' attitude error against the plan computed here: the same interpolation, other round-off
+TRACK_ATOL_DEG = 1e-9
+
+
+def _angle_deg(a, b):
+    """The rotation angle between unit quaternions ``a`` and ``b`` (N, 4), scalar first [deg]:
+    ``2 atan2(|vec(conj(a) ⊗ b)|, |scalar|)``."""
+    vec = a[:, :1] * b[:, 1:] - b[:, :1] * a[:, 1:] - np.cross(a[:, 1:], b[:, 1:])
+    return np.degrees(2.0 * np.arctan2(np.linalg.norm(vec, axis=1), np.abs(np.sum(a * b, axis=1))))
+
+
+def _at(t, t_pts, q_pts):
+    """The plan's quaternions linear between its points, normalised (how the law reads a plan)."""
+    q = np.column_stack([np.interp(t, t_pts, q_pts[:, k]) for k in range(4)])
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def test_schedule_reports_tracking_of_the_plan_and_the_command_error_apart():
+    """Issue 32: the ``schedule`` law's reference (``att_err_deg``, the run's attitude metrics) is
+    the planned attitude, not the command, which leads the body by design; the command error is
+    reported apart (``final_cmd_err_deg``, ``max_cmd_err_deg``). Truth: both angles computed here
+    from the plan's own points and the flown rows."""
+    from stationbed import simulate
+
+    scene = scene_from_dict(slew_scene())
+    _, sol = plan_scene(scene)  # the plan the law makes from [plan] (the same problem)
+    tr = simulate(scene)
+    s = tr.meta["summary"]
+    track = _angle_deg(_at(tr.t, sol.t, sol.q_BR), tr.q_BN)
+    cmd = _angle_deg(_at(tr.t, sol.t, sol.q_CR), tr.q_BN)
+    assert_allclose(tr["att_err_deg"], track, rtol=0, atol=TRACK_ATOL_DEG)
+    assert_allclose(s["final_cmd_err_deg"], cmd[-1], rtol=0, atol=TRACK_ATOL_DEG)
+    assert s["max_cmd_err_deg"] >= cmd.max() - TRACK_ATOL_DEG  # its max is over every tick
+    assert s["max_cmd_err_deg"] > 3 * s["max_att_err_deg"]  # the lead is no tracking error
 
 
 MU_EARTH_M3_S2 = 3.986004418e14  # IERS 2010

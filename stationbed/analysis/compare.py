@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.plotting import pyplot, save_png
-from ..run.metrics import METRICS, trajectory_metrics
+from ..run.metrics import ESTIMATION_WINDOW, METRICS, trajectory_metrics
 from ..run.trajectory import Trajectory
 from .dashboard import capacity_Nms, load_run, run_state, time_axis
 from .signals import relative_rate
@@ -32,6 +32,8 @@ def _fmt(v) -> str:
 WHOLE_RUN = frozenset(k for k, m in METRICS.items() if m.unit == "ticks")
 #: the metric of the last row: the same with or without a settling time
 LAST_ROW = frozenset({"final_att_err_deg"})
+#: metrics of the run from its first row (a settling time would cut off what they measure)
+FROM_START = frozenset({"est_converged_s"})
 
 
 def metric_scope(key: str, settle_s: float | None) -> str:
@@ -40,6 +42,10 @@ def metric_scope(key: str, settle_s: float | None) -> str:
         return "all ticks"
     if key in LAST_ROW:
         return "last row"
+    if key in FROM_START:
+        return "all rows"
+    if key in ESTIMATION_WINDOW:
+        return "converged" if settle_s is None else f"t >= {settle_s:g} s, converged"
     return "all rows" if settle_s is None else f"t >= {settle_s:g} s"
 
 
@@ -53,19 +59,24 @@ def settled_metrics(tr, summary: dict, settle_s: float | None, where: str = "the
     if not keep.any():
         raise ValueError(f"--settle {settle_s:g} s: no row of {where} is that late "
                          f"(its rows end at t = {tr.t[-1]:g} s)")
-    return trajectory_metrics(Trajectory(tr.columns, tr.data[keep]), summary=summary, settle_s=settle_s)
+    out = trajectory_metrics(Trajectory(tr.columns, tr.data[keep]), summary=summary, settle_s=settle_s)
+    whole = trajectory_metrics(tr, summary=summary, settle_s=settle_s)
+    out.update({k: whole[k] for k in FROM_START & set(whole)})
+    # the estimation window starts at the later of settle_s and the convergence of the whole run
+    out.update({k: whole[k] for k in set(ESTIMATION_WINDOW) & set(whole)})
+    return out
 
 
 def metrics_table(names, metrics, settle_s: float | None = None) -> str:
     """A plain-text table: one row per metric of :data:`METRICS` that some run has, one column per
     run, and the part of the run it is taken over (``t >= settle`` where a settling time applies)."""
     width = max(12, *(len(n) + 2 for n in names))
-    lines = [f"{'metric':<26}{'unit':<7}{'over':<14}" + "".join(f"{n:>{width}}" for n in names)]
+    lines = [f"{'metric':<26}{'unit':<7}{'over':<20}" + "".join(f"{n:>{width}}" for n in names)]
     for key, m in METRICS.items():
         vals = [mt.get(key) for mt in metrics]
         if all(v is None for v in vals):
             continue
-        lines.append(f"{key:<26}{m.unit:<7}{metric_scope(key, settle_s):<14}" + "".join(f"{_fmt(v):>{width}}" for v in vals))
+        lines.append(f"{key:<26}{m.unit:<7}{metric_scope(key, settle_s):<20}" + "".join(f"{_fmt(v):>{width}}" for v in vals))
     if len(lines) == 1:
         return "no run metric applies: the runs have no closed-loop columns (att_err_deg, h, tau_cmd)"
     return "\n".join(lines)

@@ -34,7 +34,8 @@ ROWS_FILES = ("trajectory.csv", "trajectory.partial.csv")
 def load_run(outdir) -> tuple[Trajectory, dict]:
     """The trajectory and summary.json (``{}`` when absent) of a run folder.
 
-    The rows are the ones summary.json names (``rows_file``: the last run's, finished or not),
+    The rows are the ones summary.json names (``rows_file``: the last run's, finished or not; a
+    plan folder's ``flown.csv``),
     else ``trajectory.csv``, else ``trajectory.partial.csv`` (a failed or interrupted run keeps its
     rows there); ``meta["rows_file"]`` says which was read and ``meta["partial"]`` whether they are
     a failed or interrupted run's; a partial file's torn last row (a run killed mid-write) is
@@ -52,12 +53,14 @@ def load_run(outdir) -> tuple[Trajectory, dict]:
         if not isinstance(meta, dict):
             raise ValueError(f"{summary}: not a run summary (a JSON object)")
     named = meta.get("rows_file")
-    order = ([named] if named in ROWS_FILES else []) + [n for n in ROWS_FILES if n != named]
+    # a file of this folder that summary.json names (a plan folder's flown.csv), else the run's
+    own = named in ROWS_FILES or (isinstance(named, str) and named.endswith(".csv") and Path(named).name == named)
+    order = ([named] if own else []) + [n for n in ROWS_FILES if n != named]
     csv = next((outdir / n for n in order if (outdir / n).is_file()), None)
     if csv is None:
         raise ValueError(f"{outdir / ROWS_FILES[0]}: no such file, nor {ROWS_FILES[1]} "
                          "(a run folder written by 'stationbed run --out DIR')")
-    partial = csv.name != ROWS_FILES[0]
+    partial = csv.name == ROWS_FILES[1]
     tr = Trajectory.from_csv(csv, torn_tail=partial)  # a killed run's last row may be torn
     meta["rows_file"] = csv.name
     meta["partial"] = partial

@@ -7,17 +7,38 @@ applies the same reduction to a finished trajectory (a :class:`~.trajectory.Traj
 pandas DataFrame with the CSV columns), so a metric read back from a CSV equals the one the
 run reported.
 
-Conventions (all reductions are over the *output rows* of the run, i.e. at ``output_dt``,
-except the tick counts, which the closed loop counts at every controller tick):
+Conventions (issue 32: no metric is a count of output rows, so none scales with ``output_dt``):
 
-- ``att_err_deg`` NaN (a controller without a reference) is ignored; inf is kept (it is a
-  number the run produced, and it makes ``max`` inf).
-- ``rms_att_err_deg`` is ``sqrt(mean(err**2))`` over the rows with ``t >= settle_s`` (all rows
-  when ``settle_s`` is None) whose error is not NaN.
+- **Means and totals are time integrals**, by the trapezoid rule between consecutive output
+  rows: ``mean(f) = ∫ f dt / ∫ dt`` over the window (a window of one row: that row's value).
+  They converge to the continuous time mean as ``output_dt`` shrinks and differ between two
+  output grids only by how each resolves the signal (a stationary noise: its sampling
+  scatter; an edge, e.g. a dropout starting: at most ``output_dt / 2``), not by the number of
+  rows: tests/test_metrics_output_dt.py runs one scene at ``output_dt`` 10, 2 and 1 s. An
+  interval counts only when both of its rows have a value (a NaN ``att_err_deg``: a controller
+  without a reference at that row).
+- **Maxima and minima are over the output rows**: a peak shorter than ``output_dt`` can be
+  missed (the tick grid inside the compiled loops is not reduced).
+- ``att_err_deg`` NaN is ignored; inf is kept (a number the run produced: it makes ``max`` inf).
+- ``rms_att_err_deg`` is ``sqrt(mean(err**2))`` over ``t >= settle_s`` (all rows when
+  ``settle_s`` is None).
+- **The estimation metrics** (``max_est_err_deg``, ``rms_est_err_deg``, ``mean_nees``,
+  ``est_inside_3sigma``) are over the *converged, settled* window ``t >= max(settle_s,
+  est_converged_s)``: the initial error is the draw from P0 and says nothing of the filter's
+  accuracy; how long the filter takes is ``est_converged_s``, the time of the first row after
+  which ``|est_err|`` stays at or below :data:`CONVERGED_FRACTION` of the filter's initial
+  uncertainty (the norm of ``est_3sigma`` at the run's first row: P0's 3σ). A filter that is
+  outside at its last row never converged: ``est_converged_s`` is inf and the estimation
+  metrics are over ``t >= settle_s`` (all rows when None).
+- ``st_dropout_s`` is the time a star-tracker head's held sample is invalid (``st_valid`` 0;
+  a head counts invalid until its first sample), integrated over the whole run and summed over
+  the heads [s].
 - ``max_torque_cmd_Nm`` is the largest ``|(tau_cmd_x, tau_cmd_y, tau_cmd_z)|`` over the rows
   (NaN rows, e.g. a gimbal-rate law's, ignored).
 - A metric whose columns the run does not have, or that saw no usable row, is absent from
   :meth:`RunMetrics.values` (never a made-up 0).
+- Every sum is exact until it is rounded once (``math.fsum`` of the per-interval terms): the
+  values do not depend on how the rows were batched.
 """
 
 from __future__ import annotations
@@ -29,7 +50,13 @@ import numpy as np
 
 from ..core.linalg import row_norms
 
-__all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics"]
+__all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics", "CONVERGED_FRACTION", "ESTIMATION_WINDOW"]
+
+#: the estimate has converged once |est_err| stays at or below this fraction of the filter's
+#: initial uncertainty (the norm of est_3sigma at the first row, P0's 3σ): the error has fallen
+#: by an order of magnitude below what the filter started out allowing (for the ISS-like set of
+#: iss_lvlh_hold_estimated: 0.030 deg, against a settled error of ~4e-4 deg RMS and 1.5e-3 deg at most)
+CONVERGED_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -39,9 +66,9 @@ class Metric:
     Attributes
     ----------
     unit : str
-        Its unit ("deg", "N m s", "1" for a ratio, "ticks").
+        Its unit ("deg", "N m s", "1" for a ratio, "ticks", "s").
     description : str
-        One line: what it measures, over which rows.
+        One line: what it measures, over which part of the run.
     worse : str
         "high" when a larger value is worse (a requirement gives a ``max``), "low" when a smaller
         one is (``min_singularity``: a requirement gives a ``min``).
@@ -56,7 +83,7 @@ class Metric:
 METRICS: dict[str, Metric] = {
     "max_att_err_deg": Metric("deg", "largest attitude error (att_err_deg) over the output rows"),
     "final_att_err_deg": Metric("deg", "attitude error of the last output row"),
-    "rms_att_err_deg": Metric("deg", "RMS attitude error over the output rows at t >= settle_s"),
+    "rms_att_err_deg": Metric("deg", "RMS attitude error, time mean (trapezoid between rows) over t >= settle_s"),
     "max_h_Nms": Metric("N m s", "largest momentum |h| of the CMG cluster's working units over the output rows "
                         "(a failed unit's held rotor momentum left out)"),
     "max_h_fraction": Metric("1", "max_h_Nms as a fraction of the working units' momentum capacity"),
@@ -64,12 +91,16 @@ METRICS: dict[str, Metric] = {
     "rate_limited_ticks": Metric("ticks", "controller ticks whose gimbal-rate command was limited"),
     "momentum_saturated_ticks": Metric("ticks", "controller ticks at which the cluster was saturated"),
     "max_torque_cmd_Nm": Metric("N m", "largest commanded torque |tau_cmd| over the output rows"),
-    # sensors and estimator (issue 20): the columns of stationbed.loop.flight.flight_columns
-    "max_est_err_deg": Metric("deg", "largest attitude estimation error |est_err| (truth vs MEKF) over the output rows"),
-    "rms_est_err_deg": Metric("deg", "RMS attitude estimation error |est_err| over the output rows"),
-    "mean_nees": Metric("1", "mean of the MEKF's NEES (6 states; consistent: 6) over the output rows"),
-    "est_inside_3sigma": Metric("1", "fraction of the output rows and axes with |est_err| <= its 3 sigma", "low"),
-    "st_dropout_rows": Metric("rows", "output rows at which a star-tracker head's held sample is invalid, summed over heads"),
+    # sensors and estimator (issue 20; windows issue 32): the columns of stationbed.loop.flight.flight_columns
+    "est_converged_s": Metric("s", "time of the first row after which |est_err| stays <= CONVERGED_FRACTION (0.1) "
+                              "of the first row's |est_3sigma| (inf: not converged)"),
+    "max_est_err_deg": Metric("deg", "largest attitude estimation error |est_err| (truth vs MEKF) over the rows "
+                              "at t >= max(settle_s, est_converged_s)"),
+    "rms_est_err_deg": Metric("deg", "RMS of |est_err|, time mean over t >= max(settle_s, est_converged_s)"),
+    "mean_nees": Metric("1", "time mean of the MEKF's NEES (6 states; consistent: 6) over t >= max(settle_s, est_converged_s)"),
+    "est_inside_3sigma": Metric("1", "fraction of the time and axes with |est_err| <= its 3 sigma, "
+                                "over t >= max(settle_s, est_converged_s)", "low"),
+    "st_dropout_s": Metric("s", "time a star-tracker head's held sample is invalid, over the run, summed over heads"),
     # thrusters (issue 21): totals over the run, the last row's thr_* columns (run/thrust.py)
     "propellant_kg": Metric("kg", "propellant used by the thrusters, Σ F t_on / (Isp g0), over the run"),
     "propellant_kg_per_orbit": Metric("kg", "propellant_kg per orbital period (2π / mean motion) of the run's length"),
@@ -78,9 +109,146 @@ METRICS: dict[str, Metric] = {
     "thruster_impulse_Ns": Metric("N s", "total thruster impulse Σ F t_on over the run"),
 }
 
+#: the estimation metrics taken over the converged, settled window (module docstring)
+ESTIMATION_WINDOW = ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma")
+
 #: metric -> the thr_* column whose last row holds it (cumulative columns)
 _THRUSTER_TOTALS = {"propellant_kg": "thr_propellant_kg", "thruster_firings": "thr_firings",
                     "thruster_control_s": "thr_control_s", "thruster_impulse_Ns": "thr_impulse_Ns"}
+
+
+def _interval_terms(t: np.ndarray, f: np.ndarray, prev) -> tuple[np.ndarray, np.ndarray]:
+    """The trapezoid terms ``(f_a + f_b) / 2 (t_b - t_a)`` and the lengths ``t_b - t_a`` of the
+    intervals ending at each row of a batch, (m, k) each; the interval ending at row 0 starts at
+    ``prev`` = (t, f) of the row before (None: no row before, a term of 0). An interval with a NaN
+    end or of no length adds 0 to both (which leaves an exact sum as it is)."""
+    t0, f0 = (t[0], f[0]) if prev is None else prev
+    tt, ff = np.concatenate(([t0], t)), np.concatenate((f0[None], f))
+    dt = np.diff(tt)[:, None]
+    terms = 0.5 * (ff[:-1] + ff[1:]) * dt
+    if np.isfinite(terms).all() and dt.min() >= 0.0:  # (the common case: the same numbers, fewer calls)
+        return terms, np.broadcast_to(dt, terms.shape)
+    ok = ~np.isnan(ff)
+    use = ok[:-1] & ok[1:] & (dt > 0.0)
+    return np.where(use, terms, 0.0), np.where(use, dt, 0.0)
+
+
+class _TimeIntegral:
+    """``∫ f dt`` of ``k`` quantities over consecutive output rows by the trapezoid rule, the
+    time each spans, and each one's largest value: fed batch by batch (the interval across two
+    batches is the same term), every sum kept exact (``math.fsum`` of the terms, :func:`_folded`)
+    so the result does not depend on the batching. A NaN is a row without a value: the intervals
+    touching it add nothing."""
+
+    def __init__(self, k: int = 1):
+        self.k = k
+        self.reset()
+
+    def reset(self) -> None:
+        k = self.k
+        self.prev = None  # (t, f) of the last row taken
+        self.chunks: list[tuple[np.ndarray, np.ndarray]] = []  # (terms, spans) per batch, (m, k) each
+        self.n_terms = 0
+        self.partials = ([[] for _ in range(k)], [[] for _ in range(k)])  # a long run's, folded
+        self.n = np.zeros(k, dtype=np.int64)  # rows with a value
+        self.last = np.full(k, math.nan)  # the last value: the mean of a window of no length
+        self.max = np.full(k, math.nan)
+
+    def add(self, t: np.ndarray, f: np.ndarray) -> None:
+        """Rows at times ``t`` (m,) with values ``f`` (m, k), following the rows taken before."""
+        if len(t):
+            self.take(t, f, *_interval_terms(t, f, self.prev))
+
+    def take(self, t, f, terms, spans) -> None:
+        """Rows ``t``, ``f`` with the terms of the intervals ending at each (:func:`_interval_terms`)."""
+        if not len(t):
+            return
+        self.prev = (float(t[-1]), f[-1].copy())
+        ok = ~np.isnan(f)
+        if ok.all():
+            self.n += len(f)
+            self.max = np.fmax(self.max, f.max(axis=0))
+            self.last = f[-1].copy()
+        elif (seen := ok.any(axis=0)).any():
+            self.n += ok.sum(axis=0)
+            self.max = np.fmax(self.max, np.fmax.reduce(f, axis=0))
+            j = len(f) - 1 - np.argmax(ok[::-1], axis=0)  # each column's last row with a value
+            self.last[seen] = f[j[seen], np.flatnonzero(seen)]
+        if len(terms):
+            self.chunks.append((terms, spans))
+            self.n_terms += len(terms)
+        if self.n_terms > _FOLD_AT:  # a long run: kept as the exact partials of its sums
+            for i, parts in enumerate(self.partials):
+                col = np.concatenate([c[i] for c in self.chunks]).T.tolist()
+                for j in range(self.k):
+                    parts[j] = _folded(parts[j] + col[j])
+            self.chunks, self.n_terms = [], 0
+
+    def _sum(self, i: int, j: int) -> float:
+        """The correctly rounded sum of the terms (i = 0) or lengths (i = 1) of quantity ``j``."""
+        rest = np.concatenate([c[i][:, j] for c in self.chunks]).tolist() if self.chunks else []
+        return math.fsum(self.partials[i][j] + rest)
+
+    def total(self, j: int = 0) -> float:
+        return self._sum(0, j)
+
+    def mean(self, j: int = 0) -> float | None:
+        """Quantity ``j``'s time mean (a window of no length: its value), None without a row."""
+        if not self.n[j]:
+            return None
+        span = self._sum(1, j)
+        return self._sum(0, j) / span if span > 0.0 else float(self.last[j])
+
+
+class _Estimation:
+    """The estimation metrics' windows, both a suffix of the rows: ``settled`` (t >= settle_s)
+    and ``converged`` (the settled rows after the last row whose |est_err| was above the
+    convergence threshold), each with |est_err|² (its max too), NEES and the fraction of axes
+    inside 3σ; the intervals' terms computed once for both."""
+
+    def __init__(self):
+        self.settled = _TimeIntegral(3)  # |e|², nees, inside
+        self.converged = _TimeIntegral(3)
+        self.prev = None  # the last row's (t, values)
+        self.threshold = None  # [deg]: CONVERGED_FRACTION x the first row's |est_3sigma|
+        self.t_converged = None  # the first row after the last one above the threshold
+        self.outside_last = False  # the last row seen was above the threshold
+
+    def add(self, t, e, s3, nees, settled) -> None:
+        n2 = np.einsum("ij,ij->i", e, e)
+        if self.threshold is None:
+            self.threshold = CONVERGED_FRACTION * float(np.sqrt(s3[0] @ s3[0]))
+            self.t_converged = float(t[0])
+        vals = np.column_stack((n2, nees, (np.abs(e) <= s3).sum(axis=1) / 3.0))
+        above = np.flatnonzero(n2 > self.threshold * self.threshold)
+        start = 0
+        if len(above):  # the converged window starts again after the last row above
+            start = int(above[-1]) + 1
+            self.converged.reset()
+            self.outside_last = start == len(t)
+            self.t_converged = None if self.outside_last else float(t[start])
+        elif self.outside_last:  # the last batch ended above: its next row is the first after
+            self.outside_last = False
+            self.t_converged = float(t[0])
+        terms, spans = _interval_terms(t, vals, self.prev)
+        prev, self.prev = self.prev, (float(t[-1]), vals[-1].copy())
+        first = int(np.argmax(settled)) if settled.any() else len(t)  # the settled rows: a suffix
+        for w, s in ((self.settled, first), (self.converged, max(first, start))):
+            # its intervals: those whose first row is in the window (the batch's row before the
+            # window's first is not; the last batch's last row is if the window took it)
+            k0 = 0 if s == 0 and w.prev is not None and w.prev[0] == (prev and prev[0]) else s + 1
+            w.take(t[s:], vals[s:], terms[k0:], spans[k0:])
+
+    def values(self) -> dict[str, float]:
+        if self.threshold is None:
+            return {}
+        conv = not self.outside_last
+        w = self.converged if conv and self.converged.n[0] else self.settled
+        out = {"est_converged_s": self.t_converged if conv else math.inf}
+        if w.n[0]:
+            out.update(max_est_err_deg=float(np.sqrt(w.max[0])), rms_est_err_deg=math.sqrt(w.mean(0)),
+                       mean_nees=w.mean(1), est_inside_3sigma=w.mean(2))
+        return out
 
 
 class RunMetrics:
@@ -91,7 +259,8 @@ class RunMetrics:
     columns : list of str
         The run's columns (:func:`~.rows.trajectory_columns`).
     settle_s : float or None
-        Settling time [s]: ``rms_att_err_deg`` counts the rows at ``t >= settle_s`` (None: all).
+        Settling time [s]: ``rms_att_err_deg`` and the estimation metrics count ``t >= settle_s``
+        (None: all rows; the estimation metrics also after ``est_converged_s``).
     h_capacity_Nms : float or None
         The CMG cluster's momentum capacity [N m s] for ``max_h_fraction`` (None or not finite:
         no fraction): its working units' (:func:`~stationbed.model.cmg.capacity`).
@@ -128,9 +297,8 @@ class RunMetrics:
         self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
         self._thr = {m: col[c] for m, c in _THRUSTER_TOTALS.items() if c in col}
         self.orbit_period_s = orbit_period_s
-        # max, err² per row, rows, nees per row, inside, dropouts; the two sums taken at the end
-        # with math.fsum (correctly rounded): the same totals whatever batches the rows came in
-        self._est_red = [0.0, [], 0, [], 0, 0]
+        self._est_red = _Estimation() if self._est is not None else None
+        self._dropout = _TimeIntegral()  # heads invalid, over the run
         self.n_rows = 0
         self.last = None
         self.rate_limited_ticks = self.momentum_saturated_ticks = None
@@ -138,17 +306,15 @@ class RunMetrics:
         self._min_sing = None
         self._err_max = math.nan  # NaN-ignoring running max (np.fmax)
         self._err_finite = False  # a value that is not NaN was seen
-        # err**2 of the settled, non-NaN rows (a long run's folded into the exact partials of their
-        # sum, Shewchuk's, as math.fsum), summed with math.fsum at the end (correctly rounded): the
-        # value cannot depend on how the rows were batched (timed flushes)
-        self._sq_partials: list[float] = []
-        self._sq_n = 0
+        self._sq = _TimeIntegral()  # err² of the settled rows, integrated in time
         self._tau_max = math.nan
 
     def update(self, rows: np.ndarray) -> None:
         """Account for a batch ``rows`` (k, len(columns)), k >= 1."""
         self.n_rows += len(rows)
         self.last = rows[-1].copy()
+        t = rows[:, self._t]
+        settled = np.ones(len(rows), bool) if self.settle_s is None else t >= self.settle_s
         if self._h is not None:
             hb = rows[:, self._h] if self.h_held_B is None else rows[:, self._h] - self.h_held_B
             h = float(row_norms(hb).max())
@@ -160,28 +326,11 @@ class RunMetrics:
             err = rows[:, self._err]
             self._err_finite |= bool(np.isfinite(err).any())
             self._err_max = float(np.fmax(self._err_max, np.fmax.reduce(err)))
-            use = ~np.isnan(err)
-            if self.settle_s is not None:
-                use &= rows[:, self._t] >= self.settle_s
-            if use.any():
-                e = err[use]
-                self._sq_partials += (e * e).tolist()
-                if len(self._sq_partials) > _FOLD_AT:
-                    self._sq_partials = _folded(self._sq_partials)
-                self._sq_n += int(use.sum())
+            self._sq.add(t[settled], (err[settled] ** 2)[:, None])
         if self._est is not None:
-            r = self._est_red
-            e = rows[:, self._est]
-            n2 = np.einsum("ij,ij->i", e, e)
-            r[0] = max(r[0], float(np.sqrt(n2.max())))
-            r[1] += n2.tolist()
-            r[2] += len(rows)
-            r[3] += rows[:, self._nees].tolist()
-            if len(r[1]) > _FOLD_AT:  # a long run: kept as the exact partials of its sum
-                r[1], r[3] = _folded(r[1]), _folded(r[3])
-            r[4] += int((np.abs(e) <= rows[:, self._s3]).sum())
+            self._est_red.add(t, rows[:, self._est], rows[:, self._s3], rows[:, self._nees], settled)
         if self._st:
-            self._est_red[5] += int((rows[:, self._st] < 0.5).sum())
+            self._dropout.add(t, (rows[:, self._st] < 0.5).sum(axis=1, keepdims=True).astype(float))
         if self._tau is not None:
             tau = row_norms(rows[:, self._tau])
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
@@ -220,17 +369,14 @@ class RunMetrics:
         if self._err_finite:
             out["final_att_err_deg"] = float(self.last[self._err])
             out["max_att_err_deg"] = self._err_max
-            if self._sq_n:
-                out["rms_att_err_deg"] = math.sqrt(math.fsum(self._sq_partials) / self._sq_n)
+            if self._sq.n[0]:
+                out["rms_att_err_deg"] = math.sqrt(self._sq.mean())
         if self._tau is not None and not math.isnan(self._tau_max):
             out["max_torque_cmd_Nm"] = self._tau_max
-        r = self._est_red
-        if self._est is not None and r[2]:
-            out.update(max_est_err_deg=r[0], rms_est_err_deg=math.sqrt(math.fsum(r[1]) / r[2]),
-                       mean_nees=math.fsum(r[3]) / r[2],
-                       est_inside_3sigma=r[4] / (3 * r[2]))
+        if self._est_red is not None:
+            out.update(self._est_red.values())
         if self._st and self.n_rows:
-            out["st_dropout_rows"] = r[5]
+            out["st_dropout_s"] = self._dropout.total()
         if self._thr and self.n_rows:
             for m, i in self._thr.items():
                 out[m] = int(round(self.last[i])) if m == "thruster_firings" else float(self.last[i])
@@ -283,7 +429,7 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
         (``h_held_B_Nms``) come from it. Taken from
         ``traj.meta`` when None and the trajectory has one.
     settle_s : float, optional
-        Settling time [s] for ``rms_att_err_deg`` (None: all rows).
+        Settling time [s] for ``rms_att_err_deg`` and the estimation metrics (None: all rows).
 
     Returns
     -------

@@ -81,7 +81,7 @@ class MonteCarlo(Strict):
     n: int = Field(default=100, ge=1)
     seed: int = Field(default=0, ge=0)
     chunk: int | None = Field(default=None, ge=1)  # samples per task (default: about n / (8 workers))
-    settle_s: float | None = Field(default=None, ge=0.0)  # s, rms_att_err_deg counts t >= settle_s
+    settle_s: float | None = Field(default=None, ge=0.0)  # s, rms_att_err_deg and the estimation metrics count t >= settle_s
     envelope_dt: float | None = Field(default=60.0, gt=0.0)  # s, per-sample trajectory for envelopes; none: omit
     max_redraws: int = Field(default=100, ge=0)  # draws refused by the scene's checks before a sample is refused
     disperse: list[Dispersion] = []

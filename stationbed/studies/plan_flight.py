@@ -4,7 +4,9 @@ with the ``schedule`` law, and fly the same slew as an eigenaxis ``pd`` slew (is
 Writes into DIR: plan.csv, plan.json (with a ``flight`` entry: planned vs flown and the eigenaxis
 slew), plan.png, flown.csv, eigenaxis.csv, flight.png, plan.rrd (rerun: ``plan/...`` series of
 planned vs flown momentum and attitude, the eigenaxis slew's momentum, the commands) and flown.rrd
-(the flown run drawn as ``stationbed run --rrd`` draws it).
+(the flown run drawn as ``stationbed run --rrd`` draws it), and summary.json, the flown run's as
+``stationbed run`` writes it, naming flown.csv as its rows: DIR is then a run folder to ``stationbed
+plot`` and ``compare`` (the flown run's attitude error is to the plan's attitude, issue 32).
 """
 
 from __future__ import annotations
@@ -64,6 +66,8 @@ def fly_plan(scene, plan_json, out_dir) -> dict:
                                "simulation.duration": scene.plan.duration})
     flown = simulate(fly_scene)
     flown.to_csv(out / "flown.csv")
+    summary = {"scene": scene.name, **flown.meta, "rows_file": "flown.csv"}  # a run folder's (cli.py's run)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     eig = simulate(eigenaxis_pd_scene(scene, plan))
     eig.to_csv(out / "eigenaxis.csv")
     # compared at the plan's own points (no interpolation of the plan; the flown rows are

@@ -52,7 +52,7 @@ LOG_SPREAD = 30.0
 def _ok_values(df, name):
     ok = df[df["status"] == "ok"]
     v = ok[name].to_numpy(dtype=float)
-    return v[~np.isnan(v)]
+    return v[np.isfinite(v)]  # NaN: no value; inf (an error that grew without bound, a filter that never converged): no bin
 
 
 def histograms(df, out: Path, requirements=()) -> list[Path]:

@@ -85,7 +85,8 @@ def scene_toml(scene: Scene, header: str = "") -> str:
 def write_sample_scene(scene: Scene, k: int, path: Path) -> Scene:
     """Write sample ``k``'s scene to ``path`` and return it as loaded back from the file (so a
     run of the return value is a run of the file). The ``[montecarlo]`` table stays (its
-    ``settle_s`` defines ``rms_att_err_deg``) without its dispersions."""
+    ``settle_s`` defines the windows of ``rms_att_err_deg`` and the estimation metrics) without its
+    dispersions."""
     s = sample_scene(scene, k)
     mc = scene.montecarlo
     changes = {"montecarlo.disperse": []}
