@@ -70,7 +70,7 @@ class StationDrawing:
         self.cmg = CmgArrows.of(scene, columns, self.geom)
         self.elastic = ElasticLines.of(scene, columns, self.geom.extent)
         self.surfaces = drawn_surfaces(scene, self.geom)
-        self.events = Events(columns)
+        self.events = Events.of(scene, columns)
         self.sensors = SensorParts.of(scene, columns, self.geom.extent)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
 
