@@ -84,8 +84,9 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
                         ("CMG singularity measure, saturated (0/1)", "telemetry/cmg",
                          some(("telemetry/cmg/singularity", "telemetry/cmg/saturated"))),
                         ("T [J]", "telemetry/T", None)))
-    environment = present((("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment",
-                            some(("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B"))),
+    environment = present((("environment torques tau_gg_B, tau_aero_B, tau_srp_B [N m]", "telemetry/environment",
+                            some(("telemetry/environment/tau_gg_B", "telemetry/environment/tau_aero_B",
+                                  "telemetry/environment/tau_srp_B"))),
                            ("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse", None)))
     arrays = present((("array angles [rad]", "telemetry/arrays",
                        some(f"telemetry/arrays/{n}" for n in names)),

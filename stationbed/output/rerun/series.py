@@ -123,7 +123,7 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
         take(f"telemetry/modes/{n}/etadot", [f"etadot_{n}_{k}" for k in ks], [f"{n} etadot_{k}" for k in ks])
     if modes:
         take("telemetry/modes/U_strain", ["U_strain"])
-    for kind in ("aero", "srp"):  # environment torques (issue 14), B components [N m]
+    for kind in ("gg", "aero", "srp"):  # environment torques (issue 14; gravity gradient), B components [N m]
         take(f"telemetry/environment/tau_{kind}_B", [f"tau_{kind}_{c}" for c in "xyz"], ["x", "y", "z"])
     take("telemetry/environment/eclipse", ["eclipse"], ["lit fraction"])
     # sensors and estimator (issue 20): error and its 3 sigma side by side per axis, bias, NEES, heads
