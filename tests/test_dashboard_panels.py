@@ -207,10 +207,20 @@ def test_thruster_panel(est_run, tmp_path, monkeypatch):
 
 
 # -- legends inside their axes ----------------------------------------------------------------
-def test_every_legend_is_inside_its_axes(est_run, monkeypatch):
-    """The hold's dashboard had the gimbals' 8-entry legend in 6 columns, wider than its panel."""
-    got = drawn(monkeypatch, est_run)
-    assert all(got["inside"].values()), [t for t, ok in got["inside"].items() if not ok]
+def test_every_legend_is_inside_its_axes(est_run, tmp_path, monkeypatch):
+    """Six entries in six columns (the attitude error with both kinds of limit ticks, the torque's
+    command and delivered per axis) were wider than their panels: drawn without
+    :func:`~stationbed.core.plotting.fit_legends`, three legends of this run stick out."""
+    def edit(cols):
+        cols["cmg_saturated"][3:6] = 1.0
+        cols["cmg_saturated"][8:10] = 1.0
+        cols["hx"][8:10], cols["hy"][8:10], cols["hz"][8:10] = 0.95 * 4 * 4760.0, 0.0, 0.0  # N m s
+
+    run = copy_run(est_run, tmp_path / "r", edit, summary={"h_saturation_Nms": HOLD_H_SAT_NMS, "rate_limited_ticks": 5,
+                                                            "momentum_saturated_ticks": 3})
+    for folder in (est_run, run):
+        got = drawn(monkeypatch, folder)
+        assert all(got["inside"].values()), [t for t, ok in got["inside"].items() if not ok]
 
 
 # -- gravity gradient in the disturbance panel ------------------------------------------------
