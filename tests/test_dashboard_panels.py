@@ -327,3 +327,37 @@ def test_recording_lights_the_thrusters_that_fired(tmp_path):
         fired = np.array([(int(col) >> 24 & 0xFF, int(col) >> 16 & 0xFF, int(col) >> 8 & 0xFF) == (255, 140, 0)
                           for col in latest])
         assert fired.tolist() == lit_by_hand[i].tolist(), (t, fired, lit_by_hand[i])
+
+
+def test_recording_of_the_estimated_run_before_the_first_sample(est_run, tmp_path):
+    """The shipped estimated run, recorded: at t = 0 (no sample yet) the heads are grey and no
+    dropout is logged; st1's one dropout (the sun exclusion) is red and logged at its row."""
+    rerun_chunk = pytest.importorskip("rerun.chunk")
+    from stationbed.output.rerun.events import RGB_BLIND, RGB_NO_SAMPLE, RGB_VALID
+    from stationbed.output.rerun.recording import write_recording
+
+    tr = Trajectory.from_csv(est_run / "trajectory.csv")
+    path = write_recording(tr, load_scene(ESTIMATED), tmp_path / "est.rrd")
+    rows = {}
+    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
+        ent = c.entity_path.lstrip("/")
+        if c.is_static or not (ent == "events" or ent.endswith("/boresight")):
+            continue
+        rb = c.to_record_batch()
+        for i, t in enumerate(rb.column("sim_time").cast("int64").to_pylist()):
+            comp = {n: rb.column(n)[i].as_py() for n in rb.schema.names if ":" in n}
+            rows.setdefault(ent, []).append((t * 1e-9, comp))
+    texts = sorted((t, c["TextLog:text"][0]) for t, c in rows["events"])
+    v1, v2 = tr["st_valid_st1"], tr["st_valid_st2"]
+    first = [tr.t[int(np.argmax(v >= 0.5))] for v in (v1, v2)]
+    drop1 = tr.t[int(np.argmax((np.arange(len(v1)) > np.argmax(v1 >= 0.5)) & (v1 < 0.5)))]  # by hand
+    st = [(t, x) for t, x in texts if x.startswith("star tracker")]
+    assert st == sorted([(first[0], "star tracker st1 first valid sample"), (first[1], "star tracker st2 first valid sample"),
+                         (drop1, "star tracker st1 dropout")])
+
+    def rgb(c):
+        col = c["Arrows3D:colors"][0]
+        return ((col >> 24) & 0xFF, (col >> 16) & 0xFF, (col >> 8) & 0xFF)
+
+    got = sorted((t, rgb(c)) for t, c in rows["world/station/sensors/st1/boresight"])
+    assert got == [(0.0, RGB_NO_SAMPLE), (first[0], RGB_VALID), (drop1, RGB_BLIND)]

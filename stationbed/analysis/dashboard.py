@@ -116,6 +116,18 @@ def capacity_Nms(summary: dict) -> float | None:
     return float(cap) if cap is not None and math.isfinite(cap) and cap > 0 else None
 
 
+def saturation_Nms(summary: dict) -> float | None:
+    """|h| at which the run's cluster counts as momentum saturated [N m s]: summary.json's
+    ``h_saturation_Nms``, or (a summary written before it was kept) the scene tables' default
+    ``saturation_fraction`` of the capacity; None without a finite capacity."""
+    if summary.get("h_saturation_Nms") is not None:
+        return float(summary["h_saturation_Nms"])
+    cap = capacity_Nms(summary)
+    from ..scene.tables import Cmg
+
+    return None if cap is None else Cmg.model_fields["saturation_fraction"].default * cap
+
+
 def _panels(tr: Trajectory, summ: dict) -> list[tuple[str, list, dict]]:
     """(panel title, [(values (k,), label, style)], options) for the panels the run has data for;
     options: ``yscale``, ``hlines``, ``hspans``, ``bars`` (per head: runs of states), ``twin``
@@ -262,7 +274,7 @@ def _limit_marks(tr: Trajectory, summ: dict) -> list[tuple[np.ndarray, str, str]
         if "hx" in tr.columns else np.full(len(tr), np.nan)
     ticks = (summ["rate_limited_ticks"], summ["momentum_saturated_ticks"]) \
         if summ.get("rate_limited_ticks") is not None and summ.get("momentum_saturated_ticks") is not None else None
-    kind = cmg_limit_kinds(tr["cmg_saturated"], h, summ.get("h_saturation_Nms"), ticks=ticks)
+    kind = cmg_limit_kinds(tr["cmg_saturated"], h, saturation_Nms(summ), ticks=ticks)
     limit = cmg_limit_name(any(c.startswith("gimbal_") for c in tr.columns))
     marks = [(kind == CMG_MOMENTUM_SATURATED, "CMG momentum saturation", "tab:red"),
              (kind == CMG_RATE_LIMIT, f"CMG {limit}", "tab:orange")]
@@ -330,7 +342,7 @@ def dashboard(outdir, png=None, run=None) -> Path:
             top = max(1.1, float(np.nanmax(lines[0][0])) * 1.05) if _finite_range(lines) else 1.1
             ax.set_ylim(0.0, top)  # a fraction of a norm: never below 0
             ax.axhline(1.0, color="tab:red", lw=0.8, ls=":", label="capacity")
-            h_sat, cap = summ.get("h_saturation_Nms"), capacity_Nms(summ)
+            h_sat, cap = saturation_Nms(summ), capacity_Nms(summ)
             if h_sat and cap and h_sat < cap:
                 ax.axhline(h_sat / cap, color="tab:red", lw=0.8, ls="--", label="saturation threshold")
         # the limit ticks on every panel, named in the first panel's and the |h| panel's legends

@@ -20,7 +20,8 @@ run that starts saturated or in shadow logs that at its first row.
 
 :class:`SensorParts` is optional and reads only what is there (``getattr``): a scene with
 ``[[sensor]]`` star trackers gets each head's boresight and the cone of its sun exclusion, drawn
-green while the head is valid and red while it is not (``st_valid_<head>``); rows with the
+green while the head is valid, red while it has dropped out and grey before its first valid
+sample (``st_valid_<head>``); rows with the
 estimation error ``est_err_{x,y,z}_deg`` get the estimated attitude as a ghost triad beside the
 true body axes, its error magnified :data:`GHOST_MAGNIFY` times (the errors are arc-seconds).
 """
@@ -47,6 +48,8 @@ GHOST_MAGNIFY = 1000.0
 #: points on the rim of an exclusion cone
 CONE_POINTS = 33
 RGB_VALID, RGB_BLIND, RGB_GHOST = (60, 200, 90), (230, 40, 40), (200, 200, 255)
+#: a head before its first valid sample (it has measured nothing yet: not blinded)
+RGB_NO_SAMPLE = (150, 150, 150)
 
 
 def event_columns(columns) -> list[str]:
@@ -226,6 +229,7 @@ class SensorParts:
         self.ghost = all(f"est_err_{a}_deg" in columns for a in "xyz")
         self.valid_cols = {n: f"st_valid_{n}" for n, _, _ in heads if f"st_valid_{n}" in columns}
         self._valid = {}
+        self._seen = {}  # a head's valid sample came in an earlier batch
 
     @classmethod
     def of(cls, scene, columns, L) -> SensorParts | None:
@@ -262,11 +266,12 @@ class SensorParts:
             send("world/station/estimate", rr.Transform3D.columns(quaternion=_rotvec_xyzw(-GHOST_MAGNIFY * err)))
         for name, col in self.valid_cols.items():
             v = rows[col]
+            drop, self._seen[name] = st_dropouts(np.nan_to_num(v), self._seen.get(name, False))
             for i in range(len(v)):
-                ok = bool(v[i] >= 0.5)
-                if self._valid.get(name) != ok:
-                    self._valid[name] = ok
-                    color = RGB_VALID if ok else RGB_BLIND
+                state = RGB_VALID if v[i] >= 0.5 else RGB_BLIND if drop[i] else RGB_NO_SAMPLE
+                if self._valid.get(name) != state:
+                    self._valid[name] = state
+                    color = state
                     rec.set_time(TIMELINE, duration=float(rows.t[i]))
                     ent = f"world/station/sensors/{name}"
                     rec.log(f"{ent}/boresight", rr.Arrows3D.from_fields(colors=[color]))
