@@ -361,3 +361,32 @@ def test_recording_of_the_estimated_run_before_the_first_sample(est_run, tmp_pat
 
     got = sorted((t, rgb(c)) for t, c in rows["world/station/sensors/st1/boresight"])
     assert got == [(0.0, RGB_NO_SAMPLE), (first[0], RGB_VALID), (drop1, RGB_BLIND)]
+
+
+def test_gravity_gradient_column_of_the_fused_closed_loop_with_arrays(est_run):
+    """The estimated hold (fused flight loop, two sun-tracking arrays): ``tau_gg`` is the hand
+    torque with the inertia about O of the body and both arrays at their logged joint angles,
+    ``I = I_body + Σ (C_BP I_P C_BPᵀ + m (|r|² E - r rᵀ))``, ``C_BP`` the active rotation by α
+    about y then by β about x (TP-2511 Eq. 35-38); the arrays' products of inertia are most of
+    this torque, so leaving them out misses by ~3 N m."""
+    tr = Trajectory.from_csv(est_run / "trajectory.csv")
+    r = R_EARTH_M + 400e3
+    n2 = MU_M3_S2 / r**3
+    inc = 0.9006  # rad, u0 = 0
+    I_body = np.diag([1.02e8, 0.91e8, 1.64e8])  # kg m²
+    I_P, m_P = np.diag([1.0e6, 9.8e5, 3.0e4]), 2200.0  # kg m², kg per array pair
+    truth = []
+    for k, (t, q) in enumerate(zip(tr.t, tr.cols("qw", "qx", "qy", "qz"))):
+        I = I_body.copy()
+        for name, y in (("stbd_pair", 38.0), ("port_pair", -38.0)):  # m, the pairs' mass centres on y_B
+            C_BP = (Rotation.from_rotvec([0.0, tr[f"alpha_{name}"][k], 0.0]).as_matrix()
+                    @ Rotation.from_rotvec([tr[f"beta_{name}"][k], 0.0, 0.0]).as_matrix())
+            rv = np.array([0.0, y, 0.0])
+            I += C_BP @ I_P @ C_BP.T + m_P * (rv @ rv * np.eye(3) - np.outer(rv, rv))
+        u = math.sqrt(n2) * t
+        R_N = np.array([math.cos(u), math.sin(u) * math.cos(inc), math.sin(u) * math.sin(inc)])
+        R_B = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix().T @ R_N
+        truth.append(3.0 * n2 * np.cross(R_B, I @ R_B))
+    got = tr.cols("tau_gg_x", "tau_gg_y", "tau_gg_z")
+    assert np.abs(got).max() > 1.0  # N m
+    assert_allclose(got, np.array(truth), rtol=0, atol=GG_TOL_NM)
