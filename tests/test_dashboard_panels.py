@@ -283,14 +283,20 @@ def test_two_comparisons_write_two_files(est_run, tmp_path, capsys):
 
 
 # -- thrusters in the recording ----------------------------------------------------------------
-def test_recording_lights_the_thrusters_that_fired(tmp_path):
+@pytest.fixture(scope="module")
+def thr_run(tmp_path_factory):
+    """The thruster-assist scene's first 100 s (no firing yet: the test puts firings in)."""
+    out = tmp_path_factory.mktemp("thr") / "thr"
+    assert main(["run", str(THRUST), "-q", "--out", str(out), "--duration", "100"]) == 0
+    return out
+
+
+def test_recording_lights_the_thrusters_that_fired(thr_run, tmp_path):
     rerun_chunk = pytest.importorskip("rerun.chunk")
     from stationbed.output.rerun.recording import write_recording
 
     scene = load_scene(THRUST)
-    out = tmp_path / "thr"
-    assert main(["run", str(THRUST), "-q", "--out", str(out), "--duration", "100"]) == 0
-    tr = Trajectory.from_csv(out / "trajectory.csv")
+    tr = Trajectory.from_csv(thr_run / "trajectory.csv")
     names = [t.name for t in scene.thruster]
     cols = dict(zip(tr.columns, tr.data.T.copy()))
     on = np.zeros((len(tr), len(names)))
@@ -390,3 +396,27 @@ def test_gravity_gradient_column_of_the_fused_closed_loop_with_arrays(est_run):
     got = tr.cols("tau_gg_x", "tau_gg_y", "tau_gg_z")
     assert np.abs(got).max() > 1.0  # N m
     assert_allclose(got, np.array(truth), rtol=0, atol=GG_TOL_NM)
+
+
+def test_recording_has_a_thrusters_tab_and_no_thruster_column_left_over(thr_run, tmp_path):
+    """The thr_* columns get entities of their own (none in ``telemetry/extra``) shown in a
+    "thrusters" tab, the firings total large; the logged totals equal the CSV's."""
+    pytest.importorskip("rerun.chunk")
+    from test_rerun import read_temporal
+    from test_rerun_blueprint import TABS, blueprint_tree
+
+    from stationbed.output.rerun.recording import write_recording
+
+    scene = load_scene(THRUST)
+    tr = Trajectory.from_csv(thr_run / "trajectory.csv")
+    path = write_recording(tr, scene, tmp_path / "t.rrd")
+    data = read_temporal(path)
+    assert not [e for e in data if e.startswith("telemetry/extra/thr_")]
+    assert_allclose(data["telemetry/thrusters/propellant_kg"]["Scalars:scalars"].ravel(), tr["thr_propellant_kg"], rtol=0, atol=0)
+    assert_allclose(data["telemetry/thrusters/on_s"]["Scalars:scalars"],
+                    tr.cols(*(f"thr_on_s_{t.name}" for t in scene.thruster)), rtol=0, atol=0)
+    root, containers, views = blueprint_tree(path)
+    (tab_box,) = [c for c in containers.values() if c["kind"] == TABS]
+    tabs = {containers[k]["name"]: containers[k] for k in tab_box["contents"]}
+    assert "thrusters" in tabs and "other" not in tabs
+    assert views[tabs["thrusters"]["contents"][0]][1] == "thruster firings (total)"
