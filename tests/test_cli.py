@@ -26,7 +26,8 @@ def test_run_writes_contract_csv(tmp_path):
     assert res.returncode == 0, res.stderr
     tr = Trajectory.from_csv(tmp_path / "trajectory.csv")
     assert tr.columns[:12] == CONTRACT
-    assert tr.columns[12:] == ["alpha_stbd", "beta_stbd", "alpha_port", "beta_port"]
+    # after the contract: the arrays' angles, then the gravity-gradient torque (issue 32)
+    assert tr.columns[12:] == ["alpha_stbd", "beta_stbd", "alpha_port", "beta_port", "tau_gg_x", "tau_gg_y", "tau_gg_z"]
     assert np.allclose(tr.t, np.arange(0, 601, 10.0))
     s = load_scene(scene)
     assert tr["alpha_stbd"][-1] == pytest.approx(s.appendage[0].alpha.rate * 600.0)

@@ -153,7 +153,7 @@ def iss_run(tmp_path_factory):
     """The ISS scene (orbit, two arrays), 3000 s, streamed through an RrdSink batch by batch."""
     scene = load_scene(ISS)
     path = tmp_path_factory.mktemp("rrd") / "iss.rrd"
-    with RrdSink(scene, path, base_columns(scene.appendage_names)) as sink:
+    with RrdSink(scene, path, trajectory_columns(scene)) as sink:  # base columns and tau_gg (issue 32)
         traj = simulate(scene, duration=3000.0, sink=sink)
     return scene, traj, path, read_temporal(path)
 
@@ -174,6 +174,7 @@ def test_entity_tree(iss_run):
         "telemetry/T",
         "telemetry/arrays/stbd_pair",
         "telemetry/arrays/port_pair",
+        "telemetry/environment/tau_gg_B",
     }
     assert temporal <= set(data)
     static = {
@@ -201,8 +202,9 @@ def test_row_counts_and_times_match_trajectory(iss_run):
         ("telemetry/omega_BN_B", ["wx", "wy", "wz"]),
         ("telemetry/T", ["T"]),
         ("telemetry/arrays/stbd_pair", ["alpha_stbd_pair", "beta_stbd_pair"]),
+        ("telemetry/environment/tau_gg_B", ["tau_gg_x", "tau_gg_y", "tau_gg_z"]),
     ],
-    ids=["omega", "T", "array_angles"],
+    ids=["omega", "T", "array_angles", "gravity_gradient"],
 )
 def test_logged_series_equal_trajectory(iss_run, entity, columns):
     _, traj, _, data = iss_run

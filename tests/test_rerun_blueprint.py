@@ -112,7 +112,7 @@ def test_open_loop_opens_on_its_attitude_tab(tmp_path):
     root, containers, views = blueprint_tree(path)
     tabs = []
     shares = height_shares(root, containers, tabs=tabs)
-    assert tabs == ["attitude", "momentum & CMGs", "arrays"]
+    assert tabs == ["attitude", "momentum & CMGs", "environment torques", "arrays"]  # gravity gradient's tau_gg_B (issue 32)
     (tab_box,) = [c for c in containers.values() if c["kind"] == TABS]
     assert containers[tab_box["active"]]["name"] == "attitude"
     assert {v for v, (cls, _) in views.items() if cls == "TimeSeries"} <= set(shares)

@@ -54,7 +54,7 @@ def add_parsers(sub) -> None:
     pl.add_argument("--png", type=Path, default=None, help="output file (default: OUTDIR/dashboard.png)")
     cp = sub.add_parser("compare", help="overlay runs and print their metrics (the Monte Carlo's definitions)")
     cp.add_argument("outdirs", type=Path, nargs="+")
-    cp.add_argument("--png", type=Path, default=None, help="output file (default: compare.png in the first folder's parent)")
+    cp.add_argument("--png", type=Path, default=None, help="output file (default: compare_<A>_vs_<B>_<hash>.png in the first folder's parent, one per set of runs)")
     cp.add_argument("--settle", type=_seconds(), default=None, help="settling time for the metrics [s] (default: the metrics' own)")
 
 

@@ -5,7 +5,9 @@ and the Monte Carlo use) with one column per run."""
 
 from __future__ import annotations
 
+import hashlib
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +18,21 @@ from ..run.trajectory import Trajectory
 from .dashboard import capacity_Nms, load_run, run_state, time_axis
 from .signals import relative_rate
 
-__all__ = ["compare", "metrics_table", "settled_metrics", "metric_scope", "WHOLE_RUN"]
+__all__ = ["compare", "metrics_table", "settled_metrics", "metric_scope", "WHOLE_RUN", "default_png"]
+
+#: the run folders' names in a default file name are cut to this many characters in all
+NAMES_MAX_CHARS = 80
+
+
+def default_png(outdirs) -> Path:
+    """The comparison's own file in the first folder's parent: ``compare_<A>_vs_<B>..._<hash>.png``,
+    the folders' names and 8 hex digits of the SHA-256 of their resolved paths (in order). The
+    same comparison writes the same file again; another (other runs, or the same names in other
+    folders) never replaces it."""
+    paths = [Path(d).resolve() for d in outdirs]
+    names = "_vs_".join(re.sub(r"[^A-Za-z0-9._-]+", "-", p.name) for p in paths)[:NAMES_MAX_CHARS]
+    tag = hashlib.sha256("\0".join(map(str, paths)).encode()).hexdigest()[:8]
+    return paths[0].parent / f"compare_{names}_{tag}.png"
 
 
 def _fmt(v) -> str:
@@ -112,7 +128,8 @@ def compare(outdirs, png=None, settle_s: float | None = None) -> tuple[str, Path
     ----------
     outdirs : list of paths  Run folders (trajectory.csv, or the partial rows of a failed run, and
         summary.json).
-    png : path, optional  Output file (default: ``compare.png`` in the first folder's parent).
+    png : path, optional  Output file (default: :func:`default_png`, named for the runs compared,
+        in the first folder's parent).
     settle_s : float, optional  Settling time [s]: every metric of the rows (max, RMS, min) is
         taken over the rows at ``t >= settle_s`` (None: all rows); the table says which.
 
@@ -142,7 +159,7 @@ def compare(outdirs, png=None, settle_s: float | None = None) -> tuple[str, Path
     if notes:
         table += "\n" + "\n".join(notes)
     plt = pyplot()
-    png = Path(png) if png is not None else Path(outdirs[0]).resolve().parent / "compare.png"
+    png = Path(png) if png is not None else default_png(outdirs)
     with np.errstate(all="ignore"):  # NaN rows are gaps
         panels = [(title, [get(tr, meta) for tr, meta in runs]) for title, get in _panels(runs)]
     t_end = max(float(tr.t[-1]) for tr, _ in runs)

@@ -14,7 +14,12 @@
   centre: what the cluster gains the body loses), with ``dh/dt`` by central differences of the
   rows (so each value is the mean over two output intervals; a command held at 10 Hz is sampled
   at the row). Beside ``tau_cmd``, it shows what the steering law and the limits let through.
+* :func:`cmg_limit_kinds` - what a row's ``cmg_saturated`` flag was: the cluster's momentum
+  saturated or only a gimbal-rate (an ideal cluster's torque) limit. The flag is set for either
+  since the previous row; the momentum is saturated where the working units' ``|h|`` reaches the
+  run's threshold (``saturation_fraction`` of the capacity, summary.json ``h_saturation_Nms``).
 """
+
 
 from __future__ import annotations
 
@@ -22,7 +27,8 @@ import numpy as np
 
 from ..core.rotation import dcm, quat_conj, quat_mult, rotation_vector
 
-__all__ = ["ERR_AXES", "relative_rate", "h_fraction", "delivered_torque", "rate_of_change"]
+__all__ = ["ERR_AXES", "relative_rate", "h_fraction", "delivered_torque", "rate_of_change", "cmg_limit_kinds",
+           "CMG_NO_LIMIT", "CMG_RATE_LIMIT", "CMG_MOMENTUM_SATURATED", "cmg_limit_name"]
 
 #: the logged attitude error's axes (the rotation vector of q_BR in B) [deg]
 ERR_AXES = ("att_err_x_deg", "att_err_y_deg", "att_err_z_deg")
@@ -93,3 +99,54 @@ def delivered_torque(tr) -> np.ndarray | None:
         return None
     h = tr.cols("hx", "hy", "hz")
     return -(rate_of_change(tr.t, h) + np.cross(tr.cols("wx", "wy", "wz"), h))
+
+
+#: the kinds of a row's CMG limit flag (:func:`cmg_limit_kinds`)
+CMG_NO_LIMIT, CMG_RATE_LIMIT, CMG_MOMENTUM_SATURATED = 0, 1, 2
+#: |h| within this fraction below the threshold counts as reaching it: the flag compares the
+#: tick's |h| with the threshold in double precision, the row gives the same state's h to 17
+#: digits, and the norm is taken again here (a few ulp)
+H_SAT_REL_TOL = 1e-9
+
+
+def cmg_limit_name(gimballed: bool) -> str:
+    """What limits a cluster short of its momentum saturation: the gimbal rates, or (an ideal
+    cluster) the torque."""
+    return "gimbal-rate limit" if gimballed else "torque limit"
+
+
+def cmg_limit_kinds(flag, h_Nms, h_sat_Nms: float | None, h_before_Nms: float = np.nan,
+                    ticks: tuple[int, int] | None = None) -> np.ndarray:
+    """The kind of each row's CMG limit flag: :data:`CMG_NO_LIMIT`, :data:`CMG_RATE_LIMIT` or
+    :data:`CMG_MOMENTUM_SATURATED`.
+
+    Parameters
+    ----------
+    flag : ndarray, shape (k,)  The rows' ``cmg_saturated`` (1: a limit at a tick since the previous row).
+    h_Nms : ndarray, shape (k,)  The working units' ``|h|`` at each row [N m s].
+    h_sat_Nms : float or None  The momentum threshold of saturation [N m s] (None or inf: the
+        cluster cannot saturate, every flag is a rate or torque limit).
+    h_before_Nms : float  ``|h|`` of the row before the first (a recording's earlier batch) [N m s].
+    ticks : (rate_limited_ticks, momentum_saturated_ticks), optional  The run's counts: a run
+        with no saturated tick has only rate limits, one with no rate-limited tick only saturation.
+
+    Returns
+    -------
+    ndarray of int, shape (k,)
+        A flagged row is saturated when |h| reached the threshold at it or at the row before
+        (the ticks between them are the ones the flag covers), else rate (torque) limited.
+    """
+    flag = np.asarray(flag, float) >= 0.5
+    h = np.asarray(h_Nms, float)
+    reached = np.zeros(len(h), bool)
+    if h_sat_Nms is not None and np.isfinite(h_sat_Nms):
+        at = h >= h_sat_Nms * (1.0 - H_SAT_REL_TOL)
+        before = np.r_[h_before_Nms, h[:-1]] >= h_sat_Nms * (1.0 - H_SAT_REL_TOL) if len(h) else at
+        reached = at | before
+    if ticks is not None:
+        rate_ticks, sat_ticks = ticks
+        if not sat_ticks:
+            reached[:] = False
+        elif not rate_ticks:
+            reached[:] = True
+    return np.where(flag, np.where(reached, CMG_MOMENTUM_SATURATED, CMG_RATE_LIMIT), CMG_NO_LIMIT)

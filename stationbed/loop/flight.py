@@ -43,7 +43,7 @@ from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
 from .suite import Suite, SuiteNoise
 
-__all__ = ["Flight", "INIT_STREAM", "READS", "SEEN", "flight_columns"]
+__all__ = ["Flight", "INIT_STREAM", "READS", "SEEN", "flight_columns", "st_dropouts"]
 
 #: the fields of the executor's measurement the tick reads (the truth row is made of them)
 READS = ("q_BN", "omega_BN_B", "r_N", "sun_N")
@@ -240,6 +240,25 @@ def flight_columns(scene) -> list[str]:
         cols += [f"est_err_{a}_deg" for a in "xyz"] + [f"est_3sigma_{a}_deg" for a in "xyz"]
         cols += [f"est_bias_{a}" for a in "xyz"] + ["nees"]
     return cols + [f"st_valid_{s.name}" for s in getattr(scene, "sensor", []) if s.kind == "star_tracker"]
+
+
+def st_dropouts(valid, seen: bool = False) -> tuple[np.ndarray, bool]:
+    """Which rows of a head's ``st_valid_<name>`` are dropouts: invalid after the head's first
+    valid sample. Before it the head has delivered nothing yet (its first sample comes one
+    period, plus its latency, after t = 0: the rows there read 0), which is not a dropout.
+
+    Parameters
+    ----------
+    valid : ndarray, shape (k,)  The rows' flag (1 valid, 0 not).
+    seen : bool  A valid sample came in an earlier batch of rows.
+
+    Returns
+    -------
+    (mask (k,) of bool, seen after these rows)
+    """
+    ok = np.asarray(valid, float) >= 0.5
+    since = np.logical_or.accumulate(ok) | seen if len(ok) else ok
+    return ~ok & since, bool(since[-1]) if len(ok) else seen
 
 
 #: the tick, the suite and the filter are inlined where they are called (an MX call copies its

@@ -499,15 +499,18 @@ class StationModel:
 
     def environment_outputs(self, t, q_BN, xe, p) -> list:
         """``(name, casadi)`` pairs for the trajectory: each kind's torque with an ``output`` stem
-        (B components [N m]) and, with an eclipse model, the shadow fraction ``eclipse``."""
+        (B components [N m]; gravity gradient with the rigid total inertia about O, :meth:`inertia`)
+        and, with an eclipse model, the shadow fraction ``eclipse``."""
         outs = []
         orbit = self.orbit_at(t, p) if self.structure.orbit else None
-        if self.needs_arrays:
-            env = self.environment(q_BN, orbit, p, self.arrays(t, q_BN, xe, p))
-            for kind in self.torques:
-                if kind.output:
-                    p_k = p[self.layout[kind.kind]] if kind.n_par else None
-                    outs.append((kind.output, kind.torque_B(t, q_BN, None, p_k, orbit, env)))
+        shown = [k for k in self.torques if k.output]
+        if shown:
+            arrays = self.arrays(t, q_BN, xe, p)
+            env = self.environment(q_BN, orbit, p, arrays) if self.needs_arrays else None
+            I_O_B = self.inertia(t, p, arrays)  # the rigid total about O (gravity gradient)
+            for kind in shown:
+                p_k = p[self.layout[kind.kind]] if kind.n_par else None
+                outs.append((kind.output, kind.torque_B(t, q_BN, I_O_B, p_k, orbit, env)))
         if self.structure.eclipse:
             outs.append(("eclipse", self.shadow(orbit, p)))
         return outs

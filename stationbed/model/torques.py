@@ -284,6 +284,7 @@ class GravityGradient(TorqueKind):
     conservative = True
     key_tag = "g"
     key_always = True
+    output = "tau_gg"  # per row, B components [N m] (the disturbance panel of ``stationbed plot``)
 
     @classmethod
     def _present(cls, scene) -> bool:

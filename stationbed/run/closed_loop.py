@@ -529,6 +529,8 @@ class ControlLoop:
             rs.h_capacity_Nms = self.capacity
             if math.isfinite(self.capacity):
                 out["h_capacity_Nms"] = float(self.capacity)  # the working units'
+                # |h| at which a tick counts as momentum saturated (the dashboard tells it from a rate limit)
+                out["h_saturation_Nms"] = float(comp.scene.cmg.saturation_fraction * self.capacity)
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
         out.update(rs.values())

@@ -99,6 +99,9 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols += thruster_columns(scene)  # thrusters (issue 21)
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
+    for kind in TORQUES.values():  # kinds the scene names outside [[torque]] (gravity gradient: [orbit])
+        if kind.output and kind.scene_model is None and kind.present(scene):
+            cols += [f"{kind.output}_{c}" for c in "xyz"]
     for t in scene.torque:  # environment torques (issue 14), B components [N m]
         if TORQUES[t.kind].output:
             cols += [f"{TORQUES[t.kind].output}_{c}" for c in "xyz"]

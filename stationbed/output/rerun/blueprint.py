@@ -1,7 +1,7 @@
 """Blueprints (the viewer's layout), stored in the recording's file as a blueprint store.
 
 A run (issue 24): the 3-D view above the events log (when the rows have a flag it watches), beside one tab per question (attitude;
-momentum & CMGs; environment torques; arrays; estimation; elastic modes), the most important
+momentum & CMGs; environment torques; arrays; estimation; thrusters; elastic modes), the most important
 panel of each tab large and the others below it, each panel only when its series are logged and
 each tab only when it has a panel; the viewer opens on the attitude tab. A check: the formulations' rates and attitudes
 overlaid, beside their pairwise differences and the check's tolerances.
@@ -84,14 +84,19 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
                         ("CMG singularity measure, saturated (0/1)", "telemetry/cmg",
                          some(("telemetry/cmg/singularity", "telemetry/cmg/saturated"))),
                         ("T [J]", "telemetry/T", None)))
-    environment = present((("environment torques tau_aero_B, tau_srp_B [N m]", "telemetry/environment",
-                            some(("telemetry/environment/tau_aero_B", "telemetry/environment/tau_srp_B"))),
+    environment = present((("environment torques tau_gg_B, tau_aero_B, tau_srp_B [N m]", "telemetry/environment",
+                            some(("telemetry/environment/tau_gg_B", "telemetry/environment/tau_aero_B",
+                                  "telemetry/environment/tau_srp_B"))),
                            ("lit fraction of the sun (eclipse)", "telemetry/environment/eclipse", None)))
     arrays = present((("array angles [rad]", "telemetry/arrays",
                        some(f"telemetry/arrays/{n}" for n in names)),
                       ("array sun-tracking error [deg]", "telemetry/arrays",
                        some(f"telemetry/arrays/{n}/track_err_deg" for n in names))))
     estimation = _estimation(plot, have)
+    thrusters = present((("thruster firings (total)", "telemetry/thrusters/firings", None),
+                         ("propellant [kg] (total)", "telemetry/thrusters/propellant_kg", None),
+                         ("momentum dump, thruster-only control (0/1)", "telemetry/thrusters/state", None),
+                         ("on-time per thruster [s] (total)", "telemetry/thrusters/on_s", None)))
     elastic = present(tuple((name, "telemetry/modes", some(f"telemetry/modes/{n}/{what}" for n in counts))
                             for name, what in (("modal coordinates eta (beam modes: tip deflection [m])", "eta"),
                                                ("modal rates etadot", "etadot")))
@@ -102,7 +107,8 @@ def run_blueprint(scene, extra=(), duration: float | None = None):
     events = rrb.TextLogView(name="events (saturation, eclipse, star-tracker dropouts, modes)", origin="events")
     tabs = [(name, views) for name, views in (("attitude", attitude), ("momentum & CMGs", momentum),
                                               ("environment torques", environment), ("arrays", arrays),
-                                              ("estimation", estimation), ("elastic modes", elastic), ("other", other))
+                                              ("estimation", estimation), ("thrusters", thrusters),
+                                              ("elastic modes", elastic), ("other", other))
             if views]
     left = rrb.Vertical(view3d, events, row_shares=[4, 1]) if event_columns(list(extra)) else view3d
     layout = rrb.Horizontal(left,

@@ -7,7 +7,8 @@ moments of the body and of each array (:mod:`.geometry`); the LVLH triad ``world
 and the Earth (nadir) direction; the total angular momentum ``H_O_N`` as an arrow; the orbit as a
 ring (scaled, Earth-centred) with a dot at the station's argument of latitude; the (inertially
 fixed) sun direction with a ``[sun]``; the CMG cluster's arrows (:mod:`.cmg_arrows`) and the bent
-centre lines of flexible arrays (:mod:`.elastic`). Rerun stores the rotations as float32
+centre lines of flexible arrays (:mod:`.elastic`); the attitude thrusters, lit while they fire
+(:mod:`.thruster_arrows`). Rerun stores the rotations as float32
 quaternions (~6e-8 resolution).
 """
 
@@ -25,6 +26,7 @@ from .frames import R_N_over_a, sun_vector_N, xyzw, xyzw_C_BP, xyzw_C_NO, xyzw_o
 from .geometry import StationGeometry
 from .sdk import TIMELINE, import_rerun
 from .surfaces import drawn_surfaces
+from .thruster_arrows import ThrusterArrows
 
 __all__ = ["StationDrawing"]
 
@@ -70,8 +72,9 @@ class StationDrawing:
         self.cmg = CmgArrows.of(scene, columns, self.geom)
         self.elastic = ElasticLines.of(scene, columns, self.geom.extent)
         self.surfaces = drawn_surfaces(scene, self.geom)
-        self.events = Events(columns)
+        self.events = Events.of(scene, columns)
         self.sensors = SensorParts.of(scene, columns, self.geom.extent)
+        self.thrusters = ThrusterArrows.of(scene, columns, self.geom)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
 
     def log_static(self, rec) -> None:
@@ -110,6 +113,8 @@ class StationDrawing:
                 rec.log(f"world/station/{name}", _boxes([(None, half, C_PA)], RGB_ARRAY, labels=[name]), static=True)
         if self.sensors is not None:
             self.sensors.log_static(rec)
+        if self.thrusters is not None:
+            self.thrusters.log_static(rec)
         if self.elastic is not None:
             self.elastic.log_static(rec)
         if scene.orbit is not None:
@@ -191,6 +196,8 @@ class StationDrawing:
             self.cmg.send(send, rows)
         if self.sensors is not None:
             self.sensors.send(rec, send, rows)
+        if self.thrusters is not None:
+            self.thrusters.send(rec, rows)
         for t, _, text in self.events.send(rec, rows):  # the sun's arrow greys out in the Earth's shadow
             if scene.sun is not None and text in ("eclipse entry", "eclipse exit"):
                 rec.set_time(TIMELINE, duration=t)

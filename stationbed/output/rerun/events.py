@@ -3,19 +3,25 @@
 :class:`Events` turns the rows' flags into ``events`` text-log entries at the time they change
 (rerun ``TextLog``: the viewer's time panel shows each as a marker, the log view lists them):
 
-* ``cmg_saturated`` 0 -> 1 "CMG saturation begins" (WARN), 1 -> 0 "ends";
+* ``cmg_saturated``, named for what it was (:func:`~stationbed.analysis.signals.cmg_limit_kinds`:
+  the flag is set for either): "CMG momentum saturation begins" (WARN) / "ends" where the working
+  units' |h| reached the saturation threshold (``saturation_fraction`` of the capacity), else
+  "CMG gimbal-rate limit begins" (WARN) / "ends" (an ideal cluster: "CMG torque limit");
 * ``eclipse`` (lit fraction of the sun) leaving 1: "eclipse entry", back to 1: "eclipse exit";
-* ``st_valid_<head>`` 1 -> 0: "star tracker <head> dropout" (WARN), 0 -> 1: "<head> valid again";
+* ``st_valid_<head>``: "star tracker <head> first valid sample" (INFO), then 1 -> 0 "star tracker
+  <head> dropout" (WARN), 0 -> 1 "<head> valid again"; the rows before the head's first valid
+  sample read 0 (no sample yet) and are not a dropout (:func:`~stationbed.loop.flight.st_dropouts`);
 * a ``mode`` or ``*_mode`` column: "<column> -> <value>" whenever its value changes (``thr_mode``:
   1 = thruster-only control, issue 21);
 * ``thr_dumping`` 0 -> 1 "thruster momentum dump begins", 1 -> 0 "ends" (issue 21).
 
 Rows come in batches (a streamed run): the last value of every flag is kept between batches, and a
-run that starts saturated, in shadow or without a valid head logs that at its first row.
+run that starts saturated or in shadow logs that at its first row.
 
 :class:`SensorParts` is optional and reads only what is there (``getattr``): a scene with
 ``[[sensor]]`` star trackers gets each head's boresight and the cone of its sun exclusion, drawn
-green while the head is valid and red while it is not (``st_valid_<head>``); rows with the
+green while the head is valid, red while it has dropped out and grey before its first valid
+sample (``st_valid_<head>``); rows with the
 estimation error ``est_err_{x,y,z}_deg`` get the estimated attitude as a ghost triad beside the
 true body axes, its error magnified :data:`GHOST_MAGNIFY` times (the errors are arc-seconds).
 """
@@ -26,7 +32,9 @@ import math
 
 import numpy as np
 
+from ...analysis.signals import CMG_MOMENTUM_SATURATED, CMG_RATE_LIMIT, cmg_limit_kinds, cmg_limit_name
 from ...core.rotation import dcm
+from ...loop.flight import st_dropouts
 from .sdk import TIMELINE, import_rerun
 
 __all__ = ["Events", "SensorParts", "event_columns", "GHOST_MAGNIFY", "ECLIPSE_LIT_TOL"]
@@ -40,6 +48,8 @@ GHOST_MAGNIFY = 1000.0
 #: points on the rim of an exclusion cone
 CONE_POINTS = 33
 RGB_VALID, RGB_BLIND, RGB_GHOST = (60, 200, 90), (230, 40, 40), (200, 200, 255)
+#: a head before its first valid sample (it has measured nothing yet: not blinded)
+RGB_NO_SAMPLE = (150, 150, 150)
 
 
 def event_columns(columns) -> list[str]:
@@ -59,19 +69,29 @@ def _state(col: str, v: float):
     return v
 
 
-def _text(col: str, state, first: bool):
-    """(level, text) of a flag entering ``state`` (None: nothing to say)."""
-    if col == "cmg_saturated":
-        return ("WARN", "CMG saturation begins") if state else (None if first else ("INFO", "CMG saturation ends"))
+def _text(col: str, state, first: bool, prev=None):
+    """(level, text) of a flag entering ``state`` from ``prev`` (None: nothing to say)."""
     if col == "eclipse":
         return (None if first else ("INFO", "eclipse exit")) if state else ("INFO", "eclipse entry")
     if col == "thr_dumping":
         return ("INFO", "thruster momentum dump begins") if state else (None if first else ("INFO", "thruster momentum dump ends"))
-    if col.startswith("st_valid_"):
+    if col.startswith("st_valid_"):  # state: "none" (no valid sample yet), "valid", "dropout"
         head = col.removeprefix("st_valid_")
-        return (None if first else ("INFO", f"star tracker {head} valid again")) if state else \
-            ("WARN", f"star tracker {head} dropout")
+        return {"none": None, "dropout": ("WARN", f"star tracker {head} dropout"),
+                "valid": None if first else ("INFO", f"star tracker {head} "
+                                                     + ("first valid sample" if prev == "none" else "valid again"))}[state]
     return None if first else ("INFO", f"{col} -> {state:g}")
+
+
+def _limit_text(prev: str | None, state: str, first: bool) -> list:
+    """The entries of the CMG limit flag going from ``prev`` to ``state`` ("" no limit, else its
+    name): the old one ends, the new one begins."""
+    out = []
+    if prev and not first:
+        out.append(("INFO", f"{prev} ends"))
+    if state:
+        out.append(("WARN", f"{state} begins"))
+    return out
 
 
 class Events:
@@ -81,6 +101,9 @@ class Events:
     ----------
     columns : list of str
         The rows' columns.
+    cmg : (gimballed, h_sat_Nms or None, h_held_B (3,)), optional
+        The cluster's facts that name its limit flag (:meth:`of` reads them from the scene);
+        without them every flag is a rate limit.
 
     Attributes
     ----------
@@ -92,26 +115,61 @@ class Events:
 
     ENTITY = "events"
 
-    def __init__(self, columns):
+    def __init__(self, columns, cmg=None):
         self.watched = event_columns(columns)
         self._last = {}
         self.log = []
+        self._seen = {}  # a head's valid sample came in an earlier batch
+        self._h_last = math.nan  # the working units' |h| of the previous batch's last row
+        self._cmg = cmg
+        self._h_cols = [c for c in ("hx", "hy", "hz") if c in columns]
+
+    @classmethod
+    def of(cls, scene, columns) -> Events:
+        """The events of a scene's rows: the cluster's saturation threshold and held momentum
+        (failed units) name its limit flag."""
+        cfg = getattr(scene, "cmg", None)
+        if cfg is None:
+            return cls(columns)
+        from ...model.cmg import capacity, cmg_geometry, held_momentum_B
+
+        cap = capacity(cfg)
+        return cls(columns, cmg=(cmg_geometry(cfg).gimballed, cfg.saturation_fraction * cap if math.isfinite(cap) else None,
+                                 held_momentum_B(cfg)))
+
+    def _states(self, col: str, rows) -> list:
+        """The state of ``col`` at each row (None: not a number)."""
+        v = rows[col]
+        if col == "cmg_saturated":  # named for what it was: momentum saturation or the rate limit
+            gimballed, h_sat, h_held = self._cmg or (True, None, np.zeros(3))
+            if len(self._h_cols) == 3:
+                h = np.linalg.norm(rows.cols(*self._h_cols) - h_held, axis=1)
+            else:
+                h = np.full(len(v), math.nan)
+            kinds = cmg_limit_kinds(np.nan_to_num(v), h, h_sat, h_before_Nms=self._h_last)
+            if len(h):
+                self._h_last = float(h[-1])
+            names = {CMG_MOMENTUM_SATURATED: "CMG momentum saturation", CMG_RATE_LIMIT: f"CMG {cmg_limit_name(gimballed)}"}
+            return [None if not math.isfinite(x) else names.get(int(k), "") for x, k in zip(v, kinds)]
+        if col.startswith("st_valid_"):
+            drop, self._seen[col] = st_dropouts(np.nan_to_num(v), self._seen.get(col, False))
+            return [None if not math.isfinite(x) else ("valid" if x >= 0.5 else "dropout" if d else "none")
+                    for x, d in zip(v, drop)]
+        return [_state(col, float(x)) for x in v]
 
     def changes(self, rows) -> list[tuple[float, str, str]]:
         """The entries of ``rows`` (a Trajectory), in time order; updates the kept states."""
         out = []
         t = rows.t
         for col in self.watched:
-            v = rows[col]
-            for i in range(len(t)):
-                s = _state(col, float(v[i]))
+            for i, s in enumerate(self._states(col, rows)):
                 if s is None:
                     continue
                 first = col not in self._last
-                if first or s != self._last[col]:
-                    said = _text(col, s, first)
-                    if said is not None:
-                        out.append((float(t[i]), *said))
+                prev = self._last.get(col)
+                if first or s != prev:
+                    said = _limit_text(prev, s, first) if col == "cmg_saturated" else [_text(col, s, first, prev)]
+                    out += [(float(t[i]), *e) for e in said if e is not None]
                     self._last[col] = s
         out.sort(key=lambda e: e[0])
         return out
@@ -171,6 +229,7 @@ class SensorParts:
         self.ghost = all(f"est_err_{a}_deg" in columns for a in "xyz")
         self.valid_cols = {n: f"st_valid_{n}" for n, _, _ in heads if f"st_valid_{n}" in columns}
         self._valid = {}
+        self._seen = {}  # a head's valid sample came in an earlier batch
 
     @classmethod
     def of(cls, scene, columns, L) -> SensorParts | None:
@@ -207,11 +266,12 @@ class SensorParts:
             send("world/station/estimate", rr.Transform3D.columns(quaternion=_rotvec_xyzw(-GHOST_MAGNIFY * err)))
         for name, col in self.valid_cols.items():
             v = rows[col]
+            drop, self._seen[name] = st_dropouts(np.nan_to_num(v), self._seen.get(name, False))
             for i in range(len(v)):
-                ok = bool(v[i] >= 0.5)
-                if self._valid.get(name) != ok:
-                    self._valid[name] = ok
-                    color = RGB_VALID if ok else RGB_BLIND
+                state = RGB_VALID if v[i] >= 0.5 else RGB_BLIND if drop[i] else RGB_NO_SAMPLE
+                if self._valid.get(name) != state:
+                    self._valid[name] = state
+                    color = state
                     rec.set_time(TIMELINE, duration=float(rows.t[i]))
                     ent = f"world/station/sensors/{name}"
                     rec.log(f"{ent}/boresight", rr.Arrows3D.from_fields(colors=[color]))

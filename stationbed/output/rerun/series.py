@@ -123,7 +123,7 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
         take(f"telemetry/modes/{n}/etadot", [f"etadot_{n}_{k}" for k in ks], [f"{n} etadot_{k}" for k in ks])
     if modes:
         take("telemetry/modes/U_strain", ["U_strain"])
-    for kind in ("aero", "srp"):  # environment torques (issue 14), B components [N m]
+    for kind in ("gg", "aero", "srp"):  # environment torques (issue 14; gravity gradient), B components [N m]
         take(f"telemetry/environment/tau_{kind}_B", [f"tau_{kind}_{c}" for c in "xyz"], ["x", "y", "z"])
     take("telemetry/environment/eclipse", ["eclipse"], ["lit fraction"])
     # sensors and estimator (issue 20): error and its 3 sigma side by side per axis, bias, NEES, heads
@@ -134,6 +134,14 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
     take("telemetry/estimation/nees", ["nees"])
     heads = [c for c in columns if c.startswith("st_valid_")]
     take("telemetry/estimation/st_valid", heads, [c.removeprefix("st_valid_") for c in heads])
+    # thrusters (issue 21): totals since t = 0, the dump and thruster-only flags, each one's on-time
+    take("telemetry/thrusters/firings", ["thr_firings"], ["firings"])
+    take("telemetry/thrusters/propellant_kg", ["thr_propellant_kg"], ["propellant [kg]"])
+    take("telemetry/thrusters/impulse_Ns", ["thr_impulse_Ns"], ["impulse [N s]"])
+    take("telemetry/thrusters/control_s", ["thr_control_s"], ["thruster-only control [s]"])
+    take("telemetry/thrusters/state", ["thr_dumping", "thr_mode"], ["dumping (0/1)", "thruster-only control (0/1)"])
+    on = [c for c in columns if c.startswith("thr_on_s_")]
+    take("telemetry/thrusters/on_s", on, [c.removeprefix("thr_on_s_") for c in on])
     extra = [c for c in columns if c not in used]
     for c in extra:
         out.append(Series(f"telemetry/extra/{c}", (c,), (c,)))
