@@ -155,9 +155,9 @@ def test_mekf_flown_in_the_loop_is_consistent():
             again = trajectory_metrics(tr)
             for k in ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma", "st_dropout_s"):
                 assert summary[k] == pytest.approx(again[k], rel=1e-12), k
-            # the head's first sample comes at t = 1 s: invalid at the row t = 0, valid at 1 s, the
-            # trapezoid between them half a second (its edge placed within output_dt / 2 = 0.5 s)
-            assert summary["st_dropout_s"] == 0.5
+            # the head's first sample comes at t = 1 s: invalid at the row t = 0 before it, which is
+            # no dropout (loop.flight.st_dropouts), valid from 1 s on: no dropout in the run
+            assert summary["st_dropout_s"] == 0.0
     lo, hi = NEES_BAND
     assert lo <= np.mean(nees_end) <= hi, (np.mean(nees_end), NEES_BAND)
     assert lo <= np.mean(nees_mid) <= hi, (np.mean(nees_mid), NEES_BAND)

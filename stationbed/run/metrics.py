@@ -30,9 +30,9 @@ Conventions (issue 32: no metric is a count of output rows, so none scales with 
   uncertainty (the norm of ``est_3sigma`` at the run's first row: P0's 3σ). A filter that is
   outside at its last row never converged: ``est_converged_s`` is inf and the estimation
   metrics are over ``t >= settle_s`` (all rows when None).
-- ``st_dropout_s`` is the time a star-tracker head's held sample is invalid (``st_valid`` 0;
-  a head counts invalid until its first sample), integrated over the whole run and summed over
-  the heads [s].
+- ``st_dropout_s`` is the time a star-tracker head's held sample is invalid (``st_valid`` 0)
+  after its first valid sample (:func:`~stationbed.loop.flight.st_dropouts`: before it the head
+  has delivered nothing yet), integrated over the whole run and summed over the heads [s].
 - ``max_torque_cmd_Nm`` is the largest ``|(tau_cmd_x, tau_cmd_y, tau_cmd_z)|`` over the rows
   (NaN rows, e.g. a gimbal-rate law's, ignored).
 - A metric whose columns the run does not have, or that saw no usable row, is absent from
@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.linalg import row_norms
+from ..loop.flight import st_dropouts
 
 __all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics", "CONVERGED_FRACTION", "ESTIMATION_WINDOW"]
 
@@ -299,6 +300,7 @@ class RunMetrics:
         self.orbit_period_s = orbit_period_s
         self._est_red = _Estimation() if self._est is not None else None
         self._dropout = _TimeIntegral()  # heads invalid, over the run
+        self._st_seen = [False] * len(self._st)  # a head's first valid sample came (st_dropouts)
         self.n_rows = 0
         self.last = None
         self.rate_limited_ticks = self.momentum_saturated_ticks = None
@@ -330,7 +332,11 @@ class RunMetrics:
         if self._est is not None:
             self._est_red.add(t, rows[:, self._est], rows[:, self._s3], rows[:, self._nees], settled)
         if self._st:
-            self._dropout.add(t, (rows[:, self._st] < 0.5).sum(axis=1, keepdims=True).astype(float))
+            drops = np.zeros((len(rows), 1))
+            for j, c in enumerate(self._st):
+                d, self._st_seen[j] = st_dropouts(rows[:, c], self._st_seen[j])
+                drops[:, 0] += d
+            self._dropout.add(t, drops)
         if self._tau is not None:
             tau = row_norms(rows[:, self._tau])
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))

@@ -107,7 +107,7 @@ _NEEDS = {
     **dict.fromkeys(("rate_limited_ticks", "momentum_saturated_ticks"), "a [controller] flying a [cmg]"),
     **dict.fromkeys(("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma"),
                     "an [estimator] (with its [[sensor]] tables)"),
-    "st_dropout_rows": "[[sensor]] star trackers",
+    "st_dropout_s": "[[sensor]] star trackers",
     **dict.fromkeys(("propellant_kg", "thruster_firings", "thruster_control_s", "thruster_impulse_Ns"),
                     "[[thruster]] tables"),
     "propellant_kg_per_orbit": "[[thruster]] tables and an [orbit]",
