@@ -85,7 +85,7 @@ def drawn_surfaces(scene, geom) -> list[DrawnSurface]:
     """
     boxes = {name: (half, C) for name, _, half, C in geom.arrays}
     out = []
-    for i, s in enumerate(getattr(scene, "surface", None) or []):
+    for i, s in enumerate(getattr(scene, "surfaces", None) or []):
         name = s.name or f"surface_{i}"
         centre = np.asarray(s.centre, float)
         if s.on == "body":
