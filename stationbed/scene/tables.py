@@ -258,7 +258,7 @@ class Appendage(Body):
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
     inertia: Mat3 | None = None
     wing: Wing | None = None
-    _J_P: np.ndarray | None = PrivateAttr(default=None)
+    _J_P: tuple | None = PrivateAttr(default=None)  # rows (a tuple: scenes compare equal by value)
     alpha: Joint = Field(default_factory=Profile)  # (a table of its own per scene: scene/knowledge.py)
     beta: Joint = Field(default_factory=Profile)
     mode: list[Mode] = []
@@ -271,7 +271,7 @@ class Appendage(Body):
     @property
     def inertia_P(self) -> np.ndarray:
         """The inertia about its mass centre [kg m²], P axes, (3, 3): ``inertia`` or the wing's."""
-        return self._J_P.copy()
+        return np.array(self._J_P, float)
 
     @model_validator(mode="after")
     def _derived(self):
@@ -279,14 +279,15 @@ class Appendage(Body):
             raise FieldError("wing" if self.wing is not None else "inertia",
                              "give 'inertia' (P axes) or 'wing' (the array once: its inertia, plate and beams "
                              "derived), " + ("not both" if self.wing is not None else "one of them is missing"))
-        self._J_P = np.array(self.inertia, float) if self.wing is None else self.wing.inertia_P(self.mass)
+        J = np.array(self.inertia, float) if self.wing is None else self.wing.inertia_P(self.mass)
+        self._J_P = tuple(map(tuple, J.tolist()))
         for i, m in enumerate(self.mode):
             if m.wing is not None:
                 if self.wing is None:
                     raise FieldError(f"mode[{i}].wing", f"bends a wing: '{self.name}' declares none (add wing = {{...}})")
                 m._wing_beam = Beam(**wing_beam(self.wing, m.wing, self.mass))
         if self.mode:
-            left = check_participation(self.mass, self._J_P, [m.integrals(self.mass) for m in self.mode])
+            left = check_participation(self.mass, J, [m.integrals(self.mass) for m in self.mode])
             if left < -PARTICIPATION_TOL:
                 raise ValueError(
                     f"modes of '{self.name}' take more than its mass or inertia (effective-mass residual "
