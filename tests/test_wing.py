@@ -187,3 +187,13 @@ def test_explicit_inertia_and_plate_that_agree_are_accepted(normal, area):
 def test_a_body_without_a_face_takes_any_plate():
     """A cube's inertia names no face: nothing to compare."""
     scene_from_dict(_explicit([0, 0, 1], inertia=[[1.0e5, 0, 0], [0, 1.0e5, 0], [0, 0, 1.0e5]]))
+
+
+def test_wing_plate_is_drawn_at_its_span_and_chord():
+    """The replay draws the wing's plate 2 span x chord, along P x and P y, facing P z."""
+    from stationbed.output.rerun.surfaces import drawn_surfaces
+
+    scene = scene_from_dict(_iss_like())
+    (d,) = [d for d in drawn_surfaces(scene, StationGeometry(scene)) if d.on == "stbd_pair"]
+    assert_allclose(2 * d.half_sizes[:2], [2 * ISS_SPAN_M, ISS_CHORD_M])
+    assert_allclose(np.abs(d.C), np.eye(3), atol=1e-15)  # box axes: P x (along), P y (chord), P z (normal)
