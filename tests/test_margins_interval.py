@@ -94,7 +94,8 @@ def test_iss_lvlh_hold_lower_gain_margins():
         lo, hi = sweep_interval(lambda k: L.A - k * L.B @ L.C)
         assert_allclose(c["gain_margin_down"], lo, rtol=GAIN_RTOL)
         assert c["gain_margin_up"] == hi
-    assert [round(c["gain_margin_down"], 3) for c in la.channels] == [0.142, 0.104, 0.005]
+    # the arrays' inertia since issue 32 (wings facing their plates); [0.142, 0.104, 0.005] before
+    assert [round(c["gain_margin_down"], 3) for c in la.channels] == [0.141, 0.100, 0.005]
 
 
 def synthetic_loop(n_fixed_zero: int):
