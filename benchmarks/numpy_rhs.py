@@ -76,7 +76,7 @@ class Model:
         for a in scene.appendage:
             I0 = I0 + _parallel_axis(float(a.mass), np.asarray(a.cm, dtype=float) - self.O_B)
         self.I0 = I0
-        self.J = [np.asarray(a.inertia, dtype=float) for a in scene.appendage]
+        self.J = [a.inertia_P for a in scene.appendage]
         self.alpha = [_profile(a.alpha) for a in scene.appendage]
         self.beta = [_profile(a.beta) for a in scene.appendage]
 

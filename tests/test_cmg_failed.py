@@ -17,15 +17,19 @@ from stationbed.model.cmg import cmg_geometry
 
 HOLD = "scenarios/iss_lvlh_hold.toml"
 UNIT2 = ["gimbal_2_outer", "gimbal_2_inner"]
-#: a gimbal that "moves" turns by more than this over 300 s [rad] (the working cluster: ~1e-2)
+#: a gimbal that "moves" turns by more than this over the run [rad] (the working cluster: ~1e-2)
 MOVES_RAD = 1e-4
 #: three units deliver the commanded torque as four do (below saturation): same error [deg]
 SAME_RESPONSE_DEG = 1e-3
+#: long enough for the error to fall past 0.7 of its start: it first grows for ~60 s while the
+#: arrays' drives spin up (to 0.560 deg since issue 32's wing inertia; 0.551 before, when 300 s
+#: was enough: 0.341 deg at 300 s, now 0.395)
+DURATION_S = 400.0
 
 
 @pytest.fixture(scope="module")
 def runs():
-    base = load_scene(HOLD).replace({"simulation.duration": 300.0})
+    base = load_scene(HOLD).replace({"simulation.duration": DURATION_S})
     return {"working": simulate(base), "failed": simulate(base.replace({"cmg.failed": [2]}))}
 
 
@@ -45,7 +49,7 @@ def test_the_same_gimbals_move_when_the_unit_works(runs):
 
 def test_three_units_still_hold_attitude(runs):
     # the law's response is set by its bandwidth, not by the cluster: the error falls the same
-    # way with three units (0.534 -> 0.335 deg in 300 s) as with four
+    # way with three units as with four (0.534 -> 0.395 deg in 300 s, 0.534 -> 0.298 deg in 400 s)
     err, ref = runs["failed"]["att_err_deg"], runs["working"]["att_err_deg"]
     assert err[-1] < 0.7 * err[0]
     assert abs(err[-1] - ref[-1]) < SAME_RESPONSE_DEG

@@ -142,10 +142,14 @@ def test_night_glider_turns_the_array_edge_on_in_eclipse():
 
 
 @pytest.mark.slow
-def test_night_glider_scene_grows_less_pitch_momentum_than_tracking():
+def test_night_glider_scene_lowers_drag_but_grows_more_pitch_momentum():
     """scenarios/iss_night_glider.toml and its documented override (night = "track" by --set):
-    parking the arrays edge-on in eclipse lowers the mean pitch drag torque and the orbit-mean
-    growth of the CMG pitch momentum (README: 885 vs 3101 N m s per orbit)."""
+    parking the arrays edge-on in eclipse lowers the mean pitch drag torque, but the orbit-mean
+    growth of the CMG pitch momentum is larger (README: 3697 vs 3077 N m s per orbit). Tracking,
+    a wing's products of inertia in B, ``(J_along - J_normal) sin α cos α``, average out over the
+    orbit; parked edge-on (sin 2α = 0) in eclipse they leave the day side's, whose gravity-gradient
+    pitch torque adds to the drag's for arrays whose face is their largest moment (issue 32: with
+    the face and the mass 90 deg apart it subtracted, and the glider grew 885 against 3101)."""
     glider = load_scene(ROOT / "scenarios" / "iss_night_glider.toml")
     track = glider.replace({"appendage.stbd_pair.alpha.night": "track", "appendage.port_pair.alpha.night": "track"})
     growth, aero = {}, {}
@@ -158,7 +162,7 @@ def test_night_glider_scene_grows_less_pitch_momentum_than_tracking():
         aero[name] = tr["tau_aero_y"].mean()
         assert tr.meta["summary"]["momentum_saturated_ticks"] == 0
     assert aero["glider"] < 0.8 * aero["track"]  # the eclipse is ~36 % of the orbit
-    assert growth["glider"] < 0.5 * growth["track"]
+    assert growth["glider"] > 1.1 * growth["track"]  # measured 1.20: the parked arrays' gravity gradient
 
 
 def test_plates_do_not_depend_on_the_mass_properties():

@@ -95,7 +95,9 @@ def test_iss_lvlh_hold_lower_gain_margins():
         lo, hi = sweep_interval(lambda k: L.A - k * L.B @ L.C)
         assert_allclose(c["gain_margin_down"], lo, rtol=GAIN_RTOL)
         assert c["gain_margin_up"] == hi
-    assert [round(c["gain_margin_down"], 3) for c in la.channels] == [0.143, 0.102, 0.005]
+    # issue 32: the wings facing their plates and the joints on their tracking state at t (0.142,
+    # 0.104, 0.005 before either)
+    assert [round(c["gain_margin_down"], 3) for c in la.channels] == [0.143, 0.102, 0.006]
 
 
 def synthetic_loop(n_fixed_zero: int):

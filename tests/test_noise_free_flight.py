@@ -99,7 +99,7 @@ def test_the_trajectory_differs_from_the_truth_fed_run_within_its_bound(runs):
     P = scene.controller.params
     c, wn = 2.0 * P["damping"] * P["bandwidth"], P["bandwidth"]
     J = np.max(np.linalg.eigvalsh(np.asarray(scene.body.inertia)))
-    J += sum(a.mass * np.dot(a.cm, a.cm) + np.max(np.diag(a.inertia)) for a in scene.appendage)  # arrays' share
+    J += sum(a.mass * np.dot(a.cm, a.cm) + np.max(np.diag(a.inertia_P)) for a in scene.appendage)  # arrays' share
     d_tau = J * (c + 2 * np.linalg.norm(w, axis=1).max()) * delta
     dh = np.linalg.norm(est.cols("hx", "hy", "hz") - fed.cols("hx", "hy", "hz"), axis=1)
     bound = d_tau * t * np.exp((c + wn) * t)

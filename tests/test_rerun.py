@@ -181,7 +181,7 @@ def test_entity_tree(iss_run):
         "world/station/body",
         "world/station/truss",
         "world/station/axes_B",
-        "world/station/stbd_pair",
+        "world/station/stbd_pair/surfaces/stbd_pair_wing",  # a wing is drawn as its plate (issue 32)
         "world/lvlh/axes",
         "world/lvlh/earth",
         "world/orbit/track",

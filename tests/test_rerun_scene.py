@@ -83,8 +83,8 @@ def test_every_surface_is_drawn_at_its_size_and_place(hold):
     scene, _, _, static = hold
     masses = [scene.body.mass] + [a.mass for a in scene.appendage]
     r_cm = sum(m * np.asarray(c, float) for m, c in zip(masses, [scene.body.cm] + [a.cm for a in scene.appendage])) / sum(masses)
-    assert scene.surface  # iss_lvlh_hold names its truss, modules and arrays
-    for s in scene.surface:
+    assert scene.surfaces  # iss_lvlh_hold names its truss and modules; its wings bring their plates
+    for s in scene.surfaces:
         ent = f"world/station/surfaces/{s.name}" if s.on == "body" else f"world/station/{s.on}/surfaces/{s.name}"
         box = static[ent]
         half = np.array(box["Boxes3D:half_sizes"][0])
@@ -105,7 +105,7 @@ def test_array_plates_turn_with_their_joints(hold):
     """The plate's normal in B, from the logged array transform, is C_BP n = Ap(alpha, beta)^T n
     (core.rotation), and it turns over the run (sun tracking)."""
     scene, traj, path, static = hold
-    s = next(s for s in scene.surface if s.on != "body")
+    s = next(s for s in scene.surfaces if s.on != "body")
     n_P = quat_rotate(static[f"world/station/{s.on}/surfaces/{s.name}"]["Boxes3D:quaternions"][0], [0, 0, 1])
     rows = temporal_rows(path, f"world/station/{s.on}")
     assert len(rows) == len(traj)

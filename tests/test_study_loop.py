@@ -47,6 +47,12 @@ def test_files_and_choices(study):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 32: with the wings' inertia facing their plates the first halving gains 2.8x (then 5.4x). "
+    "The whole error comes from the drives' acceleration-limit kinks in the first 10 s (0 with the "
+    "SARJs started at their target rate), and a kink's RK4 error depends on where it falls in the "
+    "step: the old scene gave 4.4x then 1.4x. The claim needs a truth that does not depend on that "
+    "position; kept failing visibly rather than lowered"))
 def test_substeps_converge_at_fourth_order(study):
     _, rows = study
     err = {r["substeps"]: float(r["att_err_rad"]) for r in rows if r["environment_rate"] == "0"}

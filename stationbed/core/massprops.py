@@ -17,6 +17,8 @@ __all__ = [
     "parallel_axis",
     "composite_cm",
     "coriolis_matrix",
+    "wing_pair_inertia",
+    "largest_axis",
 ]
 
 #: Relative rounding allowed when checking symmetry / triangle inequality.
@@ -107,3 +109,46 @@ def coriolis_matrix(I_p):
     except ImportError:  # pragma: no cover
         pass
     return np.trace(I_p) * np.eye(3) - 2.0 * np.asarray(I_p)
+
+
+def wing_pair_inertia(mass: float, span: float, chord: float, offset: float, e_along, e_normal) -> np.ndarray:
+    """Inertia about its mass centre of a wing pair: two uniform thin plates, one each side of it.
+
+    Each wing (``mass / 2``) runs from ``offset`` to ``offset + span`` along ``±e_along`` and is
+    ``chord`` wide along ``e_chord = e_normal × e_along``, centred on that axis; zero thickness
+    along ``e_normal``. With ``x`` the distance along ``e_along``, ``<x²> = ((o + L)³ - o³) / (3 L)``:
+
+    ``I_along = m b² / 12``, ``I_chord = m <x²>``, ``I_normal = I_along + I_chord`` (a thin
+    plate: the triangle inequality met with equality). ``offset = 0`` is one plate ``2 L`` long:
+    ``I_chord = m (2L)² / 12``.
+
+    Parameters
+    ----------
+    mass : float  Both wings [kg].
+    span : float  One wing, root to tip [m].
+    chord : float  Its width [m].
+    offset : float  From the mass centre (the gimbal axis) to each wing's root [m].
+    e_along, e_normal : array_like, shape (3,)  Orthogonal unit vectors, the frame's components.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)  [kg m²], the frame of ``e_along`` (P axes for an array).
+    """
+    e_l, e_n = np.asarray(e_along, float), np.asarray(e_normal, float)
+    e_c = np.cross(e_n, e_l)
+    x2 = ((offset + span) ** 3 - offset**3) / (3.0 * span)
+    I_l, I_c = mass * chord * chord / 12.0, mass * x2
+    return I_l * np.outer(e_l, e_l) + I_c * np.outer(e_c, e_c) + (I_l + I_c) * np.outer(e_n, e_n)
+
+
+def largest_axis(J) -> tuple[np.ndarray, float]:
+    """The principal axis of the largest moment (a plate's normal) and how distinct it is.
+
+    Returns
+    -------
+    axis : ndarray, shape (3,)  Unit vector (sign arbitrary), J's frame.
+    margin : float  ``(I_max - I_mid) / I_max``: 0 when the two largest moments are equal (the
+        axis is then any in their plane and names no face).
+    """
+    moments, vecs = np.linalg.eigh(np.asarray(J, float))
+    return vecs[:, 2], float((moments[2] - moments[1]) / moments[2])

@@ -132,7 +132,7 @@ class StationModel:
         I0 = np.array(scene.body.inertia) + parallel_axis(scene.body.mass, np.array(scene.body.cm) - r_O)
         for k, a in enumerate(scene.appendage):
             I0 += parallel_axis(a.mass, np.array(a.cm) - r_O)
-            p[L[f"J{k}"]] = np.array(a.inertia).ravel()
+            p[L[f"J{k}"]] = a.inertia_P.ravel()
             for j in JOINTS:
                 jt = getattr(a, j)
                 if jt.tracked:

@@ -65,14 +65,15 @@ def default_surfaces(scene) -> list[dict]:
     The body is the uniform box of its inertia (edges ``a² = 6 (J_yy + J_zz - J_xx)/m`` and
     cyclically) at its mass centre; each appendage is a two-sided plate in its P x-y plane (normal
     +z of P, the sun-facing normal) at its mass centre, of the area of the uniform thin plate of
-    its inertia, ``12 sqrt(J_xx J_yy) / m``. Coefficients are the defaults.
+    its inertia, ``12 sqrt(J_xx J_yy) / m``; an appendage with a ``wing`` has its own plate
+    (``Scene.surfaces``), none here. Coefficients are the defaults.
     """
     J = np.diag(np.array(scene.body.inertia, dtype=float))
     m = scene.body.mass
     edges = [float(np.sqrt(max(6.0 * (J[(i + 1) % 3] + J[(i + 2) % 3] - J[i]) / m, 1e-4))) for i in range(3)]
     out = [{"on": "body", "size": edges, "centre": list(scene.body.cm)}]
-    for a in scene.appendage:
-        Jp = np.diag(np.array(a.inertia, dtype=float))
+    for a in (a for a in scene.appendage if a.wing is None):
+        Jp = np.diag(a.inertia_P)
         out.append({"on": a.name, "area": float(12.0 * np.sqrt(Jp[0] * Jp[1]) / a.mass), "normal": [0.0, 0.0, 1.0],
                     "centre": [0.0, 0.0, 0.0], "two_sided": True})
     return out
@@ -98,7 +99,7 @@ def scene_plates(scene) -> tuple[tuple[float, ...], ...]:
     ----------
     scene : stationbed.scene.Scene
     """
-    surfaces = scene.surface or [Surface(**d) for d in default_surfaces(scene)]
+    surfaces = scene.surfaces if scene.surface else [Surface(**d) for d in default_surfaces(scene)] + scene.surfaces
     names = scene.appendage_names
     out = []
     rho = np.zeros(3)  # the mass centres are parameters (surface_origin_params)

@@ -73,6 +73,6 @@ def characteristic_scales(scene: Scene, w0, model, p) -> tuple[float, float]:
                 rates.append(abs(pr.rate) + abs(pr.amp * pr.freq) + sum(abs(st.delta) for st in pr.rate_step))
     rate = max(rates)
     # about O: hub + parallel-axis terms, plus the arrays' own inertia (orientation ignored: a scale)
-    I_total = p[model.layout["I0"]].reshape(3, 3) + sum((np.array(a.inertia) for a in scene.appendage), np.zeros((3, 3)))
+    I_total = p[model.layout["I0"]].reshape(3, 3) + sum((a.inertia_P for a in scene.appendage), np.zeros((3, 3)))
     I_max = float(np.linalg.eigvalsh(I_total).max())
     return rate, I_max * rate

@@ -19,6 +19,7 @@ from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
+from .wing import check_plate_faces, wing_surface
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
 
 __all__ = ["Scene", "load_scene", "scene_from_dict", "sensing_from_dict"]
@@ -68,6 +69,7 @@ class Scene(Strict):
             if a.tracks_sun and self.sun is None:
                 raise FieldError(f"appendage[{i}]", f"'{a.name}' tracks the sun: add a [sun] table")
         _check_environment(self)
+        check_plate_faces(self)
         if self.controller is not None:
             c, sim = self.controller, self.simulation
             if c.period < TIME_RESOLUTION * sim.duration:
@@ -98,6 +100,11 @@ class Scene(Strict):
     def appendage_names(self) -> list[str]:
         """The appendages' names, in the file's order."""
         return [a.name for a in self.appendage]
+
+    @property
+    def surfaces(self) -> list[Surface]:
+        """The ``[[surface]]`` tables, then each wing's plate (scene/wing.py), in appendage order."""
+        return list(self.surface) + [wing_surface(a) for a in self.appendage if a.wing is not None]
 
     def replace(self, changes: Mapping[str, object] | None = None, /, *, source: str | None = None, **more) -> "Scene":
         """A copy with values changed at key paths, validated as a whole like a file.

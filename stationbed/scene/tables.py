@@ -7,7 +7,7 @@ import math
 from typing import Annotated, Any, ClassVar, Literal, NamedTuple, Union
 
 import numpy as np
-from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import Discriminator, Field, PrivateAttr, Tag, field_validator, model_validator
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.beam import beam_inertia_derivative, beam_mode, check_participation
@@ -17,6 +17,7 @@ from .environment import (  # noqa: F401  (re-exported: the scene's tables are a
     SURFACE_FRACTIONS_DEFAULT, AeroTorque, Atmosphere, ConstantTorque, Elements, HarmonicTorque, Orbit, SrpTorque, Sun,
     Surface, Torque,
 )
+from .wing import AxisName, Wing, WingBending, wing_beam
 from .montecarlo import DISPERSION_KINDS, Dispersion, MonteCarlo, Requirement  # noqa: F401
 
 __all__ = [
@@ -24,7 +25,7 @@ __all__ = [
     "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "Torque", "Sun", "CmgKind", "CMG_KINDS", "UNIT_KEYS", "Cmg",
     "Sensor", "ControllerSpec", "PYRAMID_SKEW_RAD", "PARTICIPATION_TOL", "MU_EARTH_M3_S2", "R_EARTH_M", "TAGS",
     "AeroTorque", "SrpTorque", "Surface", "Atmosphere", "SURFACE_FRACTIONS_DEFAULT",
-    "Dispersion", "Requirement", "MonteCarlo", "DISPERSION_KINDS",
+    "Dispersion", "Requirement", "MonteCarlo", "DISPERSION_KINDS", "Wing", "WingBending",
 ]
 
 class RateStep(Strict):
@@ -150,13 +151,12 @@ class Body(Strict):
     @field_validator("inertia")
     @classmethod
     def _physical(cls, J):
+        if J is None:  # an appendage's wing gives it (Appendage)
+            return J
         try:
             return checked_inertia_rows(J, "inertia")
         except InvalidMassProperties as e:
             raise ValueError(str(e).removeprefix("inertia: ")) from None
-
-
-AxisName = Literal["x", "y", "z", "+x", "+y", "+z", "-x", "-y", "-z"]
 
 
 class Beam(Strict):
@@ -193,32 +193,39 @@ class Mode(Strict):
     frequency_hz: float = Field(gt=0.0)
     damping: float = Field(default=0.0, ge=0.0, lt=1.0)
     beam: Beam | None = None
+    wing: WingBending | None = None  # a wing's bending: the beam from the appendage's wing (scene/wing.py)
     translation: Vec3 | None = None
     rotation: Vec3 | None = None
     modal_mass: float | None = Field(default=None, gt=0.0)
     inertia_derivative: Mat3 | None = None  # ∂J/∂η [kg m], P axes, symmetric
     eta0: float = 0.0  # initial modal coordinate
     eta_rate0: float = 0.0  # initial modal rate [1/s x coordinate]
+    _wing_beam: Beam | None = PrivateAttr(default=None)  # the beam of ``wing``, set by its Appendage
 
     @model_validator(mode="after")
     def _one_shape(self):
         direct = self.translation is not None or self.rotation is not None or self.modal_mass is not None
-        if (self.beam is None) == (not direct):
-            raise ValueError("give a mode either 'beam' or 'translation'/'rotation' (with 'modal_mass')")
+        if (self.beam is not None) + (self.wing is not None) + direct != 1:
+            raise ValueError("give a mode one of 'beam', 'wing' or 'translation'/'rotation' (with 'modal_mass')")
         if direct and self.modal_mass is None:
             raise ValueError("a mode given by 'translation'/'rotation' needs 'modal_mass' [kg]")
         if self.inertia_derivative is not None:
-            if self.beam is not None:
-                raise ValueError("'inertia_derivative' is computed from 'beam'; give it only with 'translation'/'rotation'")
+            if not direct:
+                raise ValueError("'inertia_derivative' is computed from the beam; give it only with 'translation'/'rotation'")
             D = np.array(self.inertia_derivative)
             if np.abs(D - D.T).max() > 1e-9 * max(np.abs(D).max(), 1e-300):
                 raise ValueError("inertia_derivative: must be symmetric")
         return self
 
+    @property
+    def shape_beam(self) -> Beam | None:
+        """The mode's beam: ``beam``, or the one derived from the appendage's wing (``wing``)."""
+        return self.beam if self.beam is not None else self._wing_beam
+
     def integrals(self, array_mass: float):
         """``(Φ̄, Ĥ, M)`` in P axes (Quinn Eq. 24a, 24b, 24e)."""
-        if self.beam is not None:
-            b = self.beam
+        if self.shape_beam is not None:
+            b = self.shape_beam
             return beam_mode(b.n, b.length, b.mass or array_mass, b.root, b.span, b.deflection)
         zero = [0.0, 0.0, 0.0]
         return np.array(self.translation or zero), np.array(self.rotation or zero), float(self.modal_mass)
@@ -226,8 +233,8 @@ class Mode(Strict):
     def inertia_derivative_P(self, array_mass: float) -> np.ndarray:
         """``∂J/∂η`` [kg m], (3, 3), P axes: the first-order change of the array's inertia about its
         mass centre per unit of η (from the beam, or as given; zero when not given)."""
-        if self.beam is not None:
-            b = self.beam
+        if self.shape_beam is not None:
+            b = self.shape_beam
             return beam_inertia_derivative(b.n, b.length, b.mass or array_mass, b.root, b.span, b.deflection)
         return np.zeros((3, 3)) if self.inertia_derivative is None else np.array(self.inertia_derivative)
 
@@ -244,8 +251,14 @@ PARTICIPATION_TOL = 1e-9
 
 class Appendage(Body):
     """``[[appendage]]``: an articulated array (mass, inertia about its mass centre in P, ``cm`` in B,
-    ``alpha``/``beta`` joint profiles or sun tracking, optional elastic modes)."""
+    ``alpha``/``beta`` joint profiles or sun tracking, optional elastic modes).
+
+    Exactly one of ``inertia`` and ``wing``: a wing pair (scene/wing.py) derives the inertia
+    (:attr:`inertia_P`), its ``[[surface]]`` plate and the beams of its ``mode.wing`` modes."""
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
+    inertia: Mat3 | None = None
+    wing: Wing | None = None
+    _J_P: tuple | None = PrivateAttr(default=None)  # rows (a tuple: scenes compare equal by value)
     alpha: Joint = Field(default_factory=Profile)  # (a table of its own per scene: scene/knowledge.py)
     beta: Joint = Field(default_factory=Profile)
     mode: list[Mode] = []
@@ -255,10 +268,26 @@ class Appendage(Body):
         """Whether either joint tracks the sun."""
         return self.alpha.tracked or self.beta.tracked
 
+    @property
+    def inertia_P(self) -> np.ndarray:
+        """The inertia about its mass centre [kg m²], P axes, (3, 3): ``inertia`` or the wing's."""
+        return np.array(self._J_P, float)
+
     @model_validator(mode="after")
-    def _participation(self):
+    def _derived(self):
+        if (self.inertia is None) == (self.wing is None):
+            raise FieldError("wing" if self.wing is not None else "inertia",
+                             "give 'inertia' (P axes) or 'wing' (the array once: its inertia, plate and beams "
+                             "derived), " + ("not both" if self.wing is not None else "one of them is missing"))
+        J = np.array(self.inertia, float) if self.wing is None else self.wing.inertia_P(self.mass)
+        self._J_P = tuple(map(tuple, J.tolist()))
+        for i, m in enumerate(self.mode):
+            if m.wing is not None:
+                if self.wing is None:
+                    raise FieldError(f"mode[{i}].wing", f"bends a wing: '{self.name}' declares none (add wing = {{...}})")
+                m._wing_beam = Beam(**wing_beam(self.wing, m.wing, self.mass))
         if self.mode:
-            left = check_participation(self.mass, np.array(self.inertia), [m.integrals(self.mass) for m in self.mode])
+            left = check_participation(self.mass, J, [m.integrals(self.mass) for m in self.mode])
             if left < -PARTICIPATION_TOL:
                 raise ValueError(
                     f"modes of '{self.name}' take more than its mass or inertia (effective-mass residual "

@@ -73,7 +73,7 @@ class ElasticLines:
         for a in scene.appendage:
             groups: dict[tuple, list] = {}
             for k, mode in enumerate(a.mode, start=1):
-                b = mode.beam
+                b = mode.shape_beam
                 if b is not None:
                     groups.setdefault((tuple(b.root), b.span, b.length), []).append((k, mode))
             if not groups:
@@ -85,8 +85,8 @@ class ElasticLines:
                 e_s = axis_vector(span)
                 base.append(np.asarray(root, float) + (length * s)[:, None] * e_s)
                 for k, mode in modes:
-                    psi[g, k - 1] = cantilever_shape(mode.beam.n, length * s, length)
-                    e_d[g, k - 1] = axis_vector(mode.beam.deflection)
+                    psi[g, k - 1] = cantilever_shape(mode.shape_beam.n, length * s, length)
+                    e_d[g, k - 1] = axis_vector(mode.shape_beam.deflection)
                     amp_cols.append((f"eta_{a.name}_{k}", f"etadot_{a.name}_{k}", len(self.arrays), g))
                     amp_omega.append(2.0 * math.pi * mode.frequency_hz)
                 self.longest = max(self.longest, float(length))
@@ -108,7 +108,7 @@ class ElasticLines:
         extent : float
             The station's drawing length ``L`` [m].
         """
-        if not any(m.beam is not None for a in scene.appendage for m in a.mode):
+        if not any(m.shape_beam is not None for a in scene.appendage for m in a.mode):
             return None
         need = {f"{w}_{a.name}_{k}" for a in scene.appendage for k in range(1, len(a.mode) + 1) for w in ("eta", "etadot")}
         return cls(scene, extent) if need <= set(columns) else None

@@ -102,7 +102,7 @@ class StationGeometry:
         extent = _corners_extent(self.body_center, self.body_half, self.body_C)
         self.arrays = []  # (name, r_P_B about the composite CM, half sizes, C_PA)
         for a in apps:
-            half, C_PA = box_half_sizes(a.mass, a.inertia)
+            half, C_PA = box_half_sizes(a.mass, a.inertia_P)
             r = np.asarray(a.cm, float) - self.r_cm_B
             self.arrays.append((a.name, r, half, C_PA))
             extent = max(extent, float(np.linalg.norm(r)) + float(np.linalg.norm(half)))

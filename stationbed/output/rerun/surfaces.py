@@ -1,7 +1,8 @@
 """The scene's ``[[surface]]`` tables as drawn boxes (issue 24): the station as the scene defines it.
 
 A box surface is drawn at its ``size`` and ``centre``. A plate (``area``, ``normal``) has no
-outline in the scene, so it is drawn as a thin rectangle of its area normal to ``normal``: on an
+outline in the scene, so it is drawn as a thin rectangle of its area normal to ``normal``: a
+wing's plate (``appendage.wing``) as ``2 span`` by ``chord`` along its axes; on another
 appendage with the aspect ratio of that appendage's equivalent box (the two sides of the box
 most nearly in the plate's plane, so an array's wings keep their length to width), on the body
 square. Body surfaces are in B about the composite mass centre (``centre - r_cm``); an
@@ -84,8 +85,9 @@ def drawn_surfaces(scene, geom) -> list[DrawnSurface]:
     list of DrawnSurface
     """
     boxes = {name: (half, C) for name, _, half, C in geom.arrays}
+    wings = {a.name: a.wing for a in getattr(scene, "appendage", []) if getattr(a, "wing", None) is not None}
     out = []
-    for i, s in enumerate(getattr(scene, "surface", None) or []):
+    for i, s in enumerate(getattr(scene, "surfaces", None) or []):
         name = s.name or f"surface_{i}"
         centre = np.asarray(s.centre, float)
         if s.on == "body":
@@ -93,10 +95,15 @@ def drawn_surfaces(scene, geom) -> list[DrawnSurface]:
         if s.size is not None:
             out.append(DrawnSurface(name, s.on, centre, 0.5 * np.asarray(s.size, float), np.eye(3), False))
             continue
-        box = boxes.get(s.on) if s.on != "body" else None
-        u, v, n, aspect = _plate_axes(s.normal, *(box or (None, None)))
-        side_v = float(np.sqrt(s.area / aspect))
-        side_u = aspect * side_v
+        wing = wings.get(s.on) if s.name == f"{s.on}_wing" else None
+        if wing is not None:  # a wing's plate: its own span and chord (two wings, area kept)
+            u, v, n = wing.e_along(), wing.e_chord(), wing.e_normal()
+            side_u, side_v = 2.0 * wing.span, wing.chord
+        else:
+            box = boxes.get(s.on) if s.on != "body" else None
+            u, v, n, aspect = _plate_axes(s.normal, *(box or (None, None)))
+            side_v = float(np.sqrt(s.area / aspect))
+            side_u = aspect * side_v
         thick = max(PLATE_THICKNESS_FRACTION * min(side_u, side_v), PLATE_MIN_THICKNESS_M)
         out.append(DrawnSurface(name, s.on, centre, 0.5 * np.array([side_u, side_v, thick]),
                                 np.column_stack([u, v, n]), True))
