@@ -236,7 +236,10 @@ def run_report(folder: Path) -> Report:
     name = str(meta.get("scene", folder.name))
     status = str(meta.get("status", "unknown"))
     ok = status == "ok"
-    why = meta.get("reason") or ("" if ok else f"the run is {status}; rows kept in {meta.get('rows_file', '-')}")
+    at = meta.get("stopped_at", meta.get("last_t"))
+    why = "" if ok else (f"the run {status}" + (f" at t = {at:g} s" if isinstance(at, (int, float)) else "")
+                         + (f": {meta['reason']}" if meta.get("reason") else "")
+                         + f"; {meta.get('n_rows', meta.get('rows', '?'))} rows kept in {meta.get('rows_file', '-')}")
     loop = meta.get("summary") or {}
     rows = [[k, _g(v) if isinstance(v, float) else str(v)] for k, v in loop.items()
             if isinstance(v, (int, float, str)) and not isinstance(v, bool)]
