@@ -139,7 +139,7 @@ def study_report(folder: Path) -> Report:
     tables = []
     if worst_rows:
         tables.append(Table("Worst samples", ["requirement", "sample", "status", "value", "limit", "reason",
-                                              "replay (from the study's folder's parent as run)"],
+                                              "replay (the sample alone, its metrics bit for bit)"],
                             worst_rows, worst_bad, code_column=6,
                             note=f"The {WORST_SHOWN} worst samples per requirement; each command writes the "
                                  "sample's scene file and runs it alone (its metrics equal the row's bit for bit)."))
