@@ -2,7 +2,8 @@
 
     stationbed run SCENE.toml [--out DIR] [--formulation NAME] [--integrator NAME]
                               [--rtol X] [--atol X] [--duration S] [--step S] [--rrd FILE]
-    stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE]
+    stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE] [--out DIR]
+    stationbed report DIR   (junit.xml, report.html of a finished Monte Carlo, check or run folder)
     stationbed replay FILE.rrd [--web]
     stationbed plan SCENE.toml [--out DIR] [--intervals N] [--refine N] [--no-fly] [--set KEY.PATH=VALUE]
     stationbed list
@@ -119,6 +120,9 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("scene", type=Path)
     _scene_options(c, formulation=False)
     c.add_argument("--rrd", type=Path, default=None, help="all formulations in one recording")
+    c.add_argument("--out", type=Path, default=None, help="write DIR/junit.xml, report.html and check.json")
+    sub.add_parser("report", help="junit.xml and report.html of a finished study, check or run folder"
+                   ).add_argument("folder", type=Path)
 
     sub.add_parser("list", help="registered formulations and integrators")
 
@@ -357,12 +361,16 @@ def _with_recording(csv_sink, scene, path, recorder=None, changes=None):
 
 def _cmd_check(args) -> int:
     from .studies.check import check_scene
+    from .studies.report import check_outputs_of, write_check
 
     scene, _ = _scene_with_options(args)
-    if args.rrd:  # before the formulations run: a recording never replaces the scene
-        check_outputs({"the scene file": args.scene}, {"--rrd": args.rrd})
+    outs = check_outputs_of(args)  # --rrd, --out's files
+    if outs:  # before the formulations run: an output never replaces the scene
+        check_outputs({"the scene file": args.scene}, outs)
     res = check_scene(scene)
     print(res.table())
+    if args.out:  # junit.xml, report.html and check.json (issue 37)
+        write_check(res, scene, args)
     if args.rrd:
         from .output.rerun.recording import write_check_recording
 
@@ -371,6 +379,12 @@ def _cmd_check(args) -> int:
         return _fail(f"formulations disagree on {scene.name} beyond tolerance (table above)", EXIT_FAILED)
     print("ok: all formulations agree")
     return 0
+
+
+def _cmd_report(args) -> int:
+    from .studies.report import main
+
+    return main(args.folder)
 
 
 def _cmd_list(args) -> int:
@@ -397,49 +411,9 @@ def _cmd_list(args) -> int:
 
 #: First bytes of a rerun recording file (RRF2 in rerun 0.41; RRF0/RRF1 in older files).
 RRD_MAGIC = b"RRF"
-#: Environment variable naming the rerun viewer binary `stationbed replay` starts (tests, or
-#: a viewer outside the venv); default: the binary rerun-sdk bundles, then `rerun` on PATH.
-RERUN_BINARY_ENV = "STATIONBED_RERUN"
 #: where ``replay --web`` serves: this machine only unless ``--bind`` says otherwise (rerun's own
 #: default, 0.0.0.0, would offer the recording to every network the machine is on)
 WEB_BIND_DEFAULT = "127.0.0.1"
-
-
-def _rerun_binary() -> str | None:
-    """The rerun viewer executable: $STATIONBED_RERUN, rerun-sdk's bundled binary, or PATH."""
-    import importlib.util
-    import shutil
-
-    override = os.environ.get(RERUN_BINARY_ENV)
-    if override:
-        return override
-    spec = importlib.util.find_spec("rerun_cli")  # the package rerun-sdk installs the binary in
-    if spec is not None and spec.origin:
-        exe = Path(spec.origin).parent / ("rerun.exe" if sys.platform.startswith("win") else "rerun")
-        if exe.is_file():
-            return str(exe)
-    venv = Path(sys.executable).parent / "rerun"
-    return str(venv) if venv.is_file() else shutil.which("rerun")
-
-
-def _rerun_command(exe: str | None) -> str:
-    """How a user types the viewer: the override, else ``rerun`` when on PATH, else the venv's."""
-    import shlex
-    import shutil
-
-    if os.environ.get(RERUN_BINARY_ENV) or exe is None:
-        return shlex.quote(exe or "rerun")
-    if shutil.which("rerun"):
-        return "rerun"
-    venv = Path(sys.executable).parent / "rerun"
-    return shlex.quote(str(venv) if venv.is_file() else exe)
-
-
-def _has_display() -> bool:
-    """False on Linux/BSD without an X or Wayland display (the native viewer cannot open)."""
-    if sys.platform.startswith(("win", "darwin")):
-        return True
-    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
 
 
 def _cmd_replay(args) -> int:
@@ -455,14 +429,16 @@ def _cmd_replay(args) -> int:
     import shlex
     import subprocess
 
+    from .output.rerun.viewer import has_display, rerun_binary, rerun_command
+
     f = args.file
     if not f.is_file():
         return _fail(f"no recording at {f}", EXIT_BAD_INPUT)
     with open(f, "rb") as fh:
         if fh.read(len(RRD_MAGIC)) != RRD_MAGIC:
             return _fail(f"{f} is not a rerun recording (.rrd)", EXIT_BAD_INPUT)
-    exe = _rerun_binary()
-    shown = _rerun_command(exe)
+    exe = rerun_binary()
+    shown = rerun_command(exe)
     native = f"{shown} {shlex.quote(str(f))}"
     bind = getattr(args, "bind", None)
     if bind is not None and not args.web:
@@ -478,7 +454,7 @@ def _cmd_replay(args) -> int:
     if exe is None:
         how("the rerun viewer is not installed (pip install rerun-sdk==0.41.0)")
         return _fail("no rerun binary found", EXIT_FAILED)
-    if not args.web and not _has_display():
+    if not args.web and not has_display():
         how("no display ($DISPLAY and $WAYLAND_DISPLAY are unset), so no viewer window can open")
         return 0
     cmd = [exe, "--web-viewer", "--bind", bind, str(f)] if args.web else [exe, str(f)]
@@ -581,7 +557,7 @@ def _main(args) -> int:
         if args.cmd == "screenshot":
             return screenshot_cli.main(args)
         return {"run": _cmd_run, "check": _cmd_check, "list": _cmd_list, "replay": _cmd_replay, "study": _cmd_study,
-                "plan": _cmd_plan, "montecarlo": _cmd_montecarlo}[args.cmd](args)
+                "plan": _cmd_plan, "montecarlo": _cmd_montecarlo, "report": _cmd_report}[args.cmd](args)
     except SceneError as e:
         _debug_traceback(e)
         return _fail(str(e), EXIT_BAD_INPUT)

@@ -60,9 +60,13 @@ class Dispersion(Strict):
 
 class Requirement(Strict):
     """One ``[[montecarlo.requirement]]``: a metric bounded by ``max`` (or ``min``) in at least
-    ``coverage`` of the cases, shown with ``confidence``."""
+    ``coverage`` of the cases, shown with ``confidence``; ``id`` and ``text`` (optional) are the
+    requirement's identifier and wording in a specification, carried to summary.json, the JUnit
+    XML and the HTML report."""
 
     metric: str
+    id: str | None = Field(default=None, min_length=1)  # e.g. "SSP-41162 3.2.1.4"
+    text: str | None = Field(default=None, min_length=1)  # the requirement as the specification words it
     max: float | None = None
     min: float | None = None
     coverage: float = Field(default=0.9973, gt=0.0, lt=1.0)

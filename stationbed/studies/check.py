@@ -19,6 +19,7 @@ floored at ``FLOOR`` times the scale for very tight rtol (float64 round-off over
 from __future__ import annotations
 
 import itertools
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +61,7 @@ class CheckResult:
     pairs: list[PairDiff]
     trajectories: dict[str, Trajectory]
     tol_eta: float | None = None
+    wall_s: float = 0.0  # the runs of every formulation [s]
 
     def pair_ok(self, p: PairDiff) -> bool:
         """Whether one pair agrees within every tolerance."""
@@ -118,6 +120,7 @@ def check_scene(
     scene: Scene, *, rtol: float | None = None, duration: float | None = None, formulations=None, integrator=None
 ) -> CheckResult:
     """Run every formulation (or ``formulations``) on ``scene`` and compare them pairwise."""
+    t0 = time.perf_counter()
     rtol = scene.simulation.rtol if rtol is None else rtol
     forms = list(formulations or FORMULATIONS)
     names = [f if isinstance(f, str) else f.name for f in forms]
@@ -146,4 +149,5 @@ def check_scene(
         pairs=pairs,
         trajectories=trajs,
         tol_eta=gain * max(eta_scale, 1e-12) if flex else None,
+        wall_s=time.perf_counter() - t0,
     )

@@ -12,6 +12,10 @@ samples run). ``--sample K`` writes the exact scene of sample K (``DIR/sample_K.
 DIR ``out/<scene>_montecarlo/sample_K``, never a study's folder) and runs it alone (``DIR/trajectory.csv``, ``DIR/summary.json``; a failed run keeps its rows in
 ``DIR/trajectory.partial.csv``, as ``stationbed run``).
 
+The study's folder also gets ``junit.xml`` (one test case per requirement) and ``report.html``
+(verdicts, worst samples with the command that replays each, envelopes, provenance):
+:mod:`stationbed.studies.report`.
+
 Exit status: 0 when the study ran and every requirement is shown to hold, PASS (``--exit-zero``: 0
 whatever the verdicts; they are in summary.json and printed); 1 when a requirement is not shown:
 FAIL (a sample failed it) or NOT SHOWN (none failed, too few samples to show it); 1 also when a
@@ -34,7 +38,8 @@ DEFAULT_CONNECT_TIMEOUT_S = 10.0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 #: the files a study writes in its folder (checked against the scene file first)
-STUDY_FILES = ("samples.parquet", "summary.json", "study.json", "study.lock", "montecarlo.rrd", "chunks")
+STUDY_FILES = ("samples.parquet", "summary.json", "study.json", "study.lock", "montecarlo.rrd", "chunks", "junit.xml",
+               "report.html")
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -183,16 +188,24 @@ def main(argv=None) -> int:
             return _run_sample(scene, args, out)
         check_outputs({"the scene file": args.scene}, {f"the study's {f}": out / f for f in STUDY_FILES if f != "chunks"})
         workers = None if (args.serial or args.scheduler) else (args.workers or os.cpu_count() or 1)
+        invocation = {"scene_file": str(args.scene.resolve()), "n": scene.montecarlo.n, "set": list(args.set)}
         res = run_study(scene, out=out, workers=workers, scheduler=args.scheduler, chunk=args.chunk,
-                        resume=args.resume, charts=not args.no_charts, connect_timeout_s=args.connect_timeout)
+                        resume=args.resume, charts=not args.no_charts, connect_timeout_s=args.connect_timeout,
+                        invocation=invocation)
+        from ..report import study_report, write_reports
+
+        write_reports(study_report(out), out)  # junit.xml, report.html (issue 37)
     except (SceneError, ValueError) as e:
         return _error(e, EXIT_BAD_INPUT)
     except StudyStop as e:
         return _error(e, EXIT_FAILED)
+    except OSError as e:  # the study is on disk; only its reports could not be written
+        return _error(f"cannot write the reports in {out}: {e.strerror or e}; the study's results are kept: "
+                      f"stationbed report {out} writes them again", EXIT_FAILED)
     except KeyboardInterrupt:
         return _error("interrupted; the finished chunks are kept (run again with --resume)", EXIT_FAILED)
     print(table_text(res.summary))
-    print(f"wrote {out}/samples.parquet, summary.json, charts and montecarlo.rrd")
+    print(f"wrote {out}/samples.parquet, summary.json, charts, montecarlo.rrd, junit.xml and report.html")
     failed = [r["metric"] for r in res.summary["requirements"] if r["verdict"] == FAIL]
     unshown = [r["metric"] for r in res.summary["requirements"] if r["verdict"] == NOT_SHOWN]
     if (failed or unshown) and not args.exit_zero:

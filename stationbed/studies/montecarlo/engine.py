@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from ...core import progress
+from ...core.provenance import provenance
 from ...run.metrics import METRICS
 from ...run.rate_auto import AUTO, scene_choice
 from ...run.simulation import simulate
@@ -317,8 +318,10 @@ def _lost(where: str, e: BaseException, chunks_dir, n_kept: int, client) -> Stud
 
 
 def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None, resume=False,
-              charts=True, scheduler=None, connect_timeout_s: float = 10.0) -> MonteCarloResult:
-    """Run a Monte Carlo study (see :func:`stationbed.montecarlo`)."""
+              charts=True, scheduler=None, connect_timeout_s: float = 10.0, invocation=None) -> MonteCarloResult:
+    """Run a Monte Carlo study (see :func:`stationbed.montecarlo`); ``invocation`` (the command
+    line's scene file, ``--n`` and ``--set``) goes into study.json with the provenance, so a
+    report can print the command that replays a sample."""
     scene = study_scene(scene, n)
     mc = scene.montecarlo
     n = mc.n
@@ -326,6 +329,9 @@ def run_study(scene, *, n=None, out=None, client=None, workers=None, chunk=None,
     columns = ID_COLUMNS + drawn_columns(scene) + scene_metrics(scene)  # only what the scene can report
     check_memory(n, len(columns), n_env, _available_memory())
     study, record = study_identity(scene)
+    record["provenance"] = provenance()
+    if invocation:
+        record["invocation"] = invocation
     if scene.simulation.environment_rate == AUTO:  # resolved once here, not by each worker
         record["environment_rate"] = {"asked": AUTO, **scene_choice(scene)}
         scene = scene.replace(nominal_rate(scene))

@@ -45,7 +45,8 @@ def result_files() -> list[str]:
     """The names of the results a study writes at its end (report.finish, charts)."""
     from ...run.metrics import METRICS  # noqa: PLC0415
 
-    return (["samples.parquet", "summary.json", "montecarlo.rrd", "envelope_att_err.png", "envelope_h.png"]
+    return (["samples.parquet", "summary.json", "montecarlo.rrd", "envelope_att_err.png", "envelope_h.png",
+             "report.html", "junit.xml"]
             + [f"{kind}_{m}.png" for kind in ("hist", "scatter") for m in METRICS])
 
 
@@ -118,6 +119,8 @@ def study_identity(scene) -> tuple[str, dict]:
     mc = dict(data["montecarlo"])
     mc.pop("n", None)
     mc.pop("chunk", None)
+    # a requirement's id and wording name it in reports: they change no sample and no verdict
+    mc["requirement"] = [{k: v for k, v in r.items() if k not in ("id", "text")} for r in mc.get("requirement", [])]
     data["montecarlo"] = mc
     sources = law_sources(scene)
     scene_hash = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()

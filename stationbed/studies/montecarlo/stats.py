@@ -128,6 +128,7 @@ def requirement_verdicts(df, requirements) -> list[dict]:
              "confidence": r.confidence, "n": n, "failures": k, "not_run": int(n - ran.sum()),
              "verdict": word, "pass": ok, "success_lower_bound": success_lower_bound(n, k, r.confidence),
              "n_needed_zero_failures": need}
+        d.update({k: getattr(r, k) for k in ("id", "text") if getattr(r, k) is not None})
         if word == NOT_SHOWN:
             d["note"] = (f"0 of {n} failed; needs >= {need} samples for {100 * r.confidence:g} % confidence "
                          f"that at most {100 * (1 - r.coverage):.4g} % fail")
