@@ -26,6 +26,7 @@ from pathlib import Path
 # a failed or interrupted run leaves its rows under PARTIAL_CSV, never over a finished result
 from .core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, BadOutput, check_outputs, default_out
 from .core.paths import partial_path as _partial
+from .core import interrupts
 from .output.rerun import screenshot as screenshot_cli
 
 EXIT_FAILED = 1
@@ -213,13 +214,14 @@ def _validate(scene) -> None:
     """Everything that can be refused before an output is opened: the formulation and integrator
     names, the step, the controller and its parameters (the compiled system is built here and
     reused by the run)."""
+    from .run.closed_loop import plant_facts
     from .run.laws import build_controller
     from .run.prepare import prepare
 
-    prepare(scene)
+    system = prepare(scene).system
     spec = scene.controller
-    if spec is not None:
-        build_controller(spec, base_dir=scene.folder)
+    if spec is not None:  # an FMU's variables and binary are checked here, before the first row
+        build_controller(spec, base_dir=scene.folder).check(plant_facts(scene, system, spec.period))
 
 
 def _run(args, recorder) -> int:
@@ -557,7 +559,8 @@ def main(argv=None) -> int:
 
     progress.configure("quiet" if args.quiet else None)
     try:
-        return _main(args)
+        with interrupts.handled():  # SIGTERM stops a command as Ctrl-C does: its clean-up runs
+            return _main(args)
     finally:
         progress.reset()  # a caller in Python (tests, notebooks) gets the library default back
 

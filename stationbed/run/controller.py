@@ -179,6 +179,10 @@ class Controller:
         self.q_ref_BN = None
         self._reset(plant)
 
+    def check(self, plant: Plant) -> None:
+        """Refuse, before a command opens any output, what only the plant shows (the command
+        line calls it; nothing by default: a law's refusals come from :meth:`reset`)."""
+
     def update(self, t: float, meas: Measurement):
         """The command for the period starting at ``t`` [s] (counted in ``n_updates``).
 
