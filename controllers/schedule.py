@@ -10,8 +10,9 @@ inertia (knowledge, as the plan had it). After the plan's end the last command i
 error's sign is taken the short way round (``ε`` from the error quaternion with a non-negative
 scalar part), which is the plan's own sign whenever the body is within 180 deg of the command.
 
-Params: ``plan``: a plan.json written by ``stationbed plan`` (absolute, or relative to the working
-directory or the scene's folder); without it the law plans from the scene's ``[plan]`` table
+Params: ``plan``: a plan.json written by ``stationbed plan`` (absolute, or relative to the scene
+file's folder, as ``controller.fmu`` and a controller file are; the working folder for a scene
+made in Python); without it the law plans from the scene's ``[plan]`` table
 when the run starts (cached per scene in the process). The gains and frame are the plan's.
 """
 
@@ -55,7 +56,7 @@ class Schedule(Controller):
         try:
             if self.params.plan is not None:
                 path = Path(self.params.plan).expanduser()
-                if not path.is_absolute() and not path.exists() and scene.folder is not None:
+                if not path.is_absolute() and scene.folder is not None:  # as fmu and controller files
                     path = scene.folder / path
                 plan = read_plan(path)
             elif scene.plan is not None:
