@@ -19,6 +19,7 @@ import resource
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -181,3 +182,90 @@ def test_a_studys_recording_on_a_full_disk_is_one_line(tmp_path):
     assert res.returncode == 1, res.stderr
     line = one_error_line(res.stderr)
     assert f"cannot write {tmp_path / 'mc' / 'montecarlo.rrd'}: File too large" in line
+
+
+# ---------------------------------------------------------------------------------------------
+# stationbed screenshot
+# ---------------------------------------------------------------------------------------------
+
+#: how long the screenshot's browser may take to start [s]
+BROWSER_START_S = 60.0
+#: how long the processes it started may take to end after SIGTERM [s] (the command stops each
+#: group with SIGTERM, waits up to 10 s, then SIGKILL)
+STOP_S = 30.0
+
+
+def _descendants(pid: int) -> dict[int, str]:
+    """Every process below ``pid`` (children in sessions of their own too): pid -> command name."""
+    parent, name = {}, {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            rest = stat[stat.rindex(")") + 2:].split()
+            if rest[0] != "Z":
+                parent[int(d.name)], name[int(d.name)] = int(rest[1]), stat[stat.index("(") + 1: stat.rindex(")")]
+    below, frontier = {}, [pid]
+    while frontier:
+        p = frontier.pop()
+        for c, pp in parent.items():
+            if pp == p and c not in below:
+                below[c] = name[c]
+                frontier.append(c)
+    return below
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process tree from /proc")
+def test_sigterm_stops_the_screenshots_viewer_and_browser(tmp_path):
+    """SIGTERM while the browser renders: exit 1 ("interrupted"), and the viewer server and every
+    browser process it started are gone (they had been left running)."""
+    from stationbed.output.rerun.screenshot import find_browser
+
+    if find_browser() is None:
+        pytest.skip("no Chromium installed (apt-get install chromium; make screenshots)")
+    from stationbed import load_scene, simulate
+    from stationbed.output.rerun.recording import write_recording
+
+    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml")
+    rrd = write_recording(simulate(scene, duration=20.0), scene, tmp_path / "hold.rrd")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.Popen([str(EXE), "screenshot", str(rrd), "--out", str(tmp_path / "hold.png")], cwd=tmp_path,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen: dict[int, str] = {}
+    try:
+        deadline = time.monotonic() + BROWSER_START_S
+        while time.monotonic() < deadline and proc.poll() is None:
+            seen.update(_descendants(proc.pid))
+            if any("chrom" in n for n in seen.values()) and len(seen) >= 3:
+                break
+            time.sleep(0.2)
+        assert proc.poll() is None and any("chrom" in n for n in seen.values()), (seen, proc.poll())
+        time.sleep(1.0)
+        seen.update(_descendants(proc.pid))
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=STOP_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    deadline = time.monotonic() + STOP_S
+    while time.monotonic() < deadline and any(_alive(p) for p in seen):
+        time.sleep(0.2)
+    left = {p: n for p, n in seen.items() if _alive(p)}
+    for p in left:  # never leave them to the next test
+        try:
+            os.kill(p, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert left == {}, left
+    assert proc.returncode == 1 and "interrupted" in one_error_line(err)
