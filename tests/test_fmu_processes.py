@@ -17,6 +17,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -115,17 +116,18 @@ def _with_bad_crc(src: Path, dest: Path) -> Path:
 
 
 @pytest.mark.parametrize("damage", ["member_name", "crc"])
-def test_an_fmu_that_cannot_be_extracted_is_one_line_naming_it(fmu2, tmp_path, damage):
+def test_an_fmu_that_cannot_be_extracted_is_one_line_naming_it(fmu2, tmp_path, monkeypatch, damage):
     """A member FMPy refuses to write (``resources/a:b.txt``) or a CRC error: an FmuError naming
     the FMU (not the zip library's own message alone), and no extracted folder left."""
     bad = (_with_member(fmu2, tmp_path / "bad.fmu", "resources/a:b.txt", b"x") if damage == "member_name"
            else _with_bad_crc(fmu2, tmp_path / "bad.fmu"))
-    before = set(Path(os.environ.get("TMPDIR", "/tmp")).glob("stationbed_fmu_*"))
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))  # this test's extraction folder only
     with pytest.raises(FmuError) as exc:
         FmuController(str(bad))
     msg = str(exc.value)
     assert "\n" not in msg and msg.startswith(f"FMU '{bad}': cannot extract it (")
-    assert set(Path(os.environ.get("TMPDIR", "/tmp")).glob("stationbed_fmu_*")) <= before
+    assert list((tmp_path / "tmp").iterdir()) == []
 
 
 # ---------------------------------------------------------------------------------------------
