@@ -50,6 +50,7 @@ class Schedule(Controller):
     name = "schedule"
     command = "torque"
     Params = ScheduleParams
+    file_params = ("plan",)
 
     def _reset(self, plant):
         scene = plant.scene

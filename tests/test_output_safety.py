@@ -134,6 +134,23 @@ def test_schedule_plan_path_is_relative_to_the_scene_file(tmp_path, monkeypatch)
     assert tr.meta["status"] == "ok"
 
 
+def test_a_sample_scene_written_elsewhere_still_finds_the_plan(tmp_path):
+    """``montecarlo --sample K`` writes the sample's scene to another folder: schedule's relative
+    ``params.plan`` (a declared ``file_params``) becomes absolute, as an FMU's path does."""
+    from stationbed import load_scene, simulate
+    from stationbed.studies.montecarlo.replay import write_sample_scene
+
+    scene_dir = tmp_path / "scene"
+    assert main(["plan", str(_slew_file(scene_dir, intervals=8)), "--out", str(scene_dir), "--no-fly", "-q"]) == 0
+    d = slew_scene(intervals=8)
+    d["controller"]["params"] = {"plan": "plan.json"}
+    d["montecarlo"] = {"n": 2, "seed": 1, "disperse": [{"key": "initial.q_BN", "kind": "attitude_normal", "sigma": 1e-3}]}
+    (scene_dir / "mc.toml").write_text(scene_toml(scene_from_dict(d)))
+    back = write_sample_scene(load_scene(scene_dir / "mc.toml"), 1, tmp_path / "elsewhere" / "sample_1.toml")
+    assert Path(back.controller.params["plan"]) == (scene_dir / "plan.json").resolve()
+    assert simulate(back, duration=1.0).meta["status"] == "ok"
+
+
 def test_plan_on_a_full_disk_is_one_line_naming_the_file(tmp_path):
     """A write that fails (the flight's recording, above the limit) ends the command with one
     line naming the file, exit 1; the plan's files written before it stay."""

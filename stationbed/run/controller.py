@@ -150,6 +150,9 @@ class Controller:
     name: ClassVar[str] = ""
     command: ClassVar[str] = "torque"
     Params: ClassVar[type[ControllerParams]] = ControllerParams
+    #: parameters naming a file relative to the scene file's folder (a sample's scene written
+    #: elsewhere makes them absolute)
+    file_params: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, period: float = 0.1, **params):
         if not (period > 0 and math.isfinite(period)):
