@@ -18,8 +18,9 @@ error (issue 32). The command error is reported apart, in the run summary:
 ``final_cmd_err_deg`` and ``max_cmd_err_deg``, the angle of the law's own error quaternion
 ``conj(q_CN) ⊗ q_BN`` (on the attitude it measures) at the last and the largest tick.
 
-Params: ``plan``: a plan.json written by ``stationbed plan`` (absolute, or relative to the working
-directory or the scene's folder); without it the law plans from the scene's ``[plan]`` table
+Params: ``plan``: a plan.json written by ``stationbed plan`` (absolute, or relative to the scene
+file's folder, as ``controller.fmu`` and a controller file are; the working folder for a scene
+made in Python); without it the law plans from the scene's ``[plan]`` table
 when the run starts (cached per scene in the process). The gains and frame are the plan's.
 """
 
@@ -58,13 +59,14 @@ class Schedule(Controller):
     name = "schedule"
     command = "torque"
     Params = ScheduleParams
+    file_params = ("plan",)
 
     def _reset(self, plant):
         scene = plant.scene
         try:
             if self.params.plan is not None:
                 path = Path(self.params.plan).expanduser()
-                if not path.is_absolute() and not path.exists() and scene.folder is not None:
+                if not path.is_absolute() and scene.folder is not None:  # as fmu and controller files
                     path = scene.folder / path
                 plan = read_plan(path)
             elif scene.plan is not None:

@@ -25,7 +25,7 @@ import traceback
 from pathlib import Path
 
 # a failed or interrupted run leaves its rows under PARTIAL_CSV, never over a finished result
-from .core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, BadOutput, check_outputs, default_out
+from .core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, BadOutput, WriteFailed, check_outputs, default_out, fresh
 from .core.paths import partial_path as _partial
 from .output.rerun import screenshot as screenshot_cli
 
@@ -215,15 +215,15 @@ def _write_json(path: Path, data: dict) -> None:
 
 def _validate(scene) -> None:
     """Everything that can be refused before an output is opened: the formulation and integrator
-    names, the step, the controller and its parameters (the compiled system is built here and
-    reused by the run)."""
+    names, the step, the controller, its parameters and its plant (the system is reused by the run)."""
+    from .run.closed_loop import plant_facts
     from .run.laws import build_controller
     from .run.prepare import prepare
 
-    prepare(scene)
+    system = prepare(scene).system
     spec = scene.controller
-    if spec is not None:
-        build_controller(spec, base_dir=scene.folder)
+    if spec is not None:  # an FMU's variables and binary are checked here, before the first row
+        build_controller(spec, base_dir=scene.folder).check(plant_facts(scene, system, spec.period))
 
 
 def _run(args, recorder) -> int:
@@ -238,7 +238,7 @@ def _run(args, recorder) -> int:
     out.mkdir(parents=True, exist_ok=True)
     status = {"scene": str(args.scene)}
     rrd_error = None
-    with CsvSink(partial, trajectory_columns(scene)) as csv:
+    with CsvSink(fresh(partial), trajectory_columns(scene)) as csv:  # a link there is replaced, not followed
         sink = csv
         if args.rrd:  # stream the rows into the recording too, as they are computed
             sink = _with_recording(csv, scene, paths["partial_rrd"], recorder, changes)
@@ -476,17 +476,19 @@ def _cmd_replay(args) -> int:
 
 
 def _cmd_plan(args) -> int:
+    from .scene.plan import MAX_INTERVALS
     from .studies.plan_flight import plan_and_fly
 
-    for name in ("intervals", "refine"):
-        v = getattr(args, name)
-        if v is not None and v < 2:
-            return _fail(f"--{name} must be at least 2, got {v}", EXIT_BAD_INPUT)
-    scene, _ = _scene_with_options(args)
-    if scene.plan is None:
+    for name in ("intervals", "refine"):  # the NLP's size: plan.intervals' range
+        if (v := getattr(args, name)) is not None and not 2 <= v <= MAX_INTERVALS:
+            return _fail(f"--{name} must be between 2 and {MAX_INTERVALS}, got {v}", EXIT_BAD_INPUT)
+    if (scene := _scene_with_options(args)[0]).plan is None:
         return _fail(f"{args.scene}: plan: missing [plan] table", EXIT_BAD_INPUT)
-    out = args.out or Path("out") / scene.name / "plan"
-    info = plan_and_fly(scene, out, intervals=args.intervals, refine=args.refine, fly=not args.no_fly)
+    out = args.out or default_out(scene.name, "plan")  # a scene named ../../x stays under out/
+    try:
+        info = plan_and_fly(scene, out, intervals=args.intervals, refine=args.refine, fly=not args.no_fly)
+    except WriteFailed as e:  # a full disk: the files written before it stay
+        return _fail(str(e), EXIT_FAILED)
     st = info["solver"]
     print(f"plan: cost {info['cost']:.7g}, peak |h| {info['peak_h_Nms']:.6g} N m s "
           f"({100 * info['peak_fraction']:.1f} % of capacity); {st['intervals']} intervals, "
@@ -532,11 +534,12 @@ def main(argv=None) -> int:
     args, args.rest = _parser().parse_known_args(argv)
     if args.rest and args.cmd != "montecarlo":
         _parser().error(f"unrecognized arguments: {' '.join(args.rest)}")
-    from .core import progress
+    from .core import interrupts, progress
 
     progress.configure("quiet" if args.quiet else None)
     try:
-        return _main(args)
+        with interrupts.handled():  # SIGTERM stops a command as Ctrl-C does: its clean-up runs
+            return _main(args)
     finally:
         progress.reset()  # a caller in Python (tests, notebooks) gets the library default back
 

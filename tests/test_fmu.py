@@ -418,13 +418,13 @@ def test_the_scene_takes_a_law_or_an_fmu_not_both():
 # the command line and the Monte Carlo
 # ---------------------------------------------------------------------------------------------
 
-def _scene_file(folder: Path, fmu: Path, params=None, mc: dict | None = None) -> Path:
+def _scene_file(folder: Path, fmu: Path, params=None, mc: dict | None = None, variables=None) -> Path:
     """``folder/scene.toml`` flying ``folder/laws/pd.fmu`` (a copy of ``fmu``), named relatively."""
     from stationbed.studies.montecarlo.replay import scene_toml
 
     (folder / "laws").mkdir(parents=True, exist_ok=True)
     shutil.copy(fmu, folder / "laws" / "pd.fmu")
-    d = pd_scene({"fmu": "laws/pd.fmu", "params": {**PD_PARAMS, **(params or {})}})
+    d = pd_scene({"fmu": "laws/pd.fmu", "params": {**PD_PARAMS, **(params or {})}, **({"variables": variables} if variables else {})})
     if mc is not None:
         d["montecarlo"] = mc
     path = folder / "scene.toml"

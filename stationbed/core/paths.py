@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import os
 import re
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["OUT_ROOT", "BadOutput", "default_out", "safe_name", "check_outputs", "partial_path",
-           "CSV_NAME", "PARTIAL_CSV", "SUMMARY_NAME"]
+__all__ = ["OUT_ROOT", "BadOutput", "WriteFailed", "default_out", "safe_name", "check_outputs", "partial_path",
+           "fresh", "writing", "write_bytes", "CSV_NAME", "PARTIAL_CSV", "SUMMARY_NAME"]
 
 #: the folder every default output goes under (relative to the working folder)
 OUT_ROOT = Path("out")
@@ -25,6 +26,46 @@ SUMMARY_NAME = "summary.json"
 
 class BadOutput(ValueError):
     """An output path that is an input, another output, or a folder (exit 2, nothing written)."""
+
+
+class WriteFailed(OSError):
+    """An output that could not be written (a full disk, a file-size limit): one line naming the
+    file and the system's reason (exit 1; what was written before stays)."""
+
+    def __init__(self, path, err: OSError):
+        super().__init__(err.errno, err.strerror or str(err), str(path))
+
+    def __str__(self) -> str:
+        return f"cannot write {self.filename}: {self.strerror}"
+
+
+def fresh(path) -> Path:
+    """``path`` made ready for a new file: a file or a link already there is removed (a link
+    itself, never what it points to), so the write that follows creates a file of its own."""
+    path = Path(path)
+    if path.is_symlink() or path.is_file():
+        path.unlink()
+    return path
+
+
+@contextmanager
+def writing(path):
+    """Write one output at ``path`` (yielded): a new file (:func:`fresh`), and any ``OSError``
+    while writing it becomes :class:`WriteFailed` naming it."""
+    path = fresh(path)
+    try:
+        yield path
+    except WriteFailed:
+        raise
+    except OSError as e:
+        raise WriteFailed(path, e) from None
+
+
+def write_bytes(path, data: bytes) -> Path:
+    """``data`` as a new file at ``path`` (:func:`writing`)."""
+    with writing(path) as p, open(p, "xb") as f:
+        f.write(data)
+    return p
 
 
 def safe_name(name: str) -> str:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.paths import write_bytes, writing
 from ..core.plotting import pyplot, save_png
 from ..core.rotation import dcm, euler_321
 from .collocation import PlanError, Problem, Solution, eigenaxis_commands, simulate_commands
@@ -35,13 +36,15 @@ def eigenaxis_baseline(prob: Problem, t) -> np.ndarray:
 
 
 def write_plan(scene, prob: Problem, sol: Solution, out_dir, *, chart: bool = True) -> dict:
-    """Write plan.csv, plan.json and (``chart``) plan.png into ``out_dir``; returns the JSON dict."""
+    """Write plan.csv, plan.json and (``chart``) plan.png into ``out_dir``; returns the JSON dict.
+    Each is a new file (a link there is replaced, never written through); a write that fails
+    raises :class:`~stationbed.core.paths.WriteFailed` naming the file."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     h_norm = np.linalg.norm(sol.h_B, axis=1)
     rows = np.column_stack([sol.t, sol.q_CR, sol.q_BR, sol.omega_BN_B, sol.h_B, h_norm, sol.tau_B,
                             np.linalg.norm(sol.h_dot_B, axis=1)])
-    with open(out / "plan.csv", "w", newline="") as f:
+    with writing(out / "plan.csv") as path, open(path, "x", newline="") as f:
         w = csv.writer(f)
         w.writerow(COLUMNS)
         w.writerows([f"{v:.12g}" for v in r] for r in rows)
@@ -71,9 +74,10 @@ def write_plan(scene, prob: Problem, sol: Solution, out_dir, *, chart: bool = Tr
         "eigenaxis_commands_peak_fraction": float(np.max(eig)) / prob.h_max,
         "solver": sol.stats,
     }
-    (out / "plan.json").write_text(json.dumps(info, indent=2) + "\n")
+    write_bytes(out / "plan.json", (json.dumps(info, indent=2) + "\n").encode())
     if chart:
-        plot_plan(sol, prob, eig, out / "plan.png", title=f"{scene.name}: planned slew")
+        with writing(out / "plan.png") as path:
+            plot_plan(sol, prob, eig, path, title=f"{scene.name}: planned slew")
     return info
 
 

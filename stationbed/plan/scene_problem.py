@@ -16,6 +16,7 @@ from ..model.cmg import CmgModel, cluster_functions
 from ..model.environment import omega_ON_O, orbit_position_N
 from ..run.closed_loop import plant_facts
 from ..run.prepare import prepare
+from ..scene.plan import MAX_INTERVALS
 from .collocation import PlanError, Problem, Solution, solve
 from .model import Rotational
 
@@ -118,6 +119,9 @@ def plan_scene(scene, *, intervals: int | None = None, refine: int | None = None
     started from the first solution; the returned solution is the fine one, and its stats carry
     ``cost_coarse`` and ``cost_change`` (relative) for the mesh-refinement report.
     """
+    for name, v in (("intervals", intervals), ("refine", refine)):  # the NLP's size: plan.intervals' bounds
+        if v is not None and not 2 <= v <= MAX_INTERVALS:
+            raise PlanError(f"{name} must be between 2 and {MAX_INTERVALS} (plan.intervals' range), got {v}")
     prob = scene_problem(scene, intervals=intervals)
     sol = solve(prob)
     if refine:

@@ -151,6 +151,9 @@ class Controller:
     name: ClassVar[str] = ""
     command: ClassVar[str] = "torque"
     Params: ClassVar[type[ControllerParams]] = ControllerParams
+    #: parameters naming a file relative to the scene file's folder (a sample's scene written
+    #: elsewhere makes them absolute)
+    file_params: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, period: float = 0.1, **params):
         if not (period > 0 and math.isfinite(period)):
@@ -179,6 +182,10 @@ class Controller:
         self.n_updates = 0
         self.q_ref_BN = None
         self._reset(plant)
+
+    def check(self, plant: Plant) -> None:
+        """Refuse, before a command opens any output, what only the plant shows (the command
+        line calls it; nothing by default: a law's refusals come from :meth:`reset`)."""
 
     def update(self, t: float, meas: Measurement):
         """The command for the period starting at ``t`` [s] (counted in ``n_updates``).

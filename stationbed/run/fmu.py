@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import interrupts
 from .controller import Controller, one_line
 from .measurement import measurement_fields
 from .fmu_unit import FmuError, FmuStepError, load_unit
@@ -342,6 +343,12 @@ class FmuController(Controller):
         self._in_vrs, self._out_vrs = vr(inputs), vr(out_vars)
         self._n_values = (len(in_idx), sum(self._size(v) for v in out_vars))
 
+    def check(self, plant) -> None:
+        """Everything a run's first tick would find, before the command line opens an output:
+        the variables bound, the binary loaded and instantiated, the parameters and the
+        initialisation accepted (the instance is reused by the run, reset)."""
+        self._reset(plant)
+
     def _reset(self, plant) -> None:
         self._bind(plant)
         params = self._plant_params(plant) + self._param_values
@@ -351,7 +358,7 @@ class FmuController(Controller):
         try:
             inst.start(params)
         except Exception as e:  # noqa: BLE001 - the FMU refused its parameters or its initialisation
-            inst.broken = True
+            inst.fail(getattr(e, "status", None))
             raise FmuError(f"FMU '{self.name}': initialisation at t = 0 failed ({one_line(e)}{inst.said()})") from None
         inst.bind(self._in_vrs, self._out_vrs, *self._n_values)
         self._t_fmu = 0.0
@@ -365,14 +372,17 @@ class FmuController(Controller):
         # except the last tick of a run whose duration is not a whole number of periods (its
         # command is logged, never flown)
         start = t if t >= self._t_fmu - CLOCK_RTOL * max(1.0, t) else self._t_fmu
+        mark = interrupts.count()
         try:
             inst.tick(start, h)
         except FmuStepError:
-            inst.broken = True
+            inst.fail()
             raise
         except Exception as e:  # noqa: BLE001 - an error status (FmiStatus, or FMPy's FMICallException)
-            inst.broken = True
             status = getattr(e, "status", None)
+            inst.fail(status)
+            if interrupts.since(mark):  # Ctrl-C / SIGTERM raised inside a Python FMU's own step
+                raise KeyboardInterrupt from None
             what = f"returned status {status} ({_STATUS.get(status, 'illegal')})" if status is not None else f"failed ({one_line(e)})"
             call = f"doStep({start:.6g} s, {h:.6g} s)"
             fn = getattr(e, "function", "DoStep")

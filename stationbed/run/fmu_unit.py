@@ -40,6 +40,8 @@ __all__ = ["FmuError", "FmuStepError", "FmiStatus", "Unit", "Instance", "load_un
 FMI_EXTRA = "stationbed[fmi]"
 #: Log messages of an instance kept to quote in a failure.
 LOG_KEPT = 8
+#: FMI status ``fatal`` (FMI 2 and 3): no function of the instance may be called after it
+FATAL = 4
 
 
 class FmuError(ControllerError):
@@ -80,6 +82,7 @@ class Unit:
     unzipdir : str  Where it is extracted (removed at exit).
     variables : dict  name -> fmpy ModelVariable.
     n_instantiated : int  Instances created in this process (a test and the benchmark read it).
+    instances : list  Every instance of this unit not yet closed (freed in order at exit).
     """
 
     shown: str
@@ -90,6 +93,7 @@ class Unit:
     variables: dict
     n_instantiated: int = 0
     free: list = field(default_factory=list)
+    instances: list = field(default_factory=list)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def acquire(self, owner) -> "Instance":
@@ -101,27 +105,62 @@ class Unit:
             inst = Instance(self)
             with self.lock:
                 self.n_instantiated += 1
-        weakref.finalize(owner, self._release, inst)
+                self.instances.append(inst)
+        # at exit :func:`_close_units` frees every instance, in order, before the folder goes
+        weakref.finalize(owner, self._release, inst).atexit = False
         return inst
 
     def _release(self, inst: "Instance") -> None:
         if inst.broken:  # failed in its run: FMI allows little more than freeing it
-            inst.discard()
+            self._close(inst)
             return
         with self.lock:
             self.free.append(inst)
+
+    def _close(self, inst: "Instance") -> None:
+        with self.lock:
+            if inst not in self.instances:
+                return
+            self.instances.remove(inst)
+        inst.close()
+
+    def close(self) -> None:
+        """Free every instance (each as FMI allows after its last status), then remove the
+        extracted folder: in that order, as the process exits."""
+        with self.lock:
+            insts, self.instances, self.free = list(self.instances), [], []
+        for inst in insts:
+            inst.close()
+        shutil.rmtree(self.unzipdir, ignore_errors=True)
 
 
 #: resolved path -> (mtime_ns, size, Unit)
 _UNITS: dict[Path, tuple[int, int, Unit]] = {}
 _UNITS_LOCK = threading.Lock()
+#: units replaced in _UNITS by a newer version of their file (closed at exit too)
+_RETIRED: list[Unit] = []
 _STATS = {"extracted": 0}
+
+
+def _close_units() -> None:
+    """At exit (a normal end, an error, Ctrl-C or SIGTERM turned into one by the CLI): free the
+    instances and remove the extracted folders of every unit, instances first."""
+    with _UNITS_LOCK:
+        units = [u for *_, u in _UNITS.values()] + _RETIRED
+        _UNITS.clear()
+        _RETIRED.clear()
+    for unit in units:
+        unit.close()
+
+
+atexit.register(_close_units)
 
 
 def unit_stats() -> dict:
     """Counts of this process: ``extracted`` (FMU files unzipped) and ``instantiated`` (FMU
     instances created, all files)."""
-    return {"extracted": _STATS["extracted"], "instantiated": sum(u.n_instantiated for *_, u in _UNITS.values())}
+    units = [u for *_, u in _UNITS.values()] + _RETIRED
+    return {"extracted": _STATS["extracted"], "instantiated": sum(u.n_instantiated for u in units)}
 
 
 def _binary_dir(version: int, fmpy) -> str:
@@ -149,6 +188,8 @@ def load_unit(shown: str, path: Path) -> Unit:
         if cached is not None and cached[:2] == (st.st_mtime_ns, st.st_size):
             return cached[2]
         unit = _read(fmpy, shown, path)
+        if cached is not None:  # the file changed: its old folder and instances go at exit too
+            _RETIRED.append(cached[2])
         _UNITS[path] = (st.st_mtime_ns, st.st_size, unit)
         return unit
 
@@ -181,8 +222,14 @@ def _read(fmpy, shown: str, path: Path) -> Unit:
             if any(n.startswith("sources/") for n in names) else ""
         raise FmuError(f"FMU '{shown}' has no binary for this platform: {want} is missing; {has}{src}")
     unzipdir = tempfile.mkdtemp(prefix="stationbed_fmu_")
-    atexit.register(shutil.rmtree, unzipdir, True)
-    fmpy.extract(str(path), unzipdir)
+    try:
+        fmpy.extract(str(path), unzipdir)
+    except Exception as e:  # a member FMPy refuses (resources/a:b.txt), a CRC error, a full disk...
+        shutil.rmtree(unzipdir, ignore_errors=True)
+        raise FmuError(f"FMU '{shown}': cannot extract it ({type(e).__name__}: {one_line(e)})") from None
+    except BaseException:  # Ctrl-C while extracting: no folder left behind
+        shutil.rmtree(unzipdir, ignore_errors=True)
+        raise
     _STATS["extracted"] += 1
     variables = {v.name: v for v in md.modelVariables}
     return Unit(shown=shown, path=path, md=md, version=version, unzipdir=unzipdir, variables=variables)
@@ -208,6 +255,9 @@ class Instance:
         self.version = unit.version
         self.messages: deque[str] = deque(maxlen=LOG_KEPT)
         self.used = False
+        #: the worst FMI status a call of the failed run returned (None: no error status), set
+        #: by :meth:`fail`; it decides what :meth:`close` may still call
+        self.failed_status: int | None = None
         self.broken = False
         kw = dict(guid=md.guid, unzipDirectory=unit.unzipdir, modelIdentifier=md.coSimulation.modelIdentifier,
                   instanceName=f"stationbed_{id(self):x}")
@@ -355,12 +405,31 @@ class Instance:
             if status > 1:
                 raise FmiStatus("fmi3GetFloat64", status)
 
-    def discard(self) -> None:
-        """Free an instance that failed (it is not given back for reuse)."""
-        try:
-            self.slave.terminate()
-        except Exception:  # noqa: BLE001 - an instance in error may refuse; it is freed anyway
-            pass
+    def fail(self, status: int | None = None) -> None:
+        """Mark the instance failed (never reused): ``status`` is the FMI status of the call that
+        failed (3 error, 4 fatal), None when no call did (an output not finite, an FMI 3 step that
+        asked to terminate)."""
+        self.broken = True
+        if status is not None:
+            self.failed_status = max(status, self.failed_status or 0)
+
+    def close(self) -> None:
+        """Free the instance as FMI allows after its last status: after ``fatal`` no call at all
+        (the instance and its library stay as they are until the process ends: calling
+        ``fmi2Terminate`` on a Python FMU that raised crashed the process), after ``error`` only
+        ``freeInstance``, else ``terminate`` (when initialised) then ``freeInstance``, which
+        also unloads the library."""
+        if getattr(self, "closed", False):
+            return
+        self.closed = True
+        status = self.failed_status
+        if status is not None and status >= FATAL:
+            return
+        if status is None and self.used:
+            try:
+                self.slave.terminate()
+            except Exception:  # noqa: BLE001 - it is freed anyway
+                pass
         try:
             self.slave.freeInstance()
         except Exception:  # noqa: BLE001

@@ -15,10 +15,13 @@ from pydantic import Field, field_validator, model_validator
 
 from .base import FieldError, Strict, TimeS, Vec3, unit_quaternion
 
-__all__ = ["PlanSpec", "PLAN_OBJECTIVES"]
+__all__ = ["PlanSpec", "PLAN_OBJECTIVES", "MAX_INTERVALS"]
 
 #: the objectives: the weighted sum, or one of its two terms alone (see PlanSpec)
 PLAN_OBJECTIVES = ("weighted", "torque_energy", "peak_momentum")
+#: the most Hermite-Simpson intervals a plan takes (plan.intervals, --intervals, --refine): the NLP
+#: grows with them (1e6 intervals passed 1.5 GiB in 9 s before IPOPT started)
+MAX_INTERVALS = 2000
 
 Quaternion = Annotated[list[float], Field(min_length=4, max_length=4)]
 
@@ -51,7 +54,7 @@ class PlanSpec(Strict):
     weight_peak: float = Field(default=0.1, ge=0.0)
     kp: float = Field(default=0.000128, gt=0.0)
     kd: float = Field(default=0.015846, gt=0.0)
-    intervals: int = Field(default=60, ge=2, le=2000)
+    intervals: int = Field(default=60, ge=2, le=MAX_INTERVALS)
     max_iter: int = Field(default=3000, ge=1)
     tol: float = Field(default=1e-8, gt=0.0, lt=1.0)
 

@@ -17,17 +17,21 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.paths import write_bytes, writing
 from ..core.plotting import pyplot, save_png
 from ..core.rotation import quat_conj, quat_mult, rotation_angle
 from ..model.environment import q_ON
 from ..plan import PlanError, plan_scene, read_plan, write_plan
 from ..run.simulation import simulate
 
-__all__ = ["plan_and_fly", "fly_plan", "eigenaxis_pd_scene", "EIGENAXIS_TIME_FRACTION"]
+__all__ = ["plan_and_fly", "fly_plan", "eigenaxis_pd_scene", "EIGENAXIS_TIME_FRACTION", "FLIGHT_FILES"]
 
 #: the eigenaxis pd slew's rate limit turns the slew angle in this fraction of the plan's duration
 #: (the rest: acceleration, braking and settling of the same law's bandwidth)
 EIGENAXIS_TIME_FRACTION = 0.8
+#: the files a flight of the plan writes beside plan.json (removed when a new plan is written,
+#: flown or not: they would describe the earlier plan)
+FLIGHT_FILES = ("flown.csv", "eigenaxis.csv", "flight.png", "plan.rrd", "flown.rrd", "summary.json")
 
 
 def _relative_attitude(scene, traj) -> np.ndarray:
@@ -65,11 +69,14 @@ def fly_plan(scene, plan_json, out_dir) -> dict:
                                               "params": {"plan": str(Path(plan_json).resolve())}},
                                "simulation.duration": scene.plan.duration})
     flown = simulate(fly_scene)
-    flown.to_csv(out / "flown.csv")
+    with writing(out / "flown.csv") as path:
+        flown.to_csv(path)
     summary = {"scene": scene.name, **flown.meta, "rows_file": "flown.csv"}  # a run folder's (cli.py's run)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    with writing(out / "summary.json") as path:
+        path.write_text(json.dumps(summary, indent=2, default=str) + "\n")
     eig = simulate(eigenaxis_pd_scene(scene, plan))
-    eig.to_csv(out / "eigenaxis.csv")
+    with writing(out / "eigenaxis.csv") as path:
+        eig.to_csv(path)
     # compared at the plan's own points (no interpolation of the plan; the flown rows are
     # interpolated, exact where the output grid holds the point)
     t = plan["t"]
@@ -98,7 +105,8 @@ def fly_plan(scene, plan_json, out_dir) -> dict:
         "eigenaxis_final_error_deg": math.degrees(float(rotation_angle(_relative_attitude(scene, eig)[-1], q_end)[0])),
         "eigenaxis_pd": {k: v for k, v in eigenaxis_pd_scene(scene, plan).controller.params.items() if k != "q_ref"},
     }
-    _chart(scene, plan, t, h_plan, h_flown, eig.t, h_eig, att, cap, out / "flight.png")
+    with writing(out / "flight.png") as path:
+        _chart(scene, plan, t, h_plan, h_flown, eig.t, h_eig, att, cap, path)
     _record(scene, fly_scene, flown, plan, h_plan, eig.t, h_eig, att, out / "plan.rrd")
     return flight
 
@@ -121,13 +129,12 @@ def _chart(scene, plan, t, h_plan, h_flown, t_eig, h_eig, att, cap, path) -> Non
 
 def _record(scene, fly_scene, flown, plan, h_plan, eig_t, h_eig, att, path) -> None:
     from ..output.rerun.recording import write_recording
-    from ..output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
+    from ..output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun, saving
 
     write_recording(flown, fly_scene, Path(path).parent / "flown.rrd")
     rr = import_rerun()
     rec = rr.RecordingStream(APPLICATION_ID)
-    rec.save(path)
-    try:
+    with saving(rec, path):  # a full disk: WriteFailed naming the file, never a hang
         rec.send_recording_name(f"{scene.name} plan")
 
         def send(entity, t, values, names):
@@ -144,16 +151,17 @@ def _record(scene, fly_scene, flown, plan, h_plan, eig_t, h_eig, att, path) -> N
         send("plan/q_BR_planned", plan["t"], plan["q_BR_planned"], ["w", "x", "y", "z"])
         send("plan/q_BR_flown", t, _relative_attitude(scene, flown), ["w", "x", "y", "z"])
         rec.flush()
-    finally:
-        rec.disconnect()
 
 
 def plan_and_fly(scene, out_dir, *, intervals=None, refine=None, fly=True) -> dict:
     """Plan ``scene.plan``, write the plan's files, and (``fly``) fly it; returns plan.json's dict."""
     out = Path(out_dir)
     prob, sol = plan_scene(scene, intervals=intervals, refine=refine)
+    for name in FLIGHT_FILES:  # an earlier flight's files go (links removed, never followed)
+        with writing(out / name):
+            pass
     info = write_plan(scene, prob, sol, out)
     if fly:
         info["flight"] = fly_plan(scene, out / "plan.json", out)
-        (out / "plan.json").write_text(json.dumps(info, indent=2) + "\n")
+        write_bytes(out / "plan.json", (json.dumps(info, indent=2) + "\n").encode())
     return info

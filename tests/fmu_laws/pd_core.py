@@ -7,12 +7,14 @@ on the values the loop wrote through FMI. Flying it must give the Python law's t
 
 Test hooks (parameters): ``fail_at`` [s] makes ``do_step`` fail from that time on, ``nan_at`` [s]
 makes ``tau_cmd[1]`` NaN, ``terminate_at`` [s] makes an FMI 3 step ask to terminate the
-simulation; negative = never. The FMU keeps its own clock and fails a step that
+simulation, ``raise_at`` [s] makes ``do_step`` raise (a Python exception inside the FMU), ``step_wall_s`` [s] makes each
+step sleep that long (a signal then lands inside the FMU's own Python); negative = never. The FMU keeps its own clock and fails a step that
 does not start where the last one ended (as the FMI reference FMUs do), so a co-simulation
 master that loses the chain (or a reset that does not restart it at 0) is caught.
 """
 
 import math
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,7 +24,8 @@ INPUTS = (("q_BN", 4), ("omega_BN_B", 3), ("q_ON", 4), ("omega_ON_O", 3))
 OUTPUTS = (("tau_cmd", 3), ("q_ref_BN", 4), ("n_steps", 1))
 REAL_PARAMS = (("bandwidth", 1, 0.01), ("damping", 1, 0.9), ("max_slew_rate", 1, 0.005),
                ("q_ref", 4, None), ("inertia_O_B", 9, None), ("mean_motion", 1, 0.0),
-               ("fail_at", 1, -1.0), ("nan_at", 1, -1.0), ("terminate_at", 1, -1.0))
+               ("fail_at", 1, -1.0), ("nan_at", 1, -1.0), ("terminate_at", 1, -1.0),
+               ("raise_at", 1, -1.0), ("step_wall_s", 1, -1.0))
 BOOL_PARAMS = (("lvlh", True), ("gyro_compensation", True))
 #: the FMU's clock check [s]: ticks are k * period, computed without accumulation by the loop
 CLOCK_TOL_S = 1e-9
@@ -93,6 +96,10 @@ class PdCore:
         if abs(t - self.clock) > CLOCK_TOL_S * max(1.0, abs(t)):
             self.message = f"doStep starts at {t!r} s, the FMU's clock is at {self.clock!r} s"
             return False
+        if v["step_wall_s"] > 0.0:
+            time.sleep(v["step_wall_s"])
+        if 0.0 <= v["raise_at"] <= t:
+            raise RuntimeError(f"gain table lost at {t} s")
         if 0.0 <= v["fail_at"] <= t:
             self.message = f"gain table exhausted at {t} s"
             return False

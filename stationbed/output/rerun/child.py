@@ -345,6 +345,9 @@ def child_main(scene_path: str, rrd_path: str) -> int:
             sink.close()
         return 0
     except Exception as e:
+        from ...core.paths import WriteFailed
+
         text = " | ".join(ln.strip() for ln in str(e).splitlines() if ln.strip())
-        print(f"{CHILD_ERROR}{type(e).__name__}: {text}", file=sys.stderr, flush=True)
+        kind = "" if isinstance(e, WriteFailed) else f"{type(e).__name__}: "  # (it names the file itself)
+        print(f"{CHILD_ERROR}{kind}{text}", file=sys.stderr, flush=True)
         return 1

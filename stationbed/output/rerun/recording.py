@@ -10,7 +10,7 @@ import numpy as np
 from ...core.rotation import rotation_angle
 from ...run.trajectory import Trajectory
 from .blueprint import check_blueprint
-from .sdk import APPLICATION_ID, TIMELINE, import_rerun
+from .sdk import APPLICATION_ID, TIMELINE, import_rerun, saving
 from .sink import RrdSink
 
 __all__ = ["write_recording", "write_check_recording"]
@@ -63,8 +63,7 @@ def write_check_recording(res, scene, path) -> Path:
     names = list(res.trajectories)
     pairs = list(itertools.combinations(names, 2))
     rec = rr.RecordingStream(APPLICATION_ID)
-    rec.save(path)
-    try:
+    with saving(rec, path):  # a full disk: WriteFailed naming the file, never a hang
         rec.send_recording_name(f"{scene.name} check")
         rec.send_blueprint(check_blueprint(names, pairs), make_active=True, make_default=True)
 
@@ -85,6 +84,4 @@ def write_check_recording(res, scene, path) -> Path:
         for what, tol in (("attitude_rad", res.tol_att_rad), ("rate", res.tol_rate), ("H", res.tol_H)):
             send(f"check/tolerance/{what}", t_end, np.full(2, tol), ["tolerance"])
         rec.flush()
-    finally:
-        rec.disconnect()
     return path

@@ -26,7 +26,7 @@ import numpy as np
 from ...run.trajectory import Trajectory, base_columns
 from .blueprint import run_blueprint
 from .drawing import StationDrawing
-from .sdk import APPLICATION_ID, TIMELINE, import_rerun
+from .sdk import APPLICATION_ID, TIMELINE, RrdFile, import_rerun
 from .series import Telemetry
 
 __all__ = ["RrdSink", "TeeSink", "FLUSH_INTERVAL_S"]
@@ -139,7 +139,12 @@ class RrdSink:
         self._closed = False
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(APPLICATION_ID)
-        self.rec.save(self.path)
+        self._file = RrdFile(self.path)  # stationbed writes the file: a full disk is an error, never a hang
+        try:
+            self.rec.save(self._file.fifo)
+        except BaseException:
+            self._file.close(check=False)
+            raise
         self.rec.send_recording_name(scene.name)
         self.rec.send_property("scene", rr.AnyValues(name=scene.name, description=scene.description))
         extra = [c for c in self.columns if c not in base]
@@ -216,4 +221,5 @@ class RrdSink:
         try:
             self._send_pending()
         finally:
-            self.rec.disconnect()  # flushes everything, writes the footer, closes the file
+            self.rec.disconnect()  # flushes everything, writes the footer, closes rerun's end
+            self._file.close()  # WriteFailed (naming the file) when a write failed

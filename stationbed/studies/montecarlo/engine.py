@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ...core import progress
+from ...core import interrupts, progress
 from ...core.provenance import provenance
 from ...run.metrics import METRICS
 from ...run.rate_auto import AUTO, scene_choice
@@ -165,20 +165,21 @@ def _ctrl_c_kept():
     ran to its end after Ctrl-C), so the engine checks the record between chunks too. Only in
     the main thread and over Python's default handler (a caller's own handler is left alone)."""
     seen: list[int] = []
+    before = signal.getsignal(signal.SIGINT)
     if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            before not in (signal.default_int_handler, interrupts.handler):  # (the CLI's: the same, counted)
         yield seen
         return
 
     def handler(signum, frame):
         seen.append(signum)
-        raise KeyboardInterrupt
+        interrupts.handler(signum, frame)
 
     signal.signal(signal.SIGINT, handler)
     try:
         yield seen
     finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, before)
 
 
 #: guided tail (:func:`_gaps`): a default chunk is at most the samples left / (TAIL_SPLIT x workers) ...

@@ -23,7 +23,7 @@ import numpy as np
 
 from ...output.rerun.drawing import StationDrawing
 from ...output.rerun.geometry import StationGeometry
-from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun
+from ...output.rerun.sdk import APPLICATION_ID, TIMELINE, import_rerun, saving
 from ...run.metrics import METRICS
 from .samples import ID_COLUMNS, held_warnings
 from .stats import quiet_nan
@@ -137,8 +137,7 @@ def write_recording(path: Path, scene, t, env, df, *, percentiles, replay: bool 
     """
     rr = import_rerun()
     rec = rr.RecordingStream(APPLICATION_ID)
-    rec.save(path)
-    try:
+    with saving(rec, path):  # a full disk: WriteFailed naming the file, never a hang
         rec.send_recording_name(f"{scene.name} montecarlo")
         idx = df["index"].to_numpy()
         series = []
@@ -165,6 +164,4 @@ def write_recording(path: Path, scene, t, env, df, *, percentiles, replay: bool 
         replayed = replay and worst_k is not None and _replay_worst(rec, scene, worst_k)
         rec.send_blueprint(_blueprint(scene, series, replayed, worst_k, float(t[-1]) if len(t) else 0.0), make_active=True, make_default=True)
         rec.flush()
-    finally:
-        rec.disconnect()
     return path

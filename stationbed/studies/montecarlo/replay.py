@@ -97,6 +97,12 @@ def write_sample_scene(scene: Scene, k: int, path: Path) -> Scene:
             changes["controller.name"] = f"{(scene.folder / module).resolve()}:{cls}"
     if c is not None and c.fmu is not None and scene.folder is not None and not Path(c.fmu).expanduser().is_absolute():
         changes["controller.fmu"] = str((scene.folder / c.fmu).resolve())  # an FMU law, likewise
+    if c is not None and c.fmu is None and scene.folder is not None:  # a law's files (schedule's plan)
+        from ...run.controller import get_controller
+
+        for p in get_controller(c.name, base_dir=scene.folder).file_params:
+            if isinstance(c.params.get(p), str) and not Path(c.params[p]).expanduser().is_absolute():
+                changes[f"controller.params.{p}"] = str((scene.folder / c.params[p]).resolve())
     s = s.replace(changes)
     header = (f"sample {k} of the Monte Carlo study of '{scene.name}' (seed {mc.seed}, sample seed "
               f"{sample_seed(mc.seed, k)}): the drawn values are filled in\n"
