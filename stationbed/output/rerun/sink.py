@@ -102,6 +102,10 @@ class RrdSink:
         ``send_columns``) and flushed to the file once this much wall time [s] has passed since
         the last send; :meth:`flush` and :meth:`close` send what is left. Default
         :data:`FLUSH_INTERVAL_S`; 0 sends and flushes every batch at once.
+    live : str, optional
+        Also stream the same recording to a rerun viewer or gRPC server (``run --live``,
+        :mod:`.live`): a ``rerun+http://HOST:PORT/proxy`` URL, or ``"spawn"`` to start a viewer
+        (``rr.spawn``). ``path`` may then be None (streamed only).
 
     Attributes
     ----------
@@ -120,11 +124,11 @@ class RrdSink:
     """
 
     def __init__(self, scene, path, columns, *, duration: float | None = None,
-                 flush_interval_s: float = FLUSH_INTERVAL_S):
+                 flush_interval_s: float = FLUSH_INTERVAL_S, live: str | None = None):
         rr = import_rerun()
         self.rr = rr
         self.scene = scene
-        self.path = Path(path)
+        self.path = Path(path) if path is not None else None
         self.columns = list(columns)
         base = base_columns(scene.appendage_names)
         missing = [c for c in base if c not in self.columns]
@@ -137,9 +141,16 @@ class RrdSink:
         self.n_rows = 0  # rows sent to the file
         self.t_last = None  # time of the last row sent [s]
         self._closed = False
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(APPLICATION_ID)
-        self.rec.save(self.path)
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        if live is None:
+            self.rec.save(self.path)
+        else:  # the viewer sees what the file gets: one stream, two sinks (issue 36)
+            from .live import grpc_sink
+
+            sinks = [grpc_sink(self.rec, live)] + ([rr.FileSink(str(self.path))] if self.path is not None else [])
+            self.rec.set_sinks(*sinks)
         self.rec.send_recording_name(scene.name)
         self.rec.send_property("scene", rr.AnyValues(name=scene.name, description=scene.description))
         extra = [c for c in self.columns if c not in base]
