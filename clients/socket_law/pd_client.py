@@ -11,7 +11,7 @@ a run flown through it is bit-identical to the in-process ``pd``.
 
 ``--port 0`` picks a free port; the first line on stdout is always ``listening on HOST:PORT``.
 ``--fault KIND@TICK`` misbehaves at a tick, for the tests: ``die`` (exit), ``late`` (sleep
-``--late-s``), ``size`` (a frame 8 bytes short), ``version`` (a frame of version 99); and
+``--late-s``), ``size`` (a frame without q_ref_BN), ``version`` (a frame of version 99); and
 ``--fault noref`` leaves the ``command q_ref_BN 4`` line out of READY.
 """
 
@@ -194,8 +194,8 @@ class Run(socketserver.StreamRequestHandler):
                     os._exit(3)
                 if fault == "late":
                     time.sleep(self.server.late_s)
-                if fault == "size":
-                    conn.sendall(out.pack(out.size - 4, VERSION, CMD, tick, t, *cmd, *q_ref)[:-8])
+                if fault == "size":  # the command without q_ref_BN: a frame of 48 bytes, not 80
+                    conn.sendall(frame(CMD, tick, t, struct.pack("<3d", *cmd)))
                     continue
                 if fault == "version":
                     conn.sendall(out.pack(out.size - 4, 99, CMD, tick, t, *cmd, *q_ref))
