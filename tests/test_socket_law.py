@@ -211,3 +211,39 @@ def test_no_law_process_is_one_line_naming_the_address():
         port = s.getsockname()[1]
         with pytest.raises(SocketSetupError, match=rf"no law process listening at 127.0.0.1:{port} within 0.2 s"):
             simulate(pd_scene({"port": str(port), "params": PD_PARAMS, "timeout": 0.2}))
+
+
+MC_TABLE = {
+    "n": 4,
+    "seed": 7,
+    "disperse": [
+        {"key": "initial.q_BN", "kind": "attitude_normal", "sigma": 0.02},  # rad
+        {"key": "controller.params.bandwidth", "kind": "scale_uniform", "low": -0.2, "high": 0.2},
+    ],
+}
+#: the fused pd (casadi C) against the per-tick law: tests/test_controller_contract.py FUSED_RTOL
+FUSED_RTOL = 1e-9
+
+
+def test_a_monte_carlo_flies_one_connection_per_sample(c_client):
+    """One client serves every sample (a connection each, at once: the C client forks per
+    connection), serially and on 2 Dask workers: the same table, and the in-process pd's
+    (fused: to round-off)."""
+    import pandas as pd
+
+    from stationbed import montecarlo
+
+    base = pd_scene({"name": "pd", "params": PD_PARAMS}).model_dump(exclude_unset=True)
+    ref = montecarlo(scene_from_dict({**base, "montecarlo": MC_TABLE}), chunk=1).df
+    proc, port = start(client_command("c", c_client))
+    try:
+        d = {**base, "montecarlo": MC_TABLE,
+             "controller": {"port": f"127.0.0.1:{port}", "period": PERIOD_S, "params": PD_PARAMS}}
+        serial = montecarlo(scene_from_dict(d), chunk=1).df
+        workers = montecarlo(scene_from_dict(d), workers=2, chunk=1).df
+    finally:
+        stop(proc)
+    assert (serial["status"] == "ok").all(), serial["reason"].tolist()
+    pd.testing.assert_frame_equal(workers, serial)
+    np.testing.assert_allclose(serial["final_att_err_deg"], ref["final_att_err_deg"], rtol=FUSED_RTOL, atol=0.0)
+    assert serial["final_att_err_deg"].nunique() == len(serial)  # the samples differ
