@@ -228,7 +228,7 @@ def _run(args, recorder) -> int:
     from .output.csv import CsvSink
 
     scene, changes = _scene_with_options(args)
-    paths, pace, recording = _output_paths(args, scene.name), live.pacer(args), args.rrd or args.live
+    paths, (pace, live_url), recording = _output_paths(args, scene.name), live.options(args), args.rrd or args.live
     _validate(scene)
     out, csv_path, partial = paths["out"], paths["csv"], paths["partial_csv"]
     out.mkdir(parents=True, exist_ok=True)
@@ -237,7 +237,7 @@ def _run(args, recorder) -> int:
     with CsvSink(partial, trajectory_columns(scene)) as csv:
         sink = csv
         if recording:  # stream the rows into the recording (and --live: a viewer) too, as they are computed
-            sink = _with_recording(csv, scene, paths.get("partial_rrd"), recorder, changes, live.live_url(args.live))
+            sink = _with_recording(csv, scene, paths.get("partial_rrd"), recorder, changes, live_url)
         try:
             traj = simulate(scene, sink=sink, keep=False, pace=pace)  # rows go to disk, memory stays bounded
         except KeyboardInterrupt:

@@ -156,3 +156,19 @@ def test_live_streams_the_recording_the_file_holds(tmp_path):
         for name, values in cols.items():
             np.testing.assert_array_equal(live[entity][name], values, err_msg=f"{entity} {name}")
     assert max(cols["t"][-1] for cols in live.values()) == DURATION_S  # every row streamed, to the last
+
+
+def test_live_to_a_viewer_that_is_not_there_stops_before_the_run(tmp_path, capsys):
+    """Nobody listening at the URL: one line naming it, exit 2, no output written (rerun would
+    otherwise take the stream and drop it silently at the end)."""
+    scene = write_scene(tmp_path, {})
+    port = _free_port()
+    assert main(["run", str(scene), "--out", str(tmp_path / "o"), "--live", str(port)]) == 2
+    assert f"--live {port}: no rerun viewer or gRPC server listening at 127.0.0.1:{port}" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_hold_late_needs_realtime(tmp_path, capsys):
+    scene = write_scene(tmp_path, {})
+    assert main(["run", str(scene), "--out", str(tmp_path / "o"), "--hold-late"]) == 2
+    assert "--hold-late: holds a socket law's late command under --realtime" in capsys.readouterr().err

@@ -16,14 +16,18 @@ the wall clock, its recording streamed to a rerun viewer while it flies.
 from __future__ import annotations
 
 import os
+import re
+import socket
 import sys
 
-__all__ = ["add_options", "pacer", "live_url", "summary_parts", "grpc_sink", "SPAWN"]
+__all__ = ["add_options", "options", "pacer", "live_url", "summary_parts", "grpc_sink", "SPAWN"]
 
 #: ``--live`` without a URL: start a viewer
 SPAWN = "spawn"
 #: the port of a viewer ``--live`` starts (rerun's default)
 SPAWN_PORT = 9876
+#: how long ``--live URL`` waits to reach the viewer before the run [s]
+CONNECT_S = 2.0
 
 
 def add_options(run_parser) -> None:
@@ -36,6 +40,11 @@ def add_options(run_parser) -> None:
     r.add_argument("--live", nargs="?", const=SPAWN, default=None, metavar="URL",
                    help="stream the recording to a rerun viewer: its rerun+http://HOST:PORT/proxy URL or port "
                         "(default: start one)")
+
+
+def options(args) -> tuple:
+    """``(pacer, live URL)`` of ``stationbed run``'s options, checked before any output is opened."""
+    return pacer(args), live_url(getattr(args, "live", None))
 
 
 def pacer(args):
@@ -57,11 +66,16 @@ def live_url(value: str | None) -> str | None:
             raise ValueError("--live: no display to open a viewer on; start one where you watch (rerun, or "
                              "rerun --serve-grpc on a server) and give its URL: --live rerun+http://HOST:9876/proxy")
         return value
-    if value.isdigit():
-        return f"rerun+http://127.0.0.1:{int(value)}/proxy"
-    if not value.startswith(("rerun://", "rerun+http://", "rerun+https://")) or not value.rstrip("/").endswith("/proxy"):
+    url = f"rerun+http://127.0.0.1:{int(value)}/proxy" if value.isdigit() else value
+    m = re.fullmatch(r"rerun(?:\+https?)?://\[?([^/\]]+?)\]?:(\d+)/proxy/?", url)
+    if m is None:
         raise ValueError(f"--live {value}: give a viewer's gRPC URL, rerun+http://HOST:PORT/proxy, or a port")
-    return value
+    try:  # a viewer that is not there would take the stream silently: say so now
+        socket.create_connection((m.group(1), int(m.group(2))), timeout=CONNECT_S).close()
+    except OSError as e:
+        raise ValueError(f"--live {value}: no rerun viewer or gRPC server listening at {m.group(1)}:{m.group(2)} "
+                         f"({e.strerror or e}); start one (rerun, or rerun --serve-grpc) first") from None
+    return url
 
 
 def _has_display() -> bool:
