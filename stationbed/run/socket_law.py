@@ -53,6 +53,8 @@ MAX_TEXT = 1 << 20
 RETRY_S = 0.02
 #: command field by command kind
 COMMAND_FIELD = {"torque": ("tau_B", 3), "gimbal_rates": ("gimbal_rates", None)}
+#: late ticks whose number is kept (``late_ticks``; all are counted)
+LATE_TICKS_KEPT = 1000
 #: why a socket law keeps the run per tick (the summary's words)
 PER_TICK_WHY = "the socket law (controller.port) runs in another process: it has no compiled form"
 
@@ -134,6 +136,7 @@ class SocketController(Controller):
         self.pacer = None
         self.sock = None
         self.n_late = 0
+        self.late_ticks: list[int] = []
         self._rtt: list[float] = []
 
     def paced_by(self, pacer) -> None:
@@ -191,6 +194,7 @@ class SocketController(Controller):
         text = hello_text(self.period, meas, cmd, self.law_params, facts)
         self._k = 0
         self.n_late = 0
+        self.late_ticks = []  # the first LATE_TICKS_KEPT ticks held (--hold-late)
         self._rtt = []
         s = self.sock = self._connect()
         self._finalizer = weakref.finalize(self, _close, s, -1)
@@ -258,6 +262,8 @@ class SocketController(Controller):
             got = self._receive(k, t, limit)
             if got is None:  # late under --hold-late: the last command held, the miss counted
                 self.n_late += 1
+                if len(self.late_ticks) < LATE_TICKS_KEPT:
+                    self.late_ticks.append(k)
                 return self._last
             tick = struct.unpack_from("<q", self._in, 8)[0]
             if tick == k:
