@@ -1,7 +1,7 @@
 """``stationbed`` command line (DESIGN §6).
 
-    stationbed run SCENE.toml [--out DIR] [--formulation NAME] [--integrator NAME] [--rtol X] [--atol X]
-                              [--duration S] [--step S] [--rrd FILE] [--realtime [F] [--hold-late]] [--live [URL]]
+    stationbed run SCENE.toml [--out DIR] [--formulation NAME] [--integrator NAME]
+                              [--rtol X] [--atol X] [--duration S] [--step S] [--rrd FILE]
     stationbed check SCENE.toml [--rtol X] [--duration S] [--rrd FILE]
     stationbed replay FILE.rrd [--web]
     stationbed plan SCENE.toml [--out DIR] [--intervals N] [--refine N] [--no-fly] [--set KEY.PATH=VALUE]
