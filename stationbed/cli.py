@@ -27,7 +27,7 @@ from pathlib import Path
 # a failed or interrupted run leaves its rows under PARTIAL_CSV, never over a finished result
 from .core.paths import CSV_NAME, PARTIAL_CSV, SUMMARY_NAME, BadOutput, WriteFailed, check_outputs, default_out, fresh
 from .core.paths import partial_path as _partial
-from .output.rerun import screenshot as screenshot_cli
+from .output.rerun import live, screenshot as screenshot_cli
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -114,6 +114,7 @@ def _parser() -> argparse.ArgumentParser:
     _scene_options(r)
     r.add_argument("--step", type=float, default=None, help="fixed step [s] (simulation.step)")
     r.add_argument("--rrd", type=Path, default=None, help="also write a rerun recording")
+    live.add_options(r)  # --realtime, --hold-late, --live (issue 36)
 
     c = sub.add_parser("check", help="run every formulation and compare them")
     _quiet(c)
@@ -188,7 +189,7 @@ def _fail(msg: str, code: int) -> int:
 
 def _cmd_run(args) -> int:
     recorder = None
-    if args.rrd:  # started by main() before the heavy imports; here when called directly
+    if args.rrd or args.live:  # started by main() before the heavy imports; here when called directly
         recorder = getattr(args, "recorder", None) or _start_recording(args)
     try:
         return _run(args, recorder)
@@ -232,7 +233,7 @@ def _run(args, recorder) -> int:
     from .output.csv import CsvSink
 
     scene, changes = _scene_with_options(args)
-    paths = _output_paths(args, scene.name)
+    paths, (pace, live_url), recording = _output_paths(args, scene.name), live.options(args), args.rrd or args.live
     _validate(scene)
     out, csv_path, partial = paths["out"], paths["csv"], paths["partial_csv"]
     out.mkdir(parents=True, exist_ok=True)
@@ -240,19 +241,19 @@ def _run(args, recorder) -> int:
     rrd_error = None
     with CsvSink(fresh(partial), trajectory_columns(scene)) as csv:  # a link there is replaced, not followed
         sink = csv
-        if args.rrd:  # stream the rows into the recording too, as they are computed
-            sink = _with_recording(csv, scene, paths["partial_rrd"], recorder, changes)
+        if recording:  # stream the rows into the recording (and --live: a viewer) too, as they are computed
+            sink = _with_recording(csv, scene, paths.get("partial_rrd"), recorder, changes, live_url)
         try:
-            traj = simulate(scene, sink=sink, keep=False)  # rows go to disk, memory stays bounded
+            traj = simulate(scene, sink=sink, keep=False, pace=pace)  # rows go to disk, memory stays bounded
         except KeyboardInterrupt:
-            if args.rrd:
+            if recording:
                 rrd_error = sink.close()
             status.update(status="interrupted", rows=csv.rows_written, last_t=csv.last_t, rows_file=partial.name)
             _write_json(paths["summary"], status)
             where = f"up to t = {csv.last_t:g} s " if csv.last_t is not None else ""
             return _fail(f"interrupted; {csv.rows_written} rows {where}kept in {partial}", EXIT_FAILED)
         except SinkError as e:  # the disk is full, say: the file holds whole rows, the message says to when
-            if args.rrd:
+            if recording:
                 rrd_error = sink.close()
             status.update(status="failed", reason=str(e), rows_file=partial.name)
             try:
@@ -262,7 +263,7 @@ def _run(args, recorder) -> int:
             return _fail(str(e), EXIT_FAILED)
         except SimulationError as e:
             _debug_traceback(e)
-            if args.rrd:  # finish the recording first: the message says whether it is complete
+            if recording:  # finish the recording first: the message says whether it is complete
                 rrd_error = sink.close()
             status.update(e.trajectory.meta, rows_file=partial.name)
             _write_json(paths["summary"], status)
@@ -270,7 +271,7 @@ def _run(args, recorder) -> int:
             failed = f"; recording {paths['partial_rrd']} failed: {rrd_error}" if rrd_error else ""
             return _fail(f"{e}; {e.trajectory.meta['n_rows']} rows kept in {kept}{failed}", EXIT_FAILED)
         finally:
-            if args.rrd:  # flush and finish the recording whatever happened
+            if recording:  # flush and finish the recording whatever happened
                 rrd_error = sink.close()
     os.replace(partial, csv_path)  # the run ended: its rows take the result's name
     if args.rrd and not rrd_error:
@@ -315,7 +316,7 @@ def _summary_line(s: dict) -> str:
     if "st_dropout_s" in s:
         parts.append(f"star-tracker dropouts {s['st_dropout_s']:.4g} s")
     from .run.thrust import thruster_parts  # thrusters (issue 21)
-    return "; ".join(parts + thruster_parts(s))
+    return "; ".join(parts + thruster_parts(s) + live.summary_parts(s))  # a socket law, --realtime (issue 36)
 
 
 def _start_recording(args):
@@ -326,9 +327,9 @@ def _start_recording(args):
     """
     from .output.rerun.child import RecordingChild
 
-    if os.path.realpath(args.rrd) == os.path.realpath(args.scene):
+    if args.rrd and os.path.realpath(args.rrd) == os.path.realpath(args.scene):
         raise BadOutput(f"--rrd {args.rrd} is the scene file: choose another recording path")
-    return RecordingChild.start(args.scene, _partial(args.rrd))
+    return RecordingChild.start(args.scene, _partial(args.rrd) if args.rrd else None)
 
 
 class _RecordingTee:
@@ -347,7 +348,7 @@ class _RecordingTee:
         return self.recorder.close()
 
 
-def _with_recording(csv_sink, scene, path, recorder=None, changes=None):
+def _with_recording(csv_sink, scene, path, recorder=None, changes=None, live_url=None):
     """``csv_sink`` teed with a rerun recording at ``path``, written by ``recorder`` (a started
     :class:`~stationbed.output.rerun.child.RecordingChild`, which builds the same
     :class:`~stationbed.output.rerun.sink.RrdSink`); ``close()`` finishes it and returns ``None`` or the
@@ -355,8 +356,8 @@ def _with_recording(csv_sink, scene, path, recorder=None, changes=None):
     if recorder is None:  # no child (a caller without one): the same sink, in this process
         from .output.rerun.sink import RrdSink, TeeSink
 
-        return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=scene.simulation.duration))
-    return _RecordingTee(csv_sink, recorder.open(csv_sink.columns, scene.simulation.duration, scene.name, changes))
+        return TeeSink(csv_sink, RrdSink(scene, path, csv_sink.columns, duration=scene.simulation.duration, live=live_url))
+    return _RecordingTee(csv_sink, recorder.open(csv_sink.columns, scene.simulation.duration, scene.name, changes, live_url))
 
 
 def _cmd_check(args) -> int:
@@ -545,7 +546,7 @@ def main(argv=None) -> int:
 
 
 def _main(args) -> int:
-    if args.cmd == "run" and args.rrd:  # first, so the recorder's start-up overlaps the run's
+    if args.cmd == "run" and (args.rrd or args.live):  # first, so the recorder's start-up overlaps the run's
         try:
             args.recorder = _start_recording(args)
         except BadOutput as e:

@@ -31,6 +31,7 @@ from .fused import fused_ok, run_fused
 from .held_env import HeldBlocks, held_functions, held_rate, rate_summary
 from .initial import initial_state, initial_x
 from .laws import build_controller
+from .pacing import paced
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
 from .thrust import thrust_for
@@ -346,7 +347,7 @@ class ControlLoop:
         # the loop checks commands itself, and counts the law's calls where Controller.update
         # would have (Controller.tick_update)
         ctrl = comp.ctrl
-        update, counted = ctrl.tick_update()
+        update, counted = paced(ctrl.tick_update(), res.rows.clock)  # --realtime: every tick at its deadline
         n_per_out = comp.n_per_out
         calls = 0
         replan_at = comp.replan.tick if comp.replan is not None else -1

@@ -146,6 +146,8 @@ class Rows:
         self.sink = sink
         #: a :func:`stationbed.core.progress.task` told the time of every batch (or None)
         self.progress = None
+        #: a :class:`~.pacing.Pacer` (``--realtime``): each row is handed over at its deadline
+        self.clock = None
         self.keep = keep
         self.rows: list[np.ndarray] = []
         mc = getattr(scene, "montecarlo", None)
@@ -254,7 +256,13 @@ class Rows:
             From the sink: the rows are not counted.
         """
         self._send_bulk()
+        if self.clock is not None and len(rows) > 1:  # paced: a row at a time, each at its deadline
+            for i in range(len(rows)):
+                self.emit(rows[i : i + 1])
+            return
         if len(rows):
+            if self.clock is not None:
+                self.clock.wait(float(rows[0, 0]))
             if self.sink is not None:
                 self.sink.write(rows)
             self._count(rows)
@@ -275,6 +283,8 @@ class Rows:
         when full or :data:`FLUSH_S` after the last one. ``att_err_deg`` is the angle between
         ``q_ref`` and the row's attitude (NaN without a reference), computed a batch at a time
         (:func:`~stationbed.core.rotation.rotation_angle` is row-wise: the same numbers)."""
+        if self.clock is not None:
+            self.clock.wait(t)
         ts, xs, hs = self._pending
         ts.append(t)
         xs.append(np.array(x, dtype=float))
@@ -296,11 +306,19 @@ class Rows:
         rows = self.make(ts, xs, held)
         bad = ~np.all(np.isfinite(rows[:, :12]), axis=1)
         k = int(np.argmax(bad)) if bad.any() else len(rows)
-        if self._err_col is not None:  # (copies: the caller's arrays may be a compiled call's buffers)
-            self._bulk.append((rows[:k], np.array(q_refs[:k], dtype=float), np.array(xs[:k, self._q], dtype=float)))
-        else:
-            self._bulk.append((rows[:k], None, None))
-        self._n_bulk += k
+        q_refs = np.array(q_refs[:k], dtype=float) if self._err_col is not None else None
+        q = np.array(xs[:k, self._q], dtype=float) if self._err_col is not None else None
+        if self.clock is None:  # (copies: the caller's arrays may be a compiled call's buffers)
+            self._bulk.append((rows[:k], q_refs, q))
+            self._n_bulk += k
+        else:  # paced (run/pacing.py): each row waits for its deadline; handed over every FLUSH_S
+            for i in range(k):
+                self.clock.wait(float(rows[i, 0]))
+                self._bulk.append((rows[i : i + 1], None if q is None else q_refs[i : i + 1],
+                                   None if q is None else q[i : i + 1]))
+                self._n_bulk += 1
+                if time.perf_counter() - self._flushed_at >= FLUSH_S:
+                    self._send_bulk()
         if k < len(rows):
             self._send_bulk()
             raise IntegrationError(rows[k, 0], "outputs are not finite (NaN or inf)")

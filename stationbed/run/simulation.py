@@ -61,6 +61,7 @@ def simulate(
     controller=None,
     fused: bool = True,
     keep: bool = True,
+    pace=None,
 ) -> Trajectory:
     """Run a scene and return its :class:`Trajectory`.
 
@@ -91,6 +92,11 @@ def simulate(
         sink that takes them, e.g. a run of millions of rows): memory stays bounded, the
         trajectory holds the last row only; ``meta["n_rows"]`` counts the rows either way and
         the closed loop's ``meta["summary"]`` is computed over all of them.
+    pace : Pacer, optional
+        Pace the run to the wall clock (:class:`~.pacing.Pacer`, ``run --realtime``): the
+        per-tick executor waits for every tick's deadline, every executor hands each row over
+        at its deadline. The numbers are the unpaced run's; ``meta["realtime"]`` (and the closed
+        loop's summary) records the factor achieved, the deadline misses and the lateness.
 
     Raises
     ------
@@ -125,6 +131,7 @@ def simulate(
     model = form.model
 
     rows = Rows(scene, system, p, sink, keep)
+    rows.clock = pace
     with progress.task(f"run {scene.name}", total=duration, unit="s") as bar:
         rows.progress = bar  # updated with the time of every batch of rows handed over
         bps, steps = breakpoints(scene, duration)
@@ -153,15 +160,21 @@ def simulate(
         wall0 = time.perf_counter()
         if scene.controller is not None:
             loop = ControlLoop(scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused)
+            if pace is not None and hasattr(loop.ctrl, "paced_by"):  # a socket law's late replies (socket_law.py)
+                loop.ctrl.paced_by(pace)
             try:
-                loop.run()
+                try:
+                    loop.run()
+                finally:
+                    if hasattr(loop.ctrl, "end_run"):  # a law in another process: END, the connection closed
+                        loop.ctrl.end_run()
             except (IntegrationError, ControllerFailure) as e:
-                meta.update(status="failed", stopped_at=e.t, summary=loop.summary())
+                meta.update(status="failed", stopped_at=e.t, summary=_paced(loop.summary(), pace))
                 # the controller's own exception, if it raised, stays chained for the API user and
                 # the CLI's STATIONBED_DEBUG traceback; the loop's internals are not
                 raise SimulationError(e.t, e.reason, rows.trajectory(meta)) from e.__cause__
             meta.update(status="ok", wall_s=time.perf_counter() - wall0, n_rhs=integ.n_rhs, n_steps=integ.n_steps)
-            meta["summary"] = loop.summary()
+            meta["summary"] = _paced(loop.summary(), pace)
             return rows.trajectory(meta)
 
         clock = OutputTimes(duration, output_dt)
@@ -210,7 +223,16 @@ def simulate(
             n_rhs=integ.n_rhs,
             n_steps=integ.n_steps,
         )
+        if pace is not None:
+            meta["realtime"] = pace.summary()
         return rows.trajectory(meta)
+
+
+def _paced(summary: dict, pace) -> dict:
+    """The closed loop's summary, with the pacing's figures (:meth:`~.pacing.Pacer.summary`)."""
+    if pace is not None:
+        summary.update(pace.summary())
+    return summary
 
 
 def _check_controller_argument(scene: Scene, controller) -> None:

@@ -391,11 +391,15 @@ class Sensor(Strict):
 
 
 class ControllerSpec(Strict):
-    """``[controller]``: a registry name (controllers/) or ``module:Class``, or an FMI
-    co-simulation unit (``fmu``, issue 23), its period and parameters."""
+    """``[controller]``: a registry name (controllers/) or ``module:Class``, an FMI
+    co-simulation unit (``fmu``, issue 23) or a law in another process (``port``, issue 36:
+    docs/socket_law.md), its period and parameters."""
 
     name: str = ""
     fmu: str | None = None  # path of a co-simulation FMU, relative to the scene file's folder
+    port: str | None = None  # "host:port" (or "port": 127.0.0.1) of a law process (run/socket_law.py)
+    command: Literal["torque", "gimbal_rates"] | None = None  # a socket law's command (default torque)
+    timeout: TimeS = 5.0  # s: a socket law's reply later than this stops the run
     variables: dict[str, str] = {}  # FMU laws: loop name -> FMU variable (stationbed/run/fmu.py)
     period: TimeS = 0.1  # s
     params: dict[str, Any] = {}
@@ -403,10 +407,17 @@ class ControllerSpec(Strict):
 
     @model_validator(mode="after")
     def _law(self):
-        if self.fmu is None and not self.name:
-            raise FieldError("name", "give the law: name = \"pd\" (or module:Class) or fmu = \"path/law.fmu\"")
-        if self.fmu is not None and self.name:
-            raise FieldError("fmu", f"give name = {self.name!r} or fmu = {self.fmu!r}, not both")
+        given = [(k, v) for k, v in (("name", self.name or None), ("fmu", self.fmu), ("port", self.port)) if v is not None]
+        if not given:
+            raise FieldError("name", "give the law: name = \"pd\" (or module:Class), fmu = \"path/law.fmu\" "
+                             "or port = \"127.0.0.1:5555\"")
+        if len(given) > 1:
+            raise FieldError(given[1][0], f"give {' or '.join(f'{k} = {v!r}' for k, v in given)}, not both")
+        if self.port is not None and not self.port.strip():
+            raise FieldError("port", "is empty: give the law process's \"host:port\"")
+        if self.command is not None and self.port is None:
+            raise FieldError("command", "is a socket law's command kind: set controller.port (a Python or FMU law "
+                             "declares its own)")
         if self.fmu is not None and not self.fmu.strip():
             raise FieldError("fmu", "is empty: give the path of a co-simulation FMU")
         if self.variables and self.fmu is None:

@@ -103,7 +103,7 @@ class RecordingChild:
 
     def __init__(self, proc: subprocess.Popen | None, stderr, rrd_path, error: str | None = None):
         self.proc = proc
-        self.rrd_path = Path(rrd_path)
+        self.rrd_path = Path(rrd_path) if rrd_path else None  # None: streamed only (run --live)
         self.columns: list[str] | None = None
         self.error = error  # first failure seen (child did not start, broken pipe, ...)
         self._stderr = stderr
@@ -132,7 +132,7 @@ class RecordingChild:
         try:
             stderr = tempfile.TemporaryFile()
             proc = subprocess.Popen(
-                [sys.executable, "-I", "-c", _BOOTSTRAP, str(_PACKAGE_DIR), str(scene_path), str(rrd_path)],
+                [sys.executable, "-I", "-c", _BOOTSTRAP, str(_PACKAGE_DIR), str(scene_path), str(rrd_path or "")],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.DEVNULL,
                 stderr=stderr,
@@ -157,7 +157,8 @@ class RecordingChild:
         return cls(proc, stderr, rrd_path)
 
     # -- sink
-    def open(self, columns, duration: float | None, scene_name: str, changes: dict | None = None) -> RecordingChild:
+    def open(self, columns, duration: float | None, scene_name: str, changes: dict | None = None,
+             live: str | None = None) -> RecordingChild:
         """Tell the child the run's row columns (and duration, for the blueprint); the child then
         creates the recording.
 
@@ -172,6 +173,9 @@ class RecordingChild:
         changes : dict, optional
             Key-path assignments the run applied to the scene file (``--set`` and the run
             options); the child applies the same ones, so it draws the scene that ran.
+        live : str, optional
+            Also stream the recording to a rerun viewer (``run --live``, :mod:`.live`): a
+            ``rerun+http://HOST:PORT/proxy`` URL, or ``"spawn"`` (start a viewer).
 
         Returns
         -------
@@ -181,7 +185,8 @@ class RecordingChild:
         self.columns = list(columns)
         self._opened = True
         header = json.dumps(
-            {"columns": self.columns, "duration": duration, "scene": scene_name, "changes": changes or {}}, default=str
+            {"columns": self.columns, "duration": duration, "scene": scene_name, "changes": changes or {}, "live": live},
+            default=str
         )
         self._send(MAGIC + header.encode() + b"\n")
         return self
@@ -249,7 +254,7 @@ class RecordingChild:
         else:
             if code != 0:  # its own reason says more than the broken pipe the parent saw
                 self.error = self._child_reason(code)
-            elif self.error is None and self._opened and not self.rrd_path.is_file():
+            elif self.error is None and self._opened and self.rrd_path is not None and not self.rrd_path.is_file():
                 self.error = "the recording process wrote no file"
         if self._stderr is not None:
             self._stderr.close()
@@ -327,7 +332,7 @@ def child_main(scene_path: str, rrd_path: str) -> int:
             raise ValueError(f"scene {scene_path} is {scene.name!r} here, {header['scene']!r} in the run")
         columns = header["columns"]
         row_bytes = 8 * len(columns)
-        sink = RrdSink(scene, rrd_path, columns, duration=header["duration"])
+        sink = RrdSink(scene, rrd_path or None, columns, duration=header["duration"], live=header.get("live"))
         try:
             buf = bytearray()
             while True:

@@ -102,6 +102,10 @@ class RrdSink:
         ``send_columns``) and flushed to the file once this much wall time [s] has passed since
         the last send; :meth:`flush` and :meth:`close` send what is left. Default
         :data:`FLUSH_INTERVAL_S`; 0 sends and flushes every batch at once.
+    live : str, optional
+        Also stream the same recording to a rerun viewer or gRPC server (``run --live``,
+        :mod:`.live`): a ``rerun+http://HOST:PORT/proxy`` URL, or ``"spawn"`` to start a viewer
+        (``rr.spawn``). ``path`` may then be None (streamed only).
 
     Attributes
     ----------
@@ -120,11 +124,11 @@ class RrdSink:
     """
 
     def __init__(self, scene, path, columns, *, duration: float | None = None,
-                 flush_interval_s: float = FLUSH_INTERVAL_S):
+                 flush_interval_s: float = FLUSH_INTERVAL_S, live: str | None = None):
         rr = import_rerun()
         self.rr = rr
         self.scene = scene
-        self.path = Path(path)
+        self.path = Path(path) if path is not None else None
         self.columns = list(columns)
         base = base_columns(scene.appendage_names)
         missing = [c for c in base if c not in self.columns]
@@ -137,13 +141,21 @@ class RrdSink:
         self.n_rows = 0  # rows sent to the file
         self.t_last = None  # time of the last row sent [s]
         self._closed = False
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(APPLICATION_ID)
-        self._file = RrdFile(self.path)  # stationbed writes the file: a full disk is an error, never a hang
+        # stationbed writes the file (rerun saves into a FIFO it copies): a full disk is an error,
+        # never a hang; with --live the viewer sees what the file gets: one stream, two sinks
+        self._file = RrdFile(self.path) if self.path is not None else None
         try:
-            self.rec.save(self._file.fifo)
+            if live is None:
+                self.rec.save(self._file.fifo)
+            else:
+                from .live import grpc_sink
+
+                file_sink = [rr.FileSink(self._file.fifo)] if self._file is not None else []
+                self.rec.set_sinks(grpc_sink(self.rec, live), *file_sink)
         except BaseException:
-            self._file.close(check=False)
+            if self._file is not None:
+                self._file.close(check=False)
             raise
         self.rec.send_recording_name(scene.name)
         self.rec.send_property("scene", rr.AnyValues(name=scene.name, description=scene.description))
@@ -222,4 +234,5 @@ class RrdSink:
             self._send_pending()
         finally:
             self.rec.disconnect()  # flushes everything, writes the footer, closes rerun's end
-            self._file.close()  # WriteFailed (naming the file) when a write failed
+            if self._file is not None:
+                self._file.close()  # WriteFailed (naming the file) when a write failed

@@ -93,6 +93,8 @@ def law_sources(scene) -> dict[str, str]:
     spec = scene.controller
     if spec is None:
         return {}
+    if getattr(spec, "port", None) is not None:  # a law in another process: no source stationbed can see
+        return {}
     if spec.fmu is not None:  # an FMU law: the unit itself is its source (binary and model inside)
         fmu = Path(spec.fmu) if Path(spec.fmu).is_absolute() else Path(scene.folder or ".") / spec.fmu
         fmu = fmu.resolve()
