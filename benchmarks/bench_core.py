@@ -93,7 +93,8 @@ def _orbit_period(scene) -> float:
 def flexible_scene(scene):
     """``scene`` with two elastic modes per array: its two halves (wings) along its long axis.
 
-    Per array (inertia diagonal in P): the long axis is that of the smallest moment, the plate's
+    A wing-declared array (``appendage.wing``) bends each wing out of its plane (the beams derived
+    from the wing); otherwise, per array (inertia diagonal in P): the long axis is that of the smallest moment, the plate's
     normal that of the largest; each half is a uniform cantilever of half the array's mass from
     the array's mass centre along +-long axis, as long as half the equivalent box's side
     (``side² = 6 (I_a + I_b - I_long) / m``; ~36 m for the ISS array pairs), bending along the
@@ -104,6 +105,13 @@ def flexible_scene(scene):
     d["name"] = f"{scene.name}_flex"
     axes = "xyz"
     for a in d["appendage"]:
+        if "wing" in a:  # declared once (issue 32): each wing bends out of its plane, its beam derived
+            a["mode"] = [
+                dict(frequency_hz=FLEX_FREQUENCY_HZ, damping=FLEX_DAMPING, wing=dict(side="+", deflection="normal", n=1),
+                     eta0=FLEX_ETA0_M),
+                dict(frequency_hz=FLEX_FREQUENCY_HZ, damping=FLEX_DAMPING, wing=dict(side="-", deflection="normal", n=1)),
+            ]
+            continue
         moments = np.diag(np.asarray(a["inertia"], float))
         i_long, i_normal = int(np.argmin(moments)), int(np.argmax(moments))
         half = 0.5 * math.sqrt(6.0 * (moments.sum() - 2.0 * moments[i_long]) / a["mass"])

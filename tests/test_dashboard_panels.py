@@ -380,7 +380,11 @@ def test_gravity_gradient_column_of_the_fused_closed_loop_with_arrays(est_run):
     n2 = MU_M3_S2 / r**3
     inc = 0.9006  # rad, u0 = 0
     I_body = np.diag([1.02e8, 0.91e8, 1.64e8])  # kg m²
-    I_P, m_P = np.diag([1.0e6, 9.8e5, 3.0e4]), 2200.0  # kg m², kg per array pair
+    # each pair's wing (the scene's wing table): two plates of span L = 35 m along P x from o = 2 m
+    # out on either side of the gimbal, chord c = 24 m along P y, facing P z; uniform thin plates
+    m_P, L, o, c = 2200.0, 35.0, 2.0, 24.0  # kg per array pair, m
+    I_x, I_y = m_P * c**2 / 12.0, m_P * ((o + L) ** 3 - o**3) / (3.0 * L)  # kg m²: ∫y² dm, ∫x² dm
+    I_P = np.diag([I_x, I_y, I_x + I_y])
     truth = []
     for k, (t, q) in enumerate(zip(tr.t, tr.cols("qw", "qx", "qy", "qz"))):
         I = I_body.copy()

@@ -107,7 +107,7 @@ def arrays_on_target(scene, t, parked_at=None, lags=None):
 def composite_inertia(scene, C):
     """I_O_B [kg m²]: every body about the composite mass centre, the arrays turned by C_PB."""
     parts = [(scene.body.mass, np.array(scene.body.cm), np.array(scene.body.inertia))]
-    parts += [(a.mass, np.array(a.cm), c.T @ np.array(a.inertia) @ c) for a, c in zip(scene.appendage, C)]
+    parts += [(a.mass, np.array(a.cm), c.T @ a.inertia_P @ c) for a, c in zip(scene.appendage, C)]
     r_O = sum(m * r for m, r, _ in parts) / sum(m for m, _, _ in parts)
     return sum(J + m * ((r - r_O) @ (r - r_O) * np.eye(3) - np.outer(r - r_O, r - r_O)) for m, r, J in parts)
 
@@ -118,7 +118,7 @@ def momentum_B(scene, t, w, parked_at=None, lags=None):
     H = composite_inertia(scene, C) @ w
     for a, c, cm, cp in zip(scene.appendage, C, Cm, Cp):
         W = -((cp - cm) / (2 * FD_STEP_S)) @ c.T  # [ω_PB_P ×]
-        H = H + c.T @ np.array(a.inertia) @ np.array([W[2, 1], W[0, 2], W[1, 0]])
+        H = H + c.T @ a.inertia_P @ np.array([W[2, 1], W[0, 2], W[1, 0]])
     return H
 
 

@@ -178,6 +178,15 @@ def test_run_replaces_a_link_at_the_partial_csv(tmp_path):
     assert (out / "trajectory.csv").read_text().startswith("t,")
 
 
+def test_a_runs_recording_goes_to_a_folder_not_made_yet(tmp_path):
+    """``--rrd`` into folders that do not exist yet: made, as the CSV's ``--out`` is (the file
+    written by stationbed from rerun's stream must not lose what rerun's own sink did)."""
+    rrd = tmp_path / "new" / "deeper" / "run.rrd"
+    assert main(["run", str(ROOT / "scenarios" / "power_tower_free_drift.toml"), "--out", str(tmp_path / "out"),
+                 "--duration", "20", "--rrd", str(rrd), "-q"]) == 0
+    assert rrd.stat().st_size > 0
+
+
 def test_a_runs_recording_on_a_full_disk_is_one_line(tmp_path):
     """``run --rrd``: the recording fails past the limit (the CSV fits): exit 1, one line naming
     the recording; rerun's own file sink had reported success on a truncated file."""

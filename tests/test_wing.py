@@ -140,12 +140,12 @@ def _explicit(normal, area=1680.0, inertia=DRIFTED):
 @pytest.mark.parametrize(
     "change, pattern",
     [
-        (lambda d: d["appendage"][0].update(inertia=DRIFTED), r"appendage\[0\]\.wing: give 'inertia' .* not both$"),
-        (lambda d: d["appendage"][0]["wing"].update(normal="x"), r"appendage\[0\]\.wing\.normal: 'x' lies along the wings"),
+        (lambda d: d["appendage"][0].update(inertia=DRIFTED), r"appendage\.stbd_pair\.wing: give 'inertia' .* not both$"),
+        (lambda d: d["appendage"][0]["wing"].update(normal="x"), r"appendage\.stbd_pair\.wing\.normal: 'x' lies along the wings"),
         (lambda d: d["appendage"][0]["wing"].update(specular=0.7, diffuse=0.6), r"sum to 1\.3 > 1$"),
         (lambda d: d["appendage"][0].update(mode=[{"frequency_hz": 0.1, "wing": {"side": "+", "deflection": "normal"},
                                                    "beam": {"length": 3.0, "span": "x", "deflection": "z"}}]),
-         r"appendage\[0\]\.mode\[0\]: give a mode one of 'beam', 'wing'"),
+         r"appendage\.stbd_pair\.mode\[0\]: give a mode one of 'beam', 'wing'"),
         (lambda d: d.update(surface=[{"on": "stbd_pair", "area": 1680.0, "normal": [0, 0, 1]}]),
          r"surface\[0\]\.on: appendage 'stbd_pair' declares a wing, which is its plate"),
     ],
@@ -162,7 +162,7 @@ def test_bad_wing_declarations_are_one_line_errors(change, pattern):
 def test_mode_wing_needs_a_wing():
     d = _explicit([1, 0, 0])
     d["appendage"][0]["mode"] = [{"frequency_hz": 0.1, "wing": {"side": "+", "deflection": "normal"}}]
-    with pytest.raises(SceneError, match=r"appendage\[0\]\.mode\[0\]\.wing: bends a wing: 'stbd_pair' declares none"):
+    with pytest.raises(SceneError, match=r"appendage\.stbd_pair\.mode\[0\]\.wing: bends a wing: 'stbd_pair' declares none"):
         scene_from_dict(d)
 
 

@@ -63,6 +63,7 @@ class RrdFile:
         self.path = Path(path)
         self.error: OSError | None = None
         with writing(self.path) as p:
+            p.parent.mkdir(parents=True, exist_ok=True)  # a recording may go to a folder of its own
             self._out = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         self._dir = tempfile.mkdtemp(prefix="stationbed_rrd_")
         self.fifo = os.path.join(self._dir, "stream.rrd")
