@@ -32,7 +32,8 @@ from __future__ import annotations
 import ast
 import os
 import re
-import shlex
+import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -179,7 +180,11 @@ def env():
     e = dict(os.environ)
     e["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{e.get('PATH', '')}"
     e["MPLBACKEND"] = "Agg"
-    e.pop("DISPLAY", None)
+    for name in ("DISPLAY", "WAYLAND_DISPLAY"):  # replay prints the viewer's commands, opens no window
+        e.pop(name, None)
+    # `stationbed replay --web` starts this instead of the rerun viewer (a server that would not
+    # return): the command is checked up to the viewer's start, as tests/test_rerun.py does
+    e["STATIONBED_RERUN"] = shutil.which("true") or "/bin/true"
     return e
 
 
@@ -191,9 +196,18 @@ def scratch(tmp_path: Path) -> Path:
 
 def run(argv, cwd: Path, env: dict, where: str, expect: int):
     t0 = time.perf_counter()
-    p = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=COMMAND_TIMEOUT_S)
+    proc = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # its own process group: a timeout ends all of it
+    try:
+        out, err = proc.communicate(timeout=COMMAND_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise AssertionError(f"{where}: `{argv}` still running after {COMMAND_TIMEOUT_S} s: does the block need a cheaper override?")
+    p = subprocess.CompletedProcess(argv, proc.returncode, out, err)
     dt = time.perf_counter() - t0
     shown = argv if isinstance(argv, str) else " ".join(map(str, argv))
+    print(f"{dt:6.1f} s  {where}  {shown[:160]}")  # pytest -s: where the time goes
     assert p.returncode == expect, (
         f"{where}: `{shown}` exited {p.returncode} (expected {expect}) after {dt:.1f} s\n"
         f"--- stdout\n{p.stdout[-3000:]}\n--- stderr\n{p.stderr[-3000:]}"
