@@ -275,3 +275,35 @@ def test_api_reference_covers_the_public_surface():
     text = (DOCS / "reference" / "index.md").read_text()
     missing = [n for n in stationbed.__all__ if f"::: stationbed.{stationbed._LAZY[n]}.{n}\n" not in text]
     assert not missing, missing
+
+
+def _anchors(md: Path) -> set[str]:
+    """The heading anchors of a Markdown file, by the slugs the site and GitHub both make
+    (mkdocs.yml: pymdownx.slugs, lower case)."""
+    from pymdownx.slugs import slugify  # noqa: PLC0415
+
+    slug, fence, out = slugify(case="lower"), False, set()
+    for ln in md.read_text().splitlines():
+        if ln.lstrip().startswith("```"):
+            fence = not fence
+        elif not fence and re.match(r"#{1,6} ", ln):
+            out.add(slug(ln.lstrip("#").strip(), "-"))
+    return out
+
+
+def test_readme_links_resolve():
+    """The README is not part of the site (its strict build checks the pages' links), so its own
+    links are checked here: every relative link names a file of the checkout, and an anchor into
+    a Markdown file names one of its headings."""
+    text = re.sub(r"```.*?```", "", (ROOT / "README.md").read_text(), flags=re.S)
+    broken = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"\w+://|mailto:", target):
+            continue
+        path, _, anchor = target.partition("#")
+        f = ROOT / path if path else ROOT / "README.md"
+        if not f.exists():
+            broken.append(target)
+        elif anchor and f.suffix == ".md" and anchor not in _anchors(f):
+            broken.append(target)
+    assert not broken, broken
