@@ -8,7 +8,7 @@ OUT    ?= out/power_tower_free_drift
 # pytest workers: both cores of the CI machine
 JOBS   ?= 2
 
-.PHONY: run test test-fast bench bench-smoke check install clean screenshots
+.PHONY: run test test-fast bench bench-smoke check install clean screenshots docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -64,5 +64,16 @@ screenshots: $(STAMP)
 	$(VENV)/bin/stationbed montecarlo scenarios/iss_lvlh_hold_montecarlo.toml --n 40 --set simulation.duration=2000.0 --out $(SHOTS)/mc --exit-zero -q
 	$(VENV)/bin/stationbed screenshot $(SHOTS)/mc/montecarlo.rrd --out docs/img/rerun_montecarlo.png
 
+# the documentation site (mkdocs.yml): the `docs` extra, then a strict build into site/ (a broken
+# link or anchor, or a docstring mkdocstrings cannot read, fails it); tests/test_docs.py runs the
+# same build in CI and every command and Python block of the pages
+DOCS_STAMP := $(VENV)/.docs-installed
+$(DOCS_STAMP): $(STAMP) pyproject.toml
+	$(PY) -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache site

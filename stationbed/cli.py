@@ -125,7 +125,7 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("report", help="junit.xml and report.html of a finished study, check or run folder"
                    ).add_argument("folder", type=Path)
 
-    sub.add_parser("list", help="registered formulations and integrators")
+    sub.add_parser("list", help="every plug-in kind a scene can name: laws, sensors, estimators, actuators, torques, integrators, ...")
 
     pn = sub.add_parser("plan", help="plan a slew ([plan] table), fly it with the schedule law, compare an eigenaxis slew")
     _quiet(pn)
@@ -389,24 +389,9 @@ def _cmd_report(args) -> int:
 
 
 def _cmd_list(args) -> int:
-    from .formulations import FORMULATIONS
-    from .integrators import INTEGRATORS
+    from .plugins import format_listing
 
-    print("formulations:")
-    for n, c in FORMULATIONS.items():
-        print(f"  {n:<14} {c.description}")
-    print("integrators:")
-    for n, c in INTEGRATORS.items():
-        print(f"  {n:<14} order {c.order}, {'adaptive' if c.adaptive else 'fixed step'}")
-    from .model.cmg import STEERING_LAWS
-    from .run.controller import controller_registry
-
-    print("controllers (or module:Class, or path/file.py:Class relative to the scene):")
-    for n, c in sorted(controller_registry().items()):
-        doc = (sys.modules[c.__module__].__doc__ or "").strip().splitlines()
-        line = doc[0].split(":", 1)[-1].strip() if doc else ""
-        print(f"  {n:<18} {c.command:<13} {line}")
-    print(f"CMG kinds: ideal, dgcmg, sgcmg_pyramid; steering laws: {', '.join(STEERING_LAWS)}")
+    print(format_listing())
     return 0
 
 

@@ -4,7 +4,8 @@ Claims, each read from the source itself (the AST of every module, function-leve
 included), not from a hand-kept list of modules:
 
 * a module imports only from its own folder and the folders below it:
-  core < scene < model < formulations, integrators < loop < run < analysis, plan < controllers < output < studies < cli;
+  core < scene < model < formulations, integrators < loop < run < analysis, plan < controllers < output < studies
+  < plugins (`stationbed list`) < cli;
 * the modules of the package import each other without a cycle;
 * nothing in the library imports the shipped controllers (they are plug-ins, found through
   their entry points);
@@ -40,7 +41,8 @@ LAYERS = {
     "controllers": 7,
     "output": 8,
     "studies": 9,
-    "cli": 10,
+    "plugins": 10,  # stationbed list: reads every registry
+    "cli": 11,
 }
 #: the package's own __init__ only names what it loads lazily (PEP 562): it sits above everything
 TOP = "__init__"

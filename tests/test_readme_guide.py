@@ -1,4 +1,4 @@
-"""The README's "Write your own controller" guide, run as printed (issue 19, item 17).
+"""The "Write your own controller" guide (docs/controllers/write.md), run as printed (issue 19, item 17).
 
 The guide's Python block is written to the file its first line names, its TOML block replaces the
 ``[controller]`` of the scene the guide is written for (scenarios/iss_lvlh_hold.toml, whose
@@ -28,9 +28,12 @@ MAX_H_FRACTION = 0.5
 DURATION_S = 5553.6
 
 
-def guide_blocks(readme: str = (ROOT / "README.md").read_text()) -> tuple[str, str]:
-    """(Python block, TOML block) of the README's "Write your own controller" section."""
-    section = readme.split("### Write your own controller", 1)[1].split("\n## ", 1)[0]
+#: the guide's page of the documentation site (it was the README's section of the same name)
+GUIDE_PAGE = ROOT / "docs" / "controllers" / "write.md"
+
+
+def guide_blocks(section: str = GUIDE_PAGE.read_text()) -> tuple[str, str]:
+    """(Python block, TOML block) of the "Write your own controller" page."""
     py = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     toml = re.search(r"```toml\n(.*?)```", section, re.S).group(1)
     return py, toml

@@ -8,19 +8,30 @@ from pydantic import Field, model_validator
 
 from .base import FieldError, Strict
 
-__all__ = ["Dispersion", "Requirement", "MonteCarlo", "DISPERSION_KINDS"]
+__all__ = ["Dispersion", "Requirement", "MonteCarlo", "DISPERSION_KINDS", "DISPERSION_KIND_DOCS"]
 
 
 #: ``[[montecarlo.disperse]] kind`` -> the keys it needs (docs/design.md "Monte Carlo")
 DISPERSION_KINDS = {
-    "normal": ("sigma",),  # value + N(mean, sigma), per element
-    "uniform": ("low", "high"),  # value + U(low, high), per element
-    "scale_normal": ("sigma",),  # value * (1 + N(0, sigma)), one factor for the whole value
-    "scale_uniform": ("low", "high"),  # value * (1 + U(low, high)), one factor
-    "inertia": ("sigma",),  # 3x3: I_ii (1 + N(0, sigma)); I_ij += N(0, sigma_products) sqrt(I_ii I_jj)
-    "attitude_normal": ("sigma",),  # quaternion turned by N(0, sigma) rad about a uniform random axis
-    "choice": ("choices",),  # one of choices (weights optional)
-    "seed": (),  # a fresh non-negative integer (e.g. controller.sensor.seed)
+    "normal": ("sigma",),
+    "uniform": ("low", "high"),
+    "scale_normal": ("sigma",),
+    "scale_uniform": ("low", "high"),
+    "inertia": ("sigma",),
+    "attitude_normal": ("sigma",),
+    "choice": ("choices",),
+    "seed": (),
+}
+#: kind -> what it draws (``stationbed list``; every kind has one, tests/test_plugins_list.py)
+DISPERSION_KIND_DOCS = {
+    "normal": "value + N(mean, sigma), per element",
+    "uniform": "value + U(low, high), per element",
+    "scale_normal": "value * (1 + N(0, sigma)), one factor for the whole value",
+    "scale_uniform": "value * (1 + U(low, high)), one factor",
+    "inertia": "3x3: I_ii (1 + N(0, sigma)); I_ij += N(0, sigma_products) sqrt(I_ii I_jj)",
+    "attitude_normal": "quaternion turned by N(0, sigma) rad about a uniform random axis",
+    "choice": "one of choices (weights optional)",
+    "seed": "a fresh non-negative integer (e.g. controller.sensor.seed)",
 }
 
 
