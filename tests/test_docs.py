@@ -307,3 +307,34 @@ def test_readme_links_resolve():
         elif anchor and f.suffix == ".md" and anchor not in _anchors(f):
             broken.append(target)
     assert not broken, broken
+
+
+#: the README is the front door (issue 37 item 3): what it is, the capabilities, set-up, a tour and
+#: the scenario table; the manual is the site. Past this many lines it is becoming the manual again.
+README_MAX_LINES = 250
+
+
+def _scenario_rows(md: Path) -> set[str]:
+    """The scenario names of a Markdown file's scenario table (first cell: `a` or `a`, `b`)."""
+    names: set[str] = set()
+    for ln in md.read_text().splitlines():
+        m = re.match(r"\|\s*(`[\w]+`(?:\s*,\s*`[\w]+`)*)\s*\|", ln)
+        if m:
+            names.update(re.findall(r"`(\w+)`", m.group(1)))
+    return names
+
+
+@pytest.mark.parametrize("md", [ROOT / "README.md", DOCS / "scenes.md"], ids=["README.md", "docs/scenes.md"])
+def test_scenario_table_is_complete(md):
+    """Every scene shipped in scenarios/ has its row in the README's and the scenes page's table."""
+    shipped = {p.stem for p in (ROOT / "scenarios").glob("*.toml")}
+    missing = sorted(shipped - _scenario_rows(md))
+    assert not missing, f"{md.name}: no row for {missing}"
+
+
+def test_readme_is_the_front_door():
+    """README.md stays short and keeps the two set-up commands with their meaning."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= README_MAX_LINES
+    assert re.search(r"^make run\s+# creates \.venv, installs, runs scenarios/", text, re.M)
+    assert re.search(r"^make test\s+# creates \.venv, installs, runs the test suite", text, re.M)
