@@ -161,6 +161,11 @@ def run_fused(comp, res, K: int) -> None:
     """Run ticks 0..K of the run composed by ``comp`` with the fused loop, handing back to
     ``res`` (:class:`~.composition.RunState`) the same rows as the per-tick loop."""
     ctrl = comp.ctrl
+    if comp.thrust is not None and (comp.flight is not None or law_state.has_state(ctrl)):
+        # the combinations no hand-composed loop composed: the loop composed from its blocks (issue 33)
+        from .composed import run_composed
+
+        return run_composed(comp, res, K, _symbolic_params(ctrl), edge_ticks(comp))
     if comp.thrust is not None:  # thrusters (issue 21)
         noise = {"flags": _noise_flags(comp), "width": _noise_width, "corrupt": _corrupt_sx, "draw": _draw}
         return run_fused_thrust(comp, res, K, _symbolic_params(ctrl), edge_ticks(comp), noise)

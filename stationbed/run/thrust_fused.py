@@ -52,12 +52,10 @@ def fused_thrust_ok(comp) -> bool:
     why = None
     if th.lp:
         why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
-    elif comp.flight is not None:
-        why = "[[sensor]] tables with thrusters are flown per tick"
     elif environment_rate(comp):
         why = "an environment rate with thrusters is flown per tick"
-    elif law_state.has_state(comp.ctrl):
-        why = "a law with a state (symbolic_state) with thrusters is flown per tick"
+    elif comp.noisy and law_state.has_state(comp.ctrl):
+        why = "[controller.sensor] noise with a law that has a state and thrusters is flown per tick"
     th.fused_reason = why
     return why is None
 
