@@ -76,11 +76,12 @@ class Block:
             raise ValueError(f"block {self.name!r}: role {self.role!r}, expected one of {ROLES}")
         if self.symbolic:
             want = [self.state.size, self.inputs.size, self.noise.size, self.params.size]
-            got = [self.step.size1_in(i) for i in (3, 4, 5, 6)]
-            if self.step.n_in() != 7 or self.step.n_out() != 2 or got != want:
+            shape_ok = self.step.n_in() == 7 and self.step.n_out() == 2
+            got = [self.step.size1_in(i) for i in (3, 4, 5, 6)] if shape_ok else None
+            if not shape_ok or got != want:
                 raise ValueError(f"block {self.name!r}: step must be (k, t, h, x[{want[0]}], u[{want[1]}], "
                                  f"w[{want[2]}], p[{want[3]}]) -> (x_next, y), got {self.step}")
-            if self.step.size1_out(1) != self.outputs.size:
+            if self.step.numel_out(1) != self.outputs.size:
                 raise ValueError(f"block {self.name!r}: step reports {self.step.size1_out(1)} values, "
                                  f"its outputs layout {self.outputs.size}")
 

@@ -170,17 +170,48 @@ class Composed:
     def _front(self, plain: bool) -> ca.Function:
         """``(c, par, w) -> (c_quiet, busy, cmd, reads)`` of an active tick: measurement, sensing,
         law, the actuators' idle test, the quiet step (the law's request to the end) packed as
-        the next carry. One SX function on a plain tick, else MX (the sensing's switches lazy)."""
-        cls = ca.SX if plain else ca.MX
+        the next carry. One SX function on a plain tick; else MX around two SX functions (the
+        sensing's switches stay lazy): ``pre`` (the true measurement and every part of the rest
+        that depends on the carry and parameters alone: the plant's stage-1 kinematics, computed
+        once) and ``body`` (the rest, on what the sensing gives)."""
         C, P, N = self.carry, self.par, self.noise
-        c, par, w = C.symbol("c", cls), P.symbol("par", cls), N.symbol("w", cls)
+        SX = ca.SX
+        c, par = C.symbol("c"), P.symbol("par")
+        x = C.get(c, "x")
+        t0, h, k0, p = (P.get(par, f) for f in ("t0", "h", "k0", "p"))
+        i = C.get(c, "i")
+        t, k = t0 + i * h, k0 + i
+        y = self.plant.meas(t, x, p)
+        v_s = SX.sym("v", y.numel())
+        mem_s = [b.state.symbol(b.name) for b in self.sense]
+        outs = self._after(c, par, v_s, dict(zip((b.name for b in self.sense), mem_s)))
+        if plain:
+            w = N.symbol("w")
+            v, mem, _ = self._sense(k, t, h, y, c, w, par, plain=True)
+            outs = ca.substitute(outs, [v_s] + mem_s, [ca.densify(e) for e in [v] + [mem[b.name] for b in self.sense]])
+            return sx_function("cl_front_plain", [c, par, w], outs)
+        shared = ca.cse([y] + outs)
+        rest, syms, vals = ca.extract_parametric(shared[1:], ca.vertcat(c, par))
+        pre = sx_function("cl_pre", [c, par], [shared[0], ca.vertcat(*vals)])
+        body = sx_function("cl_body", [ca.vertcat(*syms), c, par, v_s] + mem_s, rest)
+        MX = ca.MX
+        cm, pm, wm = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
+        im = C.get(cm, "i")
+        tm, km = P.get(pm, "t0") + im * P.get(pm, "h"), P.get(pm, "k0") + im
+        ym, valsm = pre(cm, pm)
+        vm, memm, _ = self._sense(km, tm, P.get(pm, "h"), ym, cm, wm, pm, plain=False)
+        return ca.Function("cl_front", [cm, pm, wm], body(valsm, cm, pm, vm, *[memm[b.name] for b in self.sense]))
+
+    def _after(self, c, par, v, mem: dict) -> list:
+        """The front after the sensing (SX): the law on what it sees ``v``, the actuators' idle
+        test, the quiet step, the next carry with the sense blocks' memory ``mem``."""
+        C, P = self.carry, self.par
+        SX = ca.SX
         i, x, cnt = C.get(c, "i"), C.get(c, "x"), C.get(c, "counts")
         t0, h, k0, u_ext, p = (P.get(par, f) for f in ("t0", "h", "k0", "u_ext", "p"))
         t, k = t0 + i * h, k0 + i
-        y = self.plant.meas(t, x, p)
-        v, mem, _ = self._sense(k, t, h, y, c, w, par, plain)
         cmd, _, s1 = self._law(k, t, h, v, c, par)
-        idle = cls(1)
+        idle = SX(1)
         reads = []
         for a in self.actuators:
             r = self._reads(a, v)
@@ -190,14 +221,11 @@ class Composed:
         _, u, sat = self._end(t, h, x, cmd, u_ext, p)
         x_q = self.plant.step(self.plant.rhs, t, x, h, u, p)
         fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
-        fields.update({b.name: mem[b.name] for b in self.sense})
+        fields.update(mem)
         fields[self.law_block.name] = s1
         fields.update({a.name: C.get(c, a.name) for a in self.actuators})
-        busy = 1 - idle if self.actuators else cls(0)
-        outs = [C.pack(fields, symbolic=True), busy, cmd, ca.vertcat(*reads) if reads else cls(0, 1)]
-        if plain:
-            return sx_function("cl_front_plain", [c, par, w], outs)
-        return ca.Function("cl_front", [c, par, w], outs)
+        busy = 1 - idle if self.actuators else SX(0)
+        return [C.pack(fields, symbolic=True), busy, cmd, ca.vertcat(*reads) if reads else SX(0, 1)]
 
     def _busy(self) -> ca.Function:
         """``(c, par, c_quiet, cmd, reads) -> c_next`` of a tick whose chain is not idle: the

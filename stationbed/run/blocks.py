@@ -23,7 +23,7 @@ from ..loop.compose import Composed, Plant, compose
 from . import law_state
 from .system import chain_end_inputs
 
-__all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker"]
+__all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key"]
 
 _COMPOSED: dict = {}
 
@@ -105,16 +105,25 @@ def blocker(comp, cp=()) -> Block | None:
     return None
 
 
+def structure_key(comp, cp) -> tuple:
+    """What the run's composed functions depend on, read without building a block (numbers are
+    inputs, never in the key): the compiled system, the law's class, command, state and
+    parameter sizes, the flight's key, the thrusters' structure, the chain end's kind."""
+    ctrl = comp.ctrl
+    th = comp.thrust
+    return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
+            None if comp.flight is None else comp.flight.key,
+            None if th is None else (th.cluster.key, th.lp), type(comp.end).__name__)
+
+
 def composed(comp, cp) -> tuple[Composed, float]:
-    """The run's composition composed (cached by its one key) and the seconds it took to build
-    now (0 when cached)."""
-    blocks = run_blocks(comp, cp)
-    plant = plant_of(comp)
-    key = (id(comp.system), plant.key, tuple((b.name, b.role, b.key) for b in blocks))
+    """The run's composition composed (cached by its structure, :func:`structure_key`) and the
+    seconds it took to build now (0 when cached)."""
+    key = structure_key(comp, cp)
     hit = _COMPOSED.get(key)
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
-    c = compose(plant, blocks)
+    c = compose(plant_of(comp), run_blocks(comp, cp))
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0

@@ -23,7 +23,8 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions
 from . import law_state
-from .blocks import composed
+from .blocks import composed, structure_key
+from .composed_rows import rows_functions, run_rows
 from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 
 __all__ = ["run_composed", "BUILT"]
@@ -34,18 +35,21 @@ BUILT: dict[str, float] = {}
 
 
 def _functions(comp, cp) -> dict:
-    cm, _ = composed(comp, cp)
     n = comp.n_per_out
-    key = (cm.key, n)
-    hit = _CHUNKS.get(key)
+    hit = _CHUNKS.get((structure_key(comp, cp), n))
     if hit is not None and hit["system"] is comp.system:
         return hit
     t0 = time.perf_counter()
+    cm, _ = composed(comp, cp)
+    key = (cm.key, n)
     tag = "composed_" + hashlib.sha256(repr(key).encode()).hexdigest()[:16]
-    funcs = compile_functions([cm.row(), cm.chunk(n)], tag)
-    out = {"cm": cm, "row": FastCall(funcs["cl_row"]), "chunk": FastCall(funcs["cl_chunk"]), "system": comp.system}
+    row, chunk = cm.row(), cm.chunk(n)
+    many = rows_functions(cm, row, chunk, n)  # many rows per call (composed_rows.py)
+    funcs = compile_functions([row, chunk] + many, tag)
+    out = {"cm": cm, "row": FastCall(funcs["cl_row"]), "chunk": FastCall(funcs["cl_chunk"]), "system": comp.system,
+           "rows": {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}}
     BUILT[tag] = out["build_s"] = time.perf_counter() - t0
-    _CHUNKS[key] = out
+    _CHUNKS[(structure_key(comp, cp), n)] = out
     return out
 
 
@@ -95,7 +99,15 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         return held_torque_from(comp.scene, ta, comp.bps, duration)
 
     try:
+        j0 = 0
+        if not edges:  # the leading full rows, many per compiled call (composed_rows.py)
+            j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par)
+            x = c0[cx].copy()
+            if stop is not None:
+                raise stop
         for j, k in enumerate(row_ks):
+            if j < j0:
+                continue
             t = min(k * period, duration)
             n_tick = row_ks[j + 1] - k if k < K else 1
             draws = comp.tick_noise.rows(k, n_tick) if nw else None
@@ -104,7 +116,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             rc[C.slice("i")] = 0.0
             rp[:] = par
             rp[P.slice("t0")], rp[P.slice("k0")], rp[P.slice("u_ext")] = t, k, torque_at(t)
-            rp[P.slice("h")] = th.tick_length(comp, t) if th is not None else 0.0
+            rest = duration - t  # the tick's length: the period, the run's remainder for the last (0 at the end)
+            rp[P.slice("h")] = period if rest >= period * (1 - 1e-12) else max(rest, 0.0)
             if nw:
                 rw[:] = draws[0]
             row()

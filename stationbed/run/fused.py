@@ -157,11 +157,26 @@ def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
             "rows": rows}
 
 
+#: runs the composed loop (run/composed.py) takes beyond the combinations only it flies: the
+#: equivalence tests set it to fly every run it can with the composed loop, against the others
+COMPOSE_ALL = False
+
+
+def composed_takes(comp) -> bool:
+    """Whether the composed loop (issue 33) flies the fused run of ``comp``: thrusters with
+    ``[[sensor]]`` tables or a law with a state (no hand-composed loop composed them); with
+    :data:`COMPOSE_ALL`, every fused run whose parts it has (not yet: the ideal sensor's noise,
+    an environment rate)."""
+    if comp.thrust is not None and (comp.flight is not None or law_state.has_state(comp.ctrl)):
+        return True
+    return COMPOSE_ALL and not comp.noisy and environment_rate(comp) == 0
+
+
 def run_fused(comp, res, K: int) -> None:
     """Run ticks 0..K of the run composed by ``comp`` with the fused loop, handing back to
     ``res`` (:class:`~.composition.RunState`) the same rows as the per-tick loop."""
     ctrl = comp.ctrl
-    if comp.thrust is not None and (comp.flight is not None or law_state.has_state(ctrl)):
+    if composed_takes(comp):
         # the combinations no hand-composed loop composed: the loop composed from its blocks (issue 33)
         from .composed import run_composed
 
