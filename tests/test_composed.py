@@ -163,16 +163,22 @@ def test_full_flight_loop_keeps_the_momentum_balance(full_runs, which):
     assert_allclose(tr.H_O_N - tr.H_O_N[0], smooth + thr, rtol=0, atol=BALANCE_ABS)
 
 
-SHIPPED = {"iss_lvlh_hold": {"simulation.environment_rate": 0},
-           "iss_lvlh_hold_estimated": {"simulation.environment_rate": 0},
-           "iss_cmg_thruster_assist": {}}
+NOISE = {"controller.sensor": {"attitude_noise": 1e-4, "rate_noise": 1e-6, "seed": 7}}
+#: id -> (shipped scenario, changes): the held environment at the default rate (auto: 20 ticks)
+#: and every stage, the sensors and MEKF, the thrusters, the ideal measurement's noise
+SHIPPED = {"hold_auto": ("iss_lvlh_hold", {}), "hold_every_stage": ("iss_lvlh_hold", {"simulation.environment_rate": 0}),
+           "estimated_auto": ("iss_lvlh_hold_estimated", {}),
+           "estimated_every_stage": ("iss_lvlh_hold_estimated", {"simulation.environment_rate": 0}),
+           "thrusters": ("iss_cmg_thruster_assist", {}), "hold_noisy": ("iss_lvlh_hold", NOISE),
+           "thrusters_noisy": ("iss_cmg_thruster_assist", NOISE)}
 
 
-@pytest.mark.parametrize("name", list(SHIPPED))
-def test_composed_loop_is_the_hand_composed_fused_loop(name, monkeypatch):
+@pytest.mark.parametrize("case", list(SHIPPED))
+def test_composed_loop_is_the_hand_composed_fused_loop(case, monkeypatch):
     """Where a hand-composed fused loop flies the run, the composed loop gives its rows bit for
     bit (the same expressions composed once: the step to replacing them, docs/design.md)."""
-    s = _short(ROOT / "scenarios" / f"{name}.toml", 120.0, **SHIPPED[name])
+    name, over = SHIPPED[case]
+    s = _short(ROOT / "scenarios" / f"{name}.toml", 120.0, **over)
     old = simulate(s, fused=True)
     monkeypatch.setattr(fused, "COMPOSE_ALL", True)
     ran = []

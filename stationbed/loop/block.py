@@ -19,14 +19,15 @@ Optional, each exact (an executor that does not use it gives the same numbers):
   composed tick may skip it (the quiet tick);
 * :attr:`Block.plain` ``step_plain`` with :attr:`Block.is_plain` ``(k) -> flag``: on the ticks
   where ``is_plain(k)``, ``step_plain`` (an SX function, no switch left) is the step (a sensor
-  suite between its slower sensors' samples);
+  suite between its slower sensors' samples); ``is_plain`` None: on every tick (an SX block);
 * :attr:`Block.every`: its period in ticks (a block samples on ticks ``k % every == 0``; the
   suite's own sensors keep theirs inside it).
 
 :attr:`Block.symbolic` is False for a block that cannot be a casadi expression (a Python or
 FMU law, the LP thruster mapping): it keeps the run off the fused path, and the composer names
 it (:func:`~.compose.off_path`). Roles (:data:`ROLES`) say where in the tick a block sits:
-``sense`` (truth row -> what the law sees), ``law`` (what it sees -> the command), ``actuator``
+``env`` (an effect evaluated once every ``every`` ticks and held: its output ``L_hold`` is added
+to the held external torque, the plant then steps its right-hand side without it), ``sense`` (truth row -> what the law sees), ``law`` (what it sees -> the command), ``actuator``
 (a request -> the rest it leaves to the next, its pulse channels), ``end`` (the chain's end: the
 plant's held input from what is left).
 
@@ -43,10 +44,10 @@ import casadi as ca
 
 from ..core.layout import Layout
 
-__all__ = ["Block", "ROLES", "actuator_block", "sensing_block", "ACT_OUT"]
+__all__ = ["Block", "ROLES", "actuator_block", "sensing_block", "corruption_block", "ACT_OUT"]
 
 #: where a block sits in the tick, in the order the composer calls them
-ROLES = ("sense", "law", "actuator", "end")
+ROLES = ("env", "sense", "law", "actuator", "end")
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,3 +149,20 @@ def sensing_block(flight, name: str = "sensing") -> Block:
     plain = wrap(fp, ca.SX, f"{name}_plain", {}) if fp is not None else None
     return Block(name, "sense", step, X, P, S.NOISE, U, Y, plain=plain,
                  is_plain=S.is_plain if plain is not None else None, key=("flight", flight.key), p0=flight.params)
+
+
+def corruption_block(corruption, ny: int, name: str = "noise") -> Block:
+    """The ideal measurement's noise (``[controller.sensor]``, :class:`~.corruption.Corruption`)
+    as a ``sense`` block: the law sees the measurement corrupted by the tick's draws (attitude,
+    then rate: :func:`~.corruption.draws_layout`); SX, plain on every tick. Its delay is not a
+    block yet (a run with one is flown per tick)."""
+    from .corruption import corrupt_symbolic, draws_layout  # noqa: PLC0415 (a sibling, imported where used)
+
+    flags = corruption.flags
+    W = draws_layout(*flags)
+    k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
+    y, w = ca.SX.sym("y", ny), W.symbol("w")
+    seen = corrupt_symbolic(y, w, flags, corruption.layout) if W.size else y
+    f = ca.Function(f"{name}_step", [k, t, h, ca.SX.sym("x", 0), y, w, ca.SX.sym("p", 0)], [ca.SX(0, 1), seen])
+    return Block(name, "sense", f, Layout(), Layout(), W, Layout(y=ny), Layout(y_seen=ny), plain=f,
+                 key=("noise", tuple(flags)))

@@ -62,6 +62,8 @@ class Plant:
     meas_layout: Layout
     input_layout: Layout
     key: tuple
+    #: the right-hand side without the effects an ``env`` block holds (None: the plant has none)
+    rhs_held: ca.Function | None = None
 
 
 def off_path(blocks) -> Block | None:
@@ -82,7 +84,7 @@ class Composed:
 
     def __init__(self, plant: Plant, blocks: list[Block]):
         self.plant = plant
-        by = {r: [b for b in blocks if b.role == r] for r in ("sense", "law", "actuator", "end")}
+        by = {r: [b for b in blocks if b.role == r] for r in ("env", "sense", "law", "actuator", "end")}
         if len(by["law"]) != 1 or len(by["end"]) != 1:
             raise ValueError(f"a composition needs one law and one chain end, got {len(by['law'])} and {len(by['end'])}")
         names = [b.name for b in blocks]
@@ -91,6 +93,10 @@ class Composed:
         self.sense, self.actuators = by["sense"], by["actuator"]
         self.law_block, self.end = by["law"][0], by["end"][0]
         self.blocks = self.sense + [self.law_block] + self.actuators
+        #: the held environment (an ``env`` block, at most one: its numbers are the plant's)
+        self.env = by["env"][0] if by["env"] else None
+        if len(by["env"]) > 1 or (self.env is not None and plant.rhs_held is None):
+            raise ValueError("a composition holds at most one environment block, on a plant with rhs_held")
         blocker = off_path(self.blocks + [self.end])
         if blocker is not None:
             raise ValueError(f"block {blocker.name!r} is not symbolic ({blocker.why}): it cannot be composed")
@@ -102,7 +108,8 @@ class Composed:
         self.ncmd = self.law_block.outputs.slice("cmd").stop
         #: the carry from tick to tick, by name: tick index in the chunk, plant state, counts of
         #: rate-limited and saturated ticks, then each block's memory under its name
-        self.carry = Layout(i=1, x=plant.nx, counts=2, **{b.name: b.state.size for b in self.blocks})
+        self.carry = Layout(i=1, x=plant.nx, counts=2, **{b.name: b.state.size for b in self.blocks},
+                            **({self.env.name: self.env.state.size} if self.env is not None else {}))
         #: a chunk's parameters: first tick's time and index, step, active ticks, held external
         #: torque, the model's numbers, then each block's numbers under its name
         self.par = Layout(t0=1, h=1, n_act=1, k0=1, u_ext=3, p=plant.npar, **{b.name: b.params.size for b in self.blocks})
@@ -114,7 +121,8 @@ class Composed:
         self.row_layout = Layout(cmd=self.ncmd, act=nact, q_ref=4,
                                  **{b.name: b.state.size for b in self.sense + [self.law_block]},
                                  **{f"{b.name}_y": b.outputs.size for b in self.sense})
-        self.key = (plant.key, tuple((b.name, b.role, b.key) for b in self.blocks + [self.end]))
+        self.key = (plant.key, tuple((b.name, b.role, b.every, b.key) for b in self.blocks + [self.end] +
+                                     ([self.env] if self.env is not None else [])))
         self._cache: dict = {}
 
     # -- the parts ----------------------------------------------------------------------------
@@ -140,6 +148,17 @@ class Composed:
         M = self.plant.meas_layout
         return [M.get(v, f) for f in a.inputs.names if f != "tau_B"]
 
+    @property
+    def _rhs(self):
+        """The plant's right-hand side: without the held effects when an ``env`` block holds them."""
+        return self.plant.rhs if self.env is None else self.plant.rhs_held
+
+    def _u_ext(self, c, u_ext):
+        """The held external torque of the tick: the scene's, plus the ``env`` block's held value."""
+        if self.env is None:
+            return u_ext
+        return u_ext + self.env.state.get(self.carry.get(c, self.env.name), "L_hold")
+
     def _end(self, t, h, x, tau, u_ext, p):
         e = self.end
         _, out = e.call(0, t, h, type(x)(0, 1), e.inputs.pack(x=x, tau=tau, u_ext=u_ext, symbolic=True), type(x)(0, 1), p)
@@ -163,8 +182,8 @@ class Composed:
         every pulse edge ``t + on_s[j]`` (channel j adds its ``torque_B`` column while on)."""
         P = self.plant
         if on_s.numel() == 0:
-            return P.step(P.rhs, t, x, h, u, p)
-        return split_step(P.step, P.rhs, t, x, h, u, p, on_s, ca.reshape(torque_B, 3, on_s.numel()), P.input_layout)
+            return P.step(self._rhs, t, x, h, u, p)
+        return split_step(P.step, self._rhs, t, x, h, u, p, on_s, ca.reshape(torque_B, 3, on_s.numel()), P.input_layout)
 
     # -- the tick -----------------------------------------------------------------------------
     def _front(self, plain: bool) -> ca.Function:
@@ -218,10 +237,12 @@ class Composed:
             reads += r
             flag = a.idle(k, t, h, C.get(c, a.name), ca.vertcat(*r, cmd), P.get(par, a.name)) if a.idle is not None else 0
             idle = idle * flag
-        _, u, sat = self._end(t, h, x, cmd, u_ext, p)
-        x_q = self.plant.step(self.plant.rhs, t, x, h, u, p)
+        _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
+        x_q = self.plant.step(self._rhs, t, x, h, u, p)
         fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
         fields.update(mem)
+        if self.env is not None:
+            fields[self.env.name] = C.get(c, self.env.name)
         fields[self.law_block.name] = s1
         fields.update({a.name: C.get(c, a.name) for a in self.actuators})
         busy = 1 - idle if self.actuators else SX(0)
@@ -264,12 +285,12 @@ class Composed:
         end_f = sx_function("cl_end", [ts, xs_, rs_, us_, pp, hs], [u_b, sat_b])
         nch = on_s.numel()
         us, ons, tqs = SX.sym("u", u_b.numel()), SX.sym("on", nch), SX.sym("tq", 3 * nch)
-        plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self.plant.rhs, ts, xs_, hs, us, pp)])
+        plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
         split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs], [self.advance(ts, xs_, hs, us, pp, ons, tqs)])
         pulse = ca.Function.if_else("cl_pulse", split, plain)
         ar, aon, atq = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch)
         a_in = [c, par, cq, ar, aon, atq]
-        uu, fl = end_f(t, x, ar, u_ext, p, h)
+        uu, fl = end_f(t, x, ar, self._u_ext(c, u_ext), p, h)
         x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
@@ -278,6 +299,25 @@ class Composed:
         fields["x"], fields["counts"] = head[: self.plant.nx], head[self.plant.nx:]
         fields.update({a.name: m for a, m in zip(self.actuators, xa)})
         return ca.Function("cl_busy", [c, par, cq, cmd, reads], [C.pack(fields, symbolic=True)])
+
+    def _env_step(self, c, par):
+        """The carry with the ``env`` block stepped where a block of its ``every`` ticks starts
+        (``i % every == 0``, inside the active ticks: blocks start at each chunk's first tick),
+        held otherwise: an explicit branch, so the generated C evaluates it only when due."""
+        C, P = self.carry, self.par
+        e = self.env
+        MX = ca.MX
+        cs, ps = C.symbol("c", MX), P.symbol("par", MX)
+        i, n_act = C.get(cs, "i"), P.get(ps, "n_act")
+        t, h, k = P.get(ps, "t0") + i * P.get(ps, "h"), P.get(ps, "h"), P.get(ps, "k0") + i
+        n_b = ca.fmin(e.every, ca.fmax(n_act - i, 0))  # the block's active ticks
+        x1, _ = e.call(k, t, h, C.get(cs, e.name), ca.vertcat(C.get(cs, "x"), n_b), MX(0, 1), P.get(ps, "p"))
+        fields = {f: C.get(cs, f) for f in C.names}
+        fields[e.name] = x1
+        due = ca.Function("cl_env_due", [cs, ps], [C.pack(fields, symbolic=True)])
+        keep = ca.Function("cl_env_keep", [cs, ps], [cs])
+        i0, na0 = C.get(c, "i"), P.get(par, "n_act")
+        return ca.Function.if_else("cl_env", due, keep)(ca.logic_and(ca.fmod(i0, e.every) == 0, i0 < na0), c, par)
 
     def tick(self) -> ca.Function:
         """``(c, par, w) -> c_next``: one tick, its case chosen (module docstring); a tick past
@@ -290,17 +330,19 @@ class Composed:
         c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
         i, n_act, k0 = C.get(c, "i"), P.get(par, "n_act"), P.get(par, "k0")
         nr = sum(a.inputs.size - 3 for a in self.actuators)
-        hold = ca.Function("cl_hold", [c, par, w], [ca.vertcat(i + 1, c[1:]), MX(0), MX.zeros(self.ncmd), MX.zeros(nr)])
+        held = C.pack({**{f: C.get(c, f) for f in C.names}, "i": i + 1}, symbolic=True)  # (its index counts on)
+        hold = ca.Function("cl_hold", [c, par, w], [held, MX(0), MX.zeros(self.ncmd), MX.zeros(nr)])
         general = self._front(plain=False)
         plains = [b for b in self.sense if b.plain is not None]
-        if plains and len(plains) == len(self.sense):
-            flag = plains[0].is_plain(k0 + i)
-            for b in plains[1:]:
+        sometimes = [b for b in plains if b.is_plain is not None]  # (is_plain None: plain on every tick)
+        if len(plains) == len(self.sense) and not sometimes:  # no switch to keep lazy: one SX function
+            front = ca.Function.if_else("cl_active", self._front(plain=True), hold)(i < n_act, c, par, w)
+        elif len(plains) == len(self.sense):
+            flag = sometimes[0].is_plain(k0 + i)
+            for b in sometimes[1:]:
                 flag = ca.logic_and(flag, b.is_plain(k0 + i))
             cases = ca.Function.conditional("cl_cases", [hold, general, self._front(plain=True)], hold)
             front = cases((i < n_act) * (1 + flag), c, par, w)
-        elif not self.sense:  # no switch to keep lazy: the front is one SX function
-            front = ca.Function.if_else("cl_active", self._front(plain=True), hold)(i < n_act, c, par, w)
         else:
             front = ca.Function.if_else("cl_active", general, hold)(i < n_act, c, par, w)
         cq, busy, cmd, reads = front
@@ -312,6 +354,9 @@ class Composed:
         else:
             c_new = cq
         f = ca.Function("cl_step", [c, par, w], [c_new], {"always_inline": True})
+        if self.env is not None:  # the held environment first: evaluated at a block's first tick, else passed on
+            c2, par2, w2 = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
+            f = ca.Function("cl_step", [c2, par2, w2], [f(self._env_step(c2, par2), par2, w2)], {"always_inline": True})
         self._cache["tick"] = f
         return f
 

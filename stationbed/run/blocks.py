@@ -18,24 +18,49 @@ import time
 import casadi as ca
 
 from ..core.layout import Layout
-from ..loop.block import Block, actuator_block, sensing_block
+from ..loop.block import Block, actuator_block, corruption_block, sensing_block
 from ..loop.compose import Composed, Plant, compose
 from . import law_state
-from .system import chain_end_inputs
+from .chunk_layout import ENV
+from .rates import environment_rate, hold_value
+from .system import chain_end_inputs, environment_split
 
 __all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key"]
 
 _COMPOSED: dict = {}
 
 
-def plant_of(comp) -> Plant:
+def plant_of(comp, rate: int = 0) -> Plant:
     """The plant of ``comp`` for the composer: the compiled system's SX ``meas`` and ``rhs``, the
-    integrator's fixed step, the measurement's and the held input's layouts."""
+    integrator's fixed step, the measurement's and the held input's layouts; with an environment
+    ``rate``, the right-hand side without the environment kinds (:func:`~.system.environment_split`)."""
     system = comp.system
     form = system.formulation
     model = form.model
+    held = environment_split(system)["rhs_fast"] if rate else None
     return Plant(system.sx["meas"], system.sx["rhs"], system.integrator_cls.explicit_step, form.nx, model.layout.size,
-                 comp.meas_layout, model.input_layout, (form.name, system.integrator_cls.name, model.structure.key))
+                 comp.meas_layout, model.input_layout, (form.name, system.integrator_cls.name, model.structure.key), held)
+
+
+def env_block(comp, rate: int) -> Block:
+    """The environment torques (aero, SRP: the kinds with ``needs_env``) evaluated once every
+    ``rate`` ticks and held (issue 25's blocks, run/rates.py): memory the last evaluation
+    ``(L_prev, t_prev, have)`` and the held value ``L_hold``; inputs the plant's state and the
+    block's active ticks ``n_b``; numbers the model's. Its step is :func:`.rates.hold_value` on
+    the split's ``env_B``, as the hand-composed held chunks evaluate it."""
+    system = comp.system
+    nx, npar = system.formulation.nx, system.formulation.model.layout.size
+    env_B = environment_split(system)["env_B"]
+    X = Layout(**{f: ENV.shape(f)[0] for f in ENV.names}, L_hold=3)
+    k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
+    xe, u, p = X.symbol("xe"), ca.SX.sym("u", nx + 1), ca.SX.sym("p", npar)
+    x, n_b = u[:nx], u[nx]
+    L_now = env_B(t, x, p)
+    L_hold = hold_value(L_now, X.get(xe, "L_prev"), t, X.get(xe, "t_prev"), X.get(xe, "have"), n_b, h)
+    x1 = X.pack(L_prev=L_now, t_prev=t, have=1.0, L_hold=L_hold, symbolic=True)
+    f = ca.Function("env_step", [k, t, h, xe, u, ca.SX.sym("w", 0), p], [x1, L_hold])
+    return Block("env", "env", f, X, Layout(p=npar), Layout(), Layout(x=nx, n_b=1), Layout(L_hold=3), every=rate,
+                 key=("env", rate))
 
 
 def law_block(comp, cp) -> Block:
@@ -81,11 +106,14 @@ def end_block(comp) -> Block:
     return Block("end", "end", f, Layout(), Layout(p=npar), Layout(), U, Y, key=(type(comp.end).__name__, comp.command))
 
 
-def run_blocks(comp, cp) -> list[Block]:
-    """The blocks of the run composed by ``comp`` (module docstring), in the tick's order."""
-    blocks = []
+def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
+    """The blocks of the run composed by ``comp`` (module docstring), in the tick's order; with
+    an environment ``rate`` (ticks per evaluation), the held environment first."""
+    blocks = [env_block(comp, rate)] if rate else []
     if comp.flight is not None:
         blocks.append(sensing_block(comp.flight))
+    if comp.corruption is not None:  # [controller.sensor] noise (its delay: per tick, fused.fused_ok)
+        blocks.append(corruption_block(comp.corruption, comp.meas_layout.size))
     blocks.append(law_block(comp, cp))
     if comp.thrust is not None:
         b = actuator_block(comp.thrust.cluster)
@@ -113,7 +141,15 @@ def structure_key(comp, cp) -> tuple:
     th = comp.thrust
     return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
             None if comp.flight is None else comp.flight.key,
-            None if th is None else (th.cluster.key, th.lp), type(comp.end).__name__)
+            None if th is None else (th.cluster.key, th.lp), type(comp.end).__name__, held_rate(comp),
+            None if comp.corruption is None else comp.corruption.flags)
+
+
+def held_rate(comp) -> int:
+    """The environment's ticks per evaluation the composed loop holds (0: every stage): the
+    scene's rate (:func:`.rates.environment_rate`), except with thrusters, whose per-tick loop
+    evaluates every stage (the fused run keeps its numbers)."""
+    return 0 if comp.thrust is not None else environment_rate(comp)
 
 
 def composed(comp, cp) -> tuple[Composed, float]:
@@ -124,6 +160,7 @@ def composed(comp, cp) -> tuple[Composed, float]:
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
-    c = compose(plant_of(comp), run_blocks(comp, cp))
+    rate = held_rate(comp)
+    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate))
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0

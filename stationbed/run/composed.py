@@ -53,6 +53,42 @@ def _functions(comp, cp) -> dict:
     return out
 
 
+class Draws:
+    """The composition's draws by tick, from each block's own stream, in tick order: the sensing
+    block's (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.rng`` through
+    the corruption plug-in, fused.py's order). ``rows(k0, n)`` -> (n, width)."""
+
+    def __init__(self, comp, cm):
+        N = cm.noise
+        self.width = N.size
+        self.src = []
+        if "sensing" in N:
+            self.src.append((N.slice("sensing"), lambda k0, n: comp.tick_noise.rows(k0, n)))
+        if "noise" in N:
+            self.src.append((N.slice("noise"), lambda k0, n: comp.corruption.draw(comp.rng, n)))
+        self.comp = comp
+
+    def rows(self, k0: int, n: int) -> np.ndarray:
+        if len(self.src) == 1 and self.src[0][0] == slice(0, self.width):
+            return self.src[0][1](k0, n)
+        out = np.zeros((n, self.width))
+        for sl, f in self.src:
+            out[:, sl] = f(k0, n)
+        return out
+
+    def state(self):
+        c = self.comp
+        return (c.tick_noise.state() if c.tick_noise is not None else None,
+                c.rng.bit_generator.state if c.corruption is not None else None)
+
+    def restore(self, st) -> None:
+        c = self.comp
+        if st[0] is not None:
+            c.tick_noise.restore(st[0])
+        if st[1] is not None:
+            c.rng.bit_generator.state = st[1]
+
+
 def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     """Run ticks 0..K of the run composed by ``comp`` with the composed loop, handing back to
     ``res`` (:class:`~.composition.RunState`) the per-tick loop's rows and memories."""
@@ -64,14 +100,15 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     period, duration = comp.period, comp.duration
     s_law = law_state.initial(ctrl)
     law = cm.law_block.name
-    sense = cm.sense[0].name if cm.sense else None
+    fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
+    sense = fl.name if fl is not None else None
     act = cm.actuators[0].name if cm.actuators else None
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
     if sense is not None:
         par[P.slice(sense)] = flight.params
-        X = cm.sense[0].state
+        X = fl.state
     if act is not None:
         par[P.slice(act)] = th.cluster.params
     c0 = chunk.args[0]
@@ -93,7 +130,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     res.used_fused = True
     n = comp.n_per_out
     row_ks = sorted(set(range(0, K, n)) | {K})
-    nw = cm.noise.size
+    draws_of = Draws(comp, cm)
+    nw = draws_of.width
 
     def torque_at(ta):
         return held_torque_from(comp.scene, ta, comp.bps, duration)
@@ -101,7 +139,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     try:
         j0 = 0
         if not edges:  # the leading full rows, many per compiled call (composed_rows.py)
-            j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par)
+            j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par, draws_of)
             x = c0[cx].copy()
             if stop is not None:
                 raise stop
@@ -110,7 +148,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 continue
             t = min(k * period, duration)
             n_tick = row_ks[j + 1] - k if k < K else 1
-            draws = comp.tick_noise.rows(k, n_tick) if nw else None
+            draws = draws_of.rows(k, n_tick) if nw else None
             # the row at tick k: the command, actuation and reference of this tick, the memory after it
             rc[:] = c0
             rc[C.slice("i")] = 0.0
@@ -132,7 +170,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 th.x_row = c0[C.slice(act)].copy()
             xs = ys = None
             if sense is not None:
-                xs, ys = X.get(R.get(r, sense), "xs").copy(), cm.sense[0].outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
+                xs, ys = X.get(R.get(r, sense), "xs").copy(), fl.outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
             res.row(t, x, lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=r[r_q], xs=xs, ys=ys)
             if k == K:
                 if sense is not None:

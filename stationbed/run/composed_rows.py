@@ -54,11 +54,12 @@ def rows_functions(cm, row: ca.Function, chunk: ca.Function, n: int) -> list:
     return fns
 
 
-def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np.ndarray) -> tuple:
+def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np.ndarray, draws) -> tuple:
     """Run the leading full rows of a composed run in calls of ``R`` rows.
 
     ``c0`` the carry at tick 0 (updated in place to the carry after the rows run), ``par`` the
-    chunk's parameters (``h`` the period, the blocks' numbers). Returns ``(j, tail_flag, ticks,
+    chunk's parameters (``h`` the period, the blocks' numbers), ``draws`` the run's draws by tick
+    (run/composed.py ``Draws``). Returns ``(j, tail_flag, ticks,
     stop)``: the first row left to the row-by-row loop, the saturation flag carried from the rows
     before, ticks run, and an IntegrationError for the executor to raise when a row's stretch
     ended in a non-finite state (the rows up to it handed over), else None."""
@@ -69,7 +70,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     C, RL = cm.carry, cm.row_layout
     O = Layout(c=C.size, row=RL.size, counts=2)
     flight, th, fm = comp.flight, comp.thrust, res.flight
-    sense = cm.sense[0] if cm.sense else None
+    sense = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
     act_b = cm.actuators[0] if cm.actuators else None
     period, duration = comp.period, comp.duration
     out_l = comp.end.outputs
@@ -78,7 +79,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     torque = comp.ctrl.command == "torque"
     nw = cm.noise.size
     j = tail_flag = ticks = 0
-    noise0 = comp.tick_noise.state() if nw else None  # a fallback to row by row draws the same again
+    noise0 = draws.state() if nw else None  # a fallback to row by row draws the same again
     for R in sorted(calls, reverse=True):
         fc = calls[R]
         fc.args[2][:] = par
@@ -87,8 +88,11 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
             ks = np.asarray(row_ks[j : j + R], dtype=float)
             fc.args[0][:] = c0
             fc.args[1][:] = ks
-            if nw:
-                comp.tick_noise.rows_into(row_ks[j], R * n, fc.args[3].reshape(R * n, -1))
+            if nw:  # the R rows' ticks in order: column r = row r's ticks, tick by tick
+                if sense is not None and nw == sense.noise.size:
+                    comp.tick_noise.rows_into(row_ks[j], R * n, fc.args[3].reshape(R * n, -1))
+                else:
+                    fc.args[3][:] = draws.rows(row_ks[j], R * n).ravel()
             fc()
             carries = fc.res[0].reshape(R, -1)
             out = fc.res[1].reshape(R, -1)
@@ -125,7 +129,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
                 res.x = xs_[0]
                 if not _held_matches(res, held[0], act[0, cmg[0]] if has_cmg else None, cmd[0], q_ref[0], int(flag[0])):
                     if noise0 is not None:
-                        comp.tick_noise.restore(noise0)
+                        draws.restore(noise0)
                     return 0, 0, 0, None  # the executor's row has other columns: row by row
             ts = np.minimum(ks[:m] * period, duration)
             try:

@@ -165,11 +165,10 @@ COMPOSE_ALL = False
 def composed_takes(comp) -> bool:
     """Whether the composed loop (issue 33) flies the fused run of ``comp``: thrusters with
     ``[[sensor]]`` tables or a law with a state (no hand-composed loop composed them); with
-    :data:`COMPOSE_ALL`, every fused run whose parts it has (not yet: the ideal sensor's noise,
-    an environment rate)."""
+    :data:`COMPOSE_ALL`, every fused run."""
     if comp.thrust is not None and (comp.flight is not None or law_state.has_state(comp.ctrl)):
         return True
-    return COMPOSE_ALL and not comp.noisy and environment_rate(comp) == 0
+    return COMPOSE_ALL
 
 
 def run_fused(comp, res, K: int) -> None:
