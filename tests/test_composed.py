@@ -12,7 +12,7 @@ Independent truths:
   keeps the momentum balance ``ΔH_N = ∫ C_NB L dt`` with the thrusters' impulses summed here
   from their logged on-times and the scene's geometry (``r × F ĝ``);
 * the composed loop is the hand-composed fused loops (fused.py, fused_flight.py,
-  thrust_fused.py) bit for bit where they fly the same run (``fused.COMPOSE_ALL``).
+  thrust_fused.py) bit for bit where they fly the same run (``fused.HAND_COMPOSED``).
 """
 
 from __future__ import annotations
@@ -179,8 +179,9 @@ def test_composed_loop_is_the_hand_composed_fused_loop(case, monkeypatch):
     bit (the same expressions composed once: the step to replacing them, docs/design.md)."""
     name, over = SHIPPED[case]
     s = _short(ROOT / "scenarios" / f"{name}.toml", 120.0, **over)
+    monkeypatch.setattr(fused, "HAND_COMPOSED", True)
     old = simulate(s, fused=True)
-    monkeypatch.setattr(fused, "COMPOSE_ALL", True)
+    monkeypatch.setattr(fused, "HAND_COMPOSED", False)
     ran = []
     real = composed_mod.run_composed
     monkeypatch.setattr(composed_mod, "run_composed", lambda *a: ran.append(1) or real(*a))

@@ -106,6 +106,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
+    # the external torque held from t = 0 (the bulk rows hold it: they run only without edges)
+    par[P.slice("u_ext")] = held_torque_from(comp.scene, 0.0, comp.bps, duration)
     if sense is not None:
         par[P.slice(sense)] = flight.params
         X = fl.state

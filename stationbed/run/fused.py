@@ -157,18 +157,18 @@ def _build(comp, n: int, flags=(False, False), rate: int = 0) -> dict:
             "rows": rows}
 
 
-#: runs the composed loop (run/composed.py) takes beyond the combinations only it flies: the
-#: equivalence tests set it to fly every run it can with the composed loop, against the others
-COMPOSE_ALL = False
+#: True: the hand-composed fused loops below fly the runs they composed (their last use: the
+#: bit-for-bit comparison with the composed loop, tests/test_composed.py; issue 33 deletes them)
+HAND_COMPOSED = False
 
 
 def composed_takes(comp) -> bool:
-    """Whether the composed loop (issue 33) flies the fused run of ``comp``: thrusters with
-    ``[[sensor]]`` tables or a law with a state (no hand-composed loop composed them); with
-    :data:`COMPOSE_ALL`, every fused run."""
+    """Whether the composed loop (issue 33, run/composed.py) flies the fused run of ``comp``:
+    every fused run, unless :data:`HAND_COMPOSED` asks for the hand-composed loop of a
+    combination one composed (thrusters with ``[[sensor]]`` tables or a law with a state had none)."""
     if comp.thrust is not None and (comp.flight is not None or law_state.has_state(comp.ctrl)):
         return True
-    return COMPOSE_ALL
+    return not HAND_COMPOSED
 
 
 def run_fused(comp, res, K: int) -> None:
