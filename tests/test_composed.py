@@ -11,13 +11,14 @@ Independent truths:
   per-tick loop's run (the law in Python, each block compiled on its own) to round-off, and
   keeps the momentum balance ``ΔH_N = ∫ C_NB L dt`` with the thrusters' impulses summed here
   from their logged on-times and the scene's geometry (``r × F ĝ``);
-* the composed loop is the hand-composed fused loops (fused.py, fused_flight.py,
-  thrust_fused.py) bit for bit where they fly the same run (``fused.HAND_COMPOSED``).
+* the composed loop replaced the hand-composed fused loops (fused.py's, fused_flight.py,
+  thrust_fused.py) after giving their rows bit for bit on every combination they flew (the
+  test that showed it went with them: docs/design.md "One loop, built once"); every shipped
+  scenario's CSV is byte-identical to before.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import casadi as ca
@@ -30,7 +31,6 @@ from stationbed.core.layout import Layout
 from stationbed.integrators import RK4
 from stationbed.loop.block import Block
 from stationbed.loop.compose import Plant, compose
-from stationbed.run import composed as composed_mod, fused
 
 ROOT = Path(__file__).resolve().parents[1]
 FULL = ROOT / "scenarios" / "iss_full_flight_loop.toml"
@@ -161,31 +161,3 @@ def test_full_flight_loop_keeps_the_momentum_balance(full_runs, which):
     thr = _thruster_impulse_N(scene, tr)
     assert np.abs(thr[-1]).max() > 10 * BALANCE_ABS  # the thrusters' share is seen
     assert_allclose(tr.H_O_N - tr.H_O_N[0], smooth + thr, rtol=0, atol=BALANCE_ABS)
-
-
-NOISE = {"controller.sensor": {"attitude_noise": 1e-4, "rate_noise": 1e-6, "seed": 7}}
-#: id -> (shipped scenario, changes): the held environment at the default rate (auto: 20 ticks)
-#: and every stage, the sensors and MEKF, the thrusters, the ideal measurement's noise
-SHIPPED = {"hold_auto": ("iss_lvlh_hold", {}), "hold_every_stage": ("iss_lvlh_hold", {"simulation.environment_rate": 0}),
-           "estimated_auto": ("iss_lvlh_hold_estimated", {}),
-           "estimated_every_stage": ("iss_lvlh_hold_estimated", {"simulation.environment_rate": 0}),
-           "thrusters": ("iss_cmg_thruster_assist", {}), "hold_noisy": ("iss_lvlh_hold", NOISE),
-           "thrusters_noisy": ("iss_cmg_thruster_assist", NOISE)}
-
-
-@pytest.mark.parametrize("case", list(SHIPPED))
-def test_composed_loop_is_the_hand_composed_fused_loop(case, monkeypatch):
-    """Where a hand-composed fused loop flies the run, the composed loop gives its rows bit for
-    bit (the same expressions composed once: the step to replacing them, docs/design.md)."""
-    name, over = SHIPPED[case]
-    s = _short(ROOT / "scenarios" / f"{name}.toml", 120.0, **over)
-    monkeypatch.setattr(fused, "HAND_COMPOSED", True)
-    old = simulate(s, fused=True)
-    monkeypatch.setattr(fused, "HAND_COMPOSED", False)
-    ran = []
-    real = composed_mod.run_composed
-    monkeypatch.setattr(composed_mod, "run_composed", lambda *a: ran.append(1) or real(*a))
-    new = simulate(s, fused=True)
-    assert old.meta["summary"]["fused"] and new.meta["summary"]["fused"] and ran == [1]
-    assert np.array_equal(old.data, new.data, equal_nan=True)
-    assert math.isfinite(new.data[-1, 1])

@@ -87,7 +87,9 @@ def _bulk_and_row_by_row(monkeypatch, scene) -> tuple:
 
 def test_bulk_flight_rows_give_the_row_by_row_loops_bits(monkeypatch):
     seen, bulk, one = _bulk_and_row_by_row(monkeypatch, _scene())
-    assert seen == [80]  # 64 + 8 + 8 rows (the row at the run's end: row by row)
+    # 64 + 8 + 8 rows (the row at the run's end: row by row); before it, the default rate's probe
+    # (a truth-fed run, run/rate_auto.py) when not cached yet: the same executor since issue 33
+    assert seen[-1] == 80 and len(seen) <= 2
     s_bulk, s_one = bulk.meta["summary"], one.meta["summary"]
     assert s_bulk["rate_limited_ticks"] > 0 and s_bulk["fused"] is True
     assert s_bulk == s_one

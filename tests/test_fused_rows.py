@@ -171,7 +171,7 @@ def test_leading_full_rows_counted_in_numpy_as_a_row_at_a_time():
     rows and one row: the same count as one row at a time."""
     import types
 
-    from stationbed.run.fused_rows import _full_rows
+    from stationbed.run.composed_rows import _full_rows
 
     rng = np.random.default_rng(4)
     for _ in range(300):

@@ -8,10 +8,11 @@ each output row and the composed ``chunk`` over the row's ticks (cut into pieces
 scene's edges on the tick grid, :func:`~.segments.tick_pieces`), and hands the rows, the
 flight's memory, the thrusters' memory and the law's state back through the run's state.
 
-Taken today for the combinations the hand-composed fused loops never composed (thrusters with
-``[[sensor]]`` tables, thrusters with a law that has a state, :func:`~.fused.run_fused`); the
-other fused loops stay until this one is proven equal on them (docs/design.md "One loop,
-built once": what is left).
+It replaced the hand-composed fused loops of issues 20-25 (``fused.py``'s chunk,
+``fused_flight.py``, ``thrust_fused.py``, their bulk rows and held-environment chunks) after
+giving their rows bit for bit on every combination they flew; it also flies the combinations
+they never composed (thrusters with ``[[sensor]]`` tables, thrusters with a law that has a
+state).
 """
 
 from __future__ import annotations

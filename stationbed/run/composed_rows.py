@@ -1,5 +1,5 @@
 """Many output rows of the composed loop in one compiled call (issue 33; the mechanism of
-:mod:`.fused_rows` and :mod:`.flight_rows`, for any composition).
+the truth-fed and the flight loops' bulk rows of issues 25 and 20, now for any composition).
 
 ``rows_R(c, a, par, w) -> (carries, out)``: per row r (casadi ``mapaccum`` over rows), from the
 carry ``c`` at the row's first tick ``a_r``: the composed ``row`` at ``(t0 = a_r h, k0 = a_r)``,
@@ -18,19 +18,87 @@ torque-window edge in the run, not the short last period).
 
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 import numpy as np
 
 from ..core.layout import Layout
 from ..integrators import IntegrationError
-from .flight_rows import _report
-from .fused_rows import ROW_CALLS, _full_rows, _held_matches, row_flags_and_held
+from ..core.compile import FastCall
 
-__all__ = ["rows_functions", "run_rows"]
+__all__ = ["ROW_CALLS", "rows_functions", "run_rows", "row_flags_and_held"]
+
+#: rows per compiled call, largest first (the rows left over go row by row). A call of R rows
+#: saves R - 1 calls' Python; padding a call with idle rows would still run their ticks (the
+#: chunk masks a tick's result, it does not skip its arithmetic), so calls are always full.
+ROW_CALLS = (64, 8)
+
+
+def _full_rows(comp, row_ks, n: int, K: int) -> int:
+    """How many leading rows run ``n`` full ticks each (the last tick's period not cut short):
+    the first row ``j`` that does not (it is the last, its tick is ``K``, the next row is not
+    ``n`` ticks on, or its last tick ends past the duration), in numpy (a row at a time was
+    ~0.15 ms a run of 800 rows, issue 25)."""
+    period, duration = comp.period, comp.duration
+    ks = np.asarray(row_ks, dtype=np.int64)
+    a = ks[:-1]
+    ok = (a < K) & (np.diff(ks) == n) & ~(duration - (a + n - 1) * period < period * (1 - 1e-12))
+    return len(a) if ok.all() else int(np.argmin(ok))
+
+
+def row_flags_and_held(m: int, act, cmd, counts, tail_flag: int, cmg, ng: int, torque: bool) -> tuple:
+    """The first ``m`` bulk rows' saturation flags and held columns, as the row-by-row loop makes
+    them: a row's flag is its own tick's (rate limited or saturated) or any tick after the
+    previous row's tick (its chunk: ``counts`` less the row tick's own); ``tail_flag`` carries
+    the chunk before the first row. ``cmg`` = (u_cmg slice, rate-limited index, saturated index)
+    of the chain end's ``act``, or None without a cluster. Returns (flag, after, held pieces):
+    the gimbals' held input and the flag (with a cluster), the torque command (NaN when the law
+    commands rates) and the attitude error's four NaN columns (filled by the rows)."""
+    lim = sat = np.zeros(m)
+    if cmg is not None:
+        i_u, i_lim, i_sat = cmg
+        lim, sat = (act[:m, i_lim] > 0.5).astype(float), (act[:m, i_sat] > 0.5).astype(float)
+    after = ((counts[:m, 0] - lim) + (counts[:m, 1] - sat) > 0.5).astype(float)
+    prev = np.concatenate(([float(tail_flag)], after[:-1]))
+    flag = np.maximum(np.maximum(lim, sat), prev)
+    held = []
+    if cmg is not None:
+        held += [act[:m, i_u][:, :ng], flag[:, None]]
+    held += [cmd[:m] if torque else np.full((m, 3), math.nan), np.full((m, 4), math.nan)]
+    return flag, after, held
+
+
+def _held_matches(res, held, act, cmd, q_ref, flag) -> bool:
+    """Whether the bulk held values of the first row are what the executors' own row holds
+    (:meth:`~.composition.RunState.held_row`, with this row's actuation, command and reference set)."""
+    comp = res.comp
+    if act is not None:
+        res.u[comp.u_cmg] = act
+    if comp.n_cmd == 3:
+        res.last_cmd = tuple(cmd)
+    comp.ctrl.q_ref_BN = tuple(q_ref)
+    vals, _ = res.held_row(flag)
+    vals = np.asarray(vals, dtype=float)
+    return vals.shape == held.shape and bool(np.array_equal(vals, held, equal_nan=True))
+
+
+_REPORTS: dict = {}
+
+
+def _report(mekf, R: int) -> FastCall:
+    """The filter's report over R rows: its SX function mapped (casadi's virtual machine, as
+    :meth:`~stationbed.loop.flight.Flight.row` evaluates it row by row: the same numbers)."""
+    f = mekf.report_function()
+    hit = _REPORTS.get((id(f), R))
+    if hit is None or hit[0] is not f:
+        hit = _REPORTS[(id(f), R)] = (f, FastCall(f.map(R)))
+    return hit[1]
+
 
 
 def rows_functions(cm, row: ca.Function, chunk: ca.Function, n: int) -> list:
-    """``cl_rows_R`` for each R of :data:`~.fused_rows.ROW_CALLS` (module docstring); ``par`` the
+    """``cl_rows_R`` for each R of :data:`ROW_CALLS` (module docstring); ``par`` the
     chunk's parameters (its ``t0``, ``k0``, ``n_act`` set per row)."""
     C, P, R_ = cm.carry, cm.par, cm.row_layout
     nw = cm.noise.size
@@ -106,7 +174,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
             if sense is not None:
                 fl_xs = sense.state.get(RL.get(rows, sense.name), "xs")
                 fl_ys = sense.outputs.get(RL.get(rows, f"{sense.name}_y"), "ys")
-                sl = flight._rows
+                sl = flight.row_slices
                 if rep is not None:  # the filter's report against the truth (Flight.row's numbers)
                     q = xs_[:, comp.state_layout.slice("q_BN")]
                     rep.args[0][:] = fl_xs[:, sl["mekf"]].ravel()
@@ -118,8 +186,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
                 held += [fl_ys[:m, sl["valid"]]]
             if act_b is not None:  # the thrusters' columns from their memory before each row's tick
                 xa = C.get(cs, act_b.name)
-                th.row(xa[0])  # (finds its indices once)
-                held += [xa[:m][:, th._row_idx]]
+                held += [xa[:m][:, th.row_index()]]
             held = np.hstack(held)
             if j == 0:
                 if sense is not None:
