@@ -161,3 +161,22 @@ def test_full_flight_loop_keeps_the_momentum_balance(full_runs, which):
     thr = _thruster_impulse_N(scene, tr)
     assert np.abs(thr[-1]).max() > 10 * BALANCE_ABS  # the thrusters' share is seen
     assert_allclose(tr.H_O_N - tr.H_O_N[0], smooth + thr, rtol=0, atol=BALANCE_ABS)
+
+
+def test_the_summary_names_the_one_block_off_the_fused_path():
+    """A run that cannot fly fused says why in one place (``not_fused``, run/fused.py
+    ``why_not_fused``), naming the block: the law without a symbolic form, the thrusters' LP
+    mapping; a fused run has no such key; a run asked per tick says so."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_thrusters import pods, sphere  # noqa: PLC0415
+
+    s = _short(ROOT / "scenarios" / "iss_lvlh_hold.toml", 2.0)
+    assert "not_fused" not in simulate(s).meta["summary"]
+    assert simulate(s, fused=False).meta["summary"]["not_fused"] == "fused = False asked"
+    py = s.replace({"controller.name": "example_hold", "controller.params": {"reference": "lvlh"}})
+    assert simulate(py).meta["summary"]["not_fused"].startswith("law: controller 'example_hold' has no symbolic form")
+    lp = sphere(pods(), duration=2.0, mapping="lp")
+    sm = simulate(lp).meta["summary"]
+    assert sm["not_fused"].startswith("thrusters: mapping = 'lp'") and "lp" in sm["thrusters_not_fused"]

@@ -4,8 +4,9 @@ A run flies fused when every block of its composition is symbolic and the clock 
 (:func:`fused_ok`); the composed loop (:mod:`.composed`, the tick composed once from the run's
 blocks by :mod:`stationbed.loop.compose`, issue 33) then runs a whole output row's ticks in one
 compiled call (a casadi ``mapaccum`` generated as C), many rows per call where it can.
-Otherwise the per-tick loop runs, with the same numbers to round-off, and the summary says why
-(``thrusters_not_fused`` for the thrusters' reasons).
+Otherwise the per-tick loop runs, with the same numbers to round-off, and the summary names the
+one block that forces it (``not_fused``, :func:`why_not_fused`; ``thrusters_not_fused`` too for
+the thrusters' reasons).
 """
 
 from __future__ import annotations
@@ -17,36 +18,47 @@ from .controller import ControllerError, one_line
 from .rates import environment_rate
 from .segments import edge_ticks
 
-__all__ = ["fused_ok", "run_fused"]
+__all__ = ["fused_ok", "why_not_fused", "run_fused"]
+
+
+def why_not_fused(comp) -> str | None:
+    """The one reason the run composed by ``comp`` cannot fly fused, naming the block or the
+    part of the clock that forces it off the compiled path (None: it flies fused). The only
+    place that decides it: :func:`fused_ok` is this is None, the summary reports it
+    (``not_fused``). In order: the law (a Python or FMU law has no ``symbolic`` form), the
+    integrator (not one fixed explicit step per tick), a discontinuity between ticks or an array
+    rate step, the ideal measurement's delay (a ring buffer, not a block yet) or its noise with
+    ``[[sensor]]`` tables, a failure detected mid-run, the thrusters (the LP mapping; an explicit
+    environment rate; ``[controller.sensor]`` noise with a stateful law)."""
+    ctrl = comp.ctrl
+    integ = comp.integ
+    if not callable(getattr(ctrl, "symbolic", None)):
+        return f"law: controller '{ctrl.name}' has no symbolic form (called in Python per tick)"
+    if not integ.fusable or math.ceil(comp.period / integ.h_nominal - 1e-9) != 1 or comp.system.sx is None:
+        return f"integrator: '{integ.name}' is not one fixed explicit step per tick"
+    if edge_ticks(comp) is None:
+        return "plant: a discontinuity between ticks or an array rate step (the per-tick loop cuts there)"
+    if comp.noisy and comp.delay > 0:
+        return "noise: [controller.sensor] delay (its ring buffer is not a block yet)"
+    if comp.flight is not None and comp.noisy:
+        return "noise: [controller.sensor] noise with [[sensor]] tables"
+    if comp.replan is not None:
+        return "law: a failure detected mid-run (the law designs again, in Python)"
+    why = _thrust_why(comp)
+    return None if why is None else f"thrusters: {why}"
 
 
 def fused_ok(comp) -> bool:
-    """Whether the run composed by ``comp`` can run fused: a controller with a ``symbolic`` form, a ``fusable``
-    integrator at one step per period, every discontinuity inside the run on the tick grid
-    (:func:`~.segments.edge_ticks`), no sensor delay (its ring buffer is not a block yet), not the
-    ideal measurement's noise with ``[[sensor]]`` tables, no failure detected mid-run, and
-    thrusters the composed loop can fly (:func:`fused_thrust_ok`)."""
-    ctrl = comp.ctrl
-    integ = comp.integ
-    return (
-        callable(getattr(ctrl, "symbolic", None))
-        and integ.fusable
-        and math.ceil(comp.period / integ.h_nominal - 1e-9) == 1
-        and edge_ticks(comp) is not None
-        and not (comp.noisy and comp.delay > 0)
-        and comp.system.sx is not None
-        and not (comp.flight is not None and comp.noisy)
-        and comp.replan is None  # a failure detected mid-run: per tick (run/detection.py)
-        and fused_thrust_ok(comp)
-    )
+    """Whether the run composed by ``comp`` can run fused (:func:`why_not_fused` is None)."""
+    return why_not_fused(comp) is None
 
 
-def fused_thrust_ok(comp) -> bool:
-    """Whether the fused loop can fly the run's thrusters (always True without thrusters);
-    sets ``comp.thrust.fused_reason`` when it cannot."""
+def _thrust_why(comp) -> str | None:
+    """Why the fused loop cannot fly the run's thrusters (None without thrusters, or when it
+    can); kept on ``comp.thrust.fused_reason`` (the summary's ``thrusters_not_fused``)."""
     th = comp.thrust
     if th is None:
-        return True
+        return None
     why = None
     if th.lp:
         why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
@@ -55,7 +67,7 @@ def fused_thrust_ok(comp) -> bool:
     elif comp.noisy and law_state.has_state(comp.ctrl):
         why = "[controller.sensor] noise with a law that has a state and thrusters is flown per tick"
     th.fused_reason = why
-    return why is None
+    return why
 
 
 def run_fused(comp, res, K: int) -> None:
