@@ -177,13 +177,20 @@ class Composed:
             tqs.append(a.outputs.get(out, "torque_B"))
         return tau, mem, ca.vertcat(*ons) if ons else type(cmd)(0, 1), ca.vertcat(*tqs) if tqs else type(cmd)(0, 1)
 
-    def advance(self, t, x, h, u, p, on_s, torque_B):
+    def advance(self, t, x, h, u, p, on_s, torque_B, called: bool = False):
         """One fixed step of the plant over ``[t, t + h]`` with the held input ``u``, cut at
-        every pulse edge ``t + on_s[j]`` (channel j adds its ``torque_B`` column while on)."""
+        every pulse edge ``t + on_s[j]`` (channel j adds its ``torque_B`` column while on).
+        ``called``: the pieces call one right-hand side rather than each inlining it (n + 1
+        steps of 4 stages: the generated C and its compile time grow with them; the same
+        operations, bit for bit)."""
         P = self.plant
+        rhs = self._rhs
+        if called:
+            t_, x_, u_, p_ = ca.SX.sym("t"), ca.SX.sym("x", P.nx), ca.SX.sym("u", rhs.size1_in(2)), ca.SX.sym("p", P.npar)
+            rhs = sx_function("cl_rhs", [t_, x_, u_, p_], [rhs(t_, x_, u_, p_)], called=True)
         if on_s.numel() == 0:
-            return P.step(self._rhs, t, x, h, u, p)
-        return split_step(P.step, self._rhs, t, x, h, u, p, on_s, ca.reshape(torque_B, 3, on_s.numel()), P.input_layout)
+            return P.step(rhs, t, x, h, u, p)
+        return split_step(P.step, rhs, t, x, h, u, p, on_s, ca.reshape(torque_B, 3, on_s.numel()), P.input_layout)
 
     # -- the tick -----------------------------------------------------------------------------
     def _front(self, plain: bool) -> ca.Function:
@@ -286,7 +293,7 @@ class Composed:
         nch = on_s.numel()
         us, ons, tqs = SX.sym("u", u_b.numel()), SX.sym("on", nch), SX.sym("tq", 3 * nch)
         plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
-        split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs], [self.advance(ts, xs_, hs, us, pp, ons, tqs)])
+        split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs], [self.advance(ts, xs_, hs, us, pp, ons, tqs, called=True)])
         pulse = ca.Function.if_else("cl_pulse", split, plain)
         ar, aon, atq = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch)
         a_in = [c, par, cq, ar, aon, atq]
