@@ -29,8 +29,9 @@ functions: the generated C evaluates only the case taken):
   the request unchanged, keeps the quiet step, else one plain step or the step split at the
   pulse edges (:func:`~.actuator.split_step`).
 
-Every case gives the numbers the full tick would (the idle and plain forms are exact), so the
-per-tick executor, which calls the parts one by one, flies the same run to round-off.
+Every case gives the numbers the full tick would (the idle and plain forms are exact): the
+per-tick executor (its own compiled parts today, the composer's next: docs/design.md "One loop,
+built once", what is left) flies the same run to round-off (tests/test_composed_matrix.py).
 """
 
 from __future__ import annotations
