@@ -17,7 +17,7 @@ the driver's warm-up, its own local cluster of forked workers, the samples, the 
 
 ``--environment-rate N`` runs both studies' samples with ``[simulation] environment_rate = N``
 (aero and solar pressure once per N ticks, held; the fused flight loop honours it:
-run/flight_rates.py); the default ``auto`` is the scenarios' default, the bound's choice
+the composed loop's env block); the default ``auto`` is the scenarios' default, the bound's choice
 (docs/design.md "Effects at their own rate"): 20 ticks on both.
 
 The 1000-sample wall is measured when ``--samples 1000``, else ``wall(N) * 1000 / N`` (the fixed

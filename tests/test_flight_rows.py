@@ -40,7 +40,7 @@ import pytest
 
 from stationbed import load_scene, simulate
 from stationbed.core.rotation import rotation_angle
-from stationbed.run import fused_flight
+from stationbed.run import composed as composed_mod
 from stationbed.run.controller import Controller
 from stationbed.run.rate_auto import TARGET_RAD
 from stationbed.run.simulation import SimulationError
@@ -65,12 +65,13 @@ def _scene():
 
 def _spy(monkeypatch) -> list:
     """Rows run in bulk, per run."""
-    return spy_first(monkeypatch, fused_flight, "run_flight_rows")
+    return spy_first(monkeypatch, composed_mod, "run_rows")
 
 
 def _row_by_row(monkeypatch):
-    """The fused flight loop without its bulk rows (no row run in bulk; same compiled build)."""
-    monkeypatch.setattr(fused_flight, "run_flight_rows", lambda *a, **k: (0, 0, 0, None))
+    """The fused flight loop without its bulk rows (no row run in bulk; same compiled build;
+    the composed loop's, run/composed.py, issue 33)."""
+    monkeypatch.setattr(composed_mod, "run_rows", lambda *a, **k: (0, 0, 0, None))
 
 
 def _bulk_and_row_by_row(monkeypatch, scene) -> tuple:
@@ -86,7 +87,9 @@ def _bulk_and_row_by_row(monkeypatch, scene) -> tuple:
 
 def test_bulk_flight_rows_give_the_row_by_row_loops_bits(monkeypatch):
     seen, bulk, one = _bulk_and_row_by_row(monkeypatch, _scene())
-    assert seen == [80]  # 64 + 8 + 8 rows (the row at the run's end: row by row)
+    # 64 + 8 + 8 rows (the row at the run's end: row by row); before it, the default rate's probe
+    # (a truth-fed run, run/rate_auto.py) when not cached yet: the same executor since issue 33
+    assert seen[-1] == 80 and len(seen) <= 2
     s_bulk, s_one = bulk.meta["summary"], one.meta["summary"]
     assert s_bulk["rate_limited_ticks"] > 0 and s_bulk["fused"] is True
     assert s_bulk == s_one

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from stationbed import load_scene, simulate
-from stationbed.run import fused
+from stationbed.run import composed as composed_mod
 from stationbed.run.controller import Controller
 from stationbed.run.simulation import SimulationError
 from stationbed.scene import scene_from_dict
@@ -41,9 +41,10 @@ DURATION_S = 200.0
 
 
 def _row_by_row(monkeypatch):
-    """The fused loop without its bulk rows (the build offers no ``fused_rows_R``)."""
-    monkeypatch.setattr(fused, "rows_functions", lambda *a, **k: [])
-    monkeypatch.setattr(fused, "_CHUNKS", {})
+    """The fused loop without its bulk rows (the composed build offers no ``cl_rows_R``;
+    run/composed.py, issue 33)."""
+    monkeypatch.setattr(composed_mod, "rows_functions", lambda *a, **k: [])
+    monkeypatch.setattr(composed_mod, "_CHUNKS", {})
 
 
 def spy_first(monkeypatch, module, name: str) -> list:
@@ -63,7 +64,7 @@ def spy_first(monkeypatch, module, name: str) -> list:
 
 def _spy(monkeypatch) -> list:
     """Rows run in bulk, per run (a list the wrapped :func:`run_rows` appends to)."""
-    return spy_first(monkeypatch, fused, "run_rows")
+    return spy_first(monkeypatch, composed_mod, "run_rows")
 
 
 #: sensor noise of the noisy case: attitude [rad], rate [rad/s] (the MC scenario's order)
@@ -170,7 +171,7 @@ def test_leading_full_rows_counted_in_numpy_as_a_row_at_a_time():
     rows and one row: the same count as one row at a time."""
     import types
 
-    from stationbed.run.fused_rows import _full_rows
+    from stationbed.run.composed_rows import _full_rows
 
     rng = np.random.default_rng(4)
     for _ in range(300):

@@ -123,7 +123,7 @@ def test_momentum_manager_fused_is_its_per_tick_run_and_summary():
 
 
 def test_momentum_manager_fused_with_sensors_and_mekf():
-    """The estimated scenario (gyro, star trackers, MEKF; run/fused_flight.py) with
+    """The estimated scenario (gyro, star trackers, MEKF; run/composed.py) with
     momentum_manager, 60 s: fused and per tick fly the same rows and end in the same state."""
     scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace(
         {"simulation.duration": 60.0, "simulation.output_dt": 1.0, "controller.name": "momentum_manager",
@@ -223,7 +223,7 @@ def test_a_carried_state_in_the_lockstep_executor(fused):
 
 
 def test_a_carried_state_through_the_held_environment_blocks():
-    """The fused loop with the environment at its own rate (rates.held_chunk: blocks of 7 ticks,
+    """The fused loop with the environment at its own rate (the composed loop's env block: blocks of 7 ticks,
     the law's state in the carry beside x): every row's commanded torque is τ(k T) of its own
     tick k, and the count at the end is K + 1 (a state lost or shifted at a block edge breaks
     both)."""

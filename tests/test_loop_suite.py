@@ -141,7 +141,7 @@ def test_a_sensor_named_as_an_estimator_output_is_refused():
 
 def test_tick_noise_rows_are_one_whole_draw_however_they_are_asked(suite, monkeypatch):
     """The executors ask :class:`TickNoise` for rows tick by tick, a row's ticks, or many rows'
-    at once (run/flight_rows.py, straight into a compiled call's buffer: ``rows_into``), across
+    at once (run/composed_rows.py, straight into a compiled call's buffer: ``rows_into``), across
     its block boundaries and after a :meth:`restore`: every pattern, the two ways mixed, gives
     the numbers of one whole draw (tick 0 a zero row; a buffer full of NaN is overwritten
     everywhere); the draw places each sensor's samples on its own ticks (gyro every 2nd tick,

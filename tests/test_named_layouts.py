@@ -164,57 +164,29 @@ def test_actuator_finds_its_reads_by_name():
 
 
 # -- the fused chunk's vectors -------------------------------------------------------------------
-def test_fused_chunk_vectors_are_their_layouts_sizes(hold_system):
-    from stationbed.run import fused
-    from stationbed.run.chunk_layout import chunk_carry, chunk_info, chunk_par, rows_carry, rows_par
+@pytest.mark.parametrize("name", ["iss_lvlh_hold", "iss_lvlh_hold_estimated", "iss_full_flight_loop"])
+def test_composed_chunk_vectors_are_their_layouts_sizes(name, monkeypatch):
+    """The composed loop's chunk, row and rows' call (run/composed.py, issue 33) are the sizes of
+    the composition's layouts, which the executor fills by name: the carry (``i``, ``x``,
+    ``counts``, each block's memory under its name, of its layout's size), the parameters (each
+    block's numbers), the draws (each block's per tick, a row's ticks), the row's values."""
+    from stationbed.run import composed
 
-    fused._CHUNKS.clear()
-    sc = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml")
-    sc = sc.model_copy(update={"simulation": sc.simulation.model_copy(update={"environment_rate": 0})})  # every tick
-    tr = simulate(sc, duration=30.0)
-    assert tr.meta["summary"]["fused"]
-    ((key, fns),) = fused._CHUNKS.items()
-    form = hold_system.system.formulation
-    nx, npar, ncp = form.nx, form.model.layout.size, fns["ncp"]  # pd: no law state
-    n_act = form.model.nu_cmg + 3  # the CMG cluster's outputs: u_cmg (its held input), m, rate_limited, saturated
-    c0, par = fns["chunk"].args[:2]
-    assert (c0.size, par.size) == (chunk_carry(nx).size, chunk_par(ncp, npar).size)
-    assert fns["info"].res[0].size == chunk_info(3, n_act).size
-    R = max(fns["rows"])
-    assert fns["rows"][R].args[0].size == rows_carry(nx, 0).size
-    assert fns["rows"][R].args[2].size == rows_par(ncp, npar).size
-
-
-def test_fused_flight_vectors_are_their_layouts_sizes(hold_system):
-    """The fused flight chunk (held environment: the default) and its rows' call are the sizes of
-    their layouts (run/chunk_layout.py), which the executor fills by name; the info's inputs are
-    FLIGHT_INFO_IN's, in order."""
-    from stationbed.loop import Flight
-    from stationbed.run import fused_flight
-    from stationbed.run.chunk_layout import (ENV, FLIGHT_INFO_IN, chunk_info, flight_carry, flight_par,
-                                             flight_rows_out, flight_rows_par)
-
-    fused_flight._CHUNKS.clear()
-    sc = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml")
+    monkeypatch.setattr(composed, "_CHUNKS", {})
+    sc = load_scene(ROOT / "scenarios" / f"{name}.toml")
     tr = simulate(sc, duration=30.0, fused=True)
-    assert tr.meta["summary"]["environment_rate_ticks"] > 0  # the held chunk (flight_rates.py)
-    ((key, fns),) = fused_flight._CHUNKS.items()
-    form = hold_system.system.formulation
-    nx, npar, ncp = form.nx, form.model.layout.size, fns["ncp"]
-    ng, n_app = form.model.cmg.n_gimbals, form.model.structure.n_app
-    fl = Flight(sc, sc.controller.period, measurement_fields(ng, n_app), seed=0)
-    ns, nps, ny = fl.suite.STATE.size, fl.params.size, fl.suite.OUTPUTS.size
-    sizes = dict(t=1, x=nx + fns["nls"], cp=ncp, u_ext=3, p=npar, k=1, t_prev=1, theta_B=3, omega_prev=3, xs=ns,
-                 w=fl.suite.NOISE.size, ps=nps)
-    assert [a.size for a in fns["info"].args] == [sizes[f] for f in FLIGHT_INFO_IN]
-    c0, par = fns["chunk"].args[:2]
-    assert (c0.size, par.size) == (flight_carry(nx, ns, ENV.size).size, flight_par(ncp, npar, nps).size)
-    IL = chunk_info(3, form.model.nu_cmg + 3)  # (the CMG cluster's outputs; pd: no law state)
-    assert fns["info"].res[0].size == IL.size
+    assert tr.meta["summary"]["fused"]
+    fns = list(composed._CHUNKS.values())[-1]  # (the run's; the default rate's probe may come first)
+    cm, n = fns["cm"], sc.simulation.output_dt / sc.controller.period
+    c0, par, w = fns["chunk"].args
+    assert (c0.size, par.size, w.size) == (cm.carry.size, cm.par.size, cm.noise.size * round(n))
+    assert fns["row"].res[0].size == cm.row_layout.size
+    for b in cm.blocks:
+        assert cm.carry.shape(b.name)[0] == b.state.size and cm.par.shape(b.name)[0] == b.params.size, b.name
+    if cm.env is not None:
+        assert cm.carry.shape(cm.env.name)[0] == cm.env.state.size
     R = max(fns["rows"])
-    rows = fns["rows"][R]
-    assert rows.args[2].size == flight_rows_par(ncp, npar, nps).size
-    assert rows.res[1].size == R * flight_rows_out(nx, IL.size, ns, ny).size
+    assert fns["rows"][R].args[0].size == cm.carry.size and fns["rows"][R].args[2].size == cm.par.size
 
 
 def test_flight_takes_the_measurement_layout():

@@ -4,7 +4,7 @@
 Both executors run it, neither reads the other's internals:
 
 * the per-tick loop (``run/closed_loop.py``) calls :meth:`Flight.compiled` once per tick;
-* the fused loop (``run/fused_flight.py``) inlines :meth:`Flight.function` in its ``mapaccum``
+* the fused loop (``run/composed.py``, as ``loop/block.py``'s sensing block) inlines :meth:`Flight.function` in its ``mapaccum``
   (MX, so the suite's ``Switch`` nodes stay lazy in the generated code).
 
 ``(k, t, t_prev, y, theta_prev, omega_prev, xs, w, ps) -> (theta, xs_next, y_seen, ys)``
@@ -108,6 +108,12 @@ class Flight:
             bias=S.OUTPUTS.slice("bias_B_hat") if m else None,
             valid=[S.OUTPUTS.slice(h.name).start + 4 for h in self.heads])
         self._f = self._compiled = self._report = self._plain = None
+
+    @property
+    def row_slices(self) -> dict:
+        """Where :meth:`row` reads the suite's state and outputs (``mekf``, ``gyro``, ``bias``,
+        ``valid``): the bulk rows (run/composed_rows.py) read the same."""
+        return self._rows
 
     # -- the tick ---------------------------------------------------------------------------
     def function(self) -> ca.Function:

@@ -98,7 +98,7 @@ class Suite:
         """:meth:`function` on a *plain* tick, as one SX function: a tick ``k > 0`` on which the
         sensors sampling every tick sample and no other does (a star tracker between its samples
         holds). The same operations as :meth:`function` on such a tick, without its switches,
-        so that an executor can inline the whole tick in one SX graph (run/fused_flight.py).
+        so that an executor can inline the whole tick in one SX graph (run/composed.py, loop/block.py sensing_block).
         None when a star-tracker head of the filter samples every tick (its update is the
         filter's switch).
 

@@ -27,7 +27,7 @@ from .controller import (
 from .measurement import command_fields, measurement_fields
 from ..loop.cmg_cluster import chain_end
 from .composition import Composition, ControllerFailure, FlightMemory, RunState
-from .fused import fused_ok, run_fused
+from .fused import fused_ok, run_fused, why_not_fused
 from .held_env import HeldBlocks, held_functions, held_rate, rate_summary
 from .initial import initial_state, initial_x
 from .laws import build_controller
@@ -534,6 +534,8 @@ class ControlLoop:
                 out["h_saturation_Nms"] = float(comp.scene.cmg.saturation_fraction * self.capacity)
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
+        if not res.used_fused:  # the one block (or part of the clock) that kept it off the fused path
+            out["not_fused"] = why_not_fused(comp) or "fused = False asked"
         out.update(rs.values())
         out.update(rate_summary(self.comp, self.res.used_fused, self.res.held_rate))  # the effect rates run (issue 25)
         if comp.thrust is not None:

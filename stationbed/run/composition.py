@@ -9,8 +9,7 @@ thrusters, then its end: the CMG cluster or the ideal torquer, loop/cmg_cluster.
 executor reads it and none rebinds its fields (it is frozen; the objects it holds that a run
 advances are the noise streams, drawn in tick order, the law, whose reference ``q_ref_BN`` an
 executor sets from the compiled law's, and the thrusters' memory): the per-tick loop (:class:`~.closed_loop.ControlLoop`),
-the fused loops (:mod:`.fused`, :mod:`.fused_flight`, :mod:`.thrust_fused`, with
-:mod:`.fused_rows`) and the lockstep batch (:mod:`.lockstep`, :mod:`.lockstep_flight`).
+the fused loop (:mod:`.composed`, the tick composed once from the run's blocks, :mod:`.blocks`) and the lockstep batch (:mod:`.lockstep`, :mod:`.lockstep_flight`).
 
 An executor hands its results back through :class:`RunState` only: the state as it goes and at
 the end (``x``, the held input ``u``), each output row (:meth:`RunState.row`, or

@@ -1,7 +1,7 @@
 """The environment at its own rate in the per-tick and batch executors (issue 25, continued).
 
 The fused loops hold aero and solar pressure (with the shadow inside SRP) over blocks of ticks
-(:mod:`.rates`, :mod:`.flight_rates`): each output row's ticks are cut into pieces at the
+(:mod:`.rates`, the composed loop's env block): each output row's ticks are cut into pieces at the
 discontinuities on the tick grid and before a short final period
 (:func:`~.segments.tick_pieces`), each piece into blocks of N ticks from its start; at a block's
 first tick the environment is evaluated and held at its value extrapolated to the block's

@@ -1,7 +1,7 @@
 """A law's own state carried by the compiled loops (issue 22): the contract and its checks.
 
 A law that keeps a state between ticks (an integral, a running average) can still run fused
-(:mod:`.fused`, :mod:`.fused_flight`) by declaring it, beside ``symbolic_params``:
+(:mod:`.composed`: the law block's memory) by declaring it, beside ``symbolic_params``:
 
 * ``symbolic_state() -> sequence of float``: the state now, as a flat list of floats (after
   ``_reset``: its initial value);

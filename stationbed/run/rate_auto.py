@@ -74,7 +74,7 @@ def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
     """Why ``auto`` is every stage (None: the bound applies)."""
     if thrust:
         return "thrusters: their fused loop evaluates the environment every stage"
-    # [[sensor]] tables (``flight``): the flight loop honours the rate (flight_rates.py) and the
+    # [[sensor]] tables (``flight``): the composed loop honours the rate (its env block) and the
     # bound holds on the estimate's loop (module docstring)
     if scene.controller is None or scene.controller.name != "pd" or not (hasattr(params, "bandwidth")
                                                                           and hasattr(params, "damping")):

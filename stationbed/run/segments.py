@@ -169,7 +169,7 @@ def torque_at(comp, edges, u_ext):
 
 def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None) -> np.ndarray:
     """Advance a fused loop's chunk over the :func:`tick_pieces` of a row starting at tick ``k``,
-    one compiled call each (run/fused.py, fused_flight.py, thrust_fused.py).
+    one compiled call each (run/composed.py).
 
     ``chunk`` is the compiled chunk (a FastCall: carry, parameters[, each tick's draws]); its carry
     input (layout ``C``: ``i``, ``counts``, ...) holds the carry at tick ``k`` and, after, the
@@ -197,7 +197,7 @@ def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None
 
 
 def close_chunk(res, ticks: int, counts, lim: int, sat: int, x, t_end: float) -> int:
-    """After a compiled chunk of the fused loops (run/fused.py, fused_flight.py, thrust_fused.py):
+    """After a compiled chunk of the fused loop (run/composed.py):
     hand its rate-limited and saturated ticks (``counts``) back to the run's
     :class:`~.composition.RunState` ``res``, stop with IntegrationError at ``t_end`` when the
     state ``x`` is not finite (``res.ticks`` set to the ``ticks`` run), and return the next

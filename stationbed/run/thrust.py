@@ -2,7 +2,7 @@
 the law sees, the integration split at every pulse edge, the row values and the summary.
 
 :class:`ThrustLoop` is what the run's composition holds (``comp.thrust``) when the scene has
-``[[thruster]]`` tables; the fused loop (:mod:`.thrust_fused`) runs the same
+``[[thruster]]`` tables; the fused loop (:mod:`.composed`, the thrusters as a block) runs the same
 :class:`~stationbed.loop.thrusters.ThrusterCluster` function inlined.
 """
 
@@ -111,6 +111,11 @@ class ThrustLoop:
                 u = res.u.copy()
                 u[i_ext] += tq
                 res.x[:] = comp.apply_jump(s1, comp.integ.advance(s0, s1, res.x, u))
+
+    def row_index(self) -> np.ndarray:
+        """The indices of the memory's numbers a row reports (:func:`thruster_columns`' order)."""
+        self.row(self.x)
+        return self._row_idx
 
     def row(self, x=None) -> list[float]:
         """The row's values (:func:`thruster_columns`) from the actuator state ``x`` before the tick."""

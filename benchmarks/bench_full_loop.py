@@ -1,0 +1,74 @@
+"""The full flight loop fused vs the truth-fed pd loop, side by side (issue 33).
+
+    python benchmarks/bench_full_loop.py [--repeats N] [--json PATH] [--smoke]
+
+One orbit of ``scenarios/iss_full_flight_loop.toml`` (two gyros, two star trackers, the MEKF,
+16 assist thrusters, ``momentum_manager``; composed from its blocks, loop/compose.py) and of the
+same scene with the ``pd`` law (the issue's "as a new user would" combination), against
+``scenarios/iss_lvlh_hold.toml`` (the truth-fed pd fused loop), interleaved in one process,
+median of ``--repeats`` after a warm-up that compiles or loads the builds. Target (issue 33):
+the full loop <= 1.7x the truth-fed pd loop per orbit. Also printed: each run's summary
+``fused`` flag (all must be true) and the process CPU medians.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _smoke  # noqa: E402
+
+import stationbed  # noqa: E402
+
+FULL = ROOT / "scenarios" / "iss_full_flight_loop.toml"
+TRUTH = ROOT / "scenarios" / "iss_lvlh_hold.toml"
+TARGET_RATIO = 1.7  # issue 33: the full flight loop <= 1.7x the truth-fed pd fused loop per orbit
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--json", type=Path, default=None)
+    _smoke.add_option(ap)
+    args = ap.parse_args(argv)
+    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
+    if args.smoke:
+        args.repeats = 1
+    full = stationbed.load_scene(FULL)
+    full_pd = full.replace({"controller.name": "pd", "controller.params": {"reference": "lvlh", "bandwidth": 0.005,
+                                                                           "damping": 0.8, "max_slew_rate": 0.001}})
+    truth = stationbed.load_scene(TRUTH)
+    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / full.orbit.mean_motion
+    runs = {
+        "truth_pd": lambda: stationbed.simulate(truth, duration=T, fused=True),
+        "full_momentum_manager": lambda: stationbed.simulate(full, duration=T, fused=True),
+        "full_pd": lambda: stationbed.simulate(full_pd, duration=T, fused=True),
+    }
+    first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
+    print(f"# one orbit ({T:.1f} s), fused, median of {args.repeats} interleaved; warm-up incl. compile/load "
+          f"{build_s:.1f} s; load average {load:.1f} on {os.cpu_count()} cores")
+    ok = True
+    for name in runs:
+        fused = bool(first[name].meta["summary"]["fused"])
+        ok &= fused
+        print(f"{name:24s} wall {med[name]:.3f} s  cpu {cpu[name]:.3f} s  ratio {med[name] / med['truth_pd']:.2f}x "
+              f"(cpu {cpu[name] / cpu['truth_pd']:.2f}x)  fused {fused}")
+    ratio = med["full_momentum_manager"] / med["truth_pd"]
+    ok &= ratio <= TARGET_RATIO
+    print(f"target full loop <= {TARGET_RATIO}x truth-fed pd: {ratio:.2f}x {_smoke.verdict(ok, args.smoke)}")
+    if args.json:
+        args.json.write_text(json.dumps({"wall": med, "cpu": cpu, "walls": walls, "cpus": cpus, "load": load,
+                                         "build_s": build_s}, indent=1))
+    return _smoke.targets_exit(ok, args.smoke)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,193 @@
+"""The fused executor of a composed loop (issue 33): any composition of the run's blocks
+(:mod:`.blocks`: sensing, the law with its state, the actuator chain, its end) flown by one
+compiled chunk per output row, the tick composed once by :mod:`stationbed.loop.compose`.
+
+It knows no block: it writes the carry, the parameters and the draws by the composition's
+named layouts (each block's memory and numbers under its name), calls the composed ``row`` at
+each output row and the composed ``chunk`` over the row's ticks (cut into pieces at the
+scene's edges on the tick grid, :func:`~.segments.tick_pieces`), and hands the rows, the
+flight's memory, the thrusters' memory and the law's state back through the run's state.
+
+It replaced the hand-composed fused loops of issues 20-25 (``fused.py``'s chunk,
+``fused_flight.py``, ``thrust_fused.py``, their bulk rows and held-environment chunks) after
+giving their rows bit for bit on every combination they flew; it also flies the combinations
+they never composed (thrusters with ``[[sensor]]`` tables, thrusters with a law that has a
+state).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions
+from . import law_state
+from .blocks import composed, structure_key
+from .composed_rows import rows_functions, run_rows
+from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
+
+__all__ = ["run_composed", "BUILT"]
+
+_CHUNKS: dict[tuple, dict] = {}
+#: the seconds each composed structure took to build and compile (benchmarks read it)
+BUILT: dict[str, float] = {}
+
+
+def _functions(comp, cp) -> dict:
+    n = comp.n_per_out
+    hit = _CHUNKS.get((structure_key(comp, cp), n))
+    if hit is not None and hit["system"] is comp.system:
+        return hit
+    t0 = time.perf_counter()
+    cm, _ = composed(comp, cp)
+    key = (cm.key, n)
+    tag = "composed_" + hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+    row, chunk = cm.row(), cm.chunk(n)
+    many = rows_functions(cm, row, chunk, n)  # many rows per call (composed_rows.py)
+    funcs = compile_functions([row, chunk] + many, tag)
+    out = {"cm": cm, "row": FastCall(funcs["cl_row"]), "chunk": FastCall(funcs["cl_chunk"]), "system": comp.system,
+           "rows": {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}}
+    BUILT[tag] = out["build_s"] = time.perf_counter() - t0
+    _CHUNKS[(structure_key(comp, cp), n)] = out
+    return out
+
+
+class Draws:
+    """The composition's draws by tick, from each block's own stream, in tick order: the sensing
+    block's (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.rng`` through
+    the corruption plug-in, fused.py's order). ``rows(k0, n)`` -> (n, width)."""
+
+    def __init__(self, comp, cm):
+        N = cm.noise
+        self.width = N.size
+        self.src = []
+        if "sensing" in N:
+            self.src.append((N.slice("sensing"), lambda k0, n: comp.tick_noise.rows(k0, n)))
+        if "noise" in N:
+            self.src.append((N.slice("noise"), lambda k0, n: comp.corruption.draw(comp.rng, n)))
+        self.comp = comp
+
+    def rows(self, k0: int, n: int) -> np.ndarray:
+        if len(self.src) == 1 and self.src[0][0] == slice(0, self.width):
+            return self.src[0][1](k0, n)
+        out = np.zeros((n, self.width))
+        for sl, f in self.src:
+            out[:, sl] = f(k0, n)
+        return out
+
+    def state(self):
+        c = self.comp
+        return (c.tick_noise.state() if c.tick_noise is not None else None,
+                c.rng.bit_generator.state if c.corruption is not None else None)
+
+    def restore(self, st) -> None:
+        c = self.comp
+        if st[0] is not None:
+            c.tick_noise.restore(st[0])
+        if st[1] is not None:
+            c.rng.bit_generator.state = st[1]
+
+
+def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
+    """Run ticks 0..K of the run composed by ``comp`` with the composed loop, handing back to
+    ``res`` (:class:`~.composition.RunState`) the per-tick loop's rows and memories."""
+    ctrl, flight, th = comp.ctrl, comp.flight, comp.thrust
+    cp = np.asarray(symbolic_params, dtype=float)
+    fns = _functions(comp, cp)
+    cm, row, chunk = fns["cm"], fns["row"], fns["chunk"]
+    C, P, R = cm.carry, cm.par, cm.row_layout
+    period, duration = comp.period, comp.duration
+    s_law = law_state.initial(ctrl)
+    law = cm.law_block.name
+    fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
+    sense = fl.name if fl is not None else None
+    act = cm.actuators[0].name if cm.actuators else None
+    par = chunk.args[1]
+    par[:] = 0.0
+    par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
+    # the external torque held from t = 0 (the bulk rows hold it: they run only without edges)
+    par[P.slice("u_ext")] = held_torque_from(comp.scene, 0.0, comp.bps, duration)
+    if sense is not None:
+        par[P.slice(sense)] = flight.params
+        X = fl.state
+    if act is not None:
+        par[P.slice(act)] = th.cluster.params
+    c0 = chunk.args[0]
+    c0[:] = 0.0
+    c0[C.slice("x")], c0[C.slice(law)] = res.x, s_law
+    fm = res.flight
+    if sense is not None:
+        c0[C.slice(sense)] = X.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
+    if act is not None:
+        c0[C.slice(act)] = th.x
+    rc, rp, rw = row.args
+    out = comp.end.outputs
+    n_act = out.size if comp.has_cluster else 0
+    i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if n_act else (0, 0, 0)
+    r_cmd, r_act, r_q, r_s = R.slice("cmd"), R.slice("act"), R.slice("q_ref"), R.slice(law)
+    cx = C.slice("x")
+    x, s_end = c0[cx].copy(), None
+    tail_flag = ticks = 0
+    res.used_fused = True
+    n = comp.n_per_out
+    row_ks = sorted(set(range(0, K, n)) | {K})
+    draws_of = Draws(comp, cm)
+    nw = draws_of.width
+
+    def torque_at(ta):
+        return held_torque_from(comp.scene, ta, comp.bps, duration)
+
+    try:
+        j0 = 0
+        if not edges:  # the leading full rows, many per compiled call (composed_rows.py)
+            j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par, draws_of)
+            x = c0[cx].copy()
+            if stop is not None:
+                raise stop
+        for j, k in enumerate(row_ks):
+            if j < j0:
+                continue
+            t = min(k * period, duration)
+            n_tick = row_ks[j + 1] - k if k < K else 1
+            draws = draws_of.rows(k, n_tick) if nw else None
+            # the row at tick k: the command, actuation and reference of this tick, the memory after it
+            rc[:] = c0
+            rc[C.slice("i")] = 0.0
+            rp[:] = par
+            rp[P.slice("t0")], rp[P.slice("k0")], rp[P.slice("u_ext")] = t, k, torque_at(t)
+            rest = duration - t  # the tick's length: the period, the run's remainder for the last (0 at the end)
+            rp[P.slice("h")] = period if rest >= period * (1 - 1e-12) else max(rest, 0.0)
+            if nw:
+                rw[:] = draws[0]
+            row()
+            r = row.res[0]
+            cmd, a = r[r_cmd], r[r_act]
+            lim = sat = 0
+            u_cmg = None
+            if n_act:
+                lim, sat = int(a[i_lim] > 0.5), int(a[i_sat] > 0.5)
+                u_cmg = a[i_u]
+            if th is not None:
+                th.x_row = c0[C.slice(act)].copy()
+            xs = ys = None
+            if sense is not None:
+                xs, ys = X.get(R.get(r, sense), "xs").copy(), fl.outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
+            res.row(t, x, lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=r[r_q], xs=xs, ys=ys)
+            if k == K:
+                if sense is not None:
+                    m = X.split(C.get(c0, sense))
+                    fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
+                s_end = r[r_s].copy()  # the law's update at the last tick
+                break
+            counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period, torque_at, draws)
+            x = c0[cx].copy()
+            par[P.slice("h")] = period
+            ticks += n_tick
+            tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
+    finally:
+        law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
+        if th is not None:
+            th.x = th.x_row = c0[C.slice(act)].copy()
+        finish_chunks(res, x, ticks)
