@@ -456,8 +456,25 @@ def test_reports_of_a_study_whose_samples_all_fail_raise_no_numpy_warning(tmp_pa
     assert [str(w.message) for w in recwarn if issubclass(w.category, RuntimeWarning)] == []
 
 
-def test_a_warning_every_worker_sees_is_said_once_with_the_prefix(tmp_path):
-    """A law whose reset overflows a float: numpy warns in every process that runs a sample."""
+@pytest.fixture
+def port_8787_taken():
+    """Another process's server on Dask's default HTTP port (a second cluster, a notebook): the
+    study's scheduler must not take it, nor warn about it on stderr."""
+    import socket  # noqa: PLC0415
+
+    s = socket.socket()
+    try:
+        s.bind(("127.0.0.1", 8787))
+        s.listen()
+    except OSError:
+        pass  # taken already: the same situation
+    yield
+    s.close()
+
+
+def test_a_warning_every_worker_sees_is_said_once_with_the_prefix(tmp_path, port_8787_taken):
+    """A law whose reset overflows a float: numpy warns in every process that runs a sample (and
+    nothing else is said: the scheduler's HTTP server takes a free port, not a busy 8787)."""
     scene = _law_scene(tmp_path)
     law = tmp_path / "laws" / "hold.py"
     law.write_text(law.read_text().replace("        self.J = np.array(plant.inertia_O_B)\n",

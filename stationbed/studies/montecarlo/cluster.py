@@ -85,8 +85,10 @@ def local_cluster(workers: int):
         with dask.config.set({"distributed.worker.multiprocessing-method": start_method(), **QUIET}):
             gc.freeze()  # the driver's objects out of the forked workers' garbage collections
             try:
+                # the scheduler's HTTP server (health, metrics) on a free port: with no address it
+                # takes 8787 and, when another cluster holds that, warns on stderr; no dashboard
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None)
+                                       dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False})
             finally:
                 gc.unfreeze()  # the driver collects its own as before; the workers keep theirs frozen
             with cluster, Client(cluster) as client:
