@@ -219,6 +219,7 @@ class Composed:
             return sx_function("cl_front_plain", [c, par, w], outs)
         shared = ca.cse([y] + outs)
         rest, syms, vals = ca.extract_parametric(shared[1:], ca.vertcat(c, par))
+        vals = _closed(vals, syms)
         pre = sx_function("cl_pre", [c, par], [shared[0], ca.vertcat(*vals)])
         body = sx_function("cl_body", [ca.vertcat(*syms), c, par, v_s] + mem_s, rest)
         MX = ca.MX
@@ -394,3 +395,19 @@ class Composed:
         vals[self.law_block.name] = s1
         vals.update({f"{b.name}_y": outs[b.name] for b in self.sense})
         return ca.Function("cl_row", [c, par, w], [self.row_layout.pack(vals, symbolic=True)])
+
+
+def _closed(vals: list, syms: list) -> list:
+    """``extract_parametric``'s values written in the carry and parameters alone: casadi may give
+    a value in terms of other extracted symbols (seen on the Hamel form with flexible arrays:
+    ``cl_pre`` then had a free symbol); substituted until none is left (at most ``len(syms)``
+    rounds: each round resolves one more level of nesting). A value without such a symbol, the
+    usual case, is returned as it is (same graph, same generated code)."""
+    if not syms:
+        return vals
+    every = ca.vertcat(*syms)
+    for _ in range(len(syms)):
+        if not any(ca.depends_on(v, every) for v in vals):
+            return vals
+        vals = ca.substitute(vals, syms, vals)
+    raise AssertionError("extract_parametric's values still depend on its symbols")
