@@ -181,6 +181,7 @@ class Controller:
         self.plant = plant
         self.n_updates = 0
         self.q_ref_BN = None
+        self._law = None  # the compiled symbolic form (law_compiled.py), built at its first call
         self._reset(plant)
 
     def check(self, plant: Plant) -> None:
@@ -202,7 +203,49 @@ class Controller:
             the loop refuses).
         """
         self.n_updates += 1
+        if type(self)._update is Controller._update and self.has_symbolic():
+            law = self.compiled_law()
+            cmd = law(t, meas)
+            law.finish()  # the state handed back after every call: summary() sees it
+            return cmd
         return self._update(t, meas)
+
+    def has_symbolic(self) -> bool:
+        """Whether the law has a ``symbolic`` form: then every executor evaluates it compiled
+        (:mod:`.law_compiled`) and ``_update`` / ``update_batch`` are not needed."""
+        from .law_compiled import has_symbolic  # noqa: PLC0415 (it imports this module)
+
+        return has_symbolic(self)
+
+    def compiled_law(self):
+        """The law's ``symbolic`` form compiled, called as ``law(t, meas) -> command``
+        (:class:`~.law_compiled.CompiledLaw`; one per reset)."""
+        law = self.__dict__.get("_law")
+        if law is None:
+            from .law_compiled import CompiledLaw  # noqa: PLC0415
+
+            law = self._law = CompiledLaw(self)
+        return law
+
+    def hand_back_compiled(self) -> None:
+        """Give the law the state its compiled form carried (a per-tick or lockstep run's end)."""
+        for name in ("_law", "_batch_law"):
+            law = self.__dict__.get(name)
+            if law is not None:
+                law.finish()
+
+    def reload_compiled(self) -> None:
+        """The compiled form takes the law's numbers and state again (after a replan)."""
+        law = self.__dict__.get("_law")
+        if law is not None:
+            law.load()
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("_law", None)  # (compiled buffers: rebuilt at the next call)
+        state.pop("_batch_law", None)
+        state.pop("_member_meas", None)
+        return state
 
     def tick_update(self):
         """``(call, counted)``: what a per-tick executor calls every tick with ``(t, meas)``, and
@@ -213,6 +256,8 @@ class Controller:
         (the fused and batch loops count theirs at the end too), not a clock inside ``_update``
         (a law that needs its tick count keeps its own)."""
         if type(self).update is Controller.update:
+            if type(self)._update is Controller._update and self.has_symbolic():
+                return self.compiled_law(), False
             return self._update, False
         return self.update, True
 
@@ -258,6 +303,7 @@ class Controller:
         b.batch_failed = {}
         b.batch_stopped = set()  # samples that failed: not called again (the executor keeps it)
         b.q_ref_BN = None
+        b._law = b._batch_law = None
         return b
 
     def update_batch(self, t: float, meas: BatchMeasurement):
@@ -266,7 +312,11 @@ class Controller:
         set ``self.q_ref_BN`` (n, 4) or None. A non-finite row fails that sample alone. This
         default calls each member's :meth:`update` (correct for any law, as slow as per tick); a
         member that raises or returns a bad command gets a NaN row and ``batch_failed[i] =
-        (reason, exception)``; the others go on."""
+        (reason, exception)``; the others go on. A law with a ``symbolic`` form (and no
+        ``_update`` of its own) is evaluated compiled, mapped over the samples
+        (:class:`~.law_compiled.CompiledBatch`)."""
+        if type(self)._update is Controller._update and self.has_symbolic():
+            return self._symbolic_batch(t, meas)
         per = self.__dict__.get("_member_meas")
         if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
             per = self._member_meas = (meas.y, [(m.update, m, Measurement(meas.y[i], meas.layout))
@@ -299,12 +349,27 @@ class Controller:
                 except ValueError as e:
                     out[i] = np.nan
                     self.batch_failed[i] = (f"controller '{m.name}' returned {e}", None)
+        return self._failed_rows(out)
+
+    def _symbolic_batch(self, t: float, meas: BatchMeasurement):
+        law = self.__dict__.get("_batch_law")
+        if law is None:
+            from .law_compiled import CompiledBatch  # noqa: PLC0415
+
+            law = self._batch_law = CompiledBatch(self.members)
+        out, self.q_ref_BN = law(t, meas)
+        self.batch_failed = {}
+        return self._failed_rows(out)
+
+    def _failed_rows(self, out: np.ndarray) -> np.ndarray:
+        """``out``, each non-finite row of a sample not stopped given the checker's reason."""
+        stopped = self.batch_stopped
         bad = ~np.isfinite(out).all(axis=1)
         if bad.any():  # NaN or inf written as numbers: the checker's reason (the values are the same)
             for i in np.flatnonzero(bad):
                 if i not in stopped and i not in self.batch_failed:
                     try:
-                        command_values(out[i], ncmd, self.members[i].command)
+                        command_values(out[i], out.shape[1], self.members[i].command)
                     except ValueError as e:
                         self.batch_failed[i] = (f"controller '{self.members[i].name}' returned {e}", None)
         return out

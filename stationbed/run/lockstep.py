@@ -46,8 +46,10 @@ DRAW_BLOCK = 256
 
 
 def vectorised(ctrl) -> bool:
-    """Whether the law overrides :meth:`Controller.update_batch` (else the default loops)."""
-    return type(ctrl).update_batch is not Controller.update_batch
+    """Whether the law overrides :meth:`Controller.update_batch` or has a ``symbolic`` form
+    (evaluated compiled for every sample at once), else the default loops."""
+    return type(ctrl).update_batch is not Controller.update_batch or (
+        type(ctrl)._update is Controller._update and ctrl.has_symbolic())
 
 
 def _tick_ok(comp) -> bool:
@@ -499,6 +501,7 @@ class _Lockstep:
                     self._measure(i, t_next, lo.res.x)
                 self._sense(k + 1, t_next)
         finally:
+            ctrl.hand_back_compiled()  # (each sample's law state, from the compiled batch)
             wall = (time.perf_counter() - wall0) / n
             results = []
             for i, s in enumerate(S):
