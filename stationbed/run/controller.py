@@ -20,11 +20,13 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 3. Set ``self.q_ref_BN`` (4,) in ``_update`` when the law has a reference attitude: the run
    logs ``att_err_deg`` (and per axis ``att_err_x/y/z_deg``) against it.
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
-5. Optionally, for the fused loop (stationbed/run/fused.py: controller and dynamics in one
-   compiled loop), write ``symbolic_params()`` (the law's numbers, a flat array set by ``_reset``)
-   and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the measurement, its
-   fields by :func:`measurement_fields`, e.g. ``lay.get(y, "omega_BN_B")``; ``cp``), computing what ``_update`` does (a test runs both);
-   a law that keeps a state between ticks declares it: stationbed/run/law_state.py.
+5. Or write the law once, in casadi: ``symbolic_params()`` (the law's numbers, a flat array set
+   by ``_reset``) and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the
+   measurement, its fields by :func:`measurement_fields`, e.g. ``lay.get(y, "omega_BN_B")``;
+   ``cp``), and no ``_update``: every executor then evaluates it compiled (the fused loop inlined,
+   per tick, :meth:`Controller.update` and the lockstep batch: stationbed/run/law_compiled.py). A
+   law with both is called through ``_update`` per tick (``symbolic`` must compute the same: a
+   test runs both); a law that keeps a state between ticks declares it: stationbed/run/law_state.py.
 
 What ``_update`` may return (:func:`command_values` checks it, the same on every path of the
 loop): a tuple, list or 1-D numpy array of ``n`` real numbers, finite. Anything else (a (3, 1)

@@ -2,7 +2,8 @@
 control period per step, the law called once per tick for all of them (issue 22).
 
 Per tick: the law's :meth:`~.controller.Controller.update_batch` (every measurement field with a
-leading sample axis) -> one call of the compiled tick mapped over the samples (casadi
+leading sample axis; a law with only a ``symbolic`` form: that form compiled and mapped over the
+samples, :mod:`.law_compiled`) -> one call of the compiled tick mapped over the samples (casadi
 ``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
 step, measure; the map calls that very machine code once per sample, so a sample's numbers are
 its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
