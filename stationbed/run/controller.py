@@ -71,6 +71,8 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from .measurement import BatchMeasurement, Measurement, command_fields, measurement_fields, measurement_layout
+from .controller_error import ControllerError, one_line
+from .law_compiled import CompiledForm
 
 __all__ = [
     "Controller",
@@ -101,10 +103,6 @@ def _unit_quaternion(q: list[float]) -> list[float]:
 
 #: A scalar-first unit quaternion parameter (normalised; a norm off by > 1e-6 is an error).
 UnitQuaternion = Annotated[list[float], Field(min_length=4, max_length=4), AfterValidator(_unit_quaternion)]
-
-
-class ControllerError(ValueError):
-    """A controller that cannot be built (unknown name, bad parameters)."""
 
 
 class ControllerParams(BaseModel):
@@ -147,7 +145,7 @@ class Plant:
     cmg_functions: dict = field(default_factory=dict)
 
 
-class Controller:
+class Controller(CompiledForm):
     """Base class of attitude laws; see the module docstring for the contract."""
 
     name: ClassVar[str] = ""
@@ -205,49 +203,12 @@ class Controller:
             the loop refuses).
         """
         self.n_updates += 1
-        if type(self)._update is Controller._update and self.has_symbolic():
+        if self.has_symbolic():
             law = self.compiled_law()
             cmd = law(t, meas)
             law.finish()  # the state handed back after every call: summary() sees it
             return cmd
         return self._update(t, meas)
-
-    def has_symbolic(self) -> bool:
-        """Whether the law has a ``symbolic`` form: then every executor evaluates it compiled
-        (:mod:`.law_compiled`) and ``_update`` / ``update_batch`` are not needed."""
-        from .law_compiled import has_symbolic  # noqa: PLC0415 (it imports this module)
-
-        return has_symbolic(self)
-
-    def compiled_law(self):
-        """The law's ``symbolic`` form compiled, called as ``law(t, meas) -> command``
-        (:class:`~.law_compiled.CompiledLaw`; one per reset)."""
-        law = self.__dict__.get("_law")
-        if law is None:
-            from .law_compiled import CompiledLaw  # noqa: PLC0415
-
-            law = self._law = CompiledLaw(self)
-        return law
-
-    def hand_back_compiled(self) -> None:
-        """Give the law the state its compiled form carried (a per-tick or lockstep run's end)."""
-        for name in ("_law", "_batch_law"):
-            law = self.__dict__.get(name)
-            if law is not None:
-                law.finish()
-
-    def reload_compiled(self) -> None:
-        """The compiled form takes the law's numbers and state again (after a replan)."""
-        law = self.__dict__.get("_law")
-        if law is not None:
-            law.load()
-
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state.pop("_law", None)  # (compiled buffers: rebuilt at the next call)
-        state.pop("_batch_law", None)
-        state.pop("_member_meas", None)
-        return state
 
     def tick_update(self):
         """``(call, counted)``: what a per-tick executor calls every tick with ``(t, meas)``, and
@@ -258,7 +219,7 @@ class Controller:
         (the fused and batch loops count theirs at the end too), not a clock inside ``_update``
         (a law that needs its tick count keeps its own)."""
         if type(self).update is Controller.update:
-            if type(self)._update is Controller._update and self.has_symbolic():
+            if self.has_symbolic():
                 return self.compiled_law(), False
             return self._update, False
         return self.update, True
@@ -317,7 +278,7 @@ class Controller:
         (reason, exception)``; the others go on. A law with a ``symbolic`` form (and no
         ``_update`` of its own) is evaluated compiled, mapped over the samples
         (:class:`~.law_compiled.CompiledBatch`)."""
-        if type(self)._update is Controller._update and self.has_symbolic():
+        if self.has_symbolic():
             return self._symbolic_batch(t, meas)
         per = self.__dict__.get("_member_meas")
         if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
@@ -353,16 +314,6 @@ class Controller:
                     self.batch_failed[i] = (f"controller '{m.name}' returned {e}", None)
         return self._failed_rows(out)
 
-    def _symbolic_batch(self, t: float, meas: BatchMeasurement):
-        law = self.__dict__.get("_batch_law")
-        if law is None:
-            from .law_compiled import CompiledBatch  # noqa: PLC0415
-
-            law = self._batch_law = CompiledBatch(self.members)
-        out, self.q_ref_BN = law(t, meas)
-        self.batch_failed = {}
-        return self._failed_rows(out)
-
     def _failed_rows(self, out: np.ndarray) -> np.ndarray:
         """``out``, each non-finite row of a sample not stopped given the checker's reason."""
         stopped = self.batch_stopped
@@ -383,10 +334,7 @@ class Controller:
     def _update(self, t: float, meas: Measurement):  # pragma: no cover - abstract
         raise NotImplementedError
 
-
-def one_line(e: BaseException | str) -> str:
-    """An exception's message (or any text) on one line: its lines stripped, joined by " | "."""
-    return " | ".join(line.strip() for line in str(e).splitlines() if line.strip())
+    _update.abstract = True  # (CompiledForm.has_symbolic: a law that writes no _update)
 
 
 #: The longest quotation of a bad command in an error message [characters].

@@ -22,16 +22,57 @@ from ..core.compile import FastCall, compile_functions
 from . import law_state
 from .measurement import command_fields
 
-__all__ = ["has_symbolic", "CompiledLaw", "CompiledBatch"]
+__all__ = ["CompiledForm", "CompiledLaw", "CompiledBatch"]
 
 #: compiled law Functions of this process, by the serialised SX Function (the same expression
 #: twice is one library, loaded once)
 _FUNCS: dict[str, ca.Function] = {}
 
 
-def has_symbolic(ctrl) -> bool:
-    """Whether ``ctrl`` has a ``symbolic`` form (then every executor evaluates it compiled)."""
-    return callable(getattr(ctrl, "symbolic", None)) and callable(getattr(ctrl, "symbolic_params", None))
+class CompiledForm:
+    """What :class:`~.controller.Controller` gets from here: its ``symbolic`` form compiled."""
+
+    def has_symbolic(self) -> bool:
+        """Whether the law has a ``symbolic`` form and writes no ``_update``: then every executor
+        evaluates that form compiled, and ``_update`` / ``update_batch`` are not needed."""
+        return (getattr(type(self)._update, "abstract", False) and callable(getattr(self, "symbolic", None))
+                and callable(getattr(self, "symbolic_params", None)))
+
+    def compiled_law(self) -> "CompiledLaw":
+        """The law's ``symbolic`` form compiled, called as ``law(t, meas) -> command`` (one per
+        reset: ``reset`` clears ``_law``)."""
+        law = self.__dict__.get("_law")
+        if law is None:
+            law = self._law = CompiledLaw(self)
+        return law
+
+    def hand_back_compiled(self) -> None:
+        """Give the law the state its compiled form carried (a per-tick or lockstep run's end)."""
+        for name in ("_law", "_batch_law"):
+            law = self.__dict__.get(name)
+            if law is not None:
+                law.finish()
+
+    def reload_compiled(self) -> None:
+        """The compiled form takes the law's numbers and state again (after a replan)."""
+        law = self.__dict__.get("_law")
+        if law is not None:
+            law.load()
+
+    def _symbolic_batch(self, t, meas):
+        """``update_batch`` of a law with only a ``symbolic`` form: every sample at once."""
+        law = self.__dict__.get("_batch_law")
+        if law is None:
+            law = self._batch_law = CompiledBatch(self.members)
+        out, self.q_ref_BN = law(t, meas)
+        self.batch_failed = {}
+        return self._failed_rows(out)
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        for name in ("_law", "_batch_law", "_member_meas"):  # (buffers: built again at the next call)
+            state.pop(name, None)
+        return state
 
 
 def _function(ctrl, ny: int, ncp: int, ns: int) -> ca.Function:
