@@ -173,3 +173,25 @@ def test_symbolic_form_gives_the_python_law(name):
     scale = np.maximum(np.abs(per_tick.data).max(axis=0), 1e-300)
     rel = np.nan_to_num(np.abs(fused.data - per_tick.data), nan=0.0) / scale
     assert rel.max() <= FUSED_RTOL, f"{per_tick.columns[int(np.argmax(rel.max(axis=0)))]}: {rel.max():.2e}"
+
+
+@pytest.mark.parametrize("name", ["pd", "lqr", "momentum_manager"])
+def test_a_symbolic_law_is_written_once(name):
+    """pd, lqr and momentum_manager are their ``symbolic`` form alone (no float ``_update``, no
+    numpy ``update_batch``): the per-tick loop calls that form compiled, uncounted (the loop
+    counts), and the lockstep loop takes its compiled batch (issue 33)."""
+    from stationbed.run.law_compiled import CompiledLaw
+    from stationbed.run.lockstep import vectorised
+
+    cls = REGISTRY[name]
+    assert "_update" not in vars(cls) and "update_batch" not in vars(cls)
+    ctrl = cls(period=PERIOD_S, **params_of(name))
+    call, counted = ctrl.tick_update()
+    assert isinstance(call, CompiledLaw) and not counted and vectorised(ctrl)
+
+
+def test_a_law_without_symbolic_form_is_called_in_python():
+    """example_hold (no ``symbolic``) keeps the Python path: ``_update`` per tick."""
+    ctrl = REGISTRY["example_hold"](period=PERIOD_S)
+    call, counted = ctrl.tick_update()
+    assert not ctrl.has_symbolic() and call == ctrl._update and not counted
