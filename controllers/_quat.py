@@ -99,32 +99,3 @@ def lvlh_error(q_BN, omega_BN_B, q_RN, w_RN_R):
         wy - (vy - ew * ty + (ez * tx - ex * tz)),
         wz - (vz - ew * tz + (ex * ty - ey * tx)),
     )
-
-
-def lvlh_error_batch(q_BN, omega_BN_B, q_RN, w_RN_R):
-    """:func:`lvlh_error` for many samples: each argument a tuple of (n,) numpy arrays (the
-    components), the same operations element by element (the short-way flip is a sign change,
-    exact), so each sample's numbers are :func:`lvlh_error`'s."""
-    import numpy as np  # noqa: PLC0415 - the float helpers above need no numpy
-
-    qw, qx, qy, qz = q_BN
-    rw, rx, ry, rz = q_RN
-    ew = rw * qw + rx * qx + ry * qy + rz * qz
-    ex = rw * qx - rx * qw - ry * qz + rz * qy
-    ey = rw * qy + rx * qz - ry * qw - rz * qx
-    ez = rw * qz - rx * qy + ry * qx - rz * qw
-    neg = ew < 0.0
-    ew, ex, ey, ez = (np.where(neg, -v, v) for v in (ew, ex, ey, ez))
-    vx, vy, vz = w_RN_R
-    tx = 2.0 * (ey * vz - ez * vy)
-    ty = 2.0 * (ez * vx - ex * vz)
-    tz = 2.0 * (ex * vy - ey * vx)
-    wx, wy, wz = omega_BN_B
-    return (
-        2.0 * ex,
-        2.0 * ey,
-        2.0 * ez,
-        wx - (vx - ew * tx + (ey * tz - ez * ty)),
-        wy - (vy - ew * ty + (ez * tx - ex * tz)),
-        wz - (vz - ew * tz + (ex * ty - ey * tx)),
-    )

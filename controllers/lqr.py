@@ -33,7 +33,7 @@ from stationbed.run.controller import Controller, ControllerError, ControllerPar
 from stationbed.analysis.design import design_linearization
 from stationbed.analysis.margins import loop_margins, settling_time
 
-from ._quat import lvlh_error, lvlh_error_batch, lvlh_rate_varies, qmul, rotate
+from ._quat import lvlh_rate_varies, rotate
 
 #: Largest |pole| x period for which the continuous design is used with a zero-order hold:
 #: the hold's half-period delay costs |s| T / 2 rad of phase (0.25 rad = 14 deg of the >= 60 deg
@@ -113,39 +113,7 @@ class LQR(Controller):
         self._k = tuple(tuple(float(v) for v in row) for row in self.K)
         self._u0 = tuple(float(v) for v in self.u0)
 
-    def _update(self, t, meas):
-        q_RN = qmul(meas.q_ON.tolist(), self.q_RO)
-        self.q_ref_BN = q_RN
-        w_RN_R = rotate(self.q_RO, meas.omega_ON_O.tolist()) if self.varying else self.w_RN_R
-        x = lvlh_error(meas.q_BN.tolist(), meas.omega_BN_B.tolist(), q_RN, w_RN_R)
-        t0, t1, t2, w0, w1, w2 = x
-        (a0, a1, a2, a3, a4, a5), (b0, b1, b2, b3, b4, b5), (c0, c1, c2, c3, c4, c5) = self._k
-        u0, u1, u2 = self._u0
-        return (
-            u0 - (a0 * t0 + a1 * t1 + a2 * t2 + a3 * w0 + a4 * w1 + a5 * w2),
-            u1 - (b0 * t0 + b1 * t1 + b2 * t2 + b3 * w0 + b4 * w1 + b5 * w2),
-            u2 - (c0 * t0 + c1 * t1 + c2 * t2 + c3 * w0 + c4 * w1 + c5 * w2),
-        )
-
-    def update_batch(self, t, meas):
-        # many samples at once (stationbed/run/lockstep.py): _update's operations on (n,) arrays;
-        # per sample: _k (n, 3, 6), _u0 (n, 3), q_RO (n, 4), w_RN_R (n, 3)
-        if isinstance(self.varying, list):  # samples on different orbit models: one by one
-            return super().update_batch(t, meas)
-        q_RO = tuple(self.q_RO.T)
-        q_RN = qmul(tuple(meas.q_ON.T), q_RO)
-        self.q_ref_BN = np.stack(q_RN, axis=1)
-        w_RN_R = rotate(q_RO, tuple(meas.omega_ON_O.T)) if self.varying else tuple(self.w_RN_R.T)
-        t0, t1, t2, w0, w1, w2 = lvlh_error_batch(tuple(meas.q_BN.T), tuple(meas.omega_BN_B.T), q_RN, w_RN_R)
-        k = self._k
-        out = np.empty((meas.n_samples, 3))
-        for i in range(3):
-            a = k[:, i]
-            out[:, i] = self._u0[:, i] - (a[:, 0] * t0 + a[:, 1] * t1 + a[:, 2] * t2 + a[:, 3] * w0 + a[:, 4] * w1
-                                          + a[:, 5] * w2)
-        return out
-
-    # -- fused form (stationbed/run/fused.py): the same law in casadi --------------------------
+    # -- the law, written once: evaluated compiled by every executor (stationbed/run/law_compiled.py)
     def symbolic_params(self):
         return [v for row in self._k for v in row] + [*self._u0, *self.q_RO, *self.w_RN_R, float(self.varying)]
 

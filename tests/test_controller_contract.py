@@ -95,15 +95,19 @@ def contract_run(request):
     name = request.param
     scene, ticks = contract_scene(name)
     ctrl = REGISTRY[name](period=PERIOD_S, **params_of(name))
-    update = ctrl._update
+    tick_update = ctrl.tick_update
     commands = []
 
-    def recording(t, meas):  # sees every tick the per-tick loop runs
-        cmd = update(t, meas)
-        commands.append((t, cmd))
-        return cmd
+    def recording_tick_update():  # what the per-tick loop calls every tick (_update or the compiled law)
+        update, counted = tick_update()
 
-    ctrl._update = recording
+        def recording(t, meas):
+            cmd = update(t, meas)
+            commands.append((t, cmd))
+            return cmd
+        return recording, counted
+
+    ctrl.tick_update = recording_tick_update
     traj = simulate(scene, controller=ctrl, fused=False)
     return name, scene, ctrl, traj, commands, ticks
 
@@ -158,8 +162,9 @@ FUSED_RTOL = 1e-9
 
 @pytest.mark.parametrize("name", [n for n in NAMES if callable(getattr(REGISTRY[n], "symbolic", None))])
 def test_symbolic_form_gives_the_python_law(name):
-    """A law that offers ``symbolic`` (the fused compiled loop) flies the same trajectory as its
-    Python ``_update`` called every tick."""
+    """A law that offers ``symbolic`` flies the same trajectory per tick (its compiled form
+    called from Python every tick, or its ``_update`` when it has one) as fused (inlined in the
+    compiled loop)."""
     scene, _ = contract_scene(name)
     per_tick = simulate(scene, fused=False)
     fused = simulate(scene, fused=True)
@@ -168,3 +173,25 @@ def test_symbolic_form_gives_the_python_law(name):
     scale = np.maximum(np.abs(per_tick.data).max(axis=0), 1e-300)
     rel = np.nan_to_num(np.abs(fused.data - per_tick.data), nan=0.0) / scale
     assert rel.max() <= FUSED_RTOL, f"{per_tick.columns[int(np.argmax(rel.max(axis=0)))]}: {rel.max():.2e}"
+
+
+@pytest.mark.parametrize("name", ["pd", "lqr", "momentum_manager"])
+def test_a_symbolic_law_is_written_once(name):
+    """pd, lqr and momentum_manager are their ``symbolic`` form alone (no float ``_update``, no
+    numpy ``update_batch``): the per-tick loop calls that form compiled, uncounted (the loop
+    counts), and the lockstep loop takes its compiled batch (issue 33)."""
+    from stationbed.run.law_compiled import CompiledLaw
+    from stationbed.run.lockstep import vectorised
+
+    cls = REGISTRY[name]
+    assert "_update" not in vars(cls) and "update_batch" not in vars(cls)
+    ctrl = cls(period=PERIOD_S, **params_of(name))
+    call, counted = ctrl.tick_update()
+    assert isinstance(call, CompiledLaw) and not counted and vectorised(ctrl)
+
+
+def test_a_law_without_symbolic_form_is_called_in_python():
+    """example_hold (no ``symbolic``) keeps the Python path: ``_update`` per tick."""
+    ctrl = REGISTRY["example_hold"](period=PERIOD_S)
+    call, counted = ctrl.tick_update()
+    assert not ctrl.has_symbolic() and call == ctrl._update and not counted

@@ -49,7 +49,7 @@ class CapacityAwarePD(PD):
 
     def _update(self, t, meas):
         self.seen.append((t, self.plant.h_capacity))
-        return tuple(self.plant.h_capacity / self.H_REF * v for v in super()._update(t, meas))
+        return tuple(self.plant.h_capacity / self.H_REF * v for v in self.compiled_law()(t, meas))  # pd, compiled
 
 
 def scene(**knowledge):

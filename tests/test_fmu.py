@@ -228,8 +228,14 @@ class PdAsGimbalRates(PD):
     command = "gimbal_rates"
     symbolic = None  # pd's casadi form returns a torque
 
+    def _reset(self, plant):
+        super()._reset(plant)
+        self.pd = PD(period=self.period, **self.params.model_dump())  # pd itself, its one (compiled) form
+        self.pd.reset(plant)
+
     def _update(self, t, meas):
-        tau = super()._update(t, meas)
+        tau = self.pd.update(t, meas)
+        self.q_ref_BN = self.pd.q_ref_BN
         return (*tau, self.q_ref_BN[0])
 
 

@@ -2,10 +2,11 @@
 (``Controller.update_batch``).
 
 Truth, independent of the batch code: each sample's single run, ``simulate(scene_k,
-fused=False)`` (the per-tick loop, the law's ``_update`` called on each tick). The batch runs
-the same compiled tick (casadi's map calls the very machine code once per sample), the sensor
-of each sample from its own generator, and laws whose ``update_batch`` does ``_update``'s
-operations element by element: each sample's rows equal its single run's bit for bit
+fused=False)`` (the per-tick loop, the law's ``_update``, or its compiled ``symbolic`` form,
+called on each tick). The batch runs the same compiled tick (casadi's map calls the very machine
+code once per sample), the sensor of each sample from its own generator, and laws whose
+``update_batch`` does ``_update``'s operations element by element (or the law's compiled form
+mapped: pd, lqr, momentum_manager): each sample's rows equal its single run's bit for bit
 (``np.array_equal``), its summary (ticks, updates, saturation counts, metrics) too. Where a law's
 vectorised form cannot promise that, the bound and its reason are stated next to the test.
 """
@@ -64,7 +65,7 @@ LAWS = [
 
 @pytest.mark.parametrize("name,params", LAWS, ids=[n for n, _ in LAWS])
 def test_batch_row_k_is_the_single_run_k_bit_for_bit(name, params):
-    """Every shipped law (vectorised update_batch), with sensor noise: batch row k == single run
+    """Every shipped law (vectorised update_batch or compiled form), with sensor noise: batch row k == single run
     k, bit for bit, summary included; the executor says ``batch``."""
     scenes = _samples(params, name, NOISE)
     res = run_lockstep(scenes, keep=True, fused=False)

@@ -4,6 +4,7 @@ truths computed here (principal axes, a Newton solve in numpy, the integrator ar
 
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -33,7 +34,9 @@ TEA_TOL_DEG = 0.05
 
 def designed(inertia=JEOD_I, **params) -> MomentumManager:
     c = MomentumManager(period=PERIOD_S, **params)
-    c.reset(Plant(scene=None, inertia_O_B=np.array(inertia, float), mean_motion=N_400KM, period=PERIOD_S))
+    # (the measurement's layout: 8 gimbals, 2 arrays, as test_command_is_minus_K_times_state feeds)
+    c.reset(Plant(scene=SimpleNamespace(appendage=[None, None]), inertia_O_B=np.array(inertia, float),
+                  mean_motion=N_400KM, period=PERIOD_S, n_gimbals=8))
     return c
 
 
@@ -90,7 +93,8 @@ def test_reported_poles_and_margins():
 
 @pytest.mark.parametrize("about", ["tea", "lvlh"])
 def test_command_is_minus_K_times_state(about):
-    """The float-inlined _update equals -K (x - x_e) with x formed in numpy from the measurement."""
+    """The law's one form (``symbolic``, compiled, through ``update``) equals -K (x - x_e) with x
+    formed in numpy from the measurement; the integral state advances by T h."""
     from stationbed.run.controller import Measurement, measurement_layout
 
     from controllers._quat import lvlh_error

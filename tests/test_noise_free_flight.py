@@ -55,14 +55,18 @@ def noise_free(scene):
 @pytest.fixture(scope="module")
 def runs():
     seen = []
-    update = PD._update
+    tick_update = PD.tick_update
 
-    def recording(self, t, meas):
-        seen.append((t, *meas.q_BN, *meas.omega_BN_B))
-        return update(self, t, meas)
+    def recording_tick_update(self):  # what the per-tick loop calls every tick (pd's compiled form)
+        update, counted = tick_update(self)
+
+        def recording(t, meas):
+            seen.append((t, *meas.q_BN, *meas.omega_BN_B))
+            return update(t, meas)
+        return recording, counted
 
     mp = pytest.MonkeyPatch()
-    mp.setattr(PD, "_update", recording)
+    mp.setattr(PD, "tick_update", recording_tick_update)
     try:
         est = simulate(noise_free(load_scene(SCENARIO)), fused=False)
     finally:

@@ -104,7 +104,7 @@ def test_fused_law_equals_python_law_on_an_eccentric_orbit(name, params):
 
 
 def test_momentum_manager_uses_the_measured_lvlh_rate():
-    """On a two-body orbit the float-inlined manager forms its rate error from the measured
+    """On a two-body orbit the manager (its one form, compiled) forms its rate error from the measured
     ``omega_ON_O`` (any direction: with J2 it has x and z parts): ``u = -K (x - x_e)`` with
     ``x = (2 vec(q_BO), ω_BN_B - C_BO ω_ON_O, h, z)`` formed here in numpy."""
     from types import SimpleNamespace
@@ -113,9 +113,9 @@ def test_momentum_manager_uses_the_measured_lvlh_rate():
     from stationbed.run.controller import Measurement, Plant, measurement_layout
 
     inertia = np.array([[1.02e8, -6.96e6, -5.48e6], [-6.96e6, 0.91e8, 5.9e5], [-5.48e6, 5.9e5, 1.64e8]])  # kg m²
-    scene = SimpleNamespace(orbit=SimpleNamespace(kepler=True, gravity_gradient=True))
+    scene = SimpleNamespace(orbit=SimpleNamespace(kepler=True, gravity_gradient=True), appendage=[None, None])
     c = MomentumManager(period=0.1)
-    c.reset(Plant(scene=scene, inertia_O_B=inertia, mean_motion=N_RAD_S, period=0.1))
+    c.reset(Plant(scene=scene, inertia_O_B=inertia, mean_motion=N_RAD_S, period=0.1, n_gimbals=8))  # (the layout below)
     lay = measurement_layout(8, 2)
     M = Measurement(np.zeros(sum(k for _, k in lay.values())), lay)
     rng = np.random.default_rng(3)

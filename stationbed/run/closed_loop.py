@@ -378,7 +378,9 @@ class ControlLoop:
                 if k == replan_at:  # a failure detected: the law designs again (the user's code: reported as update's)
                     plant = comp.replan.plant()
                     try:
+                        ctrl.hand_back_compiled()
                         replan(ctrl, plant)
+                        ctrl.reload_compiled()
                     except Exception as e:
                         hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
                         raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
@@ -456,6 +458,7 @@ class ControlLoop:
                     self.advance(t, t_next, cmd)
                     self._sense(k + 1, t_next)
         finally:
+            ctrl.hand_back_compiled()  # the law's state its compiled form carried (law_compiled.py)
             if not counted:
                 ctrl.count_compiled_updates(calls)
             res.ticks = ticks

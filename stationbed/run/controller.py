@@ -20,11 +20,13 @@ Rules for implementers (the scipy ``OdeSolver`` pattern):
 3. Set ``self.q_ref_BN`` (4,) in ``_update`` when the law has a reference attitude: the run
    logs ``att_err_deg`` (and per axis ``att_err_x/y/z_deg``) against it.
 4. ``meas`` arrays are views refreshed in place every tick: copy what you keep.
-5. Optionally, for the fused loop (stationbed/run/fused.py: controller and dynamics in one
-   compiled loop), write ``symbolic_params()`` (the law's numbers, a flat array set by ``_reset``)
-   and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the measurement, its
-   fields by :func:`measurement_fields`, e.g. ``lay.get(y, "omega_BN_B")``; ``cp``), computing what ``_update`` does (a test runs both);
-   a law that keeps a state between ticks declares it: stationbed/run/law_state.py.
+5. Or write the law once, in casadi: ``symbolic_params()`` (the law's numbers, a flat array set
+   by ``_reset``) and ``symbolic(t, y, cp) -> (command, q_ref_BN)`` (casadi ``t``, ``y``: the
+   measurement, its fields by :func:`measurement_fields`, e.g. ``lay.get(y, "omega_BN_B")``;
+   ``cp``), and no ``_update``: every executor then evaluates it compiled (the fused loop inlined,
+   per tick, :meth:`Controller.update` and the lockstep batch: stationbed/run/law_compiled.py). A
+   law with both is called through ``_update`` per tick (``symbolic`` must compute the same: a
+   test runs both); a law that keeps a state between ticks declares it: stationbed/run/law_state.py.
 
 What ``_update`` may return (:func:`command_values` checks it, the same on every path of the
 loop): a tuple, list or 1-D numpy array of ``n`` real numbers, finite. Anything else (a (3, 1)
@@ -69,6 +71,8 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from .measurement import BatchMeasurement, Measurement, command_fields, measurement_fields, measurement_layout
+from .controller_error import ControllerError, one_line
+from .law_compiled import CompiledForm
 
 __all__ = [
     "Controller",
@@ -99,10 +103,6 @@ def _unit_quaternion(q: list[float]) -> list[float]:
 
 #: A scalar-first unit quaternion parameter (normalised; a norm off by > 1e-6 is an error).
 UnitQuaternion = Annotated[list[float], Field(min_length=4, max_length=4), AfterValidator(_unit_quaternion)]
-
-
-class ControllerError(ValueError):
-    """A controller that cannot be built (unknown name, bad parameters)."""
 
 
 class ControllerParams(BaseModel):
@@ -145,7 +145,7 @@ class Plant:
     cmg_functions: dict = field(default_factory=dict)
 
 
-class Controller:
+class Controller(CompiledForm):
     """Base class of attitude laws; see the module docstring for the contract."""
 
     name: ClassVar[str] = ""
@@ -181,6 +181,7 @@ class Controller:
         self.plant = plant
         self.n_updates = 0
         self.q_ref_BN = None
+        self._law = None  # the compiled symbolic form (law_compiled.py), built at its first call
         self._reset(plant)
 
     def check(self, plant: Plant) -> None:
@@ -202,6 +203,11 @@ class Controller:
             the loop refuses).
         """
         self.n_updates += 1
+        if self.has_symbolic():
+            law = self.compiled_law()
+            cmd = law(t, meas)
+            law.finish()  # the state handed back after every call: summary() sees it
+            return cmd
         return self._update(t, meas)
 
     def tick_update(self):
@@ -213,6 +219,8 @@ class Controller:
         (the fused and batch loops count theirs at the end too), not a clock inside ``_update``
         (a law that needs its tick count keeps its own)."""
         if type(self).update is Controller.update:
+            if self.has_symbolic():
+                return self.compiled_law(), False
             return self._update, False
         return self.update, True
 
@@ -258,6 +266,7 @@ class Controller:
         b.batch_failed = {}
         b.batch_stopped = set()  # samples that failed: not called again (the executor keeps it)
         b.q_ref_BN = None
+        b._law = b._batch_law = None
         return b
 
     def update_batch(self, t: float, meas: BatchMeasurement):
@@ -266,7 +275,11 @@ class Controller:
         set ``self.q_ref_BN`` (n, 4) or None. A non-finite row fails that sample alone. This
         default calls each member's :meth:`update` (correct for any law, as slow as per tick); a
         member that raises or returns a bad command gets a NaN row and ``batch_failed[i] =
-        (reason, exception)``; the others go on."""
+        (reason, exception)``; the others go on. A law with a ``symbolic`` form (and no
+        ``_update`` of its own) is evaluated compiled, mapped over the samples
+        (:class:`~.law_compiled.CompiledBatch`)."""
+        if self.has_symbolic():
+            return self._symbolic_batch(t, meas)
         per = self.__dict__.get("_member_meas")
         if per is None or per[0] is not meas.y:  # each member's Measurement (a row of meas.y), its update
             per = self._member_meas = (meas.y, [(m.update, m, Measurement(meas.y[i], meas.layout))
@@ -299,12 +312,17 @@ class Controller:
                 except ValueError as e:
                     out[i] = np.nan
                     self.batch_failed[i] = (f"controller '{m.name}' returned {e}", None)
+        return self._failed_rows(out)
+
+    def _failed_rows(self, out: np.ndarray) -> np.ndarray:
+        """``out``, each non-finite row of a sample not stopped given the checker's reason."""
+        stopped = self.batch_stopped
         bad = ~np.isfinite(out).all(axis=1)
         if bad.any():  # NaN or inf written as numbers: the checker's reason (the values are the same)
             for i in np.flatnonzero(bad):
                 if i not in stopped and i not in self.batch_failed:
                     try:
-                        command_values(out[i], ncmd, self.members[i].command)
+                        command_values(out[i], out.shape[1], self.members[i].command)
                     except ValueError as e:
                         self.batch_failed[i] = (f"controller '{self.members[i].name}' returned {e}", None)
         return out
@@ -316,10 +334,7 @@ class Controller:
     def _update(self, t: float, meas: Measurement):  # pragma: no cover - abstract
         raise NotImplementedError
 
-
-def one_line(e: BaseException | str) -> str:
-    """An exception's message (or any text) on one line: its lines stripped, joined by " | "."""
-    return " | ".join(line.strip() for line in str(e).splitlines() if line.strip())
+    _update.abstract = True  # (CompiledForm.has_symbolic: a law that writes no _update)
 
 
 #: The longest quotation of a bad command in an error message [characters].

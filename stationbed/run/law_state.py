@@ -23,7 +23,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from .controller import ControllerError, one_line
+from .controller_error import ControllerError, one_line
 
 __all__ = ["has_state", "initial", "symbolic", "hand_back"]
 

@@ -2,7 +2,8 @@
 control period per step, the law called once per tick for all of them (issue 22).
 
 Per tick: the law's :meth:`~.controller.Controller.update_batch` (every measurement field with a
-leading sample axis) -> one call of the compiled tick mapped over the samples (casadi
+leading sample axis; a law with only a ``symbolic`` form: that form compiled and mapped over the
+samples, :mod:`.law_compiled`) -> one call of the compiled tick mapped over the samples (casadi
 ``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
 step, measure; the map calls that very machine code once per sample, so a sample's numbers are
 its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
@@ -46,8 +47,10 @@ DRAW_BLOCK = 256
 
 
 def vectorised(ctrl) -> bool:
-    """Whether the law overrides :meth:`Controller.update_batch` (else the default loops)."""
-    return type(ctrl).update_batch is not Controller.update_batch
+    """Whether the law overrides :meth:`Controller.update_batch` or has a ``symbolic`` form
+    (evaluated compiled for every sample at once), else the default loops."""
+    return type(ctrl).update_batch is not Controller.update_batch or (
+        type(ctrl)._update is Controller._update and ctrl.has_symbolic())
 
 
 def _tick_ok(comp) -> bool:
@@ -499,6 +502,7 @@ class _Lockstep:
                     self._measure(i, t_next, lo.res.x)
                 self._sense(k + 1, t_next)
         finally:
+            ctrl.hand_back_compiled()  # (each sample's law state, from the compiled batch)
             wall = (time.perf_counter() - wall0) / n
             results = []
             for i, s in enumerate(S):

@@ -85,10 +85,20 @@ class PdCore:
         law = PD(period=1.0, reference="lvlh" if v["lvlh"] else "inertial", q_ref=list(v["q_ref"]),
                  bandwidth=v["bandwidth"], damping=v["damping"], max_slew_rate=v["max_slew_rate"],
                  gyro_compensation=bool(v["gyro_compensation"]))
-        plant = SimpleNamespace(scene=None, inertia_O_B=np.array(v["inertia_O_B"]).reshape(3, 3),
-                                mean_motion=v["mean_motion"] if v["lvlh"] else None)
+        plant = SimpleNamespace(scene=SimpleNamespace(appendage=()), inertia_O_B=np.array(v["inertia_O_B"]).reshape(3, 3),
+                                mean_motion=v["mean_motion"] if v["lvlh"] else None, n_gimbals=0)
         law.reset(plant)
         return law
+
+    def _measurement(self):
+        """What pd reads, in the measurement layout of a plant without gimbals or arrays."""
+        from stationbed.run.controller import Measurement, measurement_fields
+
+        lay = measurement_fields(0, 0)
+        meas = Measurement(np.zeros(lay.size), lay)
+        for name, _ in INPUTS:
+            getattr(meas, name)[:] = self.v[name]
+        return meas
 
     def step(self, t, h):
         """The law at the step's start ``t`` on the inputs; False (with ``message``) to fail."""
@@ -105,7 +115,7 @@ class PdCore:
             return False
         if self.law is None:
             self.law = self._law()
-        meas = SimpleNamespace(**{name: np.array(v[name]) for name, _ in INPUTS})
+        meas = self._measurement()
         tau = self.law.update(t, meas)
         v["tau_cmd"][:] = [float(x) for x in tau]
         v["q_ref_BN"][:] = [float(x) for x in self.law.q_ref_BN]
