@@ -19,6 +19,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
+from ..core.layout import Layout
 from . import law_state
 from .measurement import command_fields
 
@@ -114,7 +115,8 @@ class CompiledLaw:
         self.ny = ny
         self.fc.args[2][:] = cp
         self.fc.args[3][:] = s
-        self.ncmd = self.fc.res[0].size - 4
+        self.out = _out_layout(self.fc.res[0].size - 4)
+        self._cmd, self._q = self.out.slice("cmd"), self.out.slice("q_ref_BN")
         self._t, self._y, self._s = self.fc.args[0], self.fc.args[1], self.fc.args[3]
         self._out, self._s1 = memoryview(self.fc.res[0]), self.fc.res[1]
         self._trigger = self.fc._trigger
@@ -128,9 +130,9 @@ class CompiledLaw:
         self._trigger()
         if self._s.size:
             self._s[:] = self._s1
-        out, n = self._out, self.ncmd
-        self.ctrl.q_ref_BN = tuple(out[n:n + 4])
-        return tuple(out[:n])
+        out = self._out
+        self.ctrl.q_ref_BN = tuple(out[self._q])
+        return tuple(out[self._cmd])
 
     def finish(self) -> None:
         """Hand the law its state (``set_symbolic_state``), as the compiled loops do at the end."""
@@ -158,6 +160,7 @@ class CompiledBatch:
             self.fc.args[2][:] = cp.ravel()  # (sample i's column: its numbers, side by side)
             self.fc.args[3][:] = s.ravel()
             self.ns = s.shape[1]
+            self.out = _out_layout(self.fc.res[0].size // n - 4)
         fc = self.fc
         fc.args[0][:] = t
         fc.args[1][:] = meas.y.ravel()
@@ -165,7 +168,7 @@ class CompiledBatch:
         if self.ns:
             fc.args[3][:] = fc.res[1]
         out = fc.res[0].reshape(n, -1)
-        return out[:, :-4].copy(), out[:, -4:].copy()
+        return self.out.get(out, "cmd").copy(), self.out.get(out, "q_ref_BN").copy()
 
     def finish(self) -> None:
         """Hand each member its state."""
@@ -173,3 +176,8 @@ class CompiledBatch:
             s = self.fc.args[3].reshape(len(self.members), self.ns)
             for m, si in zip(self.members, s):
                 law_state.hand_back(m, si.copy())
+
+
+def _out_layout(ncmd: int) -> Layout:
+    """The compiled law's first output: the command (``ncmd``), then ``q_ref_BN`` (4)."""
+    return Layout(cmd=ncmd, q_ref_BN=4)

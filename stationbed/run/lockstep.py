@@ -49,8 +49,7 @@ DRAW_BLOCK = 256
 def vectorised(ctrl) -> bool:
     """Whether the law overrides :meth:`Controller.update_batch` or has a ``symbolic`` form
     (evaluated compiled for every sample at once), else the default loops."""
-    return type(ctrl).update_batch is not Controller.update_batch or (
-        type(ctrl)._update is Controller._update and ctrl.has_symbolic())
+    return type(ctrl).update_batch is not Controller.update_batch or ctrl.has_symbolic()
 
 
 def _tick_ok(comp) -> bool:
