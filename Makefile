@@ -41,6 +41,9 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_linearize.py
 	$(PY) benchmarks/bench_montecarlo.py
 	$(PY) benchmarks/bench_lockstep.py
+	$(PY) benchmarks/bench_thrusters.py
+	$(PY) benchmarks/bench_full_loop.py  # issue 33: the full flight loop fused against truth-fed pd
+	$(PY) benchmarks/bench_socket.py --realtime-duration 60  # the 10-minute drift figure: --realtime-duration 600
 	$(PY) benchmarks/bench_fmu.py  # optional: says so when FMPy is not installed
 	$(PY) benchmarks/bench_plan.py $(if $(SMOKE),--smoke)
 	$(PY) benchmarks/bench_basilisk.py  # optional: says so when bsk is not installed
