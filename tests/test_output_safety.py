@@ -95,12 +95,19 @@ def test_plans_default_folder_stays_under_out(tmp_path, monkeypatch, capsys, nam
     assert len(written) == 1 and written[0].is_relative_to(work / "out"), written
 
 
-def test_plan_replaces_a_link_instead_of_writing_through_it(tmp_path):
+def _link_to_a_victim(tmp_path: Path, name: str) -> tuple[Path, Path]:
+    """``(out, victim)``: the folder ``out`` whose file ``name`` is a link to a file that must be
+    kept as it is ("keep me")."""
     out = tmp_path / "out"
     out.mkdir()
     victim = tmp_path / "victim.txt"
     victim.write_text("keep me\n")
-    (out / "plan.csv").symlink_to(victim)
+    (out / name).symlink_to(victim)
+    return out, victim
+
+
+def test_plan_replaces_a_link_instead_of_writing_through_it(tmp_path):
+    out, victim = _link_to_a_victim(tmp_path, "plan.csv")
     assert main(["plan", str(_slew_file(tmp_path, intervals=8)), "--out", str(out), "--no-fly", "-q"]) == 0
     assert victim.read_text() == "keep me\n"
     assert not (out / "plan.csv").is_symlink() and (out / "plan.csv").read_text().startswith("t,")
@@ -167,11 +174,7 @@ def test_plan_on_a_full_disk_is_one_line_naming_the_file(tmp_path):
 # ---------------------------------------------------------------------------------------------
 
 def test_run_replaces_a_link_at_the_partial_csv(tmp_path):
-    out = tmp_path / "out"
-    out.mkdir()
-    victim = tmp_path / "victim.txt"
-    victim.write_text("keep me\n")
-    (out / "trajectory.partial.csv").symlink_to(victim)
+    out, victim = _link_to_a_victim(tmp_path, "trajectory.partial.csv")
     scene = ROOT / "scenarios" / "iss_lvlh_hold.toml"
     assert main(["run", str(scene), "--out", str(out), "--duration", "10", "-q"]) == 0
     assert victim.read_text() == "keep me\n"

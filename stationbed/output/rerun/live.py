@@ -15,10 +15,10 @@ the wall clock, its recording streamed to a rerun viewer while it flies.
 
 from __future__ import annotations
 
-import os
 import re
 import socket
-import sys
+
+from .viewer import has_display
 
 __all__ = ["add_options", "options", "pacer", "live_url", "summary_parts", "grpc_sink", "SPAWN"]
 
@@ -62,7 +62,7 @@ def live_url(value: str | None) -> str | None:
     """``--live``'s value as the recording child takes it: a gRPC URL or :data:`SPAWN`; a bare
     port is ``rerun+http://127.0.0.1:PORT/proxy``. ValueError naming ``--live`` otherwise."""
     if value is None or value == SPAWN:
-        if value == SPAWN and not _has_display():
+        if value == SPAWN and not has_display():
             raise ValueError("--live: no display to open a viewer on; start one where you watch (rerun, or "
                              "rerun --serve-grpc on a server) and give its URL: --live rerun+http://HOST:9876/proxy")
         return value
@@ -76,12 +76,6 @@ def live_url(value: str | None) -> str | None:
         raise ValueError(f"--live {value}: no rerun viewer or gRPC server listening at {m.group(1)}:{m.group(2)} "
                          f"({e.strerror or e}); start one (rerun, or rerun --serve-grpc) first") from None
     return url
-
-
-def _has_display() -> bool:
-    if sys.platform.startswith(("win", "darwin")):
-        return True
-    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
 
 
 def grpc_sink(rec, live: str):
