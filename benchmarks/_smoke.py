@@ -14,7 +14,7 @@ import statistics
 import time
 from typing import NamedTuple
 
-__all__ = ["ENV", "SMOKE_DURATION_S", "add_option", "announce", "verdict", "targets_exit", "interleaved", "Timed"]
+__all__ = ["ENV", "SMOKE_DURATION_S", "ORBIT_WHAT", "add_option", "announce", "parse", "verdict", "targets_exit", "interleaved", "Timed"]
 
 #: the environment variable that turns smoke mode on for every script (e.g. in CI)
 ENV = "STATIONBED_BENCH_SMOKE"
@@ -34,6 +34,21 @@ def announce(smoke: bool, what: str = "") -> None:
     if smoke:
         print(f"smoke mode ({what or 'tiny sizes, one repeat'}): every path runs, no number below is a measurement, "
               "no target is judged")
+
+
+#: what a script that flies an orbit does in smoke mode instead (its :func:`announce` line)
+ORBIT_WHAT = f"{SMOKE_DURATION_S:g} s instead of an orbit, one repeat"
+
+
+def parse(ap, argv=None, what: str = ORBIT_WHAT):
+    """``ap``'s arguments with ``--smoke`` added: the smoke line announced first and, in smoke
+    mode, ``repeats`` set to 1 (a script with a ``--repeats`` option)."""
+    add_option(ap)
+    args = ap.parse_args(argv)
+    announce(args.smoke, what)
+    if args.smoke and hasattr(args, "repeats"):
+        args.repeats = 1
+    return args
 
 
 def verdict(ok: bool, smoke: bool) -> str:

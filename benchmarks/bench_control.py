@@ -63,11 +63,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--no-dop853", action="store_true", help="skip the DOP853 info row")
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
-    if args.smoke:
-        args.repeats = 1
+    args = _smoke.parse(ap, argv)
 
     scene = stationbed.load_scene(args.scene)
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / scene.orbit.mean_motion

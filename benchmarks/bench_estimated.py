@@ -50,11 +50,7 @@ def main(argv=None) -> int:
     ap.add_argument("--environment-rate", type=lambda v: v if v == "auto" else int(v), default="auto",
                     help="both sides' [simulation] environment_rate (default auto, the scenes' default)")
     ap.add_argument("--profile", action="store_true", help="split each fused run's time (compiled, noise, rest)")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
-    if args.smoke:
-        args.repeats = 1
+    args = _smoke.parse(ap, argv)
     est = stationbed.load_scene(SCENE)
     est = est.replace({"simulation.environment_rate": args.environment_rate})
     truth = est.replace({"sensor": [], "estimator": None})

@@ -37,11 +37,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
-    if args.smoke:
-        args.repeats = 1
+    args = _smoke.parse(ap, argv)
     full = stationbed.load_scene(FULL)
     full_pd = full.replace({"controller.name": "pd", "controller.params": {"reference": "lvlh", "bandwidth": 0.005,
                                                                            "damping": 0.8, "max_slew_rate": 0.001}})

@@ -53,11 +53,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", type=Path, default=None, help=f"default {DEFAULT_SCENE.name} ({SMOKE_SCENE.name} with --smoke)")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, "one repeat")
-    if args.smoke:
-        args.repeats = 1
+    args = _smoke.parse(ap, argv, what="one repeat")
     if args.scene is None:
         args.scene = SMOKE_SCENE if args.smoke else DEFAULT_SCENE
     warnings.simplefilter("ignore")  # python-control's margin search on flat phase curves

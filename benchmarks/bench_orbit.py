@@ -73,11 +73,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
-    if args.smoke:
-        args.repeats = 1
+    args = _smoke.parse(ap, argv)
     results = {}
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
     for name in SCENES:

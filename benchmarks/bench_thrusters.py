@@ -36,11 +36,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
-    if args.smoke:
-        args.repeats = 1
+    args = _smoke.parse(ap, argv)
     thr = stationbed.load_scene(SCENE)
     bare = thr.replace({"thruster": [], "thrusters": None})
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / thr.orbit.mean_motion
