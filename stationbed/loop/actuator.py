@@ -39,7 +39,11 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions
 from .layout import Layout
 
-__all__ = ["Actuator", "ACTUATORS", "get_actuator", "register_actuator", "pulse_pieces", "split_step"]
+__all__ = ["Actuator", "ACTUATORS", "get_actuator", "register_actuator", "pulse_pieces", "split_step", "chain_kinds",
+           "TRUE_SUFFIX"]
+
+#: a ``READS`` name ending so reads the plant's true measurement (rule 2)
+TRUE_SUFFIX = "_true"
 
 
 class Actuator:
@@ -53,8 +57,11 @@ class Actuator:
        or write ``_layouts()`` when their shape depends on the scene (the number of thrusters),
        returning the shape-setting numbers from ``_structure()``. ``READS`` names fields of
        the run's measurement (the Layout ``stationbed.run.measurement.measurement_fields``;
-       :meth:`Actuator.reads_in` finds them there by name); the actuator sees nothing else of
-       the plant.
+       :meth:`Actuator.reads_in` finds them there by name): what the law sees (the estimate
+       with an ``[estimator]``). A name ending in ``_true`` reads that field of the plant's
+       *true* measurement (``q_BN_true``: the attitude flown): the physics of what the
+       actuator makes (a magnetic torque ``m × B`` in the true field), never its decisions;
+       the actuator sees nothing else of the plant.
     3. Set ``n_channels`` (or write ``_n_channels()``), the pulse channels.
     4. Write ``_params()`` (every ``PARAMS`` field by name) and ``_initial()`` (every ``STATE``
        field at t = 0). Numbers are inputs of the compiled function, never constants in it.
@@ -76,6 +83,14 @@ class Actuator:
        truth: ``READS`` names fields of the formulation's state layout or the true rate), and
        ``HELD = "<name>"`` when the ``OUTPUTS`` field of that name is the model's held input of
        the same name (``model.input_layout``, e.g. the CMG cluster's ``u_cmg``).
+    9. Declare where it sits in the run: ``TABLE``, the scene field holding its tables (the
+       chain has the kind when that field is set and not empty); ``ORDER``, its place in the
+       chain (lower first: what costs nothing takes its part of the request first); and
+       write ``from_scene(scene, known, plant)`` (the truth flown, what flight software
+       knows, the law's plant facts). Optionally ``ROW_COLUMNS`` (CSV column -> ``(STATE
+       field, index)``, the memory before each row's tick) or ``columns(scene)`` and
+       ``row_index()``, and ``summary(x)`` (what the run summary adds from the memory ``x``
+       at the end). ``python_only`` (with ``why``) keeps a run per tick.
     """
 
     kind: ClassVar[str] = ""
@@ -87,6 +102,11 @@ class Actuator:
     FULL_TICK: ClassVar[bool] = False  #: rule 8: every channel on for the whole tick
     INTERNAL: ClassVar[bool] = False  #: rule 8: part of the plant, reads its truth
     HELD: ClassVar[str | None] = None  #: rule 8: the OUTPUTS field that is the model's held input
+    TABLE: ClassVar[str] = ""  #: rule 9: the scene field holding its tables ("" for the chain's end)
+    ORDER: ClassVar[int] = 0  #: rule 9: its place in the chain, lower first
+    ROW_COLUMNS: ClassVar[dict] = {}  #: rule 9: CSV column -> (STATE field, index)
+    python_only: bool = False  #: rule 9: True when it runs in Python each tick (then ``why``)
+    why: str = ""
 
     _functions: ClassVar[dict] = {}
     _compiled: ClassVar[dict] = {}
@@ -97,6 +117,31 @@ class Actuator:
         self.params = self.param_layout.pack(self._params())
         self.x0 = self.state.pack(self._initial())
         self.n_commands = 0
+
+    # -- where it sits in a run (rule 9) ---------------------------------------------------
+    @classmethod
+    def present(cls, scene) -> bool:
+        """Whether ``scene`` flies this kind (its ``TABLE`` set and not empty)."""
+        return bool(cls.TABLE) and bool(getattr(scene, cls.TABLE, None))
+
+    @classmethod
+    def from_scene(cls, scene, known, plant) -> "Actuator":
+        """This kind for ``scene`` (the truth flown), ``known`` (what flight software knows) and
+        ``plant`` (the law's plant facts)."""
+        raise NotImplementedError
+
+    @classmethod
+    def columns(cls, scene) -> list[str]:
+        """Its CSV columns in ``scene``'s runs (the memory before each row's tick)."""
+        return list(cls.ROW_COLUMNS)
+
+    def row_index(self) -> np.ndarray:
+        """The indices in its memory of the values a row reports (:meth:`columns`' order)."""
+        return np.array([self.state.slice(f).start + i for f, i in self.ROW_COLUMNS.values()], dtype=int)
+
+    def summary(self, x: np.ndarray) -> dict:
+        """What the run's summary adds from its memory ``x`` at the end of the run."""
+        return {}
 
     # -- declarations -------------------------------------------------------------------
     def _layouts(self) -> tuple[Layout, Layout, Layout, Layout]:
@@ -117,11 +162,14 @@ class Actuator:
     def reads_in(self, layout: Layout) -> slice | np.ndarray:
         """Where this actuator's ``READS`` fields lie in a vector of ``layout`` (the run's
         measurement), in ``READS`` order, by name: a slice when they are contiguous there, else
-        the indices. KeyError naming a field the layout lacks; ValueError on a size mismatch."""
+        the indices. A ``<field>_true`` name (rule 2) lies in the true measurement, appended
+        after what the law sees: ``concatenate([y_seen, y_true])[reads_in(layout)]``. KeyError
+        naming a field the layout lacks; ValueError on a size mismatch."""
         at = np.arange(layout.size)
         parts = []
         for name in self.reads.names:
-            idx = at[layout.slice(name)]
+            true = name.endswith(TRUE_SUFFIX)
+            idx = at[layout.slice(name[: -len(TRUE_SUFFIX)] if true else name)] + (layout.size if true else 0)
             if idx.size != self.reads.slice(name).stop - self.reads.slice(name).start:
                 raise ValueError(f"actuator {self.kind!r} reads {name!r} of size {self.reads.shape(name)}, "
                                  f"the measurement's has {idx.size}")
@@ -167,6 +215,11 @@ class Actuator:
         idle = self._idle(t, self.state.split(x), self.reads.split(r), tau, self.param_layout.split(p))
         return ca.Function(f"{self.key}_idle", [t, x, r, tau, p], [idle])
 
+    def command_numeric(self, t: float, h: float, x: np.ndarray, r: np.ndarray, tau_B: np.ndarray):
+        """One tick as a per-tick executor runs it: :meth:`command` (a ``python_only`` kind
+        writes its own)."""
+        return self.command(t, h, x, r, tau_B)
+
     def command(self, t: float, h: float, x: np.ndarray, r: np.ndarray, tau_B: np.ndarray):
         """One tick, numerically (compiled): ``(x_next, tau_rest_B, on_s, torque_B (3, n), out)``."""
         if not 0.0 <= h:
@@ -204,6 +257,12 @@ def register_actuator(cls: type[Actuator]) -> type[Actuator]:
         raise ValueError(f"{cls.__name__} declares no kind")
     ACTUATORS[cls.kind] = cls
     return cls
+
+
+def chain_kinds(scene) -> list[type[Actuator]]:
+    """The registered kinds ``scene`` flies before the chain's end, in chain order (``ORDER``,
+    then the kind's name)."""
+    return sorted((c for c in ACTUATORS.values() if c.present(scene)), key=lambda c: (c.ORDER, c.kind))
 
 
 def get_actuator(kind: str | type[Actuator]) -> type[Actuator]:

@@ -71,6 +71,9 @@ class Block:
     key: tuple = field(default=())  #: what its expressions depend on (equal keys: equal functions)
     x0: object = None  #: its memory at t = 0 (numpy), when the block knows it alone
     p0: object = None  #: its numbers (numpy)
+    #: an actuator whose channels are on the whole tick (``FULL_TICK``): its torques are added to
+    #: the held torque, no edge cut inside the tick (the same numbers)
+    full_tick: bool = False
 
     def __post_init__(self):
         if self.role not in ROLES:
@@ -100,7 +103,8 @@ def ACT_OUT(n_channels: int, out: Layout) -> Layout:
 
 def actuator_block(act, name: str = "thrusters") -> Block:
     """The :class:`~.actuator.Actuator` plug-in ``act`` as a block before the chain's end: inputs
-    its ``READS`` fields (by their measurement names: ``h_B``) then the request ``tau_B``; outputs :func:`ACT_OUT`; its ``_idle`` as the idle
+    its ``READS`` fields (by their measurement names: ``h_B``; ``q_BN_true``: the true
+    measurement's, rule 2 of the contract) then the request ``tau_B``; outputs :func:`ACT_OUT`; its ``_idle`` as the idle
     form (rule 7 of the actuator contract). The same casadi function the per-tick loop compiles."""
     f = act.function()
     n = act.n_channels
@@ -118,8 +122,8 @@ def actuator_block(act, name: str = "thrusters") -> Block:
     if idle_f is not None:
         idle = ca.Function(f"{name}_idle", [k, t, h, x, u, p], [idle_f(t, x, r, U.get(u, "tau_B"), p)])
     return Block(name, "actuator", step, act.state, act.param_layout, Layout(), U, Y, idle=idle,
-                 symbolic=not getattr(act, "python_only", False), key=(type(act).__name__, act.key),
-                 x0=act.x0, p0=act.params)
+                 symbolic=not act.python_only, why=act.why, key=(type(act).__name__, act.key),
+                 x0=act.x0, p0=act.params, full_tick=act.FULL_TICK)
 
 
 def sensing_block(flight, name: str = "sensing") -> Block:

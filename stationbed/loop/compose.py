@@ -42,7 +42,7 @@ import casadi as ca
 
 from ..core.compile import sx_function
 from ..core.layout import Layout
-from .actuator import split_step
+from .actuator import TRUE_SUFFIX, split_step
 from .block import Block
 
 __all__ = ["Plant", "Composed", "compose", "off_path"]
@@ -102,9 +102,9 @@ class Composed:
         if blocker is not None:
             raise ValueError(f"block {blocker.name!r} is not symbolic ({blocker.why}): it cannot be composed")
         M = plant.meas_layout
-        for a in self.actuators:  # an actuator reads the law's measurement by field name
+        for a in self.actuators:  # an actuator reads the law's (or the true) measurement by field name
             for f in a.inputs.names:
-                if f != "tau_B" and f not in M:
+                if f != "tau_B" and _field(f)[0] not in M:
                     raise KeyError(f"actuator block {a.name!r} reads {f!r}, the measurement has {M.names}")
         self.ncmd = self.law_block.outputs.slice("cmd").stop
         #: the carry from tick to tick, by name: tick index in the chunk, plant state, counts of
@@ -124,6 +124,8 @@ class Composed:
                                  **{f"{b.name}_y": b.outputs.size for b in self.sense})
         self.key = (plant.key, tuple((b.name, b.role, b.every, b.key) for b in self.blocks + [self.end] +
                                      ([self.env] if self.env is not None else [])))
+        #: whether an actuator reads the true measurement (the front then evaluates it for them)
+        self._truth = any(_field(f)[1] for a in self.actuators for f in a.inputs.names)
         self._cache: dict = {}
 
     # -- the parts ----------------------------------------------------------------------------
@@ -145,9 +147,11 @@ class Composed:
         s1, out = b.call(k, t, h, self.carry.get(c, b.name), v, type(v)(0, 1), self.par.get(par, b.name))
         return b.outputs.get(out, "cmd"), b.outputs.get(out, "q_ref"), s1
 
-    def _reads(self, a: Block, v):
+    def _reads(self, a: Block, v, y):
+        """What actuator ``a`` reads: fields of what the law sees ``v``, or of the true
+        measurement ``y`` for a ``<field>_true`` name (the actuator contract's rule 2)."""
         M = self.plant.meas_layout
-        return [M.get(v, f) for f in a.inputs.names if f != "tau_B"]
+        return [M.get(y if true else v, f) for f, true in map(_field, a.inputs.names) if f != "tau_B"]
 
     @property
     def _rhs(self):
@@ -165,12 +169,12 @@ class Composed:
         _, out = e.call(0, t, h, type(x)(0, 1), e.inputs.pack(x=x, tau=tau, u_ext=u_ext, symbolic=True), type(x)(0, 1), p)
         return e.outputs.get(out, "act"), e.outputs.get(out, "u"), e.outputs.get(out, "sat")
 
-    def _chain(self, k, t, h, c, par, v, cmd):
+    def _chain(self, k, t, h, c, par, v, y, cmd):
         """The actuators in order on the law's request: (rest for the end, each one's memory
         after, on-times and torques of all channels)."""
         tau, mem, ons, tqs = cmd, {}, [], []
         for a in self.actuators:
-            x1, out = a.call(k, t, h, self.carry.get(c, a.name), ca.vertcat(*self._reads(a, v), tau), type(cmd)(0, 1),
+            x1, out = a.call(k, t, h, self.carry.get(c, a.name), ca.vertcat(*self._reads(a, v, y), tau), type(cmd)(0, 1),
                              self.par.get(par, a.name))
             mem[a.name] = x1
             tau = a.outputs.get(out, "tau_rest_B")
@@ -241,8 +245,9 @@ class Composed:
         cmd, _, s1 = self._law(k, t, h, v, c, par)
         idle = SX(1)
         reads = []
+        y = self.plant.meas(t, x, P.get(par, "p")) if self._truth else None  # the truth, for what reads it
         for a in self.actuators:
-            r = self._reads(a, v)
+            r = self._reads(a, v, y)
             reads += r
             flag = a.idle(k, t, h, C.get(c, a.name), ca.vertcat(*r, cmd), P.get(par, a.name)) if a.idle is not None else 0
             idle = idle * flag
@@ -272,7 +277,7 @@ class Composed:
         # the chain on symbols of its own (an SX function: one graph, common parts shared)
         SX = ca.SX
         ts, hs, ks, cs, ps_, cmds, rs = SX.sym("t"), SX.sym("h"), SX.sym("k"), C.symbol("c"), P.symbol("par"), SX.sym("cmd", self.ncmd), SX.sym("r", nr)
-        tau, mem, on_s, tq = cmds, {}, [], []
+        tau, mem, on_s, tq, full = cmds, {}, [], [], SX.zeros(3)
         at = 0
         for a in self.actuators:
             n_r = a.inputs.size - 3
@@ -280,13 +285,16 @@ class Composed:
             at += n_r
             mem[a.name] = x1
             tau = a.outputs.get(out, "tau_rest_B")
-            on_s.append(a.outputs.get(out, "on_s"))
-            tq.append(a.outputs.get(out, "torque_B"))
-        on_s, tq = ca.vertcat(*on_s), ca.vertcat(*tq)
-        same = ca.logic_and(ca.sum1(on_s != 0) == 0, ca.sum1(tau != cmds) == 0)
+            if a.full_tick:  # on the whole tick: added to the held torque, no edge
+                full = full + ca.sum2(ca.reshape(a.outputs.get(out, "torque_B"), 3, -1))
+            else:
+                on_s.append(a.outputs.get(out, "on_s"))
+                tq.append(a.outputs.get(out, "torque_B"))
+        on_s, tq = ca.vertcat(SX(0, 1), *on_s), ca.vertcat(SX(0, 1), *tq)
+        same = ca.logic_and(ca.sum1(on_s != 0) + ca.sum1(full != 0) == 0, ca.sum1(tau != cmds) == 0)
         chain = sx_function("cl_chain", [ks, ts, hs, cs, ps_, cmds, rs],
-                            [tau, on_s, tq, same] + [mem[a.name] for a in self.actuators])
-        rest, on, tqq, same_c, *xa = chain(k, t, h, c, par, cmd, reads)
+                            [tau, on_s, tq, same, full] + [mem[a.name] for a in self.actuators])
+        rest, on, tqq, same_c, full_c, *xa = chain(k, t, h, c, par, cmd, reads)
         # the end on the rest (SX), then the plain or the split step (explicit branches)
         xs_, rs_, us_ = SX.sym("x", self.plant.nx), SX.sym("rest", self.ncmd), SX.sym("u_ext", 3)
         pp = SX.sym("p", self.plant.npar)
@@ -297,13 +305,14 @@ class Composed:
         plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
         split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs], [self.advance(ts, xs_, hs, us, pp, ons, tqs, called=True)])
         pulse = ca.Function.if_else("cl_pulse", split, plain)
-        ar, aon, atq = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch)
-        a_in = [c, par, cq, ar, aon, atq]
-        uu, fl = end_f(t, x, ar, self._u_ext(c, u_ext), p, h)
+        ar, aon, atq, afull = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch), MX.sym("full", 3)
+        a_in = [c, par, cq, ar, aon, atq, afull]
+        held = self._u_ext(c, u_ext)
+        uu, fl = end_f(t, x, ar, held + afull if any(a.full_tick for a in self.actuators) else held, p, h)
         x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
-        head = ca.Function.if_else("cl_same", kept, acted)(same_c, c, par, cq, rest, on, tqq)
+        head = ca.Function.if_else("cl_same", kept, acted)(same_c, c, par, cq, rest, on, tqq, full_c)
         fields = {f: C.get(cq, f) for f in C.names}
         fields["x"], fields["counts"] = head[: self.plant.nx], head[self.plant.nx:]
         fields.update({a.name: m for a, m in zip(self.actuators, xa)})
@@ -389,12 +398,18 @@ class Composed:
         y = self.plant.meas(t, x, p)
         v, mem, outs = self._sense(k, t, h, y, c, w, par, plain=False)
         cmd, q_ref, s1 = self._law(k, t, h, v, c, par)
-        rest, _, _, _ = self._chain(k, t, h, c, par, v, cmd)
+        rest, _, _, _ = self._chain(k, t, h, c, par, v, y, cmd)
         act, _, _ = self._end(t, h, x, rest, u_ext, p)
         vals = dict(cmd=cmd, act=act, q_ref=q_ref, **{b.name: mem[b.name] for b in self.sense})
         vals[self.law_block.name] = s1
         vals.update({f"{b.name}_y": outs[b.name] for b in self.sense})
         return ca.Function("cl_row", [c, par, w], [self.row_layout.pack(vals, symbolic=True)])
+
+
+def _field(name: str) -> tuple[str, bool]:
+    """``(measurement field, whether it is the truth's)`` of an actuator input's name: a name
+    ending in ``_true`` reads the true measurement (the actuator contract's rule 2)."""
+    return (name[: -len(TRUE_SUFFIX)], True) if name.endswith(TRUE_SUFFIX) else (name, False)
 
 
 def _closed(vals: list, syms: list) -> list:

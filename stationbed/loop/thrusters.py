@@ -38,11 +38,13 @@ ISS's attitude thrusters' net impulse is a pure couple where they can make one).
 from __future__ import annotations
 
 import hashlib
+import math
 
 import casadi as ca
 import numpy as np
 
-from ..scene.thrusters import torque_arms
+from ..model.cmg import held_momentum_B
+from ..scene.thrusters import missing_torque, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
 
@@ -183,6 +185,8 @@ class ThrusterCluster(Actuator):
     """
 
     kind = "thrusters"
+    TABLE = "thruster"
+    ORDER = 20
 
     def __init__(self, scene, known, capacity_Nms: float, h_held_B=None):
         from ..scene.thrusters import ThrusterOptions
@@ -200,6 +204,52 @@ class ThrusterCluster(Actuator):
         self.f_max = np.array([t.force_N for t in scene.thruster])
         self.isp = np.array([t.isp_s for t in scene.thruster])
         super().__init__()
+
+    @classmethod
+    def from_scene(cls, scene, known, plant) -> "ThrusterCluster":
+        """Flight software's mapping on ``known``, the dump law on the working units' capacity
+        it knows (``plant.h_capacity``) and the failed units' held momentum it knows of."""
+        cap = plant.h_capacity if plant.h_capacity is not None else math.inf
+        return cls(scene, known, cap, held_momentum_B(known.cmg))
+
+    @property
+    def python_only(self) -> bool:
+        return self.opt.mapping == "lp"
+
+    @property
+    def why(self) -> str:
+        return "mapping = 'lp' runs scipy's HiGHS in Python each tick" if self.python_only else ""
+
+    @classmethod
+    def columns(cls, scene) -> list[str]:
+        """The CSV columns, values at the row's time t: the mode of the tick before t
+        (``thr_mode`` 1 = thruster-only control, ``thr_dumping`` 1 = dumping), and totals over
+        [0, t]: firings, time in thruster-only control [s], impulse Σ F t_on [N s], propellant
+        [kg], and each thruster's on-time [s]."""
+        if not scene.thruster:
+            return []
+        cols = ["thr_mode", "thr_dumping", "thr_firings", "thr_control_s", "thr_impulse_Ns", "thr_propellant_kg"]
+        return cols + [f"thr_on_s_{t.name}" for t in scene.thruster]
+
+    def row_index(self) -> np.ndarray:
+        s = self.state
+        idx = [s.slice(k).start for k in ("mode", "dumping", "firings", "control_s", "impulse_Ns", "propellant_kg")]
+        return np.array(idx + list(range(s.size))[s.slice("on_total_s")], dtype=int)
+
+    def summary(self, x) -> dict:
+        """What the summary adds to the thruster metrics (``propellant_kg`` and the other totals
+        are :data:`~stationbed.run.metrics.METRICS`, reduced from the rows' ``thr_*`` columns)."""
+        out = {"thruster_mapping": self.opt.mapping, "thruster_pure_couple": bool(self.pure)}
+        if self.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
+            out["orbit_period_s"] = 2.0 * math.pi / self.scene.orbit.mean_motion
+        missing = missing_torque(self.scene) if self.opt.mode != "off" else []
+        if missing:  # an assist set that dumps about some axes only (the scene check refuses the rest)
+            out["thruster_no_torque_about"] = ", ".join(missing)
+        return out
+
+    def command_numeric(self, t: float, h: float, x, r, tau_B):
+        """One tick numerically: :meth:`command_lp` with ``mapping = "lp"``, else :meth:`command`."""
+        return (self.command_lp if self.python_only else self.command)(t, h, x, r, tau_B)
 
     def _structure(self) -> tuple:
         # which thrusters each shift moves (it shapes the compiled code)

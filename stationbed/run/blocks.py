@@ -4,7 +4,7 @@ composition's one key).
 
 The blocks of a run, in the tick's order: the sensing (``[[sensor]]`` tables and the
 ``[estimator]``: :func:`~stationbed.loop.block.sensing_block`), the law (its symbolic form and
-state, :mod:`.law_state`), the actuators before the chain's end (the ``[[thruster]]`` tables:
+state, :mod:`.law_state`), the actuators before the chain's end (``comp.actuators`` in chain order:
 :func:`~stationbed.loop.block.actuator_block`) and the end (the CMG cluster or the ideal
 torquer at the plant's state, :func:`~.system.chain_end_inputs`). A block that cannot be
 symbolic (a law without ``symbolic``, the LP mapping) is a block with ``symbolic = False``
@@ -115,12 +115,8 @@ def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
     if comp.corruption is not None:  # [controller.sensor] noise (its delay: per tick, fused.fused_ok)
         blocks.append(corruption_block(comp.corruption, comp.meas_layout.size))
     blocks.append(law_block(comp, cp))
-    if comp.thrust is not None:
-        b = actuator_block(comp.thrust.cluster)
-        if comp.thrust.lp:
-            b = Block(b.name, b.role, b.step, b.state, b.params, b.noise, b.inputs, b.outputs, symbolic=False,
-                      why="mapping = 'lp' runs scipy's HiGHS in Python each tick")
-        blocks.append(b)
+    for a in comp.actuators:  # the chain, in order (run/chain.py)
+        blocks.append(actuator_block(a.cluster, a.name))
     blocks.append(end_block(comp))
     return blocks
 
@@ -136,20 +132,19 @@ def blocker(comp, cp=()) -> Block | None:
 def structure_key(comp, cp) -> tuple:
     """What the run's composed functions depend on, read without building a block (numbers are
     inputs, never in the key): the compiled system, the law's class, command, state and
-    parameter sizes, the flight's key, the thrusters' structure, the chain end's kind."""
+    parameter sizes, the flight's key, the chain's structure, the chain end's kind."""
     ctrl = comp.ctrl
-    th = comp.thrust
     return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
             None if comp.flight is None else comp.flight.key,
-            None if th is None else (th.cluster.key, th.lp), type(comp.end).__name__, held_rate(comp),
+            tuple((a.name, a.cluster.key, a.lp) for a in comp.actuators), type(comp.end).__name__, held_rate(comp),
             None if comp.corruption is None else comp.corruption.flags)
 
 
 def held_rate(comp) -> int:
     """The environment's ticks per evaluation the composed loop holds (0: every stage): the
-    scene's rate (:func:`.rates.environment_rate`), except with thrusters, whose per-tick loop
-    evaluates every stage (the fused run keeps its numbers)."""
-    return 0 if comp.thrust is not None else environment_rate(comp)
+    scene's rate (:func:`.rates.environment_rate`), except with an actuator chain, whose per-tick
+    loop evaluates every stage (the fused run keeps its numbers)."""
+    return 0 if comp.actuators else environment_rate(comp)
 
 
 def composed(comp, cp) -> tuple[Composed, float]:

@@ -26,6 +26,7 @@ from .controller import (
 )
 from .measurement import command_fields, measurement_fields
 from ..loop.cmg_cluster import chain_end
+from .chain import chain_advance, chain_for, chain_summary
 from .composition import Composition, ControllerFailure, FlightMemory, RunState
 from .fused import fused_ok, run_fused, why_not_fused
 from .held_env import HeldBlocks, held_functions, held_rate, rate_summary
@@ -34,7 +35,6 @@ from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
-from .thrust import thrust_for
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOISE_BLOCK"]
 
@@ -135,7 +135,7 @@ class ControlLoop:
             rng=np.random.default_rng(sensor.seed) if noisy else None,
             flight=flight, tick_noise=None if flight is None else flight.noise(),
             end=chain_end(model),
-            thrust=thrust_for(scene, ctrl, layout, plant),  # the [[thruster]] tables (issue 21), or None
+            actuators=chain_for(scene, ctrl, layout, plant),  # the chain before its end (run/chain.py)
         )
         self.res = RunState(comp, rows, x)
         n_y = self.meas.res[0].size
@@ -280,6 +280,9 @@ class ControlLoop:
         """The actuator chain at tick ``t`` on the law's command: sets the held input (the CMG
         cluster's ``u_cmg``, or the ideal torquer's torque); returns the saturation flag (0/1)."""
         comp = self.comp
+        for a in comp.actuators:  # the chain in order: each takes its share, the end gets the rest
+            y = self.seen if (comp.noisy or comp.flight is not None) else self.meas.res[0]
+            cmd = a.command(comp, t, y, self.meas.res[0], cmd)
         if self.act is None:  # no cluster: the ideal torquer (loop/cmg_cluster.py), the whole tick
             end = comp.end
             fc = end.compiled()
@@ -289,9 +292,6 @@ class ControlLoop:
             fc()
             self.tau_held[:] = fc.res[3]  # torque_B, its one channel on over [t, t + h]
             return 0
-        if comp.thrust is not None:  # the thrusters take their share; the CMGs get the rest
-            y = self.seen if (comp.noisy or comp.flight is not None) else self.meas.res[0]
-            cmd = comp.thrust.command(comp, t, y, cmd)
         a = self.act
         a.args[0][0] = t
         a.args[1][:] = self.x
@@ -304,8 +304,8 @@ class ControlLoop:
         (the held input set by :meth:`actuate`)."""
         comp = self.comp
         res = self.res
-        if comp.thrust is not None:  # and at every thruster's on/off edge
-            return comp.thrust.advance(comp, res, t0, t1)
+        if comp.actuators:  # and at every channel's on/off edge
+            return chain_advance(comp, res, t0, t1, self.tau_held if self.act is None else None)
         inner = [b for b in comp.bps if t0 < b < t1]
         edges = [t0] + inner + [t1]
         i_ext = comp.input_layout.slice("u_ext")
@@ -482,7 +482,7 @@ class ControlLoop:
         None; with the environment held (held_env.py) the held tick, and ``self.held`` its blocks."""
         comp = self.comp
         self.held = None
-        if comp.tick_name is None or comp.thrust is not None:
+        if comp.tick_name is None or comp.actuators:
             return None
         rate = held_rate(comp)[0]
         if rate:
@@ -541,8 +541,7 @@ class ControlLoop:
             out["not_fused"] = why_not_fused(comp) or "fused = False asked"
         out.update(rs.values())
         out.update(rate_summary(self.comp, self.res.used_fused, self.res.held_rate))  # the effect rates run (issue 25)
-        if comp.thrust is not None:
-            out.update(comp.thrust.summary(comp))
+        out.update(chain_summary(comp))
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(ctrl.summary())
         except Exception as e:

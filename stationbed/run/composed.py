@@ -6,7 +6,7 @@ It knows no block: it writes the carry, the parameters and the draws by the comp
 named layouts (each block's memory and numbers under its name), calls the composed ``row`` at
 each output row and the composed ``chunk`` over the row's ticks (cut into pieces at the
 scene's edges on the tick grid, :func:`~.segments.tick_pieces`), and hands the rows, the
-flight's memory, the thrusters' memory and the law's state back through the run's state.
+flight's memory, the actuators' memory and the law's state back through the run's state.
 
 It replaced the hand-composed fused loops of issues 20-25 (``fused.py``'s chunk,
 ``fused_flight.py``, ``thrust_fused.py``, their bulk rows and held-environment chunks) after
@@ -93,7 +93,7 @@ class Draws:
 def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     """Run ticks 0..K of the run composed by ``comp`` with the composed loop, handing back to
     ``res`` (:class:`~.composition.RunState`) the per-tick loop's rows and memories."""
-    ctrl, flight, th = comp.ctrl, comp.flight, comp.thrust
+    ctrl, flight = comp.ctrl, comp.flight
     cp = np.asarray(symbolic_params, dtype=float)
     fns = _functions(comp, cp)
     cm, row, chunk = fns["cm"], fns["row"], fns["chunk"]
@@ -103,7 +103,6 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     law = cm.law_block.name
     fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
     sense = fl.name if fl is not None else None
-    act = cm.actuators[0].name if cm.actuators else None
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
@@ -112,16 +111,16 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     if sense is not None:
         par[P.slice(sense)] = flight.params
         X = fl.state
-    if act is not None:
-        par[P.slice(act)] = th.cluster.params
+    for a in comp.actuators:  # the chain's blocks are named by their actuators (run/blocks.py)
+        par[P.slice(a.name)] = a.cluster.params
     c0 = chunk.args[0]
     c0[:] = 0.0
     c0[C.slice("x")], c0[C.slice(law)] = res.x, s_law
     fm = res.flight
     if sense is not None:
         c0[C.slice(sense)] = X.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
-    if act is not None:
-        c0[C.slice(act)] = th.x
+    for a in comp.actuators:
+        c0[C.slice(a.name)] = a.x
     rc, rp, rw = row.args
     out = comp.end.outputs
     n_act = out.size if comp.has_cluster else 0
@@ -169,8 +168,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             if n_act:
                 lim, sat = int(a[i_lim] > 0.5), int(a[i_sat] > 0.5)
                 u_cmg = a[i_u]
-            if th is not None:
-                th.x_row = c0[C.slice(act)].copy()
+            for a in comp.actuators:
+                a.x_row = c0[C.slice(a.name)].copy()
             xs = ys = None
             if sense is not None:
                 xs, ys = X.get(R.get(r, sense), "xs").copy(), fl.outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
@@ -188,6 +187,6 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
     finally:
         law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
-        if th is not None:
-            th.x = th.x_row = c0[C.slice(act)].copy()
+        for a in comp.actuators:
+            a.x = a.x_row = c0[C.slice(a.name)].copy()
         finish_chunks(res, x, ticks)

@@ -137,9 +137,8 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
         return 0, 0, 0, None
     C, RL = cm.carry, cm.row_layout
     O = Layout(c=C.size, row=RL.size, counts=2)
-    flight, th, fm = comp.flight, comp.thrust, res.flight
+    flight, fm = comp.flight, res.flight
     sense = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
-    act_b = cm.actuators[0] if cm.actuators else None
     period, duration = comp.period, comp.duration
     out_l = comp.end.outputs
     has_cmg = comp.has_cluster
@@ -184,15 +183,14 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
                     err, s3, nees = rep.res[0].reshape(R, 3), rep.res[1].reshape(R, 6), rep.res[2]
                     held += [np.degrees(err[:m]), np.degrees(s3[:m, :3]), fl_ys[:m, sl["bias"]], nees[:m, None]]
                 held += [fl_ys[:m, sl["valid"]]]
-            if act_b is not None:  # the thrusters' columns from their memory before each row's tick
-                xa = C.get(cs, act_b.name)
-                held += [xa[:m][:, th.row_index()]]
+            for a in comp.actuators:  # the chain's columns from their memory before each row's tick
+                held += [C.get(cs, a.name)[:m][:, a.idx]]
             held = np.hstack(held)
             if j == 0:
                 if sense is not None:
                     fm.xs, fm.ys = fl_xs[0], fl_ys[0]
-                if th is not None:
-                    th.x_row = C.get(cs[0], act_b.name)
+                for a in comp.actuators:
+                    a.x_row = C.get(cs[0], a.name)
                 res.x = xs_[0]
                 if not _held_matches(res, held[0], act[0, cmg[0]] if has_cmg else None, cmd[0], q_ref[0], int(flag[0])):
                     if noise0 is not None:

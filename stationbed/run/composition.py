@@ -5,17 +5,17 @@ A run is *declared* once, by :class:`Composition`: the plant (scene, compiled sy
 integrator, parameters, discontinuities), the clock, the named layouts (state, held input,
 measurement, command), the law, the measurement (the ideal sensor's noise and delay, the
 ``[[sensor]]`` flight suite and estimator, their noise streams) and the actuator chain (the
-thrusters, then its end: the CMG cluster or the ideal torquer, loop/cmg_cluster.py). Every
+actuators in chain order (run/chain.py), then its end: the CMG cluster or the ideal torquer, loop/cmg_cluster.py). Every
 executor reads it and none rebinds its fields (it is frozen; the objects it holds that a run
 advances are the noise streams, drawn in tick order, the law, whose reference ``q_ref_BN`` an
-executor sets from the compiled law's, and the thrusters' memory): the per-tick loop (:class:`~.closed_loop.ControlLoop`),
+executor sets from the compiled law's, and the actuators' memory): the per-tick loop (:class:`~.closed_loop.ControlLoop`),
 the fused loop (:mod:`.composed`, the tick composed once from the run's blocks, :mod:`.blocks`) and the lockstep batch (:mod:`.lockstep`, :mod:`.lockstep_flight`).
 
 An executor hands its results back through :class:`RunState` only: the state as it goes and at
 the end (``x``, the held input ``u``), each output row (:meth:`RunState.row`, or
 :meth:`RunState.rows_many` for many), the saturation counts (:meth:`RunState.count`), the ticks
 run, the law's last command, the flight suite's memory (:class:`FlightMemory`) and the
-thrusters' (``comp.thrust``). The rows and the summary are made from the composition and
+actuators' (``comp.actuators``). The rows and the summary are made from the composition and
 the run state alone, so no executor reads another's private attributes
 (tests/test_composition.py).
 """
@@ -78,7 +78,9 @@ class Composition:
     tick_noise: Any  #: the suite's noise stream by tick (``Flight.noise()``) or None
     # -- the actuators -----------------------------------------------------------------------
     end: Any  #: the chain's end: the CMG cluster's or the ideal torquer's plug-in
-    thrust: Any = None  #: the ``[[thruster]]`` tables (:class:`~.thrust.ThrustLoop`), before the end
+    #: the actuators before the end, in chain order (:class:`~.chain.ActuatorLoop`: magnetic
+    #: torquers, thrusters, ...; :func:`~.chain.chain_for`)
+    actuators: tuple = ()
 
     # -- derived (looked up once: the executors read them per row) ------------------------------
     @cached_property
@@ -141,9 +143,9 @@ class Composition:
 
     @cached_property
     def chain(self) -> tuple:
-        """The actuator chain in order, as plug-ins: the thrusters (with ``[[thruster]]``
-        tables), then the end (the CMG cluster or the ideal torquer), which takes what is left."""
-        return ((self.thrust.cluster,) if self.thrust is not None else ()) + (self.end,)
+        """The actuator chain in order, as plug-ins: :attr:`actuators` (magnetic torquers,
+        thrusters), then the end (the CMG cluster or the ideal torquer), which takes what is left."""
+        return tuple(a.cluster for a in self.actuators) + (self.end,)
 
     @cached_property
     def u_cmg(self) -> slice:
@@ -203,7 +205,7 @@ class RunState:
         """The row's held values (after the state's columns) and the law's reference:
         the CMG cluster's held input and the saturation flag, the torque command (NaN when the
         law commands rates), the attitude error's four columns (NaN: from the reference, by the
-        rows a batch at a time), the flight suite's and the thrusters' columns."""
+        rows a batch at a time), the flight suite's and the actuators' columns."""
         comp = self.comp
         vals = []
         if self._gimbals is not None:
@@ -219,8 +221,8 @@ class RunState:
         if comp.flight is not None:
             q = np.asarray(self.x[self._q], dtype=float)
             vals += comp.flight.row(self.flight.xs, self.flight.ys, q / np.linalg.norm(q))
-        if comp.thrust is not None:
-            vals += comp.thrust.row()
+        for a in comp.actuators:
+            vals += a.row()
         return vals, q_ref
 
     def row(self, t: float, x, flag: int, *, u_cmg=None, cmd=None, q_ref=None, xs=None, ys=None) -> None:

@@ -44,8 +44,7 @@ def why_not_fused(comp) -> str | None:
         return "noise: [controller.sensor] noise with [[sensor]] tables"
     if comp.replan is not None:
         return "law: a failure detected mid-run (the law designs again, in Python)"
-    why = _thrust_why(comp)
-    return None if why is None else f"thrusters: {why}"
+    return _chain_why(comp)
 
 
 def fused_ok(comp) -> bool:
@@ -53,21 +52,22 @@ def fused_ok(comp) -> bool:
     return why_not_fused(comp) is None
 
 
-def _thrust_why(comp) -> str | None:
-    """Why the fused loop cannot fly the run's thrusters (None without thrusters, or when it
-    can); kept on ``comp.thrust.fused_reason`` (the summary's ``thrusters_not_fused``)."""
-    th = comp.thrust
-    if th is None:
-        return None
-    why = None
-    if th.lp:
-        why = "mapping = 'lp' runs scipy's HiGHS in Python each tick"
-    elif environment_rate(comp):
-        why = "an environment rate with thrusters is flown per tick"
-    elif comp.noisy and law_state.has_state(comp.ctrl):
-        why = "[controller.sensor] noise with a law that has a state and thrusters is flown per tick"
-    th.fused_reason = why
-    return why
+def _chain_why(comp) -> str | None:
+    """Why the fused loop cannot fly the run's actuator chain, as ``"<kind>: <why>"`` (None
+    without one, or when it can); kept on the actuator's ``fused_reason`` (the summary's
+    ``<kind>_not_fused``)."""
+    for a in comp.actuators:
+        why = None
+        if a.lp:
+            why = a.cluster.why
+        elif environment_rate(comp):
+            why = f"an environment rate with {a.name} is flown per tick"
+        elif comp.noisy and law_state.has_state(comp.ctrl):
+            why = f"[controller.sensor] noise with a law that has a state and {a.name} is flown per tick"
+        a.fused_reason = why
+        if why is not None:
+            return f"{a.name}: {why}"
+    return None
 
 
 def run_fused(comp, res, K: int) -> None:

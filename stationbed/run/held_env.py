@@ -41,8 +41,8 @@ def held_rate(comp) -> tuple[int, str | None]:
     ``comp``: the rate the fused loop would run (:func:`.rates.environment_rate`; 0 = every stage)
     where the per-tick loop can cut the run into the fused loop's blocks, else 0 and the reason
     (None without environment torques). Asked first, so a run that cannot hold never probes."""
-    if comp.thrust is not None:
-        why = "thrusters: their pulses cut the tick, the per-tick loop evaluates every stage"
+    if comp.actuators:
+        why = f"{comp.actuators[0].name}: their pulses cut the tick, the per-tick loop evaluates every stage"
     elif comp.tick_name is None:
         why = "the integrator is not one RK4 step per tick: the per-tick loop evaluates every stage"
     elif edge_ticks(comp) is None:

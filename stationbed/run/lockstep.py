@@ -55,8 +55,9 @@ def vectorised(ctrl) -> bool:
 def _tick_ok(comp) -> bool:
     # a run that flies [[sensor]] tables and an [estimator] (comp.flight, issue 20) runs its
     # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) and
-    # [[thruster]] tables (comp.thrust, issue 21: the batch tick has no pulses) run per tick
-    return comp.replan is None and comp.thrust is None and comp.tick_name is not None
+    # an actuator chain (comp.actuators: [[thruster]] tables, [magnetorquers]; the batch tick
+    # has no chain) run per tick
+    return comp.replan is None and not comp.actuators and comp.tick_name is not None
 
 
 def executor(loop) -> str:

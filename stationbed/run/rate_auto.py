@@ -45,6 +45,7 @@ import numpy as np
 
 from ..core.compile import cache_dir
 from ..core.progress import LOGGER
+from ..loop.actuator import chain_kinds
 
 __all__ = ["AUTO", "TARGET_RAD", "CANDIDATES", "choice", "auto_choice", "scene_choice", "set_runner", "g_norms",
            "hold_bound_rad", "torque_rates"]
@@ -72,8 +73,9 @@ def set_runner(run) -> None:
 
 def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
     """Why ``auto`` is every stage (None: the bound applies)."""
-    if thrust:
-        return "thrusters: their fused loop evaluates the environment every stage"
+    if thrust:  # any actuator chain (thrusters, magnetic torquers: run/chain.py)
+        kinds = [k.kind for k in chain_kinds(scene)]
+        return f"{kinds[0] if kinds else 'thrusters'}: their fused loop evaluates the environment every stage"
     # [[sensor]] tables (``flight``): the composed loop honours the rate (its env block) and the
     # bound holds on the estimate's loop (module docstring)
     if scene.controller is None or scene.controller.name != "pd" or not (hasattr(params, "bandwidth")
@@ -228,7 +230,7 @@ def _disk_path(key: str) -> Path | None:
 def auto_choice(loop) -> dict:
     """:func:`choice` for a closed loop (its law, period, rows, thrusters and sensors)."""
     return choice(loop.scene, getattr(loop.ctrl, "params", None), loop.period, loop.n_per_out,
-                  getattr(loop, "thrust", None) is not None, getattr(loop, "flight", None) is not None,
+                  bool(getattr(loop, "actuators", ())), getattr(loop, "flight", None) is not None,
                   type(loop.ctrl))
 
 
@@ -252,10 +254,10 @@ def _scene_choice(scene) -> dict:
     if spec is None:
         return {"ticks": 0, "bound_rad": None, "why": "no controller"}
     if spec.name != "pd":
-        return choice(scene, None, spec.period, 1, bool(scene.thruster), bool(scene.sensor))  # (says why)
+        return choice(scene, None, spec.period, 1, bool(chain_kinds(scene)), bool(scene.sensor))  # (says why)
     law = build_controller(spec, base_dir=scene.folder)
     return choice(scene, getattr(law, "params", None), spec.period, int(round(sim.output_dt / spec.period)),
-                  bool(scene.thruster), bool(scene.sensor), type(law))
+                  bool(chain_kinds(scene)), bool(scene.sensor), type(law))
 
 
 def g_norms(I_kg_m2: float, omega_n: float, zeta: float) -> tuple[float, float, float]:

@@ -16,6 +16,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
 from .knowledge import Knowledge, knowledge_scene
+from .magnetorquers import Magnetorquers, check_magnetorquers
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
@@ -49,6 +50,7 @@ class Scene(Strict):
     knowledge: Knowledge | None = None
     thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
     thrusters: ThrusterOptions | None = None
+    magnetorquers: Magnetorquers | None = None  # issue 33: stationbed/loop/magnetorquers.py
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -87,6 +89,7 @@ class Scene(Strict):
         _check_sensors(self)
         _check_knowledge(self)
         check_thrusters(self)
+        check_magnetorquers(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
