@@ -18,6 +18,7 @@ new actuator), each claim against an independent truth:
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -272,3 +273,14 @@ def test_bad_scene_one_line(change, field):
     with pytest.raises(SceneError) as e:
         sphere().replace(change)
     assert field in str(e.value) and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("path", ["stationbed/loop/magnetorquers.py", "stationbed/scene/magnetorquers.py"],
+                         ids=["actuator", "scene_table"])
+def test_the_worked_example_shows_the_whole_file(path):
+    """docs/loop.md "Adding an actuator: a worked example" prints each file whole, as it is
+    (tests/test_docs.py runs the blocks): a change to the file without the page fails here."""
+    page = (ROOT / "docs" / "loop.md").read_text()
+    section = page[page.index("## Adding an actuator: a worked example"):]
+    blocks = re.findall(r"```python\n(.*?)```", section, re.S)
+    assert (ROOT / path).read_text() in blocks

@@ -126,6 +126,10 @@ class Composed:
                                      ([self.env] if self.env is not None else [])))
         #: whether an actuator reads the true measurement (the front then evaluates it for them)
         self._truth = any(_field(f)[1] for a in self.actuators for f in a.inputs.names)
+        #: an actuator without an idle form acts on every tick: no tick is quiet, so the front
+        #: computes no quiet step (the busy tick's end and step on the request left are the
+        #: quiet step's operations when nothing acts: the same numbers)
+        self._never_quiet = any(a.idle is None for a in self.actuators)
         self._cache: dict = {}
 
     # -- the parts ----------------------------------------------------------------------------
@@ -251,9 +255,12 @@ class Composed:
             reads += r
             flag = a.idle(k, t, h, C.get(c, a.name), ca.vertcat(*r, cmd), P.get(par, a.name)) if a.idle is not None else 0
             idle = idle * flag
-        _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
-        x_q = self.plant.step(self._rhs, t, x, h, u, p)
-        fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
+        if self._never_quiet:  # an actuator acts on every tick: the busy tick steps, no quiet step here
+            fields = dict(i=i + 1, x=x, counts=cnt)
+        else:
+            _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
+            x_q = self.plant.step(self._rhs, t, x, h, u, p)
+            fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
         fields.update(mem)
         if self.env is not None:
             fields[self.env.name] = C.get(c, self.env.name)
@@ -312,7 +319,10 @@ class Composed:
         x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
-        head = ca.Function.if_else("cl_same", kept, acted)(same_c, c, par, cq, rest, on, tqq, full_c)
+        if self._never_quiet:  # no quiet step to keep: the end and the step on what the chain leaves
+            head = acted(c, par, cq, rest, on, tqq, full_c)
+        else:
+            head = ca.Function.if_else("cl_same", kept, acted)(same_c, c, par, cq, rest, on, tqq, full_c)
         fields = {f: C.get(cq, f) for f in C.names}
         fields["x"], fields["counts"] = head[: self.plant.nx], head[self.plant.nx:]
         fields.update({a.name: m for a, m in zip(self.actuators, xa)})

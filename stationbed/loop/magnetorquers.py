@@ -25,9 +25,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..core.rotation import dcm
-from .actuator import Actuator, register_actuator
-from .layout import Layout
+from stationbed.core.layout import Layout
+from stationbed.core.rotation import dcm
+from stationbed.loop.actuator import Actuator, register_actuator
 
 __all__ = ["Magnetorquers", "dipole_field_N", "B0_T", "R_REF_M"]
 

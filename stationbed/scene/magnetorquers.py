@@ -1,10 +1,8 @@
 """The scene table of the magnetic torquers (issue 33 item 6; physics in
-:mod:`stationbed.loop.magnetorquers`, docs/loop.md "Adding an actuator: a worked example").
+:mod:`stationbed.loop.magnetorquers`, docs/loop.md "Adding an actuator: a worked example")::
 
-```toml
-[magnetorquers]
-max_dipole_Am2 = [4000.0, 4000.0, 4000.0]   # A m², each rod's largest dipole (rods along B x, y, z)
-```
+    [magnetorquers]
+    max_dipole_Am2 = [4000.0, 4000.0, 4000.0]   # A m², each rod's largest dipole (rods along B x, y, z)
 
 The scene holds it as ``Scene.magnetorquers``; the closed loop flies it before the thrusters
 and the CMG cluster (the rods take the part of the law's request they can make).
@@ -14,7 +12,7 @@ from __future__ import annotations
 
 from pydantic import model_validator
 
-from .base import FieldError, Strict, Vec3
+from stationbed.scene.base import FieldError, Strict, Vec3
 
 __all__ = ["Magnetorquers", "check_magnetorquers"]
 
