@@ -8,7 +8,9 @@ same scene with the ``pd`` law (the issue's "as a new user would" combination), 
 ``scenarios/iss_lvlh_hold.toml`` (the truth-fed pd fused loop), interleaved in one process,
 median of ``--repeats`` after a warm-up that compiles or loads the builds. Target (issue 33):
 the full loop <= 1.7x the truth-fed pd loop per orbit. Also printed: each run's summary
-``fused`` flag (all must be true) and the process CPU medians.
+``fused`` flag (all must be true), the process CPU medians, and the same loop with three
+magnetic torque rods first in the chain (``scenarios/iss_full_flight_loop_magnetorquers.toml``,
+the worked example of a new actuator, docs/loop.md: its cost per orbit against the loop without).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import stationbed  # noqa: E402
 
 FULL = ROOT / "scenarios" / "iss_full_flight_loop.toml"
 TRUTH = ROOT / "scenarios" / "iss_lvlh_hold.toml"
+RODS = ROOT / "scenarios" / "iss_full_flight_loop_magnetorquers.toml"
 TARGET_RATIO = 1.7  # issue 33: the full flight loop <= 1.7x the truth-fed pd fused loop per orbit
 
 
@@ -42,11 +45,13 @@ def main(argv=None) -> int:
     full_pd = full.replace({"controller.name": "pd", "controller.params": {"reference": "lvlh", "bandwidth": 0.005,
                                                                            "damping": 0.8, "max_slew_rate": 0.001}})
     truth = stationbed.load_scene(TRUTH)
+    rods = stationbed.load_scene(RODS)
     T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / full.orbit.mean_motion
     runs = {
         "truth_pd": lambda: stationbed.simulate(truth, duration=T, fused=True),
         "full_momentum_manager": lambda: stationbed.simulate(full, duration=T, fused=True),
         "full_pd": lambda: stationbed.simulate(full_pd, duration=T, fused=True),
+        "full_magnetorquers": lambda: stationbed.simulate(rods, duration=T, fused=True),
     }
     first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
     print(f"# one orbit ({T:.1f} s), fused, median of {args.repeats} interleaved; warm-up incl. compile/load "
@@ -57,6 +62,8 @@ def main(argv=None) -> int:
         ok &= fused
         print(f"{name:24s} wall {med[name]:.3f} s  cpu {cpu[name]:.3f} s  ratio {med[name] / med['truth_pd']:.2f}x "
               f"(cpu {cpu[name] / cpu['truth_pd']:.2f}x)  fused {fused}")
+    print(f"magnetic torquers in the chain: {med['full_magnetorquers'] / med['full_momentum_manager']:.2f}x the full "
+          "loop without them")
     ratio = med["full_momentum_manager"] / med["truth_pd"]
     ok &= ratio <= TARGET_RATIO
     print(f"target full loop <= {TARGET_RATIO}x truth-fed pd: {ratio:.2f}x {_smoke.verdict(ok, args.smoke)}")

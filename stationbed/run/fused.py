@@ -5,8 +5,8 @@ A run flies fused when every block of its composition is symbolic and the clock 
 blocks by :mod:`stationbed.loop.compose`, issue 33) then runs a whole output row's ticks in one
 compiled call (a casadi ``mapaccum`` generated as C), many rows per call where it can.
 Otherwise the per-tick loop runs, with the same numbers to round-off, and the summary names the
-one block that forces it (``not_fused``, :func:`why_not_fused`; ``thrusters_not_fused`` too for
-the thrusters' reasons).
+one block that forces it (``not_fused``, :func:`why_not_fused`; ``<kind>_not_fused`` too for an
+actuator's reasons, e.g. ``thrusters_not_fused``).
 """
 
 from __future__ import annotations
