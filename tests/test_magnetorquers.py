@@ -47,6 +47,9 @@ DIPOLE_ABS = 1e-9  # A m²
 #: the sphere turns (< 1e-3 rad/s; 6e-4 seen): < |τ| ω h² / 2 = 0.03 x 1e-3 x 0.01 / 2 = 1.5e-7 N m s per tick,
 #: 600 ticks: 1e-4 (measured 1.1e-5); the rods' impulse over the run is 0.63 N m s (checked to be seen)
 SPHERE_BALANCE_ABS = 2e-4  # N m s
+#: the sphere at rest with the thrusters (rates < 1e-5 rad/s): a 2000 N m pulse held in B while
+#: it turns, 2000 x 1e-5 x 0.01 / 2 = 1e-7 N m s per tick at most (measured 2.6e-8 in all)
+THR_BALANCE_ABS = 1e-6  # N m s
 #: the balance of the full loop with the rods (20 s, rows every tick): the rods' torque held in B
 #: while LVLH turns at orbital rate, < |τ| ω h² / 2 = 0.12 N m x 1.1e-3 rad/s x 0.01 s² / 2 per
 #: tick over 200 ticks = 1.3e-4 N m s (measured 1.1e-4), plus the trapezoids of the smooth
@@ -137,10 +140,15 @@ def test_dipole_chosen_in_the_known_field_torque_made_in_the_true_one():
     assert_allclose(rest, [0.0, tau[1], 0.0], rtol=0, atol=TORQUE_ABS)
 
 
-def sphere(cmg: bool = True, duration: float = 60.0):
+#: four thrusters at y = ±20 m firing ±z: two couples about body x (100 N: ±2000 N m)
+X_COUPLES = [{"name": n, "position_B": [0.0, y, 0.0], "direction_B": [0.0, 0.0, z], "force_N": 100.0, "isp_s": 280.0} for n, y, z in (("a", 20.0, 1.0), ("b", 20.0, -1.0), ("c", -20.0, 1.0), ("d", -20.0, -1.0))]
+
+
+def sphere(cmg: bool = True, duration: float = 60.0, thrusters: bool = False):
     """A 1e4 kg m² sphere in a 400 km orbit (no gravity gradient: a sphere has none) holding an
     inertial attitude with pd, 1000 A m² rods first in the chain, a momentum store (or the ideal
-    torquer) at its end."""
+    torquer) at its end; with ``thrusters``, :data:`X_COUPLES` between them dumping the store's
+    90 N m s about x from t = 0 (the sphere at rest: the held torques do not turn with it)."""
     d = {
         "name": "mtq_sphere",
         "simulation": {"duration": duration, "integrator": "rk4", "step": PERIOD_S, "output_dt": PERIOD_S},
@@ -153,6 +161,11 @@ def sphere(cmg: bool = True, duration: float = 60.0):
     }
     if cmg:
         d["cmg"] = {"kind": "ideal", "max_momentum": 100.0}
+    if thrusters:
+        d["initial"] = {"q_BN": [1.0, 0.0, 0.0, 0.0], "omega_BN_B": [0.0, 0.0, 0.0]}
+        d["cmg"]["h0_B"] = [90.0, 0.0, 0.0]
+        d["thruster"] = X_COUPLES
+        d["thrusters"] = {"dump_time_s": 1.0, "max_dump_torque_Nm": 1000.0}
     return scene_from_dict(d)
 
 
@@ -219,6 +232,23 @@ def test_with_the_ideal_torquer_rods_and_rest_are_the_request(fused):
     imp = np.vstack([np.zeros(3), np.cumsum(np.einsum("nij,nj->ni", C, tau) * np.diff(tr.t)[:, None], axis=0)])
     assert np.abs(tr.cols("mtq_m_x", "mtq_m_y", "mtq_m_z")).max() > 0  # the rods worked
     assert_allclose(tr.H_O_N - tr.H_O_N[0], imp, rtol=0, atol=SPHERE_BALANCE_ABS)
+
+
+@pytest.mark.parametrize("fused", [False, True], ids=["per_tick", "fused"])
+def test_rods_then_thrusters_keep_the_balance(fused):
+    """Rods first, then four thrusters dumping the store's momentum (they fire while the rods act
+    on every tick: the fused chain runs the thrusters' command where they are not idle):
+    ΔH_N = the rods' impulses + Σ_j (r_j × F_j ĝ_j) t_on,j from the logged on-times, both summed here."""
+    s = sphere(duration=20.0, thrusters=True)
+    tr = simulate(s, fused=fused)
+    assert tr.meta["summary"]["fused"] == fused and tr.meta["summary"]["thruster_firings"] > 0
+    D = np.array([np.cross(t["position_B"], t["direction_B"]) * t["force_N"] for t in X_COUPLES])  # N m
+    on = tr.data[:, [tr.columns.index(f"thr_on_s_{t['name']}") for t in X_COUPLES]]
+    C = np.array([_C_NB(q) for q in tr.q_BN[:-1]])
+    thr = np.vstack([np.zeros(3), np.cumsum(np.einsum("nij,nj->ni", C, np.diff(on, axis=0) @ D), axis=0)])
+    mag = _magnetic_impulse_N(s, tr)
+    assert np.abs(mag[-1]).max() > 1e4 * THR_BALANCE_ABS and np.abs(thr[-1]).max() > 10.0  # N m s: both seen
+    assert_allclose(tr.H_O_N - tr.H_O_N[0], thr + mag, rtol=0, atol=THR_BALANCE_ABS)
 
 
 @pytest.fixture(scope="module")

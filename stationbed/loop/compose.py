@@ -299,9 +299,13 @@ class Composed:
                 tq.append(a.outputs.get(out, "torque_B"))
         on_s, tq = ca.vertcat(SX(0, 1), *on_s), ca.vertcat(SX(0, 1), *tq)
         same = ca.logic_and(ca.sum1(on_s != 0) + ca.sum1(full != 0) == 0, ca.sum1(tau != cmds) == 0)
-        chain = sx_function("cl_chain", [ks, ts, hs, cs, ps_, cmds, rs],
-                            [tau, on_s, tq, same, full] + [mem[a.name] for a in self.actuators])
-        rest, on, tqq, same_c, full_c, *xa = chain(k, t, h, c, par, cmd, reads)
+        if self._never_quiet:  # each actuator behind its own idle test (a never-quiet chain keeps their skips)
+            rest, on, tqq, full_c, xa = self._chain_lazy(k, t, h, c, par, cmd, reads)
+            same_c = None
+        else:
+            chain = sx_function("cl_chain", [ks, ts, hs, cs, ps_, cmds, rs],
+                                [tau, on_s, tq, same, full] + [mem[a.name] for a in self.actuators])
+            rest, on, tqq, same_c, full_c, *xa = chain(k, t, h, c, par, cmd, reads)
         # the end on the rest (SX), then the plain or the split step (explicit branches)
         xs_, rs_, us_ = SX.sym("x", self.plant.nx), SX.sym("rest", self.ncmd), SX.sym("u_ext", 3)
         pp = SX.sym("p", self.plant.npar)
@@ -320,13 +324,45 @@ class Composed:
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
         if self._never_quiet:  # no quiet step to keep: the end and the step on what the chain leaves
-            head = acted(c, par, cq, rest, on, tqq, full_c)
+            head = acted(c, par, cq, rest, on, tqq, full_c)  # (same_c unused)
         else:
             head = ca.Function.if_else("cl_same", kept, acted)(same_c, c, par, cq, rest, on, tqq, full_c)
         fields = {f: C.get(cq, f) for f in C.names}
         fields["x"], fields["counts"] = head[: self.plant.nx], head[self.plant.nx:]
         fields.update({a.name: m for a, m in zip(self.actuators, xa)})
         return ca.Function("cl_busy", [c, par, cq, cmd, reads], [C.pack(fields, symbolic=True)])
+
+    def _chain_lazy(self, k, t, h, c, par, cmd, reads):
+        """The chain as one call per actuator (MX around each one's SX step), an actuator with
+        an idle form behind a ``Function.if_else`` on it: where it is idle its exact idle form
+        (memory kept, request passed on, no channel on) and its command is not evaluated. For a
+        chain that is never quiet (an actuator without an idle form acts on every tick), so
+        the others still skip their ticks of nothing. ``(rest, on_s, torque_B, full, memories)``."""
+        C, P, SX, MX = self.carry, self.par, ca.SX, ca.MX
+        tau, at, on_s, tq, full, mem = cmd, 0, [], [], MX.zeros(3), []
+        for a in self.actuators:
+            n_r = a.inputs.size - 3
+            ks, ts, hs, xs, rs, taus, ps = (SX.sym("k"), SX.sym("t"), SX.sym("h"), a.state.symbol("x"), SX.sym("r", n_r),
+                                            SX.sym("tau", 3), a.params.symbol("p"))
+            ins = [ks, ts, hs, xs, rs, taus, ps]
+            x1, out = a.call(ks, ts, hs, xs, ca.vertcat(rs, taus), SX(0, 1), ps)
+            on, tqa = a.outputs.get(out, "on_s"), a.outputs.get(out, "torque_B")
+            f = sx_function(f"cl_{a.name}", ins, [x1, a.outputs.get(out, "tau_rest_B"), on, tqa])
+            args = [k, t, h, C.get(c, a.name), reads[at: at + n_r], tau, P.get(par, a.name)]
+            at += n_r
+            if a.idle is not None:
+                idle = sx_function(f"cl_{a.name}_idle", ins, [a.idle(ks, ts, hs, xs, ca.vertcat(rs, taus), ps)])
+                kept = ca.Function(f"cl_{a.name}_kept", ins, [xs, taus, SX.zeros(on.numel()), SX.zeros(tqa.numel())])
+                x1, tau, on, tqa = ca.Function.if_else(f"cl_{a.name}_lazy", kept, f)(idle(*args), *args)
+            else:
+                x1, tau, on, tqa = f(*args)
+            mem.append(x1)
+            if a.full_tick:
+                full = full + ca.sum2(ca.reshape(tqa, 3, -1))
+            else:
+                on_s.append(on)
+                tq.append(tqa)
+        return tau, ca.vertcat(MX(0, 1), *on_s), ca.vertcat(MX(0, 1), *tq), full, mem
 
     def _env_step(self, c, par):
         """The carry with the ``env`` block stepped where a block of its ``every`` ticks starts
