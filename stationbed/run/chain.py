@@ -86,6 +86,7 @@ def chain_columns(scene) -> list[str]:
 
 
 def chain_summary(comp) -> dict:
+    """What the run's summary adds from each actuator of the chain (its kind's ``summary``)."""
     out = {}
     for a in comp.actuators:
         out.update(a.summary())
