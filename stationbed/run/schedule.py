@@ -21,6 +21,7 @@ their own copies of p); :data:`SOURCES` makes the steps from the scene (``[[faul
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -252,3 +253,14 @@ def lockstep_hook(batch, samples, held):
             batch.flight.fc.args[8].reshape(len(samples), -1)[i] = comp.flight.params
         batch._measure(i, t, batch.X[i])
     return due, step
+
+
+def bulk_stop(ticks, row_ks, j: int) -> int:
+    """The row (index in ``row_ks``, the output rows' ticks) at which a stretch of bulk rows
+    starting at row ``j`` must stop: the row holding the first step tick (``ticks``, sorted)
+    after row j's tick, or starting at it (the step applies before that row); the last row
+    without one."""
+    i = bisect.bisect_right(ticks, row_ks[j])
+    if i == len(ticks):
+        return len(row_ks) - 1
+    return bisect.bisect_right(row_ks, ticks[i]) - 1
