@@ -245,3 +245,61 @@ def test_bad_fault_is_one_line(fault, words):
     assert "\n" not in msg
     for w in words:
         assert w in msg, msg
+
+
+# -- the Monte Carlo (issue 34 item 4) --------------------------------------------------------------
+
+P_OCCUR = 0.3  # the fault's probability of occurrence per sample
+N_DRAWS = 400  # samples drawn (not run): the binomial band below
+#: |count - n p| within 4.5 standard deviations sqrt(n p (1 - p)): a false failure ~7e-6 per run
+BINOMIAL_SIGMAS = 4.5
+
+
+def study(**fault) -> dict:
+    d = box([dict({"name": "cmg", "kind": "cmg_failed", "unit": 2, "probability": P_OCCUR}, **fault)])
+    d["montecarlo"] = {"n": N_DRAWS, "seed": 7, "envelope_dt": None, "disperse": [
+        {"key": "fault.cmg.t", "kind": "uniform", "low": -3.0, "high": 3.0},  # s, about T_FAULT_S
+        {"key": "fault.cmg.unit", "kind": "choice", "choices": [1, 2, 3, 4]}]}
+    return d
+
+
+def test_montecarlo_draws_faults_on_the_grid_with_their_probability():
+    from stationbed.studies.montecarlo.dispersions import draw, drawn_columns
+
+    scene = scene_from_dict(study())
+    cols = drawn_columns(scene)
+    assert "fault.cmg.occurred" in cols and not any(c.startswith("told.fault") for c in cols)
+    occurred = 0
+    for k in range(N_DRAWS):
+        s, dr, _, why = draw(scene, k)
+        assert why is None
+        f = s.fault[0]
+        assert f.enabled == bool(dr.values["fault.cmg.occurred"])
+        assert s.knowledge is None or not any(p.startswith("fault") for p in s.knowledge.values)
+        tick = f.t / PERIOD_S
+        assert round(tick) * PERIOD_S == f.t and T_FAULT_S - 3.0 - PERIOD_S / 2 <= f.t <= T_FAULT_S + 3.0 + PERIOD_S / 2
+        if f.enabled:
+            occurred += 1
+            assert (dr.values["fault.cmg.t"], dr.values["fault.cmg.unit"]) == (f.t, f.unit)
+        else:
+            assert math.isnan(dr.values["fault.cmg.t"]) and math.isnan(dr.values["fault.cmg.unit"])
+    sd = math.sqrt(N_DRAWS * P_OCCUR * (1 - P_OCCUR))
+    assert abs(occurred - N_DRAWS * P_OCCUR) <= BINOMIAL_SIGMAS * sd
+
+
+def test_montecarlo_sample_flies_what_was_drawn():
+    from stationbed.studies.montecarlo.dispersions import draw
+
+    scene = scene_from_dict(study(probability=0.5))
+    nominal = simulate(scene_from_dict(box()), fused=True)
+    seen = set()
+    for k in range(12):
+        s, dr, _, _ = draw(scene, k)
+        tr = simulate(s, fused=True)
+        if s.fault[0].enabled:  # the drawn fault, at its drawn time
+            assert tr.meta["summary"]["faults"] == [dict(fault="cmg", kind="cmg_failed", unit=s.fault[0].unit, t=s.fault[0].t)]
+        else:  # a fault that did not occur changes nothing, bit for bit
+            assert tr.meta["summary"]["faults"] == []
+            assert np.array_equal(tr.data[:, :-1], nominal.data)
+        seen.add(s.fault[0].enabled)
+    assert seen == {True, False}

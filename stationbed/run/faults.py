@@ -93,6 +93,8 @@ def fault_steps(comp) -> list[Step]:
     steps = []
     period = comp.period
     for i, f in enumerate(comp.scene.fault):
+        if not f.enabled:
+            continue
         effect = FAULT_EFFECTS.get(f.kind)
         if effect is None:
             raise ValueError(f"fault[{i}].kind: '{f.kind}' has no effect registered (stationbed/run/faults.py)")

@@ -214,8 +214,9 @@ class Rows:
         if "faults_active" in col:
             per = scene.controller.period
             grid = lambda v: round(v / per) * per  # noqa: E731 (the tick time the step applies at)
-            self._faults = (col["faults_active"], np.array([grid(f.t) for f in scene.fault]),
-                            np.array([math.inf if f.until is None else grid(f.until) for f in scene.fault]))
+            on = [f for f in scene.fault if f.enabled]
+            self._faults = (col["faults_active"], np.array([grid(f.t) for f in on]),
+                            np.array([math.inf if f.until is None else grid(f.until) for f in on]))
 
     def make(self, ts, xs, held=None) -> np.ndarray:
         """Rows for times ``ts`` and states ``xs``.

@@ -222,7 +222,7 @@ def loop_hook(loop):
 def steps_summary(comp, res) -> dict:
     """The summary's ``faults``: the steps applied, in order (empty without a schedule)."""
     st = getattr(res, "stepper", None)
-    if not comp.schedule:
+    if not comp.schedule and not comp.scene.fault:
         return {}
     return {"faults": [] if st is None else st.summary()}
 
