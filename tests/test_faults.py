@@ -177,6 +177,23 @@ def test_wheel_speed_drop_scales_that_rotor():
         assert_allclose(hi, pyramid_h(gi, rotor), rtol=0, atol=1e-9 * H_ROTOR_NMS)
 
 
+TAU_S = 2.0  # s, the spin-down's time constant: a step every tick (τ / 20 = 0.1 s)
+
+
+@pytest.mark.parametrize("formulation", ["dalembert", "momentum"])
+def test_spin_down_follows_the_exponential_and_keeps_momentum(formulation):
+    """``spin_down_s = τ``: at every step tick the rotor holds exp(-(t - t_f) / τ) of its momentum
+    (Wie's pyramid sum, written here), the rest handed to the body (H_N constant)."""
+    tr = run(box([{"kind": "cmg_failed", "unit": 2, "spin_down_s": TAU_S}], formulation=formulation), "fused")
+    g = tr.data[:, [tr.columns.index(f"gimbal_{i}") for i in range(1, 5)]]
+    h = tr.data[:, [tr.columns.index(k) for k in ("hx", "hy", "hz")]]
+    for t, gi, hi in zip(tr.t, g, h):
+        rotor = [1.0, math.exp(-(t - T_FAULT_S) / TAU_S) if t >= T_FAULT_S else 1.0, 1.0, 1.0]
+        assert_allclose(hi, pyramid_h(gi, rotor), rtol=0, atol=1e-9 * H_ROTOR_NMS)
+    assert_allclose(tr.H_O_N, np.broadcast_to(tr.H_O_N[0], tr.H_O_N.shape), rtol=0, atol=H_DRIFT_NMS)
+    assert tr.meta["summary"]["faults"] == [dict(fault=0, kind="cmg_failed", unit=2, t=T_FAULT_S)]
+
+
 # -- thrusters -------------------------------------------------------------------------------------
 
 F_N = 100.0  # N, the leaking thruster's force

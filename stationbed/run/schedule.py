@@ -151,8 +151,9 @@ class Stepper:
         return x
 
     def summary(self) -> list[dict]:
-        """The steps applied, in order (their ``info`` and time [s])."""
-        return [dict(s.info, t=s.k * self.comp.period) for s in self.schedule.steps if s.k in self.done]
+        """The steps applied, in order (their ``info`` and time [s]; a staircase's first step only)."""
+        return [dict(s.info, t=s.k * self.comp.period) for s in self.schedule.steps
+                if s.k in self.done and "step" not in s.info]
 
 
 def stepper(comp, res) -> Stepper:
