@@ -93,7 +93,7 @@ def register_fault_kind(kind: FaultKind) -> FaultKind:
 
 for _k in (
     FaultKind("cmg_failed", "cmg", {"spin_down_s": FaultParam(0.0, 0.0, math.inf, "s, the rotor's time constant; 0: it stops at t")},
-              windowed=False, doc="a CMG unit fails: its gimbals held, its rotor stopped (momentum to the body)"),
+              windowed=False, doc="a CMG unit fails: its gimbals held, its rotor stopped or spinning down (momentum to the body)"),
     FaultKind("gimbal_stuck", "cmg", doc="a CMG unit's gimbals held at their angles at t (the rotor spins on)"),
     FaultKind("gimbal_rate_limit", "cmg", {"limit": FaultParam(None, 0.0, math.inf, "rad/s, the degraded limit")},
               doc="a CMG unit's gimbal rates clamped to a degraded limit (steering unaware)"),
