@@ -320,3 +320,24 @@ def test_montecarlo_sample_flies_what_was_drawn():
             assert np.array_equal(tr.data[:, :-1], nominal.data)
         seen.add(s.fault[0].enabled)
     assert seen == {True, False}
+
+
+@pytest.mark.parametrize("t_fault", [20.0, 20.3], ids=["on_the_probe_grid", "off_the_probe_grid"])
+def test_faults_with_the_environment_rate_probe(t_fault, tmp_path, monkeypatch):
+    """``environment_rate = "auto"`` probes the scene with a nested run at a 1 s tick before the
+    run flies: the probe flies without the faults (a fault at 20.3 s is off its grid), and the
+    compiled calls' buffers it shares with the run keep the run's nominal numbers, so the fused
+    and the per-tick run of the faulted scene agree (the probe fresh, run by the first)."""
+    from stationbed.run import rate_auto
+    from stationbed.scene import load_scene
+
+    (tmp_path / "cache").mkdir()
+    monkeypatch.setattr(rate_auto, "cache_dir", lambda: tmp_path / "cache")
+    monkeypatch.setattr(rate_auto, "_CHOICES", type(rate_auto._CHOICES)())
+    monkeypatch.setattr(rate_auto, "_BY_ID", type(rate_auto._BY_ID)())
+    scene = load_scene("scenarios/iss_lvlh_hold.toml").replace(
+        {"simulation.duration": 60.0, "fault": [{"t": t_fault, "kind": "cmg_failed", "unit": 2}]})
+    fused = simulate(scene, fused=True)
+    per_tick = simulate(scene, fused=False)
+    assert fused.meta["summary"]["environment_rate_ticks"] > 0  # the probe ran and chose a held rate
+    assert_allclose(fused.data, per_tick.data, rtol=1e-12, atol=1e-9)
