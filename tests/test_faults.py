@@ -341,3 +341,13 @@ def test_faults_with_the_environment_rate_probe(t_fault, tmp_path, monkeypatch):
     per_tick = simulate(scene, fused=False)
     assert fused.meta["summary"]["environment_rate_ticks"] > 0  # the probe ran and chose a held rate
     assert_allclose(fused.data, per_tick.data, rtol=1e-12, atol=1e-9)
+
+
+def test_fault_events_on_the_rerun_time_line():
+    """The recording's ``events`` log marks each change of ``faults_active`` at its row's time."""
+    from stationbed.output.rerun.events import Events
+
+    tr = run(box([CMG_FAULTS["gimbal_stuck"], dict(CMG_FAULTS["cmg_failed"], t=5.0)]), "fused")
+    got = Events(tr.columns).changes(tr)
+    assert [e for e in got if "fault" in e[2]] == [(T_FAULT_S, "WARN", "faults active: 1"), (5.0, "WARN", "faults active: 2"),
+                                                 (7.0, "INFO", "faults active: 1")]
