@@ -351,3 +351,14 @@ def test_fault_events_on_the_rerun_time_line():
     got = Events(tr.columns).changes(tr)
     assert [e for e in got if "fault" in e[2]] == [(T_FAULT_S, "WARN", "faults active: 1"), (5.0, "WARN", "faults active: 2"),
                                                  (7.0, "INFO", "faults active: 1")]
+
+
+def test_every_truth_kind_has_an_effect_and_a_balance_test():
+    """A CMG or thruster fault kind registered without its effect, or left out of the tests above
+    (the momentum balance, the split run, the thrusters' ledger), fails here."""
+    from stationbed.run.faults import FAULT_EFFECTS
+    from stationbed.scene.faults import FAULT_KINDS
+
+    truth = {n for n, k in FAULT_KINDS.items() if k.target in ("cmg", "thruster")}
+    assert truth <= set(FAULT_EFFECTS)
+    assert truth <= set(CMG_FAULTS) | {"thruster_stuck_on", "thruster_stuck_off"}
