@@ -27,6 +27,7 @@ from numpy.testing import assert_allclose
 
 from stationbed import simulate
 from stationbed.model.cmg import CmgGeometry
+from stationbed.run.controller import Controller, ControllerParams
 from stationbed.run.lockstep import run_lockstep
 from stationbed.scene import SceneError, scene_from_dict
 
@@ -41,6 +42,7 @@ SPLIT_ABS = 1e-9
 #: RK4 at 0.1 s over 10 s of a tumbling box (ω state) keeps H to ~3e-8 N m s (measured); a rotor's
 #: momentum lost instead of handed to the body would be 1e3 N m s
 H_DRIFT_NMS = 1e-6
+J_BOX = np.diag([1.0e5, 1.2e5, 1.5e5])  # kg m², the box's inertia
 #: g0 for the propellant's truth [m/s²] (CGPM 1901, exact)
 G0 = 9.80665
 
@@ -71,9 +73,30 @@ def box(faults=(), *, formulation="dalembert", duration=DURATION_S, q0=(1.0, 0.0
     }
 
 
+class PyHold(Controller):
+    """A law in Python only (no symbolic form: the per-tick loop calls ``_update`` every tick):
+    ``τ = -J (k q_v + c ω)``, stateless, inertial hold."""
+
+    name = "py_hold"
+    command = "torque"
+
+    class Params(ControllerParams):
+        k: float = 0.02  # 1/s²
+        c: float = 0.2  # 1/s
+
+    def _update(self, t, meas):
+        q, w, P = meas.q_BN, meas.omega_BN_B, self.params
+        s = 1.0 if q[0] >= 0.0 else -1.0
+        return tuple(-J_BOX[i, i] * (P.k * s * q[i + 1] + P.c * w[i]) for i in range(3))
+
+
 def run(d: dict, executor: str):
     """The run of scene dict ``d`` on ``executor``, asserting it ran there."""
     scene = scene_from_dict(d)
+    if executor == "python_law":
+        tr = simulate(scene, controller=PyHold(period=PERIOD_S))
+        assert not tr.meta["summary"]["fused"]
+        return tr
     if executor == "lockstep":  # the batch: a second sample (nominal) beside it
         (kind, tr), _ = run_lockstep([scene, scene_from_dict(dict(d, fault=[]))], fused=False, keep=True)
         assert kind == "batch"
@@ -91,10 +114,9 @@ AFTER = {
     "gimbal_rate_limit": {"rate_cap": CMG_FAULTS["gimbal_rate_limit"]["limit"]},
     "wheel_speed_drop": {"rotor": 1.0 - CMG_FAULTS["wheel_speed_drop"]["fraction"]},
 }
-J_BOX = np.diag([1.0e5, 1.2e5, 1.5e5])  # kg m², the box's inertia
 
 
-@pytest.mark.parametrize("executor", ["fused", "per_tick", "lockstep"])
+@pytest.mark.parametrize("executor", ["fused", "per_tick", "python_law", "lockstep"])
 @pytest.mark.parametrize("name", list(CMG_FAULTS))
 def test_fault_equals_the_split_run(name, executor, monkeypatch):
     f = dict(CMG_FAULTS[name])
