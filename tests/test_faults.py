@@ -384,3 +384,10 @@ def test_every_truth_kind_has_an_effect_and_a_balance_test():
     truth = {n for n, k in FAULT_KINDS.items() if k.target in ("cmg", "thruster")}
     assert truth <= set(FAULT_EFFECTS)
     assert truth <= set(CMG_FAULTS) | {"thruster_stuck_on", "thruster_stuck_off"}
+
+
+def test_run_line_names_the_faults():
+    from stationbed.cli import _summary_line
+
+    tr = run(box([CMG_FAULTS["gimbal_stuck"], dict(CMG_FAULTS["cmg_failed"], t=5.0)]), "fused")
+    assert "faults: gimbal_stuck 1 at 4 s, cmg_failed 2 at 5 s, gimbal_stuck 1 at 7 s cleared" in _summary_line(tr.meta["summary"])
