@@ -29,7 +29,8 @@ import numpy as np
 
 from ..core.compile import FastCall
 
-__all__ = ["Step", "Schedule", "Stepper", "SOURCES", "block_numbers", "schedule_of", "stepper", "refresh_loop"]
+__all__ = ["Step", "Schedule", "Stepper", "SOURCES", "block_numbers", "schedule_of", "stepper", "refresh_loop",
+           "composed_hook", "loop_hook", "lockstep_hook", "bulk_stop", "steps_summary"]
 
 
 @dataclass(eq=False)
@@ -157,7 +158,7 @@ class Stepper:
 
 
 def stepper(comp, res) -> Stepper:
-    """The run's :class:`Stepper` (one per run state ``res``: its ``steps_applied`` summary)."""
+    """The run's :class:`Stepper` (one per run state ``res``, kept on it: the summary reads it)."""
     st = getattr(res, "stepper", None)
     if st is None:
         st = res.stepper = Stepper(comp, res)
