@@ -19,6 +19,7 @@ from .knowledge import Knowledge, knowledge_scene
 from .magnetorquers import Magnetorquers, check_magnetorquers
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
+from .faults import Fault, check_faults
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
 from .wing import check_plate_faces, wing_surface
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
@@ -51,6 +52,7 @@ class Scene(Strict):
     thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
     thrusters: ThrusterOptions | None = None
     magnetorquers: Magnetorquers | None = None  # issue 33: stationbed/loop/magnetorquers.py
+    fault: list[Fault] = []  # issue 34: scheduled steps of the truth (stationbed/run/schedule.py)
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -90,6 +92,7 @@ class Scene(Strict):
         _check_knowledge(self)
         check_thrusters(self)
         check_magnetorquers(self)
+        check_faults(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -261,7 +264,7 @@ def _assign(data: dict, defaults: dict, path: str, value) -> None:
         elif isinstance(node, dict):
             if isinstance(key, int):
                 raise KeyPathError(f"{here}: {where} is a table, not an array")
-            if model is not None and key not in model.model_fields:
+            if model is not None and key not in model.model_fields and model.model_config.get("extra") != "allow":
                 raise KeyPathError(f"{here}: {_unknown_key(model, key)}")
         else:
             raise KeyPathError(f"{here}: {where} is a value, not {'an array' if isinstance(key, int) else 'a table'}")

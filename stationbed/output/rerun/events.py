@@ -13,7 +13,8 @@
   sample read 0 (no sample yet) and are not a dropout (:func:`~stationbed.loop.flight.st_dropouts`);
 * a ``mode`` or ``*_mode`` column: "<column> -> <value>" whenever its value changes (``thr_mode``:
   1 = thruster-only control, issue 21);
-* ``thr_dumping`` 0 -> 1 "thruster momentum dump begins", 1 -> 0 "ends" (issue 21).
+* ``thr_dumping`` 0 -> 1 "thruster momentum dump begins", 1 -> 0 "ends" (issue 21);
+* ``faults_active`` changing: "faults active: <n>" (WARN when it grows; issue 34).
 
 Rows come in batches (a streamed run): the last value of every flag is kept between batches, and a
 run that starts saturated or in shadow logs that at its first row.
@@ -54,8 +55,8 @@ RGB_NO_SAMPLE = (150, 150, 150)
 
 def event_columns(columns) -> list[str]:
     """The columns :class:`Events` watches, in column order."""
-    return [c for c in columns if c in ("cmg_saturated", "eclipse", "thr_dumping") or c.startswith("st_valid_")
-            or c == "mode" or c.endswith("_mode")]
+    return [c for c in columns if c in ("cmg_saturated", "eclipse", "thr_dumping", "faults_active")
+            or c.startswith("st_valid_") or c == "mode" or c.endswith("_mode")]
 
 
 def _state(col: str, v: float):
@@ -75,6 +76,8 @@ def _text(col: str, state, first: bool, prev=None):
         return (None if first else ("INFO", "eclipse exit")) if state else ("INFO", "eclipse entry")
     if col == "thr_dumping":
         return ("INFO", "thruster momentum dump begins") if state else (None if first else ("INFO", "thruster momentum dump ends"))
+    if col == "faults_active":  # scheduled faults (issue 34): the count at each change
+        return None if first and state == 0 else ("WARN" if state > (prev or 0) else "INFO", f"faults active: {state:g}")
     if col.startswith("st_valid_"):  # state: "none" (no valid sample yet), "valid", "dropout"
         head = col.removeprefix("st_valid_")
         return {"none": None, "dropout": ("WARN", f"star tracker {head} dropout"),
