@@ -15,6 +15,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .docking import Event, Port, Vehicle, check_docking
 from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
@@ -49,6 +50,9 @@ class Scene(Strict):
     knowledge: Knowledge | None = None
     thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
     thrusters: ThrusterOptions | None = None
+    port: list[Port] = []  # issue 35: docking ports, visiting vehicles, configuration events (scene/docking.py)
+    vehicle: list[Vehicle] = []
+    event: list[Event] = []
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -87,6 +91,7 @@ class Scene(Strict):
         _check_sensors(self)
         _check_knowledge(self)
         check_thrusters(self)
+        check_docking(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
