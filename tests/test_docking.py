@@ -206,3 +206,43 @@ def test_bad_event_is_one_line_naming_the_key(change, where):
     with pytest.raises(SceneError) as err:
         scene_from_dict(docking_dict() | change)
     assert where in str(err.value) and "\n" not in str(err.value)
+
+
+# ---------------------------------------------------------------------------------------
+# the vehicle's surfaces: on while it is docked, where its port puts them
+# ---------------------------------------------------------------------------------------
+
+#: the same plate sums in a different order: round-off of torques ~1e-5 N m
+SRP_RTOL = 1e-12
+SRP_ATOL = 1e-20  # N m
+
+
+def _srp_scene(**more):
+    from env_helpers import base_scene  # noqa: PLC0415
+
+    return base_scene(**{"torque": [{"kind": "srp"}], "sun": {"direction_N": [0.3, -0.5, 0.8]},
+                         "surface": [{"size": [4.0, 4.0, 4.0]}], **more})
+
+
+def _tau_srp(d):
+    from env_helpers import outputs  # noqa: PLC0415
+
+    f, _, _ = outputs(d)
+    return f(10.0, np.array(_q_z(0.4)))["tau_srp"]
+
+
+def test_vehicle_plates_are_on_while_docked_where_the_port_puts_them():
+    # a massless vehicle (the mass centre stays at 0) with a 10 m² plate, normal +z of V, 2 m
+    # out along V x from its interface; docked at a port at (5, 1, 0) turned a quarter about z:
+    # the plate's normal is +z of B and its centre (5, 1, 0) + (0, 2, 0) = (5, 3, 0) by hand
+    plate = {"area": 10.0, "normal": [0.0, 0.0, 1.0], "centre": [2.0, 0.0, 0.0]}
+    port = [{"name": "p", "position": [5.0, 1.0, 0.0], "axis": [1.0, 0.0, 0.0], "q_VB": _q_z(np.pi / 2)}]
+    vehicle = {"name": "v", "mass": 0.0, "inertia": [[0.0] * 3] * 3, "surface": [plate]}
+    docked = _srp_scene(port=port, vehicle=[vehicle | {"port": "p"}])
+    free = _srp_scene(port=port, vehicle=[vehicle])
+    by_hand = _srp_scene(surface=[{"size": [4.0, 4.0, 4.0]}, plate | {"centre": [5.0, 3.0, 0.0]}])
+    alone = _srp_scene()
+    assert_allclose(_tau_srp(docked), _tau_srp(by_hand), rtol=SRP_RTOL, atol=SRP_ATOL)
+    assert_allclose(_tau_srp(free), _tau_srp(alone), rtol=SRP_RTOL, atol=SRP_ATOL)
+    assert not np.allclose(_tau_srp(by_hand), _tau_srp(alone))  # the plate matters here
+    assert Structure.of(scene_from_dict(docked)) == Structure.of(scene_from_dict(free))
