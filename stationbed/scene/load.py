@@ -19,6 +19,7 @@ from .docking import Event, Port, Vehicle, check_docking
 from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
+from .faults import Fault, check_faults
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
 from .wing import check_plate_faces, wing_surface
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
@@ -50,6 +51,7 @@ class Scene(Strict):
     knowledge: Knowledge | None = None
     thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
     thrusters: ThrusterOptions | None = None
+    fault: list[Fault] = []  # issue 34: scheduled steps of the truth (stationbed/run/schedule.py)
     port: list[Port] = []  # issue 35: docking ports, visiting vehicles, configuration events (scene/docking.py)
     vehicle: list[Vehicle] = []
     event: list[Event] = []
@@ -91,6 +93,7 @@ class Scene(Strict):
         _check_sensors(self)
         _check_knowledge(self)
         check_thrusters(self)
+        check_faults(self)
         check_docking(self)
         return self
 
@@ -263,7 +266,7 @@ def _assign(data: dict, defaults: dict, path: str, value) -> None:
         elif isinstance(node, dict):
             if isinstance(key, int):
                 raise KeyPathError(f"{here}: {where} is a table, not an array")
-            if model is not None and key not in model.model_fields:
+            if model is not None and key not in model.model_fields and model.model_config.get("extra") != "allow":
                 raise KeyPathError(f"{here}: {_unknown_key(model, key)}")
         else:
             raise KeyPathError(f"{here}: {where} is a value, not {'an array' if isinstance(key, int) else 'a table'}")
