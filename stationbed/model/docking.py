@@ -175,32 +175,31 @@ def event_terms(before, after, event) -> tuple[np.ndarray, np.ndarray]:
     return capture_terms(m_s, r_s, m_v, r_v, I_v, event.rate_VB_B, v_close)
 
 
-def event_jump(form, t_e: float, K, c):
-    """The state jump ``(x, p_before, p_after) -> x_after`` of an event with ``ΔH = K ω + c``
-    (casadi, on any formulation's state: ``form``).
+def event_jump(form, t, x, p_before, p_after, K, c):
+    """The state just after an event with ``ΔH = K ω + c`` (casadi, on any formulation's
+    state: ``form``), from the state ``x`` just before, at time ``t``.
 
     The momentum form adds ΔH to its state ``H_O_B``; a rate-state form takes
     ``ω' = ω + I'⁻¹ (ΔH - (I0' - I0) ω)`` (``I' ω' = I ω + ΔH``: the arrays' and the CMGs'
     momentum relative to the body do not change). ``K = 0, c = 0`` with ``p_after = p_before``
     returns ``x`` bit for bit. Rigid arrays only (the scene refuses events with elastic modes).
+
+    Parameters
+    ----------
+    t : casadi  Time [s].
+    x : casadi, shape (nx, 1)  State just before.
+    p_before, p_after : casadi, shape (np, 1)  The parameters before and after the event.
+    K : casadi, shape (3, 3)  [kg m²];  c : casadi, shape (3, 1)  [N m s]  (:func:`event_terms`).
     """
-    K = ca.DM(np.asarray(K, float))
-    c = ca.DM(np.asarray(c, float).reshape(3, 1))
     model = form.model
     L = model.layout
-
-    def jump(x, p_before, p_after):
-        omega = form.omega(t_e, x, p_before)
-        dH = ca.mtimes(K, omega) + c
-        xl = form.state_layout
-        core = xl.slice(form.rate_field)
-        if form.omega_is_state:
-            arrays = form.arrays(t_e, x, p_after)
-            I_after = model.inertia(t_e, p_after, arrays)
-            dI0 = ca.reshape(p_after[L["I0"]] - p_before[L["I0"]], 3, 3).T
-            new = x[core] + ca.mtimes(inv3(I_after), dH - ca.mtimes(dI0, omega))
-        else:
-            new = x[core] + dH
-        return ca.vertcat(x[0 : core.start], new, x[core.stop :])
-
-    return jump
+    omega = form.omega(t, x, p_before)
+    dH = ca.mtimes(K, omega) + c
+    core = form.state_layout.slice(form.rate_field)
+    if form.omega_is_state:
+        I_after = model.inertia(t, p_after, form.arrays(t, x, p_after))
+        dI0 = ca.reshape(p_after[L["I0"]] - p_before[L["I0"]], 3, 3).T
+        new = x[core] + ca.mtimes(inv3(I_after), dH - ca.mtimes(dI0, omega))
+    else:
+        new = x[core] + dH
+    return ca.vertcat(x[0 : core.start], new, x[core.stop :])

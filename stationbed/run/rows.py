@@ -110,7 +110,18 @@ def trajectory_columns(scene: Scene) -> list[str]:
     modes = [(a.name, k + 1) for a in scene.appendage for k in range(len(a.mode))]
     if modes:
         cols += [f"eta_{n}_{k}" for n, k in modes] + [f"etadot_{n}_{k}" for n, k in modes] + ["U_strain"]
+    if scene.event:  # issue 35: the configuration flown, and the one the law was told of
+        cols += ["config", "config_known"]
     return cols
+
+
+def _configuration_times(scene) -> tuple[np.ndarray, np.ndarray]:
+    """The times [s] the truth's configuration changes (each ``[[event]]``) and the times the
+    law is told of each (``t + update_after_s``; inf: never); the ``config`` and
+    ``config_known`` columns count those at or before a row's time."""
+    done = np.array([e.t for e in scene.event], float)
+    known = np.array([math.inf if e.update_after_s == "never" else e.t + e.update_after_s for e in scene.event])
+    return done, known
 
 
 class Rows:
@@ -207,6 +218,7 @@ class Rows:
             self.held_columns += thruster_columns(scene)
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
+        self._config = (col["config"], col["config_known"], *_configuration_times(scene)) if scene.event else None
         self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []
 
     def make(self, ts, xs, held=None) -> np.ndarray:
@@ -245,6 +257,10 @@ class Rows:
         rows[:, self.gimbal_cols] = xs[:, self._gimbals]
         if held is not None and len(self.held_cols):
             rows[:, self.held_cols] = np.asarray(held, dtype=float).reshape(len(ts), -1)
+        if self._config is not None:  # (times on the tick grid: an event's own row counts it)
+            c_done, c_known, done, known = self._config
+            rows[:, c_done] = np.searchsorted(done, ts + 1e-9 * np.maximum(1.0, ts), side="right")
+            rows[:, c_known] = np.sum(known[None, :] <= ts[:, None] + 1e-9 * np.maximum(1.0, ts[:, None]), axis=1)
         return rows
 
     def emit(self, rows: np.ndarray) -> None:

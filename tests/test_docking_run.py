@@ -1,0 +1,111 @@
+"""A docking inside a run (issue 35): one compiled loop on every executor, equal to the split run.
+
+Independent truth: the *split run*. Fly the station alone to the event (the scene without its
+events, stopped at t_e); from that run's last row (attitude, body rate, CMG momentum), work the
+capture by hand here (the two bodies' angular momentum about their common mass centre, the
+composite inertia by the parallel-axis theorem: no library code); fly the docked scene from that
+state. The run with the ``[[event]]`` must give the same rows after t_e, on the fused, per-tick
+and lockstep executors (the law told at once, so both halves design on what they fly).
+
+The scene is deep space with an ideal CMG cluster and a PD law holding an inertial attitude: it
+has no clock of its own (no orbit, no sun), so the second half may start at t = 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from stationbed import simulate
+from stationbed.run.lockstep import run_lockstep
+from stationbed.scene import scene_from_dict
+
+T_EVENT_S = 10.0  # s
+DURATION_S = 20.0  # s
+M_S, M_V = 1.0e4, 2.0e3  # kg
+J_S = np.diag([4.0e4, 5.0e4, 6.0e4])  # kg m², the station about its mass centre (at 0)
+J_V = np.diag([1.0e3, 3.0e3, 3.5e3])  # kg m², the vehicle about its own
+R_PORT = np.array([-6.0, 0.5, 1.0])  # m
+CM_V = np.array([-2.5, 0.0, 0.0])  # m, from the interface along the port's axis (-x)
+CLOSING = 0.08  # m/s
+RATE_VB_B = np.array([0.0, 0.001, -0.0005])  # rad/s
+#: the two halves start from states equal to round-off (the hand-worked capture ~1e-16 relative
+#: of |ω| ~ 1e-3 rad/s); 100 RK4 ticks of a damped closed loop keep that far below 1e-10
+RTOL = 1e-10
+ATOL = 1e-13  # rad/s, N m s and quaternion units alike (|ω| ~ 1e-3, |h| ~ 10)
+
+BASE = {
+    "name": "dock_split",
+    "simulation": {"duration": DURATION_S, "formulation": "momentum", "integrator": "rk4", "step": 0.1,
+                   "output_dt": 1.0},
+    "initial": {"q_BN": (np.array([0.999, 0.02, -0.03, 0.01]) / np.linalg.norm([0.999, 0.02, -0.03, 0.01])).tolist(),
+                "omega_BN_B": [0.002, -0.001, 0.0015]},
+    "body": {"mass": M_S, "inertia": J_S.tolist()},
+    "cmg": {"kind": "ideal", "max_torque": 50.0, "max_momentum": 500.0},
+    "controller": {"name": "pd", "period": 0.1, "params": {"reference": "inertial", "bandwidth": 0.05, "damping": 0.8}},
+    "port": [{"name": "aft", "position": R_PORT.tolist(), "axis": [-1.0, 0.0, 0.0]}],
+    "vehicle": [{"name": "v", "mass": M_V, "inertia": J_V.tolist(), "cm": CM_V.tolist()}],
+}
+EVENT = {"kind": "dock", "t": T_EVENT_S, "vehicle": "v", "port": "aft", "closing_velocity": CLOSING,
+         "rate_VB_B": RATE_VB_B.tolist()}
+
+
+def _run(scene, executor):
+    if executor == "lockstep":
+        [(kind, tr)] = run_lockstep([scene], keep=True, fused=False)
+        assert kind == "batch"
+        return tr
+    return simulate(scene, fused=executor == "fused")
+
+
+def _captured(row):
+    """The state just after the capture, by hand from the station's state just before."""
+    w, h = row[0:3], row[3:6]
+    r_v = R_PORT + CM_V  # m, the vehicle's mass centre (its axes are B's)
+    r_c = M_V * r_v / (M_S + M_V)  # the composite's
+    v_v = np.cross(w, r_v) + np.array([CLOSING, 0.0, 0.0])  # closing along -axis = +x
+    v_c = M_V * v_v / (M_S + M_V)
+    H = (J_S @ w + h + J_V @ (w + RATE_VB_B) + M_S * np.cross(-r_c, -v_c) + M_V * np.cross(r_v - r_c, v_v - v_c))
+    I_c = J_S + J_V
+    for m, r in ((M_S, -r_c), (M_V, r_v - r_c)):
+        I_c = I_c + m * (r @ r * np.eye(3) - np.outer(r, r))
+    return np.linalg.solve(I_c, H - h), h
+
+
+@pytest.fixture(scope="module")
+def split():
+    """The split run's rows from t_e on (times shifted back by t_e)."""
+    first = simulate(scene_from_dict({**BASE, "simulation": {**BASE["simulation"], "duration": T_EVENT_S}}),
+                     fused=False)
+    end = first.data[-1]
+    q = first.cols("qw", "qx", "qy", "qz")[-1]
+    w, h = _captured(np.concatenate([first.cols("wx", "wy", "wz")[-1], first.cols("hx", "hy", "hz")[-1]]))
+    d = {**BASE, "initial": {"q_BN": q.tolist(), "omega_BN_B": w.tolist()},
+         "simulation": {**BASE["simulation"], "duration": DURATION_S - T_EVENT_S},
+         "cmg": {**BASE["cmg"], "h0_B": h.tolist()}}
+    d["vehicle"] = [{**BASE["vehicle"][0], "port": "aft"}]
+    assert end[0] == T_EVENT_S
+    return simulate(scene_from_dict(d), fused=False)
+
+
+COLS = ("qw", "qx", "qy", "qz", "wx", "wy", "wz", "hx", "hy", "hz")
+
+
+@pytest.mark.parametrize("executor", ["fused", "per_tick", "lockstep"])
+def test_docking_run_equals_the_split_run(split, executor):
+    tr = _run(scene_from_dict({**BASE, "event": [EVENT]}), executor)
+    after = tr.t >= T_EVENT_S
+    assert_allclose(tr.t[after] - T_EVENT_S, split.t, rtol=0, atol=1e-12)
+    assert_allclose(tr.cols(*COLS)[after], split.cols(*COLS), rtol=RTOL, atol=ATOL)
+    assert tr.meta["summary"]["fused"] == (executor == "fused")
+    assert [e["t"] for e in tr.meta["summary"]["events"]] == [T_EVENT_S, T_EVENT_S]  # the dock, the law told
+    assert_array_equal(tr["config"], (tr.t >= T_EVENT_S).astype(float))
+
+
+def test_massless_vehicle_changes_no_row():
+    """A vehicle of zero mass and no surfaces docking changes nothing, bit for bit."""
+    plain = simulate(scene_from_dict(BASE))
+    d = {**BASE, "event": [EVENT], "vehicle": [{"name": "v", "mass": 0.0, "inertia": [[0.0] * 3] * 3}]}
+    tr = simulate(scene_from_dict(d))
+    assert_array_equal(tr.data[:, : len(plain.columns)], plain.data)
