@@ -109,3 +109,24 @@ def test_massless_vehicle_changes_no_row():
     d = {**BASE, "event": [EVENT], "vehicle": [{"name": "v", "mass": 0.0, "inertia": [[0.0] * 3] * 3}]}
     tr = simulate(scene_from_dict(d))
     assert_array_equal(tr.data[:, : len(plain.columns)], plain.data)
+
+
+def test_rows_keep_their_parameters_through_another_run_of_the_system():
+    """Rows made after another run of the same compiled system (the environment rate's probe
+    runs one inside a run) use their own run's parameters: a docked vehicle's inertia changes
+    the body rate recovered from the momentum state, so rows made with the other run's numbers
+    differ (they did, before the rows kept their own copy)."""
+    from stationbed.model import StationModel, Structure  # noqa: PLC0415
+    from stationbed.run.rows import Rows  # noqa: PLC0415
+    from stationbed.run.system import build_system  # noqa: PLC0415
+
+    free = scene_from_dict(BASE)
+    docked = scene_from_dict({**BASE, "vehicle": [{**BASE["vehicle"][0], "port": "aft"}]})
+    system = build_system(Structure.of(free), "momentum", "rk4")
+    model = StationModel(Structure.of(free))
+    xs = np.zeros((2, system.formulation.nx))
+    xs[:, 0], xs[:, 4:7] = 1.0, [[100.0, -50.0, 80.0]] * 2  # q = 1, H_O_B [N m s]
+    rows = Rows(free, system, model.params(free), None)
+    before = rows.make([0.0, 1.0], xs)
+    simulate(docked)  # another run of the same system, with other numbers
+    assert_array_equal(rows.make([0.0, 1.0], xs), before)

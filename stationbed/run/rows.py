@@ -151,6 +151,10 @@ class Rows:
         self._q = self.form.state_layout.slice("q_BN")  # the attitude in the state, by name
         self.n_out = system.n_out
         self.out = FastCall.of(system.funcs["out_map"])
+        #: the parameters the rows are made with (a scheduled step sets them: :meth:`set_params`);
+        #: copied into the shared buffer at each :meth:`make`, as another run of the same system
+        #: in this process (the environment rate's probe, run/rate_auto.py) writes it too
+        self.p = np.array(p, dtype=float)
         self.out.args[2][:] = p
         self.columns = trajectory_columns(scene)
         self.scene = scene
@@ -239,6 +243,7 @@ class Rows:
         xs = np.asarray(xs, dtype=float).reshape(len(ts), self.nx)
         comp = np.empty((len(ts), self.n_out))
         o = self.out
+        o.args[2][:] = self.p
         for k in range(0, len(ts), OUT_CHUNK):
             n = min(OUT_CHUNK, len(ts) - k)
             o.args[0][:n] = ts[k : k + n]
@@ -262,6 +267,10 @@ class Rows:
             rows[:, c_done] = np.searchsorted(done, ts + 1e-9 * np.maximum(1.0, ts), side="right")
             rows[:, c_known] = np.sum(known[None, :] <= ts[:, None] + 1e-9 * np.maximum(1.0, ts[:, None]), axis=1)
         return rows
+
+    def set_params(self, p) -> None:
+        """The parameters of the rows from now on (a scheduled step: run/schedule.py)."""
+        self.p[:] = p
 
     def emit(self, rows: np.ndarray) -> None:
         """Hand ``rows`` (k, len(columns)) to the sink, then count and (``keep``) keep them.

@@ -153,7 +153,7 @@ class Stepper:
             if s.kick is not None and s.clears is None:
                 kicks.append(s.kick)
         self.res.rows.flush()  # the rows before the step, with the numbers before it
-        self.res.rows.out.args[2][:] = p
+        self.res.rows.set_params(p)
         comp.integ.set_params(p)
         if jump:
             if self._jump is None:
