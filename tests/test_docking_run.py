@@ -130,3 +130,28 @@ def test_rows_keep_their_parameters_through_another_run_of_the_system():
     before = rows.make([0.0, 1.0], xs)
     simulate(docked)  # another run of the same system, with other numbers
     assert_array_equal(rows.make([0.0, 1.0], xs), before)
+
+
+def test_momentum_manager_told_the_docking_designs_on_the_docked_station():
+    """The law's numbers after the update are those of the same law designed from the start on
+    what flight software believes of the docked station; its TEA target moves (the vehicle's
+    offset makes products of inertia: ~2 deg in pitch and yaw for the Progress)."""
+    from scenes import ROOT  # noqa: PLC0415
+    from stationbed.model import Structure  # noqa: PLC0415
+    from stationbed.run.closed_loop import plant_facts  # noqa: PLC0415
+    from stationbed.run.docking import configurations, law_numbers_after  # noqa: PLC0415
+    from stationbed.run.laws import build_controller  # noqa: PLC0415
+    from stationbed.run.system import build_system  # noqa: PLC0415
+    from stationbed.scene import knowledge_scene, load_scene  # noqa: PLC0415
+
+    scene = load_scene(ROOT / "scenarios" / "iss_progress_docking.toml").replace(
+        {"controller.name": "momentum_manager", "controller.params": {}})
+    before, after = configurations(scene)
+    system = build_system(Structure.of(scene), "momentum", "rk4")
+    law = build_controller(scene.controller)
+    law.reset(plant_facts(before, system, 0.1))
+    fresh = build_controller(scene.controller)
+    fresh.reset(plant_facts(after, system, 0.1))
+    told = law_numbers_after(law, system, 0.1, knowledge_scene(after))
+    assert_array_equal(told, np.asarray(fresh.symbolic_params(), float))
+    assert np.degrees(np.abs(np.asarray(fresh.tea_design) - np.asarray(law.tea_design))).max() > 1.0

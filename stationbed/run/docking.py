@@ -24,6 +24,7 @@ import numpy as np
 
 from ..model.docking import event_jump, event_terms
 from ..scene.docking import configuration_changes
+from .detection import replan
 from .schedule import SOURCES, Step
 
 __all__ = ["configurations", "docking_steps", "event_tick", "update_tick", "law_numbers_after"]
@@ -73,19 +74,21 @@ def _kick(form, K, c):
     return kick
 
 
-def law_numbers_after(comp, known_scene) -> np.ndarray | None:
-    """The law's ``symbolic_params`` once told ``known_scene`` (what flight software believes
-    after a configuration update): a copy of the law designs on that plant (its ``_replan`` or
-    ``_reset``); None for a law without a ``symbolic`` form."""
-    from .closed_loop import plant_facts  # noqa: PLC0415 (closed_loop imports the schedule)
-    from .detection import replan  # noqa: PLC0415
+#: ``plant_facts(scene, system, period)`` (run/closed_loop.py registers it: it imports this module's
+#: importers, so this module may not import it)
+PLANT_FACTS: list = []
 
-    ctrl = comp.ctrl
+
+def law_numbers_after(ctrl, system, period: float, known_scene) -> np.ndarray | None:
+    """The ``symbolic_params`` of the law ``ctrl`` once told ``known_scene`` (what flight
+    software believes after a configuration update): a copy of the law designs on that plant
+    (its ``_replan`` or ``_reset``, :func:`~.detection.replan`); None for a law without a
+    ``symbolic`` form. ``ctrl`` itself is not changed."""
     if not callable(getattr(ctrl, "symbolic_params", None)):
         return None
     other = copy.copy(ctrl)
     other.__dict__ = {k: copy.deepcopy(v) for k, v in ctrl.__dict__.items() if k not in ("_law", "_batch_law")}
-    replan(other, plant_facts(known_scene, comp.system, comp.period))
+    replan(other, PLANT_FACTS[0](known_scene, system, period))
     return np.asarray([float(v) for v in other.symbolic_params()], float)
 
 
@@ -114,7 +117,7 @@ def docking_steps(comp) -> list[Step]:
             continue
         from ..scene.knowledge import knowledge_scene  # noqa: PLC0415
 
-        cp = law_numbers_after(comp, knowledge_scene(configs[i + 1]))
+        cp = law_numbers_after(comp.ctrl, comp.system, period, knowledge_scene(configs[i + 1]))
         if cp is None:
             raise ValueError(f"event[{i}].update_after_s: controller '{comp.ctrl.name}' has no symbolic form, so it "
                              "cannot be told a new configuration mid-run; give update_after_s = \"never\"")

@@ -43,7 +43,8 @@ from ..core.massprops import InvalidMassProperties, checked_inertia_rows
 from .base import FieldError, Mat3, Strict, Vec3, unit_quaternion
 from .environment import Surface
 
-__all__ = ["Port", "Vehicle", "Event", "EVENT_KINDS", "check_docking", "docked_at", "configuration_changes"]
+__all__ = ["Port", "Vehicle", "Event", "EVENT_KINDS", "check_docking", "docked_at", "configuration_changes",
+           "configuration_at"]
 
 #: the event kinds: what each does to the configuration
 EVENT_KINDS = ("dock", "berth", "undock")
@@ -212,3 +213,22 @@ def configuration_changes(scene, n_events: int) -> dict:
     changes: dict = {f"vehicle[{i}].port": where[v.name] for i, v in enumerate(scene.vehicle) if where[v.name] != v.port}
     changes["event"] = [e.model_dump(exclude_unset=True) for e in scene.event[n_events:]]
     return changes
+
+
+def configuration_at(scene, which: str):
+    """The scene in a named configuration: ``"before"`` (as it starts), ``"after"`` (after every
+    event), or ``"<n>"`` (after event n, 0-based); ValueError naming ``--config`` otherwise."""
+    n_ev = len(scene.event)
+    if which == "before":
+        n = 0
+    elif which == "after":
+        n = n_ev
+    else:
+        try:
+            n = int(which) + 1
+        except ValueError:
+            n = -1
+        if not 1 <= n <= n_ev:
+            valid = "before, after" + (f", 0..{n_ev - 1} (after that event)" if n_ev else " (the scene has no [[event]])")
+            raise ValueError(f"--config: {which!r} is no configuration of {scene.name!r}; valid: {valid}")
+    return scene if n == 0 else scene.replace(configuration_changes(scene, n), source=f"--config {which}")
