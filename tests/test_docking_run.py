@@ -155,3 +155,30 @@ def test_momentum_manager_told_the_docking_designs_on_the_docked_station():
     told = law_numbers_after(law, system, 0.1, knowledge_scene(after))
     assert_array_equal(told, np.asarray(fresh.symbolic_params(), float))
     assert np.degrees(np.abs(np.asarray(fresh.tea_design) - np.asarray(law.tea_design))).max() > 1.0
+
+
+def test_recording_draws_the_vehicle_at_its_port_while_docked(tmp_path):
+    """Read back from the .rrd: the vehicle's box appears at the dock, at its port (centre
+    r_port + cm = (-8.5, 0.5, 1) m from the mass centre, here at the origin), with the uniform
+    box of its moments (edges² = 6 (I_j + I_k - I_i) / m: 16.5, 4.5, 1.5 m²), and is cleared at
+    the undock."""
+    rerun_chunk = pytest.importorskip("rerun.chunk")
+    from stationbed.output.rerun.recording import write_recording  # noqa: PLC0415
+
+    undock = {"kind": "undock", "t": 15.0, "vehicle": "v", "delta_v": 0.05}
+    scene = scene_from_dict({**BASE, "event": [EVENT, undock]})
+    path = write_recording(simulate(scene), scene, tmp_path / "dock.rrd")
+    rows = []
+    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
+        if c.is_static or c.entity_path.lstrip("/") != "world/station/vehicle/v":
+            continue
+        rb = c.to_record_batch()
+        t = rb.column("sim_time").cast("int64").to_pylist()
+        for i in range(rb.num_rows):
+            rows.append((t[i] * 1e-9, {n: rb.column(n)[i].as_py() for n in rb.schema.names if ":" in n}))
+    rows.sort(key=lambda r: r[0])
+    assert_allclose([t for t, _ in rows], [T_EVENT_S, 15.0], rtol=0, atol=1e-9)  # (ns on the time line)
+    box = rows[0][1]
+    assert_allclose(box["Boxes3D:centers"][0], R_PORT + CM_V, rtol=1e-6)  # (float32 in the recording)
+    assert_allclose(sorted(box["Boxes3D:half_sizes"][0]), sorted(0.5 * np.sqrt([16.5, 4.5, 1.5])), rtol=1e-6)
+    assert rows[1][1].get("Clear:is_recursive") is not None  # the undock clears it
