@@ -246,3 +246,18 @@ def test_vehicle_plates_are_on_while_docked_where_the_port_puts_them():
     assert_allclose(_tau_srp(free), _tau_srp(alone), rtol=SRP_RTOL, atol=SRP_ATOL)
     assert not np.allclose(_tau_srp(by_hand), _tau_srp(alone))  # the plate matters here
     assert Structure.of(scene_from_dict(docked)) == Structure.of(scene_from_dict(free))
+
+
+def test_knowledge_of_every_configuration_names_the_same_events():
+    """A Monte Carlo tells the law nominal values by key path (``[knowledge.values]``, event and
+    vehicle keys among them): the knowledge of each configuration is built (past events stay,
+    marked done, so ``event[0]`` still names one) and carries the nominal vehicle mass."""
+    from stationbed.model.docking import docked_parts  # noqa: PLC0415
+    from stationbed.scene import knowledge_scene  # noqa: PLC0415
+
+    event = {"kind": "dock", "t": 10.0, "vehicle": "v", "port": "aft", "closing_velocity": CLOSING}
+    truth = scene_from_dict(docking_dict(vehicle_mass=60.0, events=[event]) | {
+        "knowledge": {"values": {"vehicle[0].mass": 50.0, "event[0].closing_velocity": 0.05}}})
+    after = truth.replace(configuration_changes(truth, 1))
+    assert [m for m, _, _ in docked_parts(after)] == [60.0]
+    assert [m for m, _, _ in docked_parts(knowledge_scene(after))] == [50.0]  # kg: what the law is told

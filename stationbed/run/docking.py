@@ -105,6 +105,8 @@ def docking_steps(comp) -> list[Step]:
     ticks = comp.ticks()
     steps = []
     for i, e in enumerate(scene.event):
+        if e.done:  # (history: the scene is the configuration after it)
+            continue
         k = event_tick(e, period)
         K, c = event_terms(configs[i], configs[i + 1], e)
         changed = np.nonzero(ps[i + 1] != ps[i])[0]

@@ -116,11 +116,12 @@ def trajectory_columns(scene: Scene) -> list[str]:
 
 
 def _configuration_times(scene) -> tuple[np.ndarray, np.ndarray]:
-    """The times [s] the truth's configuration changes (each ``[[event]]``) and the times the
-    law is told of each (``t + update_after_s``; inf: never); the ``config`` and
+    """The times [s] the truth's configuration changes (each ``[[event]]``; -inf: a past one) and
+    the times the law is told of each (``t + update_after_s``; inf: never); the ``config`` and
     ``config_known`` columns count those at or before a row's time."""
-    done = np.array([e.t for e in scene.event], float)
-    known = np.array([math.inf if e.update_after_s == "never" else e.t + e.update_after_s for e in scene.event])
+    done = np.array([-math.inf if e.done else e.t for e in scene.event], float)  # (a past event: from the start)
+    known = np.array([-math.inf if e.done else math.inf if e.update_after_s == "never" else e.t + e.update_after_s
+                      for e in scene.event])
     return done, known
 
 

@@ -113,6 +113,10 @@ class Event(Strict):
     spring_energy_J: float | None = Field(default=None, ge=0.0)  # J, undock
     delta_v: float | None = Field(default=None, ge=0.0)  # m/s, undock: separation speed
     update_after_s: float | Literal["never"] = 0.0  # s after t the law learns the new mass properties
+    #: an event already past: the scene is the configuration after it (the vehicles' ``port``
+    #: keys say so). :func:`configuration_changes` sets it; kept so that key paths by index
+    #: (``event[1]``, a Monte Carlo's knowledge) name the same events in every configuration
+    done: bool = False
 
     @model_validator(mode="after")
     def _kind(self):
@@ -179,6 +183,10 @@ def check_docking(scene) -> None:
     last = 0.0
     for i, e in enumerate(scene.event):
         _named(vehicles, e.vehicle, f"event[{i}].vehicle", "vehicle")
+        if e.done:  # history: the vehicles' ports are the configuration after it
+            if any(not f.done for f in scene.event[:i]):
+                raise FieldError(f"event[{i}].done", "a past event follows one still to come: list them in order")
+            continue
         if e.t < last:
             raise FieldError(f"event[{i}].t", f"{e.t:g} s is before the previous event's {last:g} s: list them in order")
         last = e.t
@@ -205,13 +213,15 @@ def check_docking(scene) -> None:
 
 def configuration_changes(scene, n_events: int) -> dict:
     """The key path -> value changes that give the configuration after the first ``n_events``
-    events, for :meth:`Scene.replace`: the vehicles' ``port`` keys, and the events still to come
-    (the scene a split run re-seeds)."""
+    events, for :meth:`Scene.replace`: the vehicles' ``port`` keys, and those events marked
+    ``done`` (the scene a split run re-seeds)."""
     where = {v.name: v.port for v in scene.vehicle}
     for e in scene.event[:n_events]:
+        if e.done:
+            continue
         where[e.vehicle] = "" if e.kind == "undock" else e.port
     changes: dict = {f"vehicle[{i}].port": where[v.name] for i, v in enumerate(scene.vehicle) if where[v.name] != v.port}
-    changes["event"] = [e.model_dump(exclude_unset=True) for e in scene.event[n_events:]]
+    changes.update({f"event[{i}].done": True for i in range(n_events) if not scene.event[i].done})
     return changes
 
 

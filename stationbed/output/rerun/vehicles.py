@@ -34,7 +34,7 @@ class VehicleBoxes:
         ports = {p.name: p for p in scene.port}
         self.changes = []  # (t [s], entity, (centre, half sizes, C_BA) or None: cleared)
         times = [(0.0, v.name, v.port) for v in scene.vehicle if v.port]
-        times += [(e.t, e.vehicle, "" if e.kind == "undock" else e.port) for e in scene.event]
+        times += [(e.t, e.vehicle, "" if e.kind == "undock" else e.port) for e in scene.event if not e.done]
         vehicles = {v.name: v for v in scene.vehicle}
         for t, name, port in times:
             v = vehicles[name]
