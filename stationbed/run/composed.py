@@ -108,7 +108,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
-    # the external torque held from t = 0 (the bulk rows hold it: they run only without edges)
+    # the external torque held from t = 0 (the bulk rows hold it: they run only before the first edge)
     par[P.slice("u_ext")] = held_torque_from(comp.scene, 0.0, comp.bps, duration)
     if sense is not None:
         par[P.slice(sense)] = flight.params
@@ -147,11 +147,14 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
 
     try:
         j0 = 0
-        if not edges:  # the leading full rows, many per compiled call (composed_rows.py)
-            j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par, draws_of)
-            x = c0[cx].copy()
-            if stop is not None:
-                raise stop
+        # the leading full rows, many per compiled call (composed_rows.py), up to the first edge (a
+        # scheduled step, a change of the held torque): the torque held from t = 0 holds there
+        j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par, draws_of,
+                                              stop_tick=min(edges) if edges else None)
+        x = c0[cx].copy()
+        if stop is not None:
+            raise stop
+        resumed = False
         for j, k in enumerate(row_ks):
             if j < j0:
                 continue
@@ -196,6 +199,14 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             par[P.slice("h")] = period
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
+            if edges and not resumed and j + 1 < len(row_ks) and row_ks[j + 1] > edges[-1]:  # past the last edge:
+                resumed = True  # the full rows after it in bulk again (the torque held from there)
+                j0, tail_flag, more, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par, draws_of,
+                                                     j_start=j + 1, tail_flag=tail_flag)
+                ticks += more
+                x = c0[cx].copy()
+                if stop is not None:
+                    raise stop
     finally:
         law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
         if th is not None:

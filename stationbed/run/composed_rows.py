@@ -122,8 +122,11 @@ def rows_functions(cm, row: ca.Function, chunk: ca.Function, n: int) -> list:
     return fns
 
 
-def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np.ndarray, draws) -> tuple:
-    """Run the leading full rows of a composed run in calls of ``R`` rows.
+def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np.ndarray, draws,
+             stop_tick: int | None = None, j_start: int = 0, tail_flag: int = 0) -> tuple:
+    """Run the full rows of a composed run from row ``j_start`` on (the leading rows; or those
+    after the run's last edge, ``tail_flag`` the flag carried from the rows before) in calls of
+    ``R`` rows, up to those that end at or before ``stop_tick`` (the run's first edge) when given.
 
     ``c0`` the carry at tick 0 (updated in place to the carry after the rows run), ``par`` the
     chunk's parameters (``h`` the period, the blocks' numbers), ``draws`` the run's draws by tick
@@ -132,9 +135,11 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     before, ticks run, and an IntegrationError for the executor to raise when a row's stretch
     ended in a non-finite state (the rows up to it handed over), else None."""
     n = comp.n_per_out
-    n_rows = _full_rows(comp, row_ks, n, K)
-    if not calls or n_rows < min(calls):
-        return 0, 0, 0, None
+    n_rows = j_start + _full_rows(comp, row_ks[j_start:], n, K)
+    if stop_tick is not None:  # (rows start at 0, n, 2n...: those ending by the edge)
+        n_rows = min(n_rows, stop_tick // n)
+    if not calls or n_rows - j_start < min(calls):
+        return j_start, tail_flag, 0, None
     C, RL = cm.carry, cm.row_layout
     O = Layout(c=C.size, row=RL.size, counts=2)
     flight, th, fm = comp.flight, comp.thrust, res.flight
@@ -146,7 +151,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     cmg = (out_l.slice("u_cmg"), out_l.slice("rate_limited").start, out_l.slice("saturated").start) if has_cmg else None
     torque = comp.ctrl.command == "torque"
     nw = cm.noise.size
-    j = tail_flag = ticks = 0
+    j, ticks = j_start, 0
     noise0 = draws.state() if nw else None  # a fallback to row by row draws the same again
     for R in sorted(calls, reverse=True):
         fc = calls[R]
