@@ -108,11 +108,12 @@ def test_docking_run_equals_the_split_run(split, executor):
     assert_array_equal(tr["config"], (tr.t >= T_EVENT_S).astype(float))
 
 
-def test_massless_vehicle_changes_no_row():
+@pytest.mark.parametrize("executor", ["fused", "per_tick", "lockstep"])
+def test_massless_vehicle_changes_no_row(executor):
     """A vehicle of zero mass and no surfaces docking changes nothing, bit for bit."""
-    plain = simulate(scene_from_dict(BASE))
+    plain = _run(scene_from_dict(BASE), executor)
     d = {**BASE, "event": [EVENT], "vehicle": [{"name": "v", "mass": 0.0, "inertia": [[0.0] * 3] * 3}]}
-    tr = simulate(scene_from_dict(d))
+    tr = _run(scene_from_dict(d), executor)
     assert_array_equal(tr.data[:, : len(plain.columns)], plain.data)
 
 
