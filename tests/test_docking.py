@@ -261,3 +261,20 @@ def test_knowledge_of_every_configuration_names_the_same_events():
     after = truth.replace(configuration_changes(truth, 1))
     assert [m for m, _, _ in docked_parts(after)] == [60.0]
     assert [m for m, _, _ in docked_parts(knowledge_scene(after))] == [50.0]  # kg: what the law is told
+
+
+@pytest.mark.parametrize("which, n_docked", [("before", 0), ("after", 1), ("0", 1)])
+def test_configuration_by_name(which, n_docked):
+    from stationbed.model.docking import docked_parts  # noqa: PLC0415
+    from stationbed.scene.docking import configuration_at  # noqa: PLC0415
+
+    scene = scene_from_dict(docking_dict(events=[{"kind": "dock", "t": 10.0, "vehicle": "v", "port": "aft"}]))
+    assert len(docked_parts(configuration_at(scene, which))) == n_docked
+
+
+def test_unknown_configuration_names_the_option():
+    from stationbed.scene.docking import configuration_at  # noqa: PLC0415
+
+    scene = scene_from_dict(docking_dict(events=[{"kind": "dock", "t": 10.0, "vehicle": "v", "port": "aft"}]))
+    with pytest.raises(ValueError, match=r"^--config: '1' is no configuration of 'test_rigid'; valid: before, after, 0\.\.0"):
+        configuration_at(scene, "1")
