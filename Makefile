@@ -42,6 +42,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_montecarlo.py
 	$(PY) benchmarks/bench_lockstep.py
 	$(PY) benchmarks/bench_thrusters.py
+	$(PY) benchmarks/bench_docking.py  # issue 35: a docking fused against the same run without it
 	$(PY) benchmarks/bench_full_loop.py  # issue 33: the full flight loop fused against truth-fed pd
 	$(PY) benchmarks/bench_socket.py --realtime-duration 60  # the 10-minute drift figure: --realtime-duration 600
 	$(PY) benchmarks/bench_fmu.py  # optional: says so when FMPy is not installed

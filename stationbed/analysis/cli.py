@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 __all__ = ["COMMANDS", "add_parsers", "main"]
@@ -44,11 +45,14 @@ def add_parsers(sub) -> None:
     lz.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
     lz.add_argument("--dt", type=_seconds(positive=True), default=None, help="also write the zero-order-hold plant for this period [s]")
     lz.add_argument("--command", default="torque", choices=["torque", "gimbal_rates"], help="control input (default torque)")
+    lz.add_argument("--config", default="before", help="configuration: 'before' (as the scene starts), 'after' (every "
+                                                      "[[event]] done) or n (after event n) (docs/docking.md)")
     mg = sub.add_parser("margins", help="loop margins of the scene's controller (exact, or finite differences of a Python-only law): "
                                           "table, Bode and Nichols PNGs")
     mg.add_argument("scene", type=Path)
     mg.add_argument("--out", type=Path, default=None, help="output folder (default: out/<scene>/margins)")
     mg.add_argument("--t", type=_seconds(), default=0.0, help="time the time-varying terms are frozen at [s] (default 0)")
+    mg.add_argument("--config", default="before", help="configuration: 'before', 'after' or n (after event n)")
     pl = sub.add_parser("plot", help="dashboard PNG of a run folder (trajectory.csv, summary.json)")
     pl.add_argument("outdir", type=Path)
     pl.add_argument("--png", type=Path, default=None, help="output file (default: OUTDIR/dashboard.png)")
@@ -61,6 +65,18 @@ def add_parsers(sub) -> None:
 def main(args) -> int:
     """Run one of :data:`COMMANDS`; returns the exit status."""
     return {"linearize": _linearize, "margins": _margins, "plot": _plot, "compare": _compare}[args.cmd](args)
+
+
+def _configuration(scene, which: str):
+    """``--config``: the scene in that configuration (scene/docking.py); a bad name is an error
+    naming the option (exit 2)."""
+    from ..scene.docking import configuration_at
+
+    try:
+        return configuration_at(scene, which)
+    except ValueError as e:
+        print(f"stationbed: error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 def _out(args, scene, what: str, files: tuple[str, ...]) -> Path:
@@ -108,7 +124,7 @@ def _linearize(args) -> int:
     from . import figures
     from .plant import linearize
 
-    scene = load_scene(args.scene)
+    scene = _configuration(load_scene(args.scene), args.config)
     out = _out(args, scene, "linearize", ("plant.npz", "poles_zeros.json", "bode.png", "pole_zero.png"))
     out.mkdir(parents=True, exist_ok=True)
     sys = linearize(scene, _about(args.about), t=args.t, command=args.command)
@@ -177,7 +193,7 @@ def _margins(args) -> int:
     from . import figures
     from .margins import loop_analysis
 
-    scene = load_scene(args.scene)
+    scene = _configuration(load_scene(args.scene), args.config)
     out = _out(args, scene, "margins", ("margins.json", "loop_bode.png", "nichols.png"))
     out.mkdir(parents=True, exist_ok=True)
     la = loop_analysis(scene, t=args.t)

@@ -28,6 +28,7 @@ from ..core.massprops import composite_cm, parallel_axis
 from ..core.rotation import dcm
 from .appendages import drive_acceleration, drive_from_error, glider_error, joint_kinematics, profile, sun_targets
 from .cmg import CmgModel
+from .docking import docked_parts
 from .environment import sun_direction_N
 from .flex import Modes
 from .orbit import OrbitAt, orbit_at, orbit_params, orbit_plane
@@ -128,8 +129,11 @@ class StationModel:
         p = np.zeros(L.size)
         masses = [scene.body.mass] + [a.mass for a in scene.appendage]
         cms = [scene.body.cm] + [a.cm for a in scene.appendage]
-        r_O = composite_cm(masses, cms)
+        vehicles = docked_parts(scene)  # issue 35: docked vehicles are rigid parts of the body
+        r_O = composite_cm(masses + [m for m, _, _ in vehicles], cms + [r for _, r, _ in vehicles])
         I0 = np.array(scene.body.inertia) + parallel_axis(scene.body.mass, np.array(scene.body.cm) - r_O)
+        for m_v, r_v, I_v in vehicles:
+            I0 += I_v + parallel_axis(m_v, r_v - r_O)
         for k, a in enumerate(scene.appendage):
             I0 += parallel_axis(a.mass, np.array(a.cm) - r_O)
             p[L[f"J{k}"]] = a.inertia_P.ravel()
@@ -155,7 +159,7 @@ class StationModel:
         if self.cmg is not None:
             p[L["cmg"]] = self.cmg.params(scene.cmg)
         if self.flexible:
-            p[L["mtot"]] = sum(masses)
+            p[L["mtot"]] = sum(masses) + sum(m for m, _, _ in vehicles)
         for k, _ in self.flexible:
             a = scene.appendage[k]
             p[L[f"rho{k}"]] = np.array(a.cm) - r_O

@@ -153,7 +153,10 @@ class ParamLayout:
         if structure.sun:
             add("sun", 3)  # unit vector to the sun, N components
         if structure.surfaces:
-            add("surf_O", 3 + 3 * structure.n_app)  # r_O, then each appendage's mass centre (body coordinates) [m]
+            # r_O, then each appendage's mass centre (body coordinates) [m], then the on flags of
+            # the vehicles' plates at each port (attachments -2 - j: model/surfaces.vehicle_places)
+            places = 1 + max([-2 - int(q[0]) for q in structure.surfaces if q[0] <= -2], default=-1)
+            add("surf_O", 3 + 3 * structure.n_app + places)
         if structure.eclipse:
             add("shadow", 1)  # Earth-sun distance [m] (the conical shadow's sun disc)
         if structure.cmg is not None:

@@ -38,9 +38,10 @@ import casadi as ca
 import numpy as np
 
 from ..core.massprops import composite_cm
+from .docking import docked_parts, vehicle_in_B
 from ..scene import Surface
 
-__all__ = ["PLATE_FIELDS", "Plate", "scene_plates", "surface_origin_params", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
+__all__ = ["PLATE_FIELDS", "Plate", "scene_plates", "surface_origin_params", "vehicle_places", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
 
 #: the numbers of one plate (after its attachment), in order
 PLATE_FIELDS = ("area", "n_x", "n_y", "n_z", "c_x", "c_y", "c_z", "rho_x", "rho_y", "rho_z",
@@ -104,8 +105,11 @@ def scene_plates(scene) -> tuple[tuple[float, ...], ...]:
     out = []
     rho = np.zeros(3)  # the mass centres are parameters (surface_origin_params)
     shift = np.zeros(3)
-    for s in surfaces:
-        k = -1 if s.on == "body" else names.index(s.on)
+    placed = [(s, -1 if s.on == "body" else names.index(s.on), None, shift) for s in surfaces]
+    for j, (vehicle, port) in enumerate(vehicle_places(scene)):  # issue 35: -2 - j, on while docked there
+        _, _, _, C_BV = vehicle_in_B(vehicle, port)
+        placed += [(s, -2 - j, C_BV, -np.asarray(port.position, float)) for s in vehicle.surface]
+    for s, k, C, off in placed:
         if s.size is not None:
             faces, two = _faces(s.size, s.centre), 0.0
         else:
@@ -113,16 +117,29 @@ def scene_plates(scene) -> tuple[tuple[float, ...], ...]:
             faces, two = [(s.area, n / np.linalg.norm(n), np.asarray(s.centre, float))], float(s.two_sided)
         _, spec, diff = s.fractions
         for area, n, c in faces:
-            out.append(tuple(float(v) for v in (k, area, *n, *(c - shift), *rho, two, s.cd, spec, diff)))
+            if C is not None:  # a vehicle's plate: V axes from its interface -> B axes, body coordinates
+                n, c = C @ n, C @ c
+            out.append(tuple(float(v) for v in (k, area, *n, *(c - off), *rho, two, s.cd, spec, diff)))
     return tuple(out)
+
+
+def vehicle_places(scene) -> list[tuple]:
+    """``(vehicle, port)`` for every vehicle with surfaces and every port: their plates are in
+    the structure from t = 0 (attachment ``-2 - j``), each on only while that vehicle is docked
+    at that port (``surf_O``'s on flags), so a docking keeps the compiled system."""
+    return [(v, p) for v in scene.vehicle if v.surface for p in scene.port]
 
 
 def surface_origin_params(scene) -> np.ndarray:
     """The ``surf_O`` parameters: the composite mass centre ``r_O``, then each appendage's mass
-    centre ``a_k`` (body coordinates [m]), shape (3 + 3 n_app,)."""
+    centre ``a_k`` (body coordinates [m]), then a vehicle plate set's on flag (1 while that
+    vehicle is docked at that port, :func:`vehicle_places`), shape (3 + 3 n_app + n_places,)."""
     masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    r_O = composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
-    return np.concatenate([np.asarray(r_O, float)] + [np.asarray(a.cm, float) for a in scene.appendage])
+    vehicles = docked_parts(scene)
+    r_O = composite_cm(masses + [m for m, _, _ in vehicles], [scene.body.cm] + [a.cm for a in scene.appendage]
+                       + [r for _, r, _ in vehicles])
+    on = [1.0 if v.port == p.name else 0.0 for v, p in vehicle_places(scene)]
+    return np.concatenate([np.asarray(r_O, float)] + [np.asarray(a.cm, float) for a in scene.appendage] + [on])
 
 
 def plates_B(specs, arrays, origin) -> list[Plate]:
@@ -136,14 +153,18 @@ def plates_B(specs, arrays, origin) -> list[Plate]:
     """
     out = []
     r_O = origin[0:3]
+    n_app = len(arrays)
     for q in specs:
         k = int(q[0])
         n, c = ca.SX(ca.DM(q[2:5])), ca.SX(ca.DM(q[5:8])) - r_O
+        area = q[1]
         if k >= 0:
             C_BP = arrays[k].C_PB.T
             rho = origin[3 + 3 * k : 6 + 3 * k] - r_O
             n, c = _times(C_BP, q[2:5]), rho + _times(C_BP, q[5:8])
-        out.append(Plate(q[1], n, c, bool(q[11]), q[12], q[13], q[14]))
+        elif k <= -2:  # a vehicle's plate at a port: its area times the on flag
+            area = q[1] * origin[3 + 3 * n_app + (-2 - k)]
+        out.append(Plate(area, n, c, bool(q[11]), q[12], q[13], q[14]))
     return out
 
 

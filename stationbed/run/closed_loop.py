@@ -17,6 +17,7 @@ from ..model import Structure
 from ..model.cmg import cluster_functions
 from ..scene import knowledge_scene
 from .detection import replan, replan_of
+from .docking import PLANT_FACTS
 from .controller import (
     ControllerError,
     Measurement,
@@ -82,6 +83,9 @@ def plant_facts(scene, system, period: float, known=None) -> Plant:
         plant.h_rotor = geometry.rotor_momentum(c)
         plant.cmg_functions = cluster_functions(c)
     return plant
+
+
+PLANT_FACTS.append(plant_facts)  # (a configuration update designs on it: run/docking.py)
 
 
 class ControlLoop:

@@ -107,7 +107,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
-    # the external torque held from t = 0 (the bulk rows hold it: they run only without edges)
+    # the external torque held from t = 0 (each stretch of bulk rows sets the torque held from its start)
     par[P.slice("u_ext")] = held_torque_from(comp.scene, 0.0, comp.bps, duration)
     if sense is not None:
         par[P.slice(sense)] = flight.params
@@ -144,10 +144,11 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         step(0)
         x = c0[cx].copy()
 
-    sched = comp.schedule.ticks
-    # no torque edge: the full rows many per compiled call (composed_rows.py), in stretches
-    # between the scheduled steps (tried at the first row and at the row after each step)
-    bulk, try_at = not [e for e in edges if e not in set(sched)], {0}
+    # the full rows many per compiled call (composed_rows.py), in stretches between the edges
+    # (scheduled steps and changes of the held torque; tried at the first row and at the row
+    # after each edge), each stretch holding the torque held from its start
+    sched = sorted(set(comp.schedule.ticks) | set(edges or ()))
+    bulk, try_at = True, {0}
     try:
         j0 = 0
         for j, k in enumerate(row_ks):
@@ -159,6 +160,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 x = c0[cx].copy()
             if bulk and j in try_at:
                 stop = bulk_stop(sched, row_ks, j)
+                par[P.slice("u_ext")] = torque_at(t)
                 jj, tail_flag, n_done, err = run_rows(comp, res, cm, fns["rows"], row_ks[j : stop + 1], K, c0, par,
                                                      draws_of, tail_flag)
                 ticks += n_done

@@ -365,6 +365,7 @@ class _Lockstep:
             ctrl.batch_stopped.add(i)
             errors[i] = e
 
+        self.law_batch = ctrl  # (a scheduled step may tell a sample's law new numbers: run/docking.py)
         due, step = lockstep_hook(self, S, held)  # scheduled steps (run/schedule.py): by tick, the hook
         for i in due.get(0, ()):
             step(i, 0, 0.0)

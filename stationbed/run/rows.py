@@ -112,7 +112,19 @@ def trajectory_columns(scene: Scene) -> list[str]:
     modes = [(a.name, k + 1) for a in scene.appendage for k in range(len(a.mode))]
     if modes:
         cols += [f"eta_{n}_{k}" for n, k in modes] + [f"etadot_{n}_{k}" for n, k in modes] + ["U_strain"]
+    if scene.event:  # issue 35: the configuration flown, and the one the law was told of
+        cols += ["config", "config_known"]
     return cols
+
+
+def _configuration_times(scene) -> tuple[np.ndarray, np.ndarray]:
+    """The times [s] the truth's configuration changes (each ``[[event]]``; -inf: a past one) and
+    the times the law is told of each (``t + update_after_s``; inf: never); the ``config`` and
+    ``config_known`` columns count those at or before a row's time."""
+    done = np.array([-math.inf if e.done else e.t for e in scene.event], float)  # (a past event: from the start)
+    known = np.array([-math.inf if e.done else math.inf if e.update_after_s == "never" else e.t + e.update_after_s
+                      for e in scene.event])
+    return done, known
 
 
 class Rows:
@@ -142,6 +154,10 @@ class Rows:
         self._q = self.form.state_layout.slice("q_BN")  # the attitude in the state, by name
         self.n_out = system.n_out
         self.out = FastCall.of(system.funcs["out_map"])
+        #: the parameters the rows are made with (a scheduled step sets them: :meth:`set_params`);
+        #: copied into the shared buffer at each :meth:`make`, as another run of the same system
+        #: in this process (the environment rate's probe, run/rate_auto.py) writes it too
+        self.p = np.array(p, dtype=float)
         self.out.args[2][:] = p
         self.columns = trajectory_columns(scene)
         self.scene = scene
@@ -209,6 +225,7 @@ class Rows:
             self.held_columns += chain_columns(scene)
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
+        self._config = (col["config"], col["config_known"], *_configuration_times(scene)) if scene.event else None
         self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []
         self._faults = None  # (column, tick-grid starts, ends [s]) of the scheduled faults
         if "faults_active" in col:
@@ -236,6 +253,7 @@ class Rows:
         xs = np.asarray(xs, dtype=float).reshape(len(ts), self.nx)
         comp = np.empty((len(ts), self.n_out))
         o = self.out
+        o.args[2][:] = self.p
         for k in range(0, len(ts), OUT_CHUNK):
             n = min(OUT_CHUNK, len(ts) - k)
             o.args[0][:n] = ts[k : k + n]
@@ -257,7 +275,15 @@ class Rows:
         if self._faults is not None:  # a fault is active from its tick (that row sees it) to its until's
             c, t0, t1 = self._faults
             rows[:, c] = ((ts[:, None] >= t0) & (ts[:, None] < t1)).sum(axis=1)
+        if self._config is not None:  # (times on the tick grid: an event's own row counts it)
+            c_done, c_known, done, known = self._config
+            rows[:, c_done] = np.searchsorted(done, ts + 1e-9 * np.maximum(1.0, ts), side="right")
+            rows[:, c_known] = np.sum(known[None, :] <= ts[:, None] + 1e-9 * np.maximum(1.0, ts[:, None]), axis=1)
         return rows
+
+    def set_params(self, p) -> None:
+        """The parameters of the rows from now on (a scheduled step: run/schedule.py)."""
+        self.p[:] = p
 
     def emit(self, rows: np.ndarray) -> None:
         """Hand ``rows`` (k, len(columns)) to the sink, then count and (``keep``) keep them.

@@ -56,6 +56,9 @@ class Step:
     clears: "Step | None" = None
     info: dict = field(default_factory=dict)
     saved: dict = field(default_factory=dict)  # (owner, index) -> the value it replaced, set when applied
+    #: a jump of its own, ``kick(t, x, p_before, p_after) -> x_after`` (numpy), applied after the
+    #: numbers are set (and after ``step_jump``): a docking's momentum brought in (run/docking.py)
+    kick: "Callable | None" = None
 
 
 #: functions ``(comp) -> list[Step]`` making a run's steps from its scene (``[[fault]]``: run/faults.py)
@@ -70,7 +73,19 @@ def block_numbers(comp) -> dict[str, np.ndarray]:
         out[a.name] = a.cluster.params
     if comp.flight is not None:
         out["sensing"] = comp.flight.params
+    if any("law" in s.blocks for s in comp.schedule.steps):  # a configuration update told (run/docking.py)
+        out["law"] = np.asarray([float(v) for v in comp.ctrl.symbolic_params()], float)
     return out
+
+
+def _law_buffers(ctrl, i: int | None = None):
+    """Where a compiled law reads its numbers: the per-tick law's buffer (``i`` None) or sample
+    ``i``'s row of the lockstep batch's (None before the law's first call)."""
+    law = ctrl.__dict__.get("_law" if i is None else "_batch_law")
+    if law is None or law.fc is None:
+        return None
+    cp = law.fc.args[2]
+    return cp if i is None else cp.reshape(len(law.members), -1)[i]
 
 
 class Schedule:
@@ -125,6 +140,7 @@ class Stepper:
         p = comp.p
         p_before = p.copy()
         jump = False
+        kicks = []
         for s in self.schedule.at(k):
             if s.clears is not None:  # a window's end: what its start replaced, put back
                 edits = dict(s.clears.saved)
@@ -136,8 +152,10 @@ class Stepper:
                 s.saved[(name, i)] = float(arr[i])
                 arr[i] = v
             jump |= s.jump
+            if s.kick is not None and s.clears is None:
+                kicks.append(s.kick)
         self.res.rows.flush()  # the rows before the step, with the numbers before it
-        self.res.rows.out.args[2][:] = p
+        self.res.rows.set_params(p)
         comp.integ.set_params(p)
         if jump:
             if self._jump is None:
@@ -148,7 +166,9 @@ class Stepper:
             a[2][:] = p_before
             a[3][:] = p
             self._jump()
-            return self._jump.res[0].copy()
+            x = self._jump.res[0].copy()
+        for kick in kicks:
+            x = kick(k * comp.period, x, p_before, p)
         return x
 
     def summary(self) -> list[dict]:
@@ -180,6 +200,10 @@ def refresh_loop(loop) -> None:
         loop.held.env.args[2][:] = p
     if comp.flight is not None and comp.flight._compiled is not None:
         comp.flight._compiled.args[8][:] = comp.flight.params
+    law = getattr(getattr(loop.res, "stepper", None), "numbers", {}).get("law")
+    buf = None if law is None else _law_buffers(comp.ctrl)
+    if buf is not None:
+        buf[:] = law
 
 
 def composed_hook(comp, res, c0, cx, par, P):
@@ -226,7 +250,11 @@ def steps_summary(comp, res) -> dict:
     st = getattr(res, "stepper", None)
     if not comp.schedule and not comp.scene.fault:
         return {}
-    return {"faults": [] if st is None else st.summary()}
+    applied = [] if st is None else st.summary()
+    out = {"faults": [s for s in applied if "event" not in s]}
+    if comp.scene.event:  # docking events and the law's configuration updates (run/docking.py)
+        out["events"] = [s for s in applied if "event" in s]
+    return out
 
 
 def lockstep_hook(batch, samples, held):
@@ -253,6 +281,10 @@ def lockstep_hook(batch, samples, held):
             held.env.args[2].reshape(len(samples), -1)[i] = comp.p
         if batch.flight is not None:
             batch.flight.fc.args[8].reshape(len(samples), -1)[i] = comp.flight.params
+        law = stepper(comp, lo.res).numbers.get("law")
+        buf = None if law is None else _law_buffers(batch.law_batch, i)
+        if buf is not None:
+            buf[:] = law
         batch._measure(i, t, batch.X[i])
     return due, step
 

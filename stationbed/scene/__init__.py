@@ -10,6 +10,7 @@ validates the result the same way.
 
 from .assign import parse_assignment, parse_assignments
 from .base import ATOL_MIN, MIN_TIME_S, QUAT_NORM_TOL, RTOL_MIN, TIME_RESOLUTION, SceneError
+from .docking import Event, Port, Vehicle, configuration_changes, docked_at
 from .knowledge import Knowledge, KnowledgeCmg, knowledge_scene
 from .load import Scene, load_scene, scene_from_dict, sensing_from_dict
 from .plan import PLAN_OBJECTIVES, PlanSpec
@@ -20,5 +21,6 @@ from .tables import __all__ as _tables
 __all__ = [
     "Scene", "SceneError", "load_scene", "scene_from_dict", "parse_assignment", "parse_assignments",
     "GyroSensor", "StarTrackerSensor", "MekfEstimator", "Sensing", "sensing_from_dict",
-    "Knowledge", "KnowledgeCmg", "knowledge_scene", "PlanSpec", "PLAN_OBJECTIVES", "QUAT_NORM_TOL", "RTOL_MIN", "ATOL_MIN", "MIN_TIME_S", "TIME_RESOLUTION", *_tables,
+    "Knowledge", "KnowledgeCmg", "knowledge_scene", "PlanSpec", "PLAN_OBJECTIVES", "QUAT_NORM_TOL", "RTOL_MIN", "ATOL_MIN", "MIN_TIME_S", "TIME_RESOLUTION",
+    "Port", "Vehicle", "Event", "configuration_changes", "docked_at", *_tables,
 ]

@@ -15,6 +15,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .docking import Event, Port, Vehicle, check_docking
 from .knowledge import Knowledge, knowledge_scene
 from .magnetorquers import Magnetorquers, check_magnetorquers
 from .plan import PlanSpec
@@ -53,6 +54,9 @@ class Scene(Strict):
     thrusters: ThrusterOptions | None = None
     magnetorquers: Magnetorquers | None = None  # issue 33: stationbed/loop/magnetorquers.py
     fault: list[Fault] = []  # issue 34: scheduled steps of the truth (stationbed/run/schedule.py)
+    port: list[Port] = []  # issue 35: docking ports, visiting vehicles, configuration events (scene/docking.py)
+    vehicle: list[Vehicle] = []
+    event: list[Event] = []
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -93,6 +97,7 @@ class Scene(Strict):
         check_thrusters(self)
         check_magnetorquers(self)
         check_faults(self)
+        check_docking(self)
         return self
 
     # -- convenience -------------------------------------------------------------------

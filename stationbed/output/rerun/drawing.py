@@ -27,6 +27,7 @@ from .geometry import StationGeometry
 from .sdk import TIMELINE, import_rerun
 from .surfaces import drawn_surfaces
 from .thruster_arrows import ThrusterArrows
+from .vehicles import VehicleBoxes
 
 __all__ = ["StationDrawing"]
 
@@ -75,6 +76,7 @@ class StationDrawing:
         self.events = Events.of(scene, columns)
         self.sensors = SensorParts.of(scene, columns, self.geom.extent)
         self.thrusters = ThrusterArrows.of(scene, columns, self.geom)
+        self.vehicles = VehicleBoxes.of(scene, self.geom.r_cm_B)  # docked vehicles, while docked (issue 35)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
 
     def log_static(self, rec) -> None:
@@ -115,6 +117,8 @@ class StationDrawing:
             self.sensors.log_static(rec)
         if self.thrusters is not None:
             self.thrusters.log_static(rec)
+        if self.vehicles is not None:
+            self.vehicles.log(rec, _boxes)
         if self.elastic is not None:
             self.elastic.log_static(rec)
         if scene.orbit is not None:
