@@ -14,10 +14,12 @@ Independent truths, from the rows alone:
 * the rows of the three executors agree to round-off (:data:`EXEC_REL`);
 * the momentum balance ``H_N(t) - H_N(0) = ∫_0^t C_NB L_B dt + Σ_pulses C_NB(t_k) (r_j × F_j ĝ_j) Δt_on``:
   the smooth external torques (gravity gradient, aero, SRP) from the logged torque columns (their
-  models are proved in test_gravity_gradient, test_aero, test_srp) integrated here by trapezoids over
-  the rows, the attitude from the logged quaternion and C_NB written out here; the thrusters'
-  impulses summed here from their logged on-times and the scene's geometry. The CMG cluster's
-  momentum is inside ``H_N``, so steering, sensors, the estimator and the law cannot move it.
+  models are proved elsewhere: the gravity gradient by hand in test_closed_loop_balance, aero and
+  SRP in test_aero, test_srp) integrated here by trapezoids over the rows, the attitude from the
+  logged quaternion and C_NB written out here; the thrusters' impulses summed here from their
+  logged on-times and the scene's geometry (arms from the body origin, the mass centre of the
+  shipped thruster scenes: body.cm = 0, arrays symmetric). The CMG cluster's momentum is inside
+  ``H_N``, so steering, sensors, the estimator and the law cannot move it.
 
 Rows: one per tick (``output_dt`` = the controller period) and the last row off the tick grid
 (the duration half a tick past a whole number of ticks: a short last tick). Compiled structures
