@@ -101,10 +101,20 @@ def _C_NB(q) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
+#: the logged torque columns ``tau_<kind>_x/y/z``: external (on the whole station: the balance integrates
+#: them) or internal (the law's request, acting through the CMG cluster, whose momentum H_N holds); a
+#: new kind fails the balance until it is named here
+EXTERNAL_TORQUES = ("gg", "aero", "srp")
+INTERNAL_TORQUES = ("cmd",)
+
+
 def _smooth_torque_B(tr) -> np.ndarray:
     """The logged external torques (N m, B components) at every row, (N, 3); zero where none is logged."""
+    kinds = {c[4:-2] for c in tr.columns if c.startswith("tau_") and c.endswith("_x")}
+    unknown = kinds - set(EXTERNAL_TORQUES) - set(INTERNAL_TORQUES)
+    assert not unknown, f"torque columns {sorted(unknown)}: name them in EXTERNAL_TORQUES or INTERNAL_TORQUES"
     out = np.zeros((len(tr.t), 3))
-    for kind in ("gg", "aero", "srp"):
+    for kind in EXTERNAL_TORQUES:
         if f"tau_{kind}_x" in tr.columns:
             out += tr.cols(f"tau_{kind}_x", f"tau_{kind}_y", f"tau_{kind}_z")
     return out
