@@ -91,6 +91,23 @@ def test_reported_poles_and_margins():
     json.dumps(s, allow_nan=False)  # strict JSON (summary.json): no inf/NaN, no complex
 
 
+def test_the_design_is_made_once_per_knowledge(monkeypatch):
+    """A Monte Carlo's samples share the nominal knowledge: a reset with the same inertia, orbit,
+    period and params takes the design already made (the loop margins are not computed again,
+    the same gains), another inertia gets its own (the gains of a fresh design)."""
+    import controllers.momentum_manager as mm
+
+    monkeypatch.setattr(mm, "_DESIGNS", {})
+    calls = []
+    monkeypatch.setattr(mm, "loop_margins", lambda *a: calls.append(1) or [{}] * 3)
+    a, b = designed(), designed()
+    assert len(calls) == 1 and np.array_equal(a.K, b.K) and a.poles is b.poles
+    other = np.array(JEOD_I) * 1.05
+    c = designed(other)
+    monkeypatch.setattr(mm, "_DESIGNS", {})
+    assert len(calls) == 2 and np.array_equal(c.K, designed(other).K) and not np.allclose(c.K, a.K, rtol=1e-6)
+
+
 @pytest.mark.parametrize("about", ["tea", "lvlh"])
 def test_command_is_minus_K_times_state(about):
     """The law's one form (``symbolic``, compiled, through ``update``) equals -K (x - x_e) with x

@@ -31,7 +31,7 @@ functions: the generated C evaluates only the case taken):
 
 Every case gives the numbers the full tick would (the idle and plain forms are exact): the
 per-tick executor (its own compiled parts today, the composer's next: docs/design.md "One loop,
-built once", what is left) flies the same run to round-off (tests/test_composed_matrix.py).
+built once", what is left) flies the same run to round-off (tests/test_executor_matrix.py).
 """
 
 from __future__ import annotations
