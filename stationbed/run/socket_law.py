@@ -23,6 +23,7 @@ next tick's deadline is a miss instead: the last command is held and the miss co
 from __future__ import annotations
 
 import math
+import select
 import socket
 import struct
 import time
@@ -55,6 +56,18 @@ RETRY_S = 0.02
 COMMAND_FIELD = {"torque": ("tau_B", 3), "gimbal_rates": ("gimbal_rates", None)}
 #: late ticks whose number is kept (``late_ticks``; all are counted)
 LATE_TICKS_KEPT = 1000
+#: how long a reply is awaited by polling the socket before blocking in the kernel [s]: a process
+#: woken from a blocking ``recv`` on an idle core takes ~50 us to run again (the round trip was
+#: 64-72 us so on a quiet machine, 18 us on a loaded one whose cores stay awake); a pd client
+#: answers within ~2 us (C) or ~20 us (Python) of the measurement, so most replies land inside
+#: the spin. Bounded: a law slower than this costs one spin and then sleeps as before.
+SPIN_S = 100e-6
+#: the spin-or-block choice (:class:`WaitChoice`): ticks timed per epoch, and the epochs flown the
+#: faster way before both are timed again
+EPOCH_TICKS = 256
+EXPLOIT_EPOCHS = 8
+#: the tick and time of a frame's header (offset 8)
+TICK_T = struct.Struct("<qd")
 #: why a socket law keeps the run per tick (the summary's words)
 PER_TICK_WHY = "the socket law (controller.port) runs in another process: it has no compiled form"
 
@@ -196,6 +209,7 @@ class SocketController(Controller):
         self.n_late = 0
         self.late_ticks = []  # the first LATE_TICKS_KEPT ticks held (--hold-late)
         self._rtt = []
+        self._wait = WaitChoice()
         s = self.sock = self._connect()
         self._finalizer = weakref.finalize(self, _close, s, -1)
         try:
@@ -221,6 +235,12 @@ class SocketController(Controller):
         self._in_view = memoryview(self._in)
         self._vals = np.frombuffer(self._in, dtype="<f8", offset=HEADER.size)
         self._last = (0.0,) * self.n_cmd
+        # per tick the socket blocks (Python's timeout would poll before every send and recv):
+        # the waits are polls of its own, bounded by timeout (_send, _receive)
+        s.settimeout(None)
+        self._poll_in, self._poll_out = select.poll(), select.poll()
+        self._poll_in.register(s, select.POLLIN)
+        self._poll_out.register(s, select.POLLOUT)
 
     def _check_ready(self, body: str, cmd) -> None:
         lines = [ln.split() for ln in body.splitlines() if ln.strip()]
@@ -243,71 +263,94 @@ class SocketController(Controller):
     def _update(self, t, meas):
         k = self._k
         self._k = k + 1
-        s = self.sock
-        if s is None:
+        if self.sock is None:
             raise SocketLawError(f"tick {k} (t = {t:.6g} s): the connection is closed")
         out = self._out
-        struct.pack_into("<qd", out, 8, k, t)
+        TICK_T.pack_into(out, 8, k, t)
         self._y[:] = meas.y
         t0 = time.perf_counter()
-        try:
-            s.sendall(out)
-        except OSError as e:
-            self.close()
-            raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
+        self._send(k, t)
         limit = None
         if self.hold_late and self.pacer is not None:  # until the next tick's deadline
-            limit = self.pacer.deadline(t + self.period) - time.perf_counter()
+            limit = self.pacer.deadline(t + self.period)
         while True:
-            got = self._receive(k, t, limit)
-            if got is None:  # late under --hold-late: the last command held, the miss counted
+            if not self._receive(k, t, limit):  # late under --hold-late: the last command held, the miss counted
                 self.n_late += 1
                 if len(self.late_ticks) < LATE_TICKS_KEPT:
                     self.late_ticks.append(k)
                 return self._last
-            tick = struct.unpack_from("<q", self._in, 8)[0]
+            tick = TICK_T.unpack_from(self._in, 8)[0]
             if tick == k:
                 break
             if tick > k or not self.hold_late:
                 self.close()
                 raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process answered for tick {tick}")
-            limit = None if limit is None else self.pacer.deadline(t + self.period) - time.perf_counter()
         self._rtt.append(time.perf_counter() - t0)
         v = self._vals.tolist()
-        cmd = tuple(v[: self.n_cmd])
-        q = v[self.n_cmd:]
-        self.q_ref_BN = None if math.isnan(q[0]) else np.array(q)
+        n = self.n_cmd
+        cmd = tuple(v[:n])
+        q = v[n:]
+        self.q_ref_BN = None if q[0] != q[0] else q  # NaN: the law has no reference
         self._last = cmd
         return cmd
 
-    def _receive(self, k: int, t: float, limit):
-        """Read one COMMAND frame into ``_in``; None when ``limit`` [s] passed first (hold-late)."""
-        s, view, need = self.sock, self._in_view, self._n_in
+    def _send(self, k: int, t: float) -> None:
+        """The measurement frame out: one ``send`` (the socket blocks, so no poll before it); a
+        full send buffer (a client that stopped reading) waits up to ``timeout``, then stops."""
+        s, out = self.sock, self._out
+        sent, n = 0, len(out)
+        try:
+            while True:
+                try:
+                    sent += s.send(memoryview(out)[sent:] if sent else out, socket.MSG_DONTWAIT)
+                except BlockingIOError:
+                    pass
+                if sent >= n:
+                    return
+                if not self._poll_out.poll(self.timeout * 1e3):
+                    self.close()
+                    raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process reads no measurement within "
+                                         f"{self.timeout:g} s (the law process is late)")
+        except OSError as e:
+            self.close()
+            raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
+
+    def _receive(self, k: int, t: float, limit) -> bool:
+        """Read one COMMAND frame into ``_in``: False when the wall clock passed ``limit``
+        (``perf_counter``; hold-late) first. The socket is polled for :data:`SPIN_S`, then the
+        wait sleeps in ``poll`` for the rest of ``timeout`` (or until ``limit``)."""
+        s, view, need, ready = self.sock, self._in_view, self._n_in, self._poll_in.poll
         got = 0
-        if limit is not None:
-            s.settimeout(max(limit, 1e-6))
+        now = start = time.perf_counter()
+        spin_end = now + SPIN_S if self._wait.tick(now) else now
+        end = now + self.timeout if limit is None else limit
+        wait_s = end - now
         try:
             while got < need:
-                n = s.recv_into(view[got:], need - got)
+                if not ready(0):  # nothing yet: spin a little, then sleep in poll
+                    now = time.perf_counter()
+                    if now < spin_end and now < end:
+                        continue
+                    if spin_end > start:
+                        self._wait.missed()
+                        spin_end = start
+                    if now >= end or not ready(max(end - now, 0.0) * 1e3):
+                        if limit is not None and got == 0:
+                            return False
+                        self.close()
+                        raise SocketLawError(f"tick {k} (t = {t:.6g} s): no command within "
+                                             f"{wait_s:g} s "
+                                             f"(the law process is late{'; partial frame' if got else ''})")
+                n = s.recv_into(view[got:] if got else view, need - got)
                 if n == 0:
                     self.close()
                     raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process closed the connection")
                 got += n
                 if got >= 8:
                     self._check_header(k, t)
-        except socket.timeout:
-            if limit is not None and got == 0:
-                s.settimeout(self.timeout)
-                return None
-            self.close()
-            raise SocketLawError(f"tick {k} (t = {t:.6g} s): no command within {self.timeout if limit is None else limit:g} s "
-                                 f"(the law process is late{'; partial frame' if got else ''})") from None
         except ConnectionError as e:
             self.close()
             raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
-        finally:
-            if limit is not None and self.sock is not None:
-                s.settimeout(self.timeout)
         return True
 
     def _check_header(self, k: int, t: float) -> None:
@@ -333,6 +376,47 @@ class SocketController(Controller):
         if self.hold_late:
             out["socket_late_ticks"] = self.n_late
         return out
+
+
+class WaitChoice:
+    """Spin or block while a reply is awaited: whichever flew faster lately.
+
+    A spin (the socket polled for :data:`SPIN_S` before sleeping in ``poll``) saves the wake-up of
+    a process blocked on an idle core (on a virtual machine, a halted vCPU woken by an interrupt:
+    ~25-50 us each way); on a loaded machine it costs instead (a process that never sleeps loses its
+    turn to other processes' time slices; two processes that spin on one core each wait out the
+    other's spin). Which one wins is only known by trying: one epoch of :data:`EPOCH_TICKS` ticks
+    timed each way (wall time, everything in the tick), then :data:`EXPLOIT_EPOCHS` epochs flown
+    the faster way, and again; a spin that misses the reply ends spinning until the next cycle.
+    Numbers never depend on it.
+    """
+
+    def __init__(self):
+        self.epoch = -1  # into the cycle: 0 timed spinning, 1 timed blocking, then the faster way
+        self.k = EPOCH_TICKS  # ticks into the epoch
+        self.start = 0.0  # when the epoch began [s, perf_counter]
+        self.spin = False
+        self.timed = [math.inf, math.inf]  # s: the last epoch timed blocking, spinning
+
+    def tick(self, now: float) -> bool:
+        """Whether this tick's wait spins (``now``: ``perf_counter`` at the tick)."""
+        if self.k < EPOCH_TICKS:
+            self.k += 1
+            return self.spin
+        if self.epoch == 0:  # (a spin that missed ended the epoch's spinning: not timed)
+            self.timed[1] = now - self.start if self.spin else math.inf
+        elif self.epoch == 1:
+            self.timed[0] = now - self.start
+        self.epoch = (self.epoch + 1) % (2 + EXPLOIT_EPOCHS)
+        self.k, self.start = 1, now
+        self.spin = self.epoch == 0 if self.epoch < 2 else self.timed[1] < self.timed[0]
+        return self.spin
+
+    def missed(self) -> None:
+        """A spin that ended before the reply came (the peer shares this core, or is slow):
+        blocking until spinning is timed again."""
+        self.spin = False
+        self.timed[1] = math.inf
 
 
 # -- frames ----------------------------------------------------------------------------------
