@@ -87,23 +87,24 @@ static void missed(void) {
     W.timed[1] = LONG_MAX;
 }
 
-/* read_all; with spin, the socket polled (non-blocking recv) for SPIN_NS before a blocking read */
-static int read_spin(int fd, void *buf, size_t n, int spinning) {
+/* read at least `least` bytes into buf, at most `most` (one frame); with spinning, the socket is
+   polled (non-blocking recv) for SPIN_NS before a blocking one. The count read, -1 at the end. */
+static long read_spin(int fd, void *buf, size_t least, size_t most, int spinning) {
     char *p = buf;
+    size_t got = 0;
     long end = spinning ? now_ns() + SPIN_NS : 0;
-    while (n > 0) {
-        ssize_t k = recv(fd, p, n, MSG_DONTWAIT);
-        if (k < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
-            if (spinning && now_ns() < end) continue;
-            if (spinning) missed();
+    while (got < least) {
+        ssize_t k = recv(fd, p + got, most - got, spinning ? MSG_DONTWAIT : 0);
+        if (k < 0 && spinning && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+            if (now_ns() < end) continue;
+            missed();
             spinning = 0;
-            k = read(fd, p, n);
+            continue;
         }
         if (k <= 0) return -1;
-        p += k;
-        n -= (size_t)k;
+        got += (size_t)k;
     }
-    return 0;
+    return (long)got;
 }
 
 static int write_all(int fd, const void *buf, size_t n) {
@@ -292,20 +293,23 @@ static void serve(int fd) {
     }
     free(text);
     send_text(fd, READY, "stationbed-law 1\ncommand tau_B 3\ncommand q_ref_BN 4\nend\n");
-    double y[MAXY], out[7];
-    char reply[HEADER + sizeof out];
+    double frame[HEADER / 8 + MAXY], *y = frame + HEADER / 8, out[7]; /* (aligned for the doubles) */
+    char *in = (char *)frame, reply[HEADER + sizeof out];
+    size_t n_in = HEADER + 8u * (unsigned)n_y;
     for (;;) {
-        if (read_spin(fd, head, HEADER, choose_spin())) return; /* stationbed closed the connection */
+        /* the header, and the values with it when they came */
+        long got = read_spin(fd, in, HEADER, n_in, choose_spin());
+        if (got < 0) return; /* stationbed closed the connection */
         uint16_t kind;
         int64_t tick;
         double t;
-        memcpy(&size, head, 4);
-        memcpy(&kind, head + 6, 2);
-        memcpy(&tick, head + 8, 8);
-        memcpy(&t, head + 16, 8);
+        memcpy(&size, in, 4);
+        memcpy(&kind, in + 6, 2);
+        memcpy(&tick, in + 8, 8);
+        memcpy(&t, in + 16, 8);
         if (kind == END) return;
-        if (kind != MEAS || size + 4 - HEADER != 8u * (unsigned)n_y) return;
-        if (read_spin(fd, y, 8u * (unsigned)n_y, W.spin)) return;
+        if (kind != MEAS || size + 4 != n_in) return;
+        if ((size_t)got < n_in && read_spin(fd, in + got, n_in - (size_t)got, n_in - (size_t)got, W.spin) < 0) return;
         pd_update(&L, y, out, out + 3);
         header(reply, sizeof reply - 4, CMD, tick, t);
         memcpy(reply + HEADER, out, sizeof out);

@@ -190,21 +190,22 @@ class Reader:
         self.spin = self.epoch == 0 if self.epoch < 2 else self.timed[1] < self.timed[0]
         return self.spin
 
-    def into(self, view, n, spin):
-        """Fill ``view[:n]``; False at the end of the stream. A spin that ends before the frame
-        came (stationbed shares this core, or is paced): blocking until spinning is timed again."""
-        got = 0
+    def into(self, view, least, spin):
+        """Read at least ``least`` bytes into ``view`` (at most its size: one frame); the count
+        read, 0 at the end of the stream. A spin that ends before the frame came (stationbed
+        shares this core, or is paced): blocking until spinning is timed again."""
+        got, most = 0, len(view)
         end = time.perf_counter() + SPIN_S if spin else 0.0
-        while got < n:
+        while got < least:
             if spin and not self.ready(0):
                 if time.perf_counter() < end:
                     continue
                 spin, self.spin, self.timed[1] = False, False, math.inf
-            k = self.conn.recv_into(view[got:n], n - got)
+            k = self.conn.recv_into(view[got:] if got else view, most - got)
             if k == 0:
-                return False
+                return 0
             got += k
-        return True
+        return got
 
 
 class Run(socketserver.StreamRequestHandler):
@@ -236,12 +237,13 @@ class Run(socketserver.StreamRequestHandler):
         reader = Reader(conn)
         read, choose = reader.into, reader.choose
         while True:
-            if not read(view, HEADER.size, choose()):
+            got = read(view, HEADER.size, choose())  # the header, and the values with it when they came
+            if not got:
                 return  # stationbed closed the connection
             size, version, kind, tick, t = HEADER.unpack_from(buf)
             if kind == END:
                 return
-            if size + 4 != len(buf) or not read(view[HEADER.size:], body.size, reader.spin):
+            if size + 4 != len(buf) or (got < len(buf) and not read(view[got:], len(buf) - got, reader.spin)):
                 return
             cmd, q_ref = law.update(body.unpack_from(buf, HEADER.size))
             if tick == at:

@@ -235,12 +235,14 @@ class SocketController(Controller):
         self._in_view = memoryview(self._in)
         self._vals = np.frombuffer(self._in, dtype="<f8", offset=HEADER.size)
         self._last = (0.0,) * self.n_cmd
-        # per tick the socket blocks (Python's timeout would poll before every send and recv):
-        # the waits are polls of its own, bounded by timeout (_send, _receive)
+        # per tick the socket blocks, bounded by timeout in the kernel (Python's own timeout would
+        # poll before every send and recv: a system call each): one send and one recv a tick
         s.settimeout(None)
-        self._poll_in, self._poll_out = select.poll(), select.poll()
-        self._poll_in.register(s, select.POLLIN)
-        self._poll_out.register(s, select.POLLOUT)
+        bound = struct.pack("@ll", int(self.timeout), max(int(self.timeout % 1.0 * 1e6), 1))  # timeval; 0 is forever
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, bound)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, bound)
+        self._poll = select.poll()
+        self._poll.register(s, select.POLLIN)
 
     def _check_ready(self, body: str, cmd) -> None:
         lines = [ln.split() for ln in body.splitlines() if ln.strip()]
@@ -295,53 +297,43 @@ class SocketController(Controller):
         return cmd
 
     def _send(self, k: int, t: float) -> None:
-        """The measurement frame out: one ``send`` (the socket blocks, so no poll before it); a
-        full send buffer (a client that stopped reading) waits up to ``timeout``, then stops."""
-        s, out = self.sock, self._out
-        sent, n = 0, len(out)
+        """The measurement frame out (a client that reads nothing for ``timeout``: late)."""
         try:
-            while True:
-                try:
-                    sent += s.send(memoryview(out)[sent:] if sent else out, socket.MSG_DONTWAIT)
-                except BlockingIOError:
-                    pass
-                if sent >= n:
-                    return
-                if not self._poll_out.poll(self.timeout * 1e3):
-                    self.close()
-                    raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process reads no measurement within "
-                                         f"{self.timeout:g} s (the law process is late)")
+            self.sock.sendall(self._out)
+        except BlockingIOError:  # SO_SNDTIMEO: the send buffer stayed full
+            self.close()
+            raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process reads no measurement within "
+                                 f"{self.timeout:g} s (the law process is late)") from None
         except OSError as e:
             self.close()
             raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
 
     def _receive(self, k: int, t: float, limit) -> bool:
         """Read one COMMAND frame into ``_in``: False when the wall clock passed ``limit``
-        (``perf_counter``; hold-late) first. The socket is polled for :data:`SPIN_S`, then the
-        wait sleeps in ``poll`` for the rest of ``timeout`` (or until ``limit``)."""
-        s, view, need, ready = self.sock, self._in_view, self._n_in, self._poll_in.poll
+        (``perf_counter``; hold-late) before any of it came. The socket is polled for
+        :data:`SPIN_S` when :class:`WaitChoice` says so; then ``recv`` sleeps, up to ``timeout``
+        (or ``poll`` until ``limit``)."""
+        s, view, need, ready = self.sock, self._in_view, self._n_in, self._poll.poll
         got = 0
-        now = start = time.perf_counter()
-        spin_end = now + SPIN_S if self._wait.tick(now) else now
-        end = now + self.timeout if limit is None else limit
-        wait_s = end - now
+        start = time.perf_counter()
+        spin = self._wait.tick(start)
         try:
             while got < need:
-                if not ready(0):  # nothing yet: spin a little, then sleep in poll
-                    now = time.perf_counter()
-                    if now < spin_end and now < end:
+                if spin and not ready(0):  # nothing yet: spin a little
+                    if time.perf_counter() < start + SPIN_S:
                         continue
-                    if spin_end > start:
-                        self._wait.missed()
-                        spin_end = start
-                    if now >= end or not ready(max(end - now, 0.0) * 1e3):
-                        if limit is not None and got == 0:
+                    self._wait.missed()
+                    spin = False
+                if limit is not None and not spin:  # --hold-late: until the next tick's deadline
+                    left = limit - time.perf_counter()
+                    if left <= 0.0 or not ready(left * 1e3):
+                        if got == 0:
                             return False
-                        self.close()
-                        raise SocketLawError(f"tick {k} (t = {t:.6g} s): no command within "
-                                             f"{wait_s:g} s "
-                                             f"(the law process is late{'; partial frame' if got else ''})")
-                n = s.recv_into(view[got:] if got else view, need - got)
+                        self._late(k, t, limit - start, got)
+                try:
+                    n = s.recv_into(view[got:] if got else view, need - got)
+                except BlockingIOError:  # SO_RCVTIMEO: nothing within timeout
+                    self._late(k, t, self.timeout, got)
                 if n == 0:
                     self.close()
                     raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process closed the connection")
@@ -352,6 +344,11 @@ class SocketController(Controller):
             self.close()
             raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
         return True
+
+    def _late(self, k: int, t: float, waited_s: float, got: int):
+        self.close()
+        raise SocketLawError(f"tick {k} (t = {t:.6g} s): no command within {waited_s:g} s "
+                             f"(the law process is late{'; partial frame' if got else ''})")
 
     def _check_header(self, k: int, t: float) -> None:
         size, version, kind = struct.unpack_from("<IHH", self._in, 0)
