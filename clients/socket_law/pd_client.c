@@ -57,13 +57,15 @@ static long now_ns(void) {
    wake-up of a process blocked on an idle core (on a virtual machine, a halted vCPU: ~25-50 us);
    on a loaded machine it costs instead (a process that never sleeps loses its turn to others'
    time slices). So: one epoch of EPOCH_TICKS frames timed each way, then EXPLOIT_EPOCHS epochs
-   the faster way, and again (stationbed's side does the same: docs/socket_law.md, "Speed"). */
+   the faster way, and again; an epoch that misses more than SPINS_MISSED frames spinning blocks
+   until the next cycle (stationbed does the same: docs/socket_law.md, "Speed"). */
 #define EPOCH_TICKS 256
 #define EXPLOIT_EPOCHS 8
+#define SPINS_MISSED 8
 static struct {
-    int epoch, k, spin; /* into the cycle (0 timed spinning, 1 blocking), frames into the epoch */
+    int epoch, k, spin, missed; /* into the cycle (0 timed spinning, 1 blocking), frames into the epoch */
     long start, timed[2]; /* ns: when the epoch began; the last epoch timed blocking, spinning */
-} W = {-1, EPOCH_TICKS, 0, 0, {LONG_MAX, LONG_MAX}};
+} W = {-1, EPOCH_TICKS, 0, 0, 0, {LONG_MAX, LONG_MAX}};
 
 static int choose_spin(void) {
     if (W.k < EPOCH_TICKS) {
@@ -71,18 +73,20 @@ static int choose_spin(void) {
         return W.spin;
     }
     long now = now_ns();
-    if (W.epoch == 0) W.timed[1] = W.spin ? now - W.start : LONG_MAX; /* a spin missed: not timed */
+    if (W.epoch == 0) W.timed[1] = W.spin ? now - W.start : LONG_MAX; /* too many spins missed: not timed */
     if (W.epoch == 1) W.timed[0] = now - W.start;
     W.epoch = (W.epoch + 1) % (2 + EXPLOIT_EPOCHS);
     W.k = 1;
+    W.missed = 0;
     W.start = now;
     W.spin = W.epoch < 2 ? W.epoch == 0 : W.timed[1] < W.timed[0];
     return W.spin;
 }
 
-/* a spin that ended before the frame came (stationbed shares this core, or is paced): blocking
-   until spinning is timed again */
+/* a spin that ended before the frame came (stationbed shares this core, is paced, or was
+   preempted): more than SPINS_MISSED in an epoch, and blocking until spinning is timed again */
 static void missed(void) {
+    if (++W.missed <= SPINS_MISSED) return;
     W.spin = 0;
     W.timed[1] = LONG_MAX;
 }

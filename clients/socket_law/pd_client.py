@@ -36,6 +36,7 @@ HELLO, READY, MEAS, CMD, END, ERROR = 1, 2, 3, 4, 5, 6
 SPIN_S = 100e-6
 EPOCH_TICKS = 256
 EXPLOIT_EPOCHS = 8
+SPINS_MISSED = 8
 
 
 def frame(kind, tick, t, payload=b""):
@@ -167,13 +168,15 @@ class Reader:
     whichever flew faster lately. A spin saves the wake-up of a thread blocked on an idle core (on
     a virtual machine, a halted vCPU: ~25-50 us); on a loaded machine it costs instead (a thread
     that never sleeps loses its turn to others' time slices). So: one epoch of EPOCH_TICKS frames
-    timed each way, then EXPLOIT_EPOCHS epochs the faster way, and again (as stationbed does)."""
+    timed each way, then EXPLOIT_EPOCHS epochs the faster way, and again; an epoch that misses
+    more than SPINS_MISSED frames spinning blocks until the next cycle (as stationbed does)."""
 
     def __init__(self, conn):
         self.conn, poll = conn, select.poll()
         poll.register(conn, select.POLLIN)
         self.ready = poll.poll
         self.epoch, self.k, self.start, self.spin, self.timed = -1, EPOCH_TICKS, 0.0, False, [math.inf, math.inf]
+        self.missed = 0  # spins missed in this epoch
 
     def choose(self):
         """Whether the next frame's wait spins."""
@@ -181,26 +184,28 @@ class Reader:
             self.k += 1
             return self.spin
         now = time.perf_counter()
-        if self.epoch == 0:  # (a spin that missed ended the epoch's spinning: not timed)
+        if self.epoch == 0:  # (too many spins missed stopped the epoch's spinning: not timed)
             self.timed[1] = now - self.start if self.spin else math.inf
         elif self.epoch == 1:
             self.timed[0] = now - self.start
         self.epoch = (self.epoch + 1) % (2 + EXPLOIT_EPOCHS)
-        self.k, self.start = 1, now
+        self.k, self.start, self.missed = 1, now, 0
         self.spin = self.epoch == 0 if self.epoch < 2 else self.timed[1] < self.timed[0]
         return self.spin
 
     def into(self, view, least, spin):
         """Read at least ``least`` bytes into ``view`` (at most its size: one frame); the count
-        read, 0 at the end of the stream. A spin that ends before the frame came (stationbed
-        shares this core, or is paced): blocking until spinning is timed again."""
+        read, 0 at the end of the stream."""
         got, most = 0, len(view)
         end = time.perf_counter() + SPIN_S if spin else 0.0
         while got < least:
             if spin and not self.ready(0):
                 if time.perf_counter() < end:
                     continue
-                spin, self.spin, self.timed[1] = False, False, math.inf
+                spin = False
+                self.missed += 1
+                if self.missed > SPINS_MISSED:  # blocking until spinning is timed again
+                    self.spin, self.timed[1] = False, math.inf
             k = self.conn.recv_into(view[got:] if got else view, most - got)
             if k == 0:
                 return 0

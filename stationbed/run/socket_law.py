@@ -66,6 +66,8 @@ SPIN_S = 100e-6
 #: faster way before both are timed again
 EPOCH_TICKS = 256
 EXPLOIT_EPOCHS = 8
+#: spins an epoch may miss (each costs SPIN_S, and the epoch's time counts it) before it blocks
+SPINS_MISSED = 8
 #: the tick and time of a frame's header (offset 8)
 TICK_T = struct.Struct("<qd")
 #: why a socket law keeps the run per tick (the summary's words)
@@ -384,7 +386,8 @@ class WaitChoice:
     turn to other processes' time slices; two processes that spin on one core each wait out the
     other's spin). Which one wins is only known by trying: one epoch of :data:`EPOCH_TICKS` ticks
     timed each way (wall time, everything in the tick), then :data:`EXPLOIT_EPOCHS` epochs flown
-    the faster way, and again; a spin that misses the reply ends spinning until the next cycle.
+    the faster way, and again; an epoch whose spins miss the reply too often stops spinning until
+    the next cycle.
     Numbers never depend on it.
     """
 
@@ -394,26 +397,30 @@ class WaitChoice:
         self.start = 0.0  # when the epoch began [s, perf_counter]
         self.spin = False
         self.timed = [math.inf, math.inf]  # s: the last epoch timed blocking, spinning
+        self.n_missed = 0  # spins missed in this epoch
 
     def tick(self, now: float) -> bool:
         """Whether this tick's wait spins (``now``: ``perf_counter`` at the tick)."""
         if self.k < EPOCH_TICKS:
             self.k += 1
             return self.spin
-        if self.epoch == 0:  # (a spin that missed ended the epoch's spinning: not timed)
+        if self.epoch == 0:  # (too many spins missed stopped the epoch's spinning: not timed)
             self.timed[1] = now - self.start if self.spin else math.inf
         elif self.epoch == 1:
             self.timed[0] = now - self.start
         self.epoch = (self.epoch + 1) % (2 + EXPLOIT_EPOCHS)
-        self.k, self.start = 1, now
+        self.k, self.start, self.n_missed = 1, now, 0
         self.spin = self.epoch == 0 if self.epoch < 2 else self.timed[1] < self.timed[0]
         return self.spin
 
     def missed(self) -> None:
-        """A spin that ended before the reply came (the peer shares this core, or is slow):
-        blocking until spinning is timed again."""
-        self.spin = False
-        self.timed[1] = math.inf
+        """A spin that ended before the reply came (the peer shares this core, is slow, or was
+        preempted): more than :data:`SPINS_MISSED` in an epoch, and the wait blocks until
+        spinning is timed again (a timed epoch so ended is not a spinning one)."""
+        self.n_missed += 1
+        if self.n_missed > SPINS_MISSED:
+            self.spin = False
+            self.timed[1] = math.inf
 
 
 # -- frames ----------------------------------------------------------------------------------
