@@ -59,7 +59,9 @@ static long now_ns(void) {
    time slices). So: one epoch of EPOCH_TICKS frames timed each way, then EXPLOIT_EPOCHS epochs
    the faster way, and again; an epoch that misses more than SPINS_MISSED frames spinning blocks
    until the next cycle (stationbed does the same: docs/socket_law.md, "Speed"). */
+#ifndef EPOCH_TICKS
 #define EPOCH_TICKS 256
+#endif
 #define EXPLOIT_EPOCHS 8
 #define SPINS_MISSED 8
 static struct {

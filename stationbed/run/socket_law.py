@@ -60,7 +60,7 @@ LATE_TICKS_KEPT = 1000
 #: woken from a blocking ``recv`` on an idle core takes ~50 us to run again (the round trip was
 #: 64-72 us so on a quiet machine, 18 us on a loaded one whose cores stay awake); a pd client
 #: answers within ~2 us (C) or ~20 us (Python) of the measurement, so most replies land inside
-#: the spin. Bounded: a law slower than this costs one spin and then sleeps as before.
+#: the spin. Whether the wait spins at all, :class:`WaitChoice` decides (by timing both).
 SPIN_S = 100e-6
 #: the spin-or-block choice (:class:`WaitChoice`): ticks timed per epoch, and the epochs flown the
 #: faster way before both are timed again
