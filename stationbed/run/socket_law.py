@@ -18,6 +18,11 @@ of the wrong size, kind or version stops the run with one line naming the tick a
 the rows up to it are kept. Under ``--realtime`` with ``--hold-late``, a reply later than the
 next tick's deadline is a miss instead: the last command is held and the miss counted
 (``socket_late_ticks``); the late reply is read and dropped when it comes.
+
+While a reply is awaited the socket is polled for a moment (:data:`SPIN_S`) or the process
+sleeps in ``recv``, whichever flew faster lately (:class:`WaitChoice`; docs/design.md, "Socket
+laws and real time"): a sleeping process on an idle virtual CPU wakes late, a spinning one on a
+loaded machine loses its turn.
 """
 
 from __future__ import annotations
