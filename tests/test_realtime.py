@@ -15,6 +15,7 @@ Truths:
 from __future__ import annotations
 
 import math
+import os
 import signal
 import socket
 import subprocess
@@ -120,10 +121,40 @@ def _rerun_exe() -> str:
     return str(exe)
 
 
-def test_live_streams_the_recording_the_file_holds(tmp_path):
-    pytest.importorskip("rerun")
+def _stopped(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"  # a zombie has exited
+    except FileNotFoundError:
+        return True
+
+
+def _stop_server(pid: int, wait=None) -> None:
+    """Stop a rerun gRPC server (SIGINT: it writes what it received, then exits)."""
+    time.sleep(0.5)  # let it write what it received
+    os.kill(pid, signal.SIGINT)
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline and not (wait() is not None if wait else _stopped(pid)):
+        time.sleep(0.05)
+    if not (wait() is not None if wait else _stopped(pid)):
+        os.kill(pid, signal.SIGKILL)
+
+
+def _assert_received_what_the_file_holds(received: Path, rrd: Path) -> None:
     from test_rerun import read_temporal, static_entities  # the recording read back, entity by entity
 
+    assert static_entities(received) == static_entities(rrd)  # the station drawn as in a replay
+    live, file = read_temporal(received), read_temporal(rrd)
+    assert sorted(live) == sorted(file) and len(file) > 10
+    for entity, cols in file.items():
+        assert sorted(live[entity]) == sorted(cols), entity
+        for name, values in cols.items():
+            np.testing.assert_array_equal(live[entity][name], values, err_msg=f"{entity} {name}")
+    assert max(cols["t"][-1] for cols in live.values()) == DURATION_S  # every row streamed, to the last
+
+
+def test_live_streams_the_recording_the_file_holds(tmp_path):
+    pytest.importorskip("rerun")
     port = _free_port()
     received = tmp_path / "received.rrd"
     server = subprocess.Popen([_rerun_exe(), "--serve-grpc", "--port", str(port), "--save", str(received)],
@@ -140,22 +171,53 @@ def test_live_streams_the_recording_the_file_holds(tmp_path):
         assert main(["run", str(scene), "--out", str(tmp_path / "o"), "--rrd", str(rrd), "--live", str(port),
                      "--realtime", str(4 * FACTOR), "-q"]) == 0
     finally:
-        time.sleep(0.5)  # let the server write what it received
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=20.0)
-        except subprocess.TimeoutExpired:
-            server.kill()
+        _stop_server(server.pid, server.poll)
+        if server.poll() is None:
             server.wait()
         server.stderr.close()
-    assert static_entities(received) == static_entities(rrd)  # the station drawn as in a replay
-    live, file = read_temporal(received), read_temporal(rrd)
-    assert sorted(live) == sorted(file) and len(file) > 10
-    for entity, cols in file.items():
-        assert sorted(live[entity]) == sorted(cols), entity
-        for name, values in cols.items():
-            np.testing.assert_array_equal(live[entity][name], values, err_msg=f"{entity} {name}")
-    assert max(cols["t"][-1] for cols in live.values()) == DURATION_S  # every row streamed, to the last
+    _assert_received_what_the_file_holds(received, rrd)
+
+
+#: the viewer --live starts when given no URL, stood in for: rerun's headless gRPC server on the
+#: port the viewer is given, saving what it receives (the test has no display for a window)
+STAND_IN = """#!{python}
+import os, sys
+port = next(a.split("=", 1)[1] for a in sys.argv[1:] if a.startswith("--port="))
+with open({said!r}, "w") as f:
+    f.write(str(os.getpid()) + "\\n" + " ".join(sys.argv[1:]))
+os.execv({real!r}, [{real!r}, "--serve-grpc", "--port", port, "--save", {save!r}])
+"""
+
+
+def test_live_without_a_url_starts_a_viewer_and_streams_to_it(tmp_path, monkeypatch):
+    """``--live`` alone starts the viewer ``stationbed replay`` starts (``$STATIONBED_RERUN``,
+    here the stand-in) on rerun's port, and streams to it what the ``--rrd`` file holds. (Before,
+    rerun looked for ``rerun`` on PATH alone: a venv not activated had none.)"""
+    pytest.importorskip("rerun")
+    from stationbed.output.rerun.live import SPAWN_PORT
+    from stationbed.output.rerun.viewer import RERUN_BINARY_ENV, rerun_binary
+
+    real = rerun_binary()
+    if real is None:
+        pytest.skip("no rerun binary (rerun-sdk) to stand in for the viewer")
+    with socket.socket() as s:
+        if s.connect_ex(("127.0.0.1", SPAWN_PORT)) == 0:
+            pytest.skip(f"a viewer already listens on {SPAWN_PORT}: --live would stream to it")
+    said, received = tmp_path / "viewer_said", tmp_path / "received.rrd"
+    stand_in = tmp_path / "viewer"
+    stand_in.write_text(STAND_IN.format(python=sys.executable, said=str(said), real=real, save=str(received)))
+    stand_in.chmod(0o755)
+    monkeypatch.setenv(RERUN_BINARY_ENV, str(stand_in))
+    monkeypatch.setenv("DISPLAY", ":0")  # (has_display: the stand-in needs none)
+    scene, rrd = write_scene(tmp_path, {}), tmp_path / "file.rrd"
+    try:
+        assert main(["run", str(scene), "--out", str(tmp_path / "o"), "--rrd", str(rrd), "--live",
+                     "--realtime", str(4 * FACTOR), "-q"]) == 0
+    finally:
+        if said.exists():
+            _stop_server(int(said.read_text().split()[0]))
+    assert f"--port={SPAWN_PORT}" in said.read_text().split("\n", 1)[1].split()
+    _assert_received_what_the_file_holds(received, rrd)
 
 
 def test_live_to_a_viewer_that_is_not_there_stops_before_the_run(tmp_path, capsys):

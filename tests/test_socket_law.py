@@ -251,3 +251,65 @@ def test_a_monte_carlo_flies_one_connection_per_sample(c_client):
     pd.testing.assert_frame_equal(workers, serial)
     np.testing.assert_allclose(serial["final_att_err_deg"], ref["final_att_err_deg"], rtol=FUSED_RTOL, atol=0.0)
     assert serial["final_att_err_deg"].nunique() == len(serial)  # the samples differ
+
+
+# -- waiting for the reply: spin or block, whichever flew faster (socket_law.WaitChoice) -------------
+
+def _fly_epoch(choice, now: float, tick_s: float, misses_from: int | None = None) -> tuple[float, list[bool]]:
+    """One epoch of ticks ``tick_s`` apart on a made-up clock; from tick ``misses_from`` on, every
+    spin misses the reply."""
+    from stationbed.run.socket_law import EPOCH_TICKS
+
+    spins = []
+    for i in range(EPOCH_TICKS):
+        spins.append(choice.tick(now))
+        if misses_from is not None and i >= misses_from and spins[-1]:
+            choice.missed()
+        now += tick_s
+    return now, spins
+
+
+FAST_S, SLOW_S = 15e-6, 60e-6  # s per tick: a spinning and a blocking tick on an idle machine, or the reverse
+
+
+@pytest.mark.parametrize("spin_s, block_s, misses_from, spins", [
+    (FAST_S, SLOW_S, None, True),
+    (SLOW_S, FAST_S, None, False),
+    (FAST_S, SLOW_S, 3, False),  # spins that missed the reply: the epoch stopped spinning, not timed so
+], ids=["spin_faster", "block_faster", "spin_faster_but_missed"])
+def test_the_wait_spins_when_spinning_flew_faster(spin_s, block_s, misses_from, spins):
+    """A cycle times one epoch spinning, one blocking, then flies the faster way EXPLOIT_EPOCHS
+    epochs; then it times both again."""
+    from stationbed.run.socket_law import EXPLOIT_EPOCHS, SPINS_MISSED, WaitChoice
+
+    w = WaitChoice()
+    now, first = _fly_epoch(w, 0.0, spin_s, misses_from)
+    n_spun = len(first) if misses_from is None else misses_from + SPINS_MISSED + 1
+    assert all(first[:n_spun]) and not any(first[n_spun:])  # spinning until too many missed
+    now, second = _fly_epoch(w, now, block_s)
+    assert not any(second)
+    for _ in range(EXPLOIT_EPOCHS):
+        now, flown = _fly_epoch(w, now, FAST_S)
+        assert set(flown) == {spins}
+    now, again = _fly_epoch(w, now, FAST_S)
+    assert all(again)  # timed again: the load may have changed
+
+
+def test_a_flown_epoch_whose_spins_miss_blocks_until_the_next_cycle():
+    """A few missed spins are the epoch's time (each costs SPIN_S); more than SPINS_MISSED stop
+    spinning until the next cycle times it again."""
+    from stationbed.run.socket_law import EPOCH_TICKS, EXPLOIT_EPOCHS, SPINS_MISSED, WaitChoice
+
+    w = WaitChoice()
+    now, _ = _fly_epoch(w, 0.0, FAST_S)
+    now, _ = _fly_epoch(w, now, SLOW_S)
+    now, flown = _fly_epoch(w, now, FAST_S, misses_from=EPOCH_TICKS - SPINS_MISSED)  # as many as tolerated
+    assert all(flown)
+    half = EPOCH_TICKS // 2
+    now, flown = _fly_epoch(w, now, FAST_S, misses_from=half)
+    assert all(flown[: half + SPINS_MISSED + 1]) and not any(flown[half + SPINS_MISSED + 1:])
+    for _ in range(EXPLOIT_EPOCHS - 2):
+        now, flown = _fly_epoch(w, now, FAST_S)
+        assert not any(flown)
+    now, again = _fly_epoch(w, now, FAST_S)
+    assert all(again)

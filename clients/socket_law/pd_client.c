@@ -12,6 +12,8 @@
  * this file assumes a little-endian machine (x86-64, arm64).
  */
 #include <arpa/inet.h>
+#include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -21,11 +23,18 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <time.h>
 #include <unistd.h>
 
 enum { VERSION = 1, HELLO = 1, READY = 2, MEAS = 3, CMD = 4, END = 5, ERROR = 6 };
 #define HEADER 24 /* u32 size (bytes after it), u16 version, u16 kind, i64 tick, f64 t */
 #define MAXY 512
+/* how long a frame is awaited by polling the socket before sleeping in read [ns]: a process woken
+   from a blocking read on an idle core takes ~50 us to run again, and stationbed sends the next
+   measurement ~10 us after it reads a command (at full speed) */
+#ifndef SPIN_NS
+#define SPIN_NS 100000L
+#endif
 
 static int read_all(int fd, void *buf, size_t n) {
     char *p = buf;
@@ -36,6 +45,72 @@ static int read_all(int fd, void *buf, size_t n) {
         n -= (size_t)k;
     }
     return 0;
+}
+
+static long now_ns(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1000000000L + ts.tv_nsec;
+}
+
+/* Spin or block while the next frame is awaited, whichever flew faster lately. A spin saves the
+   wake-up of a process blocked on an idle core (on a virtual machine, a halted vCPU: ~25-50 us);
+   on a loaded machine it costs instead (a process that never sleeps loses its turn to others'
+   time slices). So: one epoch of EPOCH_TICKS frames timed each way, then EXPLOIT_EPOCHS epochs
+   the faster way, and again; an epoch that misses more than SPINS_MISSED frames spinning blocks
+   until the next cycle (stationbed does the same: docs/socket_law.md, "Speed"). */
+#ifndef EPOCH_TICKS
+#define EPOCH_TICKS 256
+#endif
+#define EXPLOIT_EPOCHS 8
+#define SPINS_MISSED 8
+static struct {
+    int epoch, k, spin, missed; /* into the cycle (0 timed spinning, 1 blocking), frames into the epoch */
+    long start, timed[2]; /* ns: when the epoch began; the last epoch timed blocking, spinning */
+} W = {-1, EPOCH_TICKS, 0, 0, 0, {LONG_MAX, LONG_MAX}};
+
+static int choose_spin(void) {
+    if (W.k < EPOCH_TICKS) {
+        W.k++;
+        return W.spin;
+    }
+    long now = now_ns();
+    if (W.epoch == 0) W.timed[1] = W.spin ? now - W.start : LONG_MAX; /* too many spins missed: not timed */
+    if (W.epoch == 1) W.timed[0] = now - W.start;
+    W.epoch = (W.epoch + 1) % (2 + EXPLOIT_EPOCHS);
+    W.k = 1;
+    W.missed = 0;
+    W.start = now;
+    W.spin = W.epoch < 2 ? W.epoch == 0 : W.timed[1] < W.timed[0];
+    return W.spin;
+}
+
+/* a spin that ended before the frame came (stationbed shares this core, is paced, or was
+   preempted): more than SPINS_MISSED in an epoch, and blocking until spinning is timed again */
+static void missed(void) {
+    if (++W.missed <= SPINS_MISSED) return;
+    W.spin = 0;
+    W.timed[1] = LONG_MAX;
+}
+
+/* read at least `least` bytes into buf, at most `most` (one frame); with spinning, the socket is
+   polled (non-blocking recv) for SPIN_NS before a blocking one. The count read, -1 at the end. */
+static long read_spin(int fd, void *buf, size_t least, size_t most, int spinning) {
+    char *p = buf;
+    size_t got = 0;
+    long end = spinning ? now_ns() + SPIN_NS : 0;
+    while (got < least) {
+        ssize_t k = recv(fd, p + got, most - got, spinning ? MSG_DONTWAIT : 0);
+        if (k < 0 && spinning && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+            if (now_ns() < end) continue;
+            missed();
+            spinning = 0;
+            continue;
+        }
+        if (k <= 0) return -1;
+        got += (size_t)k;
+    }
+    return (long)got;
 }
 
 static int write_all(int fd, const void *buf, size_t n) {
@@ -224,20 +299,23 @@ static void serve(int fd) {
     }
     free(text);
     send_text(fd, READY, "stationbed-law 1\ncommand tau_B 3\ncommand q_ref_BN 4\nend\n");
-    double y[MAXY], out[7];
-    char reply[HEADER + sizeof out];
+    double frame[HEADER / 8 + MAXY], *y = frame + HEADER / 8, out[7]; /* (aligned for the doubles) */
+    char *in = (char *)frame, reply[HEADER + sizeof out];
+    size_t n_in = HEADER + 8u * (unsigned)n_y;
     for (;;) {
-        if (read_all(fd, head, HEADER)) return; /* stationbed closed the connection */
+        /* the header, and the values with it when they came */
+        long got = read_spin(fd, in, HEADER, n_in, choose_spin());
+        if (got < 0) return; /* stationbed closed the connection */
         uint16_t kind;
         int64_t tick;
         double t;
-        memcpy(&size, head, 4);
-        memcpy(&kind, head + 6, 2);
-        memcpy(&tick, head + 8, 8);
-        memcpy(&t, head + 16, 8);
+        memcpy(&size, in, 4);
+        memcpy(&kind, in + 6, 2);
+        memcpy(&tick, in + 8, 8);
+        memcpy(&t, in + 16, 8);
         if (kind == END) return;
-        if (kind != MEAS || size + 4 - HEADER != 8u * (unsigned)n_y) return;
-        if (read_all(fd, y, 8u * (unsigned)n_y)) return;
+        if (kind != MEAS || size + 4 != n_in) return;
+        if ((size_t)got < n_in && read_spin(fd, in + got, n_in - (size_t)got, n_in - (size_t)got, W.spin) < 0) return;
         pd_update(&L, y, out, out + 3);
         header(reply, sizeof reply - 4, CMD, tick, t);
         memcpy(reply + HEADER, out, sizeof out);

@@ -18,11 +18,17 @@ of the wrong size, kind or version stops the run with one line naming the tick a
 the rows up to it are kept. Under ``--realtime`` with ``--hold-late``, a reply later than the
 next tick's deadline is a miss instead: the last command is held and the miss counted
 (``socket_late_ticks``); the late reply is read and dropped when it comes.
+
+While a reply is awaited the socket is polled for a moment (:data:`SPIN_S`) or the process
+sleeps in ``recv``, whichever flew faster lately (:class:`WaitChoice`; docs/design.md, "Socket
+laws and real time"): a sleeping process on an idle virtual CPU wakes late, a spinning one on a
+loaded machine loses its turn.
 """
 
 from __future__ import annotations
 
 import math
+import select
 import socket
 import struct
 import time
@@ -55,6 +61,20 @@ RETRY_S = 0.02
 COMMAND_FIELD = {"torque": ("tau_B", 3), "gimbal_rates": ("gimbal_rates", None)}
 #: late ticks whose number is kept (``late_ticks``; all are counted)
 LATE_TICKS_KEPT = 1000
+#: how long a reply is awaited by polling the socket before blocking in the kernel [s]: a process
+#: woken from a blocking ``recv`` on an idle core takes ~50 us to run again (the round trip was
+#: 64-72 us so on a quiet machine, 18 us on a loaded one whose cores stay awake); a pd client
+#: answers within ~2 us (C) or ~20 us (Python) of the measurement, so most replies land inside
+#: the spin. Whether the wait spins at all, :class:`WaitChoice` decides (by timing both).
+SPIN_S = 100e-6
+#: the spin-or-block choice (:class:`WaitChoice`): ticks timed per epoch, and the epochs flown the
+#: faster way before both are timed again
+EPOCH_TICKS = 256
+EXPLOIT_EPOCHS = 8
+#: spins an epoch may miss (each costs SPIN_S, and the epoch's time counts it) before it blocks
+SPINS_MISSED = 8
+#: the tick and time of a frame's header (offset 8)
+TICK_T = struct.Struct("<qd")
 #: why a socket law keeps the run per tick (the summary's words)
 PER_TICK_WHY = "the socket law (controller.port) runs in another process: it has no compiled form"
 
@@ -196,6 +216,7 @@ class SocketController(Controller):
         self.n_late = 0
         self.late_ticks = []  # the first LATE_TICKS_KEPT ticks held (--hold-late)
         self._rtt = []
+        self._wait = WaitChoice()
         s = self.sock = self._connect()
         self._finalizer = weakref.finalize(self, _close, s, -1)
         try:
@@ -221,6 +242,14 @@ class SocketController(Controller):
         self._in_view = memoryview(self._in)
         self._vals = np.frombuffer(self._in, dtype="<f8", offset=HEADER.size)
         self._last = (0.0,) * self.n_cmd
+        # per tick the socket blocks, bounded by timeout in the kernel (Python's own timeout would
+        # poll before every send and recv: a system call each): one send and one recv a tick
+        s.settimeout(None)
+        bound = struct.pack("@ll", int(self.timeout), max(int(self.timeout % 1.0 * 1e6), 1))  # timeval; 0 is forever
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, bound)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, bound)
+        self._poll = select.poll()
+        self._poll.register(s, select.POLLIN)
 
     def _check_ready(self, body: str, cmd) -> None:
         lines = [ln.split() for ln in body.splitlines() if ln.strip()]
@@ -243,72 +272,90 @@ class SocketController(Controller):
     def _update(self, t, meas):
         k = self._k
         self._k = k + 1
-        s = self.sock
-        if s is None:
+        if self.sock is None:
             raise SocketLawError(f"tick {k} (t = {t:.6g} s): the connection is closed")
         out = self._out
-        struct.pack_into("<qd", out, 8, k, t)
+        TICK_T.pack_into(out, 8, k, t)
         self._y[:] = meas.y
         t0 = time.perf_counter()
-        try:
-            s.sendall(out)
-        except OSError as e:
-            self.close()
-            raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
+        self._send(k, t)
         limit = None
         if self.hold_late and self.pacer is not None:  # until the next tick's deadline
-            limit = self.pacer.deadline(t + self.period) - time.perf_counter()
+            limit = self.pacer.deadline(t + self.period)
         while True:
-            got = self._receive(k, t, limit)
-            if got is None:  # late under --hold-late: the last command held, the miss counted
+            if not self._receive(k, t, limit):  # late under --hold-late: the last command held, the miss counted
                 self.n_late += 1
                 if len(self.late_ticks) < LATE_TICKS_KEPT:
                     self.late_ticks.append(k)
                 return self._last
-            tick = struct.unpack_from("<q", self._in, 8)[0]
+            tick = TICK_T.unpack_from(self._in, 8)[0]
             if tick == k:
                 break
             if tick > k or not self.hold_late:
                 self.close()
                 raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process answered for tick {tick}")
-            limit = None if limit is None else self.pacer.deadline(t + self.period) - time.perf_counter()
         self._rtt.append(time.perf_counter() - t0)
         v = self._vals.tolist()
-        cmd = tuple(v[: self.n_cmd])
-        q = v[self.n_cmd:]
-        self.q_ref_BN = None if math.isnan(q[0]) else np.array(q)
+        n = self.n_cmd
+        cmd = tuple(v[:n])
+        q = v[n:]
+        self.q_ref_BN = None if q[0] != q[0] else q  # NaN: the law has no reference
         self._last = cmd
         return cmd
 
-    def _receive(self, k: int, t: float, limit):
-        """Read one COMMAND frame into ``_in``; None when ``limit`` [s] passed first (hold-late)."""
-        s, view, need = self.sock, self._in_view, self._n_in
+    def _send(self, k: int, t: float) -> None:
+        """The measurement frame out (a client that reads nothing for ``timeout``: late)."""
+        try:
+            self.sock.sendall(self._out)
+        except BlockingIOError:  # SO_SNDTIMEO: the send buffer stayed full
+            self.close()
+            raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process reads no measurement within "
+                                 f"{self.timeout:g} s (the law process is late)") from None
+        except OSError as e:
+            self.close()
+            raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
+
+    def _receive(self, k: int, t: float, limit) -> bool:
+        """Read one COMMAND frame into ``_in``: False when the wall clock passed ``limit``
+        (``perf_counter``; hold-late) before any of it came. The socket is polled for
+        :data:`SPIN_S` when :class:`WaitChoice` says so; then ``recv`` sleeps, up to ``timeout``
+        (or ``poll`` until ``limit``)."""
+        s, view, need, ready = self.sock, self._in_view, self._n_in, self._poll.poll
         got = 0
-        if limit is not None:
-            s.settimeout(max(limit, 1e-6))
+        start = time.perf_counter()
+        spin = self._wait.tick(start)
         try:
             while got < need:
-                n = s.recv_into(view[got:], need - got)
+                if spin and not ready(0):  # nothing yet: spin a little
+                    if time.perf_counter() < start + SPIN_S:
+                        continue
+                    self._wait.missed()
+                    spin = False
+                if limit is not None and not spin:  # --hold-late: until the next tick's deadline
+                    left = limit - time.perf_counter()
+                    if left <= 0.0 or not ready(left * 1e3):
+                        if got == 0:
+                            return False
+                        self._late(k, t, limit - start, got)
+                try:
+                    n = s.recv_into(view[got:] if got else view, need - got)
+                except BlockingIOError:  # SO_RCVTIMEO: nothing within timeout
+                    self._late(k, t, self.timeout, got)
                 if n == 0:
                     self.close()
                     raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process closed the connection")
                 got += n
                 if got >= 8:
                     self._check_header(k, t)
-        except socket.timeout:
-            if limit is not None and got == 0:
-                s.settimeout(self.timeout)
-                return None
-            self.close()
-            raise SocketLawError(f"tick {k} (t = {t:.6g} s): no command within {self.timeout if limit is None else limit:g} s "
-                                 f"(the law process is late{'; partial frame' if got else ''})") from None
         except ConnectionError as e:
             self.close()
             raise SocketLawError(f"tick {k} (t = {t:.6g} s): the law process is gone ({e.strerror or e})") from None
-        finally:
-            if limit is not None and self.sock is not None:
-                s.settimeout(self.timeout)
         return True
+
+    def _late(self, k: int, t: float, waited_s: float, got: int):
+        self.close()
+        raise SocketLawError(f"tick {k} (t = {t:.6g} s): no command within {waited_s:g} s "
+                             f"(the law process is late{'; partial frame' if got else ''})")
 
     def _check_header(self, k: int, t: float) -> None:
         size, version, kind = struct.unpack_from("<IHH", self._in, 0)
@@ -333,6 +380,52 @@ class SocketController(Controller):
         if self.hold_late:
             out["socket_late_ticks"] = self.n_late
         return out
+
+
+class WaitChoice:
+    """Spin or block while a reply is awaited: whichever flew faster lately.
+
+    A spin (the socket polled for :data:`SPIN_S` before sleeping in ``poll``) saves the wake-up of
+    a process blocked on an idle core (on a virtual machine, a halted vCPU woken by an interrupt:
+    ~25-50 us each way); on a loaded machine it costs instead (a process that never sleeps loses its
+    turn to other processes' time slices; two processes that spin on one core each wait out the
+    other's spin). Which one wins is only known by trying: one epoch of :data:`EPOCH_TICKS` ticks
+    timed each way (wall time, everything in the tick), then :data:`EXPLOIT_EPOCHS` epochs flown
+    the faster way, and again; an epoch whose spins miss the reply too often stops spinning until
+    the next cycle.
+    Numbers never depend on it.
+    """
+
+    def __init__(self):
+        self.epoch = -1  # into the cycle: 0 timed spinning, 1 timed blocking, then the faster way
+        self.k = EPOCH_TICKS  # ticks into the epoch
+        self.start = 0.0  # when the epoch began [s, perf_counter]
+        self.spin = False
+        self.timed = [math.inf, math.inf]  # s: the last epoch timed blocking, spinning
+        self.n_missed = 0  # spins missed in this epoch
+
+    def tick(self, now: float) -> bool:
+        """Whether this tick's wait spins (``now``: ``perf_counter`` at the tick)."""
+        if self.k < EPOCH_TICKS:
+            self.k += 1
+            return self.spin
+        if self.epoch == 0:  # (too many spins missed stopped the epoch's spinning: not timed)
+            self.timed[1] = now - self.start if self.spin else math.inf
+        elif self.epoch == 1:
+            self.timed[0] = now - self.start
+        self.epoch = (self.epoch + 1) % (2 + EXPLOIT_EPOCHS)
+        self.k, self.start, self.n_missed = 1, now, 0
+        self.spin = self.epoch == 0 if self.epoch < 2 else self.timed[1] < self.timed[0]
+        return self.spin
+
+    def missed(self) -> None:
+        """A spin that ended before the reply came (the peer shares this core, is slow, or was
+        preempted): more than :data:`SPINS_MISSED` in an epoch, and the wait blocks until
+        spinning is timed again (a timed epoch so ended is not a spinning one)."""
+        self.n_missed += 1
+        if self.n_missed > SPINS_MISSED:
+            self.spin = False
+            self.timed[1] = math.inf
 
 
 # -- frames ----------------------------------------------------------------------------------

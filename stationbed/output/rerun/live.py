@@ -9,7 +9,8 @@ the wall clock, its recording streamed to a rerun viewer while it flies.
 * ``--live [URL]``: the recording the ``--rrd`` child writes (:mod:`.child`, :class:`~.sink.RrdSink`)
   also goes to a viewer, over gRPC: ``URL`` is a running viewer's or ``rerun --serve-grpc``'s
   (``rerun+http://127.0.0.1:9876/proxy``; a bare port means that on this machine); without one, a
-  viewer is started (``rr.spawn``: the rerun-sdk's viewer, which needs a display). One stream, two
+  viewer is started on port 9876 (``rr.spawn``; the binary ``stationbed replay`` starts:
+  ``$STATIONBED_RERUN``, rerun-sdk's own, or PATH's; it needs a display). One stream, two
   sinks (rerun's ``set_sinks``): the viewer gets what the file gets, the station drawn as in a replay.
 """
 
@@ -18,7 +19,7 @@ from __future__ import annotations
 import re
 import socket
 
-from .viewer import has_display
+from .viewer import has_display, rerun_binary
 
 __all__ = ["add_options", "options", "pacer", "live_url", "summary_parts", "grpc_sink", "SPAWN"]
 
@@ -82,8 +83,8 @@ def grpc_sink(rec, live: str):
     """The gRPC sink of ``rec`` for ``live`` (a URL, or :data:`SPAWN`: a viewer started first)."""
     import rerun as rr
 
-    if live == SPAWN:
-        rec.spawn(port=SPAWN_PORT, connect=False)
+    if live == SPAWN:  # the viewer `stationbed replay` starts (rerun's own search: PATH alone)
+        rr.spawn(port=SPAWN_PORT, connect=False, executable_path=rerun_binary(), recording=rec)
         live = f"rerun+http://127.0.0.1:{SPAWN_PORT}/proxy"
     return rr.GrpcSink(live)
 
