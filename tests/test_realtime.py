@@ -234,3 +234,17 @@ def test_hold_late_needs_realtime(tmp_path, capsys):
     scene = write_scene(tmp_path, {})
     assert main(["run", str(scene), "--out", str(tmp_path / "o"), "--hold-late"]) == 2
     assert "--hold-late: holds a socket law's late command under --realtime" in capsys.readouterr().err
+
+
+def test_a_sleep_that_wakes_late_is_a_miss(monkeypatch):
+    """A deadline the work kept but the sleep before it overshot by more than MISS_S is a miss
+    too (it was counted only when the work itself overran: a 10-minute run reported 0 misses
+    with a 32 ms worst lateness)."""
+    import stationbed.run.pacing as pacing
+
+    real_sleep = time.sleep
+    monkeypatch.setattr(pacing.time, "sleep", lambda s: real_sleep(s + 3 * MISS_S))  # a wake-up 3 ms late
+    p = Pacer(factor=100.0)
+    p.wait(0.0)
+    p.wait(PERIOD_S)  # due 5 ms after the first: the work took nothing, the sleep woke late
+    assert p.misses == 1 and p.worst_late_s >= 3 * MISS_S

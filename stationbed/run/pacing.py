@@ -29,7 +29,8 @@ import numpy as np
 
 __all__ = ["Pacer", "paced"]
 
-#: a tick that arrives later than its deadline by more than this counts as a deadline miss [s]
+#: a deadline released later than this counts as a miss [s] (whether the work overran it or the
+#: sleep before it woke late)
 #: (the scheduler's wake-up jitter, ~0.1 ms on Linux, is lateness, not a miss)
 MISS_S = 1e-3
 
@@ -74,12 +75,12 @@ class Pacer:
         else:
             self._work.append(now - self.released)
         due = self.wall0 + (t - self.t0) / self.factor
-        if now - due > MISS_S:
-            self.misses += 1
         if now < due:
             time.sleep(due - now)
             now = time.perf_counter()
         late = now - due
+        if late > MISS_S:  # released late: work that overran, or a sleep that woke late
+            self.misses += 1
         self.last_late_s = late
         if late > self.worst_late_s:
             self.worst_late_s = late
