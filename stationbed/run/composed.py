@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions
 from . import law_state
-from .blocks import composed, structure_key
+from .blocks import Draws, composed, structure_key
 from .composed_rows import rows_functions, run_rows
 from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 
@@ -52,42 +52,6 @@ def _functions(comp, cp) -> dict:
     BUILT[tag] = out["build_s"] = time.perf_counter() - t0
     _CHUNKS[(structure_key(comp, cp), n)] = out
     return out
-
-
-class Draws:
-    """The composition's draws by tick, from each block's own stream, in tick order: the sensing
-    block's (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.rng`` through
-    the corruption plug-in, fused.py's order). ``rows(k0, n)`` -> (n, width)."""
-
-    def __init__(self, comp, cm):
-        N = cm.noise
-        self.width = N.size
-        self.src = []
-        if "sensing" in N:
-            self.src.append((N.slice("sensing"), lambda k0, n: comp.tick_noise.rows(k0, n)))
-        if "noise" in N:
-            self.src.append((N.slice("noise"), lambda k0, n: comp.corruption.draw(comp.rng, n)))
-        self.comp = comp
-
-    def rows(self, k0: int, n: int) -> np.ndarray:
-        if len(self.src) == 1 and self.src[0][0] == slice(0, self.width):
-            return self.src[0][1](k0, n)
-        out = np.zeros((n, self.width))
-        for sl, f in self.src:
-            out[:, sl] = f(k0, n)
-        return out
-
-    def state(self):
-        c = self.comp
-        return (c.tick_noise.state() if c.tick_noise is not None else None,
-                c.rng.bit_generator.state if c.corruption is not None else None)
-
-    def restore(self, st) -> None:
-        c = self.comp
-        if st[0] is not None:
-            c.tick_noise.restore(st[0])
-        if st[1] is not None:
-            c.rng.bit_generator.state = st[1]
 
 
 def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
