@@ -111,13 +111,15 @@ def end_block(comp) -> Block:
     return Block("end", "end", f, Layout(), Layout(p=npar), Layout(), U, Y, key=(type(comp.end).__name__, comp.command))
 
 
-def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
+def run_blocks(comp, cp, rate: int = 0, noise: bool = True) -> list[Block]:
     """The blocks of the run composed by ``comp`` (module docstring), in the tick's order; with
-    an environment ``rate`` (ticks per evaluation), the held environment first."""
+    an environment ``rate`` (ticks per evaluation), the held environment first. ``noise``
+    False: without the ideal measurement's noise (an executor that corrupts what the blocks
+    give itself: the lockstep batch, whose samples may corrupt different fields)."""
     blocks = [env_block(comp, rate)] if rate else []
     if comp.flight is not None:
         blocks.append(sensing_block(comp.flight))
-    if comp.corruption is not None and not comp.delay:  # [controller.sensor] noise (with a delay: the
+    if noise and comp.corruption is not None and not comp.delay:  # [controller.sensor] noise (with a delay: the
         # per-tick loop's ring buffer, then the corruption, on what the blocks give; never fused)
         blocks.append(corruption_block(comp.corruption, comp.meas_layout.size))
     blocks.append(law_block(comp, cp))
@@ -152,7 +154,7 @@ def blocker(comp, cp=()) -> Block | None:
     return None
 
 
-def structure_key(comp, cp) -> tuple:
+def structure_key(comp, cp, noise: bool = True) -> tuple:
     """What the run's composed functions depend on, read without building a block (numbers are
     inputs, never in the key): the compiled system, the law's class, command, state and
     parameter sizes, the flight's key, the thrusters' structure, the chain end's kind."""
@@ -161,7 +163,7 @@ def structure_key(comp, cp) -> tuple:
     return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
             None if comp.flight is None else comp.flight.key,
             None if th is None else (th.cluster.key, th.lp), type(comp.end).__name__, held_rate(comp)[0],
-            None if comp.corruption is None else comp.corruption.flags, bool(comp.delay))
+            *((None if comp.corruption is None else comp.corruption.flags, bool(comp.delay)) if noise else ("no noise",)))
 
 
 def fixed_tick(comp) -> bool:
@@ -225,16 +227,16 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     return out
 
 
-def composed(comp, cp) -> tuple[Composed, float]:
+def composed(comp, cp, noise: bool = True) -> tuple[Composed, float]:
     """The run's composition composed (cached by its structure, :func:`structure_key`) and the
-    seconds it took to build now (0 when cached)."""
-    key = structure_key(comp, cp)
+    seconds it took to build now (0 when cached); ``noise`` as :func:`run_blocks`."""
+    key = structure_key(comp, cp, noise)
     hit = _COMPOSED.get(key)
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
     rate = held_rate(comp)[0]
-    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate))
+    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate, noise))
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0
 

@@ -19,7 +19,7 @@ from .controller import ControllerError, one_line
 from .measurement import Measurement
 from .segments import edge_ticks, held_torque_from, tick_pieces
 
-__all__ = ["parts", "run_parts", "NOISE_BLOCK"]
+__all__ = ["parts", "run_parts", "law_numbers", "NOISE_BLOCK"]
 
 #: ticks of draws taken at a time (any size gives the same numbers: each stream in tick order)
 NOISE_BLOCK = 256
@@ -27,14 +27,15 @@ NOISE_BLOCK = 256
 _PARTS: dict = {}
 
 
-def parts(comp, cp=()) -> dict:
+def parts(comp, cp=(), noise: bool = True) -> dict:
     """``{"cm": Composed, "sense": FastCall, "act": FastCall}`` of the run composed by ``comp``
-    (``cp`` the law's symbolic numbers, when it has them: the composition's key only)."""
-    key = structure_key(comp, cp)
+    (``cp`` the law's symbolic numbers, when it has them: the composition's key only; ``noise``
+    as :func:`~.blocks.run_blocks`)."""
+    key = structure_key(comp, cp, noise)
     hit = _PARTS.get(key)
     if hit is not None and hit["system"] is comp.system:
         return hit
-    cm, _ = composed(comp, cp)
+    cm, _ = composed(comp, cp, noise)
     tag = "parts_" + hashlib.sha256(repr(cm.key).encode()).hexdigest()[:16]
     funcs = compile_functions([cm.sense_part(), cm.act_part()], tag)
     out = {"cm": cm, "sense": FastCall(funcs["cl_sense"]), "act": FastCall(funcs["cl_act"]), "system": comp.system}
@@ -52,7 +53,7 @@ def run_parts(loop, K: int, update) -> None:
     ticks share the parts' numbers, so the act part's sensing of the next tick serves it."""
     comp, res = loop.comp, loop.res
     ctrl = comp.ctrl
-    cp = _law_numbers(ctrl)
+    cp = law_numbers(ctrl)
     fns = parts(comp, cp)
     cm, sense, act = fns["cm"], fns["sense"], fns["act"]
     C, P, S = cm.carry, cm.par, cm.sense_outputs
@@ -206,7 +207,7 @@ def run_parts(loop, K: int, update) -> None:
             fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
 
 
-def _law_numbers(ctrl):
+def law_numbers(ctrl):
     """The law's numbers for its symbolic form (empty for a law without one): the composition's
     key counts them."""
     if not callable(getattr(ctrl, "symbolic", None)):
