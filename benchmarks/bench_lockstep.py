@@ -17,7 +17,7 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
 6. ``momentum_manager`` fused (its ``symbolic`` form with the law's state carried,
    stationbed/run/law_state.py) and batch (vectorised ``update_batch``, ``fused=False``);
 7. ``example_hold`` on sensors and the MEKF (iss_lvlh_hold_estimated, each sample its own sensor
-   seed), batch (its flight tick mapped: stationbed/run/lockstep_flight.py) and per tick;
+   seed), batch (the composed parts mapped, its sensing inside: stationbed/run/lockstep.py) and per tick;
 8. each law's per-sample set-up alone (``prepare``, rows, loop, the law's design:
    ``momentum_manager`` designs an LQR and its loop margins per sample), which every executor pays
    once per sample, whatever its duration.

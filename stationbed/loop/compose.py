@@ -30,8 +30,9 @@ functions: the generated C evaluates only the case taken):
   pulse edges (:func:`~.actuator.split_step`).
 
 Every case gives the numbers the full tick would (the idle and plain forms are exact): the
-per-tick executor (its own compiled parts today, the composer's next: docs/design.md "One loop,
-built once", what is left) flies the same run to round-off (tests/test_composed_matrix.py).
+per-tick executor, which calls the composition's parts around a law it calls itself
+(:meth:`Composed.sense_part`, :meth:`Composed.act_part`: the law is the one block it may leave
+out), flies the same run to round-off (tests/test_composed_matrix.py).
 """
 
 from __future__ import annotations

@@ -249,9 +249,9 @@ class ControlLoop:
                 self.seen[:] = y
                 return
         if comp.noisy:
-            self._corrupt(k, y)
+            self.corrupt(k, y)
 
-    def _corrupt(self, k: int, y=None) -> None:
+    def corrupt(self, k: int, y=None) -> None:
         """``seen`` at tick k: the delay (this executor's ring buffer of past measurements),
         then the corruption plug-in (loop/corruption.py) compiled, on this tick's draws."""
         comp = self.comp
@@ -294,7 +294,7 @@ class ControlLoop:
         a.args[1][:] = self.x
         a.args[2][: comp.n_cmd] = cmd
         a()
-        return self._flags(a.res[0], count)
+        return self.flags(a.res[0], count)
 
     def advance(self, t0: float, t1: float, cmd) -> None:
         """Generic path: one integrator call per period, split at the discontinuities inside it
@@ -344,7 +344,7 @@ class ControlLoop:
             comp.integ.count_steps(self.n_fixed)
             res.rows.flush()
 
-    def _replan(self, t: float) -> None:
+    def redesign(self, t: float) -> None:
         """A failure detected at ``t``: the law designs again (the user's code: reported as update's)."""
         comp = self.comp
         ctrl = comp.ctrl
@@ -381,7 +381,7 @@ class ControlLoop:
                 if k == K:
                     t = duration
                 if k == replan_at:
-                    self._replan(t)
+                    self.redesign(t)
                 M.t = t
                 self.calls += 1
                 try:
@@ -418,7 +418,7 @@ class ControlLoop:
         except ValueError as e:
             raise ControllerFailure(t, f"controller '{comp.ctrl.name}' returned {e}") from None
 
-    def _flags(self, r, count: bool = True) -> int:
+    def flags(self, r, count: bool = True) -> int:
         """The chain end's reported values ``r`` (``out``): the held ``u_cmg`` kept, the
         rate-limited and saturated flags counted; returns the row's flag."""
         if self.act is None:

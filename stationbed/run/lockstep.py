@@ -3,22 +3,22 @@ control period per step, the law called once per tick for all of them (issue 22)
 
 Per tick: the law's :meth:`~.controller.Controller.update_batch` (every measurement field with a
 leading sample axis; a law with only a ``symbolic`` form: that form compiled and mapped over the
-samples, :mod:`.law_compiled`) -> one call of the compiled tick mapped over the samples (casadi
-``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
-step, measure; the map calls that very machine code once per sample, so a sample's numbers are
-its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
-delay; or the scene's sensors and estimator, their flight tick mapped the same way:
-:mod:`.lockstep_flight`) -> rows at the output ticks (each sample's own :class:`~.rows.Rows`
-and metrics).
+samples, :mod:`.law_compiled`) -> the composed tick's compiled ``act`` part mapped over the
+samples (casadi ``Function.map`` of the very function the per-tick loop calls, :mod:`.parts`:
+the held environment, the actuator chain, its end, one fixed step, the next tick's measurement
+and sensing; the map calls that machine code once per sample, so a sample's numbers are its
+single run's, bit for bit) -> each sample's ideal measurement (noise from its own generator,
+its own delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and
+metrics). Each sample keeps its own numbers, carry, draws and pieces (its rows cut at its own
+edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every executor).
 
-A tick that a sample's single run integrates on the generic path (a discontinuity inside it or
-at its end, the final tick) is run for that sample alone with its own
-:class:`~.closed_loop.ControlLoop` (the same calls, the same numbers). A sample that fails (a
-bad or non-finite command, the law raising, a non-finite state) stops alone, with its single
-run's reason and time; the batch goes on.
+A sample whose single run cannot step the composed parts (a discontinuity between ticks, an
+array rate step, an actuator that is not symbolic, a fault detected mid-run) runs its own
+:class:`~.closed_loop.ControlLoop`. A sample that fails (a bad or non-finite command, the law
+raising, a non-finite state) stops alone, with its single run's reason and time; the batch goes on.
 
 :func:`executor` says which executor a run gets: ``fused`` (a law with ``symbolic``, where the
-fused loop applies), ``batch`` (an RK4 tick at one step per period) or ``per-tick``.
+fused loop applies), ``batch`` (the composed parts, :func:`~.blocks.parts_ok`) or ``per-tick``.
 """
 
 from __future__ import annotations
@@ -252,7 +252,7 @@ class _Lockstep:
                 self.z[i, :, self.NZ.slice(f)] = zi[:, c.draws.slice(f)]
 
     def _corrupt(self, k: int) -> None:
-        """``seen`` from ``raw`` at tick k, as ``ControlLoop._corrupt`` per sample: each sample's delay
+        """``seen`` from ``raw`` at tick k, as ``ControlLoop.corrupt`` per sample: each sample's delay
         (its ring buffer), then the corruption plug-in mapped over the samples."""
         if not self.any_noisy:  # (seen is raw)
             return

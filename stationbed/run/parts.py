@@ -115,7 +115,8 @@ def run_parts(loop, K: int, update) -> None:
     replan_at = comp.replan.tick if comp.replan is not None else -1
     ncmd = comp.n_cmd
     three = ncmd == 3
-    trigger = act._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
+    fc = act
+    trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
     # the act part's buffers as memoryviews: Python floats in and out, ~half numpy's cost
     m_c, m_c1, m_cs, m_act, m_cmd = (memoryview(v) for v in (c, a_c1, a_cs, a_act, a_cmd))
     pack_cmd = struct.Struct(f"={ncmd}d").pack_into
@@ -131,9 +132,9 @@ def run_parts(loop, K: int, update) -> None:
                 if k == K:
                     t = duration
                 if k == replan_at:
-                    loop._replan(t)
+                    loop.redesign(t)
                 if delay:  # the ideal measurement's delay (a ring buffer, not a block yet) and noise
-                    loop._corrupt(k, a_v1)
+                    loop.corrupt(k, a_v1)
                 M.t = t
                 loop.calls += 1
                 try:
@@ -173,7 +174,7 @@ def run_parts(loop, K: int, update) -> None:
                 # the final tick's actuation is reported in its row but never integrated:
                 # it is not counted in the summary
                 if has_act and (m_act[i_lim] or m_act[i_sat]):
-                    sat_since_row |= loop._flags(a_act, count=k < K)
+                    sat_since_row |= loop.flags(a_act, count=k < K)
                 if row:
                     if len(cmd) == 3:
                         res.last_cmd = cmd

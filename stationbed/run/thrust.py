@@ -1,8 +1,10 @@
-"""The thrusters in the closed loop's per-tick executor (issue 21): the actuator's tick on what
-the law sees, the integration split at every pulse edge, the row values and the summary.
+"""The thrusters of a closed-loop run (issue 21): their memory, the actuator's tick on what the
+law sees for the per-tick loop's generic path (its integration, split at every pulse edge of
+any channel, is the loop's own: ``ControlLoop.advance``), the row values and the summary.
 
 :class:`ThrustLoop` is what the run's composition holds (``comp.thrust``) when the scene has
-``[[thruster]]`` tables; the fused loop (:mod:`.composed`, the thrusters as a block) runs the same
+``[[thruster]]`` tables; the composed tick (:mod:`.blocks`, the thrusters as a block: the fused
+loop, the per-tick loop's and the lockstep batch's compiled parts) runs the same
 :class:`~stationbed.loop.thrusters.ThrusterCluster` function inlined.
 """
 
@@ -12,12 +14,10 @@ import math
 
 import numpy as np
 
-from ..loop.actuator import pulse_pieces
 from ..loop.thrusters import ThrusterCluster
 from ..model.cmg import held_momentum_B
 from ..scene import knowledge_scene
 from ..scene.thrusters import missing_torque
-from .segments import segment_input
 
 __all__ = ["ThrustLoop", "thruster_columns", "thrust_for", "thruster_parts"]
 
@@ -94,23 +94,6 @@ class ThrustLoop:
         the end), as the fused loop's :func:`~.segments.tick_pieces` cuts them."""
         rest = comp.duration - t
         return comp.period if rest >= comp.period * (1 - 1e-12) else max(rest, 0.0)
-
-    def advance(self, comp, res, t0: float, t1: float) -> None:
-        """Integrate ``[t0, t1]`` split at the scene's breakpoints and the pulse edges; over each
-        piece the thrusters on add their torque to the held external torque (``res.u``, the
-        state ``res.x`` advanced in place)."""
-        cuts = [(t0 + a, t0 + b, on) for a, b, on in pulse_pieces(self.on_s, t1 - t0)]
-        cuts[-1] = (cuts[-1][0], t1, cuts[-1][2])
-        inner = [b for b in comp.bps if t0 < b < t1]
-        i_ext = comp.input_layout.slice("u_ext")
-        for a, b, on in cuts:
-            edges = [a] + [e for e in inner if a < e < b] + [b]
-            tq = self.torque_B[:, on].sum(axis=1)
-            for s0, s1 in zip(edges[:-1], edges[1:]):
-                segment_input(comp.scene, comp.model, s0, s1, res.u)
-                u = res.u.copy()
-                u[i_ext] += tq
-                res.x[:] = comp.apply_jump(s1, comp.integ.advance(s0, s1, res.x, u))
 
     def row_index(self) -> np.ndarray:
         """The indices of the memory's numbers a row reports (:func:`thruster_columns`' order)."""
