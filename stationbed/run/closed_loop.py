@@ -4,12 +4,10 @@ record, with the per-tick compiled path and the fused loop (:mod:`.fused`)."""
 from __future__ import annotations
 
 import math
-import struct
 
 import numpy as np
 
 from ..core.compile import FastCall
-from ..integrators import IntegrationError
 from ..loop.flight import Flight
 from ..model.moon import moon_position
 from ..model.sun import julian_date

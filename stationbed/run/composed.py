@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions
 from . import law_state
-from .blocks import Draws, composed, structure_key
+from .blocks import Draws, composed, numbers, structure_key
 from .composed_rows import rows_functions, run_rows
 from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 
@@ -67,7 +67,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     law = cm.law_block.name
     fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
     sense = fl.name if fl is not None else None
-    act = cm.actuators[0].name if cm.actuators else None
+    act = "thrusters" if th is not None else None  # the thrusters' memory, handed back (comp.thrust)
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
@@ -76,8 +76,9 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     if sense is not None:
         par[P.slice(sense)] = flight.params
         X = fl.state
-    if act is not None:
-        par[P.slice(act)] = th.cluster.params
+    for name, (p, _) in numbers(comp, cp).items():  # each block's numbers, by its name
+        if name in P and len(p):
+            par[P.slice(name)] = p
     c0 = chunk.args[0]
     c0[:] = 0.0
     c0[C.slice("x")], c0[C.slice(law)] = res.x, s_law

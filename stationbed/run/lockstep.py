@@ -342,7 +342,7 @@ class _Lockstep:
                 self.C[i, C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B,
                                                              omega_prev=fm.omega_prev, xs=fm.xs)
         ths = [s.loop.comp.thrust for s in S]
-        i_th = C.slice(cm.actuators[0].name) if ths[0] is not None else None
+        i_th = C.slice("thrusters") if ths[0] is not None else None
         cx = C.slice("x")
         i_fin = cx.start + lp.state_layout.slice(lp.system.formulation.rate_field).start  # the per-tick loop's finite probe
         # each sample's pieces (its own edges on the grid), then the final tick

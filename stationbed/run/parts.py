@@ -76,7 +76,7 @@ def run_parts(loop, K: int, update) -> None:
         fm = res.flight
         c[C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
     th = comp.thrust
-    i_th = C.slice(cm.actuators[0].name) if th is not None else None
+    i_th = C.slice("thrusters") if th is not None else None
     out = comp.end.outputs
     has_act = comp.has_cluster
     i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if has_act else (0, 0, 0)
