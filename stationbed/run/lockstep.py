@@ -375,16 +375,17 @@ class _Lockstep:
             errors[i] = e
 
         M = self.M
-        starts = np.zeros(n, dtype=int)  # the tick each sample's current piece starts
-        ends = np.array([p[1] for p in self.piece])
+        due = np.arange(n)  # the samples that start a piece at the next tick
+        ends = np.array([p[1] for p in self.piece])  # the tick after each sample's current piece
+        first_end = int(ends.min())
         try:
             for k in range(K + 1):
                 t = k * period
                 if k == K:
                     t = duration
-                due = np.flatnonzero(starts == k)
-                if len(due):
+                if due is not None:
                     self._start(due, k, K)
+                    due = None
                 self._corrupt(k)
                 M.t = t
                 try:
@@ -480,17 +481,19 @@ class _Lockstep:
                     ok = (v > -1e300) & (v < 1e300)
                     for i in np.flatnonzero(alive & ~ok):
                         fail(i, IntegrationError(min((k + 1) * period, duration), "state is not finite (NaN or inf)"))
-                inside = ends > k + 1  # the next tick in the same piece: the act part's sensing serves it
-                if inside.all():
+                if k + 1 < first_end:  # the next tick in the same piece: the act part's sensing serves it
                     self.C[:] = self.CS
                     self.raw[:] = self.V1
                     self.outs[:] = self.OUTS
                 else:
+                    inside = ends > k + 1
                     self.C[inside], self.raw[inside], self.outs[inside] = self.CS[inside], self.V1[inside], self.OUTS[inside]
                     self.C[~inside] = self.C1[~inside]
-                    for i in np.flatnonzero(~inside):
+                    due = np.flatnonzero(~inside)
+                    for i in due:
                         self.piece[i] = next(its[i])
-                        starts[i], ends[i] = self.piece[i][0], self.piece[i][1]
+                        ends[i] = self.piece[i][1]
+                    first_end = int(ends.min())
         finally:
             ctrl.hand_back_compiled()  # (each sample's law state, from the compiled batch)
             wall = (time.perf_counter() - wall0) / n
