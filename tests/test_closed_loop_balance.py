@@ -512,7 +512,7 @@ ENV_RATES = [1, 5, "auto"]
 @pytest.mark.parametrize("case", ["on_grid", "whole"])
 @pytest.mark.parametrize("rate", ENV_RATES, ids=[f"env_every_{n}" for n in ENV_RATES])
 def test_every_torque_kind_balance_at_each_environment_rate(rate, case, fused):
-    """The fused loop and the per-tick loop (its held tick, run/held_env.py) with aero and SRP
+    """The fused loop and the per-tick loop (the composed parts' env block, run/parts.py) with aero and SRP
     held over blocks of ``rate`` ticks keep the balance (the integral takes the every-stage
     torque columns the run logs); the window's edges on the grid cut the blocks."""
     windows = KIND_WINDOWS[case]

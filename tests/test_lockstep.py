@@ -241,7 +241,7 @@ def test_the_readmes_update_batch_gives_the_guides_numbers(tmp_path):
 def test_a_loop_with_sensors_runs_in_lockstep_bit_for_bit():
     """A scene that flies [[sensor]] tables and an [estimator] (issue 20's gyro, star trackers,
     MEKF; each sample its own seed, so its own noise): a Python law runs batch, its flight tick
-    mapped over the samples (run/lockstep_flight.py), each sample's rows (the estimation columns
+    mapped over the samples (inside the composed parts, run/parts.py), each sample's rows (the estimation columns
     included) and summary its single per-tick run's, bit for bit; a law with a symbolic form
     runs fused (the flight inlined), as its single run."""
     base = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace(

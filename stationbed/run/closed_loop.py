@@ -85,12 +85,15 @@ class ControlLoop:
     """Sense -> control (integer ticks, zero-order hold) -> actuate -> integrate -> record.
 
     Builds the run's :class:`~.composition.Composition` (``comp``) and its
-    :class:`~.composition.RunState` (``res``), and is the per-tick executor: one integrator
-    call per period (split only at scene discontinuities inside it); the integrator keeps its
-    memory (step size) across periods, so nothing restarts per tick. :meth:`run` hands the run
+    :class:`~.composition.RunState` (``res``), and is the per-tick executor: the law between
+    the composed tick's compiled parts (:func:`~.parts.run_parts`) where the run steps whole
+    fixed ticks (:func:`~.blocks.parts_ok`), else the generic path: one integrator call per
+    period (split only at scene discontinuities and pulse edges inside it; the integrator keeps
+    its memory across periods, so nothing restarts per tick). :meth:`run` hands the run
     to a fused executor when one applies (:func:`~.fused.fused_ok`). The per-tick executor's
     single-tick steps (:meth:`measure`, :meth:`actuate`, :meth:`advance`, :meth:`check_command`,
-    :meth:`noise_row`) are public: the lockstep batch runs a sample's generic ticks with them.
+    :meth:`noise_row`, :meth:`corrupt`, :meth:`flags`, :meth:`redesign`) are public: the
+    composed parts' path (:func:`~.parts.run_parts`) calls some of them.
     """
 
     def __init__(self, scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused):
