@@ -285,11 +285,13 @@ class ControlLoop:
             fc()
             self.tau_held[:] = fc.res[3]  # torque_B, its one channel on over [t, t + h]
             return 0
-        if comp.thrust is not None:  # the thrusters take their share; the CMGs get the rest
+        loops = comp.actuator_loops
+        if loops:  # the chain's actuators in order take their share; the CMGs get the rest
             y = self.seen if (comp.noisy or comp.flight is not None) else self.meas.res[0]
-            th = comp.thrust
-            cmd = th.command(comp, t, y, cmd)
-            self.pulses = th.on_s, th.torque_B
+            for a in loops:
+                cmd = a.command(comp, t, y, cmd)
+            ons, tqs = [a.on_s for a in loops], [a.torque_B for a in loops]  # every channel of the chain
+            self.pulses = (ons[0], tqs[0]) if len(loops) == 1 else (np.concatenate(ons), np.hstack(tqs))
         a = self.act
         a.args[0][0] = t
         a.args[1][:] = self.x

@@ -136,6 +136,13 @@ class Composition:
         return ((self.thrust.cluster,) if self.thrust is not None else ()) + (self.end,)
 
     @cached_property
+    def actuator_loops(self) -> tuple:
+        """The actuators before the chain's end, in order, each with its memory (the per-tick
+        loop's generic path steps them: ``command(comp, t, y, tau) -> rest``, then its
+        ``on_s`` and ``torque_B``): the thrusters (:class:`~.thrust.ThrustLoop`) today."""
+        return (self.thrust,) if self.thrust is not None else ()
+
+    @cached_property
     def u_cmg(self) -> slice:
         """The CMG cluster's held input in ``u`` (input layout)."""
         return self.input_layout.slice("u_cmg")
