@@ -10,7 +10,9 @@ and sensing; the map calls that machine code once per sample, so a sample's numb
 single run's, bit for bit) -> each sample's ideal measurement (noise from its own generator,
 its own delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and
 metrics). Each sample keeps its own numbers, carry, draws and pieces (its rows cut at its own
-edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every executor).
+edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every executor); its
+scheduled steps (faults, docking events: :mod:`.schedule`, ``lockstep_hook``) apply where its
+piece starts (every step's tick starts one), on its own row of the carry and the numbers.
 
 A sample whose single run cannot step the composed parts (a discontinuity between ticks, an
 array rate step, an actuator that is not symbolic, a fault detected mid-run) runs its own

@@ -51,7 +51,9 @@ def run_parts(loop, K: int, update) -> None:
     fused loop composes: sensing, the actuator chain in order, its end, the held
     environment). The ticks run in the fused loop's pieces (each row's ticks cut at the edges
     on the grid and before a short final period, :func:`~.segments.tick_pieces`): a piece's
-    ticks share the parts' numbers, so the act part's sensing of the next tick serves it."""
+    ticks share the parts' numbers, so the act part's sensing of the next tick serves it. A
+    scheduled step's tick starts a piece (:func:`~.segments.edge_ticks`): the step applies
+    there, before the piece's first sensing (:func:`~.schedule.parts_hook`)."""
     comp, res = loop.comp, loop.res
     ctrl = comp.ctrl
     cp = law_numbers(ctrl)
