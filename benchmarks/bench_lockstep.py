@@ -7,7 +7,7 @@ sensor noise off, 10 Hz), ``--n`` samples (default 50, one Monte Carlo chunk) of
 seconds (default 300) each, in this one process, one after the other so that the shared machine's
 load hits every row alike. Rows (CPU time of this process, ``time.process_time``, per sample):
 
-1. ``floor``: the compiled tick alone, mapped over the n samples (one call per tick, no law, no
+1. ``floor``: the compiled act part alone, mapped over the n samples (one call per tick, no law, no
    rows): what any executor pays for the physics;
 2. ``pd`` fused (per sample, the fused loop; the shipped law with a ``symbolic`` form); each
    row times the samples' set-up and their run apart (CPU of this process);
@@ -17,7 +17,7 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
 6. ``momentum_manager`` fused (its ``symbolic`` form with the law's state carried,
    stationbed/run/law_state.py) and batch (vectorised ``update_batch``, ``fused=False``);
 7. ``example_hold`` on sensors and the MEKF (iss_lvlh_hold_estimated, each sample its own sensor
-   seed), batch (its flight tick mapped: stationbed/run/lockstep_flight.py) and per tick;
+   seed), batch (the composed parts mapped, its sensing inside: stationbed/run/lockstep.py) and per tick;
 8. each law's per-sample set-up alone (``prepare``, rows, loop, the law's design:
    ``momentum_manager`` designs an LQR and its loop margins per sample), which every executor pays
    once per sample, whatever its duration.
@@ -85,20 +85,21 @@ def cpu(fn):
 
 
 def floor_row(sc, duration):
-    """The mapped compiled tick alone, n samples, one call per tick."""
+    """The mapped compiled act part alone (the composed tick after the law: chain, one RK4 step,
+    the next tick's measurement and sensing), n samples, one call per tick."""
     smp = [_Sample(s, None, False, False) for s in sc]
     ls = _Lockstep(smp)
-    for i, s in enumerate(smp):
-        ls.P[i] = s.run.p
-        ls.X[i] = s.loop.x
-    ls.H[:] = 0.1
+    C, P = ls.cm.carry, ls.cm.par
     k_ticks = int(round(duration / 0.1))
+    for i, s in enumerate(smp):
+        ls.PAR[i, P.slice("p")] = s.run.p
+        ls.PAR[i, P.slice("h")], ls.PAR[i, P.slice("n_act")] = 0.1, k_ticks
+        ls.C[i, C.slice("x")] = s.loop.x
 
     def go():
-        for k in range(k_ticks):
-            ls.T[:] = k * 0.1
-            ls.fc()
-            ls.X[:] = ls.X1
+        for _ in range(k_ticks):
+            ls.act()
+            ls.C[:] = ls.C1
     return cpu(go)[0]
 
 

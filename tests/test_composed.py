@@ -94,13 +94,18 @@ def test_block_contract_refuses_a_step_of_another_shape():
 
 
 def test_a_block_that_is_not_symbolic_cannot_be_composed():
-    """A Python law is a block with ``symbolic = False``: the composer names it and its reason."""
+    """A Python law is a block with ``symbolic = False``: the composer names it and its reason
+    when asked for the whole tick; the parts around it (what the per-tick loop calls) compose."""
     cm = _toy(1.0)
     law = cm.law_block
     py = Block("law", "law", law.step, law.state, law.params, law.noise, law.inputs, law.outputs, symbolic=False,
                why="a Python law")
-    with pytest.raises(ValueError, match="block 'law' is not symbolic \\(a Python law\\)"):
-        compose(cm.plant, [py, cm.end])
+    c = compose(cm.plant, [py, cm.end])
+    assert c.blocker is py
+    for whole in (c.tick, c.row):
+        with pytest.raises(ValueError, match="block 'law' is not symbolic \\(a Python law\\)"):
+            whole()
+    assert c.sense_part().n_out() == 3 and c.act_part().n_out() == 5
 
 
 def _short(path, duration, **over):

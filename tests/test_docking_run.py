@@ -57,9 +57,10 @@ EVENT = {"kind": "dock", "t": T_EVENT_S, "vehicle": "v", "port": "aft", "closing
 
 
 def _run(scene, executor):
-    if executor == "lockstep":
-        [(kind, tr)] = run_lockstep([scene], keep=True, fused=False)
-        assert kind == "batch"
+    if executor == "lockstep":  # two samples: the mapped parts' batch (one alone runs the per-tick loop)
+        [(kind, tr), (kind2, tr2)] = run_lockstep([scene, scene], keep=True, fused=False)
+        assert kind == kind2 == "batch"
+        assert_array_equal(tr2.data, tr.data)
         return tr
     return simulate(scene, fused=executor == "fused")
 

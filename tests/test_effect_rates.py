@@ -32,7 +32,6 @@ from stationbed import load_scene, simulate
 from stationbed.core.rotation import rotation_angle
 from stationbed.model import Structure
 from stationbed.run.rate_auto import AUTO, TARGET_RAD
-from stationbed.run.held_env import blocks
 from stationbed.run.rates import g_norms, hold_bound_rad, torque_rates
 from stationbed.run.system import build_system, environment_split
 from stationbed.scene import SceneError
@@ -112,26 +111,33 @@ def test_default_rate_is_the_bounds_choice_and_within_it(orbit):
 def test_auto_says_why_it_runs_every_stage():
     """Where the bound does not apply, ``auto`` is every stage and the summary says why: a law
     other than pd, a per-tick loop that cannot cut the run into blocks (DOP853 steps across
-    ticks), thrusters; a scene without environment torques records no bound."""
+    ticks); a scene without environment torques records no bound. Thrusters are no reason (issue
+    33: the composed loop and its per-tick parts hold the environment with them)."""
     hold = load_scene(SCENE).replace({"simulation.duration": 20.0, "simulation.output_dt": 10.0})
     tea = load_scene(ROOT / "scenarios" / "iss_tea_momentum_management.toml")
     cases = [
         (simulate(tea, duration=20.0), "pd"),
         (simulate(hold.replace({"simulation.integrator": "dop853", "simulation.step": None}), fused=False),
          "not one RK4 step per tick"),
-        (simulate(load_scene(ROOT / "scenarios" / "iss_cmg_thruster_assist.toml"), duration=20.0), "thrusters"),
         (simulate(load_scene(ROOT / "scenarios" / "eigenaxis_slew.toml"), duration=2.0), "no environment"),
     ]
     for tr, why in cases:
         s = tr.meta["summary"]
         assert (s["environment_rate_asked"], s["environment_rate_ticks"], s["environment_rate_bound_rad"]) == (AUTO, 0, None)
         assert why in s["environment_rate_why"], s["environment_rate_why"]
+    thr = load_scene(ROOT / "scenarios" / "iss_cmg_thruster_assist.toml")
+    runs = [simulate(thr, duration=20.0, fused=fused) for fused in (True, False)]
+    for tr in runs:
+        s = tr.meta["summary"]
+        assert s["environment_rate_ticks"] > 1 and s["environment_rate_bound_rad"] <= TARGET_RAD, s["environment_rate_why"]
+    assert [tr.meta["summary"]["fused"] for tr in runs] == [True, False]
+    assert float(np.max(rotation_angle(runs[0].q_BN, runs[1].q_BN))) <= EXECUTOR_ROUNDOFF_RAD
 
 
 #: the per-tick and batch executors' held tick against the fused loop's: the same blocks and
-#: operations, but a tick's time is k h there and t0 + i h in the fused chunk (round-off in t;
-#: measured 5.6e-16 rad over 61 s and 1.8e-15 rad over 600 s; blocks not cut at the rows give
-#: 6.8e-14 rad on the 61 s run, so the schedule itself is tested directly too)
+#: operations (since issue 33 the composed tick's compiled parts, at the fused chunk's times
+#: t0 + i h: measured 0 rad; before, with k h, 5.6e-16 rad over 61 s and 1.8e-15 rad over 600 s;
+#: blocks not cut at the rows gave 6.8e-14 rad on the 61 s run)
 EXECUTOR_ROUNDOFF_RAD = 1e-14
 #: the hold's own effect over 600 s (~1e-10 rad here): what the round-off sits under
 HOLD_EFFECT_MIN_RAD = 1e-12
@@ -173,23 +179,6 @@ def test_per_tick_blocks_cut_at_rows_and_a_short_last_period():
     assert [tr.meta["summary"]["environment_rate_ticks"] for tr in (per_tick, fused)] == [7, 7]
     assert per_tick.t[-1] == fused.t[-1] == 61.23
     assert float(np.max(rotation_angle(per_tick.q_BN, fused.q_BN))) <= EXECUTOR_ROUNDOFF_RAD
-
-
-def _row(r, n, rate, h=PERIOD_S):
-    """The blocks of one stretch of ``n`` ticks from tick ``r``, written out: ``rate`` at a time."""
-    return [(a, min(rate, r + n - a), h, a == r) for a in range(r, r + n, rate)]
-
-
-def test_blocks_are_the_fused_pieces_cut_by_the_rate():
-    """The schedule, against blocks written out by hand: rows of 20 ticks in blocks of 7 (7, 7, 6),
-    the last row 12 whole ticks and a 0.03 s period of its own; an edge at tick 45 cuts its row
-    into 5 and 15 ticks, each cut anew into blocks."""
-    got = list(blocks(613, 20, [], 61.23, PERIOD_S, 7))
-    expect = [b for r in range(0, 600, 20) for b in _row(r, 20, 7)] + _row(600, 12, 7) + [(612, 1, None, True)]
-    assert [g[:2] + g[3:] for g in got] == [e[:2] + e[3:] for e in expect]
-    assert [g[2] for g in got[:-1]] == [PERIOD_S] * (len(got) - 1) and got[-1][2] == pytest.approx(0.03, abs=1e-12)
-    got = list(blocks(80, 20, [45], 8.0, PERIOD_S, 7))
-    assert got == _row(0, 20, 7) + _row(20, 20, 7) + _row(40, 5, 7) + _row(45, 15, 7) + _row(60, 20, 7)
 
 
 def test_the_probe_is_kept_on_disk_for_the_next_process(tmp_path, monkeypatch):

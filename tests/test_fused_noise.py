@@ -1,13 +1,13 @@
 """Sensor noise in the closed loop: the corruption plug-in (stationbed/loop/corruption.py,
 issue 20) inlined in the fused tick (stationbed/run/fused.py) and called compiled by the
-per-tick loop (``ControlLoop._corrupt``). Truths, independent of the plug-in:
+per-tick loop (inside its composed parts; ``ControlLoop.corrupt`` on its generic path). Truths, independent of the plug-in:
 
 * the corruption: a hand-written numpy corruption (:func:`_numpy_corrupt`, here in the test:
   ``q ⊗ [1, δ/2]`` renormalised, ``ω + δω``) of random measurements and draws;
 * the random stream: numpy's own ``rng.normal(0, σ, 3)`` called tick by tick, attitude then
   rate, gives the numbers the executors draw in blocks;
-* the trajectory: the per-tick loop with the numpy corruption in place of the plug-in (and the
-  controller's Python ``update``) flies the same noisy run as the fused loop and the per-tick
+* the trajectory: the per-tick loop on its generic path with the numpy corruption in place of
+  the plug-in (and the controller's Python ``update``) flies the same noisy run as the fused loop and the per-tick
   loop with the plug-in;
 * the seed: the same seed gives the same run bit for bit, another seed another run.
 """
@@ -20,6 +20,7 @@ import pytest
 from scenes import ROOT
 from stationbed import load_scene, simulate
 from stationbed.loop import Corruption
+from stationbed.run import closed_loop
 from stationbed.run.closed_loop import ControlLoop
 from stationbed.run.measurement import measurement_fields
 from stationbed.scene import scene_from_dict
@@ -97,7 +98,7 @@ def test_block_draws_equal_the_per_tick_calls(att, rate):
 
 
 def _reference_corrupt(self, k, y=None):
-    """``ControlLoop._corrupt`` with the numpy reference in place of the plug-in (no delay)."""
+    """``ControlLoop.corrupt`` with the numpy reference in place of the plug-in (no delay)."""
     comp = self.comp
     y = self.meas.res[0] if y is None else y
     s = comp.sensor
@@ -113,8 +114,9 @@ def _iss(sensor, duration, monkeypatch):
         {"controller.sensor": sensor, "simulation.environment_rate": 0})
     kw = dict(duration=duration, output_dt=1.0)
     runs = simulate(scene, **kw), simulate(scene, fused=False, **kw)
-    with monkeypatch.context() as m:
-        m.setattr(ControlLoop, "_corrupt", _reference_corrupt)
+    with monkeypatch.context() as m:  # the generic path: it corrupts in Python, tick by tick
+        m.setattr(ControlLoop, "corrupt", _reference_corrupt)
+        m.setattr(closed_loop, "parts_ok", lambda comp: "the reference flies the generic path")
         return runs + (simulate(scene, fused=False, **kw),)
 
 

@@ -174,13 +174,20 @@ def test_executor_choice_by_capability():
 
 def test_window_edges_on_and_off_the_tick_grid_take_the_generic_tick():
     """Torque windows with edges on (1.0 s) and off (2.05 s) the tick grid, different per
-    sample: those ticks run on the sample's own generic path, as its single run does; bit for bit."""
+    sample: a sample with an edge between ticks runs its own per-tick loop on the generic path
+    (the composed parts the batch maps step whole ticks), as its single run does; bit for bit.
+    Edges on the grid, different per sample, stay in the batch (each sample its own pieces)."""
     base = _samples({"reference": "lvlh"}, "example_hold")
     kinds = [t.model_dump(exclude_unset=True) for t in base[0].torque]
     scenes = [s.replace({"torque": kinds + [{"kind": "constant", "torque_B": [20.0, -5.0, 3.0], "start": 1.0 + 0.05 * k,
                                      "stop": 2.05 + 0.1 * k}]}) for k, s in enumerate(base)]
     res = run_lockstep(scenes, keep=True, fused=False)
     for s, (kind, tr) in zip(scenes, res):
+        assert kind == "per-tick"
+        _same(tr, simulate(s, fused=False))
+    on_grid = [s.replace({"torque": kinds + [{"kind": "constant", "torque_B": [20.0, -5.0, 3.0], "start": 1.0 + 0.5 * k,
+                                              "stop": 2.5 + 0.5 * k}]}) for k, s in enumerate(base)]
+    for s, (kind, tr) in zip(on_grid, run_lockstep(on_grid, keep=True, fused=False)):
         assert kind == "batch"
         _same(tr, simulate(s, fused=False))
 
@@ -234,7 +241,7 @@ def test_the_readmes_update_batch_gives_the_guides_numbers(tmp_path):
 def test_a_loop_with_sensors_runs_in_lockstep_bit_for_bit():
     """A scene that flies [[sensor]] tables and an [estimator] (issue 20's gyro, star trackers,
     MEKF; each sample its own seed, so its own noise): a Python law runs batch, its flight tick
-    mapped over the samples (run/lockstep_flight.py), each sample's rows (the estimation columns
+    mapped over the samples (inside the composed parts, run/parts.py), each sample's rows (the estimation columns
     included) and summary its single per-tick run's, bit for bit; a law with a symbolic form
     runs fused (the flight inlined), as its single run."""
     base = load_scene(ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml").replace(

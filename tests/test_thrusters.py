@@ -375,13 +375,17 @@ def test_sensors_with_thrusters_fly_fused_as_per_tick():
 
 
 def test_lockstep_batch_never_drops_thrusters():
-    """The Monte Carlo's lockstep executor hands thruster scenes to their own loop."""
+    """The Monte Carlo's lockstep executor flies thruster scenes in the batch (the composed parts
+    mapped, the chain's pulses split the step), each sample its single per-tick run bit for bit."""
     from stationbed.run.lockstep import run_lockstep
 
     s = sphere(pods())
-    res = run_lockstep([s, s], fused=False)
-    assert [kind for kind, _ in res] == ["per-tick", "per-tick"]  # not "batch": its tick has no pulses
-    assert all(tr.meta["summary"]["thruster_firings"] > 0 for _, tr in res)
+    res = run_lockstep([s, s], fused=False, keep=True)
+    assert [kind for kind, _ in res] == ["batch", "batch"]
+    single = simulate(s, fused=False)
+    for _, tr in res:
+        assert tr.meta["summary"]["thruster_firings"] == single.meta["summary"]["thruster_firings"] > 0
+        assert np.array_equal(tr.data, single.data)
 
 
 def test_inhibit_window_fires_nothing_inside():

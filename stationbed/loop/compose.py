@@ -30,8 +30,9 @@ functions: the generated C evaluates only the case taken):
   pulse edges (:func:`~.actuator.split_step`).
 
 Every case gives the numbers the full tick would (the idle and plain forms are exact): the
-per-tick executor (its own compiled parts today, the composer's next: docs/design.md "One loop,
-built once", what is left) flies the same run to round-off (tests/test_executor_matrix.py).
+per-tick executor, which calls the composition's parts around a law it calls itself
+(:meth:`Composed.sense_part`, :meth:`Composed.act_part`: the law is the one block it may leave
+out), flies the same run to round-off (tests/test_executor_matrix.py).
 """
 
 from __future__ import annotations
@@ -98,9 +99,12 @@ class Composed:
         self.env = by["env"][0] if by["env"] else None
         if len(by["env"]) > 1 or (self.env is not None and plant.rhs_held is None):
             raise ValueError("a composition holds at most one environment block, on a plant with rhs_held")
-        blocker = off_path(self.blocks + [self.end])
-        if blocker is not None:
-            raise ValueError(f"block {blocker.name!r} is not symbolic ({blocker.why}): it cannot be composed")
+        #: the block that keeps the whole tick from being composed (a Python law, the LP
+        #: mapping), or None; a per-tick executor still calls the parts around it
+        self.blocker = off_path(self.blocks + [self.end])
+        part = off_path(self.sense + [self.end])
+        if part is not None:
+            raise ValueError(f"block {part.name!r} is not symbolic ({part.why}): it cannot be composed")
         M = plant.meas_layout
         for a in self.actuators:  # an actuator reads the law's (or the true) measurement by field name
             for f in a.inputs.names:
@@ -130,6 +134,8 @@ class Composed:
         #: computes no quiet step (the busy tick's end and step on the request left are the
         #: quiet step's operations when nothing acts: the same numbers)
         self._never_quiet = any(a.idle is None for a in self.actuators)
+        #: whether an actuator acts on the whole tick (its torque added to the held one, no edge)
+        self._full_tick = any(a.full_tick for a in self.actuators)
         self._cache: dict = {}
 
     # -- the parts ----------------------------------------------------------------------------
@@ -269,19 +275,18 @@ class Composed:
         busy = 1 - idle if self.actuators else SX(0)
         return [C.pack(fields, symbolic=True), busy, cmd, ca.vertcat(*reads) if reads else SX(0, 1)]
 
-    def _busy(self) -> ca.Function:
-        """``(c, par, c_quiet, cmd, reads) -> c_next`` of a tick whose chain is not idle: the
-        actuators in order; when nothing fires and the end gets the law's request unchanged, the
-        quiet step is the tick's (same inputs, same operations); else the end on the rest and a
-        plain step, or the step split at the pulse edges (only if one fires)."""
+    def _acted(self):
+        """The busy tick's SX parts (cached): ``chain(k, t, h, c, par, cmd, reads) -> (rest,
+        on_s, torque_B, same, memory of each actuator)`` (the actuators in order on symbols of
+        their own: one graph, common parts shared; ``same``: nothing fires and the rest is the
+        request), ``end(t, x, rest, u_ext, p, h) -> (u, sat)`` and ``pulse(fires, t, x, h, u, p,
+        on_s, torque_B) -> x_next`` (the split step when a channel fires, else the plain one:
+        explicit branches)."""
+        hit = self._cache.get("acted")
+        if hit is not None:
+            return hit
         C, P = self.carry, self.par
-        MX = ca.MX
         nr = sum(a.inputs.size - 3 for a in self.actuators)
-        c, par, cq, cmd, reads = C.symbol("c", MX), P.symbol("par", MX), C.symbol("q", MX), MX.sym("cmd", self.ncmd), MX.sym("r", nr)
-        i, x, cnt = C.get(c, "i"), C.get(c, "x"), C.get(c, "counts")
-        t0, h, k0, u_ext, p = (P.get(par, f) for f in ("t0", "h", "k0", "u_ext", "p"))
-        t, k = t0 + i * h, k0 + i
-        # the chain on symbols of its own (an SX function: one graph, common parts shared)
         SX = ca.SX
         ts, hs, ks, cs, ps_, cmds, rs = SX.sym("t"), SX.sym("h"), SX.sym("k"), C.symbol("c"), P.symbol("par"), SX.sym("cmd", self.ncmd), SX.sym("r", nr)
         tau, mem, on_s, tq, full = cmds, {}, [], [], SX.zeros(3)
@@ -299,13 +304,8 @@ class Composed:
                 tq.append(a.outputs.get(out, "torque_B"))
         on_s, tq = ca.vertcat(SX(0, 1), *on_s), ca.vertcat(SX(0, 1), *tq)
         same = ca.logic_and(ca.sum1(on_s != 0) + ca.sum1(full != 0) == 0, ca.sum1(tau != cmds) == 0)
-        if self._never_quiet:  # each actuator behind its own idle test (a never-quiet chain keeps their skips)
-            rest, on, tqq, full_c, xa = self._chain_lazy(k, t, h, c, par, cmd, reads)
-            same_c = None
-        else:
-            chain = sx_function("cl_chain", [ks, ts, hs, cs, ps_, cmds, rs],
-                                [tau, on_s, tq, same, full] + [mem[a.name] for a in self.actuators])
-            rest, on, tqq, same_c, full_c, *xa = chain(k, t, h, c, par, cmd, reads)
+        chain = sx_function("cl_chain", [ks, ts, hs, cs, ps_, cmds, rs],
+                            [tau, on_s, tq, same, full] + [mem[a.name] for a in self.actuators])
         # the end on the rest (SX), then the plain or the split step (explicit branches)
         xs_, rs_, us_ = SX.sym("x", self.plant.nx), SX.sym("rest", self.ncmd), SX.sym("u_ext", 3)
         pp = SX.sym("p", self.plant.npar)
@@ -315,11 +315,30 @@ class Composed:
         us, ons, tqs = SX.sym("u", u_b.numel()), SX.sym("on", nch), SX.sym("tq", 3 * nch)
         plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
         split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs], [self.advance(ts, xs_, hs, us, pp, ons, tqs, called=True)])
-        pulse = ca.Function.if_else("cl_pulse", split, plain)
+        out = self._cache["acted"] = (chain, end_f, ca.Function.if_else("cl_pulse", split, plain), nr, nch)
+        return out
+
+    def _busy(self) -> ca.Function:
+        """``(c, par, c_quiet, cmd, reads) -> c_next`` of a tick whose chain is not idle: the
+        actuators in order; when nothing fires and the end gets the law's request unchanged, the
+        quiet step is the tick's (same inputs, same operations); else the end on the rest and a
+        plain step, or the step split at the pulse edges (only if one fires)."""
+        C, P = self.carry, self.par
+        MX = ca.MX
+        chain, end_f, pulse, nr, nch = self._acted()
+        c, par, cq, cmd, reads = C.symbol("c", MX), P.symbol("par", MX), C.symbol("q", MX), MX.sym("cmd", self.ncmd), MX.sym("r", nr)
+        i, x, cnt = C.get(c, "i"), C.get(c, "x"), C.get(c, "counts")
+        t0, h, k0, u_ext, p = (P.get(par, f) for f in ("t0", "h", "k0", "u_ext", "p"))
+        t, k = t0 + i * h, k0 + i
+        if self._never_quiet:  # each actuator behind its own idle test (a never-quiet chain keeps their skips)
+            rest, on, tqq, full_c, xa = self._chain_lazy(k, t, h, c, par, cmd, reads)
+            same_c = None
+        else:
+            rest, on, tqq, same_c, full_c, *xa = chain(k, t, h, c, par, cmd, reads)
         ar, aon, atq, afull = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch), MX.sym("full", 3)
         a_in = [c, par, cq, ar, aon, atq, afull]
         held = self._u_ext(c, u_ext)
-        uu, fl = end_f(t, x, ar, held + afull if any(a.full_tick for a in self.actuators) else held, p, h)
+        uu, fl = end_f(t, x, ar, held + afull if self._full_tick else held, p, h)
         x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
@@ -389,6 +408,7 @@ class Composed:
         hit = self._cache.get("tick")
         if hit is not None:
             return hit
+        self._whole()
         C, P, N = self.carry, self.par, self.noise
         MX = ca.MX
         c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
@@ -436,6 +456,7 @@ class Composed:
         """``(c, par, w) -> row`` (:attr:`row_layout`) at the chunk's first tick (``i`` = 0; ``h``
         the tick's length): the law's command and reference, the end's report on what the chain
         leaves it, the memory after the tick and the outputs of the sense blocks and the law."""
+        self._whole()
         C, P, N = self.carry, self.par, self.noise
         MX = ca.MX
         c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
@@ -450,6 +471,97 @@ class Composed:
         vals[self.law_block.name] = s1
         vals.update({f"{b.name}_y": outs[b.name] for b in self.sense})
         return ca.Function("cl_row", [c, par, w], [self.row_layout.pack(vals, symbolic=True)])
+
+
+    def _whole(self) -> None:
+        if self.blocker is not None:
+            raise ValueError(f"block {self.blocker.name!r} is not symbolic ({self.blocker.why}): "
+                             "the tick cannot be composed")
+
+    # -- the parts a per-tick executor calls around a law it calls itself ----------------------
+    def sense_part(self) -> ca.Function:
+        """``(c, par, w) -> (c_sensed, v, outs)`` at the carry's tick (``t0 + i h``, ``k0 + i``):
+        the true measurement, the sense blocks in order on the tick's draws ``w``; ``c_sensed``
+        the carry with their memory after it, ``v`` what the law sees, ``outs`` their outputs
+        (each block's under its name: :attr:`sense_outputs`)."""
+        C, P, N = self.carry, self.par, self.noise
+        MX = ca.MX
+        c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
+        return ca.Function("cl_sense", [c, par, w], list(self._sensed(c, par, w, C.get(c, "i"), C.get(c, "x"))))
+
+    @property
+    def sense_outputs(self) -> Layout:
+        """The sense blocks' outputs side by side, each under its name (:meth:`sense_part`)."""
+        return Layout(**{b.name: b.outputs.size for b in self.sense})
+
+    def _sensed(self, c, par, w, i, x):
+        C, P = self.carry, self.par
+        t, k = P.get(par, "t0") + i * P.get(par, "h"), P.get(par, "k0") + i
+        y = self.plant.meas(t, x, P.get(par, "p"))
+        v, mem, outs = self._sense(k, t, P.get(par, "h"), y, c, w, par, plain=False)
+        fields = {f: C.get(c, f) for f in C.names}
+        fields.update(mem)
+        outs = ca.vertcat(*(outs[b.name] for b in self.sense)) if self.sense else type(x)(0, 1)
+        return C.pack(fields, symbolic=True), v, outs
+
+    def _acted_plain(self, c, par, cmd):
+        """The rest of a tick without actuators (SX): the end on the law's request, one step;
+        ``(c_next, act, x_next)``."""
+        C, P = self.carry, self.par
+        i, x, cnt = C.get(c, "i"), C.get(c, "x"), C.get(c, "counts")
+        t0, h, u_ext, p = (P.get(par, f) for f in ("t0", "h", "u_ext", "p"))
+        t = t0 + i * h
+        act, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
+        x1 = self.plant.step(self._rhs, t, x, h, u, p)
+        fields = {f: C.get(c, f) for f in C.names}
+        fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
+        return C.pack(fields, symbolic=True), act, x1
+
+    def act_part(self) -> ca.Function:
+        """``(c, par, cmd, v, w) -> (c_next, c_sensed, v_next, outs, act)``: the rest of the
+        carry's tick on the law's command ``cmd`` (it saw ``v``): the ``env`` block where due,
+        the actuators in order, the end, one fixed step cut at the pulse edges (the busy tick's
+        parts, :meth:`_acted`); ``c_next`` the carry at the next tick (``i + 1``), ``act`` the
+        end's report; then :meth:`sense_part` at the next tick on its draws ``w``
+        (``c_sensed``, ``v_next``, ``outs``: valid when that tick has the same parameters)."""
+        if off_path(self.actuators):
+            raise ValueError(f"block {off_path(self.actuators).name!r} is not symbolic ({off_path(self.actuators).why})")
+        C, P, N = self.carry, self.par, self.noise
+        MX = ca.MX
+        c, par, cmd, w = C.symbol("c", MX), P.symbol("par", MX), MX.sym("cmd", self.ncmd), N.symbol("w", MX)
+        v = MX.sym("v", self.plant.meas_layout.size)
+        ce = self._env_step(c, par) if self.env is not None else c
+        if not self.actuators:  # one SX function (the right-hand side inlined where it is small)
+            SX = ca.SX
+            css, pss, cms = C.symbol("c"), P.symbol("par"), SX.sym("cmd", self.ncmd)
+            c1s, acts, x1s = self._acted_plain(css, pss, cms)
+            outs_s = [c1s, acts] + ([] if self.sense else [self.plant.meas(P.get(pss, "t0") + C.get(c1s, "i") * P.get(pss, "h"),
+                                                                          x1s, P.get(pss, "p"))])
+            c1, act, *y1 = sx_function("cl_core", [css, pss, cms], outs_s)(ce, par, cmd)
+        else:
+            i, x, cnt = C.get(ce, "i"), C.get(ce, "x"), C.get(ce, "counts")
+            t0, h, k0, u_ext, p = (P.get(par, f) for f in ("t0", "h", "k0", "u_ext", "p"))
+            t, k = t0 + i * h, k0 + i
+            chain, _, pulse, _, _ = self._acted()
+            y = self.plant.meas(t, x, p) if self._truth else None  # the truth, for what reads it
+            reads = [r for a in self.actuators for r in self._reads(a, v, y)]
+            reads = ca.vertcat(*reads) if reads else MX(0, 1)
+            if self._never_quiet:  # each actuator behind its own idle test, as the busy tick
+                rest, on, tq, full, xa = self._chain_lazy(k, t, h, ce, par, cmd, reads)
+            else:
+                rest, on, tq, _, full, *xa = chain(k, t, h, ce, par, cmd, reads)
+            held = self._u_ext(ce, u_ext)  # (plus the torque of the actuators on the whole tick)
+            act, u, sat = self._end(t, h, x, rest, held + full if self._full_tick else held, p)
+            x1 = pulse(ca.sum1(on) > 0, t, x, h, u, p, on, tq)
+            fields = {f: C.get(ce, f) for f in C.names}
+            fields.update({a.name: m for a, m in zip(self.actuators, xa)})
+            fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
+            c1, y1 = C.pack(fields, symbolic=True), []
+        if self.sense or not y1:
+            cs, v1, outs = self._sensed(c1, par, w, C.get(c1, "i"), C.get(c1, "x"))
+        else:
+            cs, v1, outs = c1, y1[0], MX(0, 1)
+        return ca.Function("cl_act", [c, par, cmd, v, w], [c1, cs, v1, outs, act])
 
 
 def _field(name: str) -> tuple[str, bool]:

@@ -13,19 +13,24 @@ and the reason: :func:`blocker` names it.
 
 from __future__ import annotations
 
+import math
 import time
 
 import casadi as ca
+import numpy as np
 
 from ..core.layout import Layout
 from ..loop.block import Block, actuator_block, corruption_block, sensing_block
 from ..loop.compose import Composed, Plant, compose
 from . import law_state
 from .chunk_layout import ENV
+from .rate_auto import AUTO, auto_choice
 from .rates import environment_rate, hold_value
-from .system import chain_end_inputs, environment_split
+from .segments import edge_ticks
+from .system import chain_end_inputs, environment_split, has_environment
 
-__all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key"]
+__all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key", "fixed_tick",
+           "parts_ok", "held_rate", "rate_summary", "Draws", "numbers"]
 
 _COMPOSED: dict = {}
 
@@ -106,19 +111,35 @@ def end_block(comp) -> Block:
     return Block("end", "end", f, Layout(), Layout(p=npar), Layout(), U, Y, key=(type(comp.end).__name__, comp.command))
 
 
-def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
+def run_blocks(comp, cp, rate: int = 0, noise: bool = True) -> list[Block]:
     """The blocks of the run composed by ``comp`` (module docstring), in the tick's order; with
-    an environment ``rate`` (ticks per evaluation), the held environment first."""
+    an environment ``rate`` (ticks per evaluation), the held environment first. ``noise``
+    False: without the ideal measurement's noise (an executor that corrupts what the blocks
+    give itself: the lockstep batch, whose samples may corrupt different fields)."""
     blocks = [env_block(comp, rate)] if rate else []
     if comp.flight is not None:
         blocks.append(sensing_block(comp.flight))
-    if comp.corruption is not None:  # [controller.sensor] noise (its delay: per tick, fused.fused_ok)
+    if noise and comp.corruption is not None and not comp.delay:  # [controller.sensor] noise (with a delay: the
+        # per-tick loop's ring buffer, then the corruption, on what the blocks give; never fused)
         blocks.append(corruption_block(comp.corruption, comp.meas_layout.size))
     blocks.append(law_block(comp, cp))
     for a in comp.actuators:  # the chain, in order (run/chain.py)
         blocks.append(actuator_block(a.cluster, a.name))
     blocks.append(end_block(comp))
     return blocks
+
+
+def numbers(comp, cp) -> dict:
+    """Each block's numbers and memory at the run's start, ``{name: (params, state or None)}``,
+    of the run composed by ``comp`` (``cp`` the law's symbolic numbers): what an executor
+    writes into a cached composition's parameters and carry by the blocks' names (a cached
+    block's own ``p0``/``x0`` are those of the run that built it)."""
+    out = {"law": (np.asarray(cp, dtype=float), law_state.initial(comp.ctrl))}
+    if comp.flight is not None:
+        out["sensing"] = (comp.flight.params, None)
+    for a in comp.actuators:  # the chain, by each block's name (run/chain.py)
+        out[a.name] = (a.cluster.params, a.x)
+    return out
 
 
 def blocker(comp, cp=()) -> Block | None:
@@ -129,33 +150,124 @@ def blocker(comp, cp=()) -> Block | None:
     return None
 
 
-def structure_key(comp, cp) -> tuple:
+def structure_key(comp, cp, noise: bool = True) -> tuple:
     """What the run's composed functions depend on, read without building a block (numbers are
     inputs, never in the key): the compiled system, the law's class, command, state and
     parameter sizes, the flight's key, the chain's structure, the chain end's kind."""
     ctrl = comp.ctrl
     return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
             None if comp.flight is None else comp.flight.key,
-            tuple((a.name, a.cluster.key, a.lp) for a in comp.actuators), type(comp.end).__name__, held_rate(comp),
-            None if comp.corruption is None else comp.corruption.flags)
+            tuple((a.name, a.cluster.key, a.lp) for a in comp.actuators), type(comp.end).__name__, held_rate(comp)[0],
+            *((None if comp.corruption is None else comp.corruption.flags, bool(comp.delay)) if noise else ("no noise",)))
 
 
-def held_rate(comp) -> int:
-    """The environment's ticks per evaluation the composed loop holds (0: every stage): the
-    scene's rate (:func:`.rates.environment_rate`), except with an actuator chain, whose per-tick
-    loop evaluates every stage (the fused run keeps its numbers)."""
-    return 0 if comp.actuators else environment_rate(comp)
+def fixed_tick(comp) -> bool:
+    """Whether the run's integrator is one fixed explicit step per tick (what a composed tick
+    steps: the fused loop and the per-tick loop's compiled parts)."""
+    integ = comp.integ
+    return bool(integ.fusable and math.ceil(comp.period / integ.h_nominal - 1e-9) == 1 and comp.system.sx is not None)
 
 
-def composed(comp, cp) -> tuple[Composed, float]:
+def parts_ok(comp) -> str | None:
+    """Why the per-tick loop cannot fly the run through the composed parts (None: it can): the
+    integrator (not one fixed step per tick), a discontinuity between ticks or an array rate
+    step (the generic path cuts there), an actuator that is not symbolic."""
+    if not fixed_tick(comp):
+        return "the integrator is not one RK4 step per tick"
+    if edge_ticks(comp) is None:
+        return "a discontinuity between ticks (or an array rate step)"
+    for a in comp.actuators:
+        if a.lp:
+            return f"an actuator that is not symbolic ({a.name}: {a.cluster.why})"
+    return None
+
+
+def held_rate(comp) -> tuple[int, str | None]:
+    """``(ticks per block, why not)``: the environment rate the composed loop holds (0: every
+    stage; :func:`.rates.environment_rate`), the same for every executor where it steps the
+    composed tick or its parts; else 0 and why (:func:`parts_ok`; None without environment
+    torques). Asked first, so a run that cannot hold never probes."""
+    why = parts_ok(comp)
+    if why is None:
+        return environment_rate(comp), None
+    return 0, f"{why}: the per-tick loop evaluates every stage" if has_environment(comp.system) else None
+
+
+def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
+    """What the run's summary records (``loop`` the run's composition, ``used_fused`` whether a
+    fused executor ran, ``held`` the per-tick executor's ticks per block) of the effect rates:
+    the environment's ticks per evaluation (0 = every integrator stage) as run, and as the scene
+    asked; under ``"auto"`` also the bound of the rate run (``environment_rate_bound_rad``) or
+    why it is every stage, and for a rate ``N`` asked and not run, why
+    (``environment_rate_why``). A block never spans an output row (each chunk starts its own),
+    so the run's rate is at most the ticks per row."""
+    asked = getattr(loop.scene.simulation, "environment_rate", 0)
+    asked = asked if asked == AUTO else int(asked or 0)
+    ran = min(environment_rate(loop), loop.n_per_out) if (used_fused or held) else 0
+    out = {"environment_rate_ticks": ran, "environment_rate_asked": asked}
+    cannot = None if (used_fused or held) else held_rate(loop)[1]  # why a per-tick run did not hold
+    if asked == AUTO:  # the same keys whichever executor ran
+        if not has_environment(loop.system):
+            c = {"bound_rad": None, "why": "no environment torque"}
+        elif cannot is not None:  # auto chose a rate the loop cannot hold
+            c = {"bound_rad": None, "why": cannot}
+        else:
+            c = auto_choice(loop)  # kept per scene: no second probe
+        out["environment_rate_bound_rad"] = c["bound_rad"] if ran else None
+        out["environment_rate_why"] = c["why"]
+    elif asked and not ran:  # a rate asked and every stage run: why, as under auto
+        out["environment_rate_why"] = ("no environment torque" if not has_environment(loop.system)
+                                       else cannot or "the executor evaluates every stage")
+    elif asked and ran < asked:  # more ticks asked than a row has: the row's (a block never spans one)
+        out["environment_rate_why"] = f"at most the ticks of an output row ({loop.n_per_out}): a block never spans one"
+    return out
+
+
+def composed(comp, cp, noise: bool = True) -> tuple[Composed, float]:
     """The run's composition composed (cached by its structure, :func:`structure_key`) and the
-    seconds it took to build now (0 when cached)."""
-    key = structure_key(comp, cp)
+    seconds it took to build now (0 when cached); ``noise`` as :func:`run_blocks`."""
+    key = structure_key(comp, cp, noise)
     hit = _COMPOSED.get(key)
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
-    rate = held_rate(comp)
-    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate))
+    rate = held_rate(comp)[0]
+    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate, noise))
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0
+
+
+class Draws:
+    """The composition's draws by tick, from each block's own stream, in tick order: the sensing
+    block's (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.rng`` through
+    the corruption plug-in, fused.py's order). ``rows(k0, n)`` -> (n, width)."""
+
+    def __init__(self, comp, cm):
+        N = cm.noise
+        self.width = N.size
+        self.src = []
+        if "sensing" in N:
+            self.src.append((N.slice("sensing"), lambda k0, n: comp.tick_noise.rows(k0, n)))
+        if "noise" in N:
+            self.src.append((N.slice("noise"), lambda k0, n: comp.corruption.draw(comp.rng, n)))
+        self.comp = comp
+
+    def rows(self, k0: int, n: int) -> np.ndarray:
+        if len(self.src) == 1 and self.src[0][0] == slice(0, self.width):
+            return self.src[0][1](k0, n)
+        out = np.zeros((n, self.width))
+        for sl, f in self.src:
+            out[:, sl] = f(k0, n)
+        return out
+
+    def state(self):
+        c = self.comp
+        return (c.tick_noise.state() if c.tick_noise is not None else None,
+                c.rng.bit_generator.state if c.corruption is not None else None)
+
+    def restore(self, st) -> None:
+        c = self.comp
+        if st[0] is not None:
+            c.tick_noise.restore(st[0])
+        if st[1] is not None:
+            c.rng.bit_generator.state = st[1]

@@ -2,8 +2,8 @@
 
 The composed loop's vectors are its composition's layouts (loop/compose.py: the carry, the
 parameters, the draws, the row); what is left here is the held environment's memory, which the
-composed loop's ``env`` block (run/blocks.py) and the per-tick loop's ``env_block``
-(run/held_env.py) share.
+composed loop's ``env`` block (run/blocks.py: every executor steps it, the per-tick and lockstep
+loops through the composed parts) holds.
 """
 
 from __future__ import annotations

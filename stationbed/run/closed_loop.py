@@ -4,12 +4,10 @@ record, with the per-tick compiled path and the fused loop (:mod:`.fused`)."""
 from __future__ import annotations
 
 import math
-import struct
 
 import numpy as np
 
 from ..core.compile import FastCall
-from ..integrators import IntegrationError
 from ..loop.flight import Flight
 from ..model.moon import moon_position
 from ..model.sun import julian_date
@@ -30,18 +28,17 @@ from ..loop.cmg_cluster import chain_end
 from .chain import chain_advance, chain_for, chain_summary
 from .composition import Composition, ControllerFailure, FlightMemory, RunState
 from .fused import fused_ok, run_fused, why_not_fused
-from .held_env import HeldBlocks, held_functions, held_rate, rate_summary
+from .blocks import parts_ok, rate_summary
 from .initial import initial_state, initial_x
 from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
+from .parts import NOISE_BLOCK, run_parts
 from .schedule import loop_hook, steps_summary
 from .segments import held_torque_from, segment_input
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOISE_BLOCK"]
 
-#: sensor noise rows drawn at a time by the per-tick loop (any size gives the same numbers)
-NOISE_BLOCK = 256
 
 
 def plant_facts(scene, system, period: float, known=None) -> Plant:
@@ -92,12 +89,15 @@ class ControlLoop:
     """Sense -> control (integer ticks, zero-order hold) -> actuate -> integrate -> record.
 
     Builds the run's :class:`~.composition.Composition` (``comp``) and its
-    :class:`~.composition.RunState` (``res``), and is the per-tick executor: one integrator
-    call per period (split only at scene discontinuities inside it); the integrator keeps its
-    memory (step size) across periods, so nothing restarts per tick. :meth:`run` hands the run
+    :class:`~.composition.RunState` (``res``), and is the per-tick executor: the law between
+    the composed tick's compiled parts (:func:`~.parts.run_parts`) where the run steps whole
+    fixed ticks (:func:`~.blocks.parts_ok`), else the generic path: one integrator call per
+    period (split only at scene discontinuities and pulse edges inside it; the integrator keeps
+    its memory across periods, so nothing restarts per tick). :meth:`run` hands the run
     to a fused executor when one applies (:func:`~.fused.fused_ok`). The per-tick executor's
     single-tick steps (:meth:`measure`, :meth:`actuate`, :meth:`advance`, :meth:`check_command`,
-    :meth:`noise_row`) are public: the lockstep batch runs a sample's generic ticks with them.
+    :meth:`noise_row`, :meth:`corrupt`, :meth:`flags`, :meth:`redesign`) are public: the
+    composed parts' path (:func:`~.parts.run_parts`) calls some of them.
     """
 
     def __init__(self, scene, system, integ, p, x, rows, duration, output_dt, bps, apply_jump, controller, fused):
@@ -159,9 +159,6 @@ class ControlLoop:
             self.act = FastCall.of(f[name])
             self.act.args[3][:] = p
         self.tau_held = np.zeros(3)  # the ideal torquer's torque over the tick (no cluster)
-        self.meas_out = None  # where the fused tick writes y, when the controller reads it there
-        self.u_ext = None  # the fused tick's held-torque input, when the loop has a fused tick
-        self.n_slow = 0  # periods integrated by the generic path
 
     # -- the executors' view of the run (read: comp; handed back: res) ---------------------------
     @property
@@ -244,9 +241,6 @@ class ControlLoop:
     # -- one tick ------------------------------------------------------------------------
     def _sense(self, k: int, t: float) -> None:
         y = self.measure(t, self.x)
-        self.n_slow += 1 if k > 0 else 0
-        if self.meas_out is not None:
-            self.meas_out[:] = y
         self.M.t = t
         self._after_sense(k, t, y)
 
@@ -259,9 +253,9 @@ class ControlLoop:
                 self.seen[:] = y
                 return
         if comp.noisy:
-            self._corrupt(k, y)
+            self.corrupt(k, y)
 
-    def _corrupt(self, k: int, y=None) -> None:
+    def corrupt(self, k: int, y=None) -> None:
         """``seen`` at tick k: the delay (this executor's ring buffer of past measurements),
         then the corruption plug-in (loop/corruption.py) compiled, on this tick's draws."""
         comp = self.comp
@@ -302,11 +296,13 @@ class ControlLoop:
         a.args[1][:] = self.x
         a.args[2][: comp.n_cmd] = cmd
         a()
-        return self._flags(a.res[0], count)
+        return self.flags(a.res[0], count)
 
     def advance(self, t0: float, t1: float, cmd) -> None:
-        """Generic path: one integrator call per period, split at discontinuities inside it
-        (the held input set by :meth:`actuate`)."""
+        """Generic path: one integrator call per period, split at the discontinuities inside it
+        and, with an actuator chain, at every pulse edge of its channels (run/chain.py: the held
+        input and the channels' on-times and torques set by :meth:`actuate`; a channel on adds
+        its torque to the held external torque)."""
         comp = self.comp
         res = self.res
         if comp.actuators:  # and at every channel's on/off edge
@@ -321,59 +317,62 @@ class ControlLoop:
                 u[i_ext] += self.tau_held
             # an array rate step at b: continue from the state just after it
             self.x[:] = comp.apply_jump(b, comp.integ.advance(a, b, self.x, u))
-        if self.u_ext is not None:
-            # the fused tick holds this torque from t1 on: the stretch that *starts* at t1, not
-            # the segment that ended there (an edge on the tick grid ends a segment at t1)
-            self.u_ext[:] = held_torque_from(comp.scene, t1, comp.bps, comp.duration)
 
     def run(self) -> None:
         """Run ticks 0..K (the fused loop when :func:`~stationbed.run.fused.fused_ok`, else per
         tick), streaming the rows; raises IntegrationError or ControllerFailure with the time."""
         comp, res = self.comp, self.res
-        period, duration = comp.period, comp.duration
         K = comp.ticks()
         if self.fused:
             if fused_ok(comp):
                 return run_fused(comp, res, K)
-        sat_since_row = 0
-        flush = res.rows.flush  # rows are held and streamed in batches (ROW_BATCH, FLUSH_S)
-
-        tick = self._fast_tick(K)
-        held = self.held  # the environment held per block (held_env.py), or None: every stage
-        blk = 0 if held is not None else -1  # the tick that starts the next block
-        bps = [b for b in comp.bps if 0.0 < b < duration]
-        ib = 0  # next breakpoint
-        u_ext = comp.input_layout.slice("u_ext")
-        res.u[u_ext] = held_torque_from(comp.scene, 0.0, bps, duration)
-        if tick is not None:
-            self.u_ext[:] = res.u[u_ext]
-            fc, xin, res_x, res_y, res_act = tick
-            a_t, a_h, a_cmd = fc.args[0], fc.args[1], fc.args[3]
         # the loop checks commands itself, and counts the law's calls where Controller.update
         # would have (Controller.tick_update)
         ctrl = comp.ctrl
         update, counted = paced(ctrl.tick_update(), res.rows.clock)  # --realtime: every tick at its deadline
+        self.calls = self.n_fixed = 0
+        try:
+            if parts_ok(comp) is None:  # the composed parts around the law (parts.py)
+                run_parts(self, K, update)
+            else:
+                self._run_generic(K, update)
+        finally:
+            ctrl.hand_back_compiled()  # the law's state its compiled form carried (law_compiled.py)
+            if not counted:
+                ctrl.count_compiled_updates(self.calls)
+            comp.integ.count_steps(self.n_fixed)
+            res.rows.flush()
+
+    def redesign(self, t: float) -> None:
+        """A failure detected at ``t``: the law designs again (the user's code: reported as update's)."""
+        comp = self.comp
+        ctrl = comp.ctrl
+        plant = comp.replan.plant()
+        try:
+            ctrl.hand_back_compiled()
+            replan(ctrl, plant)
+            ctrl.reload_compiled()
+        except Exception as e:
+            hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
+            raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
+                                       f"plant with the failure detected: {one_line(e)}") from e
+
+    def _run_generic(self, K: int, update) -> None:
+        """Ticks 0..K on the generic path: per tick the measurement, the sensing, the law, the
+        actuator chain and one integrator call per period split at the discontinuities inside it
+        (an adaptive integrator, a discontinuity between ticks or an array rate step, an actuator
+        that is not symbolic)."""
+        comp, res = self.comp, self.res
+        period, duration = comp.period, comp.duration
+        sat_since_row = 0
+        bps = [b for b in comp.bps if 0.0 < b < duration]
+        u_ext = comp.input_layout.slice("u_ext")
+        res.u[u_ext] = held_torque_from(comp.scene, 0.0, bps, duration)
+        ctrl = comp.ctrl
         n_per_out = comp.n_per_out
-        calls = 0
         replan_at = comp.replan.tick if comp.replan is not None else -1
-        out = comp.end.outputs
-        i_u, i_lim, i_sat = out.slice("u_cmg") if comp.has_cluster else None, comp.nu_cmg + 1, comp.nu_cmg + 2
-        has_act = self.act is not None
-        ncmd = comp.n_cmd
-        noisy = comp.noisy or comp.flight is not None
-        i_fin = comp.state_layout.slice(comp.system.formulation.rate_field).start  # the finite-state probe
         M = self.M
         ticks = 0
-        h_set = -1.0
-        next_bp = bps[0] if bps else math.inf
-        fast = tick is not None
-        if fast:
-            trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
-            # the tick's buffers as memoryviews: Python floats in and out, ~half numpy's cost
-            m_t, m_x, m_x1, m_act = memoryview(a_t), memoryview(xin), memoryview(res_x), memoryview(res_act)
-            m_cmd, three = memoryview(a_cmd), ncmd == 3
-            pack_cmd = struct.Struct(f"={ncmd}d").pack_into
-            ndarray, f64 = np.ndarray, np.dtype(np.float64)
         steps, step = loop_hook(self)  # scheduled steps (run/schedule.py): their ticks, the hook
         try:
             if 0 in steps:
@@ -383,18 +382,10 @@ class ControlLoop:
                 t = k * period  # integer tick clock: no accumulated drift
                 if k == K:
                     t = duration
-                if k == replan_at:  # a failure detected: the law designs again (the user's code: reported as update's)
-                    plant = comp.replan.plant()
-                    try:
-                        ctrl.hand_back_compiled()
-                        replan(ctrl, plant)
-                        ctrl.reload_compiled()
-                    except Exception as e:
-                        hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
-                        raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
-                                                   f"plant with the failure detected: {one_line(e)}") from e
+                if k == replan_at:
+                    self.redesign(t)
                 M.t = t
-                calls += 1
+                self.calls += 1
                 try:
                     cmd = update(t, M)
                 except Exception as e:  # the user's code: report it (chained), keep the trajectory
@@ -402,83 +393,25 @@ class ControlLoop:
                 t_next = (k + 1) * period
                 if t_next > duration:
                     t_next = duration
-                # a step at t_next needs the jump (held: every edge is on the grid, a block's cut)
-                smooth = fast and k < K and (next_bp > t_next or held is not None)
-                if smooth:  # fused: actuate + one RK4 step + measure, one compiled call
-                    if k == blk:  # a block's first tick: the environment evaluated, held over it
-                        for _, torque in held.start(k, t, self.x):  # (and a stretch of held torque starts)
-                            self.u_ext[:] = res.u[u_ext] = torque
-                        blk = held.next
-                    m_t[0] = t
-                    if t_next - t != h_set:
-                        h_set = t_next - t
-                        a_h[0] = h_set
-                    # a tuple or list of ncmd real numbers, or a float64 array of ncmd values, is
-                    # written as is; anything else, or a failed write (wrong size, strings...),
-                    # goes to the checker, which raises or returns the values as floats
-                    cls = cmd.__class__
-                    try:
-                        if cls is tuple or cls is list:
-                            if three:  # (three numbers through the memoryview: ~1/3 of pack_into's cost)
-                                m_cmd[0], m_cmd[1], m_cmd[2] = cmd
-                            else:
-                                pack_cmd(a_cmd, 0, *cmd)  # exactly ncmd numbers; no strings, no None
-                        elif cls is ndarray and cmd.dtype is f64 and len(cmd) == ncmd:
-                            a_cmd[:] = cmd  # (a (ncmd, 1) array raises ValueError)
-                        else:
-                            raise TypeError
-                    except (TypeError, ValueError, OverflowError, struct.error):
-                        cmd = self.check_command(t, cmd)
-                        a_cmd[:] = cmd
-                    trigger()
-                    if has_act and (m_act[i_lim] or m_act[i_sat]):
-                        sat_since_row |= self._flags(res_act)
-                else:
-                    cmd = self.check_command(t, cmd)
-                    # the final tick's actuation is reported in its row but never integrated:
-                    # it is not counted in the summary
-                    sat_since_row |= self.actuate(t, cmd, count=k < K)
+                cmd = self.check_command(t, cmd)
+                # the final tick's actuation is reported in its row but never integrated:
+                # it is not counted in the summary
+                sat_since_row |= self.actuate(t, cmd, count=k < K)
                 if k % n_per_out == 0 or k == K:
                     if len(cmd) == 3:
                         res.last_cmd = cmd
-                    if smooth and has_act:
-                        res.u[comp.u_cmg] = res_act[i_u]  # the row's held rates (flags counted above)
                     res.rows.hold(t, self.x, *res.held_row(sat_since_row, t))
                     sat_since_row = 0
                 if k == K:
                     break
                 ticks += 1
-                if smooth:
-                    v = m_x1[i_fin]
-                    if not -1e300 < v < 1e300:
-                        res.ticks = ticks
-                        self.check_command(t, cmd)
-                        raise IntegrationError(t_next, "state is not finite (NaN or inf)")
-                    m_x[:] = m_x1
-                    if k + 1 in steps:  # a scheduled step at t_next: applied, then sensed
-                        step(k + 1, t_next, True)
-                    elif noisy:
-                        self.meas.res[0][:] = res_y
-                        self._after_sense(k + 1, t_next, res_y)
+                self.advance(t, t_next, cmd)
+                if k + 1 in steps:  # a scheduled step at t_next: applied, then sensed
+                    step(k + 1, t_next)
                 else:
-                    res.ticks = ticks
-                    while ib < len(bps) and bps[ib] <= t_next:
-                        ib += 1
-                    next_bp = bps[ib] if ib < len(bps) else math.inf
-                    self.advance(t, t_next, cmd)
-                    if k + 1 in steps:  # a scheduled step at t_next: applied, then sensed
-                        step(k + 1, t_next)
-                    else:
-                        self._sense(k + 1, t_next)
+                    self._sense(k + 1, t_next)
         finally:
-            ctrl.hand_back_compiled()  # the law's state its compiled form carried (law_compiled.py)
-            if not counted:
-                ctrl.count_compiled_updates(calls)
             res.ticks = ticks
-            if tick is not None:
-                n_fast = res.ticks - self.n_slow
-                comp.integ.count_steps(n_fast)
-            flush()
 
     def check_command(self, t: float, cmd) -> np.ndarray:
         """The command as floats (:func:`~.controller.command_values`), or ControllerFailure at
@@ -490,32 +423,7 @@ class ControlLoop:
         except ValueError as e:
             raise ControllerFailure(t, f"controller '{comp.ctrl.name}' returned {e}") from None
 
-    def _fast_tick(self, K: int):
-        """The fused tick when the integrator is fusable (RK4) with one step per period, else
-        None; with the environment held (held_env.py) the held tick, and ``self.held`` its blocks."""
-        comp = self.comp
-        self.held = None
-        if comp.tick_name is None or comp.actuators:
-            return None
-        rate = held_rate(comp)[0]
-        if rate:
-            hf = held_functions(comp.system, comp.ctrl.command)
-            fc = FastCall.of(hf["tick"])
-            self.held = HeldBlocks([comp], rate, K, FastCall.of(hf["env"]), fc.args[6], comp.p)
-            self.res.held_rate = rate
-        else:
-            fc = FastCall.of(comp.integ.funcs[comp.tick_name])
-        fc.args[5][:] = comp.p
-        self.tick_fc = fc  # (its p: refreshed at a scheduled step, run/schedule.py)
-        fc.args[2][:] = self.x
-        self.x = fc.args[2]  # the loop's state lives in the tick's input buffer
-        self.u_ext = fc.args[4]
-        if not comp.noisy and comp.flight is None:  # the controller reads the tick's output directly (no copy)
-            self.meas_out = fc.res[1]
-            self.M = Measurement(self.meas_out, comp.meas_layout)
-        return fc, fc.args[2], fc.res[0], fc.res[1], fc.res[2]
-
-    def _flags(self, r, count: bool = True) -> int:
+    def flags(self, r, count: bool = True) -> int:
         """The chain end's reported values ``r`` (``out``): the held ``u_cmg`` kept, the
         rate-limited and saturated flags counted; returns the row's flag."""
         if self.act is None:
@@ -572,3 +480,4 @@ def _flight(scene, period: float, layout, seed):
         u, dist, _, _ = moon_position(julian_date(scene.sun.epoch))
         moon = u * dist
     return Flight(scene, period, layout, seed=seed, moon_R_N=moon)
+

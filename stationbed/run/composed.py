@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.compile import FastCall, compile_functions
 from . import law_state
-from .blocks import composed, structure_key
+from .blocks import Draws, composed, numbers, structure_key
 from .composed_rows import rows_functions, run_rows
 from .schedule import bulk_stop, composed_hook
 from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
@@ -55,42 +55,6 @@ def _functions(comp, cp) -> dict:
     return out
 
 
-class Draws:
-    """The composition's draws by tick, from each block's own stream, in tick order: the sensing
-    block's (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.rng`` through
-    the corruption plug-in, fused.py's order). ``rows(k0, n)`` -> (n, width)."""
-
-    def __init__(self, comp, cm):
-        N = cm.noise
-        self.width = N.size
-        self.src = []
-        if "sensing" in N:
-            self.src.append((N.slice("sensing"), lambda k0, n: comp.tick_noise.rows(k0, n)))
-        if "noise" in N:
-            self.src.append((N.slice("noise"), lambda k0, n: comp.corruption.draw(comp.rng, n)))
-        self.comp = comp
-
-    def rows(self, k0: int, n: int) -> np.ndarray:
-        if len(self.src) == 1 and self.src[0][0] == slice(0, self.width):
-            return self.src[0][1](k0, n)
-        out = np.zeros((n, self.width))
-        for sl, f in self.src:
-            out[:, sl] = f(k0, n)
-        return out
-
-    def state(self):
-        c = self.comp
-        return (c.tick_noise.state() if c.tick_noise is not None else None,
-                c.rng.bit_generator.state if c.corruption is not None else None)
-
-    def restore(self, st) -> None:
-        c = self.comp
-        if st[0] is not None:
-            c.tick_noise.restore(st[0])
-        if st[1] is not None:
-            c.rng.bit_generator.state = st[1]
-
-
 def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     """Run ticks 0..K of the run composed by ``comp`` with the composed loop, handing back to
     ``res`` (:class:`~.composition.RunState`) the per-tick loop's rows and memories."""
@@ -112,8 +76,9 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     if sense is not None:
         par[P.slice(sense)] = flight.params
         X = fl.state
-    for a in comp.actuators:  # the chain's blocks are named by their actuators (run/blocks.py)
-        par[P.slice(a.name)] = a.cluster.params
+    for name, (p, _) in numbers(comp, cp).items():  # each block's numbers, by its name
+        if name in P and len(p):
+            par[P.slice(name)] = p
     c0 = chunk.args[0]
     c0[:] = 0.0
     c0[C.slice("x")], c0[C.slice(law)] = res.x, s_law

@@ -9,7 +9,8 @@ actuators in chain order (run/chain.py), then its end: the CMG cluster or the id
 executor reads it and none rebinds its fields (it is frozen; the objects it holds that a run
 advances are the noise streams, drawn in tick order, the law, whose reference ``q_ref_BN`` an
 executor sets from the compiled law's, and the actuators' memory): the per-tick loop (:class:`~.closed_loop.ControlLoop`),
-the fused loop (:mod:`.composed`, the tick composed once from the run's blocks, :mod:`.blocks`) and the lockstep batch (:mod:`.lockstep`, :mod:`.lockstep_flight`).
+the fused loop (:mod:`.composed`, the tick composed once from the run's blocks, :mod:`.blocks`),
+the per-tick loop's and the lockstep batch's compiled parts of that tick (:mod:`.parts`, :mod:`.lockstep`).
 
 An executor hands its results back through :class:`RunState` only: the state as it goes and at
 the end (``x``, the held input ``u``), each output row (:meth:`RunState.row`, or
@@ -107,17 +108,6 @@ class Composition:
         return self.ctrl.command
 
     @cached_property
-    def tick_name(self) -> str | None:
-        """The system's one-period tick for the law's command (``tick_torque`` or ``tick_rates``:
-        actuate, one RK4 step, measure; run/system.py) when the integrator runs one fused step per
-        control period, else None: what the per-tick loop and the lockstep batch call per tick."""
-        integ = self.integ
-        name = "tick_rates" if self.command == "gimbal_rates" else "tick_torque"
-        if integ.fusable and name in integ.funcs and math.ceil(self.period / integ.h_nominal - 1e-9) == 1:
-            return name
-        return None
-
-    @cached_property
     def n_cmd(self) -> int:
         return self.command_layout.size
 
@@ -202,7 +192,7 @@ class RunState:
         self.n_rate_limited = 0
         self.n_momentum_saturated = 0
         self.used_fused = False
-        self.held_rate = 0  # a per-tick executor's environment blocks (held_env.py; 0: every stage)
+        self.held_rate = 0  # a per-tick executor's environment blocks (the composed parts' env block; 0: every stage)
         # what a row reads of the composition, looked up once (a row per output sample)
         self._gimbals = slice(comp.u_cmg.start, comp.u_cmg.start + comp.ng) if comp.has_cluster else None
         self._q = comp.state_layout.slice("q_BN")

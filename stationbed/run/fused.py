@@ -15,7 +15,6 @@ import math
 
 from . import law_state
 from .controller import ControllerError, one_line
-from .rates import environment_rate
 from .segments import edge_ticks
 
 __all__ = ["fused_ok", "why_not_fused", "run_fused"]
@@ -28,8 +27,8 @@ def why_not_fused(comp) -> str | None:
     (``not_fused``). In order: the law (a Python or FMU law has no ``symbolic`` form), the
     integrator (not one fixed explicit step per tick), a discontinuity between ticks or an array
     rate step, the ideal measurement's delay (a ring buffer, not a block yet) or its noise with
-    ``[[sensor]]`` tables, a failure detected mid-run, the thrusters (the LP mapping; an explicit
-    environment rate; ``[controller.sensor]`` noise with a stateful law)."""
+    ``[[sensor]]`` tables, a failure detected mid-run, the actuator chain (the LP mapping;
+    ``[controller.sensor]`` noise with a stateful law)."""
     ctrl = comp.ctrl
     integ = comp.integ
     if not callable(getattr(ctrl, "symbolic", None)):
@@ -60,8 +59,6 @@ def _chain_why(comp) -> str | None:
         why = None
         if a.lp:
             why = a.cluster.why
-        elif environment_rate(comp):
-            why = f"an environment rate with {a.name} is flown per tick"
         elif comp.noisy and law_state.has_state(comp.ctrl):
             why = f"[controller.sensor] noise with a law that has a state and {a.name} is flown per tick"
         a.fused_reason = why

@@ -3,22 +3,24 @@ control period per step, the law called once per tick for all of them (issue 22)
 
 Per tick: the law's :meth:`~.controller.Controller.update_batch` (every measurement field with a
 leading sample axis; a law with only a ``symbolic`` form: that form compiled and mapped over the
-samples, :mod:`.law_compiled`) -> one call of the compiled tick mapped over the samples (casadi
-``Function.map`` of the same compiled ``tick_<cmd>`` the per-tick loop calls: actuate, one RK4
-step, measure; the map calls that very machine code once per sample, so a sample's numbers are
-its single run's, bit for bit) -> each sample's sensor (noise from its own generator, its own
-delay; or the scene's sensors and estimator, their flight tick mapped the same way:
-:mod:`.lockstep_flight`) -> rows at the output ticks (each sample's own :class:`~.rows.Rows`
-and metrics).
+samples, :mod:`.law_compiled`) -> the composed tick's compiled ``act`` part mapped over the
+samples (casadi ``Function.map`` of the very function the per-tick loop calls, :mod:`.parts`:
+the held environment, the actuator chain, its end, one fixed step, the next tick's measurement
+and sensing; the map calls that machine code once per sample, so a sample's numbers are its
+single run's, bit for bit) -> each sample's ideal measurement (noise from its own generator,
+its own delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and
+metrics). Each sample keeps its own numbers, carry, draws and pieces (its rows cut at its own
+edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every executor); its
+scheduled steps (faults, docking events: :mod:`.schedule`, ``lockstep_hook``) apply where its
+piece starts (every step's tick starts one), on its own row of the carry and the numbers.
 
-A tick that a sample's single run integrates on the generic path (a discontinuity inside it or
-at its end, the final tick) is run for that sample alone with its own
-:class:`~.closed_loop.ControlLoop` (the same calls, the same numbers). A sample that fails (a
-bad or non-finite command, the law raising, a non-finite state) stops alone, with its single
-run's reason and time; the batch goes on.
+A sample whose single run cannot step the composed parts (a discontinuity between ticks, an
+array rate step, an actuator that is not symbolic, a fault detected mid-run) runs its own
+:class:`~.closed_loop.ControlLoop`. A sample that fails (a bad or non-finite command, the law
+raising, a non-finite state) stops alone, with its single run's reason and time; the batch goes on.
 
 :func:`executor` says which executor a run gets: ``fused`` (a law with ``symbolic``, where the
-fused loop applies), ``batch`` (an RK4 tick at one step per period) or ``per-tick``.
+fused loop applies), ``batch`` (the composed parts, :func:`~.blocks.parts_ok`) or ``per-tick``.
 """
 
 from __future__ import annotations
@@ -33,13 +35,13 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
-from .held_env import HeldBlocks, held_functions, held_rate
 from ..loop.corruption import corrupt_compiled, draws_layout
-from .lockstep_flight import FlightBatch
+from .blocks import Draws, held_rate, numbers, parts_ok, structure_key
+from .parts import NOISE_BLOCK, law_numbers, parts
 from .prepare import prepare
 from .rows import Rows
 from .schedule import lockstep_hook
-from .segments import breakpoints, held_torque_from
+from .segments import breakpoints, edge_ticks, held_torque_from, tick_pieces
 
 __all__ = ["executor", "run_lockstep", "vectorised"]
 
@@ -54,11 +56,10 @@ def vectorised(ctrl) -> bool:
 
 
 def _tick_ok(comp) -> bool:
-    # a run that flies [[sensor]] tables and an [estimator] (comp.flight, issue 20) runs its
-    # flight tick mapped too (lockstep_flight.py); a fault detected mid-run (run/detection.py) and
-    # an actuator chain (comp.actuators: [[thruster]] tables, [magnetorquers]; the batch tick
-    # has no chain) run per tick
-    return comp.replan is None and not comp.actuators and comp.tick_name is not None
+    # a run the per-tick loop flies on the composed parts (blocks.parts_ok: one fixed step per
+    # tick, every discontinuity on the tick grid, every actuator symbolic) runs them mapped; a
+    # fault detected mid-run (run/detection.py) runs per tick
+    return comp.replan is None and parts_ok(comp) is None
 
 
 def executor(loop) -> str:
@@ -113,24 +114,6 @@ class _Sample:
         self.kind = executor(self.loop)
 
 
-def _generic_ticks(comp, K: int) -> set[int]:
-    """The ticks k < K that the per-tick loop integrates on its generic path: a discontinuity
-    in (t_k, t_k+1] (its ``smooth`` test, ``next_bp > t_next``)."""
-    out = set()
-    for b in comp.bps:
-        if not 0.0 < b < comp.duration:
-            continue
-        k = max(0, int(b // comp.period) - 1)
-        while k < K:
-            t = k * comp.period
-            t_next = min((k + 1) * comp.period, comp.duration)
-            if t < b <= t_next:
-                out.add(k)
-                break
-            k += 1
-    return out
-
-
 def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
     """Run the closed-loop ``scenes`` (samples of one study), those that can in lockstep.
 
@@ -174,8 +157,7 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
             continue
         sim = s.simulation
         comp = smp.loop.comp
-        key = (id(smp.run.system), type(comp.ctrl), comp.ctrl.command, sim.duration, sim.output_dt,
-               comp.period, getattr(comp.flight, "key", None), held_rate(comp)[0])  # (each sample its own blocks)
+        key = (structure_key(comp, law_numbers(comp.ctrl), noise=False), sim.duration, sim.output_dt, comp.period)
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
@@ -209,7 +191,10 @@ def _done(smp: _Sample, wall: float):
 
 
 class _Lockstep:
-    """The samples of one group (one compiled system, law class, duration, period) in lockstep."""
+    """The samples of one group (one composed structure, law class, duration, period) in
+    lockstep: the composed parts (:mod:`.parts`, without the ideal measurement's noise, which
+    each sample corrupts its own way here) mapped over the samples, each sample with its own
+    numbers, carry, pieces and draws."""
 
     def __init__(self, samples: list[_Sample]):
         self.S = samples
@@ -219,29 +204,25 @@ class _Lockstep:
         out = lp.end.outputs  # the chain end's reported values (act)
         self.i_u = out.slice("u_cmg") if self.has_act else None
         self.i_flags = slice(out.slice("rate_limited").start, out.slice("saturated").stop) if self.has_act else None
-        self.rate = held_rate(lp)[0]  # the environment held per block (held_env.py: every sample's blocks)
-        hf = held_functions(lp.system, lp.ctrl.command) if self.rate else None
-        f = hf["tick"] if self.rate else lp.integ.funcs[lp.tick_name]
-        fc = self.fc = mapped(f, n, 1)  # the compiled tick, called once per sample by casadi's map
-        self.env = mapped(hf["env"], n, 1) if self.rate else None  # a block's environment, the same way
-        nx = lp.system.formulation.nx
-        self.T, self.H = fc.args[0], fc.args[1]
-        self.X = fc.args[2].reshape(n, nx)
-        self.CMD = fc.args[3].reshape(n, -1)
-        self.UEXT = fc.args[4].reshape(n, 3)
-        self.P = fc.args[5].reshape(n, -1)
-        # FastCall densifies a sparse output (structural zeros, e.g. C_ON's off-diagonal in deep
-        # space): each sample's row holds every entry, as the per-tick loop's buffer does
-        nnz = [f.numel_out(j) for j in range(3)]
-        self.X1 = fc.res[0][: n * nnz[0]].reshape(n, nnz[0])
-        self.Y1 = fc.res[1][: n * nnz[1]].reshape(n, nnz[1])
-        self.ACT = fc.res[2][: n * nnz[2]].reshape(n, nnz[2])
-        self.ny1 = nnz[1]
-        self.i_fin = lp.state_layout.slice(lp.system.formulation.rate_field).start  # the per-tick loop's finite probe
-        ny = f.numel_out(1)
-        self.raw = np.zeros((n, ny))  # each sample's measurement, before its sensor
-        self.seen = np.zeros((n, ny))  # what the law sees (the raw buffer itself when no sample is noisy)
-        # sensors: per sample its own generator, noise levels and delay
+        self.cps = [law_numbers(s.loop.comp.ctrl) for s in samples]
+        fns = parts(lp, self.cps[0], noise=False)
+        self.cm = cm = fns["cm"]
+        # the parts mapped over the samples: casadi's map calls the very machine code once per sample
+        self.sense = mapped(fns["sense"].f, n, 1)
+        self.act = mapped(fns["act"].f, n, 1)
+        C, P = cm.carry, cm.par
+        nw, ny, ns = cm.noise.size, lp.meas_layout.size, cm.sense_outputs.size
+        a, r = self.act.args, self.act.res
+        self.C, self.PAR, self.CMD = a[0].reshape(n, C.size), a[1].reshape(n, P.size), a[2].reshape(n, -1)
+        self.V, self.W = a[3].reshape(n, ny), a[4].reshape(n, nw)
+        self.C1, self.CS = r[0].reshape(n, C.size), r[1].reshape(n, C.size)
+        self.V1, self.OUTS, self.ACT = r[2].reshape(n, ny), r[3].reshape(n, ns), r[4].reshape(n, -1)
+        sa, sr = self.sense.args, self.sense.res
+        self.SC, self.SPAR, self.SW = sa[0].reshape(n, C.size), sa[1].reshape(n, P.size), sa[2].reshape(n, nw)
+        self.SCS, self.SV, self.SOUTS = sr[0].reshape(n, C.size), sr[1].reshape(n, ny), sr[2].reshape(n, ns)
+        self.raw = np.zeros((n, ny))  # what each sample's blocks give the law, before its own noise
+        self.outs = np.zeros((n, ns))
+        # the ideal measurement: per sample its own generator, noise levels and delay
         sens = [s.loop.comp.sensor for s in samples]
         self.noisy = np.array([s.loop.comp.noisy for s in samples])
         self.sig_a = np.array([x.attitude_noise for x in sens])
@@ -254,14 +235,11 @@ class _Lockstep:
         self.any_noisy = bool(self.noisy.any())
         self.cor = None  # the corruption plug-in, both corruptions on, mapped over the samples
         if self.any_noisy and (self.noisy & ((self.sig_a > 0) | (self.sig_r > 0))).any():
-            one = corrupt_compiled((True, True), lp.meas_layout).f
-            if one.numel_in(0) != ny:
-                raise AssertionError(f"measurement of {ny} values, its layout {lp.meas_layout!r}")
-            self.cor = mapped(one, n, 1)
-        self.flight = FlightBatch(samples, lp.meas_layout) if lp.flight is not None else None
-        if not self.any_noisy and self.flight is None:
-            self.seen = self.raw
+            self.cor = mapped(corrupt_compiled((True, True), lp.meas_layout).f, n, 1)
+        self.seen = np.zeros((n, ny)) if self.any_noisy else self.raw  # what the law sees
         self.M = BatchMeasurement(self.seen, lp.meas_layout)
+        self.draws = [Draws(s.loop.comp, cm) for s in samples]  # each sample's sensors' streams
+        self.wblk = [(np.zeros((0, nw)), 0)] * n
 
     # -- sensors -------------------------------------------------------------------------
     def _draw(self, k: int) -> None:
@@ -276,19 +254,12 @@ class _Lockstep:
             for f in c.draws.names:
                 self.z[i, :, self.NZ.slice(f)] = zi[:, c.draws.slice(f)]
 
-    def _sense(self, k: int, t: float = 0.0) -> None:
-        """``seen`` from ``raw`` at tick k, as ``ControlLoop._corrupt`` per sample: each sample's delay
+    def _corrupt(self, k: int) -> None:
+        """``seen`` from ``raw`` at tick k, as ``ControlLoop.corrupt`` per sample: each sample's delay
         (its ring buffer), then the corruption plug-in mapped over the samples."""
-        seen, raw = self.seen, self.raw
-        if self.flight is not None:  # [[sensor]] tables (and an [estimator]): their flight tick first
-            self.flight.fly(k, t, raw, seen)
-            if not self.any_noisy:
-                return
-            # then the ideal path's noise and delay on what the flight gives the law, as
-            # ControlLoop._after_sense (allowed without an [estimator]: the truth-fed run)
-            raw = seen.copy()
-        elif not self.any_noisy:  # (seen is raw)
+        if not self.any_noisy:  # (seen is raw)
             return
+        seen, raw = self.seen, self.raw
         rows = np.arange(self.n)
         D = self.delay
         slot = k % (D + 1)
@@ -316,47 +287,89 @@ class _Lockstep:
                 sl = self.layout.slice(f)
                 seen[on, sl] = out[on, sl]
 
-    def _measure(self, i: int, t: float, x) -> None:
-        self.raw[i] = self.S[i].loop.measure(t, x)
+    def _w(self, i: int, k: int, K: int):
+        """Sample i's draws of tick k (a block of ticks at a time, in tick order)."""
+        W, w0 = self.wblk[i]
+        if k - w0 >= len(W):
+            W, w0 = self.draws[i].rows(k, min(NOISE_BLOCK, K + 1 - k)), k
+            self.wblk[i] = (W, w0)
+        return W[k - w0]
+
+    def _start(self, due, k: int, K: int) -> None:
+        """The samples ``due`` start a piece at tick k (their next ``(a, b, h)``): their numbers,
+        then their first sensing (the sense part mapped; the others' results unused)."""
+        P, C = self.cm.par, self.cm.carry
+        for i in due:
+            a, b, h = self.piece[i]
+            comp = self.S[i].loop.comp
+            if self.step is not None and self.alive[i]:  # a scheduled step at tick a (it starts a piece)
+                self.step(i, a)
+            t0 = min(a * comp.period, comp.duration)
+            row = self.PAR[i]
+            row[P.slice("t0")], row[P.slice("h")], row[P.slice("n_act")], row[P.slice("k0")] = t0, h, b - a, a
+            row[P.slice("u_ext")] = held_torque_from(comp.scene, t0, comp.bps, comp.duration)
+            self.C[i, C.slice("i")] = 0.0
+            if self.W.shape[1]:
+                self.SW[i] = self._w(i, k, K)
+        self.SPAR[:] = self.PAR
+        self.SC[:] = self.C
+        self.sense()
+        self.C[due] = self.SCS[due]
+        self.raw[due] = self.SV[due]
+        self.outs[due] = self.SOUTS[due]
 
     # -- the run -------------------------------------------------------------------------
     def run(self, SimulationError) -> list:
         S, n = self.S, self.n
         lp = S[0].loop.comp
+        cm = self.cm
+        C, P, SO = cm.carry, cm.par, cm.sense_outputs
         period, duration, n_per_out = lp.period, lp.duration, lp.n_per_out
         K = lp.ticks()
         ctrl = type(lp.ctrl).batch_of([s.loop.comp.ctrl for s in S])
         vec = vectorised(ctrl)
-        generic = [set() if self.rate else _generic_ticks(s.loop.comp, K) for s in S]  # (held: every edge on the grid)
-        any_generic = set().union(*generic)
-        i_ext = lp.input_layout.slice("u_ext")
+        self.C[:] = 0.0
+        self.PAR[:] = 0.0
         for i, s in enumerate(S):
-            self.P[i] = s.run.p
-            self.X[i] = s.loop.res.x
-            bps = [b for b in s.loop.comp.bps if 0.0 < b < duration]
-            self.UEXT[i] = held_torque_from(s.scene, 0.0, bps, duration)
-            s.loop.res.u[i_ext] = self.UEXT[i]
-            self._measure(i, 0.0, self.X[i])
-        held = None
-        if self.rate:  # each block's first tick: every sample's environment evaluated and held
-            held = HeldBlocks([s.loop.comp for s in S], self.rate, K, self.env, self.fc.args[6], self.P.ravel())
-            for s in S:
-                s.loop.res.held_rate = self.rate
-        blk = 0 if held is not None else -1
+            comp = s.loop.comp
+            self.PAR[i, P.slice("p")] = s.run.p
+            for name, (p, x) in numbers(comp, self.cps[i]).items():  # each block's numbers and memory, by name
+                if name in P and len(p):
+                    self.PAR[i, P.slice(name)] = p
+                if x is not None and name in C and len(x):
+                    self.C[i, C.slice(name)] = x
+            self.C[i, C.slice("x")] = s.loop.res.x
+            s.loop.res.held_rate = held_rate(comp)[0]
+        fl = next((b for b in cm.sense if b.name == "sensing"), None)  # each sample's flight memory, handed back
+        if fl is not None:
+            for i, s in enumerate(S):
+                fm = s.loop.res.flight
+                self.C[i, C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B,
+                                                             omega_prev=fm.omega_prev, xs=fm.xs)
+        chain = [C.slice(a.name) for a in lp.actuators]  # each actuator's memory, handed back by its block's name
+        cx = C.slice("x")
+        i_fin = cx.start + lp.state_layout.slice(lp.system.formulation.rate_field).start  # the per-tick loop's finite probe
+        # each sample's pieces (its own edges on the grid), then the final tick
+        its = []
+        for s in S:
+            c = s.loop.comp
+            e = edge_ticks(c)
+            its.append(iter([p for k0 in range(0, K, n_per_out)
+                             for p in tick_pieces(k0, min(n_per_out, K - k0), e, duration, period)] + [(K, K + 1, 0.0)]))
+        self.piece = [next(it) for it in its]
         alive = np.ones(n, dtype=bool)
         errors: dict[int, BaseException] = {}
         ticks = np.zeros(n, dtype=int)
-        n_fast = np.zeros(n, dtype=int)
         satrow = np.zeros(n, dtype=bool)
         lim_n = np.zeros(n, dtype=int)
         sat_n = np.zeros(n, dtype=int)
         ncmd, has_act, i_u, i_flags = self.ncmd, self.has_act, self.i_u, self.i_flags
+        reads = bool(cm.actuators)
+        nw = self.W.shape[1]
         wall0 = time.perf_counter()
-
         n_upd = np.zeros(n, dtype=int)
-        n_all = [0, 0, 0]  # updates, ticks, fast ticks counted for every sample (no numpy add per tick)
+        n_all = [0, 0]  # updates, ticks counted for every sample (no numpy add per tick)
         n_alive = n
-        h_set = -1.0
 
         def fail(i, e):
             nonlocal n_alive
@@ -365,17 +378,21 @@ class _Lockstep:
             ctrl.batch_stopped.add(i)
             errors[i] = e
 
-        self.law_batch = ctrl  # (a scheduled step may tell a sample's law new numbers: run/docking.py)
-        due, step = lockstep_hook(self, S, held)  # scheduled steps (run/schedule.py): by tick, the hook
-        for i in due.get(0, ()):
-            step(i, 0, 0.0)
-        self._sense(0, 0.0)
         M = self.M
+        self.alive, self.law_batch = alive, ctrl  # (a scheduled step may tell a sample's law new numbers: run/docking.py)
+        self.step = lockstep_hook(self, S)  # scheduled steps (run/schedule.py), applied where a piece starts, or None
+        due = np.arange(n)  # the samples that start a piece at the next tick
+        ends = np.array([p[1] for p in self.piece])  # the tick after each sample's current piece
+        first_end = int(ends.min())
         try:
             for k in range(K + 1):
                 t = k * period
                 if k == K:
                     t = duration
+                if due is not None:
+                    self._start(due, k, K)
+                    due = None
+                self._corrupt(k)
                 M.t = t
                 try:
                     cmd = ctrl.update_batch(t, M)
@@ -416,58 +433,42 @@ class _Lockstep:
                             break
                 if not alive.any():
                     break
-                t_next = min((k + 1) * period, duration)
-                all_smooth = k < K and k not in any_generic and n_alive == n
-                if all_smooth:
-                    smooth = alive
-                else:
-                    smooth = alive.copy()
-                    if k == K:
-                        smooth[:] = False
-                    elif k in any_generic:
-                        for i in range(n):
-                            if k in generic[i]:
-                                smooth[i] = False
-                if all_smooth or smooth.any():
-                    if k == blk:  # a block's first tick: every sample's environment, held over it
-                        for i, torque in held.start(k, t, self.X.ravel()):  # (and a stretch of held torque starts)
-                            self.UEXT[i] = S[i].loop.res.u[i_ext] = torque
-                        blk = held.next
-                    self.T[:] = t
-                    if t_next - t != h_set:
-                        h_set = t_next - t
-                        self.H[:] = h_set
-                    if n_alive == n:
-                        self.CMD[:] = cmd
-                    else:
-                        self.CMD[:] = np.where(alive[:, None], cmd, 0.0)
-                    self.fc()
-                    if has_act:
-                        if (self.ACT[:, i_flags] > 0.5).any():
-                            lim = self.ACT[:, i_flags.start] > 0.5
-                            sat = self.ACT[:, i_flags.start + 1] > 0.5
-                            lim &= smooth
-                            sat &= smooth
-                            lim_n += lim
-                            sat_n += sat
-                            satrow |= lim | sat
+                self.CMD[:] = cmd if n_alive == n else np.where(alive[:, None], cmd, 0.0)
+                if reads:
+                    self.V[:] = self.seen
                 row = k % n_per_out == 0 or k == K
-                for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):  # the generic path, per sample
-                    lo = S[i].loop
-                    lo.res.x[:] = self.X[i]
-                    satrow[i] |= bool(lo.actuate(t, cmd[i], count=k < K))
+                if row:  # the memory a row reports: before the tick's actuation, after its sensing
+                    X = self.C[:, cx].copy()
+                    mem = [self.C[:, sl].copy() for sl in chain]
+                    xs = fl.state.get(self.C[:, C.slice(fl.name)], "xs").copy() if fl is not None else None
+                    ys = fl.outputs.get(self.outs[:, SO.slice(fl.name)], "ys").copy() if fl is not None else None
+                if nw and k < K:
+                    for i in range(n):
+                        self.W[i] = self._w(i, k + 1, K)
+                self.act()
+                if has_act and (self.ACT[:, i_flags] > 0.5).any() and k < K:
+                    lim = (self.ACT[:, i_flags.start] > 0.5) & alive
+                    sat = (self.ACT[:, i_flags.start + 1] > 0.5) & alive
+                    lim_n += lim
+                    sat_n += sat
+                    satrow |= lim | sat
+                elif has_act and k == K:  # the final tick's actuation is reported in its row, not counted
+                    satrow |= (self.ACT[:, i_flags] > 0.5).any(axis=1)
                 if row:
                     for i in np.flatnonzero(alive):
-                        res = S[i].loop.res  # what this sample's run is handed back
+                        lo = S[i].loop
+                        res = lo.res  # what this sample's run is handed back
                         if ncmd == 3:
                             res.last_cmd = tuple(cmd[i].tolist())
-                        if smooth[i] and has_act:
+                        if has_act:
                             res.u[lp.u_cmg] = self.ACT[i, i_u]
                         if vec:
                             res.comp.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
-                        res.x[:] = self.X[i]
-                        if self.flight is not None:
-                            self.flight.to_loop(i)
+                        res.x[:] = X[i]
+                        for a, m in zip(lo.comp.actuators, mem):
+                            a.x_row = m[i]
+                        if xs is not None:
+                            res.flight.xs, res.flight.ys = xs[i], ys[i]
                         try:
                             res.rows.hold(t, res.x, *res.held_row(int(satrow[i]), t))
                         except ControllerFailure as e:
@@ -479,36 +480,26 @@ class _Lockstep:
                     ticks += alive
                 else:
                     n_all[1] += 1
-                v = self.X1[:, self.i_fin]
+                v = self.C1[:, i_fin]
                 # the per-tick loop's test of a finite state, -1e300 < v < 1e300, for all at once
                 # (NaN fails both: the max of an array with a NaN is NaN)
-                if all_smooth and np.abs(v).max() < 1e300:
-                    self.X[:] = self.X1
-                    self.raw[:, : self.ny1] = self.Y1
-                    n_all[2] += 1
-                else:
+                if not np.abs(v).max() < 1e300:
                     ok = (v > -1e300) & (v < 1e300)
-                    for i in np.flatnonzero(smooth & ~ok):
-                        fail(i, IntegrationError(t_next, "state is not finite (NaN or inf)"))
-                    good = smooth & ok
-                    self.X[good] = self.X1[good]
-                    self.raw[good, : self.ny1] = self.Y1[good]
-                    n_fast += good
-                for i in ([] if all_smooth else np.flatnonzero(alive & ~smooth)):
-                    lo = S[i].loop
-                    try:
-                        lo.advance(t, t_next, cmd[i])
-                    except IntegrationError as e:
-                        fail(i, e)
-                        continue
-                    bps = [b for b in lo.comp.bps if 0.0 < b < duration]
-                    self.UEXT[i] = held_torque_from(S[i].scene, t_next, bps, duration)
-                    self.X[i] = lo.res.x
-                    self._measure(i, t_next, lo.res.x)
-                for i in due.get(k + 1, ()):  # a scheduled step at t_next, before the batch senses
-                    if alive[i]:
-                        step(i, k + 1, t_next)
-                self._sense(k + 1, t_next)
+                    for i in np.flatnonzero(alive & ~ok):
+                        fail(i, IntegrationError(min((k + 1) * period, duration), "state is not finite (NaN or inf)"))
+                if k + 1 < first_end:  # the next tick in the same piece: the act part's sensing serves it
+                    self.C[:] = self.CS
+                    self.raw[:] = self.V1
+                    self.outs[:] = self.OUTS
+                else:
+                    inside = ends > k + 1
+                    self.C[inside], self.raw[inside], self.outs[inside] = self.CS[inside], self.V1[inside], self.OUTS[inside]
+                    self.C[~inside] = self.C1[~inside]
+                    due = np.flatnonzero(~inside)
+                    for i in due:
+                        self.piece[i] = next(its[i])
+                        ends[i] = self.piece[i][1]
+                    first_end = int(ends.min())
         finally:
             ctrl.hand_back_compiled()  # (each sample's law state, from the compiled batch)
             wall = (time.perf_counter() - wall0) / n
@@ -518,10 +509,14 @@ class _Lockstep:
                 res.ticks = int(ticks[i]) + n_all[1]
                 lo.comp.ctrl.n_updates += int(n_upd[i]) + n_all[0]
                 res.count(lim_n[i], sat_n[i])
-                lo.comp.integ.count_steps(int(n_fast[i]) + n_all[2])
-                res.x[:] = self.X[i]
-                if self.flight is not None:
-                    self.flight.to_loop(i)
+                lo.comp.integ.count_steps(res.ticks)
+                res.x = self.C[i, cx].copy()
+                for a, sl in zip(lo.comp.actuators, chain):
+                    a.x = self.C[i, sl].copy()
+                if fl is not None:
+                    m = fl.state.split(self.C[i, C.slice(fl.name)])
+                    fm = res.flight
+                    fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
                 s.rows.flush()
                 e = errors.get(i)
                 if e is None:

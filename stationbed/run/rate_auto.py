@@ -24,8 +24,7 @@ and the law on the estimate moves the truth's attitude through the same PD loop 
 law; the probe flies the scene truth-fed (sensors and estimator off: the environment torque is
 the same to the tracking error). docs/design.md "Effects at their own rate" argues it in full.
 
-Where the loop cannot honour a rate (thrusters: their fused executor evaluates every stage) or
-the bound's assumptions do not hold (a law other than ``pd``, ζ >= 1, no
+Where the bound's assumptions do not hold (a law other than ``pd``, ζ >= 1, no
 environment torque), ``auto`` is every stage (0) and :func:`auto_choice` says why.
 """
 
@@ -73,11 +72,10 @@ def set_runner(run) -> None:
 
 def _why_not(scene, params, thrust: bool, flight: bool) -> str | None:
     """Why ``auto`` is every stage (None: the bound applies)."""
-    if thrust:  # any actuator chain (thrusters, magnetic torquers: run/chain.py)
-        kinds = [k.kind for k in chain_kinds(scene)]
-        return f"{kinds[0] if kinds else 'thrusters'}: their fused loop evaluates the environment every stage"
-    # [[sensor]] tables (``flight``): the composed loop honours the rate (its env block) and the
-    # bound holds on the estimate's loop (module docstring)
+    # [[sensor]] tables (``flight``) and an actuator chain (``thrust``: thrusters, magnetic
+    # torquers): the composed loop and its parts honour the rate (its env block); the bound holds
+    # on the estimate's loop (module docstring) and on the chain's (its torque is the law's
+    # request, as the CMGs')
     if scene.controller is None or scene.controller.name != "pd" or not (hasattr(params, "bandwidth")
                                                                           and hasattr(params, "damping")):
         return "the bound is proven for the pd law's loop shape"

@@ -37,7 +37,7 @@ def environment_rate(loop) -> int:
     integrator stage): the scene's ``[simulation] environment_rate`` when the scene has
     environment torques, else 0; ``"auto"`` (the default) is the bound's choice
     (:func:`~.rate_auto.auto_choice`). The per-tick executors hold it in the same blocks where
-    they can cut the run into them (:func:`~.held_env.held_rate`). At most the ticks of an
+    they step the composed parts (:func:`~.blocks.held_rate`). At most the ticks of an
     output row: a block never spans one (each chunk starts its own), so a longer one is the same
     run, and a block is built as that many calls (10**6 of them took 1.5 GiB, issue 32)."""
     asked = getattr(loop.scene.simulation, "environment_rate", 0)
@@ -51,8 +51,8 @@ def environment_rate(loop) -> int:
 def hold_value(L_now, L_prev, t_now, t_prev, have, n_b, h):
     """The block's held torque (casadi, SX or MX): ``L_now`` extrapolated to the middle of the
     block's ``n_b`` ticks of ``h`` from the previous evaluation ``(L_prev, t_prev)`` when there
-    is one (``have``), else ``L_now``. Written once: the fused blocks (:func:`held_environment`)
-    and the per-tick ``env_block`` (:mod:`.held_env`) use it."""
+    is one (``have``), else ``L_now``. Written once: the composed ``env`` block
+    (:func:`~.blocks.env_block`) uses it, whichever executor steps it."""
     dt = ca.if_else(have > 0.5, t_now - t_prev, 1.0)
     zero = type(L_now).zeros(3)
     return L_now + ca.if_else(have > 0.5, (L_now - L_prev) / dt * (n_b * h / 2), zero)

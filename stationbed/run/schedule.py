@@ -30,7 +30,7 @@ import numpy as np
 from ..core.compile import FastCall
 
 __all__ = ["Step", "Schedule", "Stepper", "SOURCES", "block_numbers", "schedule_of", "stepper", "refresh_loop",
-           "composed_hook", "loop_hook", "lockstep_hook", "bulk_stop", "steps_summary"]
+           "composed_hook", "loop_hook", "parts_hook", "lockstep_hook", "bulk_stop", "steps_summary"]
 
 
 @dataclass(eq=False)
@@ -187,17 +187,12 @@ def stepper(comp, res) -> Stepper:
 
 def refresh_loop(loop) -> None:
     """After a step: the per-tick loop's own copies of p and of the blocks' numbers (its
-    measurement, actuation, fused tick, held environment, the flight tick's)."""
+    measurement, actuation, the flight tick's, the compiled law's)."""
     comp = loop.comp
     p = comp.p
     loop.meas.args[2][:] = p
     if loop.act is not None:
         loop.act.args[3][:] = p
-    tick = getattr(loop, "tick_fc", None)
-    if tick is not None:
-        tick.args[5][:] = p
-    if getattr(loop, "held", None) is not None:
-        loop.held.env.args[2][:] = p
     if comp.flight is not None and comp.flight._compiled is not None:
         comp.flight._compiled.args[8][:] = comp.flight.params
     law = getattr(getattr(loop.res, "stepper", None), "numbers", {}).get("law")
@@ -225,24 +220,41 @@ def composed_hook(comp, res, c0, cx, par, P):
 
 
 def loop_hook(loop):
-    """The per-tick loop's ``(ticks, step)``: the ticks with a scheduled step and ``step(k, t,
-    fast)``, called after integrating up to tick ``k`` (time ``t``) instead of sensing there:
-    the step applied to the loop's state (in place), the loop's copies of p refreshed
-    (:func:`refresh_loop`), then tick k sensed. ``fast``: the fused tick integrated (its own
-    measurement discarded, not counted as a generic period). At k = 0 nothing is sensed (the
-    loop senses tick 0 itself)."""
+    """The per-tick loop's generic path's ``(ticks, step)``: the ticks with a scheduled step and
+    ``step(k, t)``, called after integrating up to tick ``k`` (time ``t``) instead of sensing
+    there: the step applied to the loop's state (in place), the loop's copies of p refreshed
+    (:func:`refresh_loop`), then tick k sensed. At k = 0 nothing is sensed (the loop senses
+    tick 0 itself)."""
     comp = loop.comp
     if not comp.schedule:
         return set(), None
     st = stepper(comp, loop.res)
 
-    def step(k: int, t: float, fast: bool = False) -> None:
+    def step(k: int, t: float) -> None:
         loop.x[:] = st.apply(k, loop.x.copy())
         refresh_loop(loop)
         if k > 0:
             loop._sense(k, t)
-            loop.n_slow -= int(fast)
     return set(st.ticks), step
+
+
+def parts_hook(loop, c, cx, par, P):
+    """The per-tick loop's composed parts' ``step(k)`` (run/parts.py), called where a piece of
+    ticks starts (every step's tick starts one: :func:`~.segments.edge_ticks`), before its
+    sensing: at a step's tick, as :func:`composed_hook` on the parts' carry ``c`` and numbers
+    ``par``, and the loop's own copies refreshed (:func:`refresh_loop`: the law it calls in
+    Python reads its compiled numbers there); None when the run has no steps."""
+    comp = loop.comp
+    step = composed_hook(comp, loop.res, c, cx, par, P)
+    if step is None:
+        return None
+    st = stepper(comp, loop.res)
+
+    def at(k: int) -> None:
+        if st.due(k):
+            step(k)
+            refresh_loop(loop)
+    return at
 
 
 def steps_summary(comp, res) -> dict:
@@ -257,36 +269,36 @@ def steps_summary(comp, res) -> dict:
     return out
 
 
-def lockstep_hook(batch, samples, held):
-    """The lockstep batch's ``step(i, k, t)`` (run/lockstep.py), called for a live sample ``i``
-    whose schedule has tick ``k`` after the batch integrated up to it (time ``t``), before the
-    batch senses: the step applied to its state, its p copied into the mapped tick's (and the
-    held environment's, the flight batch's numbers), its loop refreshed, its measurement taken
-    again. Returns ``({tick: [samples]}, step)``; ``({}, None)`` when no sample has steps."""
-    due: dict[int, list[int]] = {}
-    for i, s in enumerate(samples):
-        for k in s.loop.comp.schedule.ticks:
-            due.setdefault(k, []).append(i)
-    if not due:
-        return due, None
+def lockstep_hook(batch, samples):
+    """The lockstep batch's ``step(i, k)`` (run/lockstep.py), called where a live sample ``i``
+    starts a piece of ticks at tick ``k`` (every step's tick starts one), before it senses: at
+    a step's tick, as :func:`parts_hook` on its row of the mapped parts' carry and numbers
+    (``batch.C[i]``, ``batch.PAR[i]``), its loop refreshed, its law's numbers written into the
+    compiled batch law's (``batch.law_batch``); None when no sample has steps."""
+    if not any(s.loop.comp.schedule for s in samples):
+        return None
+    P, cx = batch.cm.par, batch.cm.carry.slice("x")
 
-    def step(i: int, k: int, t: float) -> None:
+    def step(i: int, k: int) -> None:
         lo = samples[i].loop
         comp = lo.comp
-        batch.X[i] = stepper(comp, lo.res).apply(k, batch.X[i].copy())
-        lo.res.x[:] = batch.X[i]
+        if not comp.schedule:
+            return
+        st = stepper(comp, lo.res)
+        if not st.due(k):
+            return
+        batch.C[i, cx] = st.apply(k, batch.C[i, cx].copy())
+        row = batch.PAR[i]
+        row[P.slice("p")] = comp.p
+        for name, arr in st.numbers.items():
+            if name in P:
+                row[P.slice(name)] = arr
         refresh_loop(lo)
-        batch.P[i] = comp.p
-        if held is not None:
-            held.env.args[2].reshape(len(samples), -1)[i] = comp.p
-        if batch.flight is not None:
-            batch.flight.fc.args[8].reshape(len(samples), -1)[i] = comp.flight.params
-        law = stepper(comp, lo.res).numbers.get("law")
+        law = st.numbers.get("law")
         buf = None if law is None else _law_buffers(batch.law_batch, i)
         if buf is not None:
             buf[:] = law
-        batch._measure(i, t, batch.X[i])
-    return due, step
+    return step
 
 
 def bulk_stop(ticks, row_ks, j: int) -> int:

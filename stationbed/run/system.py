@@ -64,32 +64,6 @@ def _track_errors(form, t, x, p):
     return errs
 
 
-def _tick_functions(form, end, rhs, fs, nx, npar, ng, step) -> list[ca.Function]:
-    """One control period fused in one compiled call, for a fusable integrator (RK4).
-
-    ``tick_<cmd>(t, h, x, cmd, u_ext, p) -> (x(t + h), y(t + h), act)``: the actuation at
-    ``(t, x)`` (the chain's end, :func:`chain_end_inputs`: the CMG
-    cluster's steering law and limits, ``act = [u_cmg, m, rate_limited, saturated]``, or the ideal
-    torquer), one step ``step(rhs, t, x, h, u, p)`` (the integrator's ``explicit_step``) of ``h``
-    with that input held, and the measurement at the end. Same functions as the generic path
-    (the actuator's, the integrator's step, meas), composed, so both paths give the same numbers.
-    """
-    model = form.model
-    by_name = {f.name(): f for f in fs}
-    t, h = ca.SX.sym("t"), ca.SX.sym("h")
-    x, u_ext, p = ca.SX.sym("x", nx), ca.SX.sym("u_ext", 3), ca.SX.sym("p", npar)
-    out = []
-    kinds = [("torque", 3)] + ([("rates", ng)] if ng else [])
-    for kind, ncmd in kinds:
-        cmd = ca.SX.sym("cmd", ncmd)
-        act, u, _ = chain_end_inputs(by_name, model, end, "gimbal_rates" if kind == "rates" else "torque", t, h, x, cmd,
-                                     u_ext, p)
-        x1 = step(rhs, t, x, h, u, p)
-        y1 = by_name["meas"](t + h, x1, p)
-        out.append(sx_function(f"tick_{kind}", [t, h, x, cmd, u_ext, p], [x1, y1, act]))
-    return out
-
-
 def chain_end_inputs(system_sx: dict, model, end, command: str, t, h, x, cmd, u_ext, p):
     """The actuator chain's end composed into a tick (casadi): ``(act, u, sat)``.
 
@@ -205,8 +179,6 @@ def build_system(structure: Structure, formulation, integrator) -> System:
         if ng:
             fs.append(sx_function("actuate_rates", [t, x, rates, p], [end.rates_function()(t, r, rates, pc)]))
     fs.append(sx_function("inertia", [t, x, p], [model.inertia(t, p, arrays)]))
-    if integ_cls.fusable:
-        fs += _tick_functions(form, end, rhs, fs, nx, npar, ng, integ_cls.explicit_step)
     fs += integ_cls.build(rhs, nx, nu, npar)
     tag = f"{form_cls.name}_{integ_cls.name}_{structure.key}"
     funcs = compile_functions(fs, tag, extra_c=integ_cls.extra_c)

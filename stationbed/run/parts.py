@@ -1,0 +1,225 @@
+"""The composed tick's parts a per-tick executor calls around a law it calls itself (issue 33):
+:meth:`~stationbed.loop.compose.Composed.sense_part` and
+:meth:`~stationbed.loop.compose.Composed.act_part` of the run's composition (:mod:`.blocks`,
+the same blocks the fused loop composes), generated as C once per structure and cached (in
+this process by :func:`~.blocks.structure_key`, on disk by the compile cache)."""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+
+import numpy as np
+
+from ..core.compile import FastCall, compile_functions
+from ..integrators import IntegrationError
+from .blocks import Draws, composed, held_rate, numbers, structure_key
+from .composition import ControllerFailure
+from .controller import ControllerError, one_line
+from .measurement import Measurement
+from .schedule import parts_hook
+from .segments import edge_ticks, held_torque_from, tick_pieces
+
+__all__ = ["parts", "run_parts", "law_numbers", "NOISE_BLOCK"]
+
+#: ticks of draws taken at a time (any size gives the same numbers: each stream in tick order)
+NOISE_BLOCK = 256
+
+_PARTS: dict = {}
+
+
+def parts(comp, cp=(), noise: bool = True) -> dict:
+    """``{"cm": Composed, "sense": FastCall, "act": FastCall}`` of the run composed by ``comp``
+    (``cp`` the law's symbolic numbers, when it has them: the composition's key only; ``noise``
+    as :func:`~.blocks.run_blocks`)."""
+    key = structure_key(comp, cp, noise)
+    hit = _PARTS.get(key)
+    if hit is not None and hit["system"] is comp.system:
+        return hit
+    cm, _ = composed(comp, cp, noise)
+    tag = "parts_" + hashlib.sha256(repr(cm.key).encode()).hexdigest()[:16]
+    funcs = compile_functions([cm.sense_part(), cm.act_part()], tag)
+    out = {"cm": cm, "sense": FastCall(funcs["cl_sense"]), "act": FastCall(funcs["cl_act"]), "system": comp.system}
+    _PARTS[key] = out
+    return out
+
+
+def run_parts(loop, K: int, update) -> None:
+    """Ticks 0..K of the per-tick ``loop`` (:class:`~.closed_loop.ControlLoop`) on the composed
+    parts: per tick the law (``update``, called here)
+    between the compiled ``sense`` and ``act`` parts of the run's composition (the blocks the
+    fused loop composes: sensing, the actuator chain in order, its end, the held
+    environment). The ticks run in the fused loop's pieces (each row's ticks cut at the edges
+    on the grid and before a short final period, :func:`~.segments.tick_pieces`): a piece's
+    ticks share the parts' numbers, so the act part's sensing of the next tick serves it. A
+    scheduled step's tick starts a piece (:func:`~.segments.edge_ticks`): the step applies
+    there, before the piece's first sensing (:func:`~.schedule.parts_hook`)."""
+    comp, res = loop.comp, loop.res
+    ctrl = comp.ctrl
+    cp = law_numbers(ctrl)
+    fns = parts(comp, cp)
+    cm, sense, act = fns["cm"], fns["sense"], fns["act"]
+    C, P, S = cm.carry, cm.par, cm.sense_outputs
+    period, duration, n_per_out = comp.period, comp.duration, comp.n_per_out
+    edges = edge_ticks(comp)
+    res.held_rate = held_rate(comp)[0]
+    c, par, a_cmd, a_v, a_w = act.args
+    s_c, s_par, s_w = sense.args
+    c[:] = 0.0
+    par[:] = 0.0
+    par[P.slice("p")] = comp.p
+    for name, (p, x) in numbers(comp, cp).items():  # each block's numbers and memory at t = 0, by its name
+        if name in P and len(p):
+            par[P.slice(name)] = p
+        if x is not None and name in C and len(x):
+            c[C.slice(name)] = x
+    c[C.slice("x")] = res.x
+    fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's memory, handed back
+    if fl is not None:
+        fm = res.flight
+        c[C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
+    chain = [(a, C.slice(a.name)) for a in comp.actuators]  # each actuator's memory, handed back by its block's name
+    out = comp.end.outputs
+    has_act = comp.has_cluster
+    i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if has_act else (0, 0, 0)
+    cx, ci = C.slice("x"), C.slice("i")
+    i_fin = cx.start + comp.state_layout.slice(comp.system.formulation.rate_field).start  # the finite-state probe
+    pt0, ph, pn, pk, pu = (P.slice(f) for f in ("t0", "h", "n_act", "k0", "u_ext"))
+    a_c1, a_cs, a_v1, a_outs, a_act = act.res
+    s_cs, s_v, s_outs = sense.res
+    delay = comp.delay > 0
+    seen = loop.seen if delay else a_v1  # what the law sees (the act part writes the next tick's)
+    M = loop.M = Measurement(seen, comp.meas_layout)
+    reads = bool(cm.actuators)  # the chain reads what the law saw
+    draws, nw = Draws(comp, cm), cm.noise.size
+    W, w0 = np.zeros((0, nw)), 0
+
+    def w_of(k):  # tick k's draws (a block of ticks at a time, in tick order)
+        nonlocal W, w0
+        if k - w0 >= len(W):
+            W, w0 = draws.rows(k, min(NOISE_BLOCK, K + 1 - k)), k
+        return W[k - w0]
+
+    step = parts_hook(loop, c, cx, par, P)  # scheduled steps (run/schedule.py: each starts a piece), or None
+
+    def start(k, n, h):  # a piece of n ticks of h from tick k: its numbers, its first sensing
+        if step is not None:  # a step at tick k: the state jumped, the numbers rewritten, before sensing
+            step(k)
+        t0 = min(k * period, duration)
+        par[pt0], par[ph], par[pn], par[pk] = t0, h, n, k
+        par[pu] = held_torque_from(comp.scene, t0, comp.bps, duration)
+        s_par[:] = par
+        c[ci] = 0.0
+        s_c[:] = c
+        if nw:
+            s_w[:] = w_of(k)
+        sense()
+        c[:] = s_cs
+        a_v1[:] = s_v
+        return s_outs
+
+    replan_at = comp.replan.tick if comp.replan is not None else -1
+    ncmd = comp.n_cmd
+    three = ncmd == 3
+    fc = act
+    trigger = fc._trigger  # FastCall's bound buffer trigger: one C call, no wrapper
+    # the act part's buffers as memoryviews: Python floats in and out, ~half numpy's cost
+    m_c, m_c1, m_cs, m_act, m_cmd = (memoryview(v) for v in (c, a_c1, a_cs, a_act, a_cmd))
+    pack_cmd = struct.Struct(f"={ncmd}d").pack_into
+    ndarray, f64 = np.ndarray, np.dtype(np.float64)
+    sat_since_row = ticks = 0
+    pieces = [p for k0 in range(0, K, n_per_out)
+              for p in tick_pieces(k0, min(n_per_out, K - k0), edges, duration, period)] + [(K, K + 1, 0.0)]
+    try:
+        for a, b, h in pieces:
+            outs = start(a, b - a, h)
+            for k in range(a, b):
+                t = k * period  # integer tick clock: no accumulated drift
+                if k == K:
+                    t = duration
+                if k == replan_at:
+                    loop.redesign(t)
+                if delay:  # the ideal measurement's delay (a ring buffer, not a block yet) and noise
+                    loop.corrupt(k, a_v1)
+                M.t = t
+                loop.calls += 1
+                try:
+                    cmd = update(t, M)
+                except Exception as e:  # the user's code: report it (chained), keep the trajectory
+                    raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {one_line(e)}") from e
+                # a tuple or list of ncmd real numbers, or a float64 array of ncmd values, is
+                # written as is; anything else, or a failed write (wrong size, strings...),
+                # goes to the checker, which raises or returns the values as floats
+                cls = cmd.__class__
+                try:
+                    if cls is tuple or cls is list:
+                        if three:  # (three numbers through the memoryview: ~1/3 of pack_into's cost)
+                            m_cmd[0], m_cmd[1], m_cmd[2] = cmd
+                        else:
+                            pack_cmd(a_cmd, 0, *cmd)  # exactly ncmd numbers; no strings, no None
+                    elif cls is ndarray and cmd.dtype is f64 and len(cmd) == ncmd:
+                        a_cmd[:] = cmd  # (a (ncmd, 1) array raises ValueError)
+                    else:
+                        raise TypeError
+                except (TypeError, ValueError, OverflowError, struct.error):
+                    cmd = loop.check_command(t, cmd)
+                    a_cmd[:] = cmd
+                if reads:
+                    a_v[:] = seen
+                row = k % n_per_out == 0 or k == K
+                if row:  # the memory a row reports: before the tick's actuation, after its sensing
+                    x = c[cx].copy()
+                    for ac, sl in chain:
+                        ac.x_row = c[sl].copy()
+                    if fl is not None:
+                        res.flight.xs = fl.state.get(c[C.slice(fl.name)], "xs").copy()
+                        res.flight.ys = fl.outputs.get(S.get(outs, fl.name), "ys").copy()
+                if nw and k < K:
+                    a_w[:] = w_of(k + 1)
+                trigger()
+                # the final tick's actuation is reported in its row but never integrated:
+                # it is not counted in the summary
+                if has_act and (m_act[i_lim] or m_act[i_sat]):
+                    sat_since_row |= loop.flags(a_act, count=k < K)
+                if row:
+                    if len(cmd) == 3:
+                        res.last_cmd = cmd
+                    if has_act:
+                        res.u[comp.u_cmg] = a_act[i_u]
+                    res.x = x
+                    res.rows.hold(t, x, *res.held_row(sat_since_row, t))
+                    sat_since_row = 0
+                if k == K:
+                    break
+                ticks += 1
+                loop.n_fixed += 1
+                v = m_c1[i_fin]
+                if not -1e300 < v < 1e300:
+                    res.ticks = ticks
+                    loop.check_command(t, cmd)
+                    raise IntegrationError(min((k + 1) * period, duration), "state is not finite (NaN or inf)")
+                if k + 1 < b:
+                    m_c[:] = m_cs
+                    outs = a_outs
+                else:
+                    m_c[:] = m_c1
+    finally:
+        res.ticks = ticks
+        res.x = c[cx].copy()
+        for ac, sl in chain:
+            ac.x = c[sl].copy()
+        if fl is not None:
+            m = fl.state.split(c[C.slice(fl.name)])
+            fm = res.flight
+            fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
+
+
+def law_numbers(ctrl):
+    """The law's numbers for its symbolic form (empty for a law without one): the composition's
+    key counts them."""
+    if not callable(getattr(ctrl, "symbolic", None)):
+        return ()
+    try:
+        return ctrl.symbolic_params()
+    except Exception as e:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e
