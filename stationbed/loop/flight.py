@@ -41,6 +41,7 @@ from ..core.layout import Layout
 from .mekf import Mekf
 from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
+from .sensor_faults import apply_sensor_faults
 from .suite import Suite, SuiteNoise
 
 __all__ = ["Flight", "INIT_STREAM", "READS", "SEEN", "flight_columns", "st_dropouts"]
@@ -88,6 +89,9 @@ class Flight:
         self.params = np.concatenate([self.suite.params, np.zeros(3) if moon_R_N is None else np.asarray(moon_R_N, float)])
         if tuned is not None:  # the filter is flight software: tuned from what it believes
             self.params[self.suite.PARAMS.slice("mekf")] = tuned
+        # the scene's sensor faults (issue 34): numbers of the sensors' steps (loop/sensor_faults.py)
+        for name, p in apply_sensor_faults(self.suite.sensors, getattr(sensing, "fault", ())).items():
+            self.params[self.suite.PARAMS.slice(name)] = p
         self.mekf = self.suite.mekf
         #: the measurement's layout (``meas``) and its offset dict (``layout``: the tick's key reads it)
         self.meas = layout if isinstance(layout, Layout) else _from_offsets(layout)
