@@ -102,10 +102,18 @@ class Composed:
         if blocker is not None:
             raise ValueError(f"block {blocker.name!r} is not symbolic ({blocker.why}): it cannot be composed")
         M = plant.meas_layout
+        #: a field an actuator or the end reads that the measurement has not: the memory of the
+        #: block whose state has that field, as the tick starts (what it decided the tick before)
+        self.memory = {f: b for b in self.blocks for f in b.state.names}
         for a in self.actuators:  # an actuator reads the law's measurement by field name
             for f in a.inputs.names:
-                if f != "tau_B" and f not in M:
+                if f != "tau_B" and f not in M and f not in self.memory:
                     raise KeyError(f"actuator block {a.name!r} reads {f!r}, the measurement has {M.names}")
+        #: the end's inputs beyond its own (x, tau, u_ext): read from memory by name
+        self.end_reads = [f for f in self.end.inputs.names if f not in ("x", "tau", "u_ext")]
+        for f in self.end_reads:
+            if f not in self.memory:
+                raise KeyError(f"end block {self.end.name!r} reads {f!r}, no block's memory has it")
         self.ncmd = self.law_block.outputs.slice("cmd").stop
         #: the carry from tick to tick, by name: tick index in the chunk, plant state, counts of
         #: rate-limited and saturated ticks, then each block's memory under its name
@@ -145,9 +153,17 @@ class Composed:
         s1, out = b.call(k, t, h, self.carry.get(c, b.name), v, type(v)(0, 1), self.par.get(par, b.name))
         return b.outputs.get(out, "cmd"), b.outputs.get(out, "q_ref"), s1
 
-    def _reads(self, a: Block, v):
+    def _reads(self, a: Block, v, c):
         M = self.plant.meas_layout
-        return [M.get(v, f) for f in a.inputs.names if f != "tau_B"]
+        return [M.get(v, f) if f in M else self._recall(c, f) for f in a.inputs.names if f != "tau_B"]
+
+    def _recall(self, c, f: str):
+        """Field ``f`` of the memory of the block that keeps it, in the carry ``c``."""
+        b = self.memory[f]
+        return b.state.get(self.carry.get(c, b.name), f)
+
+    def _end_extra(self, c) -> dict:
+        return {f: self._recall(c, f) for f in self.end_reads}
 
     @property
     def _rhs(self):
@@ -160,9 +176,10 @@ class Composed:
             return u_ext
         return u_ext + self.env.state.get(self.carry.get(c, self.env.name), "L_hold")
 
-    def _end(self, t, h, x, tau, u_ext, p):
+    def _end(self, t, h, x, tau, u_ext, p, extra=None):
         e = self.end
-        _, out = e.call(0, t, h, type(x)(0, 1), e.inputs.pack(x=x, tau=tau, u_ext=u_ext, symbolic=True), type(x)(0, 1), p)
+        u = e.inputs.pack(x=x, tau=tau, u_ext=u_ext, **(extra or {}), symbolic=True)
+        _, out = e.call(0, t, h, type(x)(0, 1), u, type(x)(0, 1), p)
         return e.outputs.get(out, "act"), e.outputs.get(out, "u"), e.outputs.get(out, "sat")
 
     def _chain(self, k, t, h, c, par, v, cmd):
@@ -170,7 +187,7 @@ class Composed:
         after, on-times and torques of all channels)."""
         tau, mem, ons, tqs = cmd, {}, [], []
         for a in self.actuators:
-            x1, out = a.call(k, t, h, self.carry.get(c, a.name), ca.vertcat(*self._reads(a, v), tau), type(cmd)(0, 1),
+            x1, out = a.call(k, t, h, self.carry.get(c, a.name), ca.vertcat(*self._reads(a, v, c), tau), type(cmd)(0, 1),
                              self.par.get(par, a.name))
             mem[a.name] = x1
             tau = a.outputs.get(out, "tau_rest_B")
@@ -242,11 +259,11 @@ class Composed:
         idle = SX(1)
         reads = []
         for a in self.actuators:
-            r = self._reads(a, v)
+            r = self._reads(a, v, c)
             reads += r
             flag = a.idle(k, t, h, C.get(c, a.name), ca.vertcat(*r, cmd), P.get(par, a.name)) if a.idle is not None else 0
             idle = idle * flag
-        _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
+        _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p, self._end_extra(c))
         x_q = self.plant.step(self._rhs, t, x, h, u, p)
         fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
         fields.update(mem)
@@ -290,8 +307,9 @@ class Composed:
         # the end on the rest (SX), then the plain or the split step (explicit branches)
         xs_, rs_, us_ = SX.sym("x", self.plant.nx), SX.sym("rest", self.ncmd), SX.sym("u_ext", 3)
         pp = SX.sym("p", self.plant.npar)
-        _, u_b, sat_b = self._end(ts, hs, xs_, rs_, us_, pp)
-        end_f = sx_function("cl_end", [ts, xs_, rs_, us_, pp, hs], [u_b, sat_b])
+        ex_s = {f: SX.sym(f, self.memory[f].state.shape(f)[0]) for f in self.end_reads}
+        _, u_b, sat_b = self._end(ts, hs, xs_, rs_, us_, pp, ex_s)
+        end_f = sx_function("cl_end", [ts, xs_, rs_, us_, pp, hs, *ex_s.values()], [u_b, sat_b])
         nch = on_s.numel()
         us, ons, tqs = SX.sym("u", u_b.numel()), SX.sym("on", nch), SX.sym("tq", 3 * nch)
         plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
@@ -299,7 +317,7 @@ class Composed:
         pulse = ca.Function.if_else("cl_pulse", split, plain)
         ar, aon, atq = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch)
         a_in = [c, par, cq, ar, aon, atq]
-        uu, fl = end_f(t, x, ar, self._u_ext(c, u_ext), p, h)
+        uu, fl = end_f(t, x, ar, self._u_ext(c, u_ext), p, h, *self._end_extra(c).values())
         x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
@@ -390,7 +408,7 @@ class Composed:
         v, mem, outs = self._sense(k, t, h, y, c, w, par, plain=False)
         cmd, q_ref, s1 = self._law(k, t, h, v, c, par)
         rest, _, _, _ = self._chain(k, t, h, c, par, v, cmd)
-        act, _, _ = self._end(t, h, x, rest, u_ext, p)
+        act, _, _ = self._end(t, h, x, rest, u_ext, p, self._end_extra(c))
         vals = dict(cmd=cmd, act=act, q_ref=q_ref, **{b.name: mem[b.name] for b in self.sense})
         vals[self.law_block.name] = s1
         vals.update({f"{b.name}_y": outs[b.name] for b in self.sense})

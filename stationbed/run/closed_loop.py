@@ -34,6 +34,7 @@ from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
 from .segments import held_torque_from, segment_input
+from .fdir_run import fdir_for
 from .thrust import thrust_for
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOISE_BLOCK"]
@@ -136,6 +137,7 @@ class ControlLoop:
             flight=flight, tick_noise=None if flight is None else flight.noise(),
             end=chain_end(model),
             thrust=thrust_for(scene, ctrl, layout, plant),  # the [[thruster]] tables (issue 21), or None
+            fdir=fdir_for(scene, model, plant),  # [fdir] (issue 34), or None
         )
         self.res = RunState(comp, rows, x)
         n_y = self.meas.res[0].size
@@ -330,6 +332,8 @@ class ControlLoop:
         if self.fused:
             if fused_ok(comp):
                 return run_fused(comp, res, K)
+        if comp.fdir is not None:  # its block has no per-tick form
+            raise ValueError(f"[fdir] flies fused only; this run cannot: {why_not_fused(comp) or 'fused = False asked'}")
         sat_since_row = 0
         flush = res.rows.flush  # rows are held and streamed in batches (ROW_BATCH, FLUSH_S)
 
@@ -543,6 +547,8 @@ class ControlLoop:
         out.update(rate_summary(self.comp, self.res.used_fused, self.res.held_rate))  # the effect rates run (issue 25)
         if comp.thrust is not None:
             out.update(comp.thrust.summary(comp))
+        if comp.fdir is not None:
+            out.update(comp.fdir.summary(comp))
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(ctrl.summary())
         except Exception as e:

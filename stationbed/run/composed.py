@@ -103,7 +103,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     law = cm.law_block.name
     fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
     sense = fl.name if fl is not None else None
-    act = cm.actuators[0].name if cm.actuators else None
+    act = "thrusters" if th is not None else None  # the thrusters' block (actuator_block's name)
+    fd = comp.fdir
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
@@ -114,6 +115,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         X = fl.state
     if act is not None:
         par[P.slice(act)] = th.cluster.params
+    if fd is not None:
+        par[P.slice(fd.block.name)] = fd.block.p0
     c0 = chunk.args[0]
     c0[:] = 0.0
     c0[C.slice("x")], c0[C.slice(law)] = res.x, s_law
@@ -122,6 +125,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         c0[C.slice(sense)] = X.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
     if act is not None:
         c0[C.slice(act)] = th.x
+    if fd is not None:
+        c0[C.slice(fd.block.name)] = fd.x
     rc, rp, rw = row.args
     out = comp.end.outputs
     n_act = out.size if comp.has_cluster else 0
@@ -171,6 +176,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 u_cmg = a[i_u]
             if th is not None:
                 th.x_row = c0[C.slice(act)].copy()
+            if fd is not None:
+                fd.x_row = c0[C.slice(fd.block.name)].copy()
             xs = ys = None
             if sense is not None:
                 xs, ys = X.get(R.get(r, sense), "xs").copy(), fl.outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
@@ -190,4 +197,6 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
         if th is not None:
             th.x = th.x_row = c0[C.slice(act)].copy()
+        if fd is not None:
+            fd.x = c0[C.slice(fd.block.name)].copy()
         finish_chunks(res, x, ticks)

@@ -139,7 +139,8 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     O = Layout(c=C.size, row=RL.size, counts=2)
     flight, th, fm = comp.flight, comp.thrust, res.flight
     sense = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
-    act_b = cm.actuators[0] if cm.actuators else None
+    act_b = next((a for a in cm.actuators if a.name == "thrusters"), None)
+    fd = comp.fdir
     period, duration = comp.period, comp.duration
     out_l = comp.end.outputs
     has_cmg = comp.has_cluster
@@ -187,12 +188,16 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
             if act_b is not None:  # the thrusters' columns from their memory before each row's tick
                 xa = C.get(cs, act_b.name)
                 held += [xa[:m][:, th.row_index()]]
+            if fd is not None:  # the fault detection's columns from its memory before each row's tick
+                held += [C.get(cs, fd.block.name)[:m][:, fd.row_index()]]
             held = np.hstack(held)
             if j == 0:
                 if sense is not None:
                     fm.xs, fm.ys = fl_xs[0], fl_ys[0]
                 if th is not None:
                     th.x_row = C.get(cs[0], act_b.name)
+                if fd is not None:
+                    fd.x_row = C.get(cs[0], fd.block.name)
                 res.x = xs_[0]
                 if not _held_matches(res, held[0], act[0, cmg[0]] if has_cmg else None, cmd[0], q_ref[0], int(flag[0])):
                     if noise0 is not None:

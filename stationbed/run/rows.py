@@ -24,6 +24,7 @@ from ..model.torques import TORQUES
 from ..scene import Scene
 from .metrics import RunMetrics
 from .system import OUT_CHUNK
+from .fdir_run import fdir_columns
 from .thrust import thruster_columns
 from .trajectory import Trajectory, base_columns
 
@@ -97,6 +98,7 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
         cols += flight_columns(scene)  # sensors and estimator (issue 20)
         cols += thruster_columns(scene)  # thrusters (issue 21)
+        cols += fdir_columns(scene)  # fault detection and modes (issue 34)
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
     for kind in TORQUES.values():  # kinds the scene names outside [[torque]] (gravity gradient: [orbit])
@@ -205,6 +207,7 @@ class Rows:
             self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
             self.held_columns += flight_columns(scene)
             self.held_columns += thruster_columns(scene)
+            self.held_columns += fdir_columns(scene)
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
         self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []

@@ -74,7 +74,9 @@ class ThrustLoop:
         self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
         self.on_s = np.zeros(self.cluster.n)
         self.torque_B = np.zeros((3, self.cluster.n))
-        self.reads_at = self.cluster.reads_in(layout)  # its READS (h_B) in the measurement, by name
+        # its READS (h_B) in the measurement, by name (with [fdir] it reads the mode manager's
+        # memory too: flown fused only, run/fdir_run.py)
+        self.reads_at = None if self.cluster.commanded else self.cluster.reads_in(layout)
         self.fused_reason = None  # why the fused loop did not take it (summary)
 
     def command(self, comp, t: float, y, cmd) -> np.ndarray:

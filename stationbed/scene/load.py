@@ -15,6 +15,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
+from .fdir import Fdir, ModeCommand, check_fdir
 from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
@@ -49,6 +50,8 @@ class Scene(Strict):
     knowledge: Knowledge | None = None
     thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
     thrusters: ThrusterOptions | None = None
+    fdir: Fdir | None = None  # issue 34: flight software's fault detection (stationbed/loop/fdir.py)
+    mode: list[ModeCommand] = []  # issue 34: the mode manager's scheduled commands
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -87,6 +90,7 @@ class Scene(Strict):
         _check_sensors(self)
         _check_knowledge(self)
         check_thrusters(self)
+        check_fdir(self)
         return self
 
     # -- convenience -------------------------------------------------------------------

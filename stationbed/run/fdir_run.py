@@ -1,0 +1,95 @@
+"""Flight software's fault detection in a run (issue 34): the ``[fdir]`` block's memory as the
+rows' ``fdir_*`` columns, the detections in the summary, each compared with the truth's fault
+schedule there (never inside the loop: the block knows nothing of the truth).
+
+:class:`FdirLoop` is what the composition holds (``comp.fdir``); the block itself is
+:func:`stationbed.loop.fdir.fdir_block`, composed as the chain's last actuator (run/blocks.py).
+A run with ``[fdir]`` flies fused (the block has no per-tick form): one that cannot is refused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..loop.fdir import MODE_NUMBERS, FdirSpec, false_alarms_per_hour, fdir_block
+
+__all__ = ["FdirLoop", "fdir_for", "fdir_columns", "FDIR_COLUMNS", "detections_vs_truth"]
+
+#: the rows' columns: the mode of the tick before t, the CMG residual's chi-squared, whether a
+#: CMG fault has been declared, when [s] (-1: not yet) and the unit blamed (0: none)
+FDIR_COLUMNS = ["fdir_mode", "fdir_cmg_nis", "fdir_cmg_fault", "fdir_t_cmg_s", "fdir_cmg_unit"]
+_FIELDS = ["fdir_mode", "nis", "cmg_fault", "t_cmg", "cmg_unit"]
+#: the kinds of the truth's schedule a CMG detection answers (scene [[fault]] kinds, issue 34)
+CMG_KINDS = ("cmg_failed", "gimbal_stuck", "gimbal_rate_limit", "wheel_speed_drop")
+
+
+def fdir_columns(scene) -> list[str]:
+    """The CSV columns of the fault detection (none without ``[fdir]``)."""
+    return list(FDIR_COLUMNS) if getattr(scene, "fdir", None) is not None else []
+
+
+def fdir_for(scene, model, plant) -> "FdirLoop | None":
+    """The run's fault detection (None without ``[fdir]``)."""
+    if getattr(scene, "fdir", None) is None:
+        return None
+    geo = model.cmg.geometry
+    return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity))
+
+
+class FdirLoop:
+    """The fault detection of one run: its block, its memory (``x`` after the last tick,
+    ``x_row`` before the current one), the rows' values and the summary."""
+
+    def __init__(self, scene, spec: FdirSpec):
+        self.scene, self.spec = scene, spec
+        self.block = fdir_block(spec)
+        self.x = self.block.x0.copy()
+        self.x_row = self.x.copy()
+        S = self.block.state
+        self._idx = np.array([S.slice(f).start for f in _FIELDS])
+
+    def row_index(self) -> np.ndarray:
+        """Where the row's values lie in the block's memory (:data:`FDIR_COLUMNS`' order)."""
+        return self._idx
+
+    def row(self) -> list[float]:
+        return np.asarray(self.x_row, dtype=float)[self._idx].tolist()
+
+    def summary(self, comp, modes: np.ndarray | None = None, dt: float = 0.0) -> dict:
+        """The detections (time, unit, right or wrong against the truth's schedule), the stated
+        false-alarm rate of the CMG detector, and the time in each mode (from the rows)."""
+        S = self.block.state
+        x = self.x
+        out = {"fdir_cmg_false_alarms_per_hour_stated": false_alarms_per_hour(self.spec.alpha, self.spec.n,
+                                                                            3600.0 / comp.period)}
+        det = S.get(x, "cmg_fault")[0] > 0.5
+        truth = detections_vs_truth(getattr(comp.scene, "fault", ()), det, float(S.get(x, "t_cmg")[0]),
+                                    int(S.get(x, "cmg_unit")[0]))
+        out.update(truth)
+        out["fdir_cmg_excluded"] = [i + 1 for i, v in enumerate(S.get(x, "cmg_excluded")) if v > 0.5]
+        if modes is not None and modes.size:
+            names = {v: k for k, v in MODE_NUMBERS.items()}
+            m = np.rint(modes).astype(int)
+            out["fdir_mode_s"] = {names[v]: float(np.sum(m == v) * dt) for v in sorted(set(m.tolist()))}
+            out["fdir_mode_changes"] = int(np.count_nonzero(np.diff(m)))
+        return out
+
+
+def detections_vs_truth(faults, detected: bool, t_det: float, unit: int) -> dict:
+    """The CMG detection against the truth's schedule: the first scheduled CMG fault (``t``,
+    ``unit``) and the detection (time, unit, latency, whether the unit blamed is the failed one;
+    a detection with no CMG fault scheduled before it is a false alarm)."""
+    cmg = sorted((f for f in faults or () if f.kind in CMG_KINDS), key=lambda f: f.t)
+    out: dict = {"fdir_cmg_detected": bool(detected)}
+    if detected:
+        out.update(fdir_cmg_t_s=t_det, fdir_cmg_unit=unit)
+    if cmg:
+        f = cmg[0]
+        out.update(fault_cmg_t_s=float(f.t), fault_cmg_unit=int(f.unit))
+    before = [f for f in cmg if f.t <= t_det] if detected else []
+    if detected:
+        out["fdir_cmg_false_alarm"] = not before
+        if before:
+            out["fdir_cmg_latency_s"] = t_det - before[0].t
+            out["fdir_cmg_unit_right"] = unit == int(before[0].unit)
+    return out
