@@ -205,18 +205,28 @@ class Formulation:
         are taken with the arrays at ``t_minus`` and the rates recovered with the arrays at
         ``t_plus``. For the momentum form this is the identity (H and p_η are its states).
         """
+        return self.step_jump(t_minus, t_plus, x, p, p)
+
+    def step_jump(self, t_minus, t_plus, x, p_minus, p_plus):
+        """State just after a step of the parameters from ``p_minus`` to ``p_plus`` at a
+        scheduled step (run/schedule.py: a CMG rotor stopped, mass properties changed), or of
+        the array rates (:meth:`jump`, one p): the total angular momentum about O, B components
+        (the CMG rotors' included) and the modal momenta are continuous; the attitude and the
+        other states are kept; the rates are recovered with ``p_plus``. The rotor momentum a
+        step takes away goes to the body (it leaves through the bearing: the system's H is kept).
+        For the momentum form (H and p_η are its states) this is the identity."""
         m = self.model
         q_BN, xe = self.attitude(x), self.extra(x)
-        xp = self.physical_extra(t_minus, x, p)
-        omega_BN_B = self._omega(t_minus, x, p)
-        H_O_B = self.momentum_of(t_minus, q_BN, omega_BN_B, xp, p)
-        p_eta = self.modal_momenta(m.modal(m.arrays(t_minus, q_BN, xe, p), p), omega_BN_B, m.modal_state(xp))
-        arrays = m.arrays(t_plus, q_BN, xe, p)
+        xp = self.physical_extra(t_minus, x, p_minus)
+        omega_BN_B = self._omega(t_minus, x, p_minus)
+        H_O_B = self.momentum_of(t_minus, q_BN, omega_BN_B, xp, p_minus)
+        p_eta = self.modal_momenta(m.modal(m.arrays(t_minus, q_BN, xe, p_minus), p_minus), omega_BN_B, m.modal_state(xp))
+        arrays = m.arrays(t_plus, q_BN, xe, p_plus)
         omega_plus_B, eta_dot = m.velocities(
-            H_O_B, p_eta, arrays, m.modal(arrays, p), m.inertia(t_plus, p, arrays), xe, p
+            H_O_B, p_eta, arrays, m.modal(arrays, p_plus), m.inertia(t_plus, p_plus, arrays), xe, p_plus
         )
         xe_plus = ca.vertcat(xe[0 : m.n_extra + m.n_modes], eta_dot) if m.n_modes else xe
-        return self.state(t_plus, q_BN, omega_plus_B, xe_plus, p)
+        return self.state(t_plus, q_BN, omega_plus_B, xe_plus, p_plus)
 
     def atol_vector(self, atol: float, rate_scale: float, momentum_scale: float) -> np.ndarray:
         """Absolute tolerance per state component.

@@ -123,6 +123,17 @@ class Integrator:
         self._rhs = FastCall.of(funcs["rhs"])
         self._rhs.args[3][:] = self.p
 
+    def set_params(self, p) -> None:
+        """New parameter values (a scheduled step, run/schedule.py): ``self.p`` changed in place
+        and every compiled buffer that holds a copy of it refreshed (:meth:`_params_changed`)."""
+        if p is not self.p:
+            self.p[:] = p
+        self._params_changed()
+
+    def _params_changed(self) -> None:
+        """Copy ``self.p`` into the buffers that hold it (a subclass with its own adds them)."""
+        self._rhs.args[3][:] = self.p
+
     @classmethod
     def build(cls, rhs: ca.Function, nx: int, nu: int, npar: int) -> list[ca.Function]:
         """The casadi Functions this integrator wants compiled with the RHS.

@@ -302,6 +302,11 @@ class DOP853(Integrator):
             self._P = np.ascontiguousarray(self.P)
             self._P_ptr = _ptr(self._P)
 
+    def _params_changed(self) -> None:
+        super()._params_changed()  # (the C driver reads self.p itself, changed in place)
+        for fc in (self._step, self._dense):
+            fc.args[5][:] = self.p
+
     #: use the Python step loop even when the C driver is available (tests compare the two)
     force_python = False
 

@@ -94,6 +94,13 @@ class FixedStep(Integrator):
             hup[hup.size - self.p.size - tol.size : hup.size - tol.size] = self.p
             hup[hup.size - tol.size :] = tol
 
+    def _params_changed(self) -> None:
+        super()._params_changed()
+        tol = np.concatenate([[self.rtol], self.atol])
+        for fc in (self._multi, self._one):
+            hup = fc.args[1]
+            hup[hup.size - self.p.size - tol.size : hup.size - tol.size] = self.p
+
     def _check(self, t, txd, partial=None):
         x = txd[1:-1]
         if not math.isfinite(x.sum()):

@@ -213,7 +213,7 @@ class ThrusterCluster(Actuator):
         state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
                        impulse_Ns=1, propellant_kg=1)
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
-                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1))
+                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n)
         outputs = Layout(request_B=3, force_N=n)
         return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1} if self.commanded else {}))
 
@@ -226,7 +226,8 @@ class ThrusterCluster(Actuator):
                     torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, h_held=self.h_held, mode=MODES[o.mode],
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
-                    inhibit=[v for w in o.inhibit for v in w] or [0.0])
+                    inhibit=[v for w in o.inhibit for v in w] or [0.0],
+                    ok=np.ones(self.n), leak=np.zeros(self.n))  # the truth's valves (scheduled faults)
 
     def _initial(self) -> dict:
         """Everything 0: CMG control, not dumping, nothing fired (``thruster_only``: its first
@@ -289,6 +290,9 @@ class ThrusterCluster(Actuator):
     def _finish(self, h, x, tau, p, mode, dumping, inh, L_dump, req, F, on, acc):
         """Steps 5-6: the CMGs' share, the ledger, the next state."""
         Tq = p["torque_B"]
+        # the valves' truth (a scheduled fault, run/faults.py): stuck off (ok = 0) loses the
+        # command, stuck on (leak = 1) fires the whole tick; healthy (1, 0): exactly the command
+        on = ca.vertcat(*[p["leak"][i] * h + (1.0 - p["leak"][i]) * p["ok"][i] * on[i] for i in range(self.n)])
         L_thr = ca.mtimes(Tq, on) / ca.fmax(h, 1e-300)
         rest = (1.0 - mode) * (tau - L_thr) - mode * dumping * (1.0 - inh) * L_dump
         fired = [ca.if_else(ca.logic_and(on[i] > 0.0, x["prev_on_s"][i] < h), 1.0, 0.0) for i in range(self.n)]
@@ -313,7 +317,7 @@ class ThrusterCluster(Actuator):
         idle = ca.logic_and(quiet, pending == 0)
         if self.commanded:  # off (hold, drift): idle once nothing is pending and control is the CMGs'
             idle = ca.logic_or(idle, ca.logic_and(m > 1.5, ca.logic_and(x["mode"] < 0.5, ca.logic_and(x["dumping"] < 0.5, pending == 0))))
-        return idle
+        return ca.logic_and(idle, ca.sum1(p["leak"]) == 0)  # a leak fires: never idle
 
     def _command(self, t, h, x, r, tau, p):
         mode, dumping, inh, L_dump, req = self._request(t, x, r, tau, p)

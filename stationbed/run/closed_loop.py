@@ -33,6 +33,7 @@ from .initial import initial_state, initial_x
 from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
+from .schedule import loop_hook, steps_summary
 from .segments import held_torque_from, segment_input
 from .fdir_run import fdir_for
 from .thrust import thrust_for
@@ -373,7 +374,10 @@ class ControlLoop:
             m_cmd, three = memoryview(a_cmd), ncmd == 3
             pack_cmd = struct.Struct(f"={ncmd}d").pack_into
             ndarray, f64 = np.ndarray, np.dtype(np.float64)
+        steps, step = loop_hook(self)  # scheduled steps (run/schedule.py): their ticks, the hook
         try:
+            if 0 in steps:
+                step(0, 0.0)
             self._sense(0, 0.0)
             for k in range(K + 1):
                 t = k * period  # integer tick clock: no accumulated drift
@@ -451,7 +455,9 @@ class ControlLoop:
                         self.check_command(t, cmd)
                         raise IntegrationError(t_next, "state is not finite (NaN or inf)")
                     m_x[:] = m_x1
-                    if noisy:
+                    if k + 1 in steps:  # a scheduled step at t_next: applied, then sensed
+                        step(k + 1, t_next, True)
+                    elif noisy:
                         self.meas.res[0][:] = res_y
                         self._after_sense(k + 1, t_next, res_y)
                 else:
@@ -460,7 +466,7 @@ class ControlLoop:
                         ib += 1
                     next_bp = bps[ib] if ib < len(bps) else math.inf
                     self.advance(t, t_next, cmd)
-                    self._sense(k + 1, t_next)
+                    step(k + 1, t_next) if k + 1 in steps else self._sense(k + 1, t_next)
         finally:
             ctrl.hand_back_compiled()  # the law's state its compiled form carried (law_compiled.py)
             if not counted:
@@ -497,6 +503,7 @@ class ControlLoop:
         else:
             fc = FastCall.of(comp.integ.funcs[comp.tick_name])
         fc.args[5][:] = comp.p
+        self.tick_fc = fc  # (its p: refreshed at a scheduled step, run/schedule.py)
         fc.args[2][:] = self.x
         self.x = fc.args[2]  # the loop's state lives in the tick's input buffer
         self.u_ext = fc.args[4]
@@ -549,6 +556,7 @@ class ControlLoop:
             out.update(comp.thrust.summary(comp))
         if comp.fdir is not None:
             out.update(comp.fdir.summary(comp))
+        out.update(steps_summary(comp, res))  # the scheduled faults applied, with their times
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(ctrl.summary())
         except Exception as e:

@@ -26,6 +26,7 @@ from ..core.compile import FastCall, compile_functions
 from . import law_state
 from .blocks import composed, structure_key
 from .composed_rows import rows_functions, run_rows
+from .schedule import composed_hook
 from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 
 __all__ = ["run_composed", "BUILT"]
@@ -144,6 +145,11 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     def torque_at(ta):
         return held_torque_from(comp.scene, ta, comp.bps, duration)
 
+    step = composed_hook(comp, res, c0, cx, par, P)  # scheduled steps (run/schedule.py), or None
+    if step is not None:  # (one at tick 0 applies before the bulk rows too)
+        step(0)
+        x = c0[cx].copy()
+
     try:
         j0 = 0
         if not edges:  # the leading full rows, many per compiled call (composed_rows.py)
@@ -155,6 +161,9 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             if j < j0:
                 continue
             t = min(k * period, duration)
+            if step is not None:  # a step at the row's tick: before its measurement
+                step(k)
+                x = c0[cx].copy()
             n_tick = row_ks[j + 1] - k if k < K else 1
             draws = draws_of.rows(k, n_tick) if nw else None
             # the row at tick k: the command, actuation and reference of this tick, the memory after it
@@ -188,7 +197,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                     fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
                 s_end = r[r_s].copy()  # the law's update at the last tick
                 break
-            counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period, torque_at, draws)
+            counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period, torque_at, draws,
+                                step)
             x = c0[cx].copy()
             par[P.slice("h")] = period
             ticks += n_tick

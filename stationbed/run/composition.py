@@ -151,6 +151,14 @@ class Composition:
         """The CMG cluster's held input in ``u`` (input layout)."""
         return self.input_layout.slice("u_cmg")
 
+    @cached_property
+    def schedule(self):
+        """The run's scheduled steps (:class:`~.schedule.Schedule`: ``[[fault]]``, events)."""
+        from . import faults  # noqa: F401,PLC0415 (the sources of steps: [[fault]] registers itself)
+        from .schedule import schedule_of  # noqa: PLC0415 (schedule.py reads this class's fields)
+
+        return schedule_of(self)
+
     def ticks(self) -> int:
         """K: the run's ticks are 0..K (the last at ``duration``)."""
         return max(1, math.ceil(self.duration / self.period - 1e-9))

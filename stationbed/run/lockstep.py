@@ -38,6 +38,7 @@ from ..loop.corruption import corrupt_compiled, draws_layout
 from .lockstep_flight import FlightBatch
 from .prepare import prepare
 from .rows import Rows
+from .schedule import lockstep_hook
 from .segments import breakpoints, held_torque_from
 
 __all__ = ["executor", "run_lockstep", "vectorised"]
@@ -363,6 +364,9 @@ class _Lockstep:
             ctrl.batch_stopped.add(i)
             errors[i] = e
 
+        due, step = lockstep_hook(self, S, held)  # scheduled steps (run/schedule.py): by tick, the hook
+        for i in due.get(0, ()):
+            step(i, 0, 0.0)
         self._sense(0, 0.0)
         M = self.M
         try:
@@ -499,6 +503,9 @@ class _Lockstep:
                     self.UEXT[i] = held_torque_from(S[i].scene, t_next, bps, duration)
                     self.X[i] = lo.res.x
                     self._measure(i, t_next, lo.res.x)
+                for i in due.get(k + 1, ()):  # a scheduled step at t_next, before the batch senses
+                    if alive[i]:
+                        step(i, k + 1, t_next)
                 self._sense(k + 1, t_next)
         finally:
             ctrl.hand_back_compiled()  # (each sample's law state, from the compiled batch)

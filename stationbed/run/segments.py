@@ -133,15 +133,17 @@ def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.n
 
 def edge_ticks(comp) -> list[int] | None:
     """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) of the
-    discontinuities inside the run of ``comp`` (its :class:`~.composition.Composition`); None
-    when one lies between ticks or the scene has array rate steps (both need the per-tick loop)."""
+    discontinuities inside the run of ``comp`` (its :class:`~.composition.Composition`) and of
+    its scheduled steps (run/schedule.py: always on the grid); None when a discontinuity lies
+    between ticks or the scene has array rate steps (both need the per-tick loop)."""
     inside = [b for b in comp.bps if 0.0 < b < comp.duration]
     if inside and comp.model.has_steps:
         return None
     ks = [round(b / comp.period) for b in inside]
     if any(k * comp.period != b for k, b in zip(ks, inside)):
         return None
-    return sorted(set(ks))
+    K = comp.ticks()
+    return sorted(set(ks) | {k for k in comp.schedule.ticks if 0 < k < K})
 
 
 def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> list[tuple[int, int, float]]:
@@ -167,7 +169,7 @@ def torque_at(comp, edges, u_ext):
     return lambda t: u_ext
 
 
-def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None) -> np.ndarray:
+def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None, step=None) -> np.ndarray:
     """Advance a fused loop's chunk over the :func:`tick_pieces` of a row starting at tick ``k``,
     one compiled call each (run/composed.py).
 
@@ -175,13 +177,17 @@ def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None
     input (layout ``C``: ``i``, ``counts``, ...) holds the carry at tick ``k`` and, after, the
     carry at the row's end. Each piece sets the parameters (layout ``P``: ``t0``, ``h``, ``n_act``,
     ``k0`` where it has one, ``u_ext`` = ``torque_at(t0)``) and ``draws[a - k : b - k]`` (the
-    rows' ticks, tick by tick). Returns the pieces' rate-limited and saturated tick counts."""
+    rows' ticks, tick by tick); ``step(a)``, when given, applies the scheduled steps at a piece's
+    first tick ``a`` (run/schedule.py) to the carry and the parameters. Returns the pieces'
+    rate-limited and saturated tick counts."""
     c0, par = chunk.args[0], chunk.args[1]
     ci, cc = C.slice("i"), C.slice("counts")
     pt0, ph, pn, pu = (P.slice(f) for f in ("t0", "h", "n_act", "u_ext"))
     pk = P.slice("k0") if "k0" in P else None
     counts = np.zeros(2)
     for a, b, h in pieces:
+        if step is not None:
+            step(a)
         c0[ci], c0[cc] = 0.0, 0.0
         par[pt0], par[ph], par[pn] = a * period, h, b - a
         if pk is not None:

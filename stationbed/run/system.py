@@ -173,6 +173,8 @@ def build_system(structure: Structure, formulation, integrator) -> System:
     fs = [rhs, out, out.map("out_map", "serial", OUT_CHUNK, [2], []), init]
     if form.omega_is_state:
         fs.append(sx_function("jump", [t, t2, x, p], [form.jump(t, t2, x, p)]))
+    p2 = ca.SX.sym("p2", npar)  # a scheduled step's parameters after it (run/schedule.py)
+    fs.append(sx_function("step_jump", [t, x, p, p2], [form.step_jump(t, t, x, p, p2)]))
     # controller side: the measurement vector, and the actuation (steering law + limits)
     ng = 0 if cmg is None else cmg.n_gimbals
     lay = measurement_fields(ng, structure.n_app)

@@ -19,6 +19,7 @@ from .fdir import Fdir, ModeCommand, check_fdir
 from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
+from .faults import Fault, check_faults
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
 from .wing import check_plate_faces, wing_surface
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
@@ -52,6 +53,7 @@ class Scene(Strict):
     thrusters: ThrusterOptions | None = None
     fdir: Fdir | None = None  # issue 34: flight software's fault detection (stationbed/loop/fdir.py)
     mode: list[ModeCommand] = []  # issue 34: the mode manager's scheduled commands
+    fault: list[Fault] = []  # issue 34: scheduled steps of the truth (stationbed/run/schedule.py)
     _folder: Path | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
@@ -91,6 +93,7 @@ class Scene(Strict):
         _check_knowledge(self)
         check_thrusters(self)
         check_fdir(self)
+        check_faults(self)
         return self
 
     # -- convenience -------------------------------------------------------------------
@@ -262,7 +265,7 @@ def _assign(data: dict, defaults: dict, path: str, value) -> None:
         elif isinstance(node, dict):
             if isinstance(key, int):
                 raise KeyPathError(f"{here}: {where} is a table, not an array")
-            if model is not None and key not in model.model_fields:
+            if model is not None and key not in model.model_fields and model.model_config.get("extra") != "allow":
                 raise KeyPathError(f"{here}: {_unknown_key(model, key)}")
         else:
             raise KeyPathError(f"{here}: {where} is a value, not {'an array' if isinstance(key, int) else 'a table'}")

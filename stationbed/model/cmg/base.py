@@ -12,10 +12,17 @@ import numpy as np
 
 from .steering import rate_limit, singularity_measure, steer
 
-__all__ = ["CmgGeometry", "GimballedGeometry", "HEAD_PAR"]
+__all__ = ["CmgGeometry", "GimballedGeometry", "HEAD_PAR", "UNIT_TAIL", "RATE_CAP_NONE"]
 
 #: numbers at the head of the cluster's slice of p, before the geometry (limits, steering)
 HEAD_PAR = 7
+#: the per-unit numbers at the tail of the cluster's slice of p, one group of ``n_units`` each:
+#: ``working`` (1; 0: ``[cmg] failed``, its gimbals held and left out of steering), ``rotor`` (the
+#: rotor's momentum as a fraction of ``h_rotor``; 1) and ``rate_cap`` (each of its gimbals' rate
+#: clamped to it after the steering law, which does not know it [rad/s]; :data:`RATE_CAP_NONE`)
+UNIT_TAIL = ("working", "rotor", "rate_cap")
+#: ``rate_cap`` of a healthy gimbal: ``fmin(r, cap)`` is exactly ``r`` for every finite rate
+RATE_CAP_NONE = 1e300
 
 
 class CmgGeometry:
@@ -94,9 +101,16 @@ class CmgGeometry:
 
     @property
     def n_par(self) -> int:
-        """Size of the cluster's slice of p: :data:`HEAD_PAR`, the geometry, then one number per
-        unit: 1 for a working unit, 0 for a failed one (``[cmg] failed``)."""
-        return HEAD_PAR + self.n_units * (self.unit_par + 1)
+        """Size of the cluster's slice of p: :data:`HEAD_PAR`, the geometry, then :data:`UNIT_TAIL`
+        groups of one number per unit (:meth:`unit_index`)."""
+        return HEAD_PAR + self.n_units * (self.unit_par + len(UNIT_TAIL))
+
+    def unit_index(self, name: str, unit: int) -> int:
+        """Index in the cluster's slice of p of the per-unit number ``name`` (:data:`UNIT_TAIL`)
+        of ``unit`` (1-based, as ``[cmg] failed`` counts): what a scheduled step changes."""
+        if not 1 <= unit <= self.n_units:
+            raise ValueError(f"unit {unit} is not one of 1..{self.n_units}")
+        return HEAD_PAR + self.n_units * (self.unit_par + UNIT_TAIL.index(name)) + unit - 1
 
     # -- numbers (from the scene's [cmg] table) ---------------------------------------
     def _check(self, cfg) -> None:
@@ -108,7 +122,7 @@ class CmgGeometry:
         self._check(cfg)
         working = [0.0 if i + 1 in cfg.failed else 1.0 for i in range(self.n_units)]
         out = np.concatenate([np.asarray(self._head_params(cfg), float), np.asarray(self._geometry_params(cfg), float).ravel(),
-                              working])
+                              working, np.ones(self.n_units), np.full(self.n_units, RATE_CAP_NONE)])
         if out.shape != (self.n_par,):
             raise ValueError(f"cmg kind {self.kind!r}: {out.shape[0]} parameters, expected {self.n_par}")
         return out
@@ -309,12 +323,20 @@ class GimballedGeometry(CmgGeometry):
         """The singularity measure ``sqrt(det(Â Âᵀ))`` at ``xc`` (casadi scalar)."""
         return singularity_measure(self.A_hat(xc, pc))
 
+    def _tail(self, pc, name: str) -> list:
+        """The per-unit numbers ``name`` (:data:`UNIT_TAIL`) from ``pc``, one per unit (casadi)."""
+        i0 = self.unit_index(name, 1)
+        return [pc[i0 + i] for i in range(self.n_units)]
+
     def _h(self, xc, pc):
-        spins = [s for s, _ in self.spins(xc, pc)]
+        # each rotor at its fraction of h_rotor (1: x 1 is exact, the healthy cluster's numbers)
+        spins = [r * s for r, (s, _) in zip(self._tail(pc, "rotor"), self.spins(xc, pc))]
         return pc[0] * sum(spins[1:], spins[0])
 
     def _h_dot(self, xc, uc, omega_BN_B, pc):
-        return pc[0] * ca.mtimes(self.A_hat(xc, pc), uc)
+        rotor = self._tail(pc, "rotor")
+        A = ca.horzcat(*[d * rotor[i] for i, (_, ds) in enumerate(self.spins(xc, pc)) for d in ds])
+        return pc[0] * ca.mtimes(A, uc)
 
     def _state_dot(self, xc, uc, omega_BN_B, pc):
         return uc
@@ -322,7 +344,7 @@ class GimballedGeometry(CmgGeometry):
     def working(self, pc):
         """Per gimbal 1 (its unit works) or 0 (its unit failed: ``[cmg] failed``), casadi
         (n_gimbals, 1), from the tail of ``pc``."""
-        w = pc[HEAD_PAR + self.n_units * self.unit_par :]
+        w = self._tail(pc, "working")
         return ca.vertcat(*[w[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
 
     def _actuate(self, t, xc, tau_cmd, omega_BN_B, pc, steering, direct_rates):
@@ -337,9 +359,16 @@ class GimballedGeometry(CmgGeometry):
         else:
             rates = direct_rates
         rates, limited = rate_limit(rates * working, max_rate)
+        # a gimbal the hardware clamps (a scheduled fault: stuck = 0, a degraded limit), after the
+        # steering law, which does not know it; healthy: RATE_CAP_NONE, fmin/fmax exact
+        cap = self._tail(pc, "rate_cap")
+        cap = ca.vertcat(*[cap[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
+        clamped = ca.fmin(ca.fmax(rates, -cap), cap)
+        limited = ca.fmax(limited, ca.if_else(ca.mmax(ca.fabs(rates) - cap) > 0.0, 1.0, 0.0))
+        rates = clamped
         # saturation of the working units: their momentum (the failed units' is held) against
         # their capacity (h_sat = saturation_fraction x capacity of the working units)
-        w_unit = pc[HEAD_PAR + self.n_units * self.unit_par :]
+        w_unit = self._tail(pc, "working")
         spins = [s for s, _ in self.spins(xc, pc)]
         h_work = h_rotor * sum((w_unit[i] * spins[i] for i in range(1, self.n_units)), w_unit[0] * spins[0])
         sat = ca.if_else(ca.norm_2(h_work) >= h_sat, 1.0, 0.0)

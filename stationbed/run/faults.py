@@ -1,0 +1,110 @@
+"""What each ``[[fault]]`` kind does to the truth (issue 34): a :class:`~.schedule.Step` at the
+fault's tick (and one at ``until`` that clears it), made by the kind's effect registered in
+:data:`FAULT_EFFECTS` (the kind's scene side: :mod:`stationbed.scene.faults`).
+
+Truth-side kinds (the CMG unit's numbers: :data:`~stationbed.model.cmg.base.UNIT_TAIL`):
+
+* ``cmg_failed``: the unit's gimbals held (``rate_cap`` 0) and its rotor stopped at t
+  (``rotor`` 0, ``spin_down_s = 0``, the only value so far): the rotor's momentum goes to the
+  body through the bearing, the system's angular momentum is kept (the state jumps). Flight
+  software is not told: the steering law keeps the unit until it is (``[knowledge]``, FDIR).
+* ``gimbal_stuck``: the unit's gimbals held at their angles at t (``rate_cap`` 0); its rotor
+  spins on. ``gimbal_rate_limit``: its gimbal rates clamped to ``limit`` [rad/s] after the
+  steering law (the cluster's own limit still applies). Both may clear (``until``).
+* ``wheel_speed_drop``: the unit's rotor momentum drops to ``1 - fraction`` of the nominal at t
+  (the state jumps, momentum kept).
+* ``thruster_stuck_off``: the thruster's valve ignores its commands (``ok`` 0);
+  ``thruster_stuck_on``: it fires the whole of every tick (``leak`` 1), its propellant counted
+  in the ledger and its torque on the body. Both may clear.
+
+Flight software never sees these numbers (the thrusters' mapping, the steering law and the
+dump law are unchanged); what it learns is the FDIR's (issue 34 item 2).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from ..scene.faults import FAULT_KINDS, fault_tick
+from .schedule import SOURCES, Step
+
+__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps"]
+
+#: kind -> ``effect(fault, comp) -> (plant edits, block edits, jump)`` (module docstring)
+FAULT_EFFECTS: dict[str, Callable] = {}
+
+
+def register_fault_effect(kind: str):
+    """Decorator: the effect of fault ``kind`` (registered in :data:`FAULT_KINDS` first)."""
+    def deco(f):
+        if kind not in FAULT_KINDS:
+            raise ValueError(f"fault effect {kind!r}: no such fault kind (register its FaultKind first)")
+        FAULT_EFFECTS[kind] = f
+        return f
+    return deco
+
+
+def _cmg(comp, unit: int, **values) -> dict:
+    """p edits setting the CMG ``unit``'s per-unit numbers ``values`` (UNIT_TAIL names)."""
+    model = comp.model
+    g = model.cmg.geometry
+    base = model.layout["cmg"].start
+    return {base + g.unit_index(name, unit): float(v) for name, v in values.items()}
+
+
+@register_fault_effect("cmg_failed")
+def _cmg_failed(f, comp):
+    return _cmg(comp, f.unit, rate_cap=0.0, rotor=0.0), {}, True
+
+
+@register_fault_effect("gimbal_stuck")
+def _gimbal_stuck(f, comp):
+    return _cmg(comp, f.unit, rate_cap=0.0), {}, False
+
+
+@register_fault_effect("gimbal_rate_limit")
+def _gimbal_rate_limit(f, comp):
+    return _cmg(comp, f.unit, rate_cap=f.param("limit")), {}, False
+
+
+@register_fault_effect("wheel_speed_drop")
+def _wheel_speed_drop(f, comp):
+    return _cmg(comp, f.unit, rotor=1.0 - f.param("fraction")), {}, True
+
+
+def _valve(comp, name: str, field: str, value: float) -> dict:
+    th = comp.thrust.cluster
+    i = th.names.index(name)
+    return {"thrusters": {th.param_layout.slice(field).start + i: value}}
+
+
+@register_fault_effect("thruster_stuck_off")
+def _thruster_stuck_off(f, comp):
+    return {}, _valve(comp, f.unit, "ok", 0.0), False
+
+
+@register_fault_effect("thruster_stuck_on")
+def _thruster_stuck_on(f, comp):
+    return {}, _valve(comp, f.unit, "leak", 1.0), False
+
+
+def fault_steps(comp) -> list[Step]:
+    """The steps of the scene's ``[[fault]]`` tables (a :data:`~.schedule.SOURCES` entry)."""
+    steps = []
+    period = comp.period
+    for i, f in enumerate(comp.scene.fault):
+        effect = FAULT_EFFECTS.get(f.kind)
+        if effect is None:
+            raise ValueError(f"fault[{i}].kind: '{f.kind}' has no effect registered (stationbed/run/faults.py)")
+        plant, blocks, jump = effect(f, comp)
+        info = {"fault": f.name or i, "kind": f.kind, "unit": f.unit}
+        label = f"fault[{i}] {f.kind} {f.unit}"
+        start = Step(fault_tick(f.t, period, f"fault[{i}].t"), label, plant, blocks, jump, info=info)
+        steps.append(start)
+        if f.until is not None:
+            steps.append(Step(fault_tick(f.until, period, f"fault[{i}].until"), label + " clears", clears=start,
+                              info=dict(info, clears=True)))
+    return steps
+
+
+SOURCES.append(fault_steps)

@@ -1,0 +1,254 @@
+"""Scheduled steps (issues 34 and 35): a change of the run's numbers at a control tick, the same
+on every executor (docs/design.md "Scheduled steps and faults").
+
+A :class:`Step` is applied at the *start* of control tick ``k`` (``t = k * period`` exactly, the
+loop's integer clock), before that tick's measurement: it sets entries of the model's
+parameter vector ``p`` (``comp.p``: e.g. a CMG unit's ``rotor`` or ``rate_cap``,
+:data:`~stationbed.model.cmg.base.UNIT_TAIL`) and of blocks' numbers by the block's name (the
+composed loop's ``par`` slices: ``"thrusters"`` -> ``ThrusterCluster.params``, ``"sensing"`` ->
+``Flight.params``, :func:`block_numbers`), and, when it says ``jump``, moves the plant's state
+across the step keeping the system's angular momentum (the compiled ``step_jump(t, x, p_before,
+p_after)``, :meth:`~stationbed.formulations.base.Formulation.step_jump`). The measurement at
+``t`` sees the state and the numbers after the step. A window (``until``) is a second step that
+puts back the values the first one replaced.
+
+The compiled structure never changes: a step is new numbers in the same buffers, so a run with
+steps stays on its executor (the fused loop cuts its chunk there, as at any edge on the tick
+grid: :func:`~.segments.edge_ticks`). The executors call :meth:`Stepper.apply` (and refresh
+their own copies of p); :data:`SOURCES` makes the steps from the scene (``[[fault]]``:
+:mod:`.faults`; a new source, e.g. ``[[event]]``, registers a function there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..core.compile import FastCall
+
+__all__ = ["Step", "Schedule", "Stepper", "SOURCES", "block_numbers", "schedule_of", "stepper", "refresh_loop"]
+
+
+@dataclass(eq=False)
+class Step:
+    """One scheduled step (module docstring).
+
+    Attributes
+    ----------
+    k : int  The control tick it applies at (its time ``k * period``).
+    label : str  What it is, for the summary (``"fault[0] cmg_failed unit 2"``).
+    plant : dict  Index in p -> the value after the step.
+    blocks : dict  Block name -> {index in its numbers -> the value after the step}.
+    jump : bool  The state jumps, the system's angular momentum kept (``step_jump``).
+    clears : Step or None  This step ends a window: it puts back what ``clears`` replaced.
+    info : dict  What the summary reports of it (kind, unit, time...).
+    """
+
+    k: int
+    label: str
+    plant: dict = field(default_factory=dict)
+    blocks: dict = field(default_factory=dict)
+    jump: bool = False
+    clears: "Step | None" = None
+    info: dict = field(default_factory=dict)
+    saved: dict = field(default_factory=dict)  # (owner, index) -> the value it replaced, set when applied
+
+
+#: functions ``(comp) -> list[Step]`` making a run's steps from its scene (``[[fault]]``: run/faults.py)
+SOURCES: list[Callable] = []
+
+
+def block_numbers(comp) -> dict[str, np.ndarray]:
+    """The blocks' numbers a step may change, by block name (the composed loop's ``par`` slice
+    of the same name): the arrays every executor reads them from (edited in place)."""
+    out = {}
+    if comp.thrust is not None:
+        out["thrusters"] = comp.thrust.cluster.params
+    if comp.flight is not None:
+        out["sensing"] = comp.flight.params
+    return out
+
+
+class Schedule:
+    """A run's steps in tick order (``steps``), from :data:`SOURCES`; ``ticks`` the ticks with one."""
+
+    def __init__(self, steps: list[Step]):
+        self.steps = sorted(steps, key=lambda s: s.k)  # (stable: the scene's order within a tick)
+        self.ticks = sorted({s.k for s in self.steps})
+        self._at = {k: [s for s in self.steps if s.k == k] for k in self.ticks}
+
+    def __bool__(self) -> bool:
+        return bool(self.steps)
+
+    def at(self, k: int) -> list[Step]:
+        """The steps at tick ``k`` (in the scene's order)."""
+        return self._at.get(k, [])
+
+
+def schedule_of(comp) -> Schedule:
+    """The :class:`Schedule` of the run composed by ``comp`` (every source's steps; the sources'
+    modules are imported by :attr:`~.composition.Composition.schedule`)."""
+    steps = []
+    for src in SOURCES:
+        steps += src(comp)
+    return Schedule(steps)
+
+
+class Stepper:
+    """Applies a run's schedule for one executor: :meth:`apply` at a step's tick edits ``comp.p``
+    and the blocks' numbers in place, jumps the state, and refreshes the copies of p every
+    executor shares (the integrator's, the output rows': the rows before the step are flushed
+    with the old numbers first). Each tick is applied once (an executor may ask twice)."""
+
+    def __init__(self, comp, res):
+        self.comp, self.res = comp, res
+        self.schedule = comp.schedule
+        self.ticks = set(self.schedule.ticks)
+        self.done: set[int] = set()
+        self.numbers = block_numbers(comp)
+        self._jump = None
+
+    def due(self, k: int) -> bool:
+        return k in self.ticks and k not in self.done
+
+    def apply(self, k: int, x: np.ndarray) -> np.ndarray:
+        """The state just after the steps at tick ``k`` from the state ``x`` just before (a new
+        array; ``x`` itself when nothing jumps). No-op when tick ``k`` has none or was applied."""
+        if not self.due(k):
+            return x
+        self.done.add(k)
+        comp = self.comp
+        p = comp.p
+        p_before = p.copy()
+        jump = False
+        for s in self.schedule.at(k):
+            if s.clears is not None:  # a window's end: what its start replaced, put back
+                edits = dict(s.clears.saved)
+            else:
+                edits = {("p", i): v for i, v in s.plant.items()}
+                edits.update({(name, i): v for name, e in s.blocks.items() for i, v in e.items()})
+            for (name, i), v in edits.items():
+                arr = p if name == "p" else self.numbers[name]
+                s.saved[(name, i)] = float(arr[i])
+                arr[i] = v
+            jump |= s.jump
+        self.res.rows.flush()  # the rows before the step, with the numbers before it
+        self.res.rows.out.args[2][:] = p
+        comp.integ.set_params(p)
+        if jump:
+            if self._jump is None:
+                self._jump = FastCall.of(comp.system.funcs["step_jump"])
+            a = self._jump.args
+            a[0][0] = k * comp.period
+            a[1][:] = x
+            a[2][:] = p_before
+            a[3][:] = p
+            self._jump()
+            return self._jump.res[0].copy()
+        return x
+
+    def summary(self) -> list[dict]:
+        """The steps applied, in order (their ``info`` and time [s])."""
+        return [dict(s.info, t=s.k * self.comp.period) for s in self.schedule.steps if s.k in self.done]
+
+
+def stepper(comp, res) -> Stepper:
+    """The run's :class:`Stepper` (one per run state ``res``: its ``steps_applied`` summary)."""
+    st = getattr(res, "stepper", None)
+    if st is None:
+        st = res.stepper = Stepper(comp, res)
+    return st
+
+
+def refresh_loop(loop) -> None:
+    """After a step: the per-tick loop's own copies of p and of the blocks' numbers (its
+    measurement, actuation, fused tick, held environment, the flight tick's)."""
+    comp = loop.comp
+    p = comp.p
+    loop.meas.args[2][:] = p
+    if loop.act is not None:
+        loop.act.args[3][:] = p
+    tick = getattr(loop, "tick_fc", None)
+    if tick is not None:
+        tick.args[5][:] = p
+    if getattr(loop, "held", None) is not None:
+        loop.held.env.args[2][:] = p
+    if comp.flight is not None and comp.flight._compiled is not None:
+        comp.flight._compiled.args[8][:] = comp.flight.params
+
+
+def composed_hook(comp, res, c0, cx, par, P):
+    """The fused loop's ``step(a)`` (run/composed.py, :func:`~.segments.run_pieces`): at a step's
+    tick, the carry's state ``c0[cx]`` jumped and ``par``'s p and block slices rewritten; None
+    when the run has no steps."""
+    if not comp.schedule:
+        return None
+    st = stepper(comp, res)
+
+    def step(a: int) -> None:
+        if st.due(a):
+            c0[cx] = st.apply(a, c0[cx].copy())
+            par[P.slice("p")] = comp.p
+            for name, arr in st.numbers.items():
+                if name in P:
+                    par[P.slice(name)] = arr
+    return step
+
+
+def loop_hook(loop):
+    """The per-tick loop's ``(ticks, step)``: the ticks with a scheduled step and ``step(k, t,
+    fast)``, called after integrating up to tick ``k`` (time ``t``) instead of sensing there:
+    the step applied to the loop's state (in place), the loop's copies of p refreshed
+    (:func:`refresh_loop`), then tick k sensed. ``fast``: the fused tick integrated (its own
+    measurement discarded, not counted as a generic period). At k = 0 nothing is sensed (the
+    loop senses tick 0 itself)."""
+    comp = loop.comp
+    if not comp.schedule:
+        return set(), None
+    st = stepper(comp, loop.res)
+
+    def step(k: int, t: float, fast: bool = False) -> None:
+        loop.x[:] = st.apply(k, loop.x.copy())
+        refresh_loop(loop)
+        if k > 0:
+            loop._sense(k, t)
+            loop.n_slow -= int(fast)
+    return set(st.ticks), step
+
+
+def steps_summary(comp, res) -> dict:
+    """The summary's ``faults``: the steps applied, in order (empty without a schedule)."""
+    st = getattr(res, "stepper", None)
+    if not comp.schedule:
+        return {}
+    return {"faults": [] if st is None else st.summary()}
+
+
+def lockstep_hook(batch, samples, held):
+    """The lockstep batch's ``step(i, k, t)`` (run/lockstep.py), called for a live sample ``i``
+    whose schedule has tick ``k`` after the batch integrated up to it (time ``t``), before the
+    batch senses: the step applied to its state, its p copied into the mapped tick's (and the
+    held environment's, the flight batch's numbers), its loop refreshed, its measurement taken
+    again. Returns ``({tick: [samples]}, step)``; ``({}, None)`` when no sample has steps."""
+    due: dict[int, list[int]] = {}
+    for i, s in enumerate(samples):
+        for k in s.loop.comp.schedule.ticks:
+            due.setdefault(k, []).append(i)
+    if not due:
+        return due, None
+
+    def step(i: int, k: int, t: float) -> None:
+        lo = samples[i].loop
+        comp = lo.comp
+        batch.X[i] = stepper(comp, lo.res).apply(k, batch.X[i].copy())
+        lo.res.x[:] = batch.X[i]
+        refresh_loop(lo)
+        batch.P[i] = comp.p
+        if held is not None:
+            held.env.args[2].reshape(len(samples), -1)[i] = comp.p
+        if batch.flight is not None:
+            batch.flight.fc.args[8].reshape(len(samples), -1)[i] = comp.flight.params
+        batch._measure(i, t, batch.X[i])
+    return due, step
