@@ -118,7 +118,7 @@ def known_working(model, p, excluded):
     the steering law's view once flight software has isolated a unit (its gimbals then held,
     as a failed unit's are; model/cmg/base.py ``working``)."""
     geo = model.cmg.geometry
-    at = model.layout.slice("cmg").start + geo.n_par - geo.n_units * (len(_tail_groups(geo)))
+    at = model.layout["cmg"].start + geo.n_par - geo.n_units * (len(_tail_groups(geo)))
     parts = [p[:at]] + [p[at + i] * (1 - excluded[i]) for i in range(geo.n_units)] + [p[at + geo.n_units:]]
     return ca.vertcat(*parts)
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..loop.fdir import MODE_NUMBERS, FdirSpec, false_alarms_per_hour, fdir_block
+from ..loop.sensor_faults import SENSOR_FAULTS
+from .faults import register_fault_effect
 
 __all__ = ["FdirLoop", "fdir_for", "fdir_columns", "FDIR_COLUMNS", "detections_vs_truth"]
 
@@ -21,6 +23,17 @@ FDIR_COLUMNS = ["fdir_mode", "fdir_cmg_nis", "fdir_cmg_fault", "fdir_t_cmg_s", "
 _FIELDS = ["fdir_mode", "nis", "cmg_fault", "t_cmg", "cmg_unit"]
 #: the kinds of the truth's schedule a CMG detection answers (scene [[fault]] kinds, issue 34)
 CMG_KINDS = ("cmg_failed", "gimbal_stuck", "gimbal_rate_limit", "wheel_speed_drop")
+
+
+def _sensor_effect(f, comp):
+    """A sensor fault changes no number of the plant or of a block at its tick: its times are
+    numbers of the sensor's step (loop/sensor_faults.py, written by the flight at the start);
+    its step marks the time in the run's list of faults applied."""
+    return {}, {}, False
+
+
+for _kind in SENSOR_FAULTS:
+    register_fault_effect(_kind)(_sensor_effect)
 
 
 def fdir_columns(scene) -> list[str]:

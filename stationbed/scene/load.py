@@ -20,6 +20,7 @@ from .knowledge import Knowledge, knowledge_scene
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .faults import Fault, check_faults
+from . import sensor_faults  # noqa: F401,E402 (registers the sensor kinds of [[fault]])
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
 from .wing import check_plate_faces, wing_surface
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
