@@ -142,6 +142,10 @@ class Suite:
             out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], due[s.name]
         if m:
             z = {"omega_B": out[m.gyro.name]}
+            spare = self.spare_gyro()
+            if spare is not None:  # the other gyro in once the filter has declared its own failed (issue 34)
+                failed = m.state.get(X["mekf"], "gyro_fault") > 0.5
+                z["omega_B"] = ca.if_else(failed, out[spare.name], out[m.gyro.name])
             for i, h in enumerate(m.heads):
                 z[f"q_SN_{i}"], z[f"valid_{i}"] = out[h.name][0:4], out[h.name][4]
                 z[f"fresh_{i}"] = due[h.name]
@@ -157,6 +161,17 @@ class Suite:
         return ca.Function(f"suite_{len(self.sensors)}" + ("_plain" if plain else ""), [k, t, x, truth, w, p],
                            [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
                            ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"], {} if plain else {"always_inline": True})
+
+    def spare_gyro(self):
+        """The gyro the filter takes when it declares its own failed (issue 34, loop/mekf.py
+        ``innovation_gate``): the first other gyro sampling at the same period, with the scene's
+        innovation gate on (``[fdir] st_alpha``); None otherwise."""
+        m = self.mekf
+        fd = getattr(self.sensing, "fdir", None)
+        if m is None or fd is None or fd.st_alpha is None:
+            return None
+        return next((s for s in self.sensors if s.kind == "gyro" and s is not m.gyro
+                     and self.every[s.name] == self.every[m.gyro.name]), None)
 
     def compiled(self) -> ca.Function:
         """:meth:`function` generated as C (disk cache; casadi's evaluator without a compiler)."""

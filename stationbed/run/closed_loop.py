@@ -555,7 +555,7 @@ class ControlLoop:
         if comp.thrust is not None:
             out.update(comp.thrust.summary(comp))
         if comp.fdir is not None:
-            out.update(comp.fdir.summary(comp))
+            out.update(comp.fdir.summary(comp, xs=self.res.flight.xs if comp.flight is not None else None))
         out.update(steps_summary(comp, res))  # the scheduled faults applied, with their times
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(ctrl.summary())

@@ -68,7 +68,7 @@ class FdirLoop:
     def row(self) -> list[float]:
         return np.asarray(self.x_row, dtype=float)[self._idx].tolist()
 
-    def summary(self, comp, modes: np.ndarray | None = None, dt: float = 0.0) -> dict:
+    def summary(self, comp, modes: np.ndarray | None = None, dt: float = 0.0, xs=None) -> dict:
         """The detections (time, unit, right or wrong against the truth's schedule), the stated
         false-alarm rate of the CMG detector, and the time in each mode (from the rows)."""
         S = self.block.state
@@ -80,12 +80,38 @@ class FdirLoop:
                                     int(S.get(x, "cmg_unit")[0]))
         out.update(truth)
         out["fdir_cmg_excluded"] = [i + 1 for i, v in enumerate(S.get(x, "cmg_excluded")) if v > 0.5]
+        if xs is not None and comp.flight is not None and comp.flight.mekf is not None:
+            out.update(sensor_detections(comp, xs))
         if modes is not None and modes.size:
             names = {v: k for k, v in MODE_NUMBERS.items()}
             m = np.rint(modes).astype(int)
             out["fdir_mode_s"] = {names[v]: float(np.sum(m == v) * dt) for v in sorted(set(m.tolist()))}
             out["fdir_mode_changes"] = int(np.count_nonzero(np.diff(m)))
         return out
+
+
+def sensor_detections(comp, xs) -> dict:
+    """The MEKF's innovation detections (loop/mekf.py ``innovation_gate``) from the suite's
+    memory ``xs`` at the run's end: the heads excluded and the gyro declared, with their times,
+    each against the truth's first sensor fault (its unit and time: right unit, latency)."""
+    m, S = comp.flight.mekf, comp.flight.suite.STATE
+    xf = S.get(np.asarray(xs, dtype=float), "mekf")
+    L = m.state
+    t = L.get(xf, "t_fdir")
+    names = [h.name for h in m.heads] + [m.gyro.name]
+    declared = [(float(t[i]), names[i]) for i in range(len(names)) if t[i] >= 0.0]
+    out: dict = {"fdir_sensor_declared": [{"unit": u, "t": tt} for tt, u in sorted(declared)]}
+    truth = sorted((f for f in getattr(comp.scene, "fault", ()) if f.kind in SENSOR_FAULTS), key=lambda f: f.t)
+    if truth:
+        out.update(fault_sensor_t_s=float(truth[0].t), fault_sensor_unit=str(truth[0].unit))
+    if declared:
+        tt, u = min(declared)
+        before = [f for f in truth if f.t <= tt]
+        out["fdir_sensor_false_alarm"] = not before
+        if before:
+            out["fdir_sensor_latency_s"] = tt - before[0].t
+            out["fdir_sensor_unit_right"] = u == str(before[0].unit)
+    return out
 
 
 def detections_vs_truth(faults, detected: bool, t_det: float, unit: int) -> dict:

@@ -10,6 +10,8 @@ isolate = true              # the blamed unit out of the steering law (the knowl
 initial_mode = "hold"       # hold | assist | thruster_only | drift
 on_cmg_fault = "assist"     # the mode a CMG detection moves to (at least)
 assist_at = 0.6             # |h| / capacity at which hold moves to assist (momentum threshold)
+st_alpha = 1e-4             # the MEKF's innovation gate: P(chi-squared(3) > gate) per head sample
+st_persistence = 3          # consecutive rejected samples: the head out, or (heads together) the gyro
 
 [[mode]]                    # a scheduled command: this mode over [t, until)
 mode = "thruster_only"
@@ -44,6 +46,8 @@ class Fdir(Strict):
     initial_mode: Mode = "hold"
     on_cmg_fault: Mode = "assist"
     assist_at: float = Field(default=math.inf, gt=0.0)
+    st_alpha: float | None = Field(default=None, gt=0.0, lt=1.0)  # the MEKF's innovation gate (none: off)
+    st_persistence: int = Field(default=3, ge=1)  # consecutive rejected samples of a head
 
 
 class ModeCommand(Strict):
