@@ -111,7 +111,7 @@ class Flight:
         self.key = (tuple((s.name, s.key) for s in self.suite.sensors), tuple(sorted(self.suite.every.items())),
                     None if m is None else (m.gyro.name, tuple(h.name for h in m.heads), tuple(m.delays), tuple(m.every)),
                     tuple(sorted(self.layout.items())), self.has_moon,
-                    None if self.suite.spare_gyro() is None else self.suite.spare_gyro().name)
+                    None if self.suite.spare_gyro() is None else self.suite.spare_gyro().name, self.suite.pair is not None)
         self.tag = hashlib.sha256(repr(self.key).encode()).hexdigest()[:16]
         S = self.suite
         self._rows = dict(

@@ -100,6 +100,10 @@ def sensor_detections(comp, xs) -> dict:
     t = L.get(xf, "t_fdir")
     names = [h.name for h in m.heads] + [m.gyro.name]
     declared = [(float(t[i]), names[i]) for i in range(len(names)) if t[i] >= 0.0]
+    if comp.flight.suite.pair is not None:  # the redundant gyros' comparison
+        cnt, dec, tp, who = S.get(np.asarray(xs, dtype=float), "gyro_pair")
+        if dec > 0.5:
+            declared.append((float(tp), comp.flight.suite.pair[int(who) - 1].name))
     out: dict = {"fdir_sensor_declared": [{"unit": u, "t": tt} for tt, u in sorted(declared)]}
     truth = sorted((f for f in getattr(comp.scene, "fault", ()) if f.kind in SENSOR_FAULTS), key=lambda f: f.t)
     if truth:

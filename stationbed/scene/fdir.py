@@ -12,6 +12,8 @@ on_cmg_fault = "assist"     # the mode a CMG detection moves to (at least)
 assist_at = 0.6             # |h| / capacity at which hold moves to assist (momentum threshold)
 st_alpha = 1e-4             # the MEKF's innovation gate: P(chi-squared(3) > gate) per head sample
 st_persistence = 3          # consecutive rejected samples: the head out, or (heads together) the gyro
+gyro_pair_alpha = 1e-4      # two gyros of one period compared: P(chi-squared(3) > gate) per sample
+gyro_pair_persistence = 5   # consecutive samples over it
 
 [[mode]]                    # a scheduled command: this mode over [t, until)
 mode = "thruster_only"
@@ -48,6 +50,8 @@ class Fdir(Strict):
     assist_at: float = Field(default=math.inf, gt=0.0)
     st_alpha: float | None = Field(default=None, gt=0.0, lt=1.0)  # the MEKF's innovation gate (none: off)
     st_persistence: int = Field(default=3, ge=1)  # consecutive rejected samples of a head
+    gyro_pair_alpha: float | None = Field(default=None, gt=0.0, lt=1.0)  # the redundant gyros' gate (none: off)
+    gyro_pair_persistence: int = Field(default=5, ge=1)  # consecutive samples over it
 
 
 class ModeCommand(Strict):
