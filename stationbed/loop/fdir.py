@@ -11,7 +11,9 @@ reads (``h_B``, ``omega_BN_B``, ``gimbal``: the law's view, the estimate's rate 
    ``r = τ_cmd,k-1 - τ_obs``; ``χ² = |r|²/σ²`` (``[fdir] cmg_sigma_Nm``: the residual's 1σ per
    axis under nominal flight: encoders, the steering's singularity robustness, the tick's
    discretisation). A tick is over the gate when ``χ² > γ``, ``γ`` the chi-squared(3) quantile
-   of ``1 - cmg_alpha``; a fault is declared after ``cmg_persistence`` consecutive ticks over it
+   of ``1 - cmg_alpha``; a tick whose request exceeded the cluster's torque (``|τ_cmd,k-1| >
+   tau_max``, the plant's ``max_torque``: the limiter cut it, e.g. a thruster pulse's share in
+   assist) is not tested (its count held); a fault is declared after ``cmg_persistence`` consecutive ticks over it
    (:func:`persist`). With independent ticks, a nominal run's alarms start at a tick with
    probability ``(1 - α) α^N`` (the run of N exceedances preceded by a tick under the gate):
    :func:`false_alarms_per_hour` is that times the ticks per hour.
@@ -75,14 +77,15 @@ def residual_cmg(tau_prev, h_prev, w_prev, h_B, w_B, h):
 class FdirSpec:
     """The numbers of one scene's ``[fdir]`` and ``[[mode]]`` tables, as the block's parameters."""
 
-    def __init__(self, fdir, modes, n_units: int, gimbals_per_unit: int, capacity_Nms: float):
+    def __init__(self, fdir, modes, n_units: int, gimbals_per_unit: int, capacity_Nms: float,
+                 tau_max_Nm: float = NEVER_S):
         self.n_units, self.gpu = int(n_units), int(gimbals_per_unit)
         self.n_cmd = len(modes)
         cmds = [[m.t, NEVER_S if m.until is None else m.until, MODE_NUMBERS[m.mode]] for m in modes] or [[NEVER_S] * 3]
         self.values = dict(sigma=fdir.cmg_sigma_Nm, gamma=gate(fdir.cmg_alpha, 3), persist=fdir.cmg_persistence,
                            isolate=float(fdir.isolate), on_fault=MODE_NUMBERS[fdir.on_cmg_fault],
                            assist_at=fdir.assist_at if np.isfinite(fdir.assist_at) else NEVER_S,
-                           capacity=capacity_Nms, cmds=np.array(cmds, float).T)
+                           capacity=capacity_Nms, tau_max=tau_max_Nm, cmds=np.array(cmds, float).T)
         self.initial_mode = MODE_NUMBERS[fdir.initial_mode]
         self.alpha, self.n = fdir.cmg_alpha, fdir.cmg_persistence
 
@@ -90,7 +93,8 @@ class FdirSpec:
 def _layouts(ng: int, n_units: int, n_cmd: int):
     X = Layout(tau_prev=3, h_prev=3, w_prev=3, g_prev=ng, have=1, count=1, nis=1, cmg_fault=1, t_cmg=1, cmg_unit=1,
                cmg_excluded=n_units, base_mode=1, fdir_mode=1)
-    P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, capacity=1, cmds=(3, max(n_cmd, 1)))
+    P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, capacity=1, tau_max=1,
+               cmds=(3, max(n_cmd, 1)))
     U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, tau_B=3)
     out = Layout(fdir_mode=1, nis=1)
     return X, P, U, out
@@ -110,7 +114,8 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     # 1. the residual, its gate and persistence (no previous tick: nothing to compare)
     r = residual_cmg(xs["tau_prev"], xs["h_prev"], xs["w_prev"], h_B, w_B, h)
     nis = xs["have"] * ca.dot(r, r) / ps["sigma"] ** 2
-    count = persist(xs["count"], nis > ps["gamma"])
+    tested = ca.norm_2(xs["tau_prev"]) <= ps["tau_max"]
+    count = ca.if_else(tested, persist(xs["count"], nis > ps["gamma"]), xs["count"])
     new = ca.logic_and(count >= ps["persist"], xs["cmg_fault"] < 0.5)
     # 2. isolation: the unit whose gimbals moved least over the last tick (1-based)
     moved = [ca.norm_2(g[i * gpu:(i + 1) * gpu] - xs["g_prev"][i * gpu:(i + 1) * gpu]) for i in range(n_units)]

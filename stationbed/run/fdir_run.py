@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..loop.fdir import MODE_NUMBERS, FdirSpec, false_alarms_per_hour, fdir_block
-from ..loop.sensor_faults import SENSOR_FAULTS
+from ..loop.sensor_faults import NEVER_S, SENSOR_FAULTS
 from .faults import register_fault_effect
 
 __all__ = ["FdirLoop", "fdir_for", "fdir_columns", "FDIR_COLUMNS", "detections_vs_truth"]
@@ -46,7 +46,10 @@ def fdir_for(scene, model, plant) -> "FdirLoop | None":
     if getattr(scene, "fdir", None) is None:
         return None
     geo = model.cmg.geometry
-    return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity))
+    # the torque one gimbal at its rate limit gives: above it the limiter may cut the request
+    tau_max = geo.rotor_momentum(scene.cmg) * geo.max_gimbal_rate(scene.cmg)
+    tau_max = tau_max if np.isfinite(tau_max) and tau_max > 0 else NEVER_S
+    return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity, tau_max))
 
 
 class FdirLoop:
