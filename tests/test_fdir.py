@@ -29,6 +29,7 @@ from scipy.stats import binom, chi2
 
 from stationbed import simulate
 from stationbed.loop.fdir import FdirSpec, false_alarms_per_hour, fdir_block
+from stationbed.output.rerun.events import Events
 from stationbed.scene import load_scene
 from stationbed.scene.fdir import Fdir, ModeCommand
 
@@ -164,6 +165,13 @@ def test_closed_loop_cmg_failure_declared_after_the_persistence():
     assert sm["fdir_cmg_latency_s"] == pytest.approx((n_persist - 1) * 0.1, abs=1e-9)
     assert sm["fdir_cmg_excluded"] == [2]
     assert tr["fdir_mode"][-1] == 1  # assist after the detection
+
+
+def test_closed_loop_detection_is_an_event_of_the_recording():
+    tr = _closed(**{"fault.cmg2.t": 60.0})
+    texts = [(t, text) for t, _, text in Events(tr.columns).changes(tr)]
+    assert (70.0, "flight software declares a CMG fault") in texts  # the first row after 61.9 s
+    assert (70.0, "fdir_mode -> 1") in texts
 
 
 def test_closed_loop_undetected_fault_leaves_knowledge_unchanged():
