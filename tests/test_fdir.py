@@ -165,6 +165,9 @@ def test_closed_loop_cmg_failure_declared_after_the_persistence():
     assert sm["fdir_cmg_latency_s"] == pytest.approx((n_persist - 1) * 0.1, abs=1e-9)
     assert sm["fdir_cmg_excluded"] == [2]
     assert tr["fdir_mode"][-1] == 1  # assist after the detection
+    assert sm["fdir_mode_changes"] == 1
+    assert sm["fdir_mode_s"]["hold"] == pytest.approx(61.9, abs=1e-6)  # s: ticks 0..618 in hold
+    assert sm["fdir_mode_s"]["hold"] + sm["fdir_mode_s"]["assist"] == pytest.approx(120.0, abs=1e-6)
 
 
 def test_closed_loop_detection_is_an_event_of_the_recording():

@@ -27,7 +27,8 @@ reads (``h_B``, ``omega_BN_B``, ``gimbal``: the law's view, the estimate's rate 
    base mode starts at ``initial_mode``, rises to ``on_cmg_fault`` at a detection and from
    ``hold`` to ``assist`` when ``|h| >= assist_at`` x capacity; a ``[[mode]]`` command
    overrides it over its window (the last listed wins). The mode is the memory field
-   ``fdir_mode`` (the thrusters read it by name); in ``drift`` the CMGs are asked nothing.
+   ``fdir_mode`` (the thrusters read it by name); in ``drift`` the CMGs are asked nothing. The
+   memory counts the time in each mode (``mode_s``) and the changes (``mode_changes``).
 
 Every number is a parameter (dispersible); the windows are gated by the tick's time with half a
 tick of margin (:func:`~.sensor_faults.in_window`).
@@ -92,7 +93,7 @@ class FdirSpec:
 
 def _layouts(ng: int, n_units: int, n_cmd: int):
     X = Layout(tau_prev=3, h_prev=3, w_prev=3, g_prev=ng, have=1, count=1, nis=1, cmg_fault=1, t_cmg=1, cmg_unit=1,
-               cmg_excluded=n_units, base_mode=1, fdir_mode=1)
+               cmg_excluded=n_units, base_mode=1, fdir_mode=1, mode_s=len(MODE_NUMBERS), mode_changes=1)
     P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, capacity=1, tau_max=1,
                cmds=(3, max(n_cmd, 1)))
     U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, tau_B=3)
@@ -136,11 +137,13 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     x1 = X.pack(tau_prev=rest, h_prev=h_B, w_prev=w_B, g_prev=g, have=1.0, count=count, nis=nis,
                 cmg_fault=ca.fmax(xs["cmg_fault"], new), t_cmg=ca.if_else(new, t, xs["t_cmg"]),
                 cmg_unit=ca.if_else(new, unit, xs["cmg_unit"]), cmg_excluded=excl, base_mode=base, fdir_mode=mode,
-                symbolic=True)
+                mode_s=ca.vertcat(*[xs["mode_s"][j] + h * (mode == j) for j in range(len(MODE_NUMBERS))]),
+                mode_changes=xs["mode_changes"] + (mode != xs["fdir_mode"]), symbolic=True)
     y = Y.pack(tau_rest_B=rest, on_s=ca.SX(0, 1), torque_B=ca.SX(0, 1), out=ca.vertcat(mode, nis), symbolic=True)
     step = ca.Function(f"{name}_step", [k, t, h, x, u, ca.SX.sym("w", 0), p], [x1, y])
     x0 = X.pack(tau_prev=np.zeros(3), h_prev=np.zeros(3), w_prev=np.zeros(3), g_prev=np.zeros(ng), have=0.0,
                 count=0.0, nis=0.0, cmg_fault=0.0, t_cmg=NOT_YET, cmg_unit=0.0, cmg_excluded=np.zeros(n_units),
-                base_mode=float(spec.initial_mode), fdir_mode=float(spec.initial_mode))
+                base_mode=float(spec.initial_mode), fdir_mode=float(spec.initial_mode), mode_s=np.zeros(len(MODE_NUMBERS)),
+                mode_changes=0.0)
     return Block(name, "actuator", step, X, P, Layout(), U, Y, key=("fdir", ng, n_units, spec.n_cmd), x0=x0,
                  p0=P.pack(spec.values))

@@ -71,9 +71,10 @@ class FdirLoop:
     def row(self) -> list[float]:
         return np.asarray(self.x_row, dtype=float)[self._idx].tolist()
 
-    def summary(self, comp, modes: np.ndarray | None = None, dt: float = 0.0, xs=None) -> dict:
-        """The detections (time, unit, right or wrong against the truth's schedule), the stated
-        false-alarm rate of the CMG detector, and the time in each mode (from the rows)."""
+    def summary(self, comp, xs=None) -> dict:
+        """The detections (time, unit, right or wrong against the truth's schedule; the sensors'
+        from the suite's memory ``xs``), the stated false-alarm rate of the CMG detector, the time
+        in each mode [s] and the mode changes."""
         S = self.block.state
         x = self.x
         out = {"fdir_cmg_false_alarms_per_hour_stated": false_alarms_per_hour(self.spec.alpha, self.spec.n,
@@ -85,11 +86,8 @@ class FdirLoop:
         out["fdir_cmg_excluded"] = [i + 1 for i, v in enumerate(S.get(x, "cmg_excluded")) if v > 0.5]
         if xs is not None and comp.flight is not None and comp.flight.mekf is not None:
             out.update(sensor_detections(comp, xs))
-        if modes is not None and modes.size:
-            names = {v: k for k, v in MODE_NUMBERS.items()}
-            m = np.rint(modes).astype(int)
-            out["fdir_mode_s"] = {names[v]: float(np.sum(m == v) * dt) for v in sorted(set(m.tolist()))}
-            out["fdir_mode_changes"] = int(np.count_nonzero(np.diff(m)))
+        out["fdir_mode_s"] = {k: float(S.get(x, "mode_s")[v]) for k, v in MODE_NUMBERS.items()}
+        out["fdir_mode_changes"] = int(S.get(x, "mode_changes")[0])
         return out
 
 
