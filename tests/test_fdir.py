@@ -182,3 +182,23 @@ def test_closed_loop_undetected_fault_leaves_knowledge_unchanged():
     sm = tr.meta["summary"]
     assert not sm["fdir_cmg_detected"] and sm["fdir_cmg_excluded"] == []
     assert np.all(tr["fdir_mode"] == 0) and np.all(tr["fdir_cmg_unit"] == 0)
+
+
+@pytest.mark.parametrize("edit,field", [
+    (lambda d: d.pop("fdir"), "mode"),  # a [[mode]] command with no mode manager
+    (lambda d: (d.pop("thruster"), d.pop("thrusters"), d["fdir"].update(on_cmg_fault="drift")), "fdir.initial_mode"),
+    (lambda d: d["fdir"].update(initial_mode="thrusters_only"), "fdir.initial_mode"),
+    (lambda d: d["mode"][0].update(until=10.0), "mode[0].until"),
+], ids=["mode_without_fdir", "assist_without_thrusters", "misspelt_mode", "window_backwards"])
+def test_bad_fdir_tables_are_one_line_errors_naming_the_field(edit, field):
+    import tomllib  # noqa: PLC0415
+
+    from stationbed.scene import SceneError, scene_from_dict  # noqa: PLC0415
+
+    d = tomllib.loads(SCENE.read_text())
+    d["fdir"]["initial_mode"] = "assist"
+    d["mode"] = [{"mode": "drift", "t": 100.0, "until": 200.0}]
+    edit(d)
+    with pytest.raises(SceneError) as e:
+        scene_from_dict(d)
+    assert field in str(e.value) and "\n" not in str(e.value)
