@@ -315,6 +315,9 @@ def _summary_line(s: dict) -> str:
                      f"inside 3 sigma {100 * s['est_inside_3sigma']:.1f} %, mean NEES {s['mean_nees']:.3g} (6 states)")
     if "st_dropout_s" in s:
         parts.append(f"star-tracker dropouts {s['st_dropout_s']:.4g} s")
+    if s.get("faults"):  # scheduled faults (issue 34)
+        parts.append("faults: " + ", ".join(f"{f['kind']} {f['unit']} at {f['t']:g} s" + (" cleared" if f.get("clears") else "")
+                                            for f in s["faults"]))
     from .run.thrust import thruster_parts  # thrusters (issue 21)
     return "; ".join(parts + thruster_parts(s) + live.summary_parts(s))  # a socket law, --realtime (issue 36)
 

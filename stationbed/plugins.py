@@ -87,6 +87,7 @@ def plugin_groups() -> list[tuple[str, dict[str, str]]]:
     from .model.cmg.cluster import CMG_GEOMETRIES
     from .model.torques import TORQUES
     from .run.controller import controller_registry
+    from .scene.faults import FAULT_KINDS
     from .scene.montecarlo import DISPERSION_KIND_DOCS, DISPERSION_KINDS
 
     laws = {}
@@ -103,6 +104,7 @@ def plugin_groups() -> list[tuple[str, dict[str, str]]]:
         ("formulations: [simulation] formulation", {n: c.description for n, c in FORMULATIONS.items()}),
         ("integrators: [simulation] integrator", {n: describe(c) for n, c in INTEGRATORS.items()}),
         ("dispersion kinds: [[montecarlo.disperse]] kind", {n: DISPERSION_KIND_DOCS[n] for n in DISPERSION_KINDS}),
+        ("fault kinds: [[fault]] kind (unit: its target)", {n: f"[{k.target}] {k.doc}" for n, k in FAULT_KINDS.items()}),
     ]
 
 

@@ -466,7 +466,10 @@ class ControlLoop:
                         ib += 1
                     next_bp = bps[ib] if ib < len(bps) else math.inf
                     self.advance(t, t_next, cmd)
-                    step(k + 1, t_next) if k + 1 in steps else self._sense(k + 1, t_next)
+                    if k + 1 in steps:  # a scheduled step at t_next: applied, then sensed
+                        step(k + 1, t_next)
+                    else:
+                        self._sense(k + 1, t_next)
         finally:
             ctrl.hand_back_compiled()  # the law's state its compiled form carried (law_compiled.py)
             if not counted:

@@ -26,7 +26,7 @@ from ..core.compile import FastCall, compile_functions
 from . import law_state
 from .blocks import composed, structure_key
 from .composed_rows import rows_functions, run_rows
-from .schedule import composed_hook
+from .schedule import bulk_stop, composed_hook
 from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
 
 __all__ = ["run_composed", "BUILT"]
@@ -150,13 +150,12 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         step(0)
         x = c0[cx].copy()
 
+    sched = comp.schedule.ticks
+    # no torque edge: the full rows many per compiled call (composed_rows.py), in stretches
+    # between the scheduled steps (tried at the first row and at the row after each step)
+    bulk, try_at = not [e for e in edges if e not in set(sched)], {0}
     try:
         j0 = 0
-        if not edges:  # the leading full rows, many per compiled call (composed_rows.py)
-            j0, tail_flag, ticks, stop = run_rows(comp, res, cm, fns["rows"], row_ks, K, c0, par, draws_of)
-            x = c0[cx].copy()
-            if stop is not None:
-                raise stop
         for j, k in enumerate(row_ks):
             if j < j0:
                 continue
@@ -164,6 +163,19 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             if step is not None:  # a step at the row's tick: before its measurement
                 step(k)
                 x = c0[cx].copy()
+            if bulk and j in try_at:
+                stop = bulk_stop(sched, row_ks, j)
+                jj, tail_flag, n_done, err = run_rows(comp, res, cm, fns["rows"], row_ks[j : stop + 1], K, c0, par,
+                                                     draws_of, tail_flag)
+                ticks += n_done
+                x = c0[cx].copy()
+                if err is not None:
+                    raise err
+                if stop < len(row_ks) - 1 and row_ks[stop] in sched:  # a step at that row's tick: on after it
+                    try_at.add(stop)
+                if jj:
+                    j0 = j + jj
+                    continue
             n_tick = row_ks[j + 1] - k if k < K else 1
             draws = draws_of.rows(k, n_tick) if nw else None
             # the row at tick k: the command, actuation and reference of this tick, the memory after it
@@ -203,6 +215,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             par[P.slice("h")] = period
             ticks += n_tick
             tail_flag = close_chunk(res, ticks, counts, lim, sat, x, min((k + n_tick) * period, duration))
+            if bulk and sched and bulk_stop(sched, row_ks, j) == j:  # a step inside this row's ticks
+                try_at.add(j + 1)
     finally:
         law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
         if th is not None:

@@ -122,8 +122,11 @@ def rows_functions(cm, row: ca.Function, chunk: ca.Function, n: int) -> list:
     return fns
 
 
-def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np.ndarray, draws) -> tuple:
-    """Run the leading full rows of a composed run in calls of ``R`` rows.
+def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np.ndarray, draws,
+             tail_flag: int = 0) -> tuple:
+    """Run the leading full rows of a composed run (or of a stretch of it between scheduled
+    steps: ``row_ks`` its rows' ticks, ``tail_flag`` the flag carried into its first row) in
+    calls of ``R`` rows.
 
     ``c0`` the carry at tick 0 (updated in place to the carry after the rows run), ``par`` the
     chunk's parameters (``h`` the period, the blocks' numbers), ``draws`` the run's draws by tick
@@ -147,7 +150,7 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     cmg = (out_l.slice("u_cmg"), out_l.slice("rate_limited").start, out_l.slice("saturated").start) if has_cmg else None
     torque = comp.ctrl.command == "torque"
     nw = cm.noise.size
-    j = tail_flag = ticks = 0
+    j = ticks = 0
     noise0 = draws.state() if nw else None  # a fallback to row by row draws the same again
     for R in sorted(calls, reverse=True):
         fc = calls[R]

@@ -5,8 +5,11 @@ fault's tick (and one at ``until`` that clears it), made by the kind's effect re
 Truth-side kinds (the CMG unit's numbers: :data:`~stationbed.model.cmg.base.UNIT_TAIL`):
 
 * ``cmg_failed``: the unit's gimbals held (``rate_cap`` 0) and its rotor stopped at t
-  (``rotor`` 0, ``spin_down_s = 0``, the only value so far): the rotor's momentum goes to the
-  body through the bearing, the system's angular momentum is kept (the state jumps). Flight
+  (``spin_down_s = 0``: ``rotor`` 0) or spinning down with time constant ``spin_down_s`` = τ:
+  a staircase of steps, one every :data:`SPIN_DOWN_STEPS_PER_TAU`-th of τ (at least a tick, on
+  the tick grid), the rotor's momentum ``exp(-(t_j - t) / τ)`` of the nominal at each step t_j,
+  0 from :data:`SPIN_DOWN_END_TAU` τ on. At every step the rotor's momentum lost goes to the
+  body through the bearing: the system's angular momentum is kept (the state jumps). Flight
   software is not told: the steering law keeps the unit until it is (``[knowledge]``, FDIR).
 * ``gimbal_stuck``: the unit's gimbals held at their angles at t (``rate_cap`` 0); its rotor
   spins on. ``gimbal_rate_limit``: its gimbal rates clamped to ``limit`` [rad/s] after the
@@ -23,14 +26,22 @@ dump law are unchanged); what it learns is the FDIR's (issue 34 item 2).
 
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 from ..scene.faults import FAULT_KINDS, fault_tick
 from .schedule import SOURCES, Step
 
-__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps"]
+__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "SPIN_DOWN_STEPS_PER_TAU", "SPIN_DOWN_END_TAU"]
 
-#: kind -> ``effect(fault, comp) -> (plant edits, block edits, jump)`` (module docstring)
+#: a spinning-down rotor's staircase: steps per time constant (the rotor's momentum is exact at
+#: each step; between steps it is held, so the body gets its momentum in 1/20 τ impulses)
+SPIN_DOWN_STEPS_PER_TAU = 20
+#: ... and the rotor stopped (0) from this many time constants on (exp(-7) = 9e-4 of it left)
+SPIN_DOWN_END_TAU = 7.0
+
+#: kind -> ``effect(fault, comp) -> (plant edits, block edits, jump)``, or a list of
+#: ``(ticks after the fault's, plant edits, block edits, jump)`` for a staircase (module docstring)
 FAULT_EFFECTS: dict[str, Callable] = {}
 
 
@@ -54,7 +65,14 @@ def _cmg(comp, unit: int, **values) -> dict:
 
 @register_fault_effect("cmg_failed")
 def _cmg_failed(f, comp):
-    return _cmg(comp, f.unit, rate_cap=0.0, rotor=0.0), {}, True
+    tau = f.param("spin_down_s")
+    if tau == 0.0:
+        return _cmg(comp, f.unit, rate_cap=0.0, rotor=0.0), {}, True
+    every = max(1, round(tau / SPIN_DOWN_STEPS_PER_TAU / comp.period))  # ticks between steps
+    end = math.ceil(SPIN_DOWN_END_TAU * tau / comp.period)
+    steps = [(0, _cmg(comp, f.unit, rate_cap=0.0), {}, False)]
+    steps += [(j, _cmg(comp, f.unit, rotor=math.exp(-j * comp.period / tau)), {}, True) for j in range(every, end, every)]
+    return steps + [(end, _cmg(comp, f.unit, rotor=0.0), {}, True)]
 
 
 @register_fault_effect("gimbal_stuck")
@@ -93,14 +111,23 @@ def fault_steps(comp) -> list[Step]:
     steps = []
     period = comp.period
     for i, f in enumerate(comp.scene.fault):
+        if not f.enabled:
+            continue
         effect = FAULT_EFFECTS.get(f.kind)
         if effect is None:
             raise ValueError(f"fault[{i}].kind: '{f.kind}' has no effect registered (stationbed/run/faults.py)")
-        plant, blocks, jump = effect(f, comp)
-        info = {"fault": f.name or i, "kind": f.kind, "unit": f.unit}
+        out = effect(f, comp)
+        info = {"fault": f.name if f.name is not None else i, "kind": f.kind, "unit": f.unit}
         label = f"fault[{i}] {f.kind} {f.unit}"
-        start = Step(fault_tick(f.t, period, f"fault[{i}].t"), label, plant, blocks, jump, info=info)
-        steps.append(start)
+        k0 = fault_tick(f.t, period, f"fault[{i}].t")
+        K = comp.ticks()
+        parts = out if isinstance(out, list) else [(0, *out)]
+        start = None
+        for j, plant, blocks, jump in parts:  # (a staircase: its later steps within the run only)
+            if k0 + j <= K:
+                s = Step(k0 + j, label, plant, blocks, jump, info=info if j == 0 else dict(info, step=j))
+                start = s if j == 0 else start
+                steps.append(s)
         if f.until is not None:
             steps.append(Step(fault_tick(f.until, period, f"fault[{i}].until"), label + " clears", clears=start,
                               info=dict(info, clears=True)))

@@ -94,13 +94,15 @@ class _Quiet(logging.Filter):
 def _probe_scene(scene):
     """The probe's scene: ``scene`` flown every stage on the truth (no sensors, no estimator: the
     same torque) with a 1 s tick and rows, by RK4 (a DOP853 scene's too: the torque, not the
-    steps), over ``min(duration, one orbit)``. The choice is kept per this scene, so samples
+    steps), over ``min(duration, one orbit)``, without the scheduled faults. The choice is kept per this scene, so samples
     that differ only in what the probe drops (a sensor seed) share one probe."""
     dur = min(scene.simulation.duration, 2.0 * math.pi / scene.orbit.mean_motion)
     return scene.replace({"simulation.environment_rate": 0, "controller.period": PROBE_DT_S, "simulation.step": PROBE_DT_S,
                           "simulation.integrator": "rk4", "simulation.output_dt": PROBE_DT_S,
                           "simulation.duration": max(dur, 3.0 * PROBE_DT_S),
-                          "controller.sensor": {}, "sensor": [], "estimator": None})
+                          "controller.sensor": {}, "sensor": [], "estimator": None,
+                          "fault": []})  # (a fault's time may be off the probe's 1 s grid; the probe's
+    # run shares the compiled calls' buffers with the run that asks: its p must stay the nominal)
 
 
 def _probe(probe_scene) -> tuple[float, float, list]:

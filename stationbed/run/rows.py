@@ -99,6 +99,8 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols += flight_columns(scene)  # sensors and estimator (issue 20)
         cols += thruster_columns(scene)  # thrusters (issue 21)
         cols += fdir_columns(scene)  # fault detection and modes (issue 34)
+        if scene.fault:  # scheduled faults (issue 34): how many are active at the row's time
+            cols.append("faults_active")
     if scene.sun is not None:
         cols += [f"track_err_deg_{n}" for n in scene.appendage_names]
     for kind in TORQUES.values():  # kinds the scene names outside [[torque]] (gravity gradient: [orbit])
@@ -211,6 +213,13 @@ class Rows:
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
         self._axes_cols = [col[c] for c in ATT_ERR_AXES] if self._err_col is not None else []
+        self._faults = None  # (column, tick-grid starts, ends [s]) of the scheduled faults
+        if "faults_active" in col:
+            per = scene.controller.period
+            grid = lambda v: round(v / per) * per  # noqa: E731 (the tick time the step applies at)
+            on = [f for f in scene.fault if f.enabled]
+            self._faults = (col["faults_active"], np.array([grid(f.t) for f in on]),
+                            np.array([math.inf if f.until is None else grid(f.until) for f in on]))
 
     def make(self, ts, xs, held=None) -> np.ndarray:
         """Rows for times ``ts`` and states ``xs``.
@@ -248,6 +257,9 @@ class Rows:
         rows[:, self.gimbal_cols] = xs[:, self._gimbals]
         if held is not None and len(self.held_cols):
             rows[:, self.held_cols] = np.asarray(held, dtype=float).reshape(len(ts), -1)
+        if self._faults is not None:  # a fault is active from its tick (that row sees it) to its until's
+            c, t0, t1 = self._faults
+            rows[:, c] = ((ts[:, None] >= t0) & (ts[:, None] < t1)).sum(axis=1)
         return rows
 
     def emit(self, rows: np.ndarray) -> None:

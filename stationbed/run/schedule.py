@@ -21,6 +21,7 @@ their own copies of p); :data:`SOURCES` makes the steps from the scene (``[[faul
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -28,7 +29,8 @@ import numpy as np
 
 from ..core.compile import FastCall
 
-__all__ = ["Step", "Schedule", "Stepper", "SOURCES", "block_numbers", "schedule_of", "stepper", "refresh_loop"]
+__all__ = ["Step", "Schedule", "Stepper", "SOURCES", "block_numbers", "schedule_of", "stepper", "refresh_loop",
+           "composed_hook", "loop_hook", "lockstep_hook", "bulk_stop", "steps_summary"]
 
 
 @dataclass(eq=False)
@@ -150,12 +152,13 @@ class Stepper:
         return x
 
     def summary(self) -> list[dict]:
-        """The steps applied, in order (their ``info`` and time [s])."""
-        return [dict(s.info, t=s.k * self.comp.period) for s in self.schedule.steps if s.k in self.done]
+        """The steps applied, in order (their ``info`` and time [s]; a staircase's first step only)."""
+        return [dict(s.info, t=s.k * self.comp.period) for s in self.schedule.steps
+                if s.k in self.done and "step" not in s.info]
 
 
 def stepper(comp, res) -> Stepper:
-    """The run's :class:`Stepper` (one per run state ``res``: its ``steps_applied`` summary)."""
+    """The run's :class:`Stepper` (one per run state ``res``, kept on it: the summary reads it)."""
     st = getattr(res, "stepper", None)
     if st is None:
         st = res.stepper = Stepper(comp, res)
@@ -221,7 +224,7 @@ def loop_hook(loop):
 def steps_summary(comp, res) -> dict:
     """The summary's ``faults``: the steps applied, in order (empty without a schedule)."""
     st = getattr(res, "stepper", None)
-    if not comp.schedule:
+    if not comp.schedule and not comp.scene.fault:
         return {}
     return {"faults": [] if st is None else st.summary()}
 
@@ -252,3 +255,14 @@ def lockstep_hook(batch, samples, held):
             batch.flight.fc.args[8].reshape(len(samples), -1)[i] = comp.flight.params
         batch._measure(i, t, batch.X[i])
     return due, step
+
+
+def bulk_stop(ticks, row_ks, j: int) -> int:
+    """The row (index in ``row_ks``, the output rows' ticks) at which a stretch of bulk rows
+    starting at row ``j`` must stop: the row holding the first step tick (``ticks``, sorted)
+    after row j's tick, or starting at it (the step applies before that row); the last row
+    without one."""
+    i = bisect.bisect_right(ticks, row_ks[j])
+    if i == len(ticks):
+        return len(row_ks) - 1
+    return bisect.bisect_right(row_ks, ticks[i]) - 1

@@ -9,6 +9,7 @@ unit = 2                 # the target: a CMG unit number (as [cmg] failed), a th
 spin_down_s = 0.0        # the kind's own parameters (FaultKind.params)
 # until = 2400.0         # s, a window: the fault clears at this tick (kinds with windowed = True)
 # probability = 0.3      # a Monte Carlo sample draws the fault with this probability (a run: always)
+# enabled = false        # kept but not applied (a Monte Carlo sample whose draw said "no")
 ```
 
 A kind is one :class:`FaultKind` in :data:`FAULT_KINDS` (:func:`register_fault_kind`): what it
@@ -91,8 +92,8 @@ def register_fault_kind(kind: FaultKind) -> FaultKind:
 
 
 for _k in (
-    FaultKind("cmg_failed", "cmg", {"spin_down_s": FaultParam(0.0, 0.0, 0.0, "s, 0: the rotor stops at t (only 0 so far)")},
-              windowed=False, doc="a CMG unit fails: its gimbals held, its rotor stopped (momentum to the body)"),
+    FaultKind("cmg_failed", "cmg", {"spin_down_s": FaultParam(0.0, 0.0, math.inf, "s, the rotor's time constant; 0: it stops at t")},
+              windowed=False, doc="a CMG unit fails: its gimbals held, its rotor stopped or spinning down (momentum to the body)"),
     FaultKind("gimbal_stuck", "cmg", doc="a CMG unit's gimbals held at their angles at t (the rotor spins on)"),
     FaultKind("gimbal_rate_limit", "cmg", {"limit": FaultParam(None, 0.0, math.inf, "rad/s, the degraded limit")},
               doc="a CMG unit's gimbal rates clamped to a degraded limit (steering unaware)"),
@@ -120,6 +121,7 @@ class Fault(Strict):
     kind: str
     unit: int | str
     probability: float = Field(default=1.0, ge=0.0, le=1.0)
+    enabled: bool = True  # false: kept in the scene (its key paths, its columns) but never applied
 
     @model_validator(mode="after")
     def _kind_and_params(self):

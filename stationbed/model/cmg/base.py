@@ -360,10 +360,11 @@ class GimballedGeometry(CmgGeometry):
             rates = direct_rates
         rates, limited = rate_limit(rates * working, max_rate)
         # a gimbal the hardware clamps (a scheduled fault: stuck = 0, a degraded limit), after the
-        # steering law, which does not know it; healthy: RATE_CAP_NONE, fmin/fmax exact
+        # steering law, which does not know it; healthy: RATE_CAP_NONE, the rates exactly as
+        # they were (a NaN rate too: if_else, not fmin/fmax, which would turn it into a number)
         cap = self._tail(pc, "rate_cap")
         cap = ca.vertcat(*[cap[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
-        clamped = ca.fmin(ca.fmax(rates, -cap), cap)
+        clamped = ca.if_else(rates > cap, cap, ca.if_else(rates < -cap, -cap, rates))
         limited = ca.fmax(limited, ca.if_else(ca.mmax(ca.fabs(rates) - cap) > 0.0, 1.0, 0.0))
         rates = clamped
         # saturation of the working units: their momentum (the failed units' is held) against

@@ -48,6 +48,7 @@ from ...run.rate_auto import AUTO, scene_choice
 from ...scene import Scene, SceneError, knowledge_scene
 from ...scene.assign import split_path
 from ...scene.knowledge import NAMED_PATHS
+from .faults import is_fault_key, occurrence, occurrence_columns, round_times
 
 __all__ = ["sample_seed", "draw", "Draw", "value_at", "check_keys", "drawn_columns", "TOLD", "law_setting",
            "nominal_rate", "choice_value"]
@@ -223,7 +224,7 @@ def _pins(scene: Scene, data: dict, dr: Draw) -> dict:
     pins = dict(own)
     for d in scene.montecarlo.disperse:
         for key in [d.key, *d.also]:
-            if law_setting(key) or key in own:
+            if law_setting(key) or key in own or is_fault_key(key):  # (faults: never told, FDIR's to learn)
                 continue
             pins[key] = dr.changes[key] if d.known else value_at(data, key)
     return pins
@@ -242,6 +243,8 @@ def _told_one(d, known: dict, nominal: dict, values: dict) -> None:
     """The ``told.`` columns of dispersion ``d`` from the knowledge scene's data ``known``
     (``nominal``: the study's scene), named as :func:`_draw_one` names the truth's."""
     key, kind, t = d.key, d.kind, TOLD
+    if is_fault_key(key):  # flight software is never told a fault (montecarlo/faults.py)
+        return
     v = value_at(known, key)
     if kind in ("normal", "uniform"):
         _record_array(values, t + key, v)
@@ -337,7 +340,9 @@ def draw(scene: Scene, k: int, data: dict | None = None) -> tuple[Scene | None, 
         dr = Draw()
         for d in mc.disperse:
             _draw_one(d, data, rng, dr)
+        round_times(scene, dr.changes, dr.values)  # fault times on the tick grid (montecarlo/faults.py)
         pins = _pins(scene, data, dr)
+        occurrence(scene, rng, dr.changes, dr.values)
         try:
             s = scene.replace({**dr.changes, **({"knowledge.values": pins} if pins else {}), **fixed},
                               source=f"sample {k}")
@@ -346,7 +351,7 @@ def draw(scene: Scene, k: int, data: dict | None = None) -> tuple[Scene | None, 
             continue
         dr.values.update(told(scene, s, data))
         return s, dr, redraws, None
-    dr.values.update({TOLD + c: math.nan for c in list(dr.values)})
+    dr.values.update({TOLD + c: math.nan for c in list(dr.values) if not is_fault_key(c)})
     return None, dr, mc.max_redraws, f"no valid draw in {mc.max_redraws + 1} tries; last: {last}"
 
 
@@ -367,4 +372,5 @@ def drawn_columns(scene: Scene) -> list[str]:
     rng = np.random.default_rng(sample_seed(mc.seed, 0))
     for d in mc.disperse:
         _draw_one(d, data, rng, dr)
-    return list(dr.values) + [TOLD + c for c in dr.values]
+    return (list(dr.values) + occurrence_columns(scene)
+            + [TOLD + c for c in dr.values if not is_fault_key(c)])
