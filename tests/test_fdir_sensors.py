@@ -95,3 +95,33 @@ def test_closed_loop_gyro_dropout_declared_by_both_detectors(t_fault, declared):
     if declared:
         assert sm["fdir_sensor_unit_right"] and not sm["fdir_sensor_false_alarm"]
         assert sm["max_est_err_deg"] < 0.05  # deg: the spare gyro flies the filter (one gyro alone: 0.24 deg)
+
+
+#: the CMG detector at iss_cmg_failure_fdir's setting (docs/faults.md)
+CMG_SCENE_FDIR = {"cmg_sigma_Nm": 0.05, "cmg_alpha": 1e-3, "cmg_persistence": 20}
+#: the CMG failure at 150 s declared at 153.1 s in this scene (the assist's thruster pulses leave
+#: ticks untested), measured with the gyro watch off (before loop/fdir.py rate_suspect): unchanged
+T_CMG_DECLARED_S = 153.1
+
+
+def _closed_cmg(fault, duration):
+    data = tomllib.loads(SCENE.read_text())
+    data["simulation"].update(duration=duration, output_dt=10.0)
+    data["fdir"] = {"initial_mode": "assist", "st_alpha": 1e-4, "st_persistence": 3, "gyro_pair_alpha": 1e-4,
+                    "gyro_pair_persistence": 5, **CMG_SCENE_FDIR}
+    data["fault"] = [fault]
+    return simulate(scene_from_dict(data, source=str(SCENE)), fused=True).meta["summary"]
+
+
+def test_gyro_dropout_is_not_blamed_on_a_cmg():
+    """A gyro dropout at 150 s: the pair declares rga1 at 150.4 s, the filter excludes a head
+    instead of its gyro, so the law's rate stays wrong (8 N m of ω × h in the CMG residual).
+    Before the CMG test was inhibited while the gyro detectors flag the rate, CMG unit 2 was
+    declared at 262.9 s (a false alarm); now none is. A CMG failure on the same scene is declared
+    when it was before."""
+    sm = _closed_cmg({"kind": "gyro_dropout", "unit": "rga1", "t": 150.0}, 300.0)
+    assert [d["unit"] for d in sm["fdir_sensor_declared"]][:1] == ["rga1"]
+    assert not sm["fdir_cmg_detected"] and sm["fdir_cmg_excluded"] == []
+    sm = _closed_cmg({"kind": "cmg_failed", "unit": 2, "t": 150.0}, 160.0)
+    assert sm["fdir_cmg_detected"] and sm["fdir_cmg_unit"] == 2 and sm["fdir_sensor_declared"] == []
+    assert abs(sm["fdir_cmg_t_s"] - T_CMG_DECLARED_S) <= 1e-9

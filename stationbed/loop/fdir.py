@@ -14,7 +14,11 @@ reads (``h_B``, ``omega_BN_B``, ``gimbal``: the law's view, the estimate's rate 
    of ``1 - cmg_alpha``; a tick whose request exceeded the cluster's torque (``|τ_cmd,k-1| >
    tau_max``, the plant's ``max_torque``: the limiter cut it, e.g. a thruster pulse's share in
    assist) is not tested (its count held); a fault is declared after ``cmg_persistence`` consecutive ticks over it
-   (:func:`persist`). With independent ticks, a nominal run's alarms start at a tick with
+   (:func:`persist`). The test is off, its count restarted, while the rate it uses is suspect
+   (a gyro detector of the flight's suite says so, :func:`rate_suspect`; ``[fdir]
+   cmg_rate_settle_s`` after the filter's switch to the spare gyro): a gyro fault corrupts
+   ``ω × h`` (10⁻³ rad/s on ~8000 N m s is 8 N m) and would otherwise be blamed on a CMG.
+   With independent ticks, a nominal run's alarms start at a tick with
    probability ``(1 - α) α^N`` (the run of N exceedances preceded by a tick under the gate):
    :func:`false_alarms_per_hour` is that times the ticks per hour.
 2. **Isolation.** The unit blamed is the one whose gimbals moved least over the last tick (a
@@ -44,7 +48,7 @@ from ..core.layout import Layout
 from .block import ACT_OUT, Block
 from .sensor_faults import NEVER_S, in_window
 
-__all__ = ["fdir_block", "persist", "gate", "false_alarms_per_hour", "residual_cmg", "MODE_NUMBERS", "FdirSpec"]
+__all__ = ["fdir_block", "persist", "gate", "rate_suspect", "false_alarms_per_hour", "residual_cmg", "MODE_NUMBERS", "FdirSpec"]
 
 #: the mode manager's modes by number (the ``fdir_mode`` column; scene/fdir.py MODES)
 MODE_NUMBERS = {"hold": 0, "assist": 1, "thruster_only": 2, "drift": 3}
@@ -79,7 +83,7 @@ class FdirSpec:
     """The numbers of one scene's ``[fdir]`` and ``[[mode]]`` tables, as the block's parameters."""
 
     def __init__(self, fdir, modes, n_units: int, gimbals_per_unit: int, capacity_Nms: float,
-                 tau_max_Nm: float = NEVER_S):
+                 tau_max_Nm: float = NEVER_S, suite=None):
         self.n_units, self.gpu = int(n_units), int(gimbals_per_unit)
         self.n_cmd = len(modes)
         cmds = [[m.t, NEVER_S if m.until is None else m.until, MODE_NUMBERS[m.mode]] for m in modes] or [[NEVER_S] * 3]
@@ -89,14 +93,42 @@ class FdirSpec:
                            capacity=capacity_Nms, tau_max=tau_max_Nm, cmds=np.array(cmds, float).T)
         self.initial_mode = MODE_NUMBERS[fdir.initial_mode]
         self.alpha, self.n = fdir.cmg_alpha, fdir.cmg_persistence
+        #: the flight's sensor suite (loop/suite.py) whose gyro detections inhibit the CMG test
+        #: (:func:`rate_suspect`), or None (no estimator, no gyro detector: nothing to watch)
+        self.suite = suite if suite is not None and suite.mekf is not None and suite.spare_gyro() is not None else None
+        self.values["settle"] = fdir.cmg_rate_settle_s
 
 
-def _layouts(ng: int, n_units: int, n_cmd: int):
+def rate_suspect(suite, xs, t, settle):
+    """Whether the CMG test is inhibited this tick because the rate it uses is suspect, from the
+    suite's memory ``xs`` (its detectors' state after the last tick): the redundant gyros over
+    their gate or declared with the filter's gyro blamed, or the filter rejecting its heads'
+    samples, while the filter still flies its own gyro; or less than ``settle`` s since the
+    filter declared its gyro failed and took the spare (the switch's rate step, the spare's bias
+    not yet learnt). The gyro flags mirror the suite's switch (loop/suite.py ``_build``)."""
+    m, S = suite.mekf, suite.STATE
+    xf = S.get(xs, "mekf")
+    pair = S.get(xs, "gyro_pair") if suite.pair is not None else None
+    spare_blamed = ca.logic_and(pair[1] > 0.5, pair[3] > 1.5) if pair is not None else ca.SX(0)
+    switched = ca.logic_and(m.state.get(xf, "gyro_fault") > 0.5, ca.logic_not(spare_blamed))
+    suspect = ca.sum1(m.state.get(xf, "reject")) > 0.5
+    if pair is not None:
+        pair_bad = ca.logic_or(ca.logic_and(pair[1] > 0.5, pair[3] < 1.5),
+                               ca.logic_and(pair[0] > 0.5, ca.logic_not(spare_blamed)))
+        suspect = ca.logic_or(suspect, pair_bad)
+    t_switch = m.state.get(xf, "t_fdir")[len(m.heads)]
+    settling = ca.logic_and(switched, t - t_switch < settle)
+    return ca.logic_or(ca.logic_and(suspect, ca.logic_not(switched)), settling)
+
+
+def _layouts(ng: int, n_units: int, n_cmd: int, n_xs: int = 0):
     X = Layout(tau_prev=3, h_prev=3, w_prev=3, g_prev=ng, have=1, count=1, nis=1, cmg_fault=1, t_cmg=1, cmg_unit=1,
                cmg_excluded=n_units, base_mode=1, fdir_mode=1, mode_s=len(MODE_NUMBERS), mode_changes=1)
     P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, capacity=1, tau_max=1,
-               cmds=(3, max(n_cmd, 1)))
-    U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, tau_B=3)
+               cmds=(3, max(n_cmd, 1)), settle=1)
+    # xs: the suite's memory (the sensing block's, read by name: what it was after the last
+    # tick); tau_B last (the composer appends the chain's request to the fields it reads)
+    U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, **({"xs": n_xs} if n_xs else {}), tau_B=3)
     out = Layout(fdir_mode=1, nis=1)
     return X, P, U, out
 
@@ -106,7 +138,8 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     fault, the initial mode."""
     n_units, gpu = spec.n_units, spec.gpu
     ng = n_units * gpu
-    X, P, U, out = _layouts(ng, n_units, spec.n_cmd)
+    n_xs = spec.suite.STATE.size if spec.suite is not None else 0
+    X, P, U, out = _layouts(ng, n_units, spec.n_cmd, n_xs)
     Y = ACT_OUT(0, out)
     k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
     x, u, p = X.symbol("x"), U.symbol("u"), P.symbol("p")
@@ -117,6 +150,8 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     nis = xs["have"] * ca.dot(r, r) / ps["sigma"] ** 2
     tested = ca.norm_2(xs["tau_prev"]) <= ps["tau_max"]
     count = ca.if_else(tested, persist(xs["count"], nis > ps["gamma"]), xs["count"])
+    if n_xs:  # the rate suspect: the test off and its count restarted (module docstring, item 1)
+        count = ca.if_else(rate_suspect(spec.suite, us["xs"], t, ps["settle"]), 0.0, count)
     new = ca.logic_and(count >= ps["persist"], xs["cmg_fault"] < 0.5)
     # 2. isolation: the unit whose gimbals moved least over the last tick (1-based)
     moved = [ca.norm_2(g[i * gpu:(i + 1) * gpu] - xs["g_prev"][i * gpu:(i + 1) * gpu]) for i in range(n_units)]
@@ -145,5 +180,6 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
                 count=0.0, nis=0.0, cmg_fault=0.0, t_cmg=NOT_YET, cmg_unit=0.0, cmg_excluded=np.zeros(n_units),
                 base_mode=float(spec.initial_mode), fdir_mode=float(spec.initial_mode), mode_s=np.zeros(len(MODE_NUMBERS)),
                 mode_changes=0.0)
-    return Block(name, "actuator", step, X, P, Layout(), U, Y, key=("fdir", ng, n_units, spec.n_cmd), x0=x0,
+    return Block(name, "actuator", step, X, P, Layout(), U, Y, key=("fdir", ng, n_units, spec.n_cmd,
+                                                                      None if spec.suite is None else spec.suite.STATE.size), x0=x0,
                  p0=P.pack(spec.values))

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..loop.fdir import MODE_NUMBERS, FdirSpec, false_alarms_per_hour, fdir_block
 from ..loop.sensor_faults import NEVER_S, SENSOR_FAULTS
+from ..loop.suite import Suite
 from .faults import register_fault_effect
 
 __all__ = ["FdirLoop", "fdir_for", "fdir_columns", "FDIR_COLUMNS", "detections_vs_truth"]
@@ -49,7 +50,11 @@ def fdir_for(scene, model, plant) -> "FdirLoop | None":
     # the torque one gimbal at its rate limit gives: above it the limiter may cut the request
     tau_max = geo.rotor_momentum(scene.cmg) * geo.max_gimbal_rate(scene.cmg)
     tau_max = tau_max if np.isfinite(tau_max) and tau_max > 0 else NEVER_S
-    return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity, tau_max))
+    # the flight's suite (the same layout as run/closed_loop.py's Flight builds): its gyro
+    # detectors inhibit the CMG test (loop/fdir.py rate_suspect)
+    suite = Suite(scene, scene.controller.period) if scene.sensor and getattr(scene, "estimator", None) else None
+    return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity, tau_max,
+                                    suite=suite))
 
 
 class FdirLoop:

@@ -14,6 +14,8 @@ st_alpha = 1e-4             # the MEKF's innovation gate: P(chi-squared(3) > gat
 st_persistence = 3          # consecutive rejected samples: the head out, or (heads together) the gyro
 gyro_pair_alpha = 1e-4      # two gyros of one period compared: P(chi-squared(3) > gate) per sample
 gyro_pair_persistence = 5   # consecutive samples over it
+cmg_rate_settle_s = 2.0     # s: the CMG test off after the filter takes the spare gyro (and while
+                            # a gyro detector flags the rate)
 
 [[mode]]                    # a scheduled command: this mode over [t, until)
 mode = "thruster_only"
@@ -52,6 +54,7 @@ class Fdir(Strict):
     st_persistence: int = Field(default=3, ge=1)  # consecutive rejected samples of a head
     gyro_pair_alpha: float | None = Field(default=None, gt=0.0, lt=1.0)  # the redundant gyros' gate (none: off)
     gyro_pair_persistence: int = Field(default=5, ge=1)  # consecutive samples over it
+    cmg_rate_settle_s: float = Field(default=2.0, ge=0.0)  # s, the CMG test off after a gyro switch
 
 
 class ModeCommand(Strict):
