@@ -91,3 +91,16 @@ def test_small_study_columns_and_counts_match_each_samples_truth():
     assert s["false_alarms"]["consistent"]
     assert [r["n"] for r in s["requirements_faulted"]] == [k] * len(scene.montecarlo.requirement)
     assert "fault detection: declared" in table_text(res.summary)
+
+
+def test_a_fault_the_sample_did_not_draw_is_no_truth_for_the_run_summary():
+    """A sample without its fault (``enabled = false``) that declares one: a false alarm in the
+    run's summary too (it was counted against the disabled fault's time before)."""
+    from stationbed.run.fdir_run import detections_vs_truth
+    from stationbed.scene.faults import Fault
+
+    off = Fault(t=5.0, kind="cmg_failed", unit=2, enabled=False)
+    got = detections_vs_truth([off], True, 10.0, 2)
+    assert got["fdir_cmg_false_alarm"] and "fdir_cmg_latency_s" not in got and "fault_cmg_t_s" not in got
+    on = detections_vs_truth([Fault(t=5.0, kind="cmg_failed", unit=2)], True, 10.0, 2)
+    assert not on["fdir_cmg_false_alarm"] and on["fdir_cmg_latency_s"] == 5.0

@@ -111,7 +111,8 @@ def sensor_detections(comp, xs) -> dict:
         if dec > 0.5:
             declared.append((float(tp), comp.flight.suite.pair[int(who) - 1].name))
     out: dict = {"fdir_sensor_declared": [{"unit": u, "t": tt} for tt, u in sorted(declared)]}
-    truth = sorted((f for f in getattr(comp.scene, "fault", ()) if f.kind in SENSOR_FAULTS), key=lambda f: f.t)
+    truth = sorted((f for f in getattr(comp.scene, "fault", ()) if f.kind in SENSOR_FAULTS and f.enabled),
+                   key=lambda f: f.t)
     if truth:
         out.update(fault_sensor_t_s=float(truth[0].t), fault_sensor_unit=str(truth[0].unit))
     if declared:
@@ -127,8 +128,9 @@ def sensor_detections(comp, xs) -> dict:
 def detections_vs_truth(faults, detected: bool, t_det: float, unit: int) -> dict:
     """The CMG detection against the truth's schedule: the first scheduled CMG fault (``t``,
     ``unit``) and the detection (time, unit, latency, whether the unit blamed is the failed one;
-    a detection with no CMG fault scheduled before it is a false alarm)."""
-    cmg = sorted((f for f in faults or () if f.kind in CMG_KINDS), key=lambda f: f.t)
+    a detection with no CMG fault scheduled before it is a false alarm; a fault a Monte Carlo
+    sample did not draw, ``enabled = false``, is none)."""
+    cmg = sorted((f for f in faults or () if f.kind in CMG_KINDS and f.enabled), key=lambda f: f.t)
     out: dict = {"fdir_cmg_detected": bool(detected)}
     if detected:
         out.update(fdir_cmg_t_s=t_det, fdir_cmg_unit=unit)
