@@ -28,6 +28,8 @@ def _mc(folder):
     import pandas as pd  # noqa: PLC0415
 
     df = pd.read_parquet(Path(folder) / "samples.parquet")
+    if "fault.cmg2.occurred" in df:  # the samples the failure occurred in (probability < 1)
+        df = df[df["fault.cmg2.occurred"] > 0.5]
     t_f, unit = df["fault.cmg2.t"].to_numpy(float), df["fault.cmg2.unit"].to_numpy(float)  # the truth drawn
     det, blamed = df["fdir_detect_s"].to_numpy(float), df["fdir_unit"].to_numpy(float)
     return t_f, unit, det, blamed
