@@ -18,7 +18,7 @@ from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from stationbed.loop import FILTER, TRUTH, Mekf, Sensor, build_sensors, noise_rng
+from stationbed.loop import TRUTH, Mekf, Sensor, build_sensors, noise_rng
 from stationbed.scene import sensing_from_dict
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "loop.md"
@@ -48,7 +48,7 @@ def test_documented_iss_set_is_valid_and_builds_a_filter():
     assert [s.kind for s in sensors] == ["gyro", "star_tracker", "star_tracker"]
     mekf = Mekf.from_sensors(sensing.estimator, sensors)
     assert mekf.every == [10, 10]  # heads at 1 Hz, gyro at 10 Hz
-    assert FILTER.get(mekf.initial([1.0, 0, 0, 0]), "P")[0, 0] == pytest.approx(1e-6)  # (1e-3 rad)²
+    assert mekf.state.get(mekf.initial([1.0, 0, 0, 0]), "P")[0, 0] == pytest.approx(1e-6)  # (1e-3 rad)²
 
 
 def test_worked_example_is_a_sensor_with_the_cosine_law(example):

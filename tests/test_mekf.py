@@ -25,7 +25,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from stationbed.loop import FILTER, TRUTH, Mekf, build_sensors, noise_rng
+from stationbed.loop import TRUTH, Mekf, build_sensors, noise_rng
 from stationbed.loop.mekf import SERIES_BELOW, propagate
 from stationbed.scene import sensing_from_dict
 
@@ -262,11 +262,11 @@ def test_dropped_measurements_leave_the_filter_to_the_gyro():
         z[4::5, mekf.inputs.slice(f"fresh_{i}")] = 1.0  # new, but not valid
     xf, _ = mekf.record(mekf.initial([1.0, 0.0, 0.0, 0.0]), z)
     t = GYRO_DT_S * np.arange(1, n + 1)
-    P = FILTER.get(xf, "P")
+    P = mekf.state.get(xf, "P")
     expected = SIGMA_ATT0**2 + SIGMA_BIAS0**2 * t**2 + SIGMA_V**2 * t + SIGMA_U**2 * t**3 / 3
     for i in range(3):
         assert_allclose(P[:, i, i], expected, rtol=1e-12)
-    assert_allclose(FILTER.get(xf, "q_BN"), np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), rtol=0, atol=0)
+    assert_allclose(mekf.state.get(xf, "q_BN"), np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), rtol=0, atol=0)
 
 
 @pytest.mark.parametrize("latency", [0.0, 2.0], ids=["no_latency", "latency_2s"])

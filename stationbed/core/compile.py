@@ -29,7 +29,8 @@ import numpy as np
 
 from . import progress
 
-__all__ = ["compile_functions", "FastCall", "cache_dir", "compiler", "sx_function", "EVALUATOR_C", "EVALUATOR_VM"]
+__all__ = ["compile_functions", "FastCall", "cache_dir", "compiler", "sx_function", "closed_parametric", "EVALUATOR_C",
+           "EVALUATOR_VM"]
 
 
 def sx_function(name: str, inputs: list, outputs: list, *, called: bool = False) -> ca.Function:
@@ -368,3 +369,19 @@ class FastCall:
         if hit is None or hit.f is not f:
             hit = cls._cache[key] = cls(f)
         return hit
+
+
+def closed_parametric(vals: list, syms: list) -> list:
+    """``extract_parametric``'s values written in the carry and parameters alone: casadi may give
+    a value in terms of other extracted symbols (seen on the Hamel form with flexible arrays:
+    ``cl_pre`` then had a free symbol); substituted until none is left (at most ``len(syms)``
+    rounds: each round resolves one more level of nesting). A value without such a symbol, the
+    usual case, is returned as it is (same graph, same generated code)."""
+    if not syms:
+        return vals
+    every = ca.vertcat(*syms)
+    for _ in range(len(syms)):
+        if not any(ca.depends_on(v, every) for v in vals):
+            return vals
+        vals = ca.substitute(vals, syms, vals)
+    raise AssertionError("extract_parametric's values still depend on its symbols")

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from ..core.compile import sx_function
+from ..core.compile import closed_parametric, sx_function
 from ..core.layout import Layout
 from .actuator import TRUE_SUFFIX, split_step
 from .block import Block
@@ -106,10 +106,18 @@ class Composed:
         if part is not None:
             raise ValueError(f"block {part.name!r} is not symbolic ({part.why}): it cannot be composed")
         M = plant.meas_layout
+        #: a field an actuator or the end reads that the measurement has not: the memory of the
+        #: block whose state has that field, as the tick starts (what it decided the tick before)
+        self.memory = {f: b for b in self.blocks for f in b.state.names}
         for a in self.actuators:  # an actuator reads the law's (or the true) measurement by field name
             for f in a.inputs.names:
-                if f != "tau_B" and _field(f)[0] not in M:
+                if f != "tau_B" and _field(f)[0] not in M and f not in self.memory:
                     raise KeyError(f"actuator block {a.name!r} reads {f!r}, the measurement has {M.names}")
+        #: the end's inputs beyond its own (x, tau, u_ext): read from memory by name
+        self.end_reads = [f for f in self.end.inputs.names if f not in ("x", "tau", "u_ext")]
+        for f in self.end_reads:
+            if f not in self.memory:
+                raise KeyError(f"end block {self.end.name!r} reads {f!r}, no block's memory has it")
         self.ncmd = self.law_block.outputs.slice("cmd").stop
         #: the carry from tick to tick, by name: tick index in the chunk, plant state, counts of
         #: rate-limited and saturated ticks, then each block's memory under its name
@@ -157,11 +165,21 @@ class Composed:
         s1, out = b.call(k, t, h, self.carry.get(c, b.name), v, type(v)(0, 1), self.par.get(par, b.name))
         return b.outputs.get(out, "cmd"), b.outputs.get(out, "q_ref"), s1
 
-    def _reads(self, a: Block, v, y):
-        """What actuator ``a`` reads: fields of what the law sees ``v``, or of the true
-        measurement ``y`` for a ``<field>_true`` name (the actuator contract's rule 2)."""
+    def _reads(self, a: Block, v, y, c):
+        """What actuator ``a`` reads: fields of what the law sees ``v``, of the true measurement
+        ``y`` for a ``<field>_true`` name (the actuator contract's rule 2), or of another block's
+        memory in the carry ``c`` (a field no measurement has: :attr:`memory`)."""
         M = self.plant.meas_layout
-        return [M.get(y if true else v, f) for f, true in map(_field, a.inputs.names) if f != "tau_B"]
+        return [M.get(y if true else v, f) if f in M else self._recall(c, f)
+                for f, true in map(_field, a.inputs.names) if f != "tau_B"]
+
+    def _recall(self, c, f: str):
+        """Field ``f`` of the memory of the block that keeps it, in the carry ``c``."""
+        b = self.memory[f]
+        return b.state.get(self.carry.get(c, b.name), f)
+
+    def _end_extra(self, c) -> dict:
+        return {f: self._recall(c, f) for f in self.end_reads}
 
     @property
     def _rhs(self):
@@ -174,9 +192,10 @@ class Composed:
             return u_ext
         return u_ext + self.env.state.get(self.carry.get(c, self.env.name), "L_hold")
 
-    def _end(self, t, h, x, tau, u_ext, p):
+    def _end(self, t, h, x, tau, u_ext, p, extra=None):
         e = self.end
-        _, out = e.call(0, t, h, type(x)(0, 1), e.inputs.pack(x=x, tau=tau, u_ext=u_ext, symbolic=True), type(x)(0, 1), p)
+        u = e.inputs.pack(x=x, tau=tau, u_ext=u_ext, **(extra or {}), symbolic=True)
+        _, out = e.call(0, t, h, type(x)(0, 1), u, type(x)(0, 1), p)
         return e.outputs.get(out, "act"), e.outputs.get(out, "u"), e.outputs.get(out, "sat")
 
     def _chain(self, k, t, h, c, par, v, y, cmd):
@@ -184,7 +203,7 @@ class Composed:
         after, on-times and torques of all channels)."""
         tau, mem, ons, tqs = cmd, {}, [], []
         for a in self.actuators:
-            x1, out = a.call(k, t, h, self.carry.get(c, a.name), ca.vertcat(*self._reads(a, v, y), tau), type(cmd)(0, 1),
+            x1, out = a.call(k, t, h, self.carry.get(c, a.name), ca.vertcat(*self._reads(a, v, y, c), tau), type(cmd)(0, 1),
                              self.par.get(par, a.name))
             mem[a.name] = x1
             tau = a.outputs.get(out, "tau_rest_B")
@@ -233,7 +252,7 @@ class Composed:
             return sx_function("cl_front_plain", [c, par, w], outs)
         shared = ca.cse([y] + outs)
         rest, syms, vals = ca.extract_parametric(shared[1:], ca.vertcat(c, par))
-        vals = _closed(vals, syms)
+        vals = closed_parametric(vals, syms)
         pre = sx_function("cl_pre", [c, par], [shared[0], ca.vertcat(*vals)])
         body = sx_function("cl_body", [ca.vertcat(*syms), c, par, v_s] + mem_s, rest)
         MX = ca.MX
@@ -257,14 +276,14 @@ class Composed:
         reads = []
         y = self.plant.meas(t, x, P.get(par, "p")) if self._truth else None  # the truth, for what reads it
         for a in self.actuators:
-            r = self._reads(a, v, y)
+            r = self._reads(a, v, y, c)
             reads += r
             flag = a.idle(k, t, h, C.get(c, a.name), ca.vertcat(*r, cmd), P.get(par, a.name)) if a.idle is not None else 0
             idle = idle * flag
         if self._never_quiet:  # an actuator acts on every tick: the busy tick steps, no quiet step here
             fields = dict(i=i + 1, x=x, counts=cnt)
         else:
-            _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
+            _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p, self._end_extra(c))
             x_q = self.plant.step(self._rhs, t, x, h, u, p)
             fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
         fields.update(mem)
@@ -309,8 +328,9 @@ class Composed:
         # the end on the rest (SX), then the plain or the split step (explicit branches)
         xs_, rs_, us_ = SX.sym("x", self.plant.nx), SX.sym("rest", self.ncmd), SX.sym("u_ext", 3)
         pp = SX.sym("p", self.plant.npar)
-        _, u_b, sat_b = self._end(ts, hs, xs_, rs_, us_, pp)
-        end_f = sx_function("cl_end", [ts, xs_, rs_, us_, pp, hs], [u_b, sat_b])
+        ex_s = {f: SX.sym(f, self.memory[f].state.shape(f)[0]) for f in self.end_reads}
+        _, u_b, sat_b = self._end(ts, hs, xs_, rs_, us_, pp, ex_s)
+        end_f = sx_function("cl_end", [ts, xs_, rs_, us_, pp, hs, *ex_s.values()], [u_b, sat_b])
         nch = on_s.numel()
         us, ons, tqs = SX.sym("u", u_b.numel()), SX.sym("on", nch), SX.sym("tq", 3 * nch)
         plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
@@ -338,7 +358,7 @@ class Composed:
         ar, aon, atq, afull = MX.sym("rest", self.ncmd), MX.sym("on", nch), MX.sym("tq", 3 * nch), MX.sym("full", 3)
         a_in = [c, par, cq, ar, aon, atq, afull]
         held = self._u_ext(c, u_ext)
-        uu, fl = end_f(t, x, ar, held + afull if self._full_tick else held, p, h)
+        uu, fl = end_f(t, x, ar, held + afull if self._full_tick else held, p, h, *self._end_extra(c).values())
         x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
@@ -466,7 +486,7 @@ class Composed:
         v, mem, outs = self._sense(k, t, h, y, c, w, par, plain=False)
         cmd, q_ref, s1 = self._law(k, t, h, v, c, par)
         rest, _, _, _ = self._chain(k, t, h, c, par, v, y, cmd)
-        act, _, _ = self._end(t, h, x, rest, u_ext, p)
+        act, _, _ = self._end(t, h, x, rest, u_ext, p, self._end_extra(c))
         vals = dict(cmd=cmd, act=act, q_ref=q_ref, **{b.name: mem[b.name] for b in self.sense})
         vals[self.law_block.name] = s1
         vals.update({f"{b.name}_y": outs[b.name] for b in self.sense})
@@ -511,7 +531,7 @@ class Composed:
         i, x, cnt = C.get(c, "i"), C.get(c, "x"), C.get(c, "counts")
         t0, h, u_ext, p = (P.get(par, f) for f in ("t0", "h", "u_ext", "p"))
         t = t0 + i * h
-        act, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p)
+        act, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p, self._end_extra(c))
         x1 = self.plant.step(self._rhs, t, x, h, u, p)
         fields = {f: C.get(c, f) for f in C.names}
         fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
@@ -544,14 +564,14 @@ class Composed:
             t, k = t0 + i * h, k0 + i
             chain, _, pulse, _, _ = self._acted()
             y = self.plant.meas(t, x, p) if self._truth else None  # the truth, for what reads it
-            reads = [r for a in self.actuators for r in self._reads(a, v, y)]
+            reads = [r for a in self.actuators for r in self._reads(a, v, y, ce)]
             reads = ca.vertcat(*reads) if reads else MX(0, 1)
             if self._never_quiet:  # each actuator behind its own idle test, as the busy tick
                 rest, on, tq, full, xa = self._chain_lazy(k, t, h, ce, par, cmd, reads)
             else:
                 rest, on, tq, _, full, *xa = chain(k, t, h, ce, par, cmd, reads)
             held = self._u_ext(ce, u_ext)  # (plus the torque of the actuators on the whole tick)
-            act, u, sat = self._end(t, h, x, rest, held + full if self._full_tick else held, p)
+            act, u, sat = self._end(t, h, x, rest, held + full if self._full_tick else held, p, self._end_extra(ce))
             x1 = pulse(ca.sum1(on) > 0, t, x, h, u, p, on, tq)
             fields = {f: C.get(ce, f) for f in C.names}
             fields.update({a.name: m for a, m in zip(self.actuators, xa)})
@@ -568,19 +588,3 @@ def _field(name: str) -> tuple[str, bool]:
     """``(measurement field, whether it is the truth's)`` of an actuator input's name: a name
     ending in ``_true`` reads the true measurement (the actuator contract's rule 2)."""
     return (name[: -len(TRUE_SUFFIX)], True) if name.endswith(TRUE_SUFFIX) else (name, False)
-
-
-def _closed(vals: list, syms: list) -> list:
-    """``extract_parametric``'s values written in the carry and parameters alone: casadi may give
-    a value in terms of other extracted symbols (seen on the Hamel form with flexible arrays:
-    ``cl_pre`` then had a free symbol); substituted until none is left (at most ``len(syms)``
-    rounds: each round resolves one more level of nesting). A value without such a symbol, the
-    usual case, is returned as it is (same graph, same generated code)."""
-    if not syms:
-        return vals
-    every = ca.vertcat(*syms)
-    for _ in range(len(syms)):
-        if not any(ca.depends_on(v, every) for v in vals):
-            return vals
-        vals = ca.substitute(vals, syms, vals)
-    raise AssertionError("extract_parametric's values still depend on its symbols")

@@ -35,12 +35,14 @@ import pickle
 
 import casadi as ca
 import numpy as np
+from scipy.stats import chi2
 
 from ..core.compile import FastCall, compile_functions
 from ..core.layout import Layout
 from .mekf import Mekf
 from .registry import build_sensors
 from .sensor import TRUTH, noise_rng
+from .sensor_faults import apply_sensor_faults
 from .suite import Suite, SuiteNoise
 
 __all__ = ["Flight", "INIT_STREAM", "READS", "SEEN", "flight_columns", "st_dropouts"]
@@ -88,6 +90,15 @@ class Flight:
         self.params = np.concatenate([self.suite.params, np.zeros(3) if moon_R_N is None else np.asarray(moon_R_N, float)])
         if tuned is not None:  # the filter is flight software: tuned from what it believes
             self.params[self.suite.PARAMS.slice("mekf")] = tuned
+        fd = getattr(sensing, "fdir", None)
+        if fd is not None and fd.st_alpha is not None and self.suite.mekf is not None:  # the innovation gate
+            at = self.suite.PARAMS.slice("mekf").start
+            L = self.suite.mekf.param_layout
+            self.params[at + L.slice("gate").start] = float(chi2.isf(fd.st_alpha, 3))
+            self.params[at + L.slice("persist").start] = float(fd.st_persistence)
+        # the scene's sensor faults (issue 34): numbers of the sensors' steps (loop/sensor_faults.py)
+        for name, p in apply_sensor_faults(self.suite.sensors, getattr(sensing, "fault", ())).items():
+            self.params[self.suite.PARAMS.slice(name)] = p
         self.mekf = self.suite.mekf
         #: the measurement's layout (``meas``) and its offset dict (``layout``: the tick's key reads it)
         self.meas = layout if isinstance(layout, Layout) else _from_offsets(layout)
@@ -99,7 +110,8 @@ class Flight:
         #: what the tick's expression depends on (numbers are inputs): equal keys, equal functions
         self.key = (tuple((s.name, s.key) for s in self.suite.sensors), tuple(sorted(self.suite.every.items())),
                     None if m is None else (m.gyro.name, tuple(h.name for h in m.heads), tuple(m.delays), tuple(m.every)),
-                    tuple(sorted(self.layout.items())), self.has_moon)
+                    tuple(sorted(self.layout.items())), self.has_moon,
+                    None if self.suite.spare_gyro() is None else self.suite.spare_gyro().name, self.suite.pair is not None)
         self.tag = hashlib.sha256(repr(self.key).encode()).hexdigest()[:16]
         S = self.suite
         self._rows = dict(

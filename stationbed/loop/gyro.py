@@ -26,6 +26,15 @@ the bias step ``σ_u Δt^½`` and the white-noise level ``(σ_v²/Δt + σ_u² �
 without quantisation (``quantum = 0``, the default) is its own structure (``_structure``),
 whose step has no counter: the quantiser's ``floor`` and divisions are computed only by a gyro
 that has one (its output is then the same number: the carry stays 0).
+
+Faults (issue 34, ``[[fault]]`` kinds ``gyro_bias_step``, ``gyro_frozen``, ``gyro_dropout``:
+:mod:`.sensor_faults`) are numbers of the step, gated by the sample time (exact, fused,
+dispersible): a bias step ``b_f`` added to the rate from ``t_bias`` on; the output frozen at its
+last value over ``[frozen_on, frozen_off)``; zero (the assembly's packets empty: a dropout)
+over ``[dropout_on, dropout_off)``. A sample at t belongs to a window when ``on - Δt/2 <= t <
+off - Δt/2`` (samples lie on a grid of Δt: no round-off can move one across an edge). Healthy
+(the defaults, :data:`~.sensor_faults.NEVER_S`): ``raw + 0·0`` and the untaken branches, the
+same doubles as without them. The last output is kept in the state (``held_B``).
 """
 
 from __future__ import annotations
@@ -37,6 +46,7 @@ import casadi as ca
 from ..scene import GyroSensor
 from .layout import Layout
 from .sensor import Sensor
+from .sensor_faults import NEVER_S, in_window
 
 __all__ = ["RateGyro"]
 
@@ -51,11 +61,13 @@ class RateGyro(Sensor):
     scene_model = GyroSensor
     #: bias β [rad/s]; θ at the last sample [rad] (to difference the truth's running integral);
     #: the quantiser's carried remainder [rad]
-    STATE = Layout(bias_B=3, theta_B=3, carry_B=3)
+    STATE = Layout(bias_B=3, theta_B=3, carry_B=3, held_B=3)
     #: the sample period, the bias random walk's step ``σ_u Δt^½`` [rad/s] and the white noise's
     #: standard deviation ``(σ_v²/Δt + σ_u² Δt/12)^½`` [rad/s] per sample, E + M's M, the
     #: quantum [rad] (read only by a quantising gyro) and the saturation [rad/s]
-    PARAMS = Layout(dt=1, bias_step=1, white=1, M=(3, 3), quantum=1, max_rate=1)
+    #: (faults, module docstring: the bias step [rad/s] and its start, the windows [s])
+    PARAMS = Layout(dt=1, bias_step=1, white=1, M=(3, 3), quantum=1, max_rate=1, fault_bias_B=3, t_bias=1,
+                    frozen=2, dropout=2)
     #: the rate integrated over the sample [rad/s], B axes
     OUTPUTS = Layout(omega_B=3)
     reads = ("theta_B",)
@@ -70,16 +82,18 @@ class RateGyro(Sensor):
         dt, sv, su = float(e.period), float(e.sigma_v), float(e.sigma_u)
         # the operations (and their order) the step's expression had: the same doubles
         return dict(dt=dt, bias_step=su * math.sqrt(dt), white=math.sqrt(sv * sv / dt + su * su * dt / 12.0), M=e.M,
-                    quantum=e.quantum, max_rate=NO_SATURATION_RAD_S if e.max_rate is None else e.max_rate)
+                    quantum=e.quantum, max_rate=NO_SATURATION_RAD_S if e.max_rate is None else e.max_rate,
+                    fault_bias_B=[0.0, 0.0, 0.0], t_bias=NEVER_S, frozen=[NEVER_S, NEVER_S], dropout=[NEVER_S, NEVER_S])
 
     def _initial(self) -> dict:
-        return dict(bias_B=self.entry.bias0, theta_B=[0.0, 0.0, 0.0], carry_B=[0.0, 0.0, 0.0])
+        return dict(bias_B=self.entry.bias0, theta_B=[0.0, 0.0, 0.0], carry_B=[0.0, 0.0, 0.0], held_B=[0.0, 0.0, 0.0])
 
     def _step(self, t, x, truth, w, p):
         dt = p["dt"]
         omega_avg = (truth["theta_B"] - x["theta_B"]) / dt
         bias_next = x["bias_B"] + p["bias_step"] * w[0:3]
         raw = omega_avg + ca.mtimes(p["M"], omega_avg) + 0.5 * (x["bias_B"] + bias_next) + p["white"] * w[3:6]
+        raw = raw + (t >= p["t_bias"] - 0.5 * dt) * p["fault_bias_B"]  # a bias step (healthy: + 0 exactly)
         sat = ca.fmin(ca.fmax(raw, -p["max_rate"]), p["max_rate"])
         angle = x["carry_B"] + sat * dt
         if self._structure():  # the counter: whole quanta out, the remainder carried
@@ -88,4 +102,7 @@ class RateGyro(Sensor):
             out = ca.if_else(q > 0, q_safe * ca.floor(angle / q_safe + 0.5), angle)
         else:
             out = angle
-        return dict(bias_B=bias_next, theta_B=truth["theta_B"], carry_B=angle - out), dict(omega_B=out / dt)
+        rate = out / dt
+        rate = ca.if_else(in_window(t, p["dropout"], dt), ca.SX.zeros(3), rate)  # no packet: zeros
+        rate = ca.if_else(in_window(t, p["frozen"], dt), x["held_B"], rate)  # the last output again
+        return dict(bias_B=bias_next, theta_B=truth["theta_B"], carry_B=angle - out, held_B=rate), dict(omega_B=rate)

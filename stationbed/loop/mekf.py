@@ -133,7 +133,7 @@ def attitude_error(q_ref, q):
     return 2 * d[1:4] / d[0]
 
 
-def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0, joseph=False):
+def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0, joseph=False, nis=False):
     """One star-tracker head: ``(q̂, β̂, P)`` after its measurement when ``gate`` is 1 (fresh and
     valid), unchanged when 0. ``r`` = (r_cross, r_cross, r_about) [rad].
 
@@ -149,7 +149,9 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     ``(E − KH) P (E − KH)ᵀ + K R Kᵀ − (E − KH) M Kᵀ − K Mᵀ (E − KH)ᵀ``, equals
     ``P − K (P Hᵀ + M)ᵀ`` (expand it with ``K S = P Hᵀ + M``); the filter uses the short form, its
     upper triangle mirrored (exactly symmetric, a fifth of the operations). ``joseph=True`` gives
-    the Joseph form (the test's reference: the two agree to round-off)."""
+    the Joseph form (the test's reference: the two agree to round-off). ``nis=True``: also the
+    normalised innovation squared ``zᵀ S⁻¹ z`` (S the innovation's covariance, the matrix the
+    gain inverts), appended to the returned tuple."""
     if D is None:
         q_s, C = q, dcm(q_SB)
         H = ca.horzcat(C, ca.SX.zeros(3, 3))
@@ -163,7 +165,8 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
     # the gyro noise over the latency is in the state error too: Cov(Δx, v) = M = -[q_L Cᵀ; 0]
     M = ca.vertcat(-q_latency * C.T, ca.SX.zeros(3, 3))
     PHt = ca.mtimes(P, H.T) + M
-    K = ca.mtimes(PHt, inv3(ca.mtimes(H, PHt) + ca.mtimes(M.T, H.T) + R))
+    S_inv = inv3(ca.mtimes(H, PHt) + ca.mtimes(M.T, H.T) + R)
+    K = ca.mtimes(PHt, S_inv)
     dx = ca.mtimes(K, z)
     dq = ca.vertcat(1.0, dx[0:3] / 2)
     q_new = quat_mult(q, dq / ca.norm_2(dq))
@@ -180,10 +183,46 @@ def update(q, b, P, q_SN_meas, gate, q_SB, r, D=None, latency=0.0, q_latency=0.0
                 rows[i][j] = rows[j][i] = P[i, j] - ca.dot(K[i, :].T, PHt[j, :].T)
         P_new = ca.vertcat(*[ca.horzcat(*row) for row in rows])
     on = gate > 0.5
-    return ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
+    out = ca.if_else(on, q_new, q), ca.if_else(on, b + dx[3:6], b), ca.if_else(on, P_new, P)
+    return out + (ca.mtimes([z.T, S_inv, z]),) if nis else out
 
 
 _REPORTS: dict = {}
+
+#: the innovation gate when none is set (``[fdir] st_alpha`` absent): no NIS exceeds it
+NO_GATE = 1.0e300
+
+
+def FDI_STATE(n: int) -> dict:
+    """The filter's fault detection memory (n heads): each head's last normalised innovation
+    squared, its consecutive rejections, whether it is excluded; whether the gyro is declared
+    failed; when (each head, then the gyro) [s, -1: not]; the filter's own time [s]."""
+    return dict(nis=n, reject=n, excluded=n, gyro_fault=1, t_fdir=n + 1, t_filter=1)
+
+
+def innovation_gate(X: dict, Pp: dict, i: int, n: int, nis) -> dict:
+    """The chi-squared innovation gate of head ``i`` (issue 34 item 2b): its sample is rejected
+    (no update) when ``nis > gate`` (the chi-squared(3) quantile of ``1 - st_alpha``) and no gyro
+    fault is declared; after ``persist`` consecutive rejections the head is excluded when no
+    other head is rejecting at the time, else (or with one head) the gyro is declared failed
+    (the heads agree with each other, not with the propagation); once it is, samples are
+    accepted again (the filter re-converges on the heads). Returns the memory's new fields and
+    ``_reject``."""
+    failed = X["gyro_fault"] > 0.5
+    reject = ca.logic_and(nis > Pp["gate"], ca.logic_not(failed))
+    count = ca.if_else(reject, X["reject"][i] + 1.0, 0.0)
+    others = sum((X["reject"][j] > 0.5 for j in range(n) if j != i), ca.SX(0)) > 0.5 if n > 1 else ca.SX(1)
+    declared = count >= Pp["persist"]
+    head = ca.logic_and(declared, ca.logic_not(others))
+    gyro = ca.logic_and(declared, others)
+    t = X["t_filter"]
+    pick = [ca.if_else(j == i, v, X[f][j]) for f, v in (("nis", nis), ("reject", count),
+                                                       ("excluded", ca.fmax(X["excluded"][i], head))) for j in range(n)]
+    t_fdir = [ca.if_else(ca.logic_and(head, X["t_fdir"][i] < 0), t, X["t_fdir"][i]) if j == i else X["t_fdir"][j]
+              for j in range(n)]
+    t_fdir.append(ca.if_else(ca.logic_and(gyro, ca.logic_not(failed)), t, X["t_fdir"][n]))
+    return {"nis": ca.vertcat(*pick[:n]), "reject": ca.vertcat(*pick[n:2 * n]), "excluded": ca.vertcat(*pick[2 * n:]),
+            "gyro_fault": ca.fmax(X["gyro_fault"], gyro), "t_fdir": ca.vertcat(*t_fdir), "_reject": reject}
 
 
 class Mekf:
@@ -209,15 +248,18 @@ class Mekf:
         self.delays = [h.entry.n_delay for h in heads]
         #: the filter's state: FILTER, then per head with latency the filter's own turn since
         #: each sample in flight (quaternions, oldest first)
-        self.state = Layout(q_BN=4, bias_B=3, P=(6, 6), **{f"D_{i}": (4, d) for i, d in enumerate(self.delays) if d})
+        self.state = Layout(q_BN=4, bias_B=3, P=(6, 6), **{f"D_{i}": (4, d) for i, d in enumerate(self.delays) if d},
+                            **FDI_STATE(n))
         self.param_layout = Layout(dt=1, sigma_v=1, sigma_u=1, **{f"q_SB_{i}": 4 for i in range(n)},
-                                   **{f"r_{i}": 3 for i in range(n)}, **{f"latency_{i}": 1 for i in range(n)})
+                                   **{f"r_{i}": 3 for i in range(n)}, **{f"latency_{i}": 1 for i in range(n)},
+                                   gate=1, persist=1)
         #: one tick's input: the gyro's rate, then per head its output and whether it is new
         self.inputs = Layout(omega_B=3, **{f"q_SN_{i}": 4 for i in range(n)}, **{f"valid_{i}": 1 for i in range(n)},
                              **{f"fresh_{i}": 1 for i in range(n)})
         g = gyro.entry
         values = dict(dt=self.dt, sigma_v=table.sigma_v if table.sigma_v is not None else g.sigma_v,
-                      sigma_u=table.sigma_u if table.sigma_u is not None else g.sigma_u)
+                      sigma_u=table.sigma_u if table.sigma_u is not None else g.sigma_u,
+                      gate=NO_GATE, persist=1.0)  # (the innovation gate: [fdir] st_alpha sets it, flight.py)
         for i, h in enumerate(heads):
             values[f"q_SB_{i}"] = h.entry.mounting()
             cross = table.nea_cross if table.nea_cross is not None else h.entry.nea_cross
@@ -246,7 +288,10 @@ class Mekf:
         P0 = np.diag([t.sigma_attitude0**2] * 3 + [t.sigma_bias0**2] * 3)
         q = np.asarray(q_BN_hat, dtype=float)
         lines = {f"D_{i}": np.tile([[1.0], [0.0], [0.0], [0.0]], (1, d)) for i, d in enumerate(self.delays) if d}
-        return self.state.pack(q_BN=q / np.linalg.norm(q), bias_B=bias_B_hat, P=P0, **lines)
+        n = len(self.heads)
+        fdi = dict(nis=np.zeros(n), reject=np.zeros(n), excluded=np.zeros(n), gyro_fault=0.0, t_fdir=-np.ones(n + 1),
+                   t_filter=0.0)
+        return self.state.pack(q_BN=q / np.linalg.norm(q), bias_B=bias_B_hat, P=P0, **lines, **fdi)
 
     # -- the expressions ------------------------------------------------------------------
     def function(self) -> ca.Function:
@@ -267,7 +312,10 @@ class Mekf:
             dq = rotation_increment(Z["omega_B"] - X["bias_B"], Pp["dt"])
             lines = {f"D_{i}": ca.horzcat(*[quat_mult(X[f"D_{i}"][:, j], dq) for j in range(d)])
                      for i, d in enumerate(self.delays) if d}
-            prop = ca.Function(f"{name}_propagate", [xf, z, p], [S.pack(q_BN=q, bias_B=b, P=P, **lines)], {"cse": True})
+            kept = {f: X[f] for f in FDI_STATE(n)}
+            kept["t_filter"] = X["t_filter"] + Pp["dt"]
+            prop = ca.Function(f"{name}_propagate", [xf, z, p], [S.pack(q_BN=q, bias_B=b, P=P, **lines, **kept)],
+                               {"cse": True})
             skip = ca.Function(f"{name}_skip", [xf, z, p], [xf])
             xm, zm, pm = S.symbol("xf", ca.MX), self.inputs.symbol("z", ca.MX), self.param_layout.symbol("p", ca.MX)
             x1 = prop(xm, zm, pm)
@@ -278,11 +326,15 @@ class Mekf:
                 if d:  # the oldest sample in flight arrives now
                     extra = dict(D=X[f"D_{i}"][:, 0], latency=lat,
                                  q_latency=Pp["sigma_v"] ** 2 * lat + Pp["sigma_u"] ** 2 * lat**3 / 3)
-                q, b, P = update(X["q_BN"], X["bias_B"], X["P"], Z[f"q_SN_{i}"], 1.0, Pp[f"q_SB_{i}"], Pp[f"r_{i}"],
-                                 **extra)
-                upd = ca.Function(f"{name}_update_{i}", [xf, z, p], [S.pack({**X, "q_BN": q, "bias_B": b, "P": P})],
+                q, b, P, nis = update(X["q_BN"], X["bias_B"], X["P"], Z[f"q_SN_{i}"], 1.0, Pp[f"q_SB_{i}"], Pp[f"r_{i}"],
+                                      **extra, nis=True)
+                new = innovation_gate(X, Pp, i, n, nis)
+                reject = new.pop("_reject")
+                upd = ca.Function(f"{name}_update_{i}", [xf, z, p], [S.pack({**X, "q_BN": ca.if_else(reject, X["q_BN"], q),
+                                                                              "bias_B": ca.if_else(reject, X["bias_B"], b),
+                                                                              "P": ca.if_else(reject, X["P"], P), **new})],
                                   {"cse": True})
-                gate = self.inputs.get(zm, f"valid_{i}") * self.inputs.get(zm, f"fresh_{i}")
+                gate = self.inputs.get(zm, f"valid_{i}") * self.inputs.get(zm, f"fresh_{i}") * (1 - S.get(xm, "excluded")[i])
                 news.append(self.inputs.get(zm, f"fresh_{i}") if d else gate)
                 x1 = ca.Function.if_else(f"{name}_head_{i}", upd, skip)(gate, x1, zm, pm)
                 if d:  # a new sample leaves the head now: its turn starts at identity

@@ -16,6 +16,12 @@ Angles are ``atan2(|b × s|, b · s)`` (accurate at every angle). A zero Sun or 
 run without that body) and a zero position never exclude. A latency of n periods delays
 the measurement and its flag by n samples (a delay line in the state); until it has filled,
 ``valid = 0``.
+
+Faults (issue 34, ``[[fault]]`` kinds ``st_blinded`` and ``st_dropout``: :mod:`.sensor_faults`):
+a sample taken inside the window ``blinded`` or ``dropout`` (``[on, off)`` [s], half a period of
+margin: :func:`~.sensor_faults.in_window`) is not valid (``valid = 0``; a blinding beyond what
+the exclusion angles model, or the head's electronics silent); healthy (the defaults), the
+flag's untaken branch: the same numbers.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from ..core.rotation import dcm, quat_mult
 from ..scene import StarTrackerSensor
 from .layout import Layout
 from .sensor import Sensor
+from .sensor_faults import NEVER_S, in_window
 
 __all__ = ["StarTracker"]
 
@@ -44,7 +51,8 @@ class StarTracker(Sensor):
 
     kind = "star_tracker"
     scene_model = StarTrackerSensor
-    PARAMS = Layout(q_SB=4, nea_cross=1, nea_about=1, sun_exclusion=1, earth_exclusion=1, moon_exclusion=1)
+    PARAMS = Layout(q_SB=4, nea_cross=1, nea_about=1, sun_exclusion=1, earth_exclusion=1, moon_exclusion=1, period=1,
+                    blinded=2, dropout=2)
     #: the head's attitude q_SN (scalar first, w >= 0) and the validity flag (1/0)
     OUTPUTS = Layout(q_SN=4, valid=1)
     reads = ("q_BN", "R_N", "sun_N", "moon_N")
@@ -67,7 +75,8 @@ class StarTracker(Sensor):
 
         return dict(q_SB=e.mounting(), nea_cross=e.nea_cross, nea_about=e.nea_about,
                     sun_exclusion=angle(e.sun_exclusion), earth_exclusion=angle(e.earth_exclusion),
-                    moon_exclusion=angle(e.moon_exclusion))
+                    moon_exclusion=angle(e.moon_exclusion), period=float(e.period), blinded=[NEVER_S, NEVER_S],
+                    dropout=[NEVER_S, NEVER_S])
 
     def _initial(self) -> dict:
         line = [[1.0, 0.0, 0.0, 0.0, 0.0]] * max(self.entry.n_delay, 1)  # columns: nothing measured yet
@@ -89,7 +98,8 @@ class StarTracker(Sensor):
             ca.logic_and(ca.norm_2(sun) > 0.5, angle_between(boresight_N, sun) < p["sun_exclusion"]),
             ca.logic_and(ca.norm_2(moon) > 0.5, angle_between(boresight_N, moon) < p["moon_exclusion"])),
             ca.logic_and(ca.norm_2(R) > 1.0, earth_limb < p["earth_exclusion"]))
-        now = ca.vertcat(q, 1.0 - blinded)
+        silent = ca.logic_or(in_window(t, p["blinded"], p["period"]), in_window(t, p["dropout"], p["period"]))
+        now = ca.vertcat(q, ca.if_else(silent, 0.0, 1.0 - blinded))
         line = x["line"]
         if self.entry.n_delay == 0:
             return dict(line=line), dict(q_SN=now[0:4], valid=now[4])

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+from scipy.stats import chi2
 
 from ..core.compile import FastCall, compile_functions
 from .layout import Layout
@@ -33,7 +34,10 @@ __all__ = ["Suite", "SuiteNoise", "TICK_RATIO_TOL", "RESERVED"]
 #: a sensor period that is a whole number of ticks to this relative tolerance is taken as one
 TICK_RATIO_TOL = 1e-9
 #: names of the suite's own fields (a sensor may not be called so)
-RESERVED = frozenset({"mekf", "omega_hat_B", "q_BN_hat", "bias_B_hat"})
+RESERVED = frozenset({"mekf", "omega_hat_B", "q_BN_hat", "bias_B_hat", "gyro_pair"})
+#: the redundant gyros' comparison's memory (issue 34 item 2c): consecutive samples over the
+#: gate, declared (1), when [s] (-1: not), the gyro blamed (1 the filter's, 2 the spare)
+PAIR = ("count", "declared", "t", "blamed")
 
 
 class Suite:
@@ -60,16 +64,24 @@ class Suite:
         self.mekf = Mekf.from_sensors(sensing.estimator, self.sensors) if sensing.estimator is not None else None
         noisy = [s for s in self.sensors if s.n_noise]
         est = dict(mekf=self.mekf.state.size, omega_hat_B=3) if self.mekf else {}
+        fd = getattr(sensing, "fdir", None)
+        #: the redundant gyros compared (the filter's and its spare), or None (issue 34 item 2c)
+        self.pair = (self.mekf.gyro, self.spare_gyro()) if self.spare_gyro() is not None and fd.gyro_pair_alpha else None
+        if self.pair is not None:
+            est["gyro_pair"] = len(PAIR)
         self.STATE = Layout(**{s.name: s.state.size for s in self.sensors},
                             **{f"{s.name}.y": s.outputs.size for s in self.sensors}, **est)
         self.NOISE = Layout(**{s.name: s.n_noise for s in noisy})
         self.PARAMS = Layout(**{s.name: s.param_layout.size for s in self.sensors},
-                             **({"mekf": self.mekf.param_layout.size} if self.mekf else {}))
+                             **({"mekf": self.mekf.param_layout.size} if self.mekf else {}),
+                             **({"gyro_pair": 2} if self.pair else {}))
         self.OUTPUTS = Layout(**{s.name: s.outputs.size for s in self.sensors},
                               **{f"{s.name}.fresh": 1 for s in self.sensors},
                               **(dict(q_BN_hat=4, bias_B_hat=3, omega_hat_B=3) if self.mekf else {}))
         self.params = self.PARAMS.pack({s.name: s.params for s in self.sensors},
-                                       **({"mekf": self.mekf.params} if self.mekf else {}))
+                                       **({"mekf": self.mekf.params} if self.mekf else {}),
+                                       **({"gyro_pair": [float(chi2.isf(fd.gyro_pair_alpha, 3)),
+                                                         float(fd.gyro_pair_persistence)]} if self.pair else {}))
         self._f = self._compiled = self._plain = None
         self._records: dict = {}
 
@@ -81,6 +93,8 @@ class Suite:
         v.update({f"{s.name}.y": np.zeros(s.outputs.size) for s in self.sensors})
         if self.mekf:
             v.update(mekf=self.mekf.initial(q_BN_hat, bias_B_hat), omega_hat_B=np.zeros(3))
+        if self.pair:
+            v["gyro_pair"] = [0.0, 0.0, -1.0, 0.0]
         return self.STATE.pack(v)
 
     # -- the tick -------------------------------------------------------------------------
@@ -142,6 +156,13 @@ class Suite:
             out[s.name], out[f"{s.name}.fresh"] = nxt[f"{s.name}.y"], due[s.name]
         if m:
             z = {"omega_B": out[m.gyro.name]}
+            spare = self.spare_gyro()
+            if spare is not None:  # the other gyro in once the filter has declared its own failed (issue 34)
+                failed = m.state.get(X["mekf"], "gyro_fault") > 0.5
+                if self.pair:  # ... unless the comparison blamed the spare
+                    nxt["gyro_pair"] = self._compare(t, X, P, out, due[m.gyro.name])
+                    failed = ca.logic_and(failed, ca.logic_not(ca.logic_and(X["gyro_pair"][1] > 0.5, X["gyro_pair"][3] > 1.5)))
+                z["omega_B"] = ca.if_else(failed, out[spare.name], out[m.gyro.name])
             for i, h in enumerate(m.heads):
                 z[f"q_SN_{i}"], z[f"valid_{i}"] = out[h.name][0:4], out[h.name][4]
                 z[f"fresh_{i}"] = due[h.name]
@@ -157,6 +178,35 @@ class Suite:
         return ca.Function(f"suite_{len(self.sensors)}" + ("_plain" if plain else ""), [k, t, x, truth, w, p],
                            [self.STATE.pack(nxt, symbolic=True), self.OUTPUTS.pack(out, symbolic=True)],
                            ["k", "t", "x", "truth", "w", "p"], ["x_next", "y"], {} if plain else {"always_inline": True})
+
+    def _compare(self, t, X, P, out, due):
+        """The redundant gyros compared (issue 34 item 2c): ``r = ω̃₁ - ω̃₂`` on their samples,
+        ``χ² = |r|²/(w₁² + w₂²)`` (w each one's white noise per sample: the difference's variance
+        when the biases agree), over the gate ``persist`` samples in a row: declared; blamed the
+        filter's gyro when its innovations are being rejected at the time, else the spare."""
+        g1, g2 = self.pair
+        m = self.mekf
+        pm = P["gyro_pair"]
+        w1, w2 = (g.param_layout.get(P[g.name], "white") for g in (g1, g2))
+        r = out[g1.name] - out[g2.name]
+        nis = ca.dot(r, r) / (w1 * w1 + w2 * w2)
+        x = X["gyro_pair"]
+        count = ca.if_else(due > 0.5, ca.if_else(nis > pm[0], x[0] + 1.0, 0.0), x[0])
+        new = ca.logic_and(count >= pm[1], x[1] < 0.5)
+        rejecting = ca.sum1(m.state.get(X["mekf"], "reject")) > 0.5
+        return ca.vertcat(count, ca.fmax(x[1], new), ca.if_else(new, t, x[2]),
+                          ca.if_else(new, ca.if_else(rejecting, 1.0, 2.0), x[3]))
+
+    def spare_gyro(self):
+        """The gyro the filter takes when it declares its own failed (issue 34, loop/mekf.py
+        ``innovation_gate``): the first other gyro sampling at the same period, with the scene's
+        innovation gate on (``[fdir] st_alpha``); None otherwise."""
+        m = self.mekf
+        fd = getattr(self.sensing, "fdir", None)
+        if m is None or fd is None or fd.st_alpha is None:
+            return None
+        return next((s for s in self.sensors if s.kind == "gyro" and s is not m.gyro
+                     and self.every[s.name] == self.every[m.gyro.name]), None)
 
     def compiled(self) -> ca.Function:
         """:meth:`function` generated as C (disk cache; casadi's evaluator without a compiler)."""

@@ -203,6 +203,8 @@ class ThrusterCluster(Actuator):
         self.h_held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
         self.f_max = np.array([t.force_N for t in scene.thruster])
         self.isp = np.array([t.isp_s for t in scene.thruster])
+        #: the mode manager commands the mode (``[fdir]``, loop/fdir.py: its memory ``fdir_mode``)
+        self.commanded = getattr(scene, "fdir", None) is not None
         super().__init__()
 
     @classmethod
@@ -254,7 +256,7 @@ class ThrusterCluster(Actuator):
     def _structure(self) -> tuple:
         # which thrusters each shift moves (it shapes the compiled code)
         shifts = hashlib.sha1(repr(self.support).encode()).hexdigest()[:8]
-        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts)
+        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts) + (("fdir",) if self.commanded else ())
 
     def _layouts(self):
         n, ni = self.n, len(self.opt.inhibit)
@@ -263,7 +265,7 @@ class ThrusterCluster(Actuator):
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
                         levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n)
         outputs = Layout(request_B=3, force_N=n)
-        return state, params, outputs, Layout(h_B=3)
+        return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1} if self.commanded else {}))
 
     def _n_channels(self) -> int:
         return self.n
@@ -289,7 +291,7 @@ class ThrusterCluster(Actuator):
         hn = ca.norm_2(h_B)
         f = hn / p["capacity"]
         a_on, d_stop, h_min_f = p["assist"][0], p["assist"][1], p["assist"][2]
-        mode_opt = p["mode"]
+        mode_opt = self._mode_opt(r, p)
         m_prev = x["mode"]
         hand = ca.if_else(m_prev > 0.5, f > p["hand"][1], f >= p["hand"][0])
         mode = ca.if_else(mode_opt > 1.5, 0.0, ca.if_else(mode_opt > 0.5, 1.0, ca.if_else(hand, 1.0, 0.0)))
@@ -308,7 +310,16 @@ class ThrusterCluster(Actuator):
         req = (1.0 - inh) * (mode * tau + dumping * L_dump)
         return mode, dumping, inh, L_dump, req
 
-    def _fire(self, t, h, x, F, p, inh):
+    def _mode_opt(self, r, p):
+        """The mode option of the tick (``MODES``' numbers): the table's; with the mode manager
+        (``[fdir]``), from its mode: hold and drift ``off``, assist the table's, thruster_only."""
+        if not self.commanded:
+            return p["mode"]
+        m = r["fdir_mode"]
+        return ca.if_else(m < 0.5, MODES["off"], ca.if_else(m < 1.5, p["mode"], ca.if_else(m < 2.5, MODES["thruster_only"],
+                                                                                           MODES["off"])))
+
+    def _fire(self, t, h, x, F, p, inh, mode_opt=None):
         """On-times from the forces ``F`` (step 4): ``(on_s, acc_next)``."""
         n = self.n
         on, acc = [], []
@@ -320,7 +331,7 @@ class ThrusterCluster(Actuator):
             short = ca.if_else(level >= lv_on, mn, ca.if_else(level <= lv_off, 0.0,
                                                                ca.if_else(x["prev_on_s"][i] > 0.0, mn, 0.0)))
             t_on = ca.if_else(want >= mn, ca.fmin(want, h), short)
-            t_on = ca.fmin(ca.fmax(t_on, 0.0), h) * (1.0 - inh) * ca.if_else(p["mode"] > 1.5, 0.0, 1.0)
+            t_on = ca.fmin(ca.fmax(t_on, 0.0), h) * (1.0 - inh) * ca.if_else((p["mode"] if mode_opt is None else mode_opt) > 1.5, 0.0, 1.0)
             on.append(t_on)
             keep = ca.if_else(F[i] > 0.0, 1.0, 0.0) * (1.0 - inh)
             acc.append(ca.fmin(ca.fmax((want - t_on) * keep, -h), h) if self.opt.remainder else ca.SX(0.0))
@@ -349,15 +360,19 @@ class ThrusterCluster(Actuator):
         exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
         skip it (the fused loop does, behind a ``Function.if_else``)."""
         f = ca.norm_2(r["h_B"] - p["h_held"]) / p["capacity"]
-        quiet = ca.logic_and(p["mode"] < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
+        m = self._mode_opt(r, p)
+        quiet = ca.logic_and(m < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
         quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))
         pending = ca.sum1(ca.fabs(x["prev_on_s"])) + ca.sum1(ca.fabs(x["acc_s"]))
-        return ca.logic_and(ca.logic_and(quiet, pending == 0), ca.sum1(p["leak"]) == 0)
+        idle = ca.logic_and(quiet, pending == 0)
+        if self.commanded:  # off (hold, drift): idle once nothing is pending and control is the CMGs'
+            idle = ca.logic_or(idle, ca.logic_and(m > 1.5, ca.logic_and(x["mode"] < 0.5, ca.logic_and(x["dumping"] < 0.5, pending == 0))))
+        return ca.logic_and(idle, ca.sum1(p["leak"]) == 0)  # a leak fires: never idle
 
     def _command(self, t, h, x, r, tau, p):
         mode, dumping, inh, L_dump, req = self._request(t, x, r, tau, p)
         F = map_min_norm_shift(p["M"], p["V"], p["f_max"], req, self.support)
-        on, acc = self._fire(t, h, x, F, p, inh)
+        on, acc = self._fire(t, h, x, F, p, inh, self._mode_opt(r, p))
         return self._finish(h, x, tau, p, mode, dumping, inh, L_dump, req, F, on, acc)
 
     # -- the LP path (per tick, Python) -------------------------------------------------------

@@ -101,14 +101,38 @@ def end_block(comp) -> Block:
     nx, npar, ncmd = form.nx, model.layout.size, comp.n_cmd
     k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
     x, tau, u_ext, p = ca.SX.sym("x", nx), ca.SX.sym("tau", ncmd), ca.SX.sym("u_ext", 3), ca.SX.sym("p", npar)
-    act, u, sat = chain_end_inputs(system.sx, model, comp.end, comp.command, t, h, x, tau, u_ext, p)
-    U = Layout(x=nx, tau=ncmd, u_ext=3)
+    extra = {}
+    p_end = p
+    if comp.fdir is not None:  # the units flight software isolated: out of the steering law
+        n_units = comp.fdir.spec.n_units
+        excl = extra["cmg_excluded"] = ca.SX.sym("cmg_excluded", n_units)
+        p_end = known_working(model, p, excl)
+    act, u, sat = chain_end_inputs(system.sx, model, comp.end, comp.command, t, h, x, tau, u_ext, p_end)
+    U = Layout(x=nx, tau=ncmd, u_ext=3, **{f: v.numel() for f, v in extra.items()})
     Y = Layout(act=act.numel(), u=u.numel(), sat=2)
     # (a function's input must be purely symbolic: one symbol, the fields substituted in)
     u_in = ca.SX.sym("u", U.size)
     f = ca.Function("end", [k, t, h, ca.SX.sym("xe", 0), u_in, ca.SX.sym("w", 0), p],
-                    [ca.SX(0, 1), ca.substitute(ca.vertcat(act, u, sat), ca.vertcat(x, tau, u_ext), u_in)])
-    return Block("end", "end", f, Layout(), Layout(p=npar), Layout(), U, Y, key=(type(comp.end).__name__, comp.command))
+                    [ca.SX(0, 1), ca.substitute(ca.vertcat(act, u, sat), ca.vertcat(x, tau, u_ext, *extra.values()), u_in)])
+    return Block("end", "end", f, Layout(), Layout(p=npar), Layout(), U, Y,
+                 key=(type(comp.end).__name__, comp.command, tuple(extra)))
+
+
+def known_working(model, p, excluded):
+    """The model's numbers ``p`` with each CMG unit's ``working`` flag times ``1 - excluded``:
+    the steering law's view once flight software has isolated a unit (its gimbals then held,
+    as a failed unit's are; model/cmg/base.py ``working``)."""
+    geo = model.cmg.geometry
+    at = model.layout["cmg"].start + geo.n_par - geo.n_units * (len(_tail_groups(geo)))
+    parts = [p[:at]] + [p[at + i] * (1 - excluded[i]) for i in range(geo.n_units)] + [p[at + geo.n_units:]]
+    return ca.vertcat(*parts)
+
+
+def _tail_groups(geo) -> tuple:
+    """The per-unit groups at the tail of the cluster's numbers, ``working`` first."""
+    from ..model.cmg import base  # noqa: PLC0415 (a lower layer: read where used)
+
+    return getattr(base, "UNIT_TAIL", ("working",))
 
 
 def run_blocks(comp, cp, rate: int = 0, noise: bool = True) -> list[Block]:
@@ -125,6 +149,8 @@ def run_blocks(comp, cp, rate: int = 0, noise: bool = True) -> list[Block]:
     blocks.append(law_block(comp, cp))
     for a in comp.actuators:  # the chain, in order (run/chain.py)
         blocks.append(actuator_block(a.cluster, a.name))
+    if comp.fdir is not None:  # the last of the chain: it sees what is left to the CMGs
+        blocks.append(comp.fdir.block)
     blocks.append(end_block(comp))
     return blocks
 
@@ -139,6 +165,8 @@ def numbers(comp, cp) -> dict:
         out["sensing"] = (comp.flight.params, None)
     for a in comp.actuators:  # the chain, by each block's name (run/chain.py)
         out[a.name] = (a.cluster.params, a.x)
+    if comp.fdir is not None:  # [fdir]: the chain's last block (run/fdir_run.py)
+        out[comp.fdir.block.name] = (comp.fdir.block.p0, comp.fdir.x)
     return out
 
 
@@ -158,6 +186,7 @@ def structure_key(comp, cp, noise: bool = True) -> tuple:
     return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
             None if comp.flight is None else comp.flight.key,
             tuple((a.name, a.cluster.key, a.lp) for a in comp.actuators), type(comp.end).__name__, held_rate(comp)[0],
+            None if comp.fdir is None else comp.fdir.block.key,
             *((None if comp.corruption is None else comp.corruption.flags, bool(comp.delay)) if noise else ("no noise",)))
 
 

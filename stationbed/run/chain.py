@@ -29,7 +29,9 @@ class ActuatorLoop:
         self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
         self.on_s = np.zeros(cluster.n_channels)
         self.torque_B = np.zeros((3, cluster.n_channels))
-        self.reads_at = cluster.reads_in(layout)  # its READS in [seen, true], by name
+        # its READS in [seen, true], by name (None: it reads another block's memory too, e.g. the
+        # thrusters the [fdir] mode manager's: flown fused only, run/fdir_run.py)
+        self.reads_at = None if getattr(cluster, "commanded", False) else cluster.reads_in(layout)
         self.truth = any(n.endswith(TRUE_SUFFIX) for n in cluster.reads.names)  # it reads the true measurement
         self.idx = cluster.row_index()
         self.fused_reason = None  # why the fused loop did not take it (summary)

@@ -36,6 +36,7 @@ from .rows import ROW_BATCH
 from .parts import NOISE_BLOCK, run_parts
 from .schedule import loop_hook, steps_summary
 from .segments import held_torque_from, segment_input
+from .fdir_run import fdir_for
 
 __all__ = ["ControlLoop", "ControllerFailure", "ROW_BATCH", "plant_facts", "NOISE_BLOCK"]
 
@@ -141,6 +142,7 @@ class ControlLoop:
             flight=flight, tick_noise=None if flight is None else flight.noise(),
             end=chain_end(model),
             actuators=chain_for(scene, ctrl, layout, plant),  # the chain before its end (run/chain.py)
+            fdir=fdir_for(scene, model, plant),  # [fdir] (issue 34), or None
         )
         self.res = RunState(comp, rows, x)
         n_y = self.meas.res[0].size
@@ -326,6 +328,8 @@ class ControlLoop:
         if self.fused:
             if fused_ok(comp):
                 return run_fused(comp, res, K)
+        if comp.fdir is not None:  # its block's memory is handed back by the fused loop alone
+            raise ValueError(f"[fdir] flies fused only; this run cannot: {why_not_fused(comp) or 'fused = False asked'}")
         # the loop checks commands itself, and counts the law's calls where Controller.update
         # would have (Controller.tick_update)
         ctrl = comp.ctrl
@@ -464,6 +468,8 @@ class ControlLoop:
         out.update(rs.values())
         out.update(rate_summary(self.comp, self.res.used_fused, self.res.held_rate))  # the effect rates run (issue 25)
         out.update(chain_summary(comp))
+        if comp.fdir is not None:
+            out.update(comp.fdir.summary(comp, xs=self.res.flight.xs if comp.flight is not None else None))
         out.update(steps_summary(comp, res))  # the scheduled faults applied, with their times
         try:  # the user's code: a raising summary() must not hide the run's own result or failure
             out.update(ctrl.summary())

@@ -68,6 +68,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     law = cm.law_block.name
     fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
     sense = fl.name if fl is not None else None
+    fd = comp.fdir  # [fdir]: the chain's last block, its memory handed back by its name
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
@@ -87,6 +88,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         c0[C.slice(sense)] = X.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
     for a in comp.actuators:
         c0[C.slice(a.name)] = a.x
+    if fd is not None:
+        c0[C.slice(fd.block.name)] = fd.x
     rc, rp, rw = row.args
     out = comp.end.outputs
     n_act = out.size if comp.has_cluster else 0
@@ -158,6 +161,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 u_cmg = a[i_u]
             for a in comp.actuators:
                 a.x_row = c0[C.slice(a.name)].copy()
+            if fd is not None:
+                fd.x_row = c0[C.slice(fd.block.name)].copy()
             xs = ys = None
             if sense is not None:
                 xs, ys = X.get(R.get(r, sense), "xs").copy(), fl.outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
@@ -180,4 +185,6 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
         law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
         for a in comp.actuators:
             a.x = a.x_row = c0[C.slice(a.name)].copy()
+        if fd is not None:
+            fd.x = c0[C.slice(fd.block.name)].copy()
         finish_chunks(res, x, ticks)

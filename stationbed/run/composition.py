@@ -82,6 +82,7 @@ class Composition:
     #: the actuators before the end, in chain order (:class:`~.chain.ActuatorLoop`: magnetic
     #: torquers, thrusters, ...; :func:`~.chain.chain_for`)
     actuators: tuple = ()
+    fdir: Any = None  #: ``[fdir]`` (:class:`~.fdir_run.FdirLoop`): the chain's last block before the end
 
     # -- derived (looked up once: the executors read them per row) ------------------------------
     @cached_property
@@ -221,6 +222,8 @@ class RunState:
             vals += comp.flight.row(self.flight.xs, self.flight.ys, q / np.linalg.norm(q))
         for a in comp.actuators:
             vals += a.row()
+        if comp.fdir is not None:
+            vals += comp.fdir.row()
         return vals, q_ref
 
     def row(self, t: float, x, flag: int, *, u_cmg=None, cmd=None, q_ref=None, xs=None, ys=None) -> None:

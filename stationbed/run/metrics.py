@@ -108,6 +108,9 @@ METRICS: dict[str, Metric] = {
     "thruster_firings": Metric("firings", "thruster pulses started (a pulse continuing the previous tick's is one)"),
     "thruster_control_s": Metric("s", "time in thruster-only control (hand-over at CMG saturation)"),
     "thruster_impulse_Ns": Metric("N s", "total thruster impulse Σ F t_on over the run"),
+    # fault detection (issue 34): the last row's fdir_* columns (run/fdir_run.py)
+    "fdir_detect_s": Metric("s", "time flight software declared a CMG fault (the last row's fdir_t_cmg_s; -1: none)"),
+    "fdir_unit": Metric("1", "the CMG unit flight software blamed (the last row's fdir_cmg_unit; 0: none)"),
 }
 
 #: the estimation metrics taken over the converged, settled window (module docstring)
@@ -297,6 +300,7 @@ class RunMetrics:
         self._nees = col.get("nees")
         self._st = [i for c, i in col.items() if c.startswith("st_valid_")]
         self._thr = {m: col[c] for m, c in _THRUSTER_TOTALS.items() if c in col}
+        self._fdir = {m: col[c] for m, c in (("fdir_detect_s", "fdir_t_cmg_s"), ("fdir_unit", "fdir_cmg_unit")) if c in col}
         self.orbit_period_s = orbit_period_s
         self._est_red = _Estimation() if self._est is not None else None
         self._dropout = _TimeIntegral()  # heads invalid, over the run
@@ -389,6 +393,8 @@ class RunMetrics:
             t_end = float(self.last[self._t])
             if self.orbit_period_s and t_end > 0:
                 out["propellant_kg_per_orbit"] = out["propellant_kg"] * self.orbit_period_s / t_end
+        if self._fdir and self.n_rows:
+            out.update({m: float(self.last[i]) for m, i in self._fdir.items()})
         return out
 
 

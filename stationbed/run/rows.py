@@ -25,6 +25,7 @@ from ..scene import Scene
 from .metrics import RunMetrics
 from .system import OUT_CHUNK
 from .chain import chain_columns
+from .fdir_run import fdir_columns
 from .trajectory import Trajectory, base_columns
 
 __all__ = ["trajectory_columns", "ATT_ERR_AXES", "Rows", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S", "BULK_ROWS"]
@@ -97,6 +98,7 @@ def trajectory_columns(scene: Scene) -> list[str]:
         cols += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
         cols += flight_columns(scene)  # sensors and estimator (issue 20)
         cols += chain_columns(scene)  # the actuator chain: magnetic torquers, thrusters (issues 21, 33)
+        cols += fdir_columns(scene)  # fault detection and modes (issue 34)
         if scene.fault:  # scheduled faults (issue 34): how many are active at the row's time
             cols.append("faults_active")
     if scene.sun is not None:
@@ -223,6 +225,7 @@ class Rows:
             self.held_columns += ["tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "att_err_deg", *ATT_ERR_AXES]
             self.held_columns += flight_columns(scene)
             self.held_columns += chain_columns(scene)
+            self.held_columns += fdir_columns(scene)
         self.held_cols = np.array([col[c] for c in self.held_columns], dtype=int)
         self._err_col = col.get("att_err_deg")
         self._config = (col["config"], col["config_known"], *_configuration_times(scene)) if scene.event else None

@@ -16,11 +16,13 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 from .assign import KeyPathError, split_path
 from .base import TIME_RESOLUTION, FieldError, SceneError, Strict
 from .docking import Event, Port, Vehicle, check_docking
+from .fdir import Fdir, ModeCommand, check_fdir
 from .knowledge import Knowledge, knowledge_scene
 from .magnetorquers import Magnetorquers, check_magnetorquers
 from .plan import PlanSpec
 from .sensors import MekfEstimator, Sensing, SensorEntry, check_sensing
 from .faults import Fault, check_faults
+from . import sensor_faults  # noqa: F401,E402 (registers the sensor kinds of [[fault]])
 from .thrusters import Thruster, ThrusterOptions, check_thrusters
 from .wing import check_plate_faces, wing_surface
 from .tables import TAGS, Appendage, Atmosphere, Body, Cmg, ControllerSpec, Initial, MonteCarlo, Orbit, Simulation, Sun, Surface, Torque
@@ -53,6 +55,8 @@ class Scene(Strict):
     thruster: list[Thruster] = []  # issue 21: fired by the closed loop (stationbed/loop/thrusters.py)
     thrusters: ThrusterOptions | None = None
     magnetorquers: Magnetorquers | None = None  # issue 33: stationbed/loop/magnetorquers.py
+    fdir: Fdir | None = None  # issue 34: flight software's fault detection (stationbed/loop/fdir.py)
+    mode: list[ModeCommand] = []  # issue 34: the mode manager's scheduled commands
     fault: list[Fault] = []  # issue 34: scheduled steps of the truth (stationbed/run/schedule.py)
     port: list[Port] = []  # issue 35: docking ports, visiting vehicles, configuration events (scene/docking.py)
     vehicle: list[Vehicle] = []
@@ -96,6 +100,7 @@ class Scene(Strict):
         _check_knowledge(self)
         check_thrusters(self)
         check_magnetorquers(self)
+        check_fdir(self)
         check_faults(self)
         check_docking(self)
         return self

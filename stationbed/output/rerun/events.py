@@ -14,6 +14,8 @@
 * a ``mode`` or ``*_mode`` column: "<column> -> <value>" whenever its value changes (``thr_mode``:
   1 = thruster-only control, issue 21);
 * ``thr_dumping`` 0 -> 1 "thruster momentum dump begins", 1 -> 0 "ends" (issue 21);
+* ``fdir_cmg_fault`` 0 -> 1 "flight software declares a CMG fault" (WARN, issue 34; the unit and
+  time in the ``fdir_cmg_unit``, ``fdir_t_cmg_s`` columns); ``fdir_mode`` changes as any mode.
 * ``faults_active`` changing: "faults active: <n>" (WARN when it grows; issue 34).
 
 Rows come in batches (a streamed run): the last value of every flag is kept between batches, and a
@@ -55,7 +57,7 @@ RGB_NO_SAMPLE = (150, 150, 150)
 
 def event_columns(columns) -> list[str]:
     """The columns :class:`Events` watches, in column order."""
-    return [c for c in columns if c in ("cmg_saturated", "eclipse", "thr_dumping", "faults_active")
+    return [c for c in columns if c in ("cmg_saturated", "eclipse", "thr_dumping", "faults_active", "fdir_cmg_fault")
             or c.startswith("st_valid_") or c == "mode" or c.endswith("_mode")]
 
 
@@ -65,7 +67,7 @@ def _state(col: str, v: float):
         return None
     if col == "eclipse":
         return v >= 1.0 - ECLIPSE_LIT_TOL  # lit
-    if col in ("cmg_saturated", "thr_dumping") or col.startswith("st_valid_"):
+    if col in ("cmg_saturated", "thr_dumping", "fdir_cmg_fault") or col.startswith("st_valid_"):
         return v >= 0.5
     return v
 
@@ -76,6 +78,8 @@ def _text(col: str, state, first: bool, prev=None):
         return (None if first else ("INFO", "eclipse exit")) if state else ("INFO", "eclipse entry")
     if col == "thr_dumping":
         return ("INFO", "thruster momentum dump begins") if state else (None if first else ("INFO", "thruster momentum dump ends"))
+    if col == "fdir_cmg_fault":
+        return ("WARN", "flight software declares a CMG fault") if state else None
     if col == "faults_active":  # scheduled faults (issue 34): the count at each change
         return None if first and state == 0 else ("WARN" if state > (prev or 0) else "INFO", f"faults active: {state:g}")
     if col.startswith("st_valid_"):  # state: "none" (no valid sample yet), "valid", "dropout"

@@ -142,6 +142,10 @@ def telemetry_series(columns, appendage_names, modes=None) -> tuple[list[Series]
     take("telemetry/thrusters/state", ["thr_dumping", "thr_mode"], ["dumping (0/1)", "thruster-only control (0/1)"])
     on = [c for c in columns if c.startswith("thr_on_s_")]
     take("telemetry/thrusters/on_s", on, [c.removeprefix("thr_on_s_") for c in on])
+    # fault detection and modes (issue 34): the mode manager's mode, the CMG residual's chi-squared
+    take("telemetry/fdir/mode", ["fdir_mode"], ["mode (0 hold, 1 assist, 2 thruster_only, 3 drift)"])
+    take("telemetry/fdir/cmg_nis", ["fdir_cmg_nis"], ["CMG residual chi-squared"])
+    take("telemetry/fdir/cmg", ["fdir_cmg_fault", "fdir_cmg_unit", "fdir_t_cmg_s"], ["declared (0/1)", "unit", "at [s]"])
     extra = [c for c in columns if c not in used]
     for c in extra:
         out.append(Series(f"telemetry/extra/{c}", (c,), (c,)))

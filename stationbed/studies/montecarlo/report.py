@@ -12,6 +12,7 @@ import numpy as np
 
 from ...run.metrics import METRICS
 from . import charts
+from .detection import PREFIX as DETECT, detection_columns, detection_summary, detection_text
 from .dispersions import TOLD
 from .samples import ID_COLUMNS
 from .stats import PERCENTILES, metric_stats, percentile_needs, requirement_verdicts
@@ -41,8 +42,9 @@ def _clean(x):
 
 def drawn_of(df) -> list[str]:
     """The drawn-value columns of a table (between the id columns and the metrics), without their
-    ``told.`` twins (what the law was told: a driver is a truth)."""
-    return [c for c in df.columns if c not in ID_COLUMNS and c not in METRICS and not c.startswith(TOLD)]
+    ``told.`` twins (what the law was told: a driver is a truth) and the ``detect.`` columns
+    (derived: :mod:`.detection`)."""
+    return [c for c in df.columns if c not in ID_COLUMNS and c not in METRICS and not c.startswith((TOLD, DETECT))]
 
 
 def summarise(scene, df, **extra) -> dict:
@@ -66,6 +68,7 @@ def summarise(scene, df, **extra) -> dict:
         "metrics": metric_stats(df),
         "percentile_needs_n": {f"p{p:g}": percentile_needs(p) for p in PERCENTILES},
         "requirements": requirement_verdicts(df, mc.requirement),
+        **({"fault_detection": det} if (det := detection_summary(scene, df)) is not None else {}),
         **extra,
     })
 
@@ -96,6 +99,8 @@ def table_text(summary: dict) -> str:
                      f"{100 * r['confidence']:g} % confidence: {word} ({r['failures']} of {r['n']} fail; "
                      f"lower bound {r['success_lower_bound']:.4f}; 0 failures need n >= {r['n_needed_zero_failures']})"
                      + (f" - {r['note']}" if "note" in r else ""))
+    if summary.get("fault_detection"):
+        lines += detection_text(summary["fault_detection"])
     return "\n".join(lines)
 
 
@@ -110,6 +115,8 @@ def write_recording(path: Path, scene, t, env, df) -> Path:
 def finish(scene, result, *, wall_s: float, workers: int, chunk: int, draw_charts: bool) -> None:
     """Statistics into ``result.summary``; with ``result.out``: the files."""
     out = result.out
+    for col, v in detection_columns(result.df, scene).items():  # per sample, against the drawn truth
+        result.df[col] = v
     files = {}
     if out is not None:
         files = {"table": "samples.parquet", "chunks": "chunks/"}
