@@ -48,6 +48,9 @@ from ..core.layout import Layout
 from .block import ACT_OUT, Block
 from .sensor_faults import NEVER_S, in_window
 
+#: one scheduled mode command (a column of the block's ``cmds``): its window [s] and its mode
+MODE_CMD = Layout(window=2, mode=1)
+
 __all__ = ["fdir_block", "persist", "gate", "rate_suspect", "false_alarms_per_hour", "residual_cmg", "MODE_NUMBERS", "FdirSpec"]
 
 #: the mode manager's modes by number (the ``fdir_mode`` column; scene/fdir.py MODES)
@@ -86,7 +89,8 @@ class FdirSpec:
                  tau_max_Nm: float = NEVER_S, suite=None):
         self.n_units, self.gpu = int(n_units), int(gimbals_per_unit)
         self.n_cmd = len(modes)
-        cmds = [[m.t, NEVER_S if m.until is None else m.until, MODE_NUMBERS[m.mode]] for m in modes] or [[NEVER_S] * 3]
+        cmds = [MODE_CMD.pack(window=[m.t, NEVER_S if m.until is None else m.until], mode=MODE_NUMBERS[m.mode])
+                for m in modes] or [[NEVER_S] * MODE_CMD.size]
         self.values = dict(sigma=fdir.cmg_sigma_Nm, gamma=gate(fdir.cmg_alpha, 3), persist=fdir.cmg_persistence,
                            isolate=float(fdir.isolate), on_fault=MODE_NUMBERS[fdir.on_cmg_fault],
                            assist_at=fdir.assist_at if np.isfinite(fdir.assist_at) else NEVER_S,
@@ -125,7 +129,7 @@ def _layouts(ng: int, n_units: int, n_cmd: int, n_xs: int = 0):
     X = Layout(tau_prev=3, h_prev=3, w_prev=3, g_prev=ng, have=1, count=1, nis=1, cmg_fault=1, t_cmg=1, cmg_unit=1,
                cmg_excluded=n_units, base_mode=1, fdir_mode=1, mode_s=len(MODE_NUMBERS), mode_changes=1)
     P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, capacity=1, tau_max=1,
-               cmds=(3, max(n_cmd, 1)), settle=1)
+               cmds=(MODE_CMD.size, max(n_cmd, 1)), settle=1)
     # xs: the suite's memory (the sensing block's, read by name: what it was after the last
     # tick); tau_B last (the composer appends the chain's request to the fields it reads)
     U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, **({"xs": n_xs} if n_xs else {}), tau_B=3)
@@ -167,7 +171,7 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     mode = base
     for j in range(max(spec.n_cmd, 1)):
         c = ps["cmds"][:, j]
-        mode = ca.if_else(in_window(t, c[0:2], h), c[2], mode)
+        mode = ca.if_else(in_window(t, MODE_CMD.get(c, "window"), h), MODE_CMD.get(c, "mode"), mode)
     rest = ca.if_else(mode > 2.5, ca.SX.zeros(3), tau)
     x1 = X.pack(tau_prev=rest, h_prev=h_B, w_prev=w_B, g_prev=g, have=1.0, count=count, nis=nis,
                 cmg_fault=ca.fmax(xs["cmg_fault"], new), t_cmg=ca.if_else(new, t, xs["t_cmg"]),
