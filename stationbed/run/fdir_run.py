@@ -64,6 +64,7 @@ class FdirLoop:
     def __init__(self, scene, spec: FdirSpec):
         self.scene, self.spec = scene, spec
         self.block = fdir_block(spec)
+        self.name = self.block.name  #: its block's name: its memory in a composed carry
         self.x = self.block.x0.copy()
         self.x_row = self.x.copy()
         S = self.block.state

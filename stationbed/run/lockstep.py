@@ -58,8 +58,9 @@ def vectorised(ctrl) -> bool:
 def _tick_ok(comp) -> bool:
     # a run the per-tick loop flies on the composed parts (blocks.parts_ok: one fixed step per
     # tick, every discontinuity on the tick grid, every actuator symbolic) runs them mapped; a
-    # fault detected mid-run (run/detection.py) runs per tick
-    return comp.replan is None and parts_ok(comp) is None
+    # fault detected mid-run (run/detection.py) runs per tick, and so does [fdir] (its memory is
+    # handed back by the fused loop and the per-tick parts, not yet by the batch)
+    return comp.replan is None and comp.fdir is None and parts_ok(comp) is None
 
 
 def executor(loop) -> str:
