@@ -35,6 +35,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
+from balance_helpers import C_NB, torque_integral_N
 from stationbed import simulate, simulate_batch
 from stationbed.integrators import RK4
 from stationbed.run.controller import Controller
@@ -269,16 +270,6 @@ Q0_BN = [0.9, 0.3, -0.2, math.sqrt(1.0 - 0.94)]  # unit, scalar first
 KIND_ABS = 2e-3  # N m s  (a misplaced tick is >= 1 N m s)
 
 
-def C_NB(q) -> np.ndarray:
-    """DCM of unit quaternion ``q_BN`` (scalar first), B -> N, written out (DESIGN §3)."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def kinds_scene(windows, integrator="rk4", controller=True) -> dict:
     """The JEOD ISS inertia in a 400 km orbit with every torque kind: gravity gradient, orbital
     harmonics, aero and SRP on a truss box and a plate, and constant windows ``L_WIN``."""
@@ -342,9 +333,7 @@ def window_integral_N(tr, windows) -> np.ndarray:
 
 
 def smooth_integral_N(tr) -> np.ndarray:
-    f = np.einsum("nij,nj->ni", np.array([C_NB(q) for q in tr.q_BN]), smooth_torque_B(tr))
-    dt = np.diff(tr.t)[:, None]
-    return np.vstack([np.zeros(3), np.cumsum(0.5 * (f[1:] + f[:-1]) * dt, axis=0)])
+    return torque_integral_N(tr, smooth_torque_B(tr))
 
 
 def test_the_balance_scene_has_every_registered_torque_kind():

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from balance_helpers import C_NB, logged_torques_B, torque_integral_N
 from stationbed import load_scene, simulate
 from stationbed.core.layout import Layout
 from stationbed.integrators import RK4
@@ -142,15 +143,8 @@ def _thruster_impulse_N(scene, tr) -> np.ndarray:
     on = tr.data[:, [tr.columns.index(f"thr_on_s_{t.name}") for t in scene.thruster]]
     d_on = np.diff(on, axis=0)  # the on-times of the tick starting at row i
     imp_B = d_on @ D
-    imp_N = np.array([_C_NB(q) @ v for q, v in zip(tr.q_BN[:-1], imp_B)])
+    imp_N = np.array([C_NB(q) @ v for q, v in zip(tr.q_BN[:-1], imp_B)])
     return np.vstack([np.zeros(3), np.cumsum(imp_N, axis=0)])
-
-
-def _C_NB(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 @pytest.mark.parametrize("which", ["per_tick", "fused"])
@@ -160,9 +154,7 @@ def test_full_flight_loop_keeps_the_momentum_balance(full_runs, which):
     here (:func:`_thruster_impulse_N`)."""
     scene, a, b = full_runs
     tr = {"per_tick": a, "fused": b}[which]
-    L_B = sum(tr.cols(f"tau_{k}_x", f"tau_{k}_y", f"tau_{k}_z") for k in ("gg", "aero", "srp"))
-    f = np.einsum("nij,nj->ni", np.array([_C_NB(q) for q in tr.q_BN]), L_B)
-    smooth = np.vstack([np.zeros(3), np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(tr.t)[:, None], axis=0)])
+    smooth = torque_integral_N(tr, logged_torques_B(tr))
     thr = _thruster_impulse_N(scene, tr)
     assert np.abs(thr[-1]).max() > 10 * BALANCE_ABS  # the thrusters' share is seen
     assert_allclose(tr.H_O_N - tr.H_O_N[0], smooth + thr, rtol=0, atol=BALANCE_ABS)

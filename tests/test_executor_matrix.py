@@ -42,6 +42,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
+from balance_helpers import C_NB
 from scenes import SCENARIOS
 from stationbed import load_scene, simulate
 from stationbed.run.lockstep import run_lockstep
@@ -96,14 +97,6 @@ def _closed_loop(path) -> bool:
 SHIPPED = [p for p in SCENARIOS if _closed_loop(p)]
 
 
-def _C_NB(q) -> np.ndarray:
-    """DCM of unit quaternion ``q_BN`` (scalar first), B -> N, written out (DESIGN §3)."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
 #: the logged torque columns ``tau_<kind>_x/y/z``: external (on the whole station: the balance integrates
 #: them) or internal (the law's request, acting through the CMG cluster, whose momentum H_N holds); a
 #: new kind fails the balance until it is named here
@@ -131,10 +124,9 @@ def _thrust_arms_B(scene) -> np.ndarray:
 
 def balance(scene, tr) -> tuple[np.ndarray, float]:
     """The expected ``H_N(t) - H_N(0)`` at every row (N, 3), and the tolerance [N m s]."""
-    C = np.array([_C_NB(q) for q in tr.q_BN])
+    C = np.array([C_NB(q) for q in tr.q_BN])
     f_N = np.einsum("nij,nj->ni", C, _smooth_torque_B(tr))
-    dt = np.diff(tr.t)
-    smooth = np.vstack([np.zeros(3), np.cumsum(0.5 * (f_N[1:] + f_N[:-1]) * dt[:, None], axis=0)])
+    smooth = np.vstack([np.zeros(3), np.cumsum(0.5 * (f_N[1:] + f_N[:-1]) * np.diff(tr.t)[:, None], axis=0)])
     one_tick = np.abs(f_N).max(initial=0.0) * PERIOD_S
     thr = np.zeros_like(smooth)
     D = _thrust_arms_B(scene)

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from balance_helpers import C_NB, logged_torques_B, torque_integral_N
 from stationbed import load_scene, simulate
 from stationbed.loop.actuator import chain_kinds
 from stationbed.loop.magnetorquers import B0_T, R_REF_M, Magnetorquers
@@ -169,13 +170,6 @@ def sphere(cmg: bool = True, duration: float = 60.0, thrusters: bool = False):
     return scene_from_dict(d)
 
 
-def _C_NB(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
 def _r_N(scene, t) -> np.ndarray:
     """The circular orbit's position: radius (cos u, sin u cos i, sin u sin i), u = u0 + n t."""
     o = scene.orbit
@@ -190,7 +184,7 @@ def _magnetic_impulse_N(scene, tr) -> np.ndarray:
     row's tick)."""
     m = tr.cols("mtq_m_x", "mtq_m_y", "mtq_m_z")[1:]
     r = _r_N(scene, tr.t[:-1])
-    C = np.array([_C_NB(q) for q in tr.q_BN[:-1]])
+    C = np.array([C_NB(q) for q in tr.q_BN[:-1]])
     B_B = np.einsum("nji,nj->ni", C, np.array([_dipole_hand(ri) for ri in r]))  # C_BN = C_NB.T
     imp = np.einsum("nij,nj->ni", C, np.cross(m, B_B)) * np.diff(tr.t)[:, None]
     return np.vstack([np.zeros(3), np.cumsum(imp, axis=0)])
@@ -228,7 +222,7 @@ def test_with_the_ideal_torquer_rods_and_rest_are_the_request(fused):
     tr = simulate(s, fused=fused)
     assert tr.meta["summary"]["fused"] == fused
     tau = tr.cols("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")[:-1]
-    C = np.array([_C_NB(q) for q in tr.q_BN[:-1]])
+    C = np.array([C_NB(q) for q in tr.q_BN[:-1]])
     imp = np.vstack([np.zeros(3), np.cumsum(np.einsum("nij,nj->ni", C, tau) * np.diff(tr.t)[:, None], axis=0)])
     assert np.abs(tr.cols("mtq_m_x", "mtq_m_y", "mtq_m_z")).max() > 0  # the rods worked
     assert_allclose(tr.H_O_N - tr.H_O_N[0], imp, rtol=0, atol=SPHERE_BALANCE_ABS)
@@ -244,7 +238,7 @@ def test_rods_then_thrusters_keep_the_balance(fused):
     assert tr.meta["summary"]["fused"] == fused and tr.meta["summary"]["thruster_firings"] > 0
     D = np.array([np.cross(t["position_B"], t["direction_B"]) * t["force_N"] for t in X_COUPLES])  # N m
     on = tr.data[:, [tr.columns.index(f"thr_on_s_{t['name']}") for t in X_COUPLES]]
-    C = np.array([_C_NB(q) for q in tr.q_BN[:-1]])
+    C = np.array([C_NB(q) for q in tr.q_BN[:-1]])
     thr = np.vstack([np.zeros(3), np.cumsum(np.einsum("nij,nj->ni", C, np.diff(on, axis=0) @ D), axis=0)])
     mag = _magnetic_impulse_N(s, tr)
     assert np.abs(mag[-1]).max() > 1e4 * THR_BALANCE_ABS and np.abs(thr[-1]).max() > 10.0  # N m s: both seen
@@ -296,9 +290,7 @@ def test_full_loop_with_rods_keeps_the_momentum_balance(full_runs, which):
     s, a, b = full_runs
     tr = {"per_tick": a, "fused": b}[which]
     assert tr.meta["summary"]["thruster_firings"] == 0
-    L_B = sum(tr.cols(f"tau_{k}_x", f"tau_{k}_y", f"tau_{k}_z") for k in ("gg", "aero", "srp"))
-    f = np.einsum("nij,nj->ni", np.array([_C_NB(q) for q in tr.q_BN]), L_B)
-    smooth = np.vstack([np.zeros(3), np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(tr.t)[:, None], axis=0)])
+    smooth = torque_integral_N(tr, logged_torques_B(tr))
     mag = _magnetic_impulse_N(s, tr)
     assert np.abs(mag[-1]).max() > 1000 * FULL_BALANCE_ABS  # the rods' share is seen
     assert_allclose(tr.H_O_N - tr.H_O_N[0], smooth + mag, rtol=0, atol=FULL_BALANCE_ABS)
