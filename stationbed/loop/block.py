@@ -44,7 +44,7 @@ import casadi as ca
 
 from ..core.layout import Layout
 
-__all__ = ["Block", "ROLES", "actuator_block", "sensing_block", "corruption_block", "ACT_OUT"]
+__all__ = ["Block", "ROLES", "actuator_block", "sensing_block", "corruption_block", "ACT_OUT", "off_path"]
 
 #: where a block sits in the tick, in the order the composer calls them
 ROLES = ("env", "sense", "law", "actuator", "end")
@@ -170,3 +170,11 @@ def corruption_block(corruption, ny: int, name: str = "noise") -> Block:
     f = ca.Function(f"{name}_step", [k, t, h, ca.SX.sym("x", 0), y, w, ca.SX.sym("p", 0)], [ca.SX(0, 1), seen])
     return Block(name, "sense", f, Layout(), Layout(), W, Layout(y=ny), Layout(y_seen=ny), plain=f,
                  key=("noise", tuple(flags)))
+
+
+def off_path(blocks) -> Block | None:
+    """The one block that keeps a composition off the compiled path (not symbolic), or None."""
+    for b in blocks:
+        if not b.symbolic:
+            return b
+    return None

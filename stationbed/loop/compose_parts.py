@@ -1,0 +1,102 @@
+"""The composed tick's parts a per-tick executor calls around a law it calls itself (issue 33):
+:meth:`~.compose.Composed.sense_part` and :meth:`~.compose.Composed.act_part`, a mixin of
+:class:`~.compose.Composed` (it reads the composition's layouts, blocks and private cases)."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ..core.compile import sx_function
+from ..core.layout import Layout
+from .block import off_path
+
+__all__ = ["PartsMixin"]
+
+
+class PartsMixin:
+    """The per-tick parts of :class:`~.compose.Composed`."""
+
+    # -- the parts a per-tick executor calls around a law it calls itself ----------------------
+    def sense_part(self) -> ca.Function:
+        """``(c, par, w) -> (c_sensed, v, outs)`` at the carry's tick (``t0 + i h``, ``k0 + i``):
+        the true measurement, the sense blocks in order on the tick's draws ``w``; ``c_sensed``
+        the carry with their memory after it, ``v`` what the law sees, ``outs`` their outputs
+        (each block's under its name: :attr:`sense_outputs`)."""
+        C, P, N = self.carry, self.par, self.noise
+        MX = ca.MX
+        c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
+        return ca.Function("cl_sense", [c, par, w], list(self._sensed(c, par, w, C.get(c, "i"), C.get(c, "x"))))
+
+    @property
+    def sense_outputs(self) -> Layout:
+        """The sense blocks' outputs side by side, each under its name (:meth:`sense_part`)."""
+        return Layout(**{b.name: b.outputs.size for b in self.sense})
+
+    def _sensed(self, c, par, w, i, x):
+        C, P = self.carry, self.par
+        t, k = P.get(par, "t0") + i * P.get(par, "h"), P.get(par, "k0") + i
+        y = self.plant.meas(t, x, P.get(par, "p"))
+        v, mem, outs = self._sense(k, t, P.get(par, "h"), y, c, w, par, plain=False)
+        fields = {f: C.get(c, f) for f in C.names}
+        fields.update(mem)
+        outs = ca.vertcat(*(outs[b.name] for b in self.sense)) if self.sense else type(x)(0, 1)
+        return C.pack(fields, symbolic=True), v, outs
+
+    def _acted_plain(self, c, par, cmd):
+        """The rest of a tick without actuators (SX): the end on the law's request, one step;
+        ``(c_next, act, x_next)``."""
+        C, P = self.carry, self.par
+        i, x, cnt = C.get(c, "i"), C.get(c, "x"), C.get(c, "counts")
+        t0, h, u_ext, p = (P.get(par, f) for f in ("t0", "h", "u_ext", "p"))
+        t = t0 + i * h
+        act, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p, self._end_extra(c))
+        x1 = self.plant.step(self._rhs, t, x, h, u, p)
+        fields = {f: C.get(c, f) for f in C.names}
+        fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
+        return C.pack(fields, symbolic=True), act, x1
+
+    def act_part(self) -> ca.Function:
+        """``(c, par, cmd, v, w) -> (c_next, c_sensed, v_next, outs, act)``: the rest of the
+        carry's tick on the law's command ``cmd`` (it saw ``v``): the ``env`` block where due,
+        the actuators in order, the end, one fixed step cut at the pulse edges (the busy tick's
+        parts, :meth:`_acted`); ``c_next`` the carry at the next tick (``i + 1``), ``act`` the
+        end's report; then :meth:`sense_part` at the next tick on its draws ``w``
+        (``c_sensed``, ``v_next``, ``outs``: valid when that tick has the same parameters)."""
+        if off_path(self.actuators):
+            raise ValueError(f"block {off_path(self.actuators).name!r} is not symbolic ({off_path(self.actuators).why})")
+        C, P, N = self.carry, self.par, self.noise
+        MX = ca.MX
+        c, par, cmd, w = C.symbol("c", MX), P.symbol("par", MX), MX.sym("cmd", self.ncmd), N.symbol("w", MX)
+        v = MX.sym("v", self.plant.meas_layout.size)
+        ce = self._env_step(c, par) if self.env is not None else c
+        if not self.actuators:  # one SX function (the right-hand side inlined where it is small)
+            SX = ca.SX
+            css, pss, cms = C.symbol("c"), P.symbol("par"), SX.sym("cmd", self.ncmd)
+            c1s, acts, x1s = self._acted_plain(css, pss, cms)
+            outs_s = [c1s, acts] + ([] if self.sense else [self.plant.meas(P.get(pss, "t0") + C.get(c1s, "i") * P.get(pss, "h"),
+                                                                          x1s, P.get(pss, "p"))])
+            c1, act, *y1 = sx_function("cl_core", [css, pss, cms], outs_s)(ce, par, cmd)
+        else:
+            i, x, cnt = C.get(ce, "i"), C.get(ce, "x"), C.get(ce, "counts")
+            t0, h, k0, u_ext, p = (P.get(par, f) for f in ("t0", "h", "k0", "u_ext", "p"))
+            t, k = t0 + i * h, k0 + i
+            chain, _, pulse, _, _ = self._acted()
+            y = self.plant.meas(t, x, p) if self._truth else None  # the truth, for what reads it
+            reads = [r for a in self.actuators for r in self._reads(a, v, y, ce)]
+            reads = ca.vertcat(*reads) if reads else MX(0, 1)
+            if self._never_quiet:  # each actuator behind its own idle test, as the busy tick
+                rest, on, tq, full, xa = self._chain_lazy(k, t, h, ce, par, cmd, reads)
+            else:
+                rest, on, tq, _, full, *xa = chain(k, t, h, ce, par, cmd, reads)
+            held = self._u_ext(ce, u_ext)  # (plus the torque of the actuators on the whole tick)
+            act, u, sat = self._end(t, h, x, rest, held + full if self._full_tick else held, p, self._end_extra(ce))
+            x1 = pulse(ca.sum1(on) > 0, t, x, h, u, p, on, tq)
+            fields = {f: C.get(ce, f) for f in C.names}
+            fields.update({a.name: m for a, m in zip(self.actuators, xa)})
+            fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
+            c1, y1 = C.pack(fields, symbolic=True), []
+        if self.sense or not y1:
+            cs, v1, outs = self._sensed(c1, par, w, C.get(c1, "i"), C.get(c1, "x"))
+        else:
+            cs, v1, outs = c1, y1[0], MX(0, 1)
+        return ca.Function("cl_act", [c, par, cmd, v, w], [c1, cs, v1, outs, act])
