@@ -68,14 +68,12 @@ class FdirLoop:
         self.x = self.block.x0.copy()
         self.x_row = self.x.copy()
         S = self.block.state
-        self._idx = np.array([S.slice(f).start for f in _FIELDS])
-
-    def row_index(self) -> np.ndarray:
-        """Where the row's values lie in the block's memory (:data:`FDIR_COLUMNS`' order)."""
-        return self._idx
+        #: where the row's values lie in the block's memory (:data:`FDIR_COLUMNS`' order), as an
+        #: actuator's ``idx`` (the executors hand both back alike: ``Composition.memories``)
+        self.idx = np.array([S.slice(f).start for f in _FIELDS])
 
     def row(self) -> list[float]:
-        return np.asarray(self.x_row, dtype=float)[self._idx].tolist()
+        return np.asarray(self.x_row, dtype=float)[self.idx].tolist()
 
     def summary(self, comp, xs=None) -> dict:
         """The detections (time, unit, right or wrong against the truth's schedule; the sensors'
