@@ -84,9 +84,9 @@ OFF_FUSED = {
     "sgcmg_singularity": "law: controller 'torque_command' has no symbolic form",
 }
 #: the shipped scenes whose samples the lockstep batch leaves to the per-tick loop (since the batch maps the
-#: composed parts, only a law with no symbolic form, the nonlinear MPC, and [fdir], whose memory the
-#: batch does not hand back yet: docs/design.md, what is left of issue 33)
-LOCKSTEP_PER_TICK = {"eigenaxis_slew_mpc", "iss_cmg_failure_fdir", "iss_cmg_failure_fdir_montecarlo"}
+#: composed parts, only a law with no symbolic form, the nonlinear MPC; [fdir]'s memory is handed back
+#: like an actuator's, ``Composition.memories``)
+LOCKSTEP_PER_TICK = {"eigenaxis_slew_mpc"}
 
 
 def _closed_loop(path) -> bool:
@@ -249,6 +249,23 @@ def test_shipped_scene_flies_alike_on_every_executor(shipped):
         assert_same_rows(a, other)
     for key in ("thruster_firings", "controller_updates"):
         assert sm.get(key) == a.meta["summary"].get(key) == c.meta["summary"].get(key), key
+
+
+def test_fdir_samples_are_their_per_tick_runs_bit_for_bit(shipped):
+    """With ``[fdir]`` (the CMG detector, the mode manager; the scene's CMG fault moved to mid-run)
+    the lockstep batch takes the samples, and each is its own per-tick run bit for bit (the same
+    compiled parts, the detector's memory handed back like an actuator's), the detection included."""
+    name, scene, runs = shipped
+    if getattr(scene, "fdir", None) is None:
+        pytest.skip("no [fdir]")
+    kind, [(_, c), (twin, d)] = runs["lockstep"]
+    assert kind == "batch"
+    a = runs["per_tick"][1][0][1]
+    assert a.meta["summary"]["fdir_cmg_detected"]  # (the fault mid-run: the detector's memory moved)
+    for got, want in ((c, a), (d, simulate(twin, fused=False))):
+        assert np.array_equal(got.data, want.data, equal_nan=True)
+        fdir = [{k: v for k, v in tr.meta["summary"].items() if k.startswith("fdir")} for tr in (got, want)]
+        assert fdir[0] == fdir[1]
 
 
 @pytest.mark.parametrize("executor", ["per_tick", "fused", "lockstep"])

@@ -12,7 +12,7 @@ the executors do not share.
   thruster about body x of a spherical body: ``ΔH_N = F L (t - t_on)`` exactly, its propellant
   ``F t / (Isp g0)``.
 * **What the hardware does**, from the columns: a stuck gimbal's angle does not move until the
-  window ends; a degraded gimbal's rate stays within its limit; after a wheel-speed drop the
+  window ends (and ``max_h`` leaves its held rotor out, as a failed unit's: Wie's sum of the others); a degraded gimbal's rate stays within its limit; after a wheel-speed drop the
   cluster's momentum is Wie's pyramid sum with that rotor at its fraction, written here.
 * **Load errors**: a misspelt kind, unit or parameter, a time off the tick grid: one line.
 """
@@ -29,6 +29,7 @@ from stationbed import simulate
 from stationbed.model.cmg import CmgGeometry
 from stationbed.run.controller import Controller, ControllerParams
 from stationbed.run.lockstep import run_lockstep
+from stationbed.run.metrics import trajectory_metrics
 from stationbed.scene import SceneError, scene_from_dict
 
 PERIOD_S = 0.1  # s, control period and RK4 step
@@ -187,6 +188,20 @@ def pyramid_h(delta, rotor) -> np.ndarray:
     spins = np.array([[-cb * s[0], c[0], sb * s[0]], [-c[1], -cb * s[1], sb * s[1]],
                       [cb * s[2], -c[2], sb * s[2]], [c[3], cb * s[3], sb * s[3]]])
     return H_ROTOR_NMS * (np.asarray(rotor)[:, None] * spins).sum(axis=0)
+
+
+def test_max_h_leaves_a_stuck_unit_out_as_a_failed_one():
+    """While unit 1's gimbal is stuck ([4, 7) s) its rotor's momentum is held, as a failed unit's:
+    ``max_h_Nms`` is the largest |h| of the working units, Wie's sum with rotor 1 left out there
+    (all four before and after); the summary's record of the held momentum gives the same
+    number from the rows again (``trajectory_metrics``, as ``compare`` reads a run)."""
+    f = CMG_FAULTS["gimbal_stuck"]
+    tr = run(box([f]), "fused")
+    g = tr.data[:, [tr.columns.index(f"gimbal_{i}") for i in range(1, 5)]]
+    working = [pyramid_h(gi, [0.0 if T_FAULT_S <= t < f["until"] else 1.0, 1.0, 1.0, 1.0]) for t, gi in zip(tr.t, g)]
+    sm = tr.meta["summary"]
+    assert sm["max_h_Nms"] == pytest.approx(max(np.linalg.norm(w) for w in working), rel=0, abs=1e-9 * H_ROTOR_NMS)
+    assert trajectory_metrics(tr)["max_h_Nms"] == sm["max_h_Nms"]
 
 
 def test_wheel_speed_drop_scales_that_rotor():

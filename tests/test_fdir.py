@@ -15,7 +15,12 @@ Truths (none made by the block's own code):
   view (``cmg_excluded``) and the mode stay as they were;
 * closed loop (scenarios/iss_cmg_failure_fdir.toml, 120 s): no alarm in nominal flight, and a
   CMG failure at t declared at t + (N - 1) h (the rotor's momentum shows in the first tick),
-  the failed unit blamed and taken out of the steering law.
+  the failed unit blamed and taken out of the steering law; a second failure after the first
+  is isolated declared the same way (the test re-armed on the units left, the first never
+  blamed again);
+* the working units' capacity flight software knows after a declaration: the DGCMG's
+  ``n_working x h_rotor`` written by hand, what the mode manager's and the thrusters' momentum
+  thresholds divide by (a momentum under a threshold of four units, over it of three).
 """
 
 from __future__ import annotations
@@ -25,10 +30,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 from scipy.stats import binom, chi2
 
 from stationbed import simulate
 from stationbed.loop.fdir import FdirSpec, false_alarms_per_hour, fdir_block
+from stationbed.loop.thrusters import ThrusterCluster
 from stationbed.output.rerun.events import Events
 from stationbed.scene import load_scene
 from stationbed.scene.fdir import Fdir, ModeCommand
@@ -43,8 +50,14 @@ RESIDUAL_ROUNDOFF = 1e-9
 SCENE = Path(__file__).resolve().parents[1] / "scenarios" / "iss_cmg_failure_fdir.toml"
 
 
-def _spec(modes=(), **kw):
-    return FdirSpec(Fdir(**kw), [ModeCommand(**m) for m in modes], N_UNITS, GPU, CAPACITY_NMS)
+def _spec(modes=(), capacity_of=None, **kw):
+    more = {} if capacity_of is None else {"capacity_of": capacity_of}
+    return FdirSpec(Fdir(**kw), [ModeCommand(**m) for m in modes], N_UNITS, GPU, CAPACITY_NMS, **more)
+
+
+def _working_capacity(declared):
+    """A cluster of N_UNITS equal units: each unit a quarter of the capacity (as a DGCMG's n h_rotor)."""
+    return CAPACITY_NMS * (N_UNITS - len(declared)) / N_UNITS
 
 
 def _fly(spec, r_B, gimbal=None, h0_B=(100.0, 0.0, 0.0)):
@@ -114,6 +127,69 @@ def test_isolation_blames_the_unit_whose_gimbals_stopped():
     assert S.get(xs, "t_cmg").ravel()[-1] == pytest.approx(17 * H_S, abs=1e-12)
 
 
+def test_a_second_failure_after_an_isolation_is_declared_and_the_first_not_again():
+    """Unit 3 stops at tick 15 (residual until tick 24: declared at 17), the isolation works (the
+    residual back to 0), then unit 4 stops at tick 40 (residual from 40: declared at 42). Unit 3's
+    gimbals stay stopped: it ties with unit 4 as the least moved, and the lower number would win
+    a tie, so only the rule "a declared unit is never blamed again" blames unit 4."""
+    n = 60
+    g = np.outer(np.arange(n), 1e-3 * np.arange(1, N_UNITS * GPU + 1))
+    g[15:, 4:6] = g[14, 4:6]
+    g[40:, 6:8] = g[39, 6:8]
+    r = np.zeros((n, 3))
+    r[15:25, 2] = 10.0  # N m
+    r[40:, 0] = 10.0  # N m
+    b, xs, _ = _fly(_spec(cmg_persistence=3), r, gimbal=g)
+    S = b.state
+    assert S.get(xs, "cmg_excluded")[-1].tolist() == [0.0, 0.0, 1.0, 1.0]
+    assert_allclose(S.get(xs, "t_unit")[-1], [-1.0, -1.0, 17 * H_S, 42 * H_S], rtol=0, atol=1e-12)
+    assert S.get(xs, "cmg_unit").ravel()[-1] == 3 and S.get(xs, "t_cmg").ravel()[-1] == pytest.approx(17 * H_S, abs=1e-12)
+
+
+def test_a_residual_that_stays_after_the_isolation_blames_no_more_units():
+    """The isolation did not bring the residual back under the gate: the test stays waiting (a
+    residual that never comes back is not blamed on the working units one after the other)."""
+    n = 80
+    g = np.outer(np.arange(n), 1e-3 * np.arange(1, N_UNITS * GPU + 1))
+    g[15:, 4:6] = g[14, 4:6]
+    r = np.zeros((n, 3))
+    r[15:, 2] = 10.0  # N m, for ever
+    b, xs, _ = _fly(_spec(cmg_persistence=3), r, gimbal=g)
+    assert b.state.get(xs, "cmg_excluded")[-1].tolist() == [0.0, 0.0, 1.0, 0.0]
+
+
+def test_the_mode_manager_climbs_on_the_working_units_capacity():
+    """|h| = 0.5 of the four units' capacity, under assist_at = 0.6 of it; unit 3 declared at tick
+    17 (on_cmg_fault = hold: the base mode stays hold): from the next tick the threshold is 0.6
+    of the three units' capacity (0.75 of it), which 0.5 exceeds (0.5 / 0.75 = 0.67): assist."""
+    n = 30
+    g = np.outer(np.arange(n), 1e-3 * np.arange(1, N_UNITS * GPU + 1))
+    g[15:, 4:6] = g[14, 4:6]
+    r = np.zeros((n, 3))
+    r[15:, 2] = 10.0  # N m (|h| moves by 1 N m s per tick: 0.01 % of it)
+    spec = _spec(cmg_persistence=3, initial_mode="hold", on_cmg_fault="hold", assist_at=0.6,
+                 capacity_of=_working_capacity)
+    b, xs, _ = _fly(spec, r, gimbal=g, h0_B=(0.5 * CAPACITY_NMS, 0.0, 0.0))
+    S = b.state
+    assert S.get(xs, "fdir_mode").ravel().tolist() == [0.0] * 18 + [1.0] * 12
+    assert S.get(xs, "cmg_capacity").ravel()[-1] == 0.75 * CAPACITY_NMS
+
+
+def test_the_thrusters_dump_on_the_capacity_the_mode_manager_knows():
+    """In assist, |h| = 0.17 of the four DGCMGs' capacity (4 h_rotor): under assist_on = 0.2 of
+    it, over 0.2 of the three units' (3 h_rotor) the mode manager knows after a declaration."""
+    s = load_scene(SCENE)
+    h4, h3 = 4 * s.cmg.h_rotor, 3 * s.cmg.h_rotor  # N m s: the DGCMG cluster's n h_rotor
+    assert s.thrusters.assist_on == 0.2
+    c = ThrusterCluster(s, s, h4)
+    dumping = []
+    for cap in (h4, h3):
+        r = c.reads.pack(h_B=[0.17 * h4, 0.0, 0.0], fdir_mode=1.0, cmg_capacity=cap)
+        x1 = c.command(0.0, H_S, c.x0, r, np.zeros(3))[0]
+        dumping.append(c.state.get(x1, "dumping")[0])
+    assert dumping == [0.0, 1.0]
+
+
 def test_mode_sequence_by_hand():
     """hold; |h| crosses assist_at x capacity at tick 5 -> assist; a command thruster_only over
     [1.0, 1.5) s (ticks 10-14) overrides; a detection at tick 20 (residual from tick 18, N = 3)
@@ -168,6 +244,19 @@ def test_closed_loop_cmg_failure_declared_after_the_persistence():
     assert sm["fdir_mode_changes"] == 1
     assert sm["fdir_mode_s"]["hold"] == pytest.approx(61.9, abs=1e-6)  # s: ticks 0..618 in hold
     assert sm["fdir_mode_s"]["hold"] + sm["fdir_mode_s"]["assist"] == pytest.approx(120.0, abs=1e-6)
+
+
+def test_closed_loop_second_cmg_failure_declared_after_the_first_isolated():
+    f = load_scene(SCENE).fault[0].model_dump(exclude_unset=True)
+    tr = _closed(fault=[dict(f, t=60.0), dict(f, name="cmg4", unit=4, t=90.0)])
+    sm = tr.meta["summary"]
+    n_persist = load_scene(SCENE).fdir.cmg_persistence
+    assert sm["fdir_cmg_excluded"] == [2, 4]
+    assert [d["unit"] for d in sm["fdir_cmg_declared"]] == [2, 4]
+    assert_allclose([d["t"] for d in sm["fdir_cmg_declared"]], [60.0 + (n_persist - 1) * 0.1, 90.0 + (n_persist - 1) * 0.1],
+                    rtol=0, atol=1e-9)
+    assert sm["fdir_cmg_unit"] == 2 and sm["fdir_cmg_t_s"] == pytest.approx(61.9, abs=1e-9)  # the first
+    assert sm["fdir_cmg_capacity_Nms"] == 2 * load_scene(SCENE).cmg.h_rotor  # N m s: two DGCMGs left
 
 
 def test_closed_loop_detection_is_an_event_of_the_recording():

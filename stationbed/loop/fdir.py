@@ -25,13 +25,22 @@ reads (``h_B``, ``omega_BN_B``, ``gimbal``: the law's view, the estimate's rate 
    unit that delivers no torque is one whose gimbals do not answer their rates: its
    tachometers read zero). With ``isolate``, from the next tick it is out of the steering law
    (the memory field ``cmg_excluded``, which the chain's end reads by name: run/blocks.py).
-   One CMG fault per run is declared (the flag latches).
+   With ``isolate``, a declaration re-arms the test on the units left: the count waits (at -1)
+   for a tested tick under the gate (the isolation worked: a residual that never comes back is
+   not blamed on more units), then counts again, and a unit already declared is never blamed
+   again (``t_unit``, each unit's declaration time), so a second failure is declared as the
+   first was. Without ``isolate`` the first declaration latches (the steering law keeps asking
+   the dead unit, the residual stays over the gate). ``t_cmg`` and ``cmg_unit`` keep the first.
 3. **Mode manager.** ``hold`` (CMGs alone, thrusters off) < ``assist`` (the thrusters' assist
    logic as ``[thrusters]`` sets it) < ``thruster_only`` < ``drift`` (nothing commanded). The
    base mode starts at ``initial_mode``, rises to ``on_cmg_fault`` at a detection and from
    ``hold`` to ``assist`` when ``|h| >= assist_at`` x capacity; a ``[[mode]]`` command
    overrides it over its window (the last listed wins). The mode is the memory field
    ``fdir_mode`` (the thrusters read it by name); in ``drift`` the CMGs are asked nothing. The
+   capacity is the working units' as flight software knows them, the memory field
+   ``cmg_capacity`` (the thrusters' dump and hand-over thresholds read it by name too): the
+   knowledge's capacity with the units it knows failed (``[cmg] failed``) and those declared
+   here left out, from a table by the set declared (``cap_table``, ``2^n_units`` numbers). The
    memory counts the time in each mode (``mode_s``) and the changes (``mode_changes``).
 
 Every number is a parameter (dispersible); the windows are gated by the tick's time with half a
@@ -86,7 +95,10 @@ class FdirSpec:
     """The numbers of one scene's ``[fdir]`` and ``[[mode]]`` tables, as the block's parameters."""
 
     def __init__(self, fdir, modes, n_units: int, gimbals_per_unit: int, capacity_Nms: float,
-                 tau_max_Nm: float = NEVER_S, suite=None):
+                 tau_max_Nm: float = NEVER_S, suite=None, capacity_of=None):
+        """``capacity_of(declared)``: the working units' capacity flight software knows once the
+        units ``declared`` (a tuple of 1-based numbers) are out [N m s]; None: ``capacity_Nms``
+        whatever is declared (the block alone, no cluster to ask)."""
         self.n_units, self.gpu = int(n_units), int(gimbals_per_unit)
         self.n_cmd = len(modes)
         cmds = [MODE_CMD.pack(window=[m.t, NEVER_S if m.until is None else m.until], mode=MODE_NUMBERS[m.mode])
@@ -94,13 +106,30 @@ class FdirSpec:
         self.values = dict(sigma=fdir.cmg_sigma_Nm, gamma=gate(fdir.cmg_alpha, 3), persist=fdir.cmg_persistence,
                            isolate=float(fdir.isolate), on_fault=MODE_NUMBERS[fdir.on_cmg_fault],
                            assist_at=fdir.assist_at if np.isfinite(fdir.assist_at) else NEVER_S,
-                           capacity=capacity_Nms, tau_max=tau_max_Nm, cmds=np.array(cmds, float).T)
+                           tau_max=tau_max_Nm, cmds=np.array(cmds, float).T,
+                           cap_table=[capacity_Nms if capacity_of is None or not m else capacity_of(_units(m))
+                                      for m in range(2**self.n_units)])
         self.initial_mode = MODE_NUMBERS[fdir.initial_mode]
         self.alpha, self.n = fdir.cmg_alpha, fdir.cmg_persistence
         #: the flight's sensor suite (loop/suite.py) whose gyro detections inhibit the CMG test
         #: (:func:`rate_suspect`), or None (no estimator, no gyro detector: nothing to watch)
         self.suite = suite if suite is not None and suite.mekf is not None and suite.spare_gyro() is not None else None
         self.values["settle"] = fdir.cmg_rate_settle_s
+
+
+def _units(mask: int) -> tuple:
+    """The 1-based units of a declared set's bit mask (bit i: unit i + 1)."""
+    return tuple(i + 1 for i in range(mask.bit_length()) if mask >> i & 1)
+
+
+def known_capacity(table, declared):
+    """The entry of ``table`` (one capacity per declared set, by bit mask) for the 0/1 flags
+    ``declared`` (casadi): exactly the table's number."""
+    code = sum((declared[i] * 2.0**i for i in range(1, declared.numel())), declared[0])
+    cap = table[0]
+    for m in range(1, table.numel()):
+        cap = ca.if_else(code == m, table[m], cap)
+    return cap
 
 
 def rate_suspect(suite, xs, t, settle):
@@ -127,9 +156,10 @@ def rate_suspect(suite, xs, t, settle):
 
 def _layouts(ng: int, n_units: int, n_cmd: int, n_xs: int = 0):
     X = Layout(tau_prev=3, h_prev=3, w_prev=3, g_prev=ng, have=1, count=1, nis=1, cmg_fault=1, t_cmg=1, cmg_unit=1,
-               cmg_excluded=n_units, base_mode=1, fdir_mode=1, mode_s=len(MODE_NUMBERS), mode_changes=1)
-    P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, capacity=1, tau_max=1,
-               cmds=(MODE_CMD.size, max(n_cmd, 1)), settle=1)
+               cmg_excluded=n_units, base_mode=1, fdir_mode=1, mode_s=len(MODE_NUMBERS), mode_changes=1,
+               t_unit=n_units, cmg_capacity=1)
+    P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, tau_max=1,
+               cmds=(MODE_CMD.size, max(n_cmd, 1)), settle=1, cap_table=2**n_units)
     # xs: the suite's memory (the sensing block's, read by name: what it was after the last
     # tick); tau_B last (the composer appends the chain's request to the fields it reads)
     U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, **({"xs": n_xs} if n_xs else {}), tau_B=3)
@@ -153,20 +183,31 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     r = residual_cmg(xs["tau_prev"], xs["h_prev"], xs["w_prev"], h_B, w_B, h)
     nis = xs["have"] * ca.dot(r, r) / ps["sigma"] ** 2
     tested = ca.norm_2(xs["tau_prev"]) <= ps["tau_max"]
-    count = ca.if_else(tested, persist(xs["count"], nis > ps["gamma"]), xs["count"])
+    over = nis > ps["gamma"]
+    # after a declaration the count waits at -1 for a tick under the gate (the isolation worked), then counts again
+    count = ca.if_else(tested, ca.if_else(xs["count"] < 0, ca.if_else(over, -1.0, 0.0), persist(xs["count"], over)),
+                       xs["count"])
     if n_xs:  # the rate suspect: the test off and its count restarted (module docstring, item 1)
-        count = ca.if_else(rate_suspect(spec.suite, us["xs"], t, ps["settle"]), 0.0, count)
-    new = ca.logic_and(count >= ps["persist"], xs["cmg_fault"] < 0.5)
-    # 2. isolation: the unit whose gimbals moved least over the last tick (1-based)
-    moved = [ca.norm_2(g[i * gpu:(i + 1) * gpu] - xs["g_prev"][i * gpu:(i + 1) * gpu]) for i in range(n_units)]
+        count = ca.if_else(rate_suspect(spec.suite, us["xs"], t, ps["settle"]), ca.fmin(count, 0.0), count)
+    # armed: before the first declaration; after it, with isolate, while a unit is left undeclared
+    declared = [xs["t_unit"][i] >= 0.0 for i in range(n_units)]
+    left = sum((ca.logic_not(d) for d in declared[1:]), ca.logic_not(declared[0]))
+    armed = ca.logic_or(xs["cmg_fault"] < 0.5, ca.logic_and(ps["isolate"] > 0.5, left > 0.5))
+    new = ca.logic_and(count >= ps["persist"], armed)
+    count = ca.if_else(new, -1.0, count)  # declared: the count waits for the residual back under the gate
+    # 2. isolation: the unit whose gimbals moved least over the last tick (1-based), of those not declared
+    moved = [ca.if_else(declared[i], ca.inf,
+                        ca.norm_2(g[i * gpu:(i + 1) * gpu] - xs["g_prev"][i * gpu:(i + 1) * gpu])) for i in range(n_units)]
     unit, least = ca.SX(1.0), moved[0]
     for i in range(1, n_units):
         unit = ca.if_else(moved[i] < least, float(i + 1), unit)
         least = ca.fmin(least, moved[i])
     excl = ca.vertcat(*[ca.fmax(xs["cmg_excluded"][i], new * ps["isolate"] * (unit == i + 1)) for i in range(n_units)])
-    # 3. the mode manager
+    first = ca.logic_and(new, xs["cmg_fault"] < 0.5)  # t_cmg, cmg_unit: the first declaration's
+    t_unit = ca.vertcat(*[ca.if_else(ca.logic_and(new, unit == i + 1), t, xs["t_unit"][i]) for i in range(n_units)])
+    # 3. the mode manager (on the capacity flight software knew after the last tick)
     base = ca.fmax(xs["base_mode"], new * ps["on_fault"])
-    climb = ca.logic_and(base < 0.5, ca.norm_2(h_B) >= ps["assist_at"] * ps["capacity"])
+    climb = ca.logic_and(base < 0.5, ca.norm_2(h_B) >= ps["assist_at"] * xs["cmg_capacity"])
     base = ca.if_else(climb, float(MODE_NUMBERS["assist"]), base)
     mode = base
     for j in range(max(spec.n_cmd, 1)):
@@ -174,16 +215,18 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
         mode = ca.if_else(in_window(t, MODE_CMD.get(c, "window"), h), MODE_CMD.get(c, "mode"), mode)
     rest = ca.if_else(mode > 2.5, ca.SX.zeros(3), tau)
     x1 = X.pack(tau_prev=rest, h_prev=h_B, w_prev=w_B, g_prev=g, have=1.0, count=count, nis=nis,
-                cmg_fault=ca.fmax(xs["cmg_fault"], new), t_cmg=ca.if_else(new, t, xs["t_cmg"]),
-                cmg_unit=ca.if_else(new, unit, xs["cmg_unit"]), cmg_excluded=excl, base_mode=base, fdir_mode=mode,
+                cmg_fault=ca.fmax(xs["cmg_fault"], new), t_cmg=ca.if_else(first, t, xs["t_cmg"]),
+                cmg_unit=ca.if_else(first, unit, xs["cmg_unit"]),
+                cmg_excluded=excl, base_mode=base, fdir_mode=mode,
                 mode_s=ca.vertcat(*[xs["mode_s"][j] + h * (mode == j) for j in range(len(MODE_NUMBERS))]),
-                mode_changes=xs["mode_changes"] + (mode != xs["fdir_mode"]), symbolic=True)
+                mode_changes=xs["mode_changes"] + (mode != xs["fdir_mode"]), t_unit=t_unit,
+                cmg_capacity=known_capacity(ps["cap_table"], ca.vertcat(*[t_unit[i] >= 0.0 for i in range(n_units)])), symbolic=True)
     y = Y.pack(tau_rest_B=rest, on_s=ca.SX(0, 1), torque_B=ca.SX(0, 1), out=ca.vertcat(mode, nis), symbolic=True)
     step = ca.Function(f"{name}_step", [k, t, h, x, u, ca.SX.sym("w", 0), p], [x1, y])
     x0 = X.pack(tau_prev=np.zeros(3), h_prev=np.zeros(3), w_prev=np.zeros(3), g_prev=np.zeros(ng), have=0.0,
                 count=0.0, nis=0.0, cmg_fault=0.0, t_cmg=NOT_YET, cmg_unit=0.0, cmg_excluded=np.zeros(n_units),
                 base_mode=float(spec.initial_mode), fdir_mode=float(spec.initial_mode), mode_s=np.zeros(len(MODE_NUMBERS)),
-                mode_changes=0.0)
+                mode_changes=0.0, t_unit=np.full(n_units, NOT_YET), cmg_capacity=spec.values["cap_table"][0])
     return Block(name, "actuator", step, X, P, Layout(), U, Y, key=("fdir", ng, n_units, spec.n_cmd,
                                                                       None if spec.suite is None else spec.suite.STATE.size), x0=x0,
                  p0=P.pack(spec.values))

@@ -265,7 +265,7 @@ class ThrusterCluster(Actuator):
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
                         levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n)
         outputs = Layout(request_B=3, force_N=n)
-        return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1} if self.commanded else {}))
+        return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1, "cmg_capacity": 1} if self.commanded else {}))
 
     def _n_channels(self) -> int:
         return self.n
@@ -289,7 +289,8 @@ class ThrusterCluster(Actuator):
         """(mode, dumping, inhibited, L_dump, request): steps 1-2 of the module docstring."""
         h_B = r["h_B"] - p["h_held"]  # the working units' momentum, as flight software knows them
         hn = ca.norm_2(h_B)
-        f = hn / p["capacity"]
+        cap = self._capacity(r, p)
+        f = hn / cap
         a_on, d_stop, h_min_f = p["assist"][0], p["assist"][1], p["assist"][2]
         mode_opt = self._mode_opt(r, p)
         m_prev = x["mode"]
@@ -297,7 +298,7 @@ class ThrusterCluster(Actuator):
         mode = ca.if_else(mode_opt > 1.5, 0.0, ca.if_else(mode_opt > 0.5, 1.0, ca.if_else(hand, 1.0, 0.0)))
         dumping = ca.if_else(x["dumping"] > 0.5, f > d_stop, f >= a_on)
         dumping = ca.if_else(mode_opt > 1.5, 0.0, ca.if_else(dumping, 1.0, 0.0))
-        h_min = h_min_f * p["capacity"]
+        h_min = h_min_f * cap
         excess = ca.fmax(hn - h_min, 0.0)
         dH = -excess / ca.fmax(hn, 1e-300) * h_B
         L = dH / p["dump"][0]
@@ -309,6 +310,11 @@ class ThrusterCluster(Actuator):
             inh = ca.fmax(inh, ca.if_else(ca.logic_and(t >= w[2 * k], t < w[2 * k + 1]), 1.0, 0.0))
         req = (1.0 - inh) * (mode * tau + dumping * L_dump)
         return mode, dumping, inh, L_dump, req
+
+    def _capacity(self, r, p):
+        """The working units' capacity flight software knows: the table's; with the mode manager
+        (``[fdir]``), its memory ``cmg_capacity`` (the same number until a unit is declared)."""
+        return r["cmg_capacity"] if self.commanded else p["capacity"]
 
     def _mode_opt(self, r, p):
         """The mode option of the tick (``MODES``' numbers): the table's; with the mode manager
@@ -359,7 +365,7 @@ class ThrusterCluster(Actuator):
         below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
         exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
         skip it (the fused loop does, behind a ``Function.if_else``)."""
-        f = ca.norm_2(r["h_B"] - p["h_held"]) / p["capacity"]
+        f = ca.norm_2(r["h_B"] - p["h_held"]) / self._capacity(r, p)
         m = self._mode_opt(r, p)
         quiet = ca.logic_and(m < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
         quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))

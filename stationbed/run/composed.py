@@ -68,7 +68,6 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     law = cm.law_block.name
     fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
     sense = fl.name if fl is not None else None
-    fd = comp.fdir  # [fdir]: the chain's last block, its memory handed back by its name
     par = chunk.args[1]
     par[:] = 0.0
     par[P.slice("h")], par[P.slice("p")], par[P.slice(law)] = period, comp.p, cp
@@ -86,10 +85,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     fm = res.flight
     if sense is not None:
         c0[C.slice(sense)] = X.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
-    for a in comp.actuators:
+    for a in comp.memories:  # the chain's blocks' memory (the actuators, [fdir]), by each block's name
         c0[C.slice(a.name)] = a.x
-    if fd is not None:
-        c0[C.slice(fd.block.name)] = fd.x
     rc, rp, rw = row.args
     out = comp.end.outputs
     n_act = out.size if comp.has_cluster else 0
@@ -159,10 +156,8 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             if n_act:
                 lim, sat = int(a[i_lim] > 0.5), int(a[i_sat] > 0.5)
                 u_cmg = a[i_u]
-            for a in comp.actuators:
+            for a in comp.memories:
                 a.x_row = c0[C.slice(a.name)].copy()
-            if fd is not None:
-                fd.x_row = c0[C.slice(fd.block.name)].copy()
             xs = ys = None
             if sense is not None:
                 xs, ys = X.get(R.get(r, sense), "xs").copy(), fl.outputs.get(R.get(r, f"{sense}_y"), "ys").copy()
@@ -183,8 +178,6 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 try_at.add(j + 1)
     finally:
         law_state.hand_back(ctrl, C.get(c0, law) if s_end is None else s_end)
-        for a in comp.actuators:
+        for a in comp.memories:
             a.x = a.x_row = c0[C.slice(a.name)].copy()
-        if fd is not None:
-            fd.x = c0[C.slice(fd.block.name)].copy()
         finish_chunks(res, x, ticks)

@@ -142,7 +142,6 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
     O = Layout(c=C.size, row=RL.size, counts=2)
     flight, fm = comp.flight, res.flight
     sense = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's block
-    fd = comp.fdir
     period, duration = comp.period, comp.duration
     out_l = comp.end.outputs
     has_cmg = comp.has_cluster
@@ -187,18 +186,14 @@ def run_rows(comp, res, cm, calls: dict, row_ks, K: int, c0: np.ndarray, par: np
                     err, s3, nees = rep.res[0].reshape(R, 3), rep.res[1].reshape(R, 6), rep.res[2]
                     held += [np.degrees(err[:m]), np.degrees(s3[:m, :3]), fl_ys[:m, sl["bias"]], nees[:m, None]]
                 held += [fl_ys[:m, sl["valid"]]]
-            for a in comp.actuators:  # the chain's columns from their memory before each row's tick
+            for a in comp.memories:  # the chain's columns from their memory before each row's tick
                 held += [C.get(cs, a.name)[:m][:, a.idx]]
-            if fd is not None:  # the fault detection's columns from its memory before each row's tick
-                held += [C.get(cs, fd.block.name)[:m][:, fd.row_index()]]
             held = np.hstack(held)
             if j == 0:
                 if sense is not None:
                     fm.xs, fm.ys = fl_xs[0], fl_ys[0]
-                for a in comp.actuators:
+                for a in comp.memories:
                     a.x_row = C.get(cs[0], a.name)
-                if fd is not None:
-                    fd.x_row = C.get(cs[0], fd.block.name)
                 res.x = xs_[0]
                 if not _held_matches(res, held[0], act[0, cmg[0]] if has_cmg else None, cmd[0], q_ref[0], int(flag[0])):
                     if noise0 is not None:

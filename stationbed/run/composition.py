@@ -139,6 +139,14 @@ class Composition:
         return tuple(a.cluster for a in self.actuators) + (self.end,)
 
     @cached_property
+    def memories(self) -> tuple:
+        """The chain's blocks whose memory the executors hand back by the block's name:
+        :attr:`actuators` in chain order, then ``[fdir]`` (the chain's last block). Each has
+        ``name``, ``x`` (after the last tick), ``x_row`` (before the current one, what a row
+        reports), ``idx`` (the row's values in its memory) and ``row()``."""
+        return (*self.actuators, *(() if self.fdir is None else (self.fdir,)))
+
+    @cached_property
     def u_cmg(self) -> slice:
         """The CMG cluster's held input in ``u`` (input layout)."""
         return self.input_layout.slice("u_cmg")
@@ -220,10 +228,8 @@ class RunState:
         if comp.flight is not None:
             q = np.asarray(self.x[self._q], dtype=float)
             vals += comp.flight.row(self.flight.xs, self.flight.ys, q / np.linalg.norm(q))
-        for a in comp.actuators:
+        for a in comp.memories:
             vals += a.row()
-        if comp.fdir is not None:
-            vals += comp.fdir.row()
         return vals, q_ref
 
     def row(self, t: float, x, flag: int, *, u_cmg=None, cmd=None, q_ref=None, xs=None, ys=None) -> None:

@@ -32,7 +32,8 @@ from typing import Callable
 from ..scene.faults import FAULT_KINDS, fault_tick
 from .schedule import SOURCES, Step
 
-__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "SPIN_DOWN_STEPS_PER_TAU", "SPIN_DOWN_END_TAU"]
+__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "held_units", "SPIN_DOWN_STEPS_PER_TAU",
+           "SPIN_DOWN_END_TAU"]
 
 #: a spinning-down rotor's staircase: steps per time constant (the rotor's momentum is exact at
 #: each step; between steps it is held, so the body gets its momentum in 1/20 τ impulses)
@@ -53,6 +54,26 @@ def register_fault_effect(kind: str):
         FAULT_EFFECTS[kind] = f
         return f
     return deco
+
+
+def held_units(scene, cmg, columns) -> list:
+    """The units whose gimbals a ``gimbal_stuck`` fault of the truth holds, for the metrics
+    (:class:`~.metrics.RunMetrics` ``held_units``): per fault ``(t, until, momentum(row))``, the
+    unit's rotor momentum (B [N m s], the nominal rotor's: the fault leaves it spinning) at the
+    row's gimbal angles, which from ``t`` are the angles it is held at. Like a unit failed from
+    the start (``[cmg] failed``, ``held_momentum_B``), its momentum is then not the working
+    units': ``max_h`` leaves it out. (``cmg_failed`` stops its rotor: nothing is left to hold.)"""
+    stuck = [f for f in getattr(scene, "fault", None) or () if f.kind == "gimbal_stuck" and f.enabled]
+    if cmg is None or not stuck or not cmg.geometry.gimballed:
+        return []
+    col = {c: i for i, c in enumerate(columns)}
+    gi = [col[g] for g in cmg.gimbal_names]
+    geo, cfg = cmg.geometry, scene.cmg
+
+    def momentum(unit):
+        return lambda row: geo.unit_momenta_B(cfg, row[gi])[unit - 1]
+
+    return [(f.t, math.inf if f.until is None else f.until, momentum(f.unit)) for f in stuck]
 
 
 def _cmg(comp, unit: int, **values) -> dict:

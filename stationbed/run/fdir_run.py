@@ -53,8 +53,13 @@ def fdir_for(scene, model, plant) -> "FdirLoop | None":
     # the flight's suite (the same layout as run/closed_loop.py's Flight builds): its gyro
     # detectors inhibit the CMG test (loop/fdir.py rate_suspect)
     suite = Suite(scene, scene.controller.period) if scene.sensor and getattr(scene, "estimator", None) else None
+    known = plant.scene.cmg  # the working units' capacity flight software knows, some units declared out
+
+    def capacity_of(declared):
+        return geo.capacity(known.model_copy(update={"failed": sorted(set(known.failed) | set(declared))}))
+
     return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity, tau_max,
-                                    suite=suite))
+                                    suite=suite, capacity_of=capacity_of))
 
 
 class FdirLoop:
@@ -68,14 +73,12 @@ class FdirLoop:
         self.x = self.block.x0.copy()
         self.x_row = self.x.copy()
         S = self.block.state
-        self._idx = np.array([S.slice(f).start for f in _FIELDS])
-
-    def row_index(self) -> np.ndarray:
-        """Where the row's values lie in the block's memory (:data:`FDIR_COLUMNS`' order)."""
-        return self._idx
+        #: where the row's values lie in the block's memory (:data:`FDIR_COLUMNS`' order), as an
+        #: actuator's ``idx`` (the executors hand both back alike: ``Composition.memories``)
+        self.idx = np.array([S.slice(f).start for f in _FIELDS])
 
     def row(self) -> list[float]:
-        return np.asarray(self.x_row, dtype=float)[self._idx].tolist()
+        return np.asarray(self.x_row, dtype=float)[self.idx].tolist()
 
     def summary(self, comp, xs=None) -> dict:
         """The detections (time, unit, right or wrong against the truth's schedule; the sensors'
@@ -90,6 +93,10 @@ class FdirLoop:
                                     int(S.get(x, "cmg_unit")[0]))
         out.update(truth)
         out["fdir_cmg_excluded"] = [i + 1 for i, v in enumerate(S.get(x, "cmg_excluded")) if v > 0.5]
+        # every CMG declaration (a second failure after the first is isolated: loop/fdir.py item 2), in time order
+        out["fdir_cmg_declared"] = [{"unit": i + 1, "t": float(v)} for v, i in
+                                    sorted((v, i) for i, v in enumerate(S.get(x, "t_unit")) if v >= 0.0)]
+        out["fdir_cmg_capacity_Nms"] = float(S.get(x, "cmg_capacity")[0])  # the working units' as flight software knows
         if xs is not None and comp.flight is not None and comp.flight.mekf is not None:
             out.update(sensor_detections(comp, xs))
         out["fdir_mode_s"] = {k: float(S.get(x, "mode_s")[v]) for k, v in MODE_NUMBERS.items()}

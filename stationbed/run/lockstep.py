@@ -58,9 +58,8 @@ def vectorised(ctrl) -> bool:
 def _tick_ok(comp) -> bool:
     # a run the per-tick loop flies on the composed parts (blocks.parts_ok: one fixed step per
     # tick, every discontinuity on the tick grid, every actuator symbolic) runs them mapped; a
-    # fault detected mid-run (run/detection.py) runs per tick, and so does [fdir] (its memory is
-    # handed back by the fused loop and the per-tick parts, not yet by the batch)
-    return comp.replan is None and comp.fdir is None and parts_ok(comp) is None
+    # fault detected mid-run (run/detection.py) runs per tick
+    return comp.replan is None and parts_ok(comp) is None
 
 
 def executor(loop) -> str:
@@ -347,7 +346,7 @@ class _Lockstep:
                 fm = s.loop.res.flight
                 self.C[i, C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B,
                                                              omega_prev=fm.omega_prev, xs=fm.xs)
-        chain = [C.slice(a.name) for a in lp.actuators]  # each actuator's memory, handed back by its block's name
+        chain = [C.slice(a.name) for a in lp.memories]  # the chain's blocks' memory, handed back by each block's name
         cx = C.slice("x")
         i_fin = cx.start + lp.state_layout.slice(lp.system.formulation.rate_field).start  # the per-tick loop's finite probe
         # each sample's pieces (its own edges on the grid), then the final tick
@@ -466,7 +465,7 @@ class _Lockstep:
                         if vec:
                             res.comp.ctrl.q_ref_BN = None if q_ref is None else np.array(q_ref[i], dtype=float)
                         res.x[:] = X[i]
-                        for a, m in zip(lo.comp.actuators, mem):
+                        for a, m in zip(lo.comp.memories, mem):
                             a.x_row = m[i]
                         if xs is not None:
                             res.flight.xs, res.flight.ys = xs[i], ys[i]
@@ -512,7 +511,7 @@ class _Lockstep:
                 res.count(lim_n[i], sat_n[i])
                 lo.comp.integ.count_steps(res.ticks)
                 res.x = self.C[i, cx].copy()
-                for a, sl in zip(lo.comp.actuators, chain):
+                for a, sl in zip(lo.comp.memories, chain):
                     a.x = self.C[i, sl].copy()
                 if fl is not None:
                     m = fl.state.split(self.C[i, C.slice(fl.name)])

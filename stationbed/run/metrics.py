@@ -58,6 +58,9 @@ __all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics", "CONVERGED_F
 #: by an order of magnitude below what the filter started out allowing (for the ISS-like set of
 #: iss_lvlh_hold_estimated: 0.030 deg, against a settled error of ~4e-4 deg RMS and 1.5e-3 deg at most)
 CONVERGED_FRACTION = 0.1
+#: a row at a scheduled fault's time belongs to its window: the rows' times are ticks times the
+#: period, the fault's on the same grid (round-off ~1e-12 s; a tick is at least a millisecond)
+HELD_T_TOL_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -272,6 +275,12 @@ class RunMetrics:
         The failed units' held rotor momentum, B components [N m s]
         (:func:`~stationbed.model.cmg.held_momentum_B`): ``max_h_Nms`` is that of the working
         units, ``|h - h_held_B|`` (None: no failed unit).
+    held_units : list of (t_s, until_s, h_B), optional
+        Units whose gimbals a scheduled fault holds over ``[t_s, until_s)`` (``gimbal_stuck``):
+        their rotor momentum ``h_B`` (B [N m s], shape (3,)) is held there as a failed unit's
+        and left out of ``max_h_Nms`` the same way; ``h_B`` a callable instead: it gives the
+        momentum from the first row in the window (the unit's at the angles it is held at, as
+        every later row has them), then kept (:attr:`held_units`, what the summary records).
 
     Attributes
     ----------
@@ -284,12 +293,14 @@ class RunMetrics:
     """
 
     def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None,
-                 h_held_B=None, orbit_period_s: float | None = None):
+                 h_held_B=None, orbit_period_s: float | None = None, held_units=None):
         col = {c: i for i, c in enumerate(columns)}
         self.columns = list(columns)
         self.settle_s = settle_s
         self.h_capacity_Nms = h_capacity_Nms
         self.h_held_B = None if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
+        self.held_units = [[float(a), float(b), h if callable(h) else np.asarray(h, dtype=float).reshape(3)]
+                           for a, b, h in held_units or ()]
         self._t = col.get("t", 0)
         self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
         self._sing = col.get("cmg_singularity")
@@ -323,6 +334,12 @@ class RunMetrics:
         settled = np.ones(len(rows), bool) if self.settle_s is None else t >= self.settle_s
         if self._h is not None:
             hb = rows[:, self._h] if self.h_held_B is None else rows[:, self._h] - self.h_held_B
+            for u in self.held_units:  # units held by a scheduled fault, over their window
+                on = (t >= u[0] - HELD_T_TOL_S) & (t < u[1] - HELD_T_TOL_S)
+                if on.any():
+                    if callable(u[2]):
+                        u[2] = np.asarray(u[2](rows[np.argmax(on)]), dtype=float).reshape(3)
+                    hb[on] -= u[2]
             h = float(row_norms(hb).max())
             self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
         if self._sing is not None:
@@ -458,7 +475,9 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
     if cap is None and "max_h_fraction" in summary and summary.get("max_h_fraction"):
         cap = summary["max_h_Nms"] / summary["max_h_fraction"]
     m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap, h_held_B=summary.get("h_held_B_Nms"),
-                   orbit_period_s=summary.get("orbit_period_s"))
+                   orbit_period_s=summary.get("orbit_period_s"),
+                   held_units=[(u["t"], math.inf if u["until"] is None else u["until"], u["h_B"])
+                               for u in summary.get("h_held_units_Nms", ())])
     if len(data):
         m.update(np.asarray(data, dtype=float))
     if "rate_limited_ticks" in summary:

@@ -78,8 +78,8 @@ def run_parts(loop, K: int, update) -> None:
     if fl is not None:
         fm = res.flight
         c[C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
-    # each actuator's memory (and [fdir]'s, the chain's last block), handed back by its block's name
-    chain = [(a, C.slice(a.name)) for a in (*comp.actuators, *((comp.fdir,) if comp.fdir is not None else ()))]
+    # the chain's blocks' memory (Composition.memories), handed back by each block's name
+    chain = [(a, C.slice(a.name)) for a in comp.memories]
     out = comp.end.outputs
     has_act = comp.has_cluster
     i_u, i_lim, i_sat = (out.slice("u_cmg"), out.slice("rate_limited").start, out.slice("saturated").start) if has_act else (0, 0, 0)
