@@ -104,3 +104,21 @@ def test_a_fault_the_sample_did_not_draw_is_no_truth_for_the_run_summary():
     assert got["fdir_cmg_false_alarm"] and "fdir_cmg_latency_s" not in got and "fault_cmg_t_s" not in got
     on = detections_vs_truth([Fault(t=5.0, kind="cmg_failed", unit=2)], True, 10.0, 2)
     assert not on["fdir_cmg_false_alarm"] and on["fdir_cmg_latency_s"] == 5.0
+
+
+@pytest.mark.parametrize("upper", [math.nan, None])  # (None: the summary read back from its JSON)
+def test_the_text_of_a_study_whose_every_sample_drew_its_fault(upper):
+    """No sample without a fault: the false-alarm line says there is nothing to bound (it raised
+    TypeError formatting the missing bound before)."""
+    from stationbed.studies.montecarlo.detection import detection_text
+
+    rate = {"k": 4, "n": 4, "clopper_pearson": list(clopper_pearson(4, 4))}
+    d = {"confidence": 0.95, "detection": rate, "isolation": rate,
+         "latency_s": {"count": 4, "max": 1.9, **{f"p{p:g}": None for p in (50, 90, 99)},
+                       **{f"p{p:g}_interval": None for p in (50, 90, 99)}},
+         "false_alarms": {"k": 0, "n": 0, "rate": None, "upper": upper, "stated_per_run": 1e-6, "run_hours": 1.5,
+                          "consistent": True, "early_in_faulted": 0},
+         "requirements_faulted": [], "requirements_no_fault": []}
+    lines = detection_text(d)
+    assert lines[0].startswith("fault detection: declared 4 of 4")
+    assert any(ln.startswith("false alarms: no sample without a fault") for ln in lines), lines

@@ -200,9 +200,12 @@ def detection_text(d: dict) -> list[str]:
             parts.append(f"p{p:g} {v:.3g} s" + (f" [{ci[0]:.3g}, {ci[1]:.3g}]" if ci else " [n too small]"))
     if lat["count"]:
         out.append(f"detection latency ({lat['count']}): " + ", ".join(parts + [f"max {lat['max']:.3g} s"]))
-    out.append(f"false alarms: {fa['k']} of {fa['n']} samples without a fault (upper {pc} % bound "
-               f"{fa['upper']:.3g}; stated {fa['stated_per_run']:.3g} per run of {fa['run_hours']:.3g} h: "
-               f"{'consistent' if fa['consistent'] else 'NOT consistent'}); {fa['early_in_faulted']} before a fault")
+    if not fa["n"]:  # every sample drew its fault: no flight to count false alarms on (upper is nan)
+        out.append(f"false alarms: no sample without a fault (nothing to bound); {fa['early_in_faulted']} before a fault")
+    else:
+        out.append(f"false alarms: {fa['k']} of {fa['n']} samples without a fault (upper {pc} % bound "
+                   f"{fa['upper']:.3g}; stated {fa['stated_per_run']:.3g} per run of {fa['run_hours']:.3g} h: "
+                   f"{'consistent' if fa['consistent'] else 'NOT consistent'}); {fa['early_in_faulted']} before a fault")
     for label, key in (("with a fault", "requirements_faulted"), ("without", "requirements_no_fault")):
         for r in d[key]:
             out.append(f"  {label}: {r['metric']} {r['verdict']} ({r['failures']} of {r['n']} fail)")
