@@ -36,7 +36,7 @@ def why_not_fused(comp) -> str | None:
     if not integ.fusable or math.ceil(comp.period / integ.h_nominal - 1e-9) != 1 or comp.system.sx is None:
         return f"integrator: '{integ.name}' is not one fixed explicit step per tick"
     if edge_ticks(comp) is None:
-        return "plant: a discontinuity between ticks or an array rate step (the per-tick loop cuts there)"
+        return "plant: an array rate step (the per-tick loop cuts there and jumps)"
     if comp.noisy and comp.delay > 0:
         return "noise: [controller.sensor] delay (its ring buffer is not a block yet)"
     if comp.flight is not None and comp.noisy:

@@ -41,7 +41,7 @@ from .parts import NOISE_BLOCK, law_numbers, parts
 from .prepare import prepare
 from .rows import Rows
 from .schedule import lockstep_hook
-from .segments import breakpoints, edge_ticks, held_torque_from, tick_pieces
+from .segments import breakpoints, edge_ticks, held_torque_from, max_edges, off_grid_ticks, tick_edges, tick_pieces
 
 __all__ = ["executor", "run_lockstep", "vectorised"]
 
@@ -211,6 +211,11 @@ class _Lockstep:
         # the parts mapped over the samples: casadi's map calls the very machine code once per sample
         self.sense = mapped(fns["sense"].f, n, 1)
         self.act = mapped(fns["act"].f, n, 1)
+        # the edge tick's case (a discontinuity inside a tick), mapped too: run on the ticks where a
+        # sample is in one (each such tick a piece of its own), its results taken for those samples
+        self.act_edge = mapped(fns["act_edge"].f, n, 1) if fns.get("act_edge") is not None else None
+        self.edge_at = [off_grid_ticks(s.loop.comp) for s in samples]
+        self.edge_now: dict[int, np.ndarray] = {}  # sample -> its current piece's edges
         C, P = cm.carry, cm.par
         nw, ny, ns = cm.noise.size, lp.meas_layout.size, cm.sense_outputs.size
         a, r = self.act.args, self.act.res
@@ -309,6 +314,9 @@ class _Lockstep:
             row = self.PAR[i]
             row[P.slice("t0")], row[P.slice("h")], row[P.slice("n_act")], row[P.slice("k0")] = t0, h, b - a, a
             row[P.slice("u_ext")] = held_torque_from(comp.scene, t0, comp.bps, comp.duration)
+            self.edge_now.pop(i, None)
+            if a in self.edge_at[i]:
+                self.edge_now[i] = tick_edges(comp, a, h, max_edges(comp))
             self.C[i, C.slice("i")] = 0.0
             if self.W.shape[1]:
                 self.SW[i] = self._w(i, k, K)
@@ -318,6 +326,24 @@ class _Lockstep:
         self.C[due] = self.SCS[due]
         self.raw[due] = self.SV[due]
         self.outs[due] = self.SOUTS[due]
+
+    def _act_edges(self) -> None:
+        """The act part of the edge tick's case for the samples in an edge tick (:attr:`edge_now`),
+        on the act part's inputs, its results written over theirs (the others' unused)."""
+        fe, n, np_ = self.act_edge, self.n, self.cm.par.size
+        for dst, src in zip(fe.args, self.act.args):
+            if dst.size == src.size:
+                dst[:] = src
+        pe = fe.args[1].reshape(n, -1)
+        pe[:, :np_] = self.PAR
+        pe[:, np_:] = 0.0
+        for i, e in self.edge_now.items():
+            pe[i, np_:] = e
+        fe()
+        idx = list(self.edge_now)
+        for dst, src in zip(self.act.res, fe.res):
+            d, r = dst.reshape(n, -1), src.reshape(n, -1)
+            d[idx] = r[idx]
 
     # -- the run -------------------------------------------------------------------------
     def run(self, SimulationError) -> list:
@@ -447,6 +473,8 @@ class _Lockstep:
                     for i in range(n):
                         self.W[i] = self._w(i, k + 1, K)
                 self.act()
+                if self.edge_now:
+                    self._act_edges()
                 if has_act and (self.ACT[:, i_flags] > 0.5).any() and k < K:
                     lim = (self.ACT[:, i_flags.start] > 0.5) & alive
                     sat = (self.ACT[:, i_flags.start + 1] > 0.5) & alive
