@@ -114,7 +114,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     def torque_at(ta):
         return held_torque_from(comp.scene, ta, comp.bps, duration)
 
-    step = composed_hook(comp, res, c0, cx, par, P)  # scheduled steps (run/schedule.py), or None
+    step = composed_hook(comp, res, c0, cx, par, P, C)  # scheduled steps (run/schedule.py), or None
     ne = max_edges(comp)  # the edge tick's case (a discontinuity between ticks), or None
     og = off_grid_ticks(comp)
     edge_case = (fns["edge"], lambda a, h: tick_edges(comp, a, h, ne) if a in og else None) if ne else None

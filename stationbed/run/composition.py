@@ -146,7 +146,7 @@ class Composition:
     @cached_property
     def schedule(self):
         """The run's scheduled steps (:class:`~.schedule.Schedule`: ``[[fault]]``, events)."""
-        from . import docking, faults  # noqa: F401,PLC0415 (the sources of steps: [[fault]], [[event]] register themselves)
+        from . import detection, docking, faults  # noqa: F401,PLC0415 (the sources of steps register themselves)
         from .schedule import schedule_of  # noqa: PLC0415 (schedule.py reads this class's fields)
 
         return schedule_of(self)

@@ -41,8 +41,6 @@ def why_not_fused(comp) -> str | None:
         return "noise: [controller.sensor] delay (its ring buffer is not a block yet)"
     if comp.flight is not None and comp.noisy:
         return "noise: [controller.sensor] noise with [[sensor]] tables"
-    if comp.replan is not None:
-        return "law: a failure detected mid-run (the law designs again, in Python)"
     return _chain_why(comp)
 
 

@@ -59,6 +59,11 @@ class Step:
     #: a jump of its own, ``kick(t, x, p_before, p_after) -> x_after`` (numpy), applied after the
     #: numbers are set (and after ``step_jump``): a docking's momentum brought in (run/docking.py)
     kick: "Callable | None" = None
+    #: the law designs again at the tick, in Python (a failure detected: run/detection.py):
+    #: ``redesign(t, s) -> (cp, s_after)`` from the law's state ``s`` the executor carried, its new
+    #: symbolic numbers and state; an executor that carries the law's numbers calls it between
+    #: chunks (:func:`composed_hook`), one that calls the law in Python lets the law design itself
+    redesign: "Callable | None" = None
 
 
 #: functions ``(comp) -> list[Step]`` making a run's steps from its scene (``[[fault]]``: run/faults.py)
@@ -201,10 +206,11 @@ def refresh_loop(loop) -> None:
         buf[:] = law
 
 
-def composed_hook(comp, res, c0, cx, par, P):
+def composed_hook(comp, res, c0, cx, par, P, C=None):
     """The fused loop's ``step(a)`` (run/composed.py, :func:`~.segments.run_pieces`): at a step's
-    tick, the carry's state ``c0[cx]`` jumped and ``par``'s p and block slices rewritten; None
-    when the run has no steps."""
+    tick, the carry's state ``c0[cx]`` jumped and ``par``'s p and block slices rewritten; with
+    the carry's layout ``C``, a step's ``redesign`` too (the law's numbers in ``par`` and its
+    state in ``c0``, under the law block's name ``"law"``); None when the run has no steps."""
     if not comp.schedule:
         return None
     st = stepper(comp, res)
@@ -216,6 +222,10 @@ def composed_hook(comp, res, c0, cx, par, P):
             for name, arr in st.numbers.items():
                 if name in P:
                     par[P.slice(name)] = arr
+            for s in st.schedule.at(a) if C is not None else ():
+                if s.redesign is not None:
+                    cp, s_law = s.redesign(a * comp.period, C.get(c0, "law").copy())
+                    par[P.slice("law")], c0[C.slice("law")] = cp, s_law
     return step
 
 
@@ -260,7 +270,7 @@ def parts_hook(loop, c, cx, par, P):
 def steps_summary(comp, res) -> dict:
     """The summary's ``faults``: the steps applied, in order (empty without a schedule)."""
     st = getattr(res, "stepper", None)
-    if not comp.schedule and not comp.scene.fault:
+    if not comp.scene.fault and not comp.scene.event:  # (a detection's redesign alone reports nothing here)
         return {}
     applied = [] if st is None else st.summary()
     out = {"faults": [s for s in applied if "event" not in s]}
