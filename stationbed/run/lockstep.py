@@ -57,10 +57,13 @@ def vectorised(ctrl) -> bool:
 
 def _tick_ok(comp) -> bool:
     # a run the per-tick loop flies on the composed parts (blocks.parts_ok: one fixed step per
-    # tick, every discontinuity on the tick grid, every actuator symbolic) runs them mapped; a
-    # fault detected mid-run (run/detection.py) runs per tick, and so does [fdir] (its memory is
-    # handed back by the fused loop and the per-tick parts, not yet by the batch)
-    return comp.replan is None and comp.fdir is None and parts_ok(comp) is None
+    # tick, every actuator symbolic) runs them mapped; a fault detected mid-run (run/detection.py)
+    # too, its law designing again at its tick (schedule.lockstep_hook), except with a law that
+    # writes its own update_batch (its batch stand-in holds copies of the members' numbers); [fdir]
+    # runs per tick (its memory is handed back by the fused loop and the per-tick parts, not yet
+    # by the batch)
+    own_batch = type(comp.ctrl).update_batch is not Controller.update_batch
+    return not (comp.replan is not None and own_batch) and comp.fdir is None and parts_ok(comp) is None
 
 
 def executor(loop) -> str:

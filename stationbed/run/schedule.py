@@ -308,7 +308,37 @@ def lockstep_hook(batch, samples):
         buf = None if law is None else _law_buffers(batch.law_batch, i)
         if buf is not None:
             buf[:] = law
+        if any(s.redesign is not None for s in st.schedule.at(k)):
+            _batch_redesign(batch, i, k, lo)
     return step
+
+
+def _batch_redesign(batch, i: int, k: int, lo) -> None:
+    """Sample ``i``'s law designs again at tick ``k`` (a step's ``redesign``) in the lockstep
+    batch: a law evaluated compiled for the batch (``symbolic``) is handed its state from the
+    batch law's row, designs again, and its new numbers and state go into that row (before the
+    batch law's first call the batch takes them from the law itself); a law called in Python
+    (each member's ``update``) designs again itself, as per tick (``ControlLoop.redesign``)."""
+    comp = lo.comp
+    t = k * comp.period
+    if not comp.ctrl.has_symbolic():
+        lo.redesign(t)
+        return
+    law = batch.law_batch.__dict__.get("_batch_law")
+    fc = None if law is None else law.fc
+    rows = None if fc is None else fc.args[3].reshape(len(law.members), -1)
+    s_now = rows[i].copy() if rows is not None else _initial_state(comp.ctrl)
+    redesign = next(s.redesign for s in comp.schedule.at(k) if s.redesign is not None)
+    cp, s_after = redesign(t, s_now)
+    if fc is not None:
+        _law_buffers(batch.law_batch, i)[:] = cp
+        rows[i] = s_after
+
+
+def _initial_state(ctrl):
+    from . import law_state  # noqa: PLC0415
+
+    return law_state.initial(ctrl)
 
 
 def bulk_stop(ticks, row_ks, j: int) -> int:
