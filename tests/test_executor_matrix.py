@@ -398,6 +398,24 @@ def test_drawn_blocks_fly_alike_and_keep_the_balance(c):
             assert_balance(s, tr)
 
 
+def test_edge_tick_is_the_generic_paths_split(monkeypatch):
+    """A tick holding a window edge (off the tick grid, with thrusters firing) is the edge tick's
+    compiled case on the fused loop and on the per-tick parts: their rows are the generic per-tick
+    path's (it integrates [t, b] and [b, t + h] with the same RK4 step, each with the torque held
+    over it: run/closed_loop.py ``advance``) to round-off; the lockstep batch's are the per-tick
+    run's. The generic path is reached here by refusing the composed parts."""
+    import stationbed.run.closed_loop as cl  # noqa: PLC0415
+
+    scene = sphere_scene(thrusters=True, sensing="none", state=False, noise=False, env=None, window="off")
+    runs = _runs(scene)
+    assert runs["fused"][0] == "fused" and runs["lockstep"][0] == "batch", (runs["fused"][0], runs["lockstep"][0])
+    monkeypatch.setattr(cl, "parts_ok", lambda comp: "the generic path, asked by the test")
+    generic = simulate(scene, fused=False)
+    for _, [(_, tr), *_] in runs.values():
+        assert_same_rows(generic, tr)
+    assert generic.meta["summary"]["thruster_firings"] > 0
+
+
 # ---------------------------------------------------------------------------------------------
 # a failure detected mid-run (run/detection.py): the law designs again at the detection tick
 # ---------------------------------------------------------------------------------------------
