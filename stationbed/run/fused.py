@@ -25,10 +25,12 @@ def why_not_fused(comp) -> str | None:
     part of the clock that forces it off the compiled path (None: it flies fused). The only
     place that decides it: :func:`fused_ok` is this is None, the summary reports it
     (``not_fused``). In order: the law (a Python or FMU law has no ``symbolic`` form), the
-    integrator (not one fixed explicit step per tick), a discontinuity between ticks or an array
-    rate step, the ideal measurement's delay (a ring buffer, not a block yet) or its noise with
-    ``[[sensor]]`` tables, a failure detected mid-run, the actuator chain (the LP mapping;
-    ``[controller.sensor]`` noise with a stateful law)."""
+    integrator (not one fixed explicit step per tick), an array rate step (the state jumps
+    inside a tick), the ideal measurement's delay (a ring buffer, not a block yet) or its noise
+    with ``[[sensor]]`` tables, the actuator chain (the LP mapping; ``[controller.sensor]``
+    noise with a stateful law). Not reasons: a discontinuity between ticks (its tick is the
+    edge tick's compiled case, :func:`~.segments.tick_edges`) and a failure detected mid-run
+    (the law designs again at its tick, a scheduled step: :func:`~.detection.detection_steps`)."""
     ctrl = comp.ctrl
     integ = comp.integ
     if not callable(getattr(ctrl, "symbolic", None)):
