@@ -76,8 +76,7 @@ def detection_steps(comp) -> list[Step]:
 
     def redesign(t: float, s) -> tuple[np.ndarray, np.ndarray]:
         from . import law_state  # noqa: PLC0415 (its peers import this module)
-        from .composition import ControllerFailure  # noqa: PLC0415
-        from .controller import one_line  # noqa: PLC0415
+        from .controller_error import ControllerFailure, one_line  # noqa: PLC0415
 
         ctrl = comp.ctrl
         try:
