@@ -136,7 +136,9 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             if step is not None:  # a step at the row's tick: before its measurement
                 step(k)
                 x = c0[cx].copy()
-            if bulk and j in try_at:
+            if bulk and j in try_at and k in og:  # a row starting at an edge tick: row by row, bulk again after it
+                try_at.add(j + 1)
+            elif bulk and j in try_at:
                 stop = bulk_stop(sched, row_ks, j)
                 par[P.slice("u_ext")] = torque_at(t)
                 jj, tail_flag, n_done, err = run_rows(comp, res, cm, fns["rows"], row_ks[j : stop + 1], K, c0, par,
