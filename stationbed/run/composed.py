@@ -5,7 +5,8 @@ compiled chunk per output row, the tick composed once by :mod:`stationbed.loop.c
 It knows no block: it writes the carry, the parameters and the draws by the composition's
 named layouts (each block's memory and numbers under its name), calls the composed ``row`` at
 each output row and the composed ``chunk`` over the row's ticks (cut into pieces at the
-scene's edges on the tick grid, :func:`~.segments.tick_pieces`), and hands the rows, the
+scene's edges, :func:`~.segments.tick_pieces`: a tick holding one between ticks runs the edge
+tick's compiled case, its step split there), and hands the rows, the
 flight's memory, the actuators' memory and the law's state back through the run's state.
 
 It replaced the hand-composed fused loops of issues 20-25 (``fused.py``'s chunk,

@@ -14,9 +14,11 @@ edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every ex
 scheduled steps (faults, docking events: :mod:`.schedule`, ``lockstep_hook``) apply where its
 piece starts (every step's tick starts one), on its own row of the carry and the numbers.
 
-A sample whose single run cannot step the composed parts (a discontinuity between ticks, an
-array rate step, an actuator that is not symbolic, a fault detected mid-run) runs its own
-:class:`~.closed_loop.ControlLoop`. A sample that fails (a bad or non-finite command, the law
+A tick holding a discontinuity between ticks is a piece of its own, the edge tick's compiled
+case mapped too (its results taken for the samples in one); a fault detected mid-run designs
+the sample's law again at its tick (``lockstep_hook``). A sample whose single run cannot step
+the composed parts (an array rate step, an actuator that is not symbolic, ``[fdir]``, a
+detection with a law's own ``update_batch``) runs its own :class:`~.closed_loop.ControlLoop`. A sample that fails (a bad or non-finite command, the law
 raising, a non-finite state) stops alone, with its single run's reason and time; the batch goes on.
 
 :func:`executor` says which executor a run gets: ``fused`` (a law with ``symbolic``, where the
