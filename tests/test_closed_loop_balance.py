@@ -20,8 +20,8 @@ hypothesis with edges on the tick grid, off it, at 0, at the duration and beyond
 
 Executors: the generic per-period path (``RK4Generic``: RK4 declared not fusable; ``dop853``),
 the per-tick fused tick (``rk4``, ``fused=False``), the fused loop (``rk4`` with a symbolic
-law; it splits its chunks at edges on the tick grid and hands a run with an edge between ticks
-to the per-tick loop, asserted here), the open loop and the open-loop batch (``simulate_batch``; the
+law; it splits its chunks at edges on the tick grid, and flies a tick holding an edge between
+ticks as a piece of its own, its step cut at the edge: it takes every run here, asserted), the open loop and the open-loop batch (``simulate_batch``; the
 Monte Carlo's closed-loop samples run through ``simulate``, i.e. the executors above).
 """
 
@@ -107,18 +107,12 @@ def window_impulse_x(windows, t) -> np.ndarray:
     return total
 
 
-def fuses(windows, duration=DURATION_S) -> bool:
-    """Whether the fused loop can take the run: every window edge inside (0, duration) on the tick
-    grid (``k * PERIOD_S`` exactly); an edge between ticks needs the per-tick loop's cut."""
-    return all(round(e / PERIOD_S) * PERIOD_S == e for w in windows for e in w if 0.0 < e < duration)
-
-
 def run_closed(executor: str, windows, **kw):
     integrator, override, fused = CLOSED[executor]
     tr = simulate(scene_from_dict(sphere_scene(windows, integrator=integrator, **kw)), integrator=override, fused=fused)
     used = tr.meta["summary"]["fused"]
-    # the fused loop runs exactly when every edge inside the run is on the tick grid
-    assert used == (executor == "fused" and fuses(windows)), tr.meta["summary"]
+    # the fused loop takes every run (an edge between ticks: the edge tick's case), the others none
+    assert used == (executor == "fused"), tr.meta["summary"]
     return tr
 
 
@@ -243,7 +237,7 @@ def test_held_command_acts_over_its_period(executor, windows):
     d["simulation"]["output_dt"] = 0.5
     ctrl = SineTorque(period=PERIOD_S)
     tr = simulate(scene_from_dict(d), integrator=override, controller=ctrl, fused=fused)
-    assert tr.meta["summary"]["fused"] == (executor == "fused" and fuses(windows, duration))
+    assert tr.meta["summary"]["fused"] == (executor == "fused")
     dH = tr.H_O_N - tr.H_O_N[0]
     expect = held_command_impulse(tr.t, duration) + window_impulse_x(windows, tr.t)
     assert tr.t[-1] == duration
@@ -364,7 +358,7 @@ def test_every_torque_kind_balance(executor, case):
     tr = simulate(scene_from_dict(kinds_scene(windows, integrator, controller=closed)), integrator=override,
                   fused=bool(fused))
     if closed:
-        assert tr.meta["summary"]["fused"] == (executor == "fused" and fuses(windows, KIND_DURATION_S))
+        assert tr.meta["summary"]["fused"] == (executor == "fused")
     expect = smooth_integral_N(tr) + window_integral_N(tr, windows)
     assert np.abs(expect[-1]).max() > 100 * ONE_TICK_NMS  # the balance has something to check
     assert_allclose(tr.H_O_N - tr.H_O_N[0], expect, rtol=0, atol=KIND_ABS)
@@ -397,17 +391,9 @@ def _lockstep(scenes):
     from stationbed.run.lockstep import run_lockstep  # noqa: PLC0415
 
     res = run_lockstep(scenes, keep=True, fused=False)
-    # a sample with an edge between ticks flies its own per-tick loop (the batch maps whole ticks)
-    want = ["batch" if _on_grid(s) else "per-tick" for s in scenes]
-    assert [k for k, _ in res] == want, [k for k, _ in res]
+    # every sample in the batch: one with an edge between ticks flies that tick as the edge tick's case
+    assert [k for k, _ in res] == ["batch"] * len(scenes), [k for k, _ in res]
     return [tr for _, tr in res]
-
-
-def _on_grid(scene) -> bool:
-    """Whether every torque window's edges fall on the tick grid (``k * period`` exactly)."""
-    p = scene.controller.period
-    edges = [e for t in scene.torque for e in (getattr(t, "start", None), getattr(t, "stop", None)) if e is not None]
-    return all(round(e / p) * p == e for e in edges if 0.0 < e < scene.simulation.duration)
 
 
 @EDGE_SETTINGS

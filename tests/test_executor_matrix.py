@@ -19,7 +19,9 @@ Independent truths, from the rows alone:
   logged quaternion and C_NB written out here; the thrusters' impulses summed here from their
   logged on-times and the scene's geometry (arms from the body origin, the mass centre of the
   shipped thruster scenes: body.cm = 0, arrays symmetric); the magnetic torque rods' ``m × B``
-  summed from their logged dipoles and the field written out in test_magnetorquers. The CMG cluster's momentum is inside
+  summed from their logged dipoles and the field written out in test_magnetorquers; a ``[[torque]]``
+  window's (``kind = "constant"``: not logged) from the scene's table, each row interval's share of
+  the window at the attitude interpolated between the rows. The CMG cluster's momentum is inside
   ``H_N``, so steering, sensors, the estimator and the law cannot move it.
 
 Rows: one per tick (``output_dt`` = the controller period) and the last row off the tick grid
@@ -49,6 +51,7 @@ from stationbed.run.lockstep import run_lockstep
 from test_magnetorquers import _magnetic_impulse_N
 from test_thrusters import PERIOD_S, pods, sphere
 
+import test_fault_detection  # noqa: E402,F401 - the module of the detection scene's law
 import test_law_state  # noqa: E402,F401 - the module of the law the drawn scenes name, imported before any @given runs
 
 #: executors against each other: the same expressions in another order (generated C of one fused
@@ -138,8 +141,28 @@ def balance(scene, tr) -> tuple[np.ndarray, float]:
     mag = np.zeros_like(smooth)
     if scene.magnetorquers is not None:  # the rods' m x B (an external torque with no tau_ column)
         mag = _magnetic_impulse_N(scene, tr)
+    win, tau_win = _window_impulse_N(scene, tr, C)
+    one_tick = max(one_tick, tau_win * PERIOD_S)
     tol = BALANCE_TICK_FRACTION * one_tick + BALANCE_ROUNDOFF_REL * np.abs(tr.H_O_N).max()
-    return smooth + thr + mag, tol
+    return smooth + thr + mag + win, tol
+
+
+def _window_impulse_N(scene, tr, C) -> tuple[np.ndarray, float]:
+    """``∫ C_NB τ_B dt`` of the scene's ``[[torque]] kind = "constant"`` windows (``torque_B`` on
+    ``start <= t < stop``) from the first row to each row (N, 3) [N m s], each row interval's
+    overlap with a window at the attitude interpolated to the overlap's middle (``C`` the rows'
+    C_NB); and the largest window torque [N m]."""
+    out = np.zeros((len(tr.t), 3))
+    tau_max = 0.0
+    for w in (t for t in scene.torque if t.kind == "constant"):
+        tau = np.asarray(w.torque_B, dtype=float)
+        tau_max = max(tau_max, float(np.linalg.norm(tau)))
+        a, b = np.maximum(tr.t[:-1], w.start), np.minimum(tr.t[1:], w.stop)
+        dt = np.maximum(b - a, 0.0)
+        s = ((0.5 * (a + b) - tr.t[:-1]) / np.diff(tr.t))[:, None, None]
+        Cm = (1 - s) * C[:-1] + s * C[1:]
+        out[1:] += np.cumsum(np.einsum("nij,j->ni", Cm, tau) * dt[:, None], axis=0)
+    return out, tau_max
 
 
 def _twin(scene):
@@ -296,10 +319,18 @@ ORBIT = {"orbit": {"altitude": 4.0e5, "inclination": 0.9, "u0": 0.3, "gravity_gr
 SPHERE_DURATION_S = 20.05  # s: 200 ticks and a short last one
 
 
-def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env):
+#: a ``[[torque]]`` window [N m, s]: its edges on the tick grid (k * PERIOD_S exactly), or inside
+#: ticks 25 and 123 (the fused loop's edge tick: the step split at the edge)
+WINDOW_TORQUE_NM = [2.0, -1.5, 1.0]
+WINDOW_S = {"grid": (2.5, 12.5), "off": (2.55, 12.35)}
+
+
+def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env, window=None):
     """The sphere of test_thrusters (ideal CMG at 90 % of its capacity, so the dump fires at once)
     with the drawn blocks: ``sensing`` "none", "sensors" (flown and logged beside the ideal path)
-    or "mekf" (the law on the estimate); ``env`` None (deep space) or the environment rate."""
+    or "mekf" (the law on the estimate); ``env`` None (deep space) or the environment rate;
+    ``window`` None, or a constant torque window with its edges on the tick grid ("grid") or
+    between ticks ("off")."""
     over = {"simulation.output_dt": PERIOD_S}
     if not thrusters:
         over.update({"thruster": [], "thrusters": None})
@@ -313,6 +344,10 @@ def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env):
         over["controller.sensor"] = NOISE
     if env is not None:
         over.update({**ORBIT, "simulation.environment_rate": env})
+    if window is not None:
+        start, stop = WINDOW_S[window]
+        over["torque"] = [*over.get("torque", []), {"kind": "constant", "torque_B": WINDOW_TORQUE_NM, "start": start,
+                                                    "stop": stop}]
     return sphere(pods(), duration=SPHERE_DURATION_S).replace(over)
 
 
@@ -332,19 +367,21 @@ def off_fused_reasons(c) -> tuple[str, ...]:
 combos = st.fixed_dictionaries({
     "thrusters": st.booleans(), "sensing": st.sampled_from(["none", "sensors", "mekf"]),
     "state": st.booleans(), "noise": st.booleans(), "env": st.sampled_from([None, "auto", 1, 5]),
+    "window": st.sampled_from([None, "grid", "off"]),
 }).filter(lambda c: not (c["sensing"] == "mekf" and c["noise"]))  # (a scene refuses the two together)
 
 
 def _matrix(thr, sens, state, noise):
     """test_composed_matrix's 16: sensors come with the MEKF except beside the ideal noise; deep space."""
     return {"thrusters": thr, "sensing": ("sensors" if noise else "mekf") if sens else "none", "state": state,
-            "noise": noise, "env": None}
+            "noise": noise, "env": None, "window": None}
 
 
 def _with_examples(f):
     for c in itertools.product([False, True], repeat=4):
         f = example(c=_matrix(*c))(f)
-    return f
+    # a torque window's edges between ticks with the full flight loop: sensors, MEKF, thrusters, a law with a state
+    return example(c={**_matrix(True, True, True, False), "window": "off"})(f)
 
 
 @settings(max_examples=6, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
@@ -375,4 +412,48 @@ def test_drawn_blocks_fly_alike_and_keep_the_balance(c):
         for s, tr in pairs:
             if c["thrusters"]:
                 assert tr.meta["summary"]["thruster_firings"] > 0, name
+            assert_balance(s, tr)
+
+
+def test_edge_tick_is_the_generic_paths_split(monkeypatch):
+    """A tick holding a window edge (off the tick grid, with thrusters firing) is the edge tick's
+    compiled case on the fused loop and on the per-tick parts: their rows are the generic per-tick
+    path's (it integrates [t, b] and [b, t + h] with the same RK4 step, each with the torque held
+    over it: run/closed_loop.py ``advance``) to round-off; the lockstep batch's are the per-tick
+    run's. The generic path is reached here by refusing the composed parts."""
+    import stationbed.run.closed_loop as cl  # noqa: PLC0415
+
+    scene = sphere_scene(thrusters=True, sensing="none", state=False, noise=False, env=None, window="off")
+    runs = _runs(scene)
+    assert runs["fused"][0] == "fused" and runs["lockstep"][0] == "batch", (runs["fused"][0], runs["lockstep"][0])
+    monkeypatch.setattr(cl, "parts_ok", lambda comp: "the generic path, asked by the test")
+    generic = simulate(scene, fused=False)
+    for _, [(_, tr), *_] in runs.values():
+        assert_same_rows(generic, tr)
+    assert generic.meta["summary"]["thruster_firings"] > 0
+
+
+# ---------------------------------------------------------------------------------------------
+# a failure detected mid-run (run/detection.py): the law designs again at the detection tick
+# ---------------------------------------------------------------------------------------------
+
+#: the detection's scene: iss_lvlh_hold with a CMG unit failed from t = 0 and known to the law from
+#: 2.05 s (the first tick after it: 21), flown by tests/test_fault_detection.py's symbolic law whose
+#: numbers scale with the capacity it believes (the redesign shows in the rows)
+DETECTED = {"simulation.duration": 40.5 * PERIOD_S, "simulation.output_dt": PERIOD_S, "cmg.failed": [2],
+            "knowledge": {"failure_detected_after_s": 2.05},
+            "controller.name": "test_fault_detection:CapacitySymbolicPD"}
+
+
+def test_detected_failure_flies_alike_and_keeps_the_balance():
+    """A failure detected mid-run (the redesign a scheduled step) flies fused, per tick and in the
+    lockstep batch with the same rows, and each run keeps the momentum balance."""
+    scene = load_scene("scenarios/iss_lvlh_hold.toml").replace(DETECTED)
+    runs = _runs(scene)
+    assert runs["fused"][0] == "fused" and runs["lockstep"][0] == "batch", (runs["fused"][0], runs["lockstep"][0])
+    a = runs["per_tick"][1][0][1]
+    for other in (runs["fused"][1][0][1], runs["lockstep"][1][0][1]):
+        assert_same_rows(a, other)
+    for _, (_, pairs) in runs.items():
+        for s, tr in pairs:
             assert_balance(s, tr)

@@ -52,14 +52,33 @@ class CapacityAwarePD(PD):
         return tuple(self.plant.h_capacity / self.H_REF * v for v in self.compiled_law()(t, meas))  # pd, compiled
 
 
+class CapacitySymbolicPD(PD):
+    """pd written once (``symbolic``, no ``_update``: every executor evaluates it compiled), its
+    torque scaled by the capacity it believes over H_REF: a number of its ``symbolic_params``
+    that a redesign changes."""
+
+    H_REF = 2.0e4  # N m s
+
+    def _reset(self, plant):
+        super()._reset(plant)
+        self.scale = plant.h_capacity / self.H_REF
+
+    def symbolic_params(self):
+        return [*super().symbolic_params(), self.scale]
+
+    def symbolic(self, t, y, cp):
+        cmd, q_ref = super().symbolic(t, y, cp[:-1])
+        return cmd * cp[-1], q_ref
+
+
 def scene(**knowledge):
     s = load_scene(SCENARIO).replace({"simulation.duration": 4.0, "simulation.output_dt": PERIOD_S,
                                       "cmg.failed": FAILED})
     return s.replace({"knowledge": knowledge}) if knowledge else s
 
 
-def fly(s, fused=False):
-    law = CapacityAwarePD(s.controller.period, **s.controller.params)
+def fly(s, fused=False, law=None):
+    law = (law or CapacityAwarePD)(s.controller.period, **s.controller.params)
     return simulate(s, controller=law, fused=fused), law
 
 
@@ -98,6 +117,33 @@ def test_detected_at_once_is_known_from_the_first_tick():
     np.testing.assert_array_equal(tr.data, known.data)
 
 
+def test_a_detection_flies_fused_with_the_per_tick_numbers_and_a_fresh_design():
+    """A symbolic law with a detection inside the run flies fused (the redesign a scheduled step:
+    the law designs again in Python at the detection tick, its new numbers written into the fused
+    loop's): its rows are the per-tick run's, bit for bit (the same compiled law, the same numbers),
+    they differ from the run in which the failure is never detected after the detection tick, and
+    the law's numbers after it are those of a law designed on the failure known from the start."""
+    s = scene(failure_detected_after_s=DETECTED_S)
+    fused, law = fly(s, fused=True, law=CapacitySymbolicPD)
+    per_tick, _ = fly(s, law=CapacitySymbolicPD)
+    never, _ = fly(scene(), fused=True, law=CapacitySymbolicPD)
+    _, fresh = fly(scene(failed_units=FAILED), fused=True, law=CapacitySymbolicPD)
+    assert fused.meta["summary"]["fused"] and not per_tick.meta["summary"]["fused"]
+    np.testing.assert_array_equal(fused.data, per_tick.data)
+    t = fused.cols("t").ravel()
+    after = t >= math.ceil(DETECTED_S / PERIOD_S) * PERIOD_S - 1e-9
+    np.testing.assert_array_equal(fused.data[~after], never.data[~after])
+    assert np.abs(fused.data[after] - never.data[after]).max() > 0
+    assert law.symbolic_params() == fresh.symbolic_params() and law.scale < never_scale(s)
+    assert fused.meta["summary"]["controller_updates"] == per_tick.meta["summary"]["controller_updates"]
+
+
+def never_scale(s) -> float:
+    """The law's scale on the four-unit plant (the design before the detection)."""
+    _, law = fly(s.replace({"knowledge": None}), fused=True, law=CapacitySymbolicPD)
+    return law.scale
+
+
 def test_a_detection_after_the_run_changes_nothing_and_the_loop_runs_fused():
     late = scene(failure_detected_after_s=100.0)
     tr, law = fly(late, fused=True)
@@ -126,21 +172,24 @@ def test_a_law_without_the_hook_designs_again_with_its_reset():
 
 
 
-def test_lockstep_leaves_a_detection_to_the_per_tick_loop(monkeypatch):
-    """run_lockstep (the Monte Carlo's executor) runs a sample with a detection inside it per
-    tick (the batch and fused loops hold the law's plant fixed): each sample's rows are its
-    single run's, bit for bit, and differ from the run in which the failure is never detected."""
+@pytest.mark.parametrize("law", [CapacityAwarePD, CapacitySymbolicPD], ids=["python", "symbolic"])
+def test_lockstep_flies_a_detection_in_the_batch(monkeypatch, law):
+    """run_lockstep (the Monte Carlo's executor) runs a sample with a detection inside it in the
+    batch, its law designing again at the detection tick (a scheduled step: in Python for a law
+    called per member, into the compiled batch law's row for a symbolic one): each sample's rows
+    are its single per-tick run's, bit for bit, and differ from the run in which the failure is
+    never detected."""
     import stationbed.run.closed_loop as cl
     from stationbed.run.lockstep import run_lockstep
 
-    monkeypatch.setattr(cl, "build_controller", lambda spec, base_dir=None: CapacityAwarePD(spec.period, **spec.params))
+    monkeypatch.setattr(cl, "build_controller", lambda spec, base_dir=None: law(spec.period, **spec.params))
     inertia = np.array(load_scene(SCENARIO).body.inertia)
     scenes = [scene(failure_detected_after_s=DETECTED_S).replace({"body.inertia": (inertia * f).tolist()})
               for f in (1.0, 1.03)]
     res = run_lockstep(scenes, keep=True, fused=False)
-    assert [k for k, _ in res] == ["per-tick"] * 2
+    assert [k for k, _ in res] == ["batch"] * 2
     for s, (_, tr) in zip(scenes, res):
-        np.testing.assert_array_equal(tr.data, fly(s)[0].data)
+        np.testing.assert_array_equal(tr.data, fly(s, law=law)[0].data)
     never, _ = fly(scenes[0].replace({"knowledge": None}))
     assert np.abs(res[0][1].data - never.data).max() > 0
 

@@ -172,18 +172,18 @@ def test_executor_choice_by_capability():
     assert kinds == ["per-tick", "per-tick"]
 
 
-def test_window_edges_on_and_off_the_tick_grid_take_the_generic_tick():
+def test_window_edges_on_and_off_the_tick_grid_stay_in_the_batch():
     """Torque windows with edges on (1.0 s) and off (2.05 s) the tick grid, different per
-    sample: a sample with an edge between ticks runs its own per-tick loop on the generic path
-    (the composed parts the batch maps step whole ticks), as its single run does; bit for bit.
-    Edges on the grid, different per sample, stay in the batch (each sample its own pieces)."""
+    sample: a sample with an edge between ticks stays in the batch (that tick the edge tick's
+    case, its act part mapped for the samples in one), its rows its single run's, bit for bit.
+    Edges on the grid, different per sample, stay in the batch too (each sample its own pieces)."""
     base = _samples({"reference": "lvlh"}, "example_hold")
     kinds = [t.model_dump(exclude_unset=True) for t in base[0].torque]
     scenes = [s.replace({"torque": kinds + [{"kind": "constant", "torque_B": [20.0, -5.0, 3.0], "start": 1.0 + 0.05 * k,
                                      "stop": 2.05 + 0.1 * k}]}) for k, s in enumerate(base)]
     res = run_lockstep(scenes, keep=True, fused=False)
     for s, (kind, tr) in zip(scenes, res):
-        assert kind == "per-tick"
+        assert kind == "batch"
         _same(tr, simulate(s, fused=False))
     on_grid = [s.replace({"torque": kinds + [{"kind": "constant", "torque_B": [20.0, -5.0, 3.0], "start": 1.0 + 0.5 * k,
                                               "stop": 2.5 + 0.5 * k}]}) for k, s in enumerate(base)]

@@ -296,23 +296,33 @@ def _sorted(v: list) -> list:
     return v
 
 
-def split_step(step, rhs, t, x, h, u, p, on_s, torque_B, u_layout: Layout | None = None):
+def split_step(step, rhs, t, x, h, u, p, on_s, torque_B, u_layout: Layout | None = None, edge=None):
     """One tick of ``step`` (an integrator's ``explicit_step``) split at the pulse edges, casadi.
 
     ``on_s`` (n,) sorted (a branch-free network), pieces ``[e_j, e_j+1]`` from 0 to ``h``; over
     each, the channels with ``on_s > (e_j + e_j+1) / 2`` add their ``torque_B`` (3, n) column to
     the held external torque ``u_ext`` of ``u`` (by ``u_layout``, the model's ``input_layout``;
     None: ``u`` is ``u_ext`` alone). A zero-length piece is the identity (a step of 0).
+
+    ``edge`` (4 m,), the scene's discontinuities inside the tick (an edge tick's case,
+    :func:`~stationbed.run.segments.tick_edges`): ``m`` times into the tick, then ``m`` jumps of
+    the held external torque (3 each); the tick is also cut there, and past edge ``i`` its jump
+    is added (an edge at ``h`` with no jump changes nothing).
     """
     lay = Layout(u_ext=3) if u_layout is None else u_layout
     n = on_s.numel()
     on = [ca.fmin(ca.fmax(on_s[j], 0.0), h) for j in range(n)]
-    edges = [ca.SX(0.0) if isinstance(on_s, ca.SX) else 0.0] + _sorted(on) + [h]
+    m = 0 if edge is None else edge.numel() // 4
+    es = [ca.fmin(ca.fmax(edge[i], 0.0), h) for i in range(m)]
+    edges = [ca.SX(0.0) if isinstance(on_s, ca.SX) else 0.0] + _sorted(on + es) + [h]
     for a, b in zip(edges[:-1], edges[1:]):
         mid = 0.5 * (a + b)
         tq = 0
         for j in range(n):
             tq = tq + ca.if_else(on[j] > mid, 1.0, 0.0) * torque_B[:, j]
-        uj = lay.pack({**lay.split(u), "u_ext": lay.get(u, "u_ext") + tq})
+        u_ext = lay.get(u, "u_ext")
+        for i in range(m):
+            u_ext = u_ext + ca.if_else(es[i] < mid, 1.0, 0.0) * edge[m + 3 * i: m + 3 * i + 3]
+        uj = lay.pack({**lay.split(u), "u_ext": u_ext + tq})
         x = step(rhs, t + a, x, b - a, uj, p)
     return x

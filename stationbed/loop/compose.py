@@ -69,16 +69,22 @@ class Plant:
     rhs_held: ca.Function | None = None
 
 
-def compose(plant: Plant, blocks: list[Block]) -> "Composed":
-    """The composition of ``blocks`` (any order: sorted by role, kept in order within one)."""
-    return Composed(plant, blocks)
+def compose(plant: Plant, blocks: list[Block], n_edges: int = 0) -> "Composed":
+    """The composition of ``blocks`` (any order: sorted by role, kept in order within one);
+    ``n_edges`` > 0: the edge tick's case (:attr:`Composed.n_edges`)."""
+    return Composed(plant, blocks, n_edges)
 
 
 class Composed(PartsMixin):
     """The tick of one composition, its parts and its layouts (module docstring)."""
 
-    def __init__(self, plant: Plant, blocks: list[Block]):
+    def __init__(self, plant: Plant, blocks: list[Block], n_edges: int = 0):
         self.plant = plant
+        #: the edge tick's case (> 0): its step also cut at up to ``n_edges`` of the scene's
+        #: discontinuities inside the tick, the parameters' ``edge`` (times into the tick, then
+        #: the held torque's jumps: :func:`~.actuator.split_step`); appended last, so the
+        #: parameters before it are those of the composition without it
+        self.n_edges = n_edges
         by = {r: [b for b in blocks if b.role == r] for r in ("env", "sense", "law", "actuator", "end")}
         if len(by["law"]) != 1 or len(by["end"]) != 1:
             raise ValueError(f"a composition needs one law and one chain end, got {len(by['law'])} and {len(by['end'])}")
@@ -118,7 +124,8 @@ class Composed(PartsMixin):
                             **({self.env.name: self.env.state.size} if self.env is not None else {}))
         #: a chunk's parameters: first tick's time and index, step, active ticks, held external
         #: torque, the model's numbers, then each block's numbers under its name
-        self.par = Layout(t0=1, h=1, n_act=1, k0=1, u_ext=3, p=plant.npar, **{b.name: b.params.size for b in self.blocks})
+        self.par = Layout(t0=1, h=1, n_act=1, k0=1, u_ext=3, p=plant.npar, **{b.name: b.params.size for b in self.blocks},
+                          **({"edge": 4 * n_edges} if n_edges else {}))
         #: one tick's draws, by block
         self.noise = Layout(**{b.name: b.noise.size for b in self.blocks if b.noise.size})
         nact = self.end.outputs.slice("act").stop - self.end.outputs.slice("act").start
@@ -129,6 +136,8 @@ class Composed(PartsMixin):
                                  **{f"{b.name}_y": b.outputs.size for b in self.sense})
         self.key = (plant.key, tuple((b.name, b.role, b.every, b.key) for b in self.blocks + [self.end] +
                                      ([self.env] if self.env is not None else [])))
+        if n_edges:
+            self.key += (("edges", n_edges),)
         #: whether an actuator reads the true measurement (the front then evaluates it for them)
         self._truth = any(_field(f)[1] for a in self.actuators for f in a.inputs.names)
         #: an actuator without an idle form acts on every tick: no tick is quiet, so the front
@@ -204,9 +213,10 @@ class Composed(PartsMixin):
             tqs.append(a.outputs.get(out, "torque_B"))
         return tau, mem, ca.vertcat(*ons) if ons else type(cmd)(0, 1), ca.vertcat(*tqs) if tqs else type(cmd)(0, 1)
 
-    def advance(self, t, x, h, u, p, on_s, torque_B, called: bool = False):
+    def advance(self, t, x, h, u, p, on_s, torque_B, called: bool = False, edge=None):
         """One fixed step of the plant over ``[t, t + h]`` with the held input ``u``, cut at
-        every pulse edge ``t + on_s[j]`` (channel j adds its ``torque_B`` column while on).
+        every pulse edge ``t + on_s[j]`` (channel j adds its ``torque_B`` column while on) and,
+        in the edge tick's case, at the scene's edges ``edge`` (:func:`~.actuator.split_step`).
         ``called``: the pieces call one right-hand side rather than each inlining it (n + 1
         steps of 4 stages: the generated C and its compile time grow with them; the same
         operations, bit for bit)."""
@@ -215,9 +225,24 @@ class Composed(PartsMixin):
         if called:
             t_, x_, u_, p_ = ca.SX.sym("t"), ca.SX.sym("x", P.nx), ca.SX.sym("u", rhs.size1_in(2)), ca.SX.sym("p", P.npar)
             rhs = sx_function("cl_rhs", [t_, x_, u_, p_], [rhs(t_, x_, u_, p_)], called=True)
-        if on_s.numel() == 0:
+        if on_s.numel() == 0 and edge is None:
             return P.step(rhs, t, x, h, u, p)
-        return split_step(P.step, rhs, t, x, h, u, p, on_s, ca.reshape(torque_B, 3, on_s.numel()), P.input_layout)
+        return split_step(P.step, rhs, t, x, h, u, p, on_s, ca.reshape(torque_B, 3, on_s.numel()), P.input_layout, edge)
+
+    def _edge_args(self, par) -> list:
+        """``[edge]`` in the edge tick's case, else none: the last input of ``cl_pulse``."""
+        return [self.par.get(par, "edge")] if self.n_edges else []
+
+    def _edge(self, par):
+        """The edge tick's ``edge`` parameters in ``par`` (None: not the edge tick's case)."""
+        return self.par.get(par, "edge") if self.n_edges else None
+
+    def _step(self, t, x, h, u, p, edge=None):
+        """One fixed step of the plant (SX), cut at the scene's edges ``edge`` in the edge tick's case."""
+        if edge is None:
+            return self.plant.step(self._rhs, t, x, h, u, p)
+        return split_step(self.plant.step, self._rhs, t, x, h, u, p, ca.SX(0, 1), ca.SX(3, 0), self.plant.input_layout,
+                          edge)
 
     # -- the tick -----------------------------------------------------------------------------
     def _front(self, plain: bool) -> ca.Function:
@@ -277,7 +302,7 @@ class Composed(PartsMixin):
             fields = dict(i=i + 1, x=x, counts=cnt)
         else:
             _, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p, self._end_extra(c))
-            x_q = self.plant.step(self._rhs, t, x, h, u, p)
+            x_q = self._step(t, x, h, u, p, self._edge(par))
             fields = dict(i=i + 1, x=x_q, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
         fields.update(mem)
         if self.env is not None:
@@ -326,8 +351,10 @@ class Composed(PartsMixin):
         end_f = sx_function("cl_end", [ts, xs_, rs_, us_, pp, hs, *ex_s.values()], [u_b, sat_b])
         nch = on_s.numel()
         us, ons, tqs = SX.sym("u", u_b.numel()), SX.sym("on", nch), SX.sym("tq", 3 * nch)
-        plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs], [self.plant.step(self._rhs, ts, xs_, hs, us, pp)])
-        split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs], [self.advance(ts, xs_, hs, us, pp, ons, tqs, called=True)])
+        eds = [SX.sym("edge", 4 * self.n_edges)] if self.n_edges else []  # (the edge tick's case)
+        plain = sx_function("cl_plain", [ts, xs_, hs, us, pp, ons, tqs, *eds], [self._step(ts, xs_, hs, us, pp, *eds)])
+        split = sx_function("cl_split", [ts, xs_, hs, us, pp, ons, tqs, *eds],
+                            [self.advance(ts, xs_, hs, us, pp, ons, tqs, called=True, edge=eds[0] if eds else None)])
         out = self._cache["acted"] = (chain, end_f, ca.Function.if_else("cl_pulse", split, plain), nr, nch)
         return out
 
@@ -352,7 +379,7 @@ class Composed(PartsMixin):
         a_in = [c, par, cq, ar, aon, atq, afull]
         held = self._u_ext(c, u_ext)
         uu, fl = end_f(t, x, ar, held + afull if self._full_tick else held, p, h, *self._end_extra(c).values())
-        x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq)
+        x_b = pulse(ca.sum1(aon) > 0, t, x, h, uu, p, aon, atq, *self._edge_args(par))
         acted = ca.Function("cl_acted", a_in, [ca.vertcat(x_b, cnt + ca.vertcat(fl[0] > 0.5, fl[1] > 0.5))])
         kept = ca.Function("cl_kept", a_in, [ca.vertcat(C.get(cq, "x"), C.get(cq, "counts"))])
         if self._never_quiet:  # no quiet step to keep: the end and the step on what the chain leaves

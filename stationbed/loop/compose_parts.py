@@ -50,7 +50,7 @@ class PartsMixin:
         t0, h, u_ext, p = (P.get(par, f) for f in ("t0", "h", "u_ext", "p"))
         t = t0 + i * h
         act, u, sat = self._end(t, h, x, cmd, self._u_ext(c, u_ext), p, self._end_extra(c))
-        x1 = self.plant.step(self._rhs, t, x, h, u, p)
+        x1 = self._step(t, x, h, u, p, self._edge(par))
         fields = {f: C.get(c, f) for f in C.names}
         fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))
         return C.pack(fields, symbolic=True), act, x1
@@ -90,7 +90,7 @@ class PartsMixin:
                 rest, on, tq, _, full, *xa = chain(k, t, h, ce, par, cmd, reads)
             held = self._u_ext(ce, u_ext)  # (plus the torque of the actuators on the whole tick)
             act, u, sat = self._end(t, h, x, rest, held + full if self._full_tick else held, p, self._end_extra(ce))
-            x1 = pulse(ca.sum1(on) > 0, t, x, h, u, p, on, tq)
+            x1 = pulse(ca.sum1(on) > 0, t, x, h, u, p, on, tq, *self._edge_args(par))
             fields = {f: C.get(ce, f) for f in C.names}
             fields.update({a.name: m for a, m in zip(self.actuators, xa)})
             fields.update(i=i + 1, x=x1, counts=cnt + ca.vertcat(sat[0] > 0.5, sat[1] > 0.5))

@@ -26,7 +26,7 @@ from . import law_state
 from .chunk_layout import ENV
 from .rate_auto import AUTO, auto_choice
 from .rates import environment_rate, hold_value
-from .segments import edge_ticks
+from .segments import edge_ticks, max_edges
 from .system import chain_end_inputs, environment_split, has_environment
 
 __all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key", "fixed_tick",
@@ -187,7 +187,8 @@ def structure_key(comp, cp, noise: bool = True) -> tuple:
             None if comp.flight is None else comp.flight.key,
             tuple((a.name, a.cluster.key, a.lp) for a in comp.actuators), type(comp.end).__name__, held_rate(comp)[0],
             None if comp.fdir is None else comp.fdir.block.key,
-            *((None if comp.corruption is None else comp.corruption.flags, bool(comp.delay)) if noise else ("no noise",)))
+            *((None if comp.corruption is None else comp.corruption.flags, bool(comp.delay)) if noise else ("no noise",)),
+            *((("edges", max_edges(comp)),) if max_edges(comp) else ()))
 
 
 def fixed_tick(comp) -> bool:
@@ -199,12 +200,13 @@ def fixed_tick(comp) -> bool:
 
 def parts_ok(comp) -> str | None:
     """Why the per-tick loop cannot fly the run through the composed parts (None: it can): the
-    integrator (not one fixed step per tick), a discontinuity between ticks or an array rate
-    step (the generic path cuts there), an actuator that is not symbolic."""
+    integrator (not one fixed step per tick), an array rate step (the state jumps there: the
+    generic path cuts and jumps), an actuator that is not symbolic. A discontinuity between
+    ticks is not one: its tick is the edge tick's case (:func:`composed`, ``edges``)."""
     if not fixed_tick(comp):
         return "the integrator is not one RK4 step per tick"
     if edge_ticks(comp) is None:
-        return "a discontinuity between ticks (or an array rate step)"
+        return "an array rate step (the generic path cuts there and jumps)"
     for a in comp.actuators:
         if a.lp:
             return f"an actuator that is not symbolic ({a.name}: {a.cluster.why})"
@@ -252,16 +254,18 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     return out
 
 
-def composed(comp, cp, noise: bool = True) -> tuple[Composed, float]:
+def composed(comp, cp, noise: bool = True, edges: bool = False) -> tuple[Composed, float]:
     """The run's composition composed (cached by its structure, :func:`structure_key`) and the
-    seconds it took to build now (0 when cached); ``noise`` as :func:`run_blocks`."""
-    key = structure_key(comp, cp, noise)
+    seconds it took to build now (0 when cached); ``noise`` as :func:`run_blocks`; ``edges``:
+    its edge tick's case (the step also cut at the scene's discontinuities inside the tick,
+    :func:`~.segments.tick_edges`; the same blocks, the parameters with ``edge`` appended)."""
+    key = structure_key(comp, cp, noise) + (("edge case",) if edges else ())
     hit = _COMPOSED.get(key)
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
     rate = held_rate(comp)[0]
-    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate, noise))
+    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate, noise), max_edges(comp) if edges else 0)
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0
 

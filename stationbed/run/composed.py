@@ -5,7 +5,8 @@ compiled chunk per output row, the tick composed once by :mod:`stationbed.loop.c
 It knows no block: it writes the carry, the parameters and the draws by the composition's
 named layouts (each block's memory and numbers under its name), calls the composed ``row`` at
 each output row and the composed ``chunk`` over the row's ticks (cut into pieces at the
-scene's edges on the tick grid, :func:`~.segments.tick_pieces`), and hands the rows, the
+scene's edges, :func:`~.segments.tick_pieces`: a tick holding one between ticks runs the edge
+tick's compiled case, its step split there), and hands the rows, the
 flight's memory, the actuators' memory and the law's state back through the run's state.
 
 It replaced the hand-composed fused loops of issues 20-25 (``fused.py``'s chunk,
@@ -20,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import time
 
+import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
@@ -27,7 +29,7 @@ from . import law_state
 from .blocks import Draws, composed, numbers, structure_key
 from .composed_rows import rows_functions, run_rows
 from .schedule import bulk_stop, composed_hook
-from .segments import close_chunk, finish_chunks, held_torque_from, run_pieces, tick_pieces
+from .segments import close_chunk, finish_chunks, held_torque_from, max_edges, off_grid_ticks, run_pieces, tick_edges, tick_pieces
 
 __all__ = ["run_composed", "BUILT"]
 
@@ -47,9 +49,15 @@ def _functions(comp, cp) -> dict:
     tag = "composed_" + hashlib.sha256(repr(key).encode()).hexdigest()[:16]
     row, chunk = cm.row(), cm.chunk(n)
     many = rows_functions(cm, row, chunk, n)  # many rows per call (composed_rows.py)
-    funcs = compile_functions([row, chunk] + many, tag)
+    edge = []
+    if max_edges(comp):  # the edge tick's case: one tick, its step cut at the scene's edges inside it
+        ce, _ = composed(comp, cp, edges=True)
+        one = ce.chunk(1)
+        edge = [ca.Function("cl_chunk_edge", one.mx_in(), one.call(one.mx_in()))]
+    funcs = compile_functions([row, chunk] + many + edge, tag + ("_edges" if edge else ""))
     out = {"cm": cm, "row": FastCall(funcs["cl_row"]), "chunk": FastCall(funcs["cl_chunk"]), "system": comp.system,
-           "rows": {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many}}
+           "rows": {int(f.name().rsplit("_", 1)[1]): FastCall(funcs[f.name()]) for f in many},
+           "edge": FastCall(funcs["cl_chunk_edge"]) if edge else None}
     BUILT[tag] = out["build_s"] = time.perf_counter() - t0
     _CHUNKS[(structure_key(comp, cp), n)] = out
     return out
@@ -104,7 +112,10 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     def torque_at(ta):
         return held_torque_from(comp.scene, ta, comp.bps, duration)
 
-    step = composed_hook(comp, res, c0, cx, par, P)  # scheduled steps (run/schedule.py), or None
+    step = composed_hook(comp, res, c0, cx, par, P, C)  # scheduled steps (run/schedule.py), or None
+    ne = max_edges(comp)  # the edge tick's case (a discontinuity between ticks), or None
+    og = off_grid_ticks(comp)
+    edge_case = (fns["edge"], lambda a, h: tick_edges(comp, a, h, ne) if a in og else None) if ne else None
     if step is not None:  # (one at tick 0 applies before the bulk rows too)
         step(0)
         x = c0[cx].copy()
@@ -123,7 +134,9 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             if step is not None:  # a step at the row's tick: before its measurement
                 step(k)
                 x = c0[cx].copy()
-            if bulk and j in try_at:
+            if bulk and j in try_at and k in og:  # a row starting at an edge tick: row by row, bulk again after it
+                try_at.add(j + 1)
+            elif bulk and j in try_at:
                 stop = bulk_stop(sched, row_ks, j)
                 par[P.slice("u_ext")] = torque_at(t)
                 jj, tail_flag, n_done, err = run_rows(comp, res, cm, fns["rows"], row_ks[j : stop + 1], K, c0, par,
@@ -169,7 +182,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
                 s_end = r[r_s].copy()  # the law's update at the last tick
                 break
             counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period, torque_at, draws,
-                                step)
+                                step, edge_case)
             x = c0[cx].copy()
             par[P.slice("h")] = period
             ticks += n_tick

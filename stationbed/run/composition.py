@@ -33,18 +33,11 @@ import numpy as np
 from ..core.layout import Layout
 from ..loop.corruption import Corruption
 from .controller import command_values
+from .controller_error import ControllerFailure  # (defined there: run/detection.py raises it too)
 
 __all__ = ["Composition", "RunState", "FlightMemory", "ControllerFailure"]
 
 
-class ControllerFailure(Exception):
-    """The controller raised or returned a bad command at time ``t`` [s]; ``reason`` is one line.
-
-    When it raised, that exception is this one's ``__cause__`` (with its traceback)."""
-    def __init__(self, t: float, reason: str):
-        super().__init__(reason)
-        self.t = t
-        self.reason = reason
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,7 +147,7 @@ class Composition:
     @cached_property
     def schedule(self):
         """The run's scheduled steps (:class:`~.schedule.Schedule`: ``[[fault]]``, events)."""
-        from . import docking, faults  # noqa: F401,PLC0415 (the sources of steps: [[fault]], [[event]] register themselves)
+        from . import detection, docking, faults  # noqa: F401,PLC0415 (the sources of steps register themselves)
         from .schedule import schedule_of  # noqa: PLC0415 (schedule.py reads this class's fields)
 
         return schedule_of(self)

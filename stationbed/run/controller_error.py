@@ -4,11 +4,22 @@ import it)."""
 
 from __future__ import annotations
 
-__all__ = ["ControllerError", "one_line"]
+__all__ = ["ControllerError", "ControllerFailure", "one_line"]
 
 
 class ControllerError(ValueError):
     """A controller that cannot be built (unknown name, bad parameters)."""
+
+
+class ControllerFailure(Exception):
+    """The controller raised or returned a bad command at time ``t`` [s]; ``reason`` is one line
+    (:mod:`.composition` re-exports it).
+
+    When it raised, that exception is this one's ``__cause__`` (with its traceback)."""
+    def __init__(self, t: float, reason: str):
+        super().__init__(reason)
+        self.t = t
+        self.reason = reason
 
 
 def one_line(e: BaseException | str) -> str:

@@ -5,16 +5,25 @@ from t = 0) are unknown to the law until the first controller tick at or after T
 the loop hands the law the plant of :func:`~stationbed.scene.knowledge.detected_scene` through
 :func:`replan`: ``law.plant`` becomes it and the law's ``_replan(plant)`` runs — a hook a law
 may define (e.g. to keep an integrator or a schedule in progress); without it, ``_reset(plant)``
-designs again on the new plant (``n_updates`` and ``q_ref_BN`` are kept either way). The per-tick loop does it (a law's ``symbolic`` form
-holds the plant's numbers as constants of a compiled chunk, so the fused and lockstep executors
-leave a run with a replan inside it to the per-tick loop; the numbers are the same).
+designs again on the new plant (``n_updates`` and ``q_ref_BN`` are kept either way).
+
+The detection is a scheduled step (run/schedule.py, :func:`detection_steps`): its tick cuts the
+fused loop's chunk, and there the executor hands the law the state it carried, calls the
+redesign in Python (:meth:`Step.redesign <.schedule.Step>`) and writes the law's new
+``symbolic_params`` and state into the compiled loop's numbers and carry (the law's numbers are
+parameters of the composed tick, never constants). The per-tick loop calls the law itself and
+lets it design again at that tick (``ControlLoop.redesign``); the numbers are the same.
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["Replan", "replan", "replan_of"]
+import numpy as np
+
+from .schedule import SOURCES, Step
+
+__all__ = ["Replan", "replan", "replan_of", "detection_steps"]
 
 
 def replan(law, plant) -> None:
@@ -54,3 +63,32 @@ def replan_of(scene, system, period: float, duration: float, plant_facts) -> Rep
     if tick * period >= duration:
         return None
     return Replan(tick, scene, system, period, plant_facts)
+
+
+def detection_steps(comp) -> list[Step]:
+    """The run's detection as a scheduled step (a :data:`~.schedule.SOURCES` entry): at the
+    detection tick the law designs again (``Step.redesign``) on the plant of :class:`Replan`;
+    none without one. ControllerFailure at the tick's time naming the law's hook if it raises
+    (the per-tick loop's message)."""
+    r = comp.replan
+    if r is None:
+        return []
+
+    def redesign(t: float, s) -> tuple[np.ndarray, np.ndarray]:
+        from . import law_state  # noqa: PLC0415 (its peers import this module)
+        from .controller_error import ControllerFailure, one_line  # noqa: PLC0415
+
+        ctrl = comp.ctrl
+        try:
+            law_state.hand_back(ctrl, s)
+            replan(ctrl, r.plant())
+        except Exception as e:
+            hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
+            raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
+                                       f"plant with the failure detected: {one_line(e)}") from e
+        return np.asarray([float(v) for v in ctrl.symbolic_params()], float), law_state.initial(ctrl)
+
+    return [Step(r.tick, "failure detected", info={"step": "detection"}, redesign=redesign)]
+
+
+SOURCES.append(detection_steps)

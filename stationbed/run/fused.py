@@ -25,10 +25,12 @@ def why_not_fused(comp) -> str | None:
     part of the clock that forces it off the compiled path (None: it flies fused). The only
     place that decides it: :func:`fused_ok` is this is None, the summary reports it
     (``not_fused``). In order: the law (a Python or FMU law has no ``symbolic`` form), the
-    integrator (not one fixed explicit step per tick), a discontinuity between ticks or an array
-    rate step, the ideal measurement's delay (a ring buffer, not a block yet) or its noise with
-    ``[[sensor]]`` tables, a failure detected mid-run, the actuator chain (the LP mapping;
-    ``[controller.sensor]`` noise with a stateful law)."""
+    integrator (not one fixed explicit step per tick), an array rate step (the state jumps
+    inside a tick), the ideal measurement's delay (a ring buffer, not a block yet) or its noise
+    with ``[[sensor]]`` tables, the actuator chain (the LP mapping; ``[controller.sensor]``
+    noise with a stateful law). Not reasons: a discontinuity between ticks (its tick is the
+    edge tick's compiled case, :func:`~.segments.tick_edges`) and a failure detected mid-run
+    (the law designs again at its tick, a scheduled step: :func:`~.detection.detection_steps`)."""
     ctrl = comp.ctrl
     integ = comp.integ
     if not callable(getattr(ctrl, "symbolic", None)):
@@ -36,13 +38,11 @@ def why_not_fused(comp) -> str | None:
     if not integ.fusable or math.ceil(comp.period / integ.h_nominal - 1e-9) != 1 or comp.system.sx is None:
         return f"integrator: '{integ.name}' is not one fixed explicit step per tick"
     if edge_ticks(comp) is None:
-        return "plant: a discontinuity between ticks or an array rate step (the per-tick loop cuts there)"
+        return "plant: an array rate step (the per-tick loop cuts there and jumps)"
     if comp.noisy and comp.delay > 0:
         return "noise: [controller.sensor] delay (its ring buffer is not a block yet)"
     if comp.flight is not None and comp.noisy:
         return "noise: [controller.sensor] noise with [[sensor]] tables"
-    if comp.replan is not None:
-        return "law: a failure detected mid-run (the law designs again, in Python)"
     return _chain_why(comp)
 
 

@@ -14,9 +14,11 @@ edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every ex
 scheduled steps (faults, docking events: :mod:`.schedule`, ``lockstep_hook``) apply where its
 piece starts (every step's tick starts one), on its own row of the carry and the numbers.
 
-A sample whose single run cannot step the composed parts (a discontinuity between ticks, an
-array rate step, an actuator that is not symbolic, a fault detected mid-run) runs its own
-:class:`~.closed_loop.ControlLoop`. A sample that fails (a bad or non-finite command, the law
+A tick holding a discontinuity between ticks is a piece of its own, the edge tick's compiled
+case mapped too (its results taken for the samples in one); a fault detected mid-run designs
+the sample's law again at its tick (``lockstep_hook``). A sample whose single run cannot step
+the composed parts (an array rate step, an actuator that is not symbolic, ``[fdir]``, a
+detection with a law's own ``update_batch``) runs its own :class:`~.closed_loop.ControlLoop`. A sample that fails (a bad or non-finite command, the law
 raising, a non-finite state) stops alone, with its single run's reason and time; the batch goes on.
 
 :func:`executor` says which executor a run gets: ``fused`` (a law with ``symbolic``, where the
@@ -41,7 +43,7 @@ from .parts import NOISE_BLOCK, law_numbers, parts
 from .prepare import prepare
 from .rows import Rows
 from .schedule import lockstep_hook
-from .segments import breakpoints, edge_ticks, held_torque_from, tick_pieces
+from .segments import breakpoints, edge_ticks, held_torque_from, max_edges, off_grid_ticks, tick_edges, tick_pieces
 
 __all__ = ["executor", "run_lockstep", "vectorised"]
 
@@ -57,9 +59,11 @@ def vectorised(ctrl) -> bool:
 
 def _tick_ok(comp) -> bool:
     # a run the per-tick loop flies on the composed parts (blocks.parts_ok: one fixed step per
-    # tick, every discontinuity on the tick grid, every actuator symbolic) runs them mapped; a
-    # fault detected mid-run (run/detection.py) runs per tick
-    return comp.replan is None and parts_ok(comp) is None
+    # tick, every actuator symbolic) runs them mapped; a fault detected mid-run (run/detection.py)
+    # too, its law designing again at its tick (schedule.lockstep_hook), except with a law that
+    # writes its own update_batch (its batch stand-in holds copies of the members' numbers)
+    own_batch = type(comp.ctrl).update_batch is not Controller.update_batch
+    return not (comp.replan is not None and own_batch) and parts_ok(comp) is None
 
 
 def executor(loop) -> str:
@@ -210,6 +214,11 @@ class _Lockstep:
         # the parts mapped over the samples: casadi's map calls the very machine code once per sample
         self.sense = mapped(fns["sense"].f, n, 1)
         self.act = mapped(fns["act"].f, n, 1)
+        # the edge tick's case (a discontinuity inside a tick), mapped too: run on the ticks where a
+        # sample is in one (each such tick a piece of its own), its results taken for those samples
+        self.act_edge = mapped(fns["act_edge"].f, n, 1) if fns.get("act_edge") is not None else None
+        self.edge_at = [off_grid_ticks(s.loop.comp) for s in samples]
+        self.edge_now: dict[int, np.ndarray] = {}  # sample -> its current piece's edges
         C, P = cm.carry, cm.par
         nw, ny, ns = cm.noise.size, lp.meas_layout.size, cm.sense_outputs.size
         a, r = self.act.args, self.act.res
@@ -308,6 +317,9 @@ class _Lockstep:
             row = self.PAR[i]
             row[P.slice("t0")], row[P.slice("h")], row[P.slice("n_act")], row[P.slice("k0")] = t0, h, b - a, a
             row[P.slice("u_ext")] = held_torque_from(comp.scene, t0, comp.bps, comp.duration)
+            self.edge_now.pop(i, None)
+            if a in self.edge_at[i]:
+                self.edge_now[i] = tick_edges(comp, a, h, max_edges(comp))
             self.C[i, C.slice("i")] = 0.0
             if self.W.shape[1]:
                 self.SW[i] = self._w(i, k, K)
@@ -317,6 +329,24 @@ class _Lockstep:
         self.C[due] = self.SCS[due]
         self.raw[due] = self.SV[due]
         self.outs[due] = self.SOUTS[due]
+
+    def _act_edges(self) -> None:
+        """The act part of the edge tick's case for the samples in an edge tick (:attr:`edge_now`),
+        on the act part's inputs, its results written over theirs (the others' unused)."""
+        fe, n, np_ = self.act_edge, self.n, self.cm.par.size
+        for dst, src in zip(fe.args, self.act.args):
+            if dst.size == src.size:
+                dst[:] = src
+        pe = fe.args[1].reshape(n, -1)
+        pe[:, :np_] = self.PAR
+        pe[:, np_:] = 0.0
+        for i, e in self.edge_now.items():
+            pe[i, np_:] = e
+        fe()
+        idx = list(self.edge_now)
+        for dst, src in zip(self.act.res, fe.res):
+            d, r = dst.reshape(n, -1), src.reshape(n, -1)
+            d[idx] = r[idx]
 
     # -- the run -------------------------------------------------------------------------
     def run(self, SimulationError) -> list:
@@ -446,6 +476,8 @@ class _Lockstep:
                     for i in range(n):
                         self.W[i] = self._w(i, k + 1, K)
                 self.act()
+                if self.edge_now:
+                    self._act_edges()
                 if has_act and (self.ACT[:, i_flags] > 0.5).any() and k < K:
                     lim = (self.ACT[:, i_flags.start] > 0.5) & alive
                     sat = (self.ACT[:, i_flags.start + 1] > 0.5) & alive

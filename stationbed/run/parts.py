@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import struct
 
+import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
@@ -18,7 +19,7 @@ from .composition import ControllerFailure
 from .controller import ControllerError, one_line
 from .measurement import Measurement
 from .schedule import parts_hook
-from .segments import edge_ticks, held_torque_from, tick_pieces
+from .segments import edge_ticks, held_torque_from, max_edges, off_grid_ticks, tick_edges, tick_pieces
 
 __all__ = ["parts", "run_parts", "law_numbers", "NOISE_BLOCK"]
 
@@ -29,17 +30,26 @@ _PARTS: dict = {}
 
 
 def parts(comp, cp=(), noise: bool = True) -> dict:
-    """``{"cm": Composed, "sense": FastCall, "act": FastCall}`` of the run composed by ``comp``
-    (``cp`` the law's symbolic numbers, when it has them: the composition's key only; ``noise``
-    as :func:`~.blocks.run_blocks`)."""
+    """``{"cm": Composed, "sense": FastCall, "act": FastCall, "act_edge": FastCall or None}`` of
+    the run composed by ``comp`` (``cp`` the law's symbolic numbers, when it has them: the
+    composition's key only; ``noise`` as :func:`~.blocks.run_blocks`); ``act_edge`` the act
+    part of the edge tick's case (a discontinuity inside a tick: its parameters end with the
+    edges, :func:`~.segments.tick_edges`), when the run has one."""
     key = structure_key(comp, cp, noise)
     hit = _PARTS.get(key)
     if hit is not None and hit["system"] is comp.system:
         return hit
     cm, _ = composed(comp, cp, noise)
     tag = "parts_" + hashlib.sha256(repr(cm.key).encode()).hexdigest()[:16]
-    funcs = compile_functions([cm.sense_part(), cm.act_part()], tag)
-    out = {"cm": cm, "sense": FastCall(funcs["cl_sense"]), "act": FastCall(funcs["cl_act"]), "system": comp.system}
+    fs = [cm.sense_part(), cm.act_part()]
+    if max_edges(comp):
+        ce, _ = composed(comp, cp, noise, edges=True)
+        a = ce.act_part()
+        fs.append(ca.Function("cl_act_edge", a.mx_in(), a.call(a.mx_in())))
+        tag += "_edges"
+    funcs = compile_functions(fs, tag)
+    out = {"cm": cm, "sense": FastCall(funcs["cl_sense"]), "act": FastCall(funcs["cl_act"]), "system": comp.system,
+           "act_edge": FastCall(funcs["cl_act_edge"]) if len(fs) > 2 else None}
     _PARTS[key] = out
     return out
 
@@ -102,8 +112,22 @@ def run_parts(loop, K: int, update) -> None:
         return W[k - w0]
 
     step = parts_hook(loop, c, cx, par, P)  # scheduled steps (run/schedule.py: each starts a piece), or None
+    n_edges, og = max_edges(comp), off_grid_ticks(comp)  # the ticks holding a discontinuity: the edge tick's case
+    fe = fns["act_edge"]
+
+    def edge_trigger(e):  # the act part of the edge tick's case on the act part's buffers
+        def run():
+            for dst, src in zip(fe.args, act.args):
+                dst[: len(src)] = src
+            fe.args[1][P.size:] = e
+            fe()
+            for dst, src in zip(act.res, fe.res):
+                dst[:] = src
+        return run
 
     def start(k, n, h):  # a piece of n ticks of h from tick k: its numbers, its first sensing
+        nonlocal trigger
+        trigger = act._trigger if k not in og else edge_trigger(tick_edges(comp, k, h, n_edges))
         if step is not None:  # a step at tick k: the state jumped, the numbers rewritten, before sensing
             step(k)
         t0 = min(k * period, duration)

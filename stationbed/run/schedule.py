@@ -59,6 +59,11 @@ class Step:
     #: a jump of its own, ``kick(t, x, p_before, p_after) -> x_after`` (numpy), applied after the
     #: numbers are set (and after ``step_jump``): a docking's momentum brought in (run/docking.py)
     kick: "Callable | None" = None
+    #: the law designs again at the tick, in Python (a failure detected: run/detection.py):
+    #: ``redesign(t, s) -> (cp, s_after)`` from the law's state ``s`` the executor carried, its new
+    #: symbolic numbers and state; an executor that carries the law's numbers calls it between
+    #: chunks (:func:`composed_hook`), one that calls the law in Python lets the law design itself
+    redesign: "Callable | None" = None
 
 
 #: functions ``(comp) -> list[Step]`` making a run's steps from its scene (``[[fault]]``: run/faults.py)
@@ -201,10 +206,11 @@ def refresh_loop(loop) -> None:
         buf[:] = law
 
 
-def composed_hook(comp, res, c0, cx, par, P):
+def composed_hook(comp, res, c0, cx, par, P, C=None):
     """The fused loop's ``step(a)`` (run/composed.py, :func:`~.segments.run_pieces`): at a step's
-    tick, the carry's state ``c0[cx]`` jumped and ``par``'s p and block slices rewritten; None
-    when the run has no steps."""
+    tick, the carry's state ``c0[cx]`` jumped and ``par``'s p and block slices rewritten; with
+    the carry's layout ``C``, a step's ``redesign`` too (the law's numbers in ``par`` and its
+    state in ``c0``, under the law block's name ``"law"``); None when the run has no steps."""
     if not comp.schedule:
         return None
     st = stepper(comp, res)
@@ -216,6 +222,10 @@ def composed_hook(comp, res, c0, cx, par, P):
             for name, arr in st.numbers.items():
                 if name in P:
                     par[P.slice(name)] = arr
+            for s in st.schedule.at(a) if C is not None else ():
+                if s.redesign is not None:
+                    cp, s_law = s.redesign(a * comp.period, C.get(c0, "law").copy())
+                    par[P.slice("law")], c0[C.slice("law")] = cp, s_law
     return step
 
 
@@ -260,7 +270,7 @@ def parts_hook(loop, c, cx, par, P):
 def steps_summary(comp, res) -> dict:
     """The summary's ``faults``: the steps applied, in order (empty without a schedule)."""
     st = getattr(res, "stepper", None)
-    if not comp.schedule and not comp.scene.fault:
+    if not comp.scene.fault and not comp.scene.event:  # (a detection's redesign alone reports nothing here)
         return {}
     applied = [] if st is None else st.summary()
     out = {"faults": [s for s in applied if "event" not in s]}
@@ -298,7 +308,37 @@ def lockstep_hook(batch, samples):
         buf = None if law is None else _law_buffers(batch.law_batch, i)
         if buf is not None:
             buf[:] = law
+        if any(s.redesign is not None for s in st.schedule.at(k)):
+            _batch_redesign(batch, i, k, lo)
     return step
+
+
+def _batch_redesign(batch, i: int, k: int, lo) -> None:
+    """Sample ``i``'s law designs again at tick ``k`` (a step's ``redesign``) in the lockstep
+    batch: a law evaluated compiled for the batch (``symbolic``) is handed its state from the
+    batch law's row, designs again, and its new numbers and state go into that row (before the
+    batch law's first call the batch takes them from the law itself); a law called in Python
+    (each member's ``update``) designs again itself, as per tick (``ControlLoop.redesign``)."""
+    comp = lo.comp
+    t = k * comp.period
+    if not comp.ctrl.has_symbolic():
+        lo.redesign(t)
+        return
+    law = batch.law_batch.__dict__.get("_batch_law")
+    fc = None if law is None else law.fc
+    rows = None if fc is None else fc.args[3].reshape(len(law.members), -1)
+    s_now = rows[i].copy() if rows is not None else _initial_state(comp.ctrl)
+    redesign = next(s.redesign for s in comp.schedule.at(k) if s.redesign is not None)
+    cp, s_after = redesign(t, s_now)
+    if fc is not None:
+        _law_buffers(batch.law_batch, i)[:] = cp
+        rows[i] = s_after
+
+
+def _initial_state(ctrl):
+    from . import law_state  # noqa: PLC0415
+
+    return law_state.initial(ctrl)
 
 
 def bulk_stop(ticks, row_ks, j: int) -> int:

@@ -21,6 +21,9 @@ __all__ = [
     "held_torque",
     "held_torque_from",
     "edge_ticks",
+    "off_grid_ticks",
+    "max_edges",
+    "tick_edges",
     "tick_pieces",
     "torque_at",
     "close_chunk",
@@ -132,18 +135,64 @@ def segment_input(scene: Scene, model: StationModel, a: float, b: float, u: np.n
 
 
 def edge_ticks(comp) -> list[int] | None:
-    """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) of the
-    discontinuities inside the run of ``comp`` (its :class:`~.composition.Composition`) and of
-    its scheduled steps (run/schedule.py: always on the grid); None when a discontinuity lies
-    between ticks or the scene has array rate steps (both need the per-tick loop)."""
+    """The ticks k (``t = k * period`` exactly, as the loop's clock computes it) where a fused
+    loop cuts its chunk: the discontinuities on the tick grid, its scheduled steps (run/schedule.py:
+    always on the grid), and each tick holding a discontinuity between ticks with the tick after
+    it (that tick is a piece of its own, its step split at the edge: :func:`tick_edges`); None
+    when the scene has array rate steps (the state jumps there: the per-tick loop's generic path)."""
     inside = [b for b in comp.bps if 0.0 < b < comp.duration]
     if inside and comp.model.has_steps:
         return None
-    ks = [round(b / comp.period) for b in inside]
-    if any(k * comp.period != b for k, b in zip(ks, inside)):
-        return None
     K = comp.ticks()
-    return sorted(set(ks) | {k for k in comp.schedule.ticks if 0 < k < K})
+    ks = {round(b / comp.period) for b in inside if round(b / comp.period) * comp.period == b}
+    for k in off_grid_ticks(comp):
+        ks |= {k, k + 1}
+    return sorted({k for k in ks | set(comp.schedule.ticks) if 0 < k < K})
+
+
+def off_grid_ticks(comp) -> dict[int, list[float]]:
+    """The ticks that hold a discontinuity of the scene strictly inside them (the per-tick
+    loop's ``t_k < b < t_k+1``, ``t_k = k * period``, the last tick ending at the duration):
+    tick -> its breakpoints [s], sorted."""
+    period, duration = comp.period, comp.duration
+    out: dict[int, list[float]] = {}
+    for b in comp.bps:
+        if not 0.0 < b < duration:
+            continue
+        k = int(b // period)
+        while k > 0 and k * period >= b:
+            k -= 1
+        while min((k + 1) * period, duration) <= b:
+            k += 1
+        if k * period < b:
+            out.setdefault(k, []).append(float(b))
+    return {k: sorted(v) for k, v in sorted(out.items())}
+
+
+def max_edges(comp) -> int:
+    """The most scene breakpoints inside one tick of the run (0: every edge on the grid): the
+    size of an edge tick's compiled case (:func:`tick_edges`)."""
+    return max((len(v) for v in off_grid_ticks(comp).values()), default=0)
+
+
+def tick_edges(comp, k: int, h: float, n: int) -> np.ndarray | None:
+    """The edges inside tick ``k`` of length ``h`` [s] as an edge tick's parameters (the composed
+    ``edge``, :func:`~stationbed.loop.actuator.split_step`), or None when the tick holds none:
+    ``n`` times into the tick [s] then ``n`` jumps of the held external torque (3 each, B
+    components [N m]: the torque held after the edge less the one before, :func:`held_torque_from`),
+    padded with edges at ``h`` that change nothing. The tick's own held torque is the one held
+    from its start (the executors set it)."""
+    bs = off_grid_ticks(comp).get(k)
+    if not bs:
+        return None
+    t0 = k * comp.period
+    e, du = np.full(n, h), np.zeros((n, 3))
+    prev = held_torque_from(comp.scene, t0, comp.bps, comp.duration)
+    for j, b in enumerate(bs):
+        nxt = held_torque_from(comp.scene, b, comp.bps, comp.duration)
+        e[j], du[j] = b - t0, nxt - prev
+        prev = nxt
+    return np.concatenate([e, du.ravel()])
 
 
 def tick_pieces(k: int, n_act: int, edges, duration: float, period: float) -> list[tuple[int, int, float]]:
@@ -169,7 +218,7 @@ def torque_at(comp, edges, u_ext):
     return lambda t: u_ext
 
 
-def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None, step=None) -> np.ndarray:
+def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None, step=None, edge=None) -> np.ndarray:
     """Advance a fused loop's chunk over the :func:`tick_pieces` of a row starting at tick ``k``,
     one compiled call each (run/composed.py).
 
@@ -178,7 +227,10 @@ def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None
     carry at the row's end. Each piece sets the parameters (layout ``P``: ``t0``, ``h``, ``n_act``,
     ``k0`` where it has one, ``u_ext`` = ``torque_at(t0)``) and ``draws[a - k : b - k]`` (the
     rows' ticks, tick by tick); ``step(a)``, when given, applies the scheduled steps at a piece's
-    first tick ``a`` (run/schedule.py) to the carry and the parameters. Returns the pieces'
+    first tick ``a`` (run/schedule.py) to the carry and the parameters. ``edge``, when given,
+    ``(edge_chunk, edges_of)``: a piece whose ``edges_of(a, h)`` is not None (a tick holding a
+    discontinuity, a piece of its own: :func:`edge_ticks`) runs the edge tick's compiled case
+    ``edge_chunk`` (one tick; the parameters then those edges). Returns the pieces'
     rate-limited and saturated tick counts."""
     c0, par = chunk.args[0], chunk.args[1]
     ci, cc = C.slice("i"), C.slice("counts")
@@ -195,8 +247,19 @@ def run_pieces(chunk, C, P, pieces, k: int, period: float, torque_at, draws=None
         par[pu] = torque_at(a * period)
         if draws is not None:  # column-major (width, n): tick by tick
             chunk.args[2][: draws.shape[1] * (b - a)] = draws[a - k : b - k].ravel()
-        chunk()
-        rc = chunk.res[0]
+        e = None if edge is None else edge[1](a, h)
+        if e is not None:  # the edge tick's case: the same carry, parameters and draws, then the edges
+            fe = edge[0]
+            fe.args[0][:] = c0
+            fe.args[1][: len(par)] = par
+            fe.args[1][len(par):] = e
+            if draws is not None:
+                fe.args[2][:] = chunk.args[2][: draws.shape[1]]
+            fe()
+            rc = fe.res[0]
+        else:
+            chunk()
+            rc = chunk.res[0]
         counts += rc[cc]
         c0[:] = rc
     return counts
