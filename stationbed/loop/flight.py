@@ -3,9 +3,10 @@
 :class:`Flight` is the sensing half of the closed loop's composition (issue 20, docs/loop.md).
 Both executors run it, neither reads the other's internals:
 
-* the per-tick loop (``run/closed_loop.py``) calls :meth:`Flight.compiled` once per tick;
-* the fused loop (``run/composed.py``, as ``loop/block.py``'s sensing block) inlines :meth:`Flight.function` in its ``mapaccum``
-  (MX, so the suite's ``Switch`` nodes stay lazy in the generated code).
+* every executor composes :meth:`Flight.function` as ``loop/block.py``'s sensing block: the fused
+  loop (``run/composed.py``) inlines it in its ``mapaccum``, the per-tick loop calls it in its
+  compiled parts (``run/parts.py``; on its generic path on the measurement it is handed) (MX, so
+  the suite's ``Switch`` nodes stay lazy in the generated code).
 
 ``(k, t, t_prev, y, theta_prev, omega_prev, xs, w, ps) -> (theta, xs_next, y_seen, ys)``
 

@@ -328,10 +328,11 @@ class ControlLoop:
                                        f"plant with the failure detected: {one_line(e)}") from e
 
     def _run_generic(self, K: int, update) -> None:
-        """Ticks 0..K on the generic path: per tick the measurement, the sensing, the law, the
-        actuator chain and one integrator call per period split at the discontinuities inside it
-        (an adaptive integrator, a discontinuity between ticks or an array rate step, an actuator
-        that is not symbolic)."""
+        """Ticks 0..K on the generic path: per tick the measurement, the run's composed blocks
+        (:class:`~.parts.GenericTick`: the sense blocks on it, the chain's blocks in order around
+        the law called here) and one integrator call per period split at the discontinuities and
+        pulse edges inside it (an adaptive integrator, a discontinuity between ticks or an array
+        rate step, an actuator that is not symbolic)."""
         comp, res = self.comp, self.res
         period, duration = comp.period, comp.duration
         sat_since_row = 0
