@@ -278,7 +278,8 @@ class GenericTick:
         self.pieces = fns["chain"]
         self.chain = [(a, C.slice(a.name)) for a in comp.actuators]
         self.cx = C.slice("x")
-        self.pt0, self.ph, self.pk = P.slice("t0"), P.slice("h"), P.slice("k0")
+        self.pt0, self.ph, self.pk = (P.slice(f).start for f in ("t0", "h", "k0"))
+        self.period, self.duration = comp.period, comp.duration
         self.i_ext = comp.input_layout.slice("u_ext")
         # on_s and torque_B of the chain's channels over the tick (set by :meth:`act`)
         self.on_s, self.torque_B, self.held_B = np.zeros(0), np.zeros((3, 0)), np.zeros(3)
@@ -292,10 +293,10 @@ class GenericTick:
                 self.par[P.slice(name)] = p
 
     def _at(self, k: int, t: float) -> None:
-        comp, par = self.comp, self.par
-        rest = comp.duration - t  # the tick's length: the period, the remainder of the run for the last one
+        par = self.par
+        rest = self.duration - t  # the tick's length: the period, the remainder of the run for the last one
         par[self.pt0], par[self.pk] = t, k
-        par[self.ph] = comp.period if rest >= comp.period * (1 - 1e-12) else max(rest, 0.0)
+        par[self.ph] = self.period if rest >= self.period * (1 - 1e-12) else max(rest, 0.0)
 
     def sense(self, k: int, t: float, y: np.ndarray) -> np.ndarray:
         """Tick k (time t) of the sense blocks on the true measurement ``y``: what the law sees."""
@@ -328,7 +329,7 @@ class GenericTick:
         c[self.cx] = x
         for a, _ in self.chain:  # the memory a row reports: before the tick
             a.x_row = a.x
-        tau, ons, tqs, rep = np.asarray(cmd, dtype=float), [], [], None
+        tau, ons, tqs, rep = cmd, [], [], None
         for lo, hi, fc in self.pieces:
             if fc is None:  # a block that is not symbolic: its Python step
                 x1, tau, on, tq = cm.python_step(lo, c, self.par, tau, v, y)
@@ -338,15 +339,18 @@ class GenericTick:
                 a[0][:], a[1][:], a[2][:], a[3][:], a[4][:] = c, self.par, tau, v, y
                 fc()
                 r = fc.res
-                c[:] = r[0]
-                tau, on, tq = r[1].copy(), r[2].copy(), r[3].copy()
+                if hi - lo > 1 or not len(r[5]):  # (a piece of the end alone keeps the carry)
+                    c[:] = r[0]
+                tau, on, tq = r[1], r[2], r[3]
                 if len(r[5]):  # the end is the piece's last
                     rep = r[4]
-                    self.held_B = r[5][self.i_ext].copy()
+                    self.held_B = r[5][self.i_ext]
             ons.append(on)
             tqs.append(tq)
         for a, sl in self.chain:
             a.x = c[sl].copy()
-        self.on_s = np.concatenate(ons)
-        self.torque_B = np.concatenate(tqs).reshape(-1, 3).T
+        if len(ons) == 1:  # (the buffers: read before the next tick's call)
+            self.on_s, self.torque_B = ons[0], tqs[0].reshape(-1, 3).T
+        else:
+            self.on_s, self.torque_B = np.concatenate(ons), np.concatenate(tqs).reshape(-1, 3).T
         return rep
