@@ -22,7 +22,7 @@ from scenes import SCENARIOS
 from stationbed import load_scene, simulate
 from stationbed.scene import scene_from_dict
 from test_closed_loop_balance import RK4Generic, sphere_scene
-from test_executor_matrix import THRUSTER_START, assert_same_rows
+from test_executor_matrix import THRUSTER_START, assert_balance, assert_same_rows
 from test_thrusters import pods, sphere
 
 #: ticks flown: enough for the dump to fire (THRUSTER_START: within ~5 s; the sphere's at 10 s) and the rods to act
@@ -69,3 +69,17 @@ def test_generic_path_flies_the_composed_parts_rows(name):
     if scene.magnetorquers is not None:
         assert _acts(generic, "mtq_m_x") or _acts(generic, "mtq_m_y") or _acts(generic, "mtq_m_z")
     assert_same_rows(parts, generic)
+
+
+def test_a_block_in_python_between_compiled_pieces_keeps_the_balance():
+    """The LP mapping (a block that is not symbolic) between the rods and the cluster: the chain
+    in three pieces (rods compiled, thrusters in Python, the end compiled), which only the generic
+    path flies. Its rows keep the momentum balance (the logged pulses and dipoles against ΔH_N,
+    test_executor_matrix's truth): a pulse of the Python piece booked wrong (its on-times, its
+    torques, its place in the chain's channels) breaks it."""
+    scene = _full_flight_magnetorquers().replace({"thrusters.mapping": "lp"})
+    tr = simulate(scene, fused=False)
+    assert tr.meta["summary"]["not_fused"].startswith("thrusters: mapping = 'lp'")
+    assert tr.cols("thr_firings")[-1, 0] > 0
+    assert _acts(tr, "mtq_m_x") or _acts(tr, "mtq_m_y") or _acts(tr, "mtq_m_z")
+    assert_balance(scene, tr)
