@@ -19,7 +19,7 @@ The executors add the channels that are on to the plant's external torque and **
 integration at every edge** ``t + on_s[j]`` (:func:`pulse_pieces` per tick in Python,
 :func:`split_step` in the compiled tick): no averaging, so a channel's impulse is exactly
 ``torque_B[:, j] * on_s[j]`` (to round-off). Both evaluate the same casadi function
-(:meth:`Actuator.function`; compiled per tick, inlined in the fused loop). There is no numpy twin.
+(:meth:`Actuator.function`, as a block of the composed tick: loop/block.py). There is no numpy twin.
 
 How the existing actuators read in this contract (docs/loop.md, "Actuators"): the ideal torquer
 is one channel with ``on_s = h`` and ``torque_B = tau_B`` (``tau_rest_B = 0``); the CMG cluster

@@ -41,6 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import casadi as ca
+import numpy as np
 
 from ..core.layout import Layout
 
@@ -74,6 +75,9 @@ class Block:
     #: an actuator whose channels are on the whole tick (``FULL_TICK``): its torques are added to
     #: the held torque, no edge cut inside the tick (the same numbers)
     full_tick: bool = False
+    #: a block that is not symbolic: its step in Python, ``(k, t, h, x, u, p) -> (x_next, y)`` on
+    #: numpy vectors of the same layouts (what a per-tick executor calls in its place: the LP mapping)
+    python: object = None
 
     def __post_init__(self):
         if self.role not in ROLES:
@@ -123,7 +127,18 @@ def actuator_block(act, name: str = "thrusters") -> Block:
         idle = ca.Function(f"{name}_idle", [k, t, h, x, u, p], [idle_f(t, x, r, U.get(u, "tau_B"), p)])
     return Block(name, "actuator", step, act.state, act.param_layout, Layout(), U, Y, idle=idle,
                  symbolic=not act.python_only, why=act.why, key=(type(act).__name__, act.key),
-                 x0=act.x0, p0=act.params, full_tick=act.FULL_TICK)
+                 x0=act.x0, p0=act.params, full_tick=act.FULL_TICK,
+                 python=_python_step(act, reads.size, Y) if act.python_only else None)
+
+
+def _python_step(act, n_r: int, Y: Layout):
+    """The step of a ``python_only`` actuator (rule 9 of the contract: its ``command_numeric``)
+    in the block's layouts: ``u`` its reads then ``tau_B``, ``y`` :func:`ACT_OUT`."""
+
+    def step(k, t, h, x, u, p):
+        x1, rest, on_s, torque_B, out = act.command_numeric(t, h, x, u[:n_r], u[n_r:n_r + 3])
+        return x1, Y.pack(tau_rest_B=rest, on_s=on_s, torque_B=np.asarray(torque_B).T.ravel(), out=out)
+    return step
 
 
 def sensing_block(flight, name: str = "sensing") -> Block:

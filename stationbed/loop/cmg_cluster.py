@@ -19,8 +19,8 @@ the end of every actuator chain.
 
 The system (``run/system.py``) builds its compiled ``actuate`` / ``actuate_rates`` (the
 cluster's function at the plant's state) from these functions, and every executor composes the
-chain's end through ``run.system.chain_end_inputs``: inlined in the fused ticks, compiled per
-tick (the system's ``actuate``; the torquer's :meth:`~.actuator.Actuator.compiled`).
+chain's end through ``run.system.chain_end_inputs``: the end block of the composed tick (the
+fused loop's, the per-tick loop's parts, its generic path's chain part).
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from ..core.compile import sx_function
 from ..core.layout import Layout
@@ -32,10 +33,20 @@ class PartsMixin:
         """The sense blocks' outputs side by side, each under its name (:meth:`sense_part`)."""
         return Layout(**{b.name: b.outputs.size for b in self.sense})
 
-    def _sensed(self, c, par, w, i, x):
+    def sense_on_part(self) -> ca.Function:
+        """``(c, par, y, w) -> (c_sensed, v, outs)``: :meth:`sense_part` on the true measurement
+        ``y`` it is handed (an executor that measures the plant itself: the generic path)."""
+        C, P, N = self.carry, self.par, self.noise
+        MX = ca.MX
+        c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
+        y = MX.sym("y", self.plant.meas_layout.size)
+        return ca.Function("cl_sense_on", [c, par, y, w], list(self._sensed(c, par, w, C.get(c, "i"), C.get(c, "x"), y)))
+
+    def _sensed(self, c, par, w, i, x, y=None):
         C, P = self.carry, self.par
         t, k = P.get(par, "t0") + i * P.get(par, "h"), P.get(par, "k0") + i
-        y = self.plant.meas(t, x, P.get(par, "p"))
+        if y is None:
+            y = self.plant.meas(t, x, P.get(par, "p"))
         v, mem, outs = self._sense(k, t, P.get(par, "h"), y, c, w, par, plain=False)
         fields = {f: C.get(c, f) for f in C.names}
         fields.update(mem)
@@ -100,3 +111,63 @@ class PartsMixin:
         else:
             cs, v1, outs = c1, y1[0], MX(0, 1)
         return ca.Function("cl_act", [c, par, cmd, v, w], [c1, cs, v1, outs, act])
+
+    # -- the chain, block by block, for an executor that integrates itself (the generic path) ---
+    @property
+    def chain(self) -> list:
+        """The actuators in order, then the end."""
+        return self.actuators + [self.end]
+
+    def chain_pieces(self) -> list[tuple[int, int]]:
+        """:attr:`chain` cut around each block that is not symbolic: ``(lo, hi)`` index ranges in
+        order, each either symbolic blocks (:meth:`chain_part`) or one block that is not
+        (:meth:`python_step`)."""
+        out, lo = [], 0
+        for j, b in enumerate(self.chain):
+            if not b.symbolic:
+                out += ([(lo, j)] if j > lo else []) + [(j, j + 1)]
+                lo = j + 1
+        return out + ([(lo, len(self.chain))] if lo < len(self.chain) else [])
+
+    def chain_part(self, lo: int, hi: int) -> ca.Function:
+        """``(c, par, tau, v, y) -> (c_next, rest, on_s, torque_B, act, u, sat)``: the symbolic
+        blocks ``chain[lo:hi]`` in order at the carry's tick on the request ``tau`` (what the law
+        saw ``v``, the true measurement ``y``): ``c_next`` the carry with their memory after,
+        ``rest`` what they leave, ``on_s`` and ``torque_B`` their channels' (3 per channel,
+        column-major); ``act``, ``u``, ``sat`` the end's report, the plant's held input (its
+        ``u_ext`` the parameters' plus the end's torque) and (rate limited, saturated) on what
+        is left, when the end is among them (else empty)."""
+        C, P, M = self.carry, self.par, self.plant.meas_layout
+        MX = ca.MX
+        blocks = self.chain[lo:hi]
+        if off_path(blocks):
+            raise ValueError(f"block {off_path(blocks).name!r} is not symbolic ({off_path(blocks).why})")
+        n_in = 3 if blocks[0] is not self.end else self.ncmd
+        c, par, tau0, v, y = C.symbol("c", MX), P.symbol("par", MX), MX.sym("tau", n_in), MX.sym("v", M.size), MX.sym("y", M.size)
+        i, x = C.get(c, "i"), C.get(c, "x")
+        t0, h, k0, u_ext, p = (P.get(par, f) for f in ("t0", "h", "k0", "u_ext", "p"))
+        t, k = t0 + i * h, k0 + i
+        fields = {f: C.get(c, f) for f in C.names}
+        tau, ons, tqs, end = tau0, [MX(0, 1)], [MX(0, 1)], [MX(0, 1)] * 3
+        for b in blocks:
+            if b is self.end:
+                end = self._end(t, h, x, tau, self._u_ext(c, u_ext), p, self._end_extra(c))
+                continue
+            x1, out = b.call(k, t, h, C.get(c, b.name), ca.vertcat(*self._reads(b, v, y, c), tau), MX(0, 1), P.get(par, b.name))
+            fields[b.name], tau = x1, b.outputs.get(out, "tau_rest_B")
+            ons.append(b.outputs.get(out, "on_s"))
+            tqs.append(b.outputs.get(out, "torque_B"))
+        return ca.Function(f"cl_chain_{lo}_{hi}", [c, par, tau0, v, y],
+                           [C.pack(fields, symbolic=True), tau, ca.vertcat(*ons), ca.vertcat(*tqs), *end])
+
+    def python_step(self, j: int, c, par, tau, v, y):
+        """Block ``chain[j]``, not symbolic, numerically at the carry's tick (its Python step,
+        :attr:`~.block.Block.python`) on the request ``tau``: ``(its memory after, rest, on_s,
+        torque_B)`` (numpy; ``v``, ``y`` as :meth:`chain_part`)."""
+        C, P = self.carry, self.par
+        b = self.chain[j]
+        i = C.get(c, "i")[0]
+        t0, h, k0 = (P.get(par, f)[0] for f in ("t0", "h", "k0"))
+        u = np.concatenate([*self._reads(b, v, y, c), tau])
+        x1, out = b.python(k0 + i, t0 + i * h, h, C.get(c, b.name), u, P.get(par, b.name))
+        return x1, b.outputs.get(out, "tau_rest_B"), b.outputs.get(out, "on_s"), b.outputs.get(out, "torque_B")

@@ -3,9 +3,10 @@
 :class:`Flight` is the sensing half of the closed loop's composition (issue 20, docs/loop.md).
 Both executors run it, neither reads the other's internals:
 
-* the per-tick loop (``run/closed_loop.py``) calls :meth:`Flight.compiled` once per tick;
-* the fused loop (``run/composed.py``, as ``loop/block.py``'s sensing block) inlines :meth:`Flight.function` in its ``mapaccum``
-  (MX, so the suite's ``Switch`` nodes stay lazy in the generated code).
+* every executor composes :meth:`Flight.function` as ``loop/block.py``'s sensing block: the fused
+  loop (``run/composed.py``) inlines it in its ``mapaccum``, the per-tick loop calls it in its
+  compiled parts (``run/parts.py``; on its generic path on the measurement it is handed) (MX, so
+  the suite's ``Switch`` nodes stay lazy in the generated code).
 
 ``(k, t, t_prev, y, theta_prev, omega_prev, xs, w, ps) -> (theta, xs_next, y_seen, ys)``
 
@@ -37,7 +38,7 @@ import casadi as ca
 import numpy as np
 from scipy.stats import chi2
 
-from ..core.compile import FastCall, compile_functions
+from ..core.compile import FastCall
 from ..core.layout import Layout
 from .mekf import Mekf
 from .registry import build_sensors
@@ -119,7 +120,7 @@ class Flight:
             gyro=(S.STATE.slice(m.gyro.name), m.gyro.state.slice("bias_B")) if m else None,
             bias=S.OUTPUTS.slice("bias_B_hat") if m else None,
             valid=[S.OUTPUTS.slice(h.name).start + 4 for h in self.heads])
-        self._f = self._compiled = self._report = self._plain = None
+        self._f = self._report = self._plain = None
 
     @property
     def row_slices(self) -> dict:
@@ -187,17 +188,6 @@ class Flight:
         return ca.Function(fname, [k, t, t_prev, y, th0, om0, xs, w, ps], [th, xs1, seen, ys],
                            ["k", "t", "t_prev", "y", "theta_prev", "omega_prev", "xs", "w", "ps"],
                            ["theta", "xs_next", "y_seen", "ys"], opts)
-
-    def compiled(self) -> FastCall:
-        """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall`."""
-        if self._compiled is None:
-            lib = _COMPILED.get(self.key)
-            if lib is None:
-                f = self.function()
-                lib = _COMPILED[self.key] = compile_functions([f], f"flight_{self.tag}")[f.name()]
-            self._compiled = FastCall(lib)
-            self._compiled.args[8][:] = self.params
-        return self._compiled
 
     # -- the run's numbers ----------------------------------------------------------------------
     def initial(self, q_BN: np.ndarray, omega_BN_B: np.ndarray) -> np.ndarray:
@@ -285,7 +275,6 @@ _INLINE = {"always_inline": True}
 #: ticks of noise drawn at a time (any size gives the same numbers: SuiteNoise draws in tick order)
 NOISE_BLOCK = 4096
 _TICKS: dict = {}
-_COMPILED: dict = {}
 
 
 class TickNoise:

@@ -1,16 +1,17 @@
 """The actuator chain of a closed-loop run (issue 33): the scene's actuator kinds before the
 chain's end, in chain order (:func:`~stationbed.loop.actuator.chain_kinds`), each an
 :class:`ActuatorLoop` holding its plug-in and its memory, which every executor reads and hands
-back here by the same names. No executor names a kind: the per-tick loop calls
-:meth:`ActuatorLoop.command` in order and :func:`chain_advance`; the fused loop composes the
-same plug-ins as blocks (run/blocks.py) and writes each one's memory and numbers by its name.
+back here by the same names. No executor names a kind: every executor composes the plug-ins
+as blocks (run/blocks.py) and writes each one's memory and numbers by its name; the generic
+per-tick path calls the chain's blocks in order (run/parts.py ``GenericTick``), then
+:func:`chain_advance`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..loop.actuator import TRUE_SUFFIX, chain_kinds, pulse_pieces
+from ..loop.actuator import chain_kinds, pulse_pieces
 from ..scene import knowledge_scene
 from .segments import segment_input
 
@@ -20,19 +21,15 @@ __all__ = ["ActuatorLoop", "chain_for", "chain_advance", "chain_columns", "chain
 class ActuatorLoop:
     """One actuator of the chain in a run: the plug-in (``cluster``, its block's name ``name``)
     and its memory (``x`` after the last tick, ``x_row`` before the current one: what a row
-    reports), its channels' on-times and torques over the current tick."""
+    reports)."""
 
     def __init__(self, cluster, layout):
         self.cluster = cluster
         self.name = cluster.kind
         self.x = cluster.x0.copy()  # the actuator's memory after the last tick
         self.x_row = self.x.copy()  # ... before the current tick (what a row reports)
-        self.on_s = np.zeros(cluster.n_channels)
-        self.torque_B = np.zeros((3, cluster.n_channels))
-        # its READS in [seen, true], by name (None: it reads another block's memory too, e.g. the
-        # thrusters the [fdir] mode manager's: flown fused only, run/fdir_run.py)
-        self.reads_at = None if getattr(cluster, "commanded", False) else cluster.reads_in(layout)
-        self.truth = any(n.endswith(TRUE_SUFFIX) for n in cluster.reads.names)  # it reads the true measurement
+        if not getattr(cluster, "commanded", False):  # its READS are measurement fields (KeyError naming one
+            cluster.reads_in(layout)  # that is not; a commanded one reads the [fdir] mode manager's memory too)
         self.idx = cluster.row_index()
         self.fused_reason = None  # why the fused loop did not take it (summary)
 
@@ -40,16 +37,6 @@ class ActuatorLoop:
     def lp(self) -> bool:
         """Whether the plug-in runs in Python each tick (it keeps the run per tick)."""
         return bool(self.cluster.python_only)
-
-    def command(self, comp, t: float, y_seen, y_true, cmd) -> np.ndarray:
-        """Tick at ``t`` on what the law sees ``y_seen`` (and the truth ``y_true``, for a kind
-        that reads it): its channels over ``[t, t + h]``; returns the request it leaves."""
-        h = tick_length(comp, t)
-        r = (np.concatenate([y_seen, y_true]) if self.truth else y_seen)[self.reads_at]
-        self.x_row = self.x
-        self.x, rest, self.on_s, self.torque_B, _ = self.cluster.command_numeric(t, h, self.x, r,
-                                                                                 np.asarray(cmd, dtype=float))
-        return rest
 
     def row(self, x=None) -> list[float]:
         """The row's values (the plug-in's columns) from the memory ``x`` before the tick."""
@@ -60,13 +47,6 @@ class ActuatorLoop:
         if self.fused_reason:
             out[f"{self.name}_not_fused"] = self.fused_reason
         return out
-
-
-def tick_length(comp, t: float) -> float:
-    """The tick's length [s]: the period, the remainder of the run for the last one (0 at the
-    end), as the fused loop's :func:`~.segments.tick_pieces` cuts them."""
-    rest = comp.duration - t
-    return comp.period if rest >= comp.period * (1 - 1e-12) else max(rest, 0.0)
 
 
 def chain_for(scene, ctrl, layout, plant) -> tuple:
@@ -95,12 +75,11 @@ def chain_summary(comp) -> dict:
     return out
 
 
-def chain_advance(comp, res, t0: float, t1: float, held_B=None) -> None:
-    """Integrate ``[t0, t1]`` split at the scene's breakpoints and every channel's edge; over
-    each piece the channels on add their torque to the held external torque (``res.u``, plus
-    ``held_B``: the ideal torquer's at the chain's end; the state ``res.x`` advanced in place)."""
-    on_s = np.concatenate([a.on_s for a in comp.actuators])
-    torque_B = np.hstack([a.torque_B for a in comp.actuators])
+def chain_advance(comp, res, t0: float, t1: float, on_s, torque_B, held_B=None) -> None:
+    """Integrate ``[t0, t1]`` split at the scene's breakpoints and every channel's edge (the
+    chain's channels in order: on-times ``on_s``, torques ``torque_B`` (3, n)); over each piece
+    the channels on add their torque to the held external torque (``res.u``, plus ``held_B``:
+    the ideal torquer's at the chain's end; the state ``res.x`` advanced in place)."""
     cuts = [(t0 + a, t0 + b, on) for a, b, on in pulse_pieces(on_s, t1 - t0)]
     cuts[-1] = (cuts[-1][0], t1, cuts[-1][2])
     inner = [b for b in comp.bps if t0 < b < t1]

@@ -33,7 +33,7 @@ from .initial import initial_state, initial_x
 from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
-from .parts import NOISE_BLOCK, run_parts
+from .parts import NOISE_BLOCK, GenericTick, law_numbers, run_parts
 from .schedule import loop_hook, steps_summary
 from .segments import held_torque_from, segment_input
 from .fdir_run import fdir_for
@@ -155,12 +155,8 @@ class ControlLoop:
             self.M = Measurement(self.meas.res[0], layout)
         if flight is not None:
             self._init_flight()
-        self.act = None  # the CMG cluster's plug-in at the plant's state, compiled (system.py)
-        if cmg is not None:
-            name = "actuate_rates" if ctrl.command == "gimbal_rates" else "actuate"
-            self.act = FastCall.of(f[name])
-            self.act.args[3][:] = p
-        self.tau_held = np.zeros(3)  # the ideal torquer's torque over the tick (no cluster)
+        #: the generic path's tick on the composed blocks (:class:`~.parts.GenericTick`), while it runs
+        self.generic = None
 
     # -- the executors' view of the run (read: comp; handed back: res) ---------------------------
     @property
@@ -223,23 +219,6 @@ class ControlLoop:
         m()
         return m.res[0]
 
-    def _fly(self, k: int, t: float, y: np.ndarray) -> np.ndarray:
-        """Tick k of the sensing from the true measurement ``y``: returns what the law sees."""
-        fm = self.res.flight
-        fc = self.comp.flight.compiled()
-        a = fc.args
-        a[0][0], a[1][0], a[2][0] = k, t, fm.t_prev
-        a[3][:] = y
-        a[4][:] = fm.theta_B
-        a[5][:] = fm.omega_prev
-        a[6][:] = fm.xs
-        a[7][:] = self.noise_row(k)
-        fc()
-        fm.theta_B[:], fm.xs[:], fm.ys[:] = fc.res[0], fc.res[1], fc.res[3]
-        fm.omega_prev[:] = y[self.comp.meas_layout.slice("omega_BN_B")]
-        fm.t_prev = t
-        return fc.res[2]
-
     # -- one tick ------------------------------------------------------------------------
     def _sense(self, k: int, t: float) -> None:
         y = self.measure(t, self.x)
@@ -250,7 +229,7 @@ class ControlLoop:
         """The sensing, then the ideal path's noise and delay, on the true measurement ``y``."""
         comp = self.comp
         if comp.flight is not None:
-            y = self._fly(k, t, y)
+            y = self.generic.sense(k, t, y)
             if not comp.noisy:
                 self.seen[:] = y
                 return
@@ -277,28 +256,14 @@ class ControlLoop:
         fc()
         self.seen[:] = fc.res[0]
 
-    def actuate(self, t: float, cmd, count: bool = True) -> int:
-        """The actuator chain at tick ``t`` on the law's command: sets the held input (the CMG
-        cluster's ``u_cmg``, or the ideal torquer's torque); returns the saturation flag (0/1)."""
+    def actuate(self, k: int, t: float, cmd, count: bool = True) -> int:
+        """The actuator chain at tick k (time ``t``) on the law's command: its blocks in order
+        (:meth:`~.parts.GenericTick.act`) set the held input (the CMG cluster's ``u_cmg``, or the
+        ideal torquer's torque) and the channels' on-times; returns the saturation flag (0/1)."""
         comp = self.comp
-        for a in comp.actuators:  # the chain in order: each takes its share, the end gets the rest
-            y = self.seen if (comp.noisy or comp.flight is not None) else self.meas.res[0]
-            cmd = a.command(comp, t, y, self.meas.res[0], cmd)
-        if self.act is None:  # no cluster: the ideal torquer (loop/cmg_cluster.py), the whole tick
-            end = comp.end
-            fc = end.compiled()
-            fc.args[0][0] = t
-            fc.args[1][0] = comp.period
-            fc.args[4][:] = cmd
-            fc()
-            self.tau_held[:] = fc.res[3]  # torque_B, its one channel on over [t, t + h]
-            return 0
-        a = self.act
-        a.args[0][0] = t
-        a.args[1][:] = self.x
-        a.args[2][: comp.n_cmd] = cmd
-        a()
-        return self.flags(a.res[0], count)
+        y = self.meas.res[0]
+        return self.flags(self.generic.act(k, t, self.x, cmd, self.seen if (comp.noisy or comp.flight is not None) else y, y),
+                          count)
 
     def advance(self, t0: float, t1: float, cmd) -> None:
         """Generic path: one integrator call per period, split at the discontinuities inside it
@@ -307,16 +272,17 @@ class ControlLoop:
         its torque to the held external torque)."""
         comp = self.comp
         res = self.res
+        g = self.generic
         if comp.actuators:  # and at every channel's on/off edge
-            return chain_advance(comp, res, t0, t1, self.tau_held if self.act is None else None)
+            return chain_advance(comp, res, t0, t1, g.on_s, g.torque_B, g.held_B)
         inner = [b for b in comp.bps if t0 < b < t1]
         edges = [t0] + inner + [t1]
         i_ext = comp.input_layout.slice("u_ext")
         for a, b in zip(edges[:-1], edges[1:]):
             segment_input(comp.scene, comp.model, a, b, res.u)
             u = res.u.copy()
-            if self.act is None:
-                u[i_ext] += self.tau_held
+            if not comp.has_cluster:
+                u[i_ext] += g.held_B
             # an array rate step at b: continue from the state just after it
             self.x[:] = comp.apply_jump(b, comp.integ.advance(a, b, self.x, u))
 
@@ -362,10 +328,11 @@ class ControlLoop:
                                        f"plant with the failure detected: {one_line(e)}") from e
 
     def _run_generic(self, K: int, update) -> None:
-        """Ticks 0..K on the generic path: per tick the measurement, the sensing, the law, the
-        actuator chain and one integrator call per period split at the discontinuities inside it
-        (an adaptive integrator, a discontinuity between ticks or an array rate step, an actuator
-        that is not symbolic)."""
+        """Ticks 0..K on the generic path: per tick the measurement, the run's composed blocks
+        (:class:`~.parts.GenericTick`: the sense blocks on it, the chain's blocks in order around
+        the law called here) and one integrator call per period split at the discontinuities and
+        pulse edges inside it (an adaptive integrator, a discontinuity between ticks or an array
+        rate step, an actuator that is not symbolic)."""
         comp, res = self.comp, self.res
         period, duration = comp.period, comp.duration
         sat_since_row = 0
@@ -377,6 +344,7 @@ class ControlLoop:
         replan_at = comp.replan.tick if comp.replan is not None else -1
         M = self.M
         ticks = 0
+        self.generic = GenericTick(comp, res, law_numbers(ctrl), self.noise_row)
         steps, step = loop_hook(self)  # scheduled steps (run/schedule.py): their ticks, the hook
         try:
             if 0 in steps:
@@ -400,7 +368,7 @@ class ControlLoop:
                 cmd = self.check_command(t, cmd)
                 # the final tick's actuation is reported in its row but never integrated:
                 # it is not counted in the summary
-                sat_since_row |= self.actuate(t, cmd, count=k < K)
+                sat_since_row |= self.actuate(k, t, cmd, count=k < K)
                 if k % n_per_out == 0 or k == K:
                     if len(cmd) == 3:
                         res.last_cmd = cmd
@@ -430,7 +398,7 @@ class ControlLoop:
     def flags(self, r, count: bool = True) -> int:
         """The chain end's reported values ``r`` (``out``): the held ``u_cmg`` kept, the
         rate-limited and saturated flags counted; returns the row's flag."""
-        if self.act is None:
+        if not self.comp.has_cluster:
             return 0
         out = self.comp.end.outputs
         self.res.u[self.comp.u_cmg] = r[out.slice("u_cmg")]

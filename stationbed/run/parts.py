@@ -21,7 +21,7 @@ from .measurement import Measurement
 from .schedule import parts_hook
 from .segments import edge_ticks, held_torque_from, max_edges, off_grid_ticks, tick_edges, tick_pieces
 
-__all__ = ["parts", "run_parts", "law_numbers", "NOISE_BLOCK"]
+__all__ = ["parts", "run_parts", "law_numbers", "NOISE_BLOCK", "generic_parts", "GenericTick"]
 
 #: ticks of draws taken at a time (any size gives the same numbers: each stream in tick order)
 NOISE_BLOCK = 256
@@ -248,3 +248,133 @@ def law_numbers(ctrl):
         return ctrl.symbolic_params()
     except Exception as e:
         raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e
+
+
+_GENERIC: dict = {}
+
+
+def generic_parts(comp, cp=()) -> dict:
+    """``{"cm": Composed, "sense": FastCall or None, "chain": [(lo, hi, FastCall or None)]}``:
+    the parts the generic path calls (:class:`GenericTick`) of the run composed by ``comp``
+    without the ideal measurement's noise (that path corrupts what the sensing gives itself):
+    the sense blocks on a measurement they are handed (None: no sense block) and the chain's
+    pieces in order (:meth:`~stationbed.loop.compose.Composed.chain_pieces`; None: a block that
+    is not symbolic, called in Python). Generated as C once per structure and cached."""
+    key = structure_key(comp, cp, noise=False)
+    hit = _GENERIC.get(key)
+    if hit is not None and hit["system"] is comp.system:
+        return hit
+    cm, _ = composed(comp, cp, noise=False)
+    pieces = [(lo, hi, all(b.symbolic for b in cm.chain[lo:hi])) for lo, hi in cm.chain_pieces()]
+    fs = ([cm.sense_on_part()] if cm.sense else []) + [cm.chain_part(lo, hi) for lo, hi, sym in pieces if sym]
+    tag = "generic_" + hashlib.sha256(repr((cm.key, pieces)).encode()).hexdigest()[:16]
+    funcs = compile_functions(fs, tag)
+    out = {"cm": cm, "sense": FastCall(funcs["cl_sense_on"]) if cm.sense else None, "system": comp.system,
+           "chain": [(lo, hi, FastCall(funcs[f"cl_chain_{lo}_{hi}"]) if sym else None) for lo, hi, sym in pieces]}
+    _GENERIC[key] = out
+    return out
+
+
+class GenericTick:
+    """The generic path's tick on the run's composed blocks (:func:`generic_parts`): the sense
+    blocks on the true measurement it is handed (:meth:`sense`), the chain's blocks in order on
+    the law's command (:meth:`act`: compiled pieces, a block that is not symbolic in Python).
+    The blocks' memory lives in the carry ``c``, handed back by block name after each call
+    (``res.flight``, each actuator's ``x`` of ``comp.actuators``); the numbers in ``par``
+    (:meth:`refresh` after a scheduled step). ``noise_row(k)``: tick k's sensor draws."""
+
+    def __init__(self, comp, res, cp, noise_row):
+        fns = generic_parts(comp, cp)
+        self.comp, self.res, self.cp, self.noise_row = comp, res, cp, noise_row
+        cm = self.cm = fns["cm"]
+        C, P = cm.carry, cm.par
+        self.c, self.par = np.zeros(C.size), np.zeros(P.size)
+        self.refresh()
+        for name, (_, x) in numbers(comp, cp).items():  # each block's memory at t = 0, by its name
+            if x is not None and name in C and len(x):
+                self.c[C.slice(name)] = x
+        self.fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's memory, handed back
+        if self.fl is not None:
+            fm = res.flight
+            self.c[C.slice(self.fl.name)] = self.fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B,
+                                                               omega_prev=fm.omega_prev, xs=fm.xs)
+        self.sense_fc = fns["sense"]
+        self.pieces = fns["chain"]
+        self.chain = [(a, C.slice(a.name)) for a in comp.actuators]
+        self.cx = C.slice("x")
+        self.pt0, self.ph, self.pk = (P.slice(f).start for f in ("t0", "h", "k0"))
+        self.period, self.duration = comp.period, comp.duration
+        self.i_ext = comp.input_layout.slice("u_ext")
+        # on_s and torque_B of the chain's channels over the tick (set by :meth:`act`)
+        self.on_s, self.torque_B, self.held_B = np.zeros(0), np.zeros((3, 0)), np.zeros(3)
+
+    def refresh(self) -> None:
+        """``par``'s numbers from the run's (the model's p, each block's by its name)."""
+        P = self.cm.par
+        self.par[P.slice("p")] = self.comp.p
+        for name, (p, _) in numbers(self.comp, self.cp).items():
+            if name in P and len(p):
+                self.par[P.slice(name)] = p
+
+    def _at(self, k: int, t: float) -> None:
+        par = self.par
+        rest = self.duration - t  # the tick's length: the period, the remainder of the run for the last one
+        par[self.pt0], par[self.pk] = t, k
+        par[self.ph] = self.period if rest >= self.period * (1 - 1e-12) else max(rest, 0.0)
+
+    def sense(self, k: int, t: float, y: np.ndarray) -> np.ndarray:
+        """Tick k (time t) of the sense blocks on the true measurement ``y``: what the law sees."""
+        if self.sense_fc is None:
+            return y
+        self._at(k, t)
+        fc, C = self.sense_fc, self.cm.carry
+        a = fc.args
+        a[0][:], a[1][:], a[2][:] = self.c, self.par, y
+        if len(a[3]):
+            a[3][:] = self.noise_row(k)
+        fc()
+        self.c[:] = fc.res[0]
+        fl = self.fl
+        if fl is not None:
+            m = fl.state.split(self.c[C.slice(fl.name)])
+            fm = self.res.flight
+            fm.t_prev = float(m["t_prev"][0])
+            fm.theta_B[:], fm.omega_prev[:], fm.xs[:] = m["theta_B"], m["omega_prev"], m["xs"]
+            fm.ys[:] = fl.outputs.get(self.cm.sense_outputs.get(fc.res[2], fl.name), "ys")
+        return fc.res[1]
+
+    def act(self, k: int, t: float, x: np.ndarray, cmd, v: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Tick k (time t, plant state ``x``) of the chain on the law's command ``cmd`` (what
+        the law saw ``v``, the true measurement ``y``): sets :attr:`on_s`, :attr:`torque_B`
+        (3, channels) and :attr:`held_B` (the end's torque added to the held external one: the
+        ideal torquer's); returns the end's report (``out``)."""
+        self._at(k, t)
+        c, cm = self.c, self.cm
+        c[self.cx] = x
+        for a, _ in self.chain:  # the memory a row reports: before the tick
+            a.x_row = a.x
+        tau, ons, tqs, rep = cmd, [], [], None
+        for lo, hi, fc in self.pieces:
+            if fc is None:  # a block that is not symbolic: its Python step
+                x1, tau, on, tq = cm.python_step(lo, c, self.par, tau, v, y)
+                c[cm.carry.slice(cm.chain[lo].name)] = x1
+            else:
+                a = fc.args
+                a[0][:], a[1][:], a[2][:], a[3][:], a[4][:] = c, self.par, tau, v, y
+                fc()
+                r = fc.res
+                if hi - lo > 1 or not len(r[5]):  # (a piece of the end alone keeps the carry)
+                    c[:] = r[0]
+                tau, on, tq = r[1], r[2], r[3]
+                if len(r[5]):  # the end is the piece's last
+                    rep = r[4]
+                    self.held_B = r[5][self.i_ext]
+            ons.append(on)
+            tqs.append(tq)
+        for a, sl in self.chain:
+            a.x = c[sl].copy()
+        if len(ons) == 1:  # (the buffers: read before the next tick's call)
+            self.on_s, self.torque_B = ons[0], tqs[0].reshape(-1, 3).T
+        else:
+            self.on_s, self.torque_B = np.concatenate(ons), np.concatenate(tqs).reshape(-1, 3).T
+        return rep

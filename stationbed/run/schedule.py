@@ -192,14 +192,12 @@ def stepper(comp, res) -> Stepper:
 
 def refresh_loop(loop) -> None:
     """After a step: the per-tick loop's own copies of p and of the blocks' numbers (its
-    measurement, actuation, the flight tick's, the compiled law's)."""
+    measurement's, the generic path's blocks', the compiled law's)."""
     comp = loop.comp
     p = comp.p
     loop.meas.args[2][:] = p
-    if loop.act is not None:
-        loop.act.args[3][:] = p
-    if comp.flight is not None and comp.flight._compiled is not None:
-        comp.flight._compiled.args[8][:] = comp.flight.params
+    if loop.generic is not None:  # the generic path's blocks (run/parts.py GenericTick)
+        loop.generic.refresh()
     law = getattr(getattr(loop.res, "stepper", None), "numbers", {}).get("law")
     buf = None if law is None else _law_buffers(comp.ctrl)
     if buf is not None:
