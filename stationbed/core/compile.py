@@ -359,6 +359,11 @@ class FastCall:
     def __call__(self):
         self._trigger()
 
+    @property
+    def trigger(self):
+        """The bound buffer's trigger: one C call, no Python wrapper (hot loops keep it)."""
+        return self._trigger
+
     _cache: dict = {}
 
     @classmethod

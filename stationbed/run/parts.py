@@ -127,7 +127,7 @@ def run_parts(loop, K: int, update) -> None:
 
     def start(k, n, h):  # a piece of n ticks of h from tick k: its numbers, its first sensing
         nonlocal trigger
-        trigger = act._trigger if k not in og else edge_trigger(tick_edges(comp, k, h, n_edges))
+        trigger = act.trigger if k not in og else edge_trigger(tick_edges(comp, k, h, n_edges))
         if step is not None:  # a step at tick k: the state jumped, the numbers rewritten, before sensing
             step(k)
         t0 = min(k * period, duration)
