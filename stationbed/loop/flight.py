@@ -223,7 +223,7 @@ class Flight:
         return x
 
     def noise(self) -> "TickNoise":
-        """The run's noise, tick by tick from tick 0 (:class:`TickNoise`)."""
+        """The run's noise, tick by tick from tick 0 (:class:`TickNoise`; tick 0 draws nothing)."""
         return TickNoise(SuiteNoise(self.suite, self.seed))
 
     # -- columns --------------------------------------------------------------------------------
@@ -289,15 +289,21 @@ _COMPILED: dict = {}
 
 
 class TickNoise:
-    """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
-    draws nothing: a zero row), asked in tick order (each tick once); drawn
-    :data:`NOISE_BLOCK` ticks at a time. The rows returned are read-only to the caller (a view
-    of the block when they lie inside it)."""
+    """A noise source's rows by tick, the one noise stream every executor reads: ``rows(k0, n)``
+    gives ticks ``k0 .. k0+n-1``, asked in tick order (each tick once); drawn :data:`NOISE_BLOCK`
+    ticks at a time. The ticks before the source's first (its ``next_tick`` at the start: the
+    suite's 1, tick 0 draws nothing; the ideal measurement's corruption's 0) are zero rows. The
+    rows returned are read-only to the caller (a view of the block when they lie inside it).
 
-    def __init__(self, noise: SuiteNoise):
+    The source (:class:`~.suite.SuiteNoise`, :class:`~.corruption.CorruptionNoise`) has
+    ``width``, ``rngs`` (its generators by name), ``next_tick`` and ``draw(n, out=None)``: the
+    rows of its next ``n`` ticks, in tick order (so any block size gives the same numbers)."""
+
+    def __init__(self, noise):
         self.noise = noise
-        self.width = noise.suite.NOISE.size
-        self.buf, self.k0, self.next = np.zeros((0, self.width)), 1, 0
+        self.width = noise.width
+        self.first = noise.next_tick
+        self.buf, self.k0, self.next = np.zeros((0, self.width)), self.first, 0
 
     def state(self) -> tuple:
         """Where the stream is (its block, next tick, the generators' states): :meth:`restore`
@@ -318,13 +324,13 @@ class TickNoise:
             raise ValueError(f"sensor noise asked for tick {k0}, the next tick is {self.next}")
         self.next = k0 + n
         i = k0 - self.k0
-        if k0 >= 1 and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
+        if k0 >= self.first and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
             return self.buf[i : i + n]
-        if k0 >= 1 and i == len(self.buf):  # the block used up: the next starts here (a view of it)
+        if k0 >= self.first and i == len(self.buf):  # the block used up: the next starts here (a view of it)
             self.k0, self.buf = k0, self.noise.draw(max(NOISE_BLOCK, n))
             return self.buf[:n]
         out = np.zeros((n, self.width))
-        first = max(k0, 1)
+        first = max(k0, self.first)
         while first < k0 + n:
             i = first - self.k0
             if i >= len(self.buf):
@@ -338,9 +344,9 @@ class TickNoise:
     def rows_into(self, k0: int, n: int, out: np.ndarray) -> None:
         """:meth:`rows` written into ``out`` (shape (n, width)): drawn straight into it where the
         block drawn is used up (the same numbers: each sensor draws in tick order)."""
-        first = max(k0, 1)
+        first = max(k0, self.first)
         if n > 0 and k0 == self.next and first - self.k0 == len(self.buf) and first < k0 + n:
-            out[: first - k0] = 0.0  # tick 0 draws nothing
+            out[: first - k0] = 0.0  # the ticks before the source's first draw nothing
             self.noise.draw(k0 + n - first, out=out[first - k0 :])
             self.next, self.k0, self.buf = k0 + n, k0 + n, np.zeros((0, self.width))
         else:

@@ -138,7 +138,6 @@ class ControlLoop:
             command_layout=command_fields(ctrl.command, ng),
             ctrl=ctrl, replan=replan_of(scene, system, period, duration, plant_facts),  # fault detection
             sensor=sensor, noisy=noisy, delay=int(round(sensor.delay / period)) if noisy else 0,
-            rng=np.random.default_rng(sensor.seed) if noisy else None,
             flight=flight, tick_noise=None if flight is None else flight.noise(),
             end=chain_end(model),
             actuators=chain_for(scene, ctrl, layout, plant),  # the chain before its end (run/chain.py)
@@ -258,8 +257,9 @@ class ControlLoop:
             self.corrupt(k, y)
 
     def corrupt(self, k: int, y=None) -> None:
-        """``seen`` at tick k: the delay (this executor's ring buffer of past measurements),
-        then the corruption plug-in (loop/corruption.py) compiled, on this tick's draws."""
+        """``seen`` at tick k on the generic path: the delay (a ring buffer of past measurements;
+        the composed parts and the fused loop fly the delay block), then the corruption plug-in
+        (loop/corruption.py) compiled, on this tick's draws (the run's stream, ``ideal_noise``)."""
         comp = self.comp
         y = self.meas.res[0] if y is None else y
         delay = comp.delay
@@ -273,7 +273,7 @@ class ControlLoop:
             return
         fc = c.compiled()
         fc.args[0][:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
-        fc.args[1][:] = c.draw(comp.rng, 1)[0]
+        fc.args[1][:] = comp.ideal_noise.rows(k, 1)[0]
         fc()
         self.seen[:] = fc.res[0]
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 
-from . import law_state
 from .controller import ControllerError, one_line
 from .segments import edge_ticks
 
@@ -26,9 +25,9 @@ def why_not_fused(comp) -> str | None:
     place that decides it: :func:`fused_ok` is this is None, the summary reports it
     (``not_fused``). In order: the law (a Python or FMU law has no ``symbolic`` form), the
     integrator (not one fixed explicit step per tick), a discontinuity between ticks or an array
-    rate step, the ideal measurement's delay (a ring buffer, not a block yet) or its noise with
-    ``[[sensor]]`` tables, a failure detected mid-run, the actuator chain (the LP mapping;
-    ``[controller.sensor]`` noise with a stateful law)."""
+    rate step, a failure detected mid-run, the actuator chain (the LP mapping). The ideal
+    measurement's delay and noise are blocks (with ``[[sensor]]`` tables, a law with a state,
+    any actuator): never a reason."""
     ctrl = comp.ctrl
     integ = comp.integ
     if not callable(getattr(ctrl, "symbolic", None)):
@@ -37,10 +36,6 @@ def why_not_fused(comp) -> str | None:
         return f"integrator: '{integ.name}' is not one fixed explicit step per tick"
     if edge_ticks(comp) is None:
         return "plant: a discontinuity between ticks or an array rate step (the per-tick loop cuts there)"
-    if comp.noisy and comp.delay > 0:
-        return "noise: [controller.sensor] delay (its ring buffer is not a block yet)"
-    if comp.flight is not None and comp.noisy:
-        return "noise: [controller.sensor] noise with [[sensor]] tables"
     if comp.replan is not None:
         return "law: a failure detected mid-run (the law designs again, in Python)"
     return _chain_why(comp)
@@ -59,8 +54,6 @@ def _chain_why(comp) -> str | None:
         why = None
         if a.lp:
             why = a.cluster.why
-        elif comp.noisy and law_state.has_state(comp.ctrl):
-            why = f"[controller.sensor] noise with a law that has a state and {a.name} is flown per tick"
         a.fused_reason = why
         if why is not None:
             return f"{a.name}: {why}"

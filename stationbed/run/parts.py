@@ -28,15 +28,14 @@ NOISE_BLOCK = 256
 _PARTS: dict = {}
 
 
-def parts(comp, cp=(), noise: bool = True) -> dict:
+def parts(comp, cp=()) -> dict:
     """``{"cm": Composed, "sense": FastCall, "act": FastCall}`` of the run composed by ``comp``
-    (``cp`` the law's symbolic numbers, when it has them: the composition's key only; ``noise``
-    as :func:`~.blocks.run_blocks`)."""
-    key = structure_key(comp, cp, noise)
+    (``cp`` the law's symbolic numbers, when it has them: the composition's key only)."""
+    key = structure_key(comp, cp)
     hit = _PARTS.get(key)
     if hit is not None and hit["system"] is comp.system:
         return hit
-    cm, _ = composed(comp, cp, noise)
+    cm, _ = composed(comp, cp)
     tag = "parts_" + hashlib.sha256(repr(cm.key).encode()).hexdigest()[:16]
     funcs = compile_functions([cm.sense_part(), cm.act_part()], tag)
     out = {"cm": cm, "sense": FastCall(funcs["cl_sense"]), "act": FastCall(funcs["cl_act"]), "system": comp.system}
@@ -88,8 +87,7 @@ def run_parts(loop, K: int, update) -> None:
     pt0, ph, pn, pk, pu = (P.slice(f) for f in ("t0", "h", "n_act", "k0", "u_ext"))
     a_c1, a_cs, a_v1, a_outs, a_act = act.res
     s_cs, s_v, s_outs = sense.res
-    delay = comp.delay > 0
-    seen = loop.seen if delay else a_v1  # what the law sees (the act part writes the next tick's)
+    seen = a_v1  # what the law sees (the act part writes the next tick's)
     M = loop.M = Measurement(seen, comp.meas_layout)
     reads = bool(cm.actuators)  # the chain reads what the law saw
     draws, nw = Draws(comp, cm), cm.noise.size
@@ -140,8 +138,6 @@ def run_parts(loop, K: int, update) -> None:
                     t = duration
                 if k == replan_at:
                     loop.redesign(t)
-                if delay:  # the ideal measurement's delay (a ring buffer, not a block yet) and noise
-                    loop.corrupt(k, a_v1)
                 M.t = t
                 loop.calls += 1
                 try:
