@@ -80,12 +80,14 @@ def test_plugin_corrupts_as_the_quaternion_product(att, rate):
         assert np.all(fc.res[0][touched] != y[touched])
 
 
+@pytest.mark.parametrize("end", [None, 1000], ids=["open", "run_end"])
 @pytest.mark.parametrize("att,rate", [(ATT_RAD, RATE_RAD_S), (ATT_RAD, 0.0), (0.0, RATE_RAD_S)])
-def test_block_draws_equal_the_per_tick_calls(att, rate, monkeypatch):
-    """The corruption's stream (``Corruption.noise``: rows of a block of ticks, as the suite's)
-    asked in blocks of uneven sizes (as the rows cut a run) gives, bit for bit, the numbers of
-    ``rng.normal(0, σ_att, 3)`` then ``rng.normal(0, σ_rate, 3)`` called once per tick from
-    tick 0; after a ``restore`` the same again."""
+def test_block_draws_equal_the_per_tick_calls(att, rate, end, monkeypatch):
+    """The corruption's stream (``Corruption.noise``: rows of a block of ticks, as the suite's;
+    its last block cut at the run's end or not) asked in blocks of uneven sizes (as the rows cut
+    a run) gives, bit for bit, the numbers of ``rng.normal(0, σ_att, 3)`` then
+    ``rng.normal(0, σ_rate, 3)`` called once per tick from tick 0; after a ``restore`` the same
+    again."""
     from stationbed.loop import flight
 
     monkeypatch.setattr(flight, "NOISE_BLOCK", 64)  # small blocks: the stream draws again inside the run
@@ -99,7 +101,7 @@ def test_block_draws_equal_the_per_tick_calls(att, rate, monkeypatch):
         if rate > 0:
             row += list(ref.normal(0.0, rate, 3))
         per_tick.append(row)
-    stream = Corruption(att, rate, measurement_fields(0, 0)).noise(np.random.default_rng(seed))
+    stream = Corruption(att, rate, measurement_fields(0, 0)).noise(np.random.default_rng(seed), end)
     sizes = [1, 100, 37, 100, 1, 761]  # sums to 1000
     starts = np.cumsum([0] + sizes[:-1])
     blocks = []

@@ -126,10 +126,11 @@ class Corruption:
         """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall` (shared)."""
         return corrupt_compiled(self.flags, self.layout)
 
-    def noise(self, rng: np.random.Generator):
+    def noise(self, rng: np.random.Generator, end: int | None = None):
         """The run's draws by tick from tick 0, from ``rng`` (the ``[controller.sensor]``
-        generator): a :class:`~.flight.TickNoise` of :class:`CorruptionNoise`."""
-        return TickNoise(CorruptionNoise(self, rng))
+        generator): a :class:`~.flight.TickNoise` of :class:`CorruptionNoise` (``end``: the run's
+        ticks, none drawn past them)."""
+        return TickNoise(CorruptionNoise(self, rng), end)
 
 
 class CorruptionNoise:

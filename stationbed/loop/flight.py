@@ -297,13 +297,20 @@ class TickNoise:
 
     The source (:class:`~.suite.SuiteNoise`, :class:`~.corruption.CorruptionNoise`) has
     ``width``, ``rngs`` (its generators by name), ``next_tick`` and ``draw(n, out=None)``: the
-    rows of its next ``n`` ticks, in tick order (so any block size gives the same numbers)."""
+    rows of its next ``n`` ticks, in tick order (so any block size gives the same numbers).
+    ``end``: the run's ticks (0 .. end - 1), when known: no block is drawn past them."""
 
-    def __init__(self, noise):
+    def __init__(self, noise, end: int | None = None):
         self.noise = noise
         self.width = noise.width
         self.first = noise.next_tick
+        self.end = end
         self.buf, self.k0, self.next = np.zeros((0, self.width)), self.first, 0
+
+    def _block(self, k0: int, n: int) -> int:
+        """Ticks to draw from tick ``k0`` when ``n`` are needed: a block, never past the run's end."""
+        m = NOISE_BLOCK if self.end is None else min(NOISE_BLOCK, self.end - k0)
+        return max(m, n)
 
     def state(self) -> tuple:
         """Where the stream is (its block, next tick, the generators' states): :meth:`restore`
@@ -327,7 +334,7 @@ class TickNoise:
         if k0 >= self.first and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
             return self.buf[i : i + n]
         if k0 >= self.first and i == len(self.buf):  # the block used up: the next starts here (a view of it)
-            self.k0, self.buf = k0, self.noise.draw(max(NOISE_BLOCK, n))
+            self.k0, self.buf = k0, self.noise.draw(self._block(k0, n))
             return self.buf[:n]
         out = np.zeros((n, self.width))
         first = max(k0, self.first)
@@ -335,7 +342,7 @@ class TickNoise:
             i = first - self.k0
             if i >= len(self.buf):
                 self.k0, i = first, 0
-                self.buf = self.noise.draw(max(NOISE_BLOCK, k0 + n - first))
+                self.buf = self.noise.draw(self._block(first, k0 + n - first))
             m = min(len(self.buf) - i, k0 + n - first)
             out[first - k0 : first - k0 + m] = self.buf[i : i + m]
             first += m

@@ -105,7 +105,7 @@ class Composition:
         c = self.corruption
         if c is None or c.width == 0:
             return None
-        return c.noise(np.random.default_rng(self.sensor.seed))
+        return c.noise(np.random.default_rng(self.sensor.seed), self.ticks() + 1)
 
     @property
     def layout(self) -> dict:
