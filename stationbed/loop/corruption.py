@@ -5,10 +5,10 @@ with one tick's draws ``nz`` (:func:`draws_layout`: ``attitude`` 3, then ``rate`
 the values of ``rng.normal(0, sigma, 3)``): ``q_BN`` turned by the small rotation ``nz_att``
 (``q ⊗ [1, nz_att / 2]``, renormalised), ``omega_BN_B + nz_rate``; the other fields untouched.
 
-Written **once** as casadi expressions (:meth:`Corruption.symbolic`): the fused loop inlines
-them in its compiled tick, the per-tick loop calls them compiled (:meth:`Corruption.compiled`),
-the lockstep batch maps the compiled function over its samples (:func:`corrupt_compiled` with
-both corruptions on, each sample keeping the fields its own run corrupts). There is no numpy twin.
+Written **once** as casadi expressions (:meth:`Corruption.symbolic`), composed as the ``noise``
+block (:func:`~.block.corruption_block`): the fused loop inlines them in its compiled tick, the
+per-tick loop's composed parts and the lockstep batch (those parts mapped) call them compiled;
+the per-tick loop's generic path calls :meth:`Corruption.compiled`. There is no numpy twin.
 
 It is not a :class:`~.sensor.Sensor`: a sensor samples the truth (:data:`~.sensor.TRUTH`) at its
 own period and feeds the flight suite's estimator; this corrupts, every tick, what the law itself
