@@ -325,12 +325,12 @@ WINDOW_TORQUE_NM = [2.0, -1.5, 1.0]
 WINDOW_S = {"grid": (2.5, 12.5), "off": (2.55, 12.35)}
 
 
-def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env, window=None):
+def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env, delay: int = 0, window=None):
     """The sphere of test_thrusters (ideal CMG at 90 % of its capacity, so the dump fires at once)
     with the drawn blocks: ``sensing`` "none", "sensors" (flown and logged beside the ideal path)
     or "mekf" (the law on the estimate); ``env`` None (deep space) or the environment rate;
-    ``window`` None, or a constant torque window with its edges on the tick grid ("grid") or
-    between ticks ("off")."""
+    ``delay`` the ideal measurement's delay [ticks] (before its noise); ``window`` None, or a
+    constant torque window with its edges on the tick grid ("grid") or between ticks ("off")."""
     over = {"simulation.output_dt": PERIOD_S}
     if not thrusters:
         over.update({"thruster": [], "thrusters": None})
@@ -340,8 +340,8 @@ def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env, w
         over["estimator"] = {"kind": "mekf"}
     if state:  # a law with a state (its tick count), symbolic: flies fused
         over["controller"] = {"name": "test_law_state:CountedSine", "period": PERIOD_S}
-    if noise:
-        over["controller.sensor"] = NOISE
+    if noise or delay:
+        over["controller.sensor"] = {**(NOISE if noise else {"seed": NOISE["seed"]}), "delay": delay * PERIOD_S}
     if env is not None:
         over.update({**ORBIT, "simulation.environment_rate": env})
     if window is not None:
@@ -351,34 +351,25 @@ def sphere_scene(thrusters: bool, sensing: str, state: bool, noise: bool, env, w
     return sphere(pods(), duration=SPHERE_DURATION_S).replace(over)
 
 
-#: the blocks that may keep a drawn combination off the fused path, and what the summary says
-#: (an upper bound: a combination may come to fly fused; none may fall off for another reason)
-def off_fused_reasons(c) -> tuple[str, ...]:
-    why = []
-    if c["sensing"] != "none" and c["noise"]:
-        why.append("noise: [controller.sensor] noise with [[sensor]] tables")
-    if c["thrusters"] and c["noise"] and c["state"]:
-        why.append("thrusters: [controller.sensor] noise with a law that has a state")
-    if c["thrusters"] and c["env"] not in (None, "auto"):
-        why.append("thrusters:")
-    return tuple(why)
-
-
 combos = st.fixed_dictionaries({
     "thrusters": st.booleans(), "sensing": st.sampled_from(["none", "sensors", "mekf"]),
     "state": st.booleans(), "noise": st.booleans(), "env": st.sampled_from([None, "auto", 1, 5]),
-    "window": st.sampled_from([None, "grid", "off"]),
-}).filter(lambda c: not (c["sensing"] == "mekf" and c["noise"]))  # (a scene refuses the two together)
+    "delay": st.sampled_from([0, 1, 3]), "window": st.sampled_from([None, "grid", "off"]),
+}).filter(lambda c: not (c["sensing"] == "mekf" and (c["noise"] or c["delay"])))  # (a scene refuses the MEKF
+# beside the ideal measurement's noise or delay)
 
 
-def _matrix(thr, sens, state, noise):
+def _matrix(thr, sens, state, noise, delay=0):
     """test_composed_matrix's 16: sensors come with the MEKF except beside the ideal noise; deep space."""
-    return {"thrusters": thr, "sensing": ("sensors" if noise else "mekf") if sens else "none", "state": state,
-            "noise": noise, "env": None, "window": None}
+    return {"thrusters": thr, "sensing": ("sensors" if noise or delay else "mekf") if sens else "none", "state": state,
+            "noise": noise, "env": None, "delay": delay, "window": None}
 
 
 def _with_examples(f):
     for c in itertools.product([False, True], repeat=4):
+        f = example(c=_matrix(*c))(f)
+    # the delay (a ring of 3 ticks) before the noise, with every other block; a delay alone
+    for c in [(True, True, True, True, 3), (False, False, False, False, 1)]:
         f = example(c=_matrix(*c))(f)
     # a torque window's edges between ticks with the full flight loop: sensors, MEKF, thrusters, a law with a state
     return example(c={**_matrix(True, True, True, False), "window": "off"})(f)
@@ -388,8 +379,8 @@ def _with_examples(f):
 @given(c=combos)
 @_with_examples
 def test_drawn_blocks_fly_alike_and_keep_the_balance(c):
-    """Thrusters, sensors (with or without the MEKF), the ideal measurement's noise, a law with a
-    state and the environment block at a drawn rate: per tick = fused = lockstep, the fused run
+    """Thrusters, sensors (with or without the MEKF), the ideal measurement's noise and delay, a law
+    with a state and the environment block at a drawn rate: per tick = fused = lockstep, the fused run
     fused or naming the block that keeps it per tick, and every run keeps the balance (the
     thrusters fire in every combination that has them); the lockstep batch takes every sample
     without thrusters."""
@@ -398,9 +389,9 @@ def test_drawn_blocks_fly_alike_and_keep_the_balance(c):
     a = runs["per_tick"][1][0][1]
     b = runs["fused"][1][0][1]
     sm = b.meta["summary"]
-    if not sm["fused"]:
-        why = off_fused_reasons(c)
-        assert why and sm["not_fused"].startswith(why), (c, sm["not_fused"])
+    # every drawn combination flies fused (issue 33): the ideal measurement's noise and delay are
+    # blocks, an edge between ticks the edge tick's case, an explicit environment rate a block
+    assert sm["fused"] and "not_fused" not in sm, (c, sm.get("not_fused"))
     # the lockstep batch takes every combination but those with thrusters (it has no pulses: each
     # such sample runs the per-tick loop, an upper bound as above)
     assert runs["lockstep"][0] == "batch" or c["thrusters"], runs["lockstep"][0]

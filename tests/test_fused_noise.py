@@ -20,8 +20,11 @@ import pytest
 from scenes import ROOT
 from stationbed import load_scene, simulate
 from stationbed.loop import Corruption
+from stationbed.loop.block import delay_block
 from stationbed.run import closed_loop
 from stationbed.run.closed_loop import ControlLoop
+from stationbed.run.controller import Controller
+from stationbed.run.lockstep import run_lockstep
 from stationbed.run.measurement import measurement_fields
 from stationbed.scene import scene_from_dict
 
@@ -65,7 +68,7 @@ def test_plugin_corrupts_as_the_quaternion_product(att, rate):
         y = rng.normal(size=layout.size)
         q = rng.normal(size=4)
         y[layout.slice("q_BN")] = q / np.linalg.norm(q)
-        nz = c.draw(rng, 1)[0]
+        nz = c.noise(rng).rows(0, 1)[0]
         fc.args[0][:], fc.args[1][:] = y, nz
         fc()
         ref = _numpy_corrupt(y, nz, att, rate, layout)
@@ -77,10 +80,17 @@ def test_plugin_corrupts_as_the_quaternion_product(att, rate):
         assert np.all(fc.res[0][touched] != y[touched])
 
 
+@pytest.mark.parametrize("end", [None, 1000], ids=["open", "run_end"])
 @pytest.mark.parametrize("att,rate", [(ATT_RAD, RATE_RAD_S), (ATT_RAD, 0.0), (0.0, RATE_RAD_S)])
-def test_block_draws_equal_the_per_tick_calls(att, rate):
-    """Blocks of uneven sizes (as the rows cut a run) give, bit for bit, the numbers of
-    ``rng.normal(0, σ_att, 3)`` then ``rng.normal(0, σ_rate, 3)`` called once per tick."""
+def test_block_draws_equal_the_per_tick_calls(att, rate, end, monkeypatch):
+    """The corruption's stream (``Corruption.noise``: rows of a block of ticks, as the suite's;
+    its last block cut at the run's end or not) asked in blocks of uneven sizes (as the rows cut
+    a run) gives, bit for bit, the numbers of ``rng.normal(0, σ_att, 3)`` then
+    ``rng.normal(0, σ_rate, 3)`` called once per tick from tick 0; after a ``restore`` the same
+    again."""
+    from stationbed.loop import flight
+
+    monkeypatch.setattr(flight, "NOISE_BLOCK", 64)  # small blocks: the stream draws again inside the run
     n_ticks, seed = 1000, 42
     ref = np.random.default_rng(seed)
     per_tick = []
@@ -91,20 +101,31 @@ def test_block_draws_equal_the_per_tick_calls(att, rate):
         if rate > 0:
             row += list(ref.normal(0.0, rate, 3))
         per_tick.append(row)
-    c, rng = Corruption(att, rate, measurement_fields(0, 0)), np.random.default_rng(seed)
+    stream = Corruption(att, rate, measurement_fields(0, 0)).noise(np.random.default_rng(seed), end)
     sizes = [1, 100, 37, 100, 1, 761]  # sums to 1000
-    blocks = np.vstack([c.draw(rng, k) for k in sizes])
-    assert np.array_equal(blocks, np.array(per_tick))
+    starts = np.cumsum([0] + sizes[:-1])
+    blocks = []
+    for k0, n in zip(starts, sizes):
+        if k0 == 238:  # put back before a block, asked again: the same numbers
+            st = stream.state()
+            stream.rows(k0, n)
+            stream.restore(st)
+        blocks.append(stream.rows(k0, n))
+    assert np.array_equal(np.vstack(blocks), np.array(per_tick))
 
 
 def _reference_corrupt(self, k, y=None):
-    """``ControlLoop.corrupt`` with the numpy reference in place of the plug-in (no delay)."""
+    """``ControlLoop.corrupt`` with the numpy reference in place of the plug-in (no delay), its
+    draws ``rng.normal`` per tick from its own generator of the run's seed."""
     comp = self.comp
     y = self.meas.res[0] if y is None else y
     s = comp.sensor
+    if k == 0:
+        self.reference_rng = np.random.default_rng(s.seed)
+    rng = self.reference_rng
     att, rate = s.attitude_noise > 0, s.rate_noise > 0
-    nz = np.concatenate([comp.rng.normal(0.0, s.attitude_noise, 3) if att else [],
-                         comp.rng.normal(0.0, s.rate_noise, 3) if rate else []])
+    nz = np.concatenate([rng.normal(0.0, s.attitude_noise, 3) if att else [],
+                         rng.normal(0.0, s.rate_noise, 3) if rate else []])
     self.seen[:] = _numpy_corrupt(y, nz, att, rate, comp.meas_layout)
 
 
@@ -164,15 +185,82 @@ def test_noisy_fused_run_is_seeded_and_the_noise_shows():
     assert _rel(runs[0], clean).max() > 1e3 * PATH_RTOL
 
 
-def test_delay_keeps_the_per_tick_loop():
-    """A sensor delay is not fused (its history of measurements is kept in Python): the run
-    falls back to the per-tick loop, with the same numbers as forcing it."""
-    scene = load_scene(ROOT / "scenarios" / "iss_lvlh_hold.toml").replace(
-        {"controller.sensor": {"attitude_noise": ATT_RAD, "delay": 0.3, "seed": 1}}
-    )
-    a, b = simulate(scene, duration=5.0), simulate(scene, duration=5.0, fused=False)
-    assert a.meta["summary"]["fused"] is False
-    assert np.array_equal(a.data, b.data, equal_nan=True)
+@pytest.mark.parametrize("delay", [1, 3])
+def test_delay_block_passes_on_the_measurement_of_delay_ticks_before(delay):
+    """The delay block (loop/block.py ``delay_block``), stepped tick by tick from a zero memory as
+    the executors start it, on its step (the per-tick parts) and on its plain step where it
+    says it may (the fused loop's plain ticks): at tick k the measurement of tick ``k - delay``,
+    tick 0's before that (a hand-written index), bit for bit (a -0.0 keeps its sign)."""
+    n, ny = 12, 5
+    ys = np.random.default_rng(4).normal(size=(n, ny))
+    ys[0, 1] = ys[5, 2] = -0.0
+    b = delay_block(delay, ny)
+    expect = ys[[max(k - delay, 0) for k in range(n)]]
+    for plain in (False, True):
+        x, seen = np.zeros(b.state.size), []
+        for k in range(n):
+            f = b.plain if plain and b.is_plain(float(k)) else b.step
+            x, out = (np.asarray(v, dtype=float).ravel() for v in f(k, 0.1 * k, 0.1, x, ys[k], [], []))
+            seen.append(out)
+        assert np.array(seen).tobytes() == expect.tobytes(), f"plain={plain}"
+
+
+W_B = measurement_fields(0, 0).slice("omega_BN_B")
+ECHO_GAIN = 2.0  # N m per rad/s: the command echoes what the law sees
+
+
+class EchoRate(Controller):
+    """``τ = -ECHO_GAIN ω_seen``: the logged command shows, exactly, the rate the law was given."""
+
+    name = "echo_rate"
+    command = "torque"
+
+    def symbolic_params(self):
+        return []
+
+    def symbolic(self, t, y, cp):
+        import casadi as ca
+
+        return -ECHO_GAIN * y[W_B], ca.DM([1.0, 0.0, 0.0, 0.0])
+
+
+DELAY_TICKS = 3
+
+
+def _echo_tumbler(seed: int):
+    """The tumbler (an ideal torquer: the command acts as given) flown by :class:`EchoRate` with a
+    delay of :data:`DELAY_TICKS` and rate noise, a row per tick."""
+    return scene_from_dict({
+        "name": "tumbler",
+        "simulation": {"duration": 3.0, "integrator": "rk4", "step": 0.1, "output_dt": 0.1},
+        "initial": {"omega_BN_B": [0.3, -0.2, 0.4]},
+        "body": {"mass": 100.0, "inertia": [[100.0, 5.0, -3.0], [5.0, 200.0, 2.0], [-3.0, 2.0, 250.0]]},
+        "controller": {"name": "test_fused_noise:EchoRate", "period": 0.1,
+                       "sensor": {"rate_noise": RATE_RAD_S, "delay": DELAY_TICKS * 0.1, "seed": seed}},
+    })
+
+
+@pytest.mark.parametrize("executor", ["fused", "per_tick", "lockstep"])
+def test_delayed_noisy_rate_is_the_rate_of_delay_ticks_before_plus_the_ticks_draw(executor):
+    """With a delay and rate noise, at tick k the law sees ``ω(k - d) + z_k`` (``ω(0)`` before
+    tick d; ``z_k`` = ``rng.normal(0, σ, 3)`` of tick k from the run's seed, drawn here): the
+    logged command is ``-ECHO_GAIN`` times that, bit for bit, against the logged true rate. The
+    delay flies fused (it was the per-tick loop's ring buffer), and in the lockstep batch."""
+    seeds = (5, 6)
+    if executor == "lockstep":
+        runs = run_lockstep([_echo_tumbler(s) for s in seeds], keep=True, fused=False)
+        assert [k for k, _ in runs] == ["batch", "batch"]
+        runs = [tr for _, tr in runs]
+    else:
+        runs = [simulate(_echo_tumbler(s), fused=executor == "fused") for s in seeds]
+    for seed, tr in zip(seeds, runs):
+        assert tr.meta["summary"]["fused"] is (executor == "fused"), tr.meta["summary"].get("not_fused")
+        assert tr.meta["summary"]["controller_updates"] == len(tr.t)
+        w, cmd = tr.cols("wx", "wy", "wz"), tr.cols("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")
+        rng = np.random.default_rng(seed)
+        z = np.array([rng.normal(0.0, RATE_RAD_S, 3) for _ in range(len(w))])
+        seen = w[[max(k - DELAY_TICKS, 0) for k in range(len(w))]] + z
+        assert np.array_equal(cmd, -ECHO_GAIN * seen)
 
 
 def test_noisy_fused_loop_without_a_cluster():

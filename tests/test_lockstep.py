@@ -75,12 +75,13 @@ def test_batch_row_k_is_the_single_run_k_bit_for_bit(name, params):
 
 
 def test_samples_with_different_corruptions_are_their_single_runs():
-    """One batch whose samples corrupt different fields (both, attitude only, rate only, a delay
-    alone, none): the mapped corruption plug-in keeps per sample only its own run's fields, so
-    row k is single run k bit for bit."""
+    """Samples that corrupt different fields (both, attitude only, rate only, a delay alone, a
+    delay and noise, none), two of each, mixed: the ideal measurement's delay and noise are
+    blocks of the mapped parts, so each kind is a batch of its own (its structure), and row k is
+    single run k bit for bit."""
     base = _samples({"reference": "lvlh", "bandwidth": 0.01}, "pd")[0]
-    sensors = [dict(NOISE), {"attitude_noise": 1e-3}, {"rate_noise": 1e-5}, {"delay": 0.2}, {}]
-    scenes = [base.replace({"controller.sensor": {**x, "seed": 3 + k}}) for k, x in enumerate(sensors)]
+    sensors = [dict(NOISE), {"attitude_noise": 1e-3}, {"rate_noise": 1e-5}, {"delay": 0.2}, {**NOISE, "delay": 0.3}, {}]
+    scenes = [base.replace({"controller.sensor": {**x, "seed": 3 + k}}) for k, x in enumerate(sensors + sensors)]
     res = run_lockstep(scenes, keep=True, fused=False)
     for s, (kind, tr) in zip(scenes, res):
         assert kind == "batch"

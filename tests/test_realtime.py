@@ -50,10 +50,12 @@ def scene_dict(controller: dict | None) -> dict:
     return d
 
 
-#: executor -> the scene's controller: pd fuses; a sensor delay keeps it per tick; none: open loop
+#: executor -> the scene's controller: pd fuses; a law in Python (with sensor noise and delay) runs
+#: per tick; none: open loop
 EXECUTORS = {
     "fused": {},
-    "per_tick": {"sensor": {"attitude_noise": 1.0e-4, "delay": PERIOD_S, "seed": 2}},
+    "per_tick": {"name": "example_hold", "params": {"reference": "lvlh"},
+                 "sensor": {"attitude_noise": 1.0e-4, "delay": PERIOD_S, "seed": 2}},
     "open_loop": None,
 }
 

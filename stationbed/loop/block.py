@@ -33,7 +33,9 @@ plant's held input from what is left).
 
 Adapters of the existing plug-ins (no numbers change: the same casadi functions are called):
 :func:`actuator_block` (an :class:`~.actuator.Actuator` before the chain's end),
-:func:`sensing_block` (the :class:`~.flight.Flight` suite and estimator).
+:func:`sensing_block` (the :class:`~.flight.Flight` suite and estimator); the ideal
+measurement's delay and corruption (``[controller.sensor]``): :func:`delay_block`,
+:func:`corruption_block`.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ import numpy as np
 
 from ..core.layout import Layout
 
-__all__ = ["Block", "ROLES", "actuator_block", "sensing_block", "corruption_block", "ACT_OUT", "off_path"]
+__all__ = ["Block", "ROLES", "actuator_block", "sensing_block", "delay_block", "corruption_block", "ACT_OUT", "off_path"]
 
 #: where a block sits in the tick, in the order the composer calls them
 ROLES = ("env", "sense", "law", "actuator", "end")
@@ -170,11 +172,40 @@ def sensing_block(flight, name: str = "sensing") -> Block:
                  is_plain=S.is_plain if plain is not None else None, key=("flight", flight.key), p0=flight.params)
 
 
+def delay_block(delay: int, ny: int, name: str = "delay") -> Block:
+    """The ideal measurement's delay (``[controller.sensor] delay``, ``delay`` >= 1 whole ticks)
+    as a ``sense`` block: at tick k it passes on the measurement of tick ``k - delay``, tick 0's
+    before that. Its memory ``ring`` holds the last ``delay`` measurements it was given, oldest
+    first. The plain step (every tick but the first, ``is_plain``: k > 0) is the shift alone
+    (out the oldest, in the tick's); the step is an explicit branch on ``k == 0`` (a casadi
+    ``Function.if_else``: only the case taken runs), where the ring is filled with tick 0's
+    measurement: copies only, so what the law sees is that measurement bit for bit."""
+    SX, MX = ca.SX, ca.MX
+    R = Layout(ring=delay * ny)
+
+    def case(fname, first: bool):
+        k, t, h, ring, y = SX.sym("k"), SX.sym("t"), SX.sym("h"), R.symbol("ring"), SX.sym("y", ny)
+        x1, out = (ca.repmat(y, delay, 1), y) if first else (ca.vertcat(ring[ny:], y), ring[:ny])
+        return ca.Function(fname, [k, t, h, ring, y, SX.sym("w", 0), SX.sym("p", 0)], [x1, out])
+
+    plain = case(f"{name}_plain", first=False)
+    branch = ca.Function.if_else(f"{name}_branch", case(f"{name}_first", first=True), plain)
+    ins = [MX.sym("k"), MX.sym("t"), MX.sym("h"), R.symbol("ring", MX), MX.sym("y", ny), MX.sym("w", 0), MX.sym("p", 0)]
+    step = ca.Function(f"{name}_step", ins, branch(ins[0] < 0.5, *ins))
+    return Block(name, "sense", step, R, Layout(), Layout(), Layout(y=ny), Layout(y_seen=ny), plain=plain,
+                 is_plain=_after_first, key=("delay", delay))
+
+
+def _after_first(k):
+    """Whether tick ``k`` (casadi) is past the first: the delay's ring is full."""
+    return k > 0.5
+
+
 def corruption_block(corruption, ny: int, name: str = "noise") -> Block:
     """The ideal measurement's noise (``[controller.sensor]``, :class:`~.corruption.Corruption`)
     as a ``sense`` block: the law sees the measurement corrupted by the tick's draws (attitude,
-    then rate: :func:`~.corruption.draws_layout`); SX, plain on every tick. Its delay is not a
-    block yet (a run with one is flown per tick)."""
+    then rate: :func:`~.corruption.draws_layout`); SX, plain on every tick. Its delay is the
+    block before it (:func:`delay_block`)."""
     from .corruption import corrupt_symbolic, draws_layout  # noqa: PLC0415 (a sibling, imported where used)
 
     flags = corruption.flags

@@ -5,18 +5,18 @@ with one tick's draws ``nz`` (:func:`draws_layout`: ``attitude`` 3, then ``rate`
 the values of ``rng.normal(0, sigma, 3)``): ``q_BN`` turned by the small rotation ``nz_att``
 (``q ⊗ [1, nz_att / 2]``, renormalised), ``omega_BN_B + nz_rate``; the other fields untouched.
 
-Written **once** as casadi expressions (:meth:`Corruption.symbolic`): the fused loop inlines
-them in its compiled tick, the per-tick loop calls them compiled (:meth:`Corruption.compiled`),
-the lockstep batch maps the compiled function over its samples (:func:`corrupt_compiled` with
-both corruptions on, each sample keeping the fields its own run corrupts). There is no numpy twin.
+Written **once** as casadi expressions (:meth:`Corruption.symbolic`), composed as the ``noise``
+block (:func:`~.block.corruption_block`): the fused loop inlines them in its compiled tick, the
+per-tick loop's composed parts and the lockstep batch (those parts mapped) call them compiled;
+the per-tick loop's generic path calls :meth:`Corruption.compiled`. There is no numpy twin.
 
 It is not a :class:`~.sensor.Sensor`: a sensor samples the truth (:data:`~.sensor.TRUTH`) at its
 own period and feeds the flight suite's estimator; this corrupts, every tick, what the law itself
 sees (the whole measurement vector, gimbal angles included). The draws come from the run's one
-``[controller.sensor]`` generator, per tick attitude then rate (:meth:`Corruption.draw`), so a
-noisy run keeps its noise stream. The sensor *delay* (a ring buffer of past measurements) is
-not part of the plug-in: it is the executor's memory (the per-tick loop and the lockstep batch
-keep it; the fused loop refuses a delay and runs such a scene per tick).
+``[controller.sensor]`` generator, per tick attitude then rate, served as the suite's are
+(:meth:`Corruption.noise`: a :class:`~.flight.TickNoise` stream of a block of ticks at a time),
+so a noisy run keeps its noise stream on every executor. The sensor *delay* is a block of its
+own (:func:`~.block.delay_block`), composed before this one.
 """
 
 from __future__ import annotations
@@ -27,9 +27,10 @@ import casadi as ca
 import numpy as np
 
 from ..core.compile import FastCall, compile_functions
+from .flight import TickNoise
 from .layout import Layout
 
-__all__ = ["Corruption", "draws_layout", "corrupt_symbolic", "corrupt_compiled"]
+__all__ = ["Corruption", "CorruptionNoise", "draws_layout", "corrupt_symbolic", "corrupt_compiled"]
 
 
 @lru_cache(maxsize=None)
@@ -125,9 +126,30 @@ class Corruption:
         """:meth:`function` generated as C (disk cache), bound as a :class:`FastCall` (shared)."""
         return corrupt_compiled(self.flags, self.layout)
 
-    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+    def noise(self, rng: np.random.Generator, end: int | None = None):
+        """The run's draws by tick from tick 0, from ``rng`` (the ``[controller.sensor]``
+        generator): a :class:`~.flight.TickNoise` of :class:`CorruptionNoise` (``end``: the run's
+        ticks, none drawn past them)."""
+        return TickNoise(CorruptionNoise(self, rng), end)
+
+
+class CorruptionNoise:
+    """The draws of one run's corruption, tick chunk by tick chunk in order from tick 0 (the
+    source of its :class:`~.flight.TickNoise` stream)."""
+
+    def __init__(self, corruption: Corruption, rng: np.random.Generator):
+        self.sigma, self.width = corruption.sigma, corruption.width
+        self.rngs = {"noise": rng}
+        self.next_tick = 0
+
+    def draw(self, n: int, out: np.ndarray | None = None) -> np.ndarray:
         """The draws of the next ``n`` ticks, (n, width): per tick ``rng.normal(0, σ_att, 3)``
         then ``rng.normal(0, σ_rate, 3)`` (a Generator fills an array element by element from
         one stream, and ``normal(0, σ)`` is ``0 + σ z``: the same numbers from one
-        ``standard_normal`` call)."""
-        return 0.0 + self.sigma * rng.standard_normal((n, self.width))
+        ``standard_normal`` call); written into ``out`` when given."""
+        z = 0.0 + self.sigma * self.rngs["noise"].standard_normal((n, self.width))
+        self.next_tick += n
+        if out is None:
+            return z
+        out[...] = z
+        return out

@@ -213,7 +213,7 @@ class Flight:
         return x
 
     def noise(self) -> "TickNoise":
-        """The run's noise, tick by tick from tick 0 (:class:`TickNoise`)."""
+        """The run's noise, tick by tick from tick 0 (:class:`TickNoise`; tick 0 draws nothing)."""
         return TickNoise(SuiteNoise(self.suite, self.seed))
 
     # -- columns --------------------------------------------------------------------------------
@@ -278,15 +278,28 @@ _TICKS: dict = {}
 
 
 class TickNoise:
-    """The suite's noise rows by tick: ``rows(k0, n)`` gives ticks ``k0 .. k0+n-1`` (tick 0
-    draws nothing: a zero row), asked in tick order (each tick once); drawn
-    :data:`NOISE_BLOCK` ticks at a time. The rows returned are read-only to the caller (a view
-    of the block when they lie inside it)."""
+    """A noise source's rows by tick, the one noise stream every executor reads: ``rows(k0, n)``
+    gives ticks ``k0 .. k0+n-1``, asked in tick order (each tick once); drawn :data:`NOISE_BLOCK`
+    ticks at a time. The ticks before the source's first (its ``next_tick`` at the start: the
+    suite's 1, tick 0 draws nothing; the ideal measurement's corruption's 0) are zero rows. The
+    rows returned are read-only to the caller (a view of the block when they lie inside it).
 
-    def __init__(self, noise: SuiteNoise):
+    The source (:class:`~.suite.SuiteNoise`, :class:`~.corruption.CorruptionNoise`) has
+    ``width``, ``rngs`` (its generators by name), ``next_tick`` and ``draw(n, out=None)``: the
+    rows of its next ``n`` ticks, in tick order (so any block size gives the same numbers).
+    ``end``: the run's ticks (0 .. end - 1), when known: no block is drawn past them."""
+
+    def __init__(self, noise, end: int | None = None):
         self.noise = noise
-        self.width = noise.suite.NOISE.size
-        self.buf, self.k0, self.next = np.zeros((0, self.width)), 1, 0
+        self.width = noise.width
+        self.first = noise.next_tick
+        self.end = end
+        self.buf, self.k0, self.next = np.zeros((0, self.width)), self.first, 0
+
+    def _block(self, k0: int, n: int) -> int:
+        """Ticks to draw from tick ``k0`` when ``n`` are needed: a block, never past the run's end."""
+        m = NOISE_BLOCK if self.end is None else min(NOISE_BLOCK, self.end - k0)
+        return max(m, n)
 
     def state(self) -> tuple:
         """Where the stream is (its block, next tick, the generators' states): :meth:`restore`
@@ -307,18 +320,18 @@ class TickNoise:
             raise ValueError(f"sensor noise asked for tick {k0}, the next tick is {self.next}")
         self.next = k0 + n
         i = k0 - self.k0
-        if k0 >= 1 and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
+        if k0 >= self.first and 0 <= i and i + n <= len(self.buf):  # inside the block drawn: a view, no copy
             return self.buf[i : i + n]
-        if k0 >= 1 and i == len(self.buf):  # the block used up: the next starts here (a view of it)
-            self.k0, self.buf = k0, self.noise.draw(max(NOISE_BLOCK, n))
+        if k0 >= self.first and i == len(self.buf):  # the block used up: the next starts here (a view of it)
+            self.k0, self.buf = k0, self.noise.draw(self._block(k0, n))
             return self.buf[:n]
         out = np.zeros((n, self.width))
-        first = max(k0, 1)
+        first = max(k0, self.first)
         while first < k0 + n:
             i = first - self.k0
             if i >= len(self.buf):
                 self.k0, i = first, 0
-                self.buf = self.noise.draw(max(NOISE_BLOCK, k0 + n - first))
+                self.buf = self.noise.draw(self._block(first, k0 + n - first))
             m = min(len(self.buf) - i, k0 + n - first)
             out[first - k0 : first - k0 + m] = self.buf[i : i + m]
             first += m
@@ -327,9 +340,9 @@ class TickNoise:
     def rows_into(self, k0: int, n: int, out: np.ndarray) -> None:
         """:meth:`rows` written into ``out`` (shape (n, width)): drawn straight into it where the
         block drawn is used up (the same numbers: each sensor draws in tick order)."""
-        first = max(k0, 1)
+        first = max(k0, self.first)
         if n > 0 and k0 == self.next and first - self.k0 == len(self.buf) and first < k0 + n:
-            out[: first - k0] = 0.0  # tick 0 draws nothing
+            out[: first - k0] = 0.0  # the ticks before the source's first draw nothing
             self.noise.draw(k0 + n - first, out=out[first - k0 :])
             self.next, self.k0, self.buf = k0 + n, k0 + n, np.zeros((0, self.width))
         else:

@@ -245,6 +245,7 @@ class SuiteNoise:
 
     def __init__(self, suite: Suite, seed: int):
         self.suite = suite
+        self.width = suite.NOISE.size
         self.rngs = {s.name: noise_rng(seed, i) for i, s in enumerate(suite.sensors)}
         self.next_tick = 1
 

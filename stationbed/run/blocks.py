@@ -20,7 +20,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.layout import Layout
-from ..loop.block import Block, actuator_block, corruption_block, sensing_block
+from ..loop.block import Block, actuator_block, corruption_block, delay_block, sensing_block
 from ..loop.compose import Composed, Plant, compose
 from . import law_state
 from .chunk_layout import ENV
@@ -135,16 +135,15 @@ def _tail_groups(geo) -> tuple:
     return getattr(base, "UNIT_TAIL", ("working",))
 
 
-def run_blocks(comp, cp, rate: int = 0, noise: bool = True) -> list[Block]:
+def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
     """The blocks of the run composed by ``comp`` (module docstring), in the tick's order; with
-    an environment ``rate`` (ticks per evaluation), the held environment first. ``noise``
-    False: without the ideal measurement's noise (an executor that corrupts what the blocks
-    give itself: the lockstep batch, whose samples may corrupt different fields)."""
+    an environment ``rate`` (ticks per evaluation), the held environment first."""
     blocks = [env_block(comp, rate)] if rate else []
     if comp.flight is not None:
         blocks.append(sensing_block(comp.flight))
-    if noise and comp.corruption is not None and not comp.delay:  # [controller.sensor] noise (with a delay: the
-        # per-tick loop's ring buffer, then the corruption, on what the blocks give; never fused)
+    if comp.delay:  # [controller.sensor] delay, then its noise, on what the sensing gives
+        blocks.append(delay_block(comp.delay, comp.meas_layout.size))
+    if comp.ideal_noise is not None:
         blocks.append(corruption_block(comp.corruption, comp.meas_layout.size))
     blocks.append(law_block(comp, cp))
     for a in comp.actuators:  # the chain, in order (run/chain.py)
@@ -178,16 +177,17 @@ def blocker(comp, cp=()) -> Block | None:
     return None
 
 
-def structure_key(comp, cp, noise: bool = True) -> tuple:
+def structure_key(comp, cp) -> tuple:
     """What the run's composed functions depend on, read without building a block (numbers are
     inputs, never in the key): the compiled system, the law's class, command, state and
-    parameter sizes, the flight's key, the chain's structure, the chain end's kind."""
+    parameter sizes, the flight's key, the chain's structure, the chain end's kind, the ideal
+    measurement's delay and the fields its noise corrupts."""
     ctrl = comp.ctrl
     return (id(comp.system), type(ctrl), ctrl.command, law_state.initial(ctrl).size, len(cp),
             None if comp.flight is None else comp.flight.key,
             tuple((a.name, a.cluster.key, a.lp) for a in comp.actuators), type(comp.end).__name__, held_rate(comp)[0],
             None if comp.fdir is None else comp.fdir.block.key,
-            *((None if comp.corruption is None else comp.corruption.flags, bool(comp.delay)) if noise else ("no noise",)),
+            comp.delay, None if comp.ideal_noise is None else comp.corruption.flags,
             *((("edges", max_edges(comp)),) if max_edges(comp) else ()))
 
 
@@ -254,53 +254,46 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     return out
 
 
-def composed(comp, cp, noise: bool = True, edges: bool = False) -> tuple[Composed, float]:
+def composed(comp, cp, edges: bool = False) -> tuple[Composed, float]:
     """The run's composition composed (cached by its structure, :func:`structure_key`) and the
-    seconds it took to build now (0 when cached); ``noise`` as :func:`run_blocks`; ``edges``:
-    its edge tick's case (the step also cut at the scene's discontinuities inside the tick,
-    :func:`~.segments.tick_edges`; the same blocks, the parameters with ``edge`` appended)."""
-    key = structure_key(comp, cp, noise) + (("edge case",) if edges else ())
+    seconds it took to build now (0 when cached); ``edges``: its edge tick's case (the step also
+    cut at the scene's discontinuities inside the tick, :func:`~.segments.tick_edges`; the same
+    blocks, the parameters with ``edge`` appended)."""
+    key = structure_key(comp, cp) + (("edge case",) if edges else ())
     hit = _COMPOSED.get(key)
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
     rate = held_rate(comp)[0]
-    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate, noise), max_edges(comp) if edges else 0)
+    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate), max_edges(comp) if edges else 0)
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0
 
 
 class Draws:
-    """The composition's draws by tick, from each block's own stream, in tick order: the sensing
-    block's (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.rng`` through
-    the corruption plug-in, fused.py's order). ``rows(k0, n)`` -> (n, width)."""
+    """The composition's draws by tick, each block's from its own stream (a
+    :class:`~stationbed.loop.flight.TickNoise`), in tick order: the sensing block's
+    (``comp.tick_noise``: its sensors' streams), the noise block's (``comp.ideal_noise``: the
+    corruption's). ``rows(k0, n)`` -> (n, width); ``state()`` / ``restore()`` put every stream
+    back (the rows asked again are the same numbers)."""
 
     def __init__(self, comp, cm):
         N = cm.noise
         self.width = N.size
-        self.src = []
-        if "sensing" in N:
-            self.src.append((N.slice("sensing"), lambda k0, n: comp.tick_noise.rows(k0, n)))
-        if "noise" in N:
-            self.src.append((N.slice("noise"), lambda k0, n: comp.corruption.draw(comp.rng, n)))
-        self.comp = comp
+        streams = {"sensing": comp.tick_noise, "noise": comp.ideal_noise}
+        self.src = [(N.slice(name), streams[name]) for name in N.names]
 
     def rows(self, k0: int, n: int) -> np.ndarray:
         if len(self.src) == 1 and self.src[0][0] == slice(0, self.width):
-            return self.src[0][1](k0, n)
+            return self.src[0][1].rows(k0, n)
         out = np.zeros((n, self.width))
-        for sl, f in self.src:
-            out[:, sl] = f(k0, n)
+        for sl, stream in self.src:
+            out[:, sl] = stream.rows(k0, n)
         return out
 
     def state(self):
-        c = self.comp
-        return (c.tick_noise.state() if c.tick_noise is not None else None,
-                c.rng.bit_generator.state if c.corruption is not None else None)
+        return [stream.state() for _, stream in self.src]
 
     def restore(self, st) -> None:
-        c = self.comp
-        if st[0] is not None:
-            c.tick_noise.restore(st[0])
-        if st[1] is not None:
-            c.rng.bit_generator.state = st[1]
+        for (_, stream), s in zip(self.src, st):
+            stream.restore(s)

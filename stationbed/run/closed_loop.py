@@ -97,7 +97,7 @@ class ControlLoop:
     its memory across periods, so nothing restarts per tick). :meth:`run` hands the run
     to a fused executor when one applies (:func:`~.fused.fused_ok`). The per-tick executor's
     single-tick steps (:meth:`measure`, :meth:`actuate`, :meth:`advance`, :meth:`check_command`,
-    :meth:`noise_row`, :meth:`corrupt`, :meth:`flags`, :meth:`redesign`) are public: the
+    :meth:`flags`, :meth:`redesign`) are public: the
     composed parts' path (:func:`~.parts.run_parts`) calls some of them.
     """
 
@@ -138,7 +138,6 @@ class ControlLoop:
             command_layout=command_fields(ctrl.command, ng),
             ctrl=ctrl, replan=replan_of(scene, system, period, duration, plant_facts),  # fault detection
             sensor=sensor, noisy=noisy, delay=int(round(sensor.delay / period)) if noisy else 0,
-            rng=np.random.default_rng(sensor.seed) if noisy else None,
             flight=flight, tick_noise=None if flight is None else flight.noise(),
             end=chain_end(model),
             actuators=chain_for(scene, ctrl, layout, plant),  # the chain before its end (run/chain.py)
@@ -146,8 +145,6 @@ class ControlLoop:
         )
         self.res = RunState(comp, rows, x)
         n_y = self.meas.res[0].size
-        if noisy:
-            self.history = np.zeros((comp.delay + 1, n_y))
         if noisy or flight is not None:
             self.seen = np.zeros(n_y)  # what the law sees
             self.M = Measurement(self.seen, layout)
@@ -201,15 +198,6 @@ class ControlLoop:
         ml = comp.meas_layout
         xs = fl.initial(ml.get(y0, "q_BN"), ml.get(y0, "omega_BN_B"))
         self.res.flight = FlightMemory(0.0, np.zeros(3), np.zeros(3), xs, np.zeros(fl.suite.OUTPUTS.size))
-        self._w, self._w_k0 = np.zeros((0, fl.suite.NOISE.size)), 0
-
-    def noise_row(self, k: int) -> np.ndarray:
-        """Tick k's sensor draws (drawn :data:`NOISE_BLOCK` ticks at a time, in tick order)."""
-        i = k - self._w_k0
-        if i >= len(self._w):
-            self._w_k0, i = k, 0
-            self._w = self.comp.tick_noise.rows(k, NOISE_BLOCK)
-        return self._w[i]
 
     def measure(self, t: float, x) -> np.ndarray:
         """The true measurement at ``(t, x)`` (the compiled ``meas``; a view of its buffer)."""
@@ -226,35 +214,10 @@ class ControlLoop:
         self._after_sense(k, t, y)
 
     def _after_sense(self, k: int, t: float, y: np.ndarray) -> None:
-        """The sensing, then the ideal path's noise and delay, on the true measurement ``y``."""
-        comp = self.comp
-        if comp.flight is not None:
-            y = self.generic.sense(k, t, y)
-            if not comp.noisy:
-                self.seen[:] = y
-                return
-        if comp.noisy:
-            self.corrupt(k, y)
-
-    def corrupt(self, k: int, y=None) -> None:
-        """``seen`` at tick k: the delay (this executor's ring buffer of past measurements),
-        then the corruption plug-in (loop/corruption.py) compiled, on this tick's draws."""
-        comp = self.comp
-        y = self.meas.res[0] if y is None else y
-        delay = comp.delay
-        slot = k % (delay + 1)
-        if k == 0:
-            self.history[:] = y
-        self.history[slot] = y
-        c = comp.corruption
-        if c.width == 0:  # a delay alone
-            self.seen[:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
-            return
-        fc = c.compiled()
-        fc.args[0][:] = self.history[(k - delay) % (delay + 1)] if k >= delay else self.history[0]
-        fc.args[1][:] = c.draw(comp.rng, 1)[0]
-        fc()
-        self.seen[:] = fc.res[0]
+        """The sense blocks (the sensing, the ideal measurement's delay and noise) on the true
+        measurement ``y``: ``seen``, what the law sees."""
+        if self.generic.sense_fc is not None:
+            self.seen[:] = self.generic.sense(k, t, y)
 
     def actuate(self, k: int, t: float, cmd, count: bool = True) -> int:
         """The actuator chain at tick k (time ``t``) on the law's command: its blocks in order
@@ -344,7 +307,7 @@ class ControlLoop:
         replan_at = comp.replan.tick if comp.replan is not None else -1
         M = self.M
         ticks = 0
-        self.generic = GenericTick(comp, res, law_numbers(ctrl), self.noise_row)
+        self.generic = GenericTick(comp, res, law_numbers(ctrl))
         steps, step = loop_hook(self)  # scheduled steps (run/schedule.py): their ticks, the hook
         try:
             if 0 in steps:

@@ -67,7 +67,6 @@ class Composition:
     sensor: Any  #: ``[controller.sensor]``: the ideal measurement's noise and delay
     noisy: bool  #: whether that noise or delay is on
     delay: int  #: its delay in ticks
-    rng: Any  #: its noise stream (numpy Generator), drawn in tick order by the executor running
     flight: Any  #: the ``[[sensor]]`` suite and estimator (:class:`~stationbed.loop.Flight`) or None
     tick_noise: Any  #: the suite's noise stream by tick (``Flight.noise()``) or None
     # -- the actuators -----------------------------------------------------------------------
@@ -85,10 +84,21 @@ class Composition:
     @cached_property
     def corruption(self):
         """The ideal measurement's noise as its plug-in (:class:`~stationbed.loop.Corruption`;
-        its delay stays the executor's ring buffer), or None when ``[controller.sensor]`` is off."""
+        its delay is a block of its own, :func:`~stationbed.loop.block.delay_block`), or None
+        when ``[controller.sensor]`` is off."""
         if not self.noisy:
             return None
         return Corruption(self.sensor.attitude_noise, self.sensor.rate_noise, self.meas_layout)
+
+    @cached_property
+    def ideal_noise(self):
+        """The corruption's draws by tick from tick 0 (its noise stream, as ``tick_noise`` is the
+        suite's: :meth:`~stationbed.loop.Corruption.noise` on the ``[controller.sensor]`` seed's
+        generator), or None without draws (no noise, or a delay alone)."""
+        c = self.corruption
+        if c is None or c.width == 0:
+            return None
+        return c.noise(np.random.default_rng(self.sensor.seed), self.ticks() + 1)
 
     @property
     def layout(self) -> dict:

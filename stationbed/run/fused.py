@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 
-from . import law_state
 from .controller import ControllerError, one_line
 from .segments import edge_ticks
 
@@ -26,11 +25,11 @@ def why_not_fused(comp) -> str | None:
     place that decides it: :func:`fused_ok` is this is None, the summary reports it
     (``not_fused``). In order: the law (a Python or FMU law has no ``symbolic`` form), the
     integrator (not one fixed explicit step per tick), an array rate step (the state jumps
-    inside a tick), the ideal measurement's delay (a ring buffer, not a block yet) or its noise
-    with ``[[sensor]]`` tables, the actuator chain (the LP mapping; ``[controller.sensor]``
-    noise with a stateful law). Not reasons: a discontinuity between ticks (its tick is the
-    edge tick's compiled case, :func:`~.segments.tick_edges`) and a failure detected mid-run
-    (the law designs again at its tick, a scheduled step: :func:`~.detection.detection_steps`)."""
+    inside a tick), the actuator chain (the LP mapping). Not reasons: a discontinuity between
+    ticks (its tick is the edge tick's compiled case, :func:`~.segments.tick_edges`), a failure
+    detected mid-run (the law designs again at its tick, a scheduled step:
+    :func:`~.detection.detection_steps`), the ideal measurement's delay and noise (blocks, with
+    ``[[sensor]]`` tables, a law with a state, any actuator)."""
     ctrl = comp.ctrl
     integ = comp.integ
     if not callable(getattr(ctrl, "symbolic", None)):
@@ -39,10 +38,6 @@ def why_not_fused(comp) -> str | None:
         return f"integrator: '{integ.name}' is not one fixed explicit step per tick"
     if edge_ticks(comp) is None:
         return "plant: an array rate step (the per-tick loop cuts there and jumps)"
-    if comp.noisy and comp.delay > 0:
-        return "noise: [controller.sensor] delay (its ring buffer is not a block yet)"
-    if comp.flight is not None and comp.noisy:
-        return "noise: [controller.sensor] noise with [[sensor]] tables"
     return _chain_why(comp)
 
 
@@ -59,8 +54,6 @@ def _chain_why(comp) -> str | None:
         why = None
         if a.lp:
             why = a.cluster.why
-        elif comp.noisy and law_state.has_state(comp.ctrl):
-            why = f"[controller.sensor] noise with a law that has a state and {a.name} is flown per tick"
         a.fused_reason = why
         if why is not None:
             return f"{a.name}: {why}"

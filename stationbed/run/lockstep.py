@@ -6,10 +6,10 @@ leading sample axis; a law with only a ``symbolic`` form: that form compiled and
 samples, :mod:`.law_compiled`) -> the composed tick's compiled ``act`` part mapped over the
 samples (casadi ``Function.map`` of the very function the per-tick loop calls, :mod:`.parts`:
 the held environment, the actuator chain, its end, one fixed step, the next tick's measurement
-and sensing; the map calls that machine code once per sample, so a sample's numbers are its
-single run's, bit for bit) -> each sample's ideal measurement (noise from its own generator,
-its own delay) -> rows at the output ticks (each sample's own :class:`~.rows.Rows` and
-metrics). Each sample keeps its own numbers, carry, draws and pieces (its rows cut at its own
+and sensing, the ideal measurement's delay and noise; the map calls that machine code once per
+sample, so a sample's numbers are its single run's, bit for bit) -> rows at the output ticks
+(each sample's own :class:`~.rows.Rows` and metrics). Each sample keeps its own numbers, carry,
+draws (its own streams: :class:`~.blocks.Draws`) and pieces (its rows cut at its own
 edges on the tick grid, as :func:`~.segments.tick_pieces` cuts them for every executor); its
 scheduled steps (faults, docking events: :mod:`.schedule`, ``lockstep_hook``) apply where its
 piece starts (every step's tick starts one), on its own row of the carry and the numbers.
@@ -37,7 +37,6 @@ from ..integrators.dop853_batch import mapped
 from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
-from ..loop.corruption import corrupt_compiled, draws_layout
 from .blocks import Draws, held_rate, numbers, parts_ok, structure_key
 from .parts import NOISE_BLOCK, law_numbers, parts
 from .prepare import prepare
@@ -46,9 +45,6 @@ from .schedule import lockstep_hook
 from .segments import breakpoints, edge_ticks, held_torque_from, max_edges, off_grid_ticks, tick_edges, tick_pieces
 
 __all__ = ["executor", "run_lockstep", "vectorised"]
-
-#: ticks of sensor noise drawn per call of a sample's generator (the same stream as per tick)
-DRAW_BLOCK = 256
 
 
 def vectorised(ctrl) -> bool:
@@ -161,7 +157,7 @@ def run_lockstep(scenes, *, sinks=None, fused: bool = True, keep: bool = False):
             continue
         sim = s.simulation
         comp = smp.loop.comp
-        key = (structure_key(comp, law_numbers(comp.ctrl), noise=False), sim.duration, sim.output_dt, comp.period)
+        key = (structure_key(comp, law_numbers(comp.ctrl)), sim.duration, sim.output_dt, comp.period)
         groups.setdefault(key, []).append(i)
         samples[i] = smp
     for idx in groups.values():
@@ -196,9 +192,8 @@ def _done(smp: _Sample, wall: float):
 
 class _Lockstep:
     """The samples of one group (one composed structure, law class, duration, period) in
-    lockstep: the composed parts (:mod:`.parts`, without the ideal measurement's noise, which
-    each sample corrupts its own way here) mapped over the samples, each sample with its own
-    numbers, carry, pieces and draws."""
+    lockstep: the composed parts (:mod:`.parts`) mapped over the samples, each sample with its
+    own numbers, carry, pieces and draws."""
 
     def __init__(self, samples: list[_Sample]):
         self.S = samples
@@ -209,7 +204,7 @@ class _Lockstep:
         self.i_u = out.slice("u_cmg") if self.has_act else None
         self.i_flags = slice(out.slice("rate_limited").start, out.slice("saturated").stop) if self.has_act else None
         self.cps = [law_numbers(s.loop.comp.ctrl) for s in samples]
-        fns = parts(lp, self.cps[0], noise=False)
+        fns = parts(lp, self.cps[0])
         self.cm = cm = fns["cm"]
         # the parts mapped over the samples: casadi's map calls the very machine code once per sample
         self.sense = mapped(fns["sense"].f, n, 1)
@@ -229,73 +224,13 @@ class _Lockstep:
         sa, sr = self.sense.args, self.sense.res
         self.SC, self.SPAR, self.SW = sa[0].reshape(n, C.size), sa[1].reshape(n, P.size), sa[2].reshape(n, nw)
         self.SCS, self.SV, self.SOUTS = sr[0].reshape(n, C.size), sr[1].reshape(n, ny), sr[2].reshape(n, ns)
-        self.raw = np.zeros((n, ny))  # what each sample's blocks give the law, before its own noise
+        self.seen = np.zeros((n, ny))  # what each sample's law sees (its sense blocks' output)
         self.outs = np.zeros((n, ns))
-        # the ideal measurement: per sample its own generator, noise levels and delay
-        sens = [s.loop.comp.sensor for s in samples]
-        self.noisy = np.array([s.loop.comp.noisy for s in samples])
-        self.sig_a = np.array([x.attitude_noise for x in sens])
-        self.sig_r = np.array([x.rate_noise for x in sens])
-        self.delay = np.array([s.loop.comp.delay for s in samples])
-        self.hist = np.zeros((n, int(self.delay.max()) + 1, ny))
-        self.NZ = draws_layout(True, True)  # each sample's draws by name (those off stay 0)
-        self.z = np.zeros((n, DRAW_BLOCK, self.NZ.size))
-        self.layout = lp.meas_layout
-        self.any_noisy = bool(self.noisy.any())
-        self.cor = None  # the corruption plug-in, both corruptions on, mapped over the samples
-        if self.any_noisy and (self.noisy & ((self.sig_a > 0) | (self.sig_r > 0))).any():
-            self.cor = mapped(corrupt_compiled((True, True), lp.meas_layout).f, n, 1)
-        self.seen = np.zeros((n, ny)) if self.any_noisy else self.raw  # what the law sees
         self.M = BatchMeasurement(self.seen, lp.meas_layout)
-        self.draws = [Draws(s.loop.comp, cm) for s in samples]  # each sample's sensors' streams
+        self.draws = [Draws(s.loop.comp, cm) for s in samples]  # each sample's own streams (sensors, noise)
         self.wblk = [(np.zeros((0, nw)), 0)] * n
 
     # -- sensors -------------------------------------------------------------------------
-    def _draw(self, k: int) -> None:
-        """Each noisy sample's draws for ticks k .. k + DRAW_BLOCK - 1, from its own generator in
-        its single run's order (its plug-in's :meth:`~stationbed.loop.Corruption.draw`)."""
-        self.z[:] = 0.0
-        for i, s in enumerate(self.S):
-            c = s.loop.comp.corruption
-            if c is None or c.width == 0:
-                continue
-            zi = c.draw(s.loop.comp.rng, DRAW_BLOCK)
-            for f in c.draws.names:
-                self.z[i, :, self.NZ.slice(f)] = zi[:, c.draws.slice(f)]
-
-    def _corrupt(self, k: int) -> None:
-        """``seen`` from ``raw`` at tick k, as ``ControlLoop.corrupt`` per sample: each sample's delay
-        (its ring buffer), then the corruption plug-in mapped over the samples."""
-        if not self.any_noisy:  # (seen is raw)
-            return
-        seen, raw = self.seen, self.raw
-        rows = np.arange(self.n)
-        D = self.delay
-        slot = k % (D + 1)
-        if k == 0:
-            self.hist[:] = raw[:, None, :]
-        self.hist[rows, slot] = raw
-        src = np.where(k >= D, (k - D) % (D + 1), 0)
-        seen[:] = self.hist[rows, src]
-        if self.cor is None:  # delays alone
-            return
-        kb = k % DRAW_BLOCK
-        if kb == 0:
-            self._draw(k)
-        # the corruption plug-in (loop/corruption.py), compiled, mapped over the samples; each
-        # sample keeps the fields its own run corrupts (the two corruptions touch disjoint fields
-        # with the same operations, so a row is its single run's, bit for bit)
-        cor = self.cor
-        cor.args[0][:] = seen.ravel()
-        cor.args[1][:] = self.z[:, kb].ravel()
-        cor()
-        out = cor.res[0].reshape(self.n, -1)
-        for f, sig in (("q_BN", self.sig_a), ("omega_BN_B", self.sig_r)):
-            on = self.noisy & (sig > 0)
-            if on.any():
-                sl = self.layout.slice(f)
-                seen[on, sl] = out[on, sl]
-
     def _w(self, i: int, k: int, K: int):
         """Sample i's draws of tick k (a block of ticks at a time, in tick order)."""
         W, w0 = self.wblk[i]
@@ -327,7 +262,7 @@ class _Lockstep:
         self.SC[:] = self.C
         self.sense()
         self.C[due] = self.SCS[due]
-        self.raw[due] = self.SV[due]
+        self.seen[due] = self.SV[due]
         self.outs[due] = self.SOUTS[due]
 
     def _act_edges(self) -> None:
@@ -422,7 +357,6 @@ class _Lockstep:
                 if due is not None:
                     self._start(due, k, K)
                     due = None
-                self._corrupt(k)
                 M.t = t
                 try:
                     cmd = ctrl.update_batch(t, M)
@@ -521,11 +455,11 @@ class _Lockstep:
                         fail(i, IntegrationError(min((k + 1) * period, duration), "state is not finite (NaN or inf)"))
                 if k + 1 < first_end:  # the next tick in the same piece: the act part's sensing serves it
                     self.C[:] = self.CS
-                    self.raw[:] = self.V1
+                    self.seen[:] = self.V1
                     self.outs[:] = self.OUTS
                 else:
                     inside = ends > k + 1
-                    self.C[inside], self.raw[inside], self.outs[inside] = self.CS[inside], self.V1[inside], self.OUTS[inside]
+                    self.C[inside], self.seen[inside], self.outs[inside] = self.CS[inside], self.V1[inside], self.OUTS[inside]
                     self.C[~inside] = self.C1[~inside]
                     due = np.flatnonzero(~inside)
                     for i in due:

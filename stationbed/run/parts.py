@@ -29,21 +29,21 @@ NOISE_BLOCK = 256
 _PARTS: dict = {}
 
 
-def parts(comp, cp=(), noise: bool = True) -> dict:
+def parts(comp, cp=()) -> dict:
     """``{"cm": Composed, "sense": FastCall, "act": FastCall, "act_edge": FastCall or None}`` of
     the run composed by ``comp`` (``cp`` the law's symbolic numbers, when it has them: the
-    composition's key only; ``noise`` as :func:`~.blocks.run_blocks`); ``act_edge`` the act
-    part of the edge tick's case (a discontinuity inside a tick: its parameters end with the
-    edges, :func:`~.segments.tick_edges`), when the run has one."""
-    key = structure_key(comp, cp, noise)
+    composition's key only); ``act_edge`` the act part of the edge tick's case (a discontinuity
+    inside a tick: its parameters end with the edges, :func:`~.segments.tick_edges`), when the
+    run has one."""
+    key = structure_key(comp, cp)
     hit = _PARTS.get(key)
     if hit is not None and hit["system"] is comp.system:
         return hit
-    cm, _ = composed(comp, cp, noise)
+    cm, _ = composed(comp, cp)
     tag = "parts_" + hashlib.sha256(repr(cm.key).encode()).hexdigest()[:16]
     fs = [cm.sense_part(), cm.act_part()]
     if max_edges(comp):
-        ce, _ = composed(comp, cp, noise, edges=True)
+        ce, _ = composed(comp, cp, edges=True)
         a = ce.act_part()
         fs.append(ca.Function("cl_act_edge", a.mx_in(), a.call(a.mx_in())))
         tag += "_edges"
@@ -98,8 +98,7 @@ def run_parts(loop, K: int, update) -> None:
     pt0, ph, pn, pk, pu = (P.slice(f) for f in ("t0", "h", "n_act", "k0", "u_ext"))
     a_c1, a_cs, a_v1, a_outs, a_act = act.res
     s_cs, s_v, s_outs = sense.res
-    delay = comp.delay > 0
-    seen = loop.seen if delay else a_v1  # what the law sees (the act part writes the next tick's)
+    seen = a_v1  # what the law sees (the act part writes the next tick's)
     M = loop.M = Measurement(seen, comp.meas_layout)
     reads = bool(cm.actuators)  # the chain reads what the law saw
     draws, nw = Draws(comp, cm), cm.noise.size
@@ -164,8 +163,6 @@ def run_parts(loop, K: int, update) -> None:
                     t = duration
                 if k == replan_at:
                     loop.redesign(t)
-                if delay:  # the ideal measurement's delay (a ring buffer, not a block yet) and noise
-                    loop.corrupt(k, a_v1)
                 M.t = t
                 loop.calls += 1
                 try:
@@ -255,16 +252,16 @@ _GENERIC: dict = {}
 
 def generic_parts(comp, cp=()) -> dict:
     """``{"cm": Composed, "sense": FastCall or None, "chain": [(lo, hi, FastCall or None)]}``:
-    the parts the generic path calls (:class:`GenericTick`) of the run composed by ``comp``
-    without the ideal measurement's noise (that path corrupts what the sensing gives itself):
-    the sense blocks on a measurement they are handed (None: no sense block) and the chain's
-    pieces in order (:meth:`~stationbed.loop.compose.Composed.chain_pieces`; None: a block that
-    is not symbolic, called in Python). Generated as C once per structure and cached."""
-    key = structure_key(comp, cp, noise=False)
+    the parts the generic path calls (:class:`GenericTick`) of the run composed by ``comp``:
+    the sense blocks (the sensing, the ideal measurement's delay and noise) on a measurement
+    they are handed (None: no sense block) and the chain's pieces in order
+    (:meth:`~stationbed.loop.compose.Composed.chain_pieces`; None: a block that is not
+    symbolic, called in Python). Generated as C once per structure and cached."""
+    key = structure_key(comp, cp)
     hit = _GENERIC.get(key)
     if hit is not None and hit["system"] is comp.system:
         return hit
-    cm, _ = composed(comp, cp, noise=False)
+    cm, _ = composed(comp, cp)
     pieces = [(lo, hi, all(b.symbolic for b in cm.chain[lo:hi])) for lo, hi in cm.chain_pieces()]
     fs = ([cm.sense_on_part()] if cm.sense else []) + [cm.chain_part(lo, hi) for lo, hi, sym in pieces if sym]
     tag = "generic_" + hashlib.sha256(repr((cm.key, pieces)).encode()).hexdigest()[:16]
@@ -281,12 +278,15 @@ class GenericTick:
     the law's command (:meth:`act`: compiled pieces, a block that is not symbolic in Python).
     The blocks' memory lives in the carry ``c``, handed back by block name after each call
     (``res.flight``, each actuator's ``x`` of ``comp.actuators``); the numbers in ``par``
-    (:meth:`refresh` after a scheduled step). ``noise_row(k)``: tick k's sensor draws."""
+    (:meth:`refresh` after a scheduled step). The sense blocks' draws come from their streams
+    (:class:`~.blocks.Draws`), :data:`NOISE_BLOCK` ticks at a time in tick order."""
 
-    def __init__(self, comp, res, cp, noise_row):
+    def __init__(self, comp, res, cp):
         fns = generic_parts(comp, cp)
-        self.comp, self.res, self.cp, self.noise_row = comp, res, cp, noise_row
+        self.comp, self.res, self.cp = comp, res, cp
         cm = self.cm = fns["cm"]
+        self.draws, self.K = Draws(comp, cm), comp.ticks()
+        self.W, self.w0 = np.zeros((0, cm.noise.size)), 0
         C, P = cm.carry, cm.par
         self.c, self.par = np.zeros(C.size), np.zeros(P.size)
         self.refresh()
@@ -331,7 +331,9 @@ class GenericTick:
         a = fc.args
         a[0][:], a[1][:], a[2][:] = self.c, self.par, y
         if len(a[3]):
-            a[3][:] = self.noise_row(k)
+            if k - self.w0 >= len(self.W):
+                self.W, self.w0 = self.draws.rows(k, min(NOISE_BLOCK, self.K + 1 - k)), k
+            a[3][:] = self.W[k - self.w0]
         fc()
         self.c[:] = fc.res[0]
         fl = self.fl
