@@ -114,11 +114,11 @@ def test_block_draws_equal_the_per_tick_calls(att, rate, end, monkeypatch):
     assert np.array_equal(np.vstack(blocks), np.array(per_tick))
 
 
-def _reference_corrupt(self, k, y=None):
-    """``ControlLoop.corrupt`` with the numpy reference in place of the plug-in (no delay), its
-    draws ``rng.normal`` per tick from its own generator of the run's seed."""
+def _reference_sense(self, k, t, y):
+    """``ControlLoop._after_sense`` (the generic path's sense blocks: here the noise block alone)
+    with the numpy reference in place of the plug-in (no delay, no sensors), its draws
+    ``rng.normal`` per tick from its own generator of the run's seed."""
     comp = self.comp
-    y = self.meas.res[0] if y is None else y
     s = comp.sensor
     if k == 0:
         self.reference_rng = np.random.default_rng(s.seed)
@@ -135,8 +135,8 @@ def _iss(sensor, duration, monkeypatch):
         {"controller.sensor": sensor, "simulation.environment_rate": 0})
     kw = dict(duration=duration, output_dt=1.0)
     runs = simulate(scene, **kw), simulate(scene, fused=False, **kw)
-    with monkeypatch.context() as m:  # the generic path: it corrupts in Python, tick by tick
-        m.setattr(ControlLoop, "corrupt", _reference_corrupt)
+    with monkeypatch.context() as m:  # the generic path, its sensing in Python, tick by tick
+        m.setattr(ControlLoop, "_after_sense", _reference_sense)
         m.setattr(closed_loop, "parts_ok", lambda comp: "the reference flies the generic path")
         return runs + (simulate(scene, fused=False, **kw),)
 
