@@ -27,7 +27,7 @@ from stationbed.integrators import RK4
 from stationbed.loop.actuator import pulse_pieces, split_step
 from stationbed.loop.thrusters import (G0_M_S2, ThrusterCluster, map_lp, map_min_norm_shift, mapping_matrices,
                                        opposed_pairs, supports, torque_arms)
-from stationbed.scene.thrusters import torque_authority
+from stationbed.scene.thrusters import AUTHORITY_ROUNDOFF_REL, missing_torque, torque_authority
 from stationbed.scene import SceneError, scene_from_dict
 
 PERIOD_S = 0.1  # s
@@ -544,3 +544,53 @@ def test_assist_set_about_one_axis_flies_and_its_summary_says_what_it_lacks():
     assert sm["thruster_no_torque_about"] == "-y, +y, -z, +z"
     assert any("no torque about -y, +y, -z, +z" in p for p in thruster_parts(sm))
     assert "thruster_no_torque_about" not in simulate(sphere(pods(), duration=1.0), fused=False).meta["summary"]
+
+
+def _lp_missing(s):
+    """The directions the LP alone (:func:`torque_authority`) finds no torque about: the truth
+    the fast path must give (the same round-off threshold)."""
+    D, _ = torque_arms(s)
+    f = np.array([t.force_N for t in s.thruster])
+    auth, scale = torque_authority(D, f), float(np.linalg.norm(D, axis=0) @ f)
+    return [f"{'-+'[c]}{'xyz'[k]}" for k in range(3) for c in range(2) if auth[k, c] <= AUTHORITY_ROUNDOFF_REL * scale]
+
+
+#: pods() moved off the origin by amounts no other test uses (sets the cache has not seen)
+POD_SHIFT_M = [0.123, -0.456, 0.789]
+NO_LP_SHIFT_M = [-0.321, 0.654, -0.987]
+
+
+@pytest.mark.parametrize("entries", [pods(), x_couples(), one_sided(), _at(pods(), [0.0, 0.0, 0.0]),
+                                     [{**e, "position_B": list(np.add(e["position_B"], POD_SHIFT_M))} for e in pods()]],
+                         ids=["pods", "x_couples", "one_sided", "through_cm", "pods_shifted"])
+def test_missing_directions_are_the_lps(entries):
+    assert missing_torque(sphere(entries, mode="off")) == _lp_missing(sphere(entries, mode="off"))
+
+
+axis_dir = st.sampled_from([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0],
+                            [1.0, 1.0, 0], [0, -1.0, 2.0]])
+position = st.lists(st.sampled_from([-20.0, -3.0, 0.0, 2.5, 20.0]), min_size=3, max_size=3)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.lists(st.tuples(position, axis_dir, st.sampled_from([50.0, 130.0])), min_size=1, max_size=9))
+def test_missing_directions_of_any_set_are_the_lps(spec):
+    """Sets of up to nine thrusters on a coarse grid (couples, one-sided sets, lines through the
+    mass centre, parallel forces: what the firings of three cannot show is left to the LP)."""
+    entries = [{"name": f"t{i}", "position_B": p, "direction_B": d, "force_N": f, "isp_s": ISP_S}
+               for i, (p, d, f) in enumerate(spec)]
+    s = sphere(entries, mode="off")
+    assert missing_torque(s) == _lp_missing(s)
+
+
+def test_a_set_with_torque_each_way_needs_no_lp(monkeypatch):
+    """A set that turns the station both ways about every axis is shown so by three-thruster
+    firings: no LP (6 of them were ~10 ms of each Monte Carlo sample, whose mass centre is drawn)."""
+    import scipy.optimize
+
+    def no_lp(*a, **k):
+        raise AssertionError("linprog called")
+
+    monkeypatch.setattr(scipy.optimize, "linprog", no_lp)
+    shifted = [{**e, "position_B": list(np.add(e["position_B"], NO_LP_SHIFT_M))} for e in pods()]
+    assert missing_torque(sphere(shifted, mode="thruster_only")) == []

@@ -30,6 +30,7 @@ dumps about some axes only is flown, and its run's summary and line say which it
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from typing import Annotated, Literal
 
@@ -48,6 +49,13 @@ __all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "to
 AUTHORITY_ROUNDOFF_REL = 1e-9
 #: the thrusters a message names at most (then "and N more")
 NAMED_MAX = 6
+#: a firing of three thrusters found by :func:`_shown` proves a direction when its torque exceeds
+#: this fraction of the set's scale: 1e5 x :data:`AUTHORITY_ROUNDOFF_REL`, far above the LP's
+#: tolerances (HiGHS: 1e-7 on its rows), so the LP would find at least as much (real sets make
+#: ~1e-3 of their scale about an axis; a set that does not shows it to the LP as before)
+SHOWN_REL = 1e-4
+#: sets of at most this many thrusters look for the firings first (C(n, 3) triples: 9880 at 40)
+SHOWN_MAX_THRUSTERS = 40
 
 #: a thruster's or group's name: it becomes a column stem (letters, digits, underscores)
 ThrusterName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
@@ -179,10 +187,41 @@ def _missing(D_bytes: bytes, f_bytes: bytes) -> tuple[str, ...]:
     draws or ``replace`` makes is checked again (6 LPs: ~25 ms) and most share their set's."""
     f_max = np.frombuffer(f_bytes)
     D = np.frombuffer(D_bytes).reshape(3, len(f_max))
-    auth = torque_authority(D, f_max)
     scale = float(np.linalg.norm(D, axis=0) @ f_max)
+    if _shown(D, f_max, SHOWN_REL * scale):  # (6 LPs: ~10 ms a Monte Carlo sample, whose mass centre is drawn)
+        return ()
+    auth = torque_authority(D, f_max)
     return tuple(f"{'-+'[col]}{'xyz'[k]}" for k in range(3) for col in range(2)
                  if auth[k, col] <= AUTHORITY_ROUNDOFF_REL * scale)
+
+
+def _shown(D: np.ndarray, f_max: np.ndarray, floor: float) -> bool:
+    """Whether firings prove that the set turns the station both ways about every axis of B by
+    more than ``floor`` [N m], :func:`torque_authority`'s question asked of three thrusters at a
+    time: thrusters i, j, l with arms ``a, b, c`` about the two other axes make no torque there
+    at forces ``v = (det(b, c), det(c, a), det(a, b))`` (``a v_i + b v_j + c v_l = 0``), a firing
+    when they share a sign, scaled to the largest within each ``f_max``. Every direction the set
+    has is made by at most three thrusters (Caratheodory in the 3-D torque space), so a set with
+    some authority each way is shown; False (not shown) leaves the answer to the LP."""
+    n = len(f_max)
+    if not 3 <= n <= SHOWN_MAX_THRUSTERS:
+        return False
+    tri = np.array(list(itertools.combinations(range(n), 3)))
+    F = f_max[tri]
+    for k in range(3):
+        A, B = D[[j for j in range(3) if j != k]][:, tri]  # (m, 3) arms about the other two axes
+        v = np.stack([A[:, 1] * B[:, 2] - A[:, 2] * B[:, 1], A[:, 2] * B[:, 0] - A[:, 0] * B[:, 2],
+                      A[:, 0] * B[:, 1] - A[:, 1] * B[:, 0]], axis=1)
+        v *= np.where(v.sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
+        ok = np.all(v >= 0.0, axis=1) & np.any(v > 0.0, axis=1)
+        if not ok.any():
+            return False
+        v, F_ok = v[ok], F[ok]
+        t = np.min(np.where(v > 0.0, F_ok / np.where(v > 0.0, v, 1.0), np.inf), axis=1)
+        torque = np.einsum("ij,ij->i", D[k][tri[ok]], v) * t
+        if not (torque.max() > floor and torque.min() < -floor):
+            return False
+    return True
 
 
 def _check_authority(scene, mode: str) -> None:
