@@ -22,12 +22,14 @@ from scenes import SCENARIOS
 from stationbed import load_scene, simulate
 from stationbed.scene import scene_from_dict
 from test_closed_loop_balance import RK4Generic, sphere_scene
-from test_executor_matrix import THRUSTER_START, assert_balance, assert_same_rows
+from test_executor_matrix import THRUSTER_START, _steps_inside, assert_balance, assert_same_rows
 from test_thrusters import pods, sphere
 
 #: ticks flown: enough for the dump to fire (THRUSTER_START: within ~5 s; the sphere's at 10 s) and the rods to act
 TICKS = 60
 SPHERE_TICKS = 120
+#: ticks of the fdir scene: its fault at mid-run, declared ~2 s after (docs/faults.md)
+FDIR_TICKS = 80
 PERIOD_S = 0.1  # s, the scenes' control period and RK4 step
 
 
@@ -50,8 +52,16 @@ def _sphere_torquer():
     return scene_from_dict(d)
 
 
+def _cmg_failure_fdir():
+    """[fdir] (the CMG detector, the mode manager: the chain's last block) with the scene's CMG
+    failure moved to mid-run, so the detector declares inside the short run."""
+    s = load_scene(next(p for p in SCENARIOS if p.stem == "iss_cmg_failure_fdir"))
+    return s.replace({"simulation.duration": (FDIR_TICKS + 0.5) * PERIOD_S, "simulation.output_dt": PERIOD_S,
+                      **_steps_inside(s, FDIR_TICKS, PERIOD_S)})
+
+
 SCENES = {"full_flight_magnetorquers": _full_flight_magnetorquers, "sphere_thrusters": _sphere_thrusters,
-          "sphere_torquer": _sphere_torquer}
+          "sphere_torquer": _sphere_torquer, "cmg_failure_fdir": _cmg_failure_fdir}
 
 
 def _acts(tr, col: str) -> bool:
@@ -64,10 +74,13 @@ def test_generic_path_flies_the_composed_parts_rows(name):
     parts = simulate(scene, fused=False)
     generic = simulate(scene, integrator=RK4Generic, fused=False)
     assert "integrator" in generic.meta["summary"]["not_fused"]  # it flew the generic path
-    if scene.thruster:
+    if scene.thruster and getattr(scene, "fdir", None) is None:  # (with [fdir] its mode manager holds them off)
         assert generic.cols("thr_firings")[-1, 0] > 0  # the chain acts: the dump fires
     if scene.magnetorquers is not None:
         assert _acts(generic, "mtq_m_x") or _acts(generic, "mtq_m_y") or _acts(generic, "mtq_m_z")
+    if getattr(scene, "fdir", None) is not None:  # the detector declared, alike on both paths
+        fdir = [{k: v for k, v in tr.meta["summary"].items() if k.startswith("fdir")} for tr in (parts, generic)]
+        assert fdir[0]["fdir_cmg_detected"] and fdir[0] == fdir[1]
     assert_same_rows(parts, generic)
 
 

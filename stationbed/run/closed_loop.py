@@ -257,8 +257,6 @@ class ControlLoop:
         if self.fused:
             if fused_ok(comp):
                 return run_fused(comp, res, K)
-        if comp.fdir is not None and parts_ok(comp) is not None:  # its block runs compiled: fused or on the parts
-            raise ValueError(f"[fdir] flies on the compiled parts only; this run cannot: {parts_ok(comp)}")
         # the loop checks commands itself, and counts the law's calls where Controller.update
         # would have (Controller.tick_update)
         ctrl = comp.ctrl

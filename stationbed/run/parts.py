@@ -277,7 +277,7 @@ class GenericTick:
     blocks on the true measurement it is handed (:meth:`sense`), the chain's blocks in order on
     the law's command (:meth:`act`: compiled pieces, a block that is not symbolic in Python).
     The blocks' memory lives in the carry ``c``, handed back by block name after each call
-    (``res.flight``, each actuator's ``x`` of ``comp.actuators``); the numbers in ``par``
+    (``res.flight``, each memory's ``x`` of ``comp.memories``: the actuators, then ``[fdir]``); the numbers in ``par``
     (:meth:`refresh` after a scheduled step). The sense blocks' draws come from their streams
     (:class:`~.blocks.Draws`), :data:`NOISE_BLOCK` ticks at a time in tick order."""
 
@@ -300,7 +300,7 @@ class GenericTick:
                                                                omega_prev=fm.omega_prev, xs=fm.xs)
         self.sense_fc = fns["sense"]
         self.pieces = fns["chain"]
-        self.chain = [(a, C.slice(a.name)) for a in comp.actuators]
+        self.chain = [(a, C.slice(a.name)) for a in comp.memories]  # the memories handed back, by name
         self.cx = C.slice("x")
         self.pt0, self.ph, self.pk = (P.slice(f).start for f in ("t0", "h", "k0"))
         self.period, self.duration = comp.period, comp.duration
