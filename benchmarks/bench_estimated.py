@@ -13,7 +13,7 @@ each after a warm-up run that compiles or loads the cached builds:
 * ``per_tick`` (info): the per-tick loop (the law in Python, one compiled flight tick per tick).
 
 ``--environment-rate N``: both sides with ``[simulation] environment_rate = N`` (aero and solar
-pressure once per N ticks, held: run/rates.py, the composed loop's env block; the same accuracy on both
+pressure once per N ticks, held: run/env_block.py, the composed loop's env block; the same accuracy on both
 sides, as the ratio asks). The default is both scenes' default, ``auto`` (the bound's choice,
 run/rate_auto.py: 20 ticks on both); then the every-stage pair (``environment_rate = 0`` on both)
 is timed beside it too (``fused_every``, info). ``--profile``: after the rounds, each fused run once more under ``cProfile``, its time split into

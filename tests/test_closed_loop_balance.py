@@ -476,7 +476,7 @@ def test_window_impulse_with_sensors_and_mekf(executor):
     assert_allclose(dH, cum[np.searchsorted(nodes, t)], rtol=0, atol=bound + CLOSED_FORM_ABS)
 
 
-#: the environment torques at their own rate (issue 25, stationbed/run/rates.py): every tick, and
+#: the environment torques at their own rate (issue 25, stationbed/run/env_block.py): every tick, and
 #: a whole 0.5 s row (5 ticks, the most a block spans here); the held torque's error averages out
 #: over each block to ~|L''| Δ² (docs/design.md), far inside KIND_ABS
 #: each option, and the default ("auto": the bound's choice, here the row's 5 ticks)

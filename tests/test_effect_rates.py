@@ -1,15 +1,15 @@
 """Effects at their own rate (issue 25): the environment torques held over blocks of ticks in the
-fused loop (``[simulation] environment_rate``, stationbed/run/rates.py) against the every-stage
+fused loop (``[simulation] environment_rate``, stationbed/run/env_block.py) against the every-stage
 evaluation.
 
 Truths used:
 
 * the every-stage loop itself (``environment_rate = 0``: aero and SRP at each RK4 stage), run on
   the same scene: each option's attitude difference from it stays inside the bound
-  :func:`~stationbed.run.rates.hold_bound_rad` proves for the linearised loop, with the torque's
+  :func:`~stationbed.run.rate_auto.hold_bound_rad` proves for the linearised loop, with the torque's
   rates measured from the every-stage run's own logged torque columns at 1 s;
 * the impulse response of the second-order loop integrated numerically (scipy ``quad``) for the
-  norms the bound uses (:func:`~stationbed.run.rates.g_norms`);
+  norms the bound uses (:func:`~stationbed.run.rate_auto.g_norms`);
 * the split right-hand side against the whole one at random states (the same torques, summed in
   another order: round-off).
 
@@ -32,7 +32,7 @@ from stationbed import load_scene, simulate
 from stationbed.core.rotation import rotation_angle
 from stationbed.model import Structure
 from stationbed.run.rate_auto import AUTO, TARGET_RAD
-from stationbed.run.rates import g_norms, hold_bound_rad, torque_rates
+from stationbed.run.rate_auto import g_norms, hold_bound_rad, torque_rates
 from stationbed.run.system import build_system, environment_split
 from stationbed.scene import SceneError
 

@@ -18,7 +18,7 @@ Claims:
   bound (run/rate_auto.py: the MEKF is kinematic, so the law on the estimate moves the truth
   through the same PD loop; docs/design.md "Effects at their own rate"), and no more than the
   hold moves the truth-fed loop of the same scene (independent truth: the truth-fed pair,
-  run/rates.py, whose hold tests/test_effect_rates.py bounds) times :data:`HOLD_SAME_DRAWS`;
+  run/env_block.py, whose hold tests/test_effect_rates.py bounds) times :data:`HOLD_SAME_DRAWS`;
   a noise row reaching the wrong tick of a held block would move it by the noise's effect
   (~1e-7 rad), four orders above the hold's;
 * a run whose state turns non-finite inside a bulk call stops where the row-by-row loop stops:

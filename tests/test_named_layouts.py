@@ -11,7 +11,7 @@ Claims:
   quaternion whose DCM is the ``C_ON`` field, the unit sun vector), and the older offset dict
   (``measurement_layout``) is the same layout;
 * an actuator finds its ``READS`` in the measurement by name (``Actuator.reads_in``);
-* the fused chunk's carry and parameters (run/chunk_layout.py) are the sizes of the compiled
+* the composed chunk's carry and parameters (loop/compose.py) are the sizes of the compiled
   chunk the executor fills;
 * a formulation's state parts (``attitude``, ``core_vector``, ``extra``) are its layout's.
 """

@@ -130,15 +130,15 @@ def actuator_block(act, name: str = "thrusters") -> Block:
     return Block(name, "actuator", step, act.state, act.param_layout, Layout(), U, Y, idle=idle,
                  symbolic=not act.python_only, why=act.why, key=(type(act).__name__, act.key),
                  x0=act.x0, p0=act.params, full_tick=act.FULL_TICK,
-                 python=_python_step(act, reads.size, Y) if act.python_only else None)
+                 python=_python_step(act, reads.size, U, Y) if act.python_only else None)
 
 
-def _python_step(act, n_r: int, Y: Layout):
+def _python_step(act, n_r: int, U: Layout, Y: Layout):
     """The step of a ``python_only`` actuator (rule 9 of the contract: its ``command_numeric``)
-    in the block's layouts: ``u`` its reads then ``tau_B``, ``y`` :func:`ACT_OUT`."""
+    in the block's layouts: ``u`` (``U``) its reads then ``tau_B``, ``y`` :func:`ACT_OUT`."""
 
     def step(k, t, h, x, u, p):
-        x1, rest, on_s, torque_B, out = act.command_numeric(t, h, x, u[:n_r], u[n_r:n_r + 3])
+        x1, rest, on_s, torque_B, out = act.command_numeric(t, h, x, u[:n_r], U.get(u, "tau_B"))
         return x1, Y.pack(tau_rest_B=rest, on_s=on_s, torque_B=np.asarray(torque_B).T.ravel(), out=out)
     return step
 

@@ -23,13 +23,12 @@ from ..core.layout import Layout
 from ..loop.block import Block, actuator_block, corruption_block, delay_block, sensing_block
 from ..loop.compose import Composed, Plant, compose
 from . import law_state
-from .chunk_layout import ENV
+from .env_block import env_block, environment_rate
 from .rate_auto import AUTO, auto_choice
-from .rates import environment_rate, hold_value
 from .segments import edge_ticks, max_edges
 from .system import chain_end_inputs, environment_split, has_environment
 
-__all__ = ["plant_of", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key", "fixed_tick",
+__all__ = ["plant_of", "env_block", "law_block", "end_block", "run_blocks", "composed", "blocker", "structure_key", "fixed_tick",
            "parts_ok", "held_rate", "rate_summary", "Draws", "numbers"]
 
 _COMPOSED: dict = {}
@@ -45,27 +44,6 @@ def plant_of(comp, rate: int = 0) -> Plant:
     held = environment_split(system)["rhs_fast"] if rate else None
     return Plant(system.sx["meas"], system.sx["rhs"], system.integrator_cls.explicit_step, form.nx, model.layout.size,
                  comp.meas_layout, model.input_layout, (form.name, system.integrator_cls.name, model.structure.key), held)
-
-
-def env_block(comp, rate: int) -> Block:
-    """The environment torques (aero, SRP: the kinds with ``needs_env``) evaluated once every
-    ``rate`` ticks and held (issue 25's blocks, run/rates.py): memory the last evaluation
-    ``(L_prev, t_prev, have)`` and the held value ``L_hold``; inputs the plant's state and the
-    block's active ticks ``n_b``; numbers the model's. Its step is :func:`.rates.hold_value` on
-    the split's ``env_B``, as the hand-composed held chunks evaluate it."""
-    system = comp.system
-    nx, npar = system.formulation.nx, system.formulation.model.layout.size
-    env_B = environment_split(system)["env_B"]
-    X = Layout(**{f: ENV.shape(f)[0] for f in ENV.names}, L_hold=3)
-    k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
-    xe, u, p = X.symbol("xe"), ca.SX.sym("u", nx + 1), ca.SX.sym("p", npar)
-    x, n_b = u[:nx], u[nx]
-    L_now = env_B(t, x, p)
-    L_hold = hold_value(L_now, X.get(xe, "L_prev"), t, X.get(xe, "t_prev"), X.get(xe, "have"), n_b, h)
-    x1 = X.pack(L_prev=L_now, t_prev=t, have=1.0, L_hold=L_hold, symbolic=True)
-    f = ca.Function("env_step", [k, t, h, xe, u, ca.SX.sym("w", 0), p], [x1, L_hold])
-    return Block("env", "env", f, X, Layout(p=npar), Layout(), Layout(x=nx, n_b=1), Layout(L_hold=3), every=rate,
-                 key=("env", rate))
 
 
 def law_block(comp, cp) -> Block:

@@ -8,7 +8,7 @@ at its period, its commands held over each period; DOP853 at ``REF_RTOL`` betwee
 * RK4 sub-steps per tick (1: the fused loop when the law has a symbolic form; more: the per-tick
   loop with ``step = period / m``);
 * the environment torques' rate (``[simulation] environment_rate``: 0 = every RK4 stage, N =
-  once per N ticks held at the extrapolated mid-block value, stationbed/run/rates.py; one sub-step).
+  once per N ticks held at the extrapolated mid-block value, stationbed/run/env_block.py; one sub-step).
 
 Writes ``precision_loop.csv``, a chart of attitude error against CPU time per run (labelled per
 choice) and the cheapest choice per target accuracy (``precision_loop_cheapest.md``). The
