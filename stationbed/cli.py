@@ -318,8 +318,8 @@ def _summary_line(s: dict) -> str:
     if s.get("faults"):  # scheduled faults (issue 34)
         parts.append("faults: " + ", ".join(f"{f['kind']} {f['unit']} at {f['t']:g} s" + (" cleared" if f.get("clears") else "")
                                             for f in s["faults"]))
-    from .run.thrust import thruster_parts  # thrusters (issue 21)
-    return "; ".join(parts + thruster_parts(s) + live.summary_parts(s))  # a socket law, --realtime (issue 36)
+    from .run.chain import chain_summary_parts  # each actuator kind's parts (thrusters: issue 21)
+    return "; ".join(parts + chain_summary_parts(s) + live.summary_parts(s))  # a socket law, --realtime (issue 36)
 
 
 def _start_recording(args):

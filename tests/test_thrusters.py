@@ -538,11 +538,14 @@ def test_mode_off_takes_any_set():
 def test_assist_set_about_one_axis_flies_and_its_summary_says_what_it_lacks():
     """x_couples dumps about x only: flown (the dump here is about x), and the summary and the
     run's line name the four directions it cannot turn the station about; pods() lacks none."""
-    from stationbed.run.thrust import thruster_parts
+    from stationbed.run.chain import chain_summary_parts as thruster_parts
 
     sm = simulate(sphere(x_couples(), duration=1.0), fused=False).meta["summary"]
     assert sm["thruster_no_torque_about"] == "-y, +y, -z, +z"
     assert any("no torque about -y, +y, -z, +z" in p for p in thruster_parts(sm))
+    from stationbed.cli import _summary_line  # the run's line: the thrusters' parts through their plug-in
+
+    assert f"thrusters {sm['thruster_firings']} firings" in _summary_line(sm)
     assert "thruster_no_torque_about" not in simulate(sphere(pods(), duration=1.0), fused=False).meta["summary"]
 
 

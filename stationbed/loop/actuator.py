@@ -135,6 +135,12 @@ class Actuator:
         """Its CSV columns in ``scene``'s runs (the memory before each row's tick)."""
         return list(cls.ROW_COLUMNS)
 
+    @staticmethod
+    def summary_parts(s: dict) -> list[str]:
+        """The run summary line's parts for this kind (``stationbed run``), from the run's
+        summary ``s``; none when the run has none of it (the default: no parts)."""
+        return []
+
     def row_index(self) -> np.ndarray:
         """The indices in its memory of the values a row reports (:meth:`columns`' order)."""
         return np.array([self.state.slice(f).start + i for f, i in self.ROW_COLUMNS.values()], dtype=int)

@@ -222,6 +222,21 @@ class ThrusterCluster(Actuator):
     def why(self) -> str:
         return "mapping = 'lp' runs scipy's HiGHS in Python each tick" if self.python_only else ""
 
+    @staticmethod
+    def summary_parts(s: dict) -> list[str]:
+        """The run summary line's thruster parts (``stationbed run``), none without thrusters."""
+        if "propellant_kg" not in s:
+            return []
+        per = f" ({s['propellant_kg_per_orbit']:.4g} kg per orbit)" if "propellant_kg_per_orbit" in s else ""
+        out = [f"thrusters {s['thruster_firings']} firings, impulse {s['thruster_impulse_Ns']:.4g} N s, propellant "
+               f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
+        if s.get("thruster_no_torque_about"):
+            out.append(f"thrusters make no torque about {s['thruster_no_torque_about']}: a dump or hand-over "
+                       "there is not delivered")
+        if "thrusters_not_fused" in s:
+            out.append(f"thrusters flown per tick: {s['thrusters_not_fused']}")
+        return out
+
     @classmethod
     def columns(cls, scene) -> list[str]:
         """The CSV columns, values at the row's time t: the mode of the tick before t

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..loop.actuator import chain_kinds, pulse_pieces
+from ..loop.actuator import ACTUATORS, chain_kinds, pulse_pieces
 from ..scene import knowledge_scene
 from .segments import segment_input
 
-__all__ = ["ActuatorLoop", "chain_for", "chain_advance", "chain_columns", "chain_summary"]
+__all__ = ["ActuatorLoop", "chain_for", "chain_advance", "chain_columns", "chain_summary", "chain_summary_parts"]
 
 
 class ActuatorLoop:
@@ -65,6 +65,12 @@ def chain_for(scene, ctrl, layout, plant) -> tuple:
 def chain_columns(scene) -> list[str]:
     """The CSV columns of the scene's chain, in chain order."""
     return [c for k in chain_kinds(scene) for c in k.columns(scene)]
+
+
+def chain_summary_parts(s: dict) -> list[str]:
+    """The run summary line's parts of every registered actuator kind (its ``summary_parts``, in
+    chain order: none for a kind the run's summary ``s`` does not hold)."""
+    return [part for k in sorted(ACTUATORS.values(), key=lambda c: (c.ORDER, c.kind)) for part in k.summary_parts(s)]
 
 
 def chain_summary(comp) -> dict:

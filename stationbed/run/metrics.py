@@ -105,7 +105,7 @@ METRICS: dict[str, Metric] = {
     "est_inside_3sigma": Metric("1", "fraction of the time and axes with |est_err| <= its 3 sigma, "
                                 "over t >= max(settle_s, est_converged_s)", "low"),
     "st_dropout_s": Metric("s", "time a star-tracker head's held sample is invalid, over the run, summed over heads"),
-    # thrusters (issue 21): totals over the run, the last row's thr_* columns (run/thrust.py)
+    # thrusters (issue 21): totals over the run, the last row's thr_* columns (loop/thrusters.py ``columns``)
     "propellant_kg": Metric("kg", "propellant used by the thrusters, Σ F t_on / (Isp g0), over the run"),
     "propellant_kg_per_orbit": Metric("kg", "propellant_kg per orbital period (2π / mean motion) of the run's length"),
     "thruster_firings": Metric("firings", "thruster pulses started (a pulse continuing the previous tick's is one)"),
