@@ -28,7 +28,7 @@ from stationbed.run.prepare import prepare
 
 RUN = Path(__file__).resolve().parents[1] / "stationbed" / "run"
 EXECUTORS = ["closed_loop.py", "fused.py", "composed.py", "composed_rows.py", "blocks.py", "lockstep.py",
-             "parts.py", "thrust.py", "segments.py", "composition.py"]
+             "parts.py", "chain.py", "env_block.py", "segments.py", "composition.py"]
 #: FastCall's bound C trigger and its per-process buffer cache (core/compile.py): read by the
 #: per-tick loop's hot path and the lockstep set-up, part of the compiled-call wrapper
 FASTCALL_OWN = {"fc._trigger", "FastCall._cache"}
