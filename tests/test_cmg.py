@@ -465,3 +465,45 @@ def test_ideal_limits_never_silent(rng):
         if np.linalg.norm(h) >= 100.0:
             assert u @ h >= -1e-9 * np.linalg.norm(h)  # ḣ·h = -u·h ≤ 0: the store does not grow
     assert n_changed >= 20
+
+
+@pytest.mark.parametrize("kind", ["sgcmg_pyramid", "dgcmg"])
+def test_healthy_cluster_leaves_the_fault_numbers_out(kind, rng):
+    """A scene without ``[[fault]]`` (``unit_faults`` False): h, its derivative and the actuation
+    read no unit's ``rotor`` or ``rate_cap`` (the fused tick of iss_lvlh_hold carried ~130 SX
+    instructions of them: x 1 and a clamp at RATE_CAP_NONE), and give the faultable cluster's
+    numbers bit for bit at the scene's (healthy) numbers."""
+    c = cfg(kind, steering="sr")
+    healthy, faultable = (CmgModel(c.kind, c.n_units, c.steering, faults) for faults in (False, True))
+    t, pc = ca.SX.sym("t"), ca.SX.sym("pc", healthy.n_par)
+    xc, uc, w, tau = ca.SX.sym("x", healthy.nx), ca.SX.sym("u", healthy.nu), ca.SX.sym("w", 3), ca.SX.sym("tau", 3)
+    tail = [healthy.geometry.unit_index(name, u) for name in ("rotor", "rate_cap") for u in range(1, c.n_units + 1)]
+
+    def outputs(m):
+        return [m.h(xc, pc), m.h_dot(xc, uc, w, pc), *m.actuate(t, xc, tau, w, pc)]
+
+    def reads_tail(m):
+        return [any(ca.depends_on(e, pc[i]) for i in tail) for e in outputs(m)]
+
+    assert not any(reads_tail(healthy))
+    assert reads_tail(faultable)[0] and reads_tail(faultable)[2]  # (the check can see a read)
+    args = [0.7, rng.uniform(-1.0, 1.0, healthy.nx), rng.uniform(-0.01, 0.01, healthy.nu), rng.normal(0.0, 1e-3, 3),
+            rng.normal(0.0, 50.0, 3), healthy.params(c)]
+    numbers = [ca.Function("f", [t, xc, uc, w, tau, pc], outputs(m))(*args) for m in (healthy, faultable)]
+    for a, b in zip(*numbers):
+        np.testing.assert_array_equal(num(a), num(b))
+
+
+def test_structure_knows_a_scene_with_faults():
+    """The structure (and its key, the compiled library's and the composed loop's caches) tells a
+    scene with ``[[fault]]`` from one without: the same cluster, two codes."""
+    from pathlib import Path
+
+    from stationbed.model.structure import Structure
+    from stationbed.scene import load_scene
+
+    scenarios = Path(__file__).resolve().parents[1] / "scenarios"
+    plain = Structure.of(load_scene(scenarios / "iss_lvlh_hold.toml"))
+    faulted = Structure.of(load_scene(scenarios / "iss_cmg_failure_fdir.toml"))
+    assert plain.cmg == ("dgcmg", 4, "sr", False) and faulted.cmg == ("dgcmg", 4, "sr", True)
+    assert "cdgcmg4srE" in plain.key and "cdgcmg4sruE" in faulted.key

@@ -31,8 +31,9 @@ class Structure:
     joints : tuple  Per appendage ``((kind, n_steps) for alpha, (kind, n_steps) for beta)`` with
         kind ``"p"`` (profile with ``n_steps`` rate steps) or ``"s"`` (sun-tracking drive, a state).
     sun : bool  Whether the scene has a sun direction (in ``p``).
-    cmg : tuple or None  ``(kind, n_units, steering)`` of the CMG cluster (steering ``"none"``
-        for a cluster without gimbals).
+    cmg : tuple or None  ``(kind, n_units, steering, unit_faults)`` of the CMG cluster (steering
+        ``"none"`` for a cluster without gimbals; ``unit_faults``: the scene has ``[[fault]]``
+        tables, whose steps may change a unit's rotor or rate cap, :class:`~stationbed.model.cmg.CmgModel`).
     modes : tuple of int  Elastic modes per appendage (all 0: a rigid scene, whose equations and
         key do not change).
     orbit_kind : tuple  ``()`` for a circular orbit (or none), ``(newton_steps, j2)`` for a
@@ -77,7 +78,8 @@ class Structure:
             torques=tuple(k for k, kind in TORQUES.items() if kind.symbolic and kind.present(scene)),
             joints=tuple((joint(a.alpha), joint(a.beta)) for a in scene.appendage),
             sun=scene.sun is not None,
-            cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none"),
+            cmg=None if c is None else (c.kind, c.n_units, c.steering if get_geometry(c.kind).gimbals_per_unit else "none",
+                                        bool(scene.fault)),
             modes=tuple(len(a.mode) for a in scene.appendage) if any(a.mode for a in scene.appendage) else (),
             orbit_kind=orbit_kind(scene.orbit) if scene.orbit is not None else (),
             surfaces=scene_plates(scene) if plated else (),
@@ -88,7 +90,7 @@ class Structure:
     def key(self) -> str:
         """A name of the structure (it names the cached library), e.g. ``a2o1g1h0jp0p0s0``."""
         j = "".join(f"{k}{n}" for a in self.joints for k, n in a)
-        c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}"
+        c = "" if self.cmg is None else f"c{self.cmg[0]}{self.cmg[1]}{self.cmg[2]}{'u' if self.cmg[3:4] != (False,) else ''}"
         f = "" if not self.modes else "f" + "_".join(str(n) for n in self.modes)
         trq = "".join(kind.key(k in self.torques) for k, kind in TORQUES.items() if kind.symbolic)
         k = "" if not self.orbit_kind else f"k{self.orbit_kind[0]}{'j' if self.orbit_kind[1] else ''}"

@@ -61,6 +61,11 @@ class CmgGeometry:
     gimbal_suffixes: ClassVar[tuple[str, ...]] = ()
     unit_par: ClassVar[int] = 0
     state_kind: ClassVar[str] = "attitude"
+    #: whether the symbols read the per-unit ``rotor`` and ``rate_cap`` (a scheduled CMG fault
+    #: changes them); False for a scene without ``[[fault]]`` (:class:`~stationbed.model.structure.Structure`):
+    #: its rotors stay at h_rotor and no gimbal is clamped, so those terms (x 1, a clamp at
+    #: RATE_CAP_NONE) are left out of the code, the same numbers
+    unit_faults: bool = True
 
     def __init__(self, n_units: int):
         self.n_units = int(n_units)
@@ -330,10 +335,14 @@ class GimballedGeometry(CmgGeometry):
 
     def _h(self, xc, pc):
         # each rotor at its fraction of h_rotor (1: x 1 is exact, the healthy cluster's numbers)
-        spins = [r * s for r, (s, _) in zip(self._tail(pc, "rotor"), self.spins(xc, pc))]
+        spins = [s for s, _ in self.spins(xc, pc)]
+        if self.unit_faults:
+            spins = [r * s for r, s in zip(self._tail(pc, "rotor"), spins)]
         return pc[0] * sum(spins[1:], spins[0])
 
     def _h_dot(self, xc, uc, omega_BN_B, pc):
+        if not self.unit_faults:  # every rotor at h_rotor: the healthy cluster's Jacobian
+            return pc[0] * ca.mtimes(self.A_hat(xc, pc), uc)
         rotor = self._tail(pc, "rotor")
         A = ca.horzcat(*[d * rotor[i] for i, (_, ds) in enumerate(self.spins(xc, pc)) for d in ds])
         return pc[0] * ca.mtimes(A, uc)
@@ -362,11 +371,12 @@ class GimballedGeometry(CmgGeometry):
         # a gimbal the hardware clamps (a scheduled fault: stuck = 0, a degraded limit), after the
         # steering law, which does not know it; healthy: RATE_CAP_NONE, the rates exactly as
         # they were (a NaN rate too: if_else, not fmin/fmax, which would turn it into a number)
-        cap = self._tail(pc, "rate_cap")
-        cap = ca.vertcat(*[cap[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
-        clamped = ca.if_else(rates > cap, cap, ca.if_else(rates < -cap, -cap, rates))
-        limited = ca.fmax(limited, ca.if_else(ca.mmax(ca.fabs(rates) - cap) > 0.0, 1.0, 0.0))
-        rates = clamped
+        if self.unit_faults:
+            cap = self._tail(pc, "rate_cap")
+            cap = ca.vertcat(*[cap[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
+            clamped = ca.if_else(rates > cap, cap, ca.if_else(rates < -cap, -cap, rates))
+            limited = ca.fmax(limited, ca.if_else(ca.mmax(ca.fabs(rates) - cap) > 0.0, 1.0, 0.0))
+            rates = clamped
         # saturation of the working units: their momentum (the failed units' is held) against
         # their capacity (h_sat = saturation_fraction x capacity of the working units)
         w_unit = self._tail(pc, "working")

@@ -62,15 +62,19 @@ class CmgModel:
     kind : str  A :data:`CMG_GEOMETRIES` name.
     n_units : int  Number of units.
     steering : str  Steering law (``"none"`` for a cluster without gimbals).
+    unit_faults : bool  Whether scheduled faults may change a unit's ``rotor`` or ``rate_cap``
+        (:attr:`~stationbed.model.cmg.base.CmgGeometry.unit_faults`).
     """
 
     kind: str
     n_units: int
     steering: str
+    unit_faults: bool = True
     geometry: CmgGeometry = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         object.__setattr__(self, "geometry", get_geometry(self.kind)(self.n_units))
+        self.geometry.unit_faults = bool(self.unit_faults)
         if self.geometry.gimballed and self.steering not in STEERING_LAWS:
             raise ValueError(f"unknown steering law {self.steering!r}; valid: {', '.join(STEERING_LAWS)}")
 
