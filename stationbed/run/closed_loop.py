@@ -33,7 +33,9 @@ from .initial import initial_state, initial_x
 from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
-from .parts import NOISE_BLOCK, GenericTick, law_numbers, run_parts
+from .controller_error import law_failure, replan_failure
+from .law_state import law_numbers
+from .parts import NOISE_BLOCK, GenericTick, run_parts
 from .schedule import loop_hook, steps_summary
 from .segments import held_torque_from, segment_input
 from .fdir_run import fdir_for
@@ -284,9 +286,7 @@ class ControlLoop:
             replan(ctrl, plant)
             ctrl.reload_compiled()
         except Exception as e:
-            hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
-            raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
-                                       f"plant with the failure detected: {one_line(e)}") from e
+            raise replan_failure(ctrl, t, e) from e
 
     def _run_generic(self, K: int, update) -> None:
         """Ticks 0..K on the generic path: per tick the measurement, the run's composed blocks
@@ -322,7 +322,7 @@ class ControlLoop:
                 try:
                     cmd = update(t, M)
                 except Exception as e:  # the user's code: report it (chained), keep the trajectory
-                    raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {one_line(e)}") from e
+                    raise law_failure(ctrl, t, e) from e
                 t_next = (k + 1) * period
                 if t_next > duration:
                     t_next = duration

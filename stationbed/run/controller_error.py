@@ -4,7 +4,7 @@ import it)."""
 
 from __future__ import annotations
 
-__all__ = ["ControllerError", "ControllerFailure", "one_line"]
+__all__ = ["ControllerError", "ControllerFailure", "one_line", "law_failure", "replan_failure"]
 
 
 class ControllerError(ValueError):
@@ -25,3 +25,16 @@ class ControllerFailure(Exception):
 def one_line(e: BaseException | str) -> str:
     """An exception's message (or any text) on one line: its lines stripped, joined by " | "."""
     return " | ".join(line.strip() for line in str(e).splitlines() if line.strip())
+
+
+def law_failure(ctrl, t: float, e: BaseException) -> ControllerFailure:
+    """The failure at ``t`` of the law ``ctrl`` whose update raised ``e`` (raise it ``from e``)."""
+    return ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {one_line(e)}")
+
+
+def replan_failure(ctrl, t: float, e: BaseException) -> ControllerFailure:
+    """The failure at ``t`` of the law ``ctrl`` whose design on the plant with a detected failure
+    (its ``_replan``, else its ``_reset``) raised ``e`` (raise it ``from e``)."""
+    hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
+    return ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
+                                f"plant with the failure detected: {one_line(e)}")

@@ -76,16 +76,14 @@ def detection_steps(comp) -> list[Step]:
 
     def redesign(t: float, s) -> tuple[np.ndarray, np.ndarray]:
         from . import law_state  # noqa: PLC0415 (its peers import this module)
-        from .controller_error import ControllerFailure, one_line  # noqa: PLC0415
+        from .controller_error import replan_failure  # noqa: PLC0415
 
         ctrl = comp.ctrl
         try:
             law_state.hand_back(ctrl, s)
             replan(ctrl, r.plant())
         except Exception as e:
-            hook = "_replan" if hasattr(ctrl, "_replan") else "_reset"
-            raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__} in {hook} on the "
-                                       f"plant with the failure detected: {one_line(e)}") from e
+            raise replan_failure(ctrl, t, e) from e
         return np.asarray([float(v) for v in ctrl.symbolic_params()], float), law_state.initial(ctrl)
 
     return [Step(r.tick, "failure detected", info={"step": "detection"}, redesign=redesign)]

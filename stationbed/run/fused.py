@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from .controller import ControllerError, one_line
+from .law_state import law_numbers
 from .segments import edge_ticks
 
 __all__ = ["fused_ok", "why_not_fused", "run_fused"]
@@ -65,12 +65,4 @@ def run_fused(comp, res, K: int) -> None:
     ``res`` (:class:`~.composition.RunState`) the same rows as the per-tick loop."""
     from .composed import run_composed  # noqa: PLC0415 (the executor, imported where it runs)
 
-    return run_composed(comp, res, K, _symbolic_params(comp.ctrl), edge_ticks(comp))
-
-
-def _symbolic_params(ctrl):
-    """``ctrl.symbolic_params()``; ControllerError naming the controller if the user's code raises."""
-    try:
-        return ctrl.symbolic_params()
-    except Exception as e:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e
+    return run_composed(comp, res, K, law_numbers(comp.ctrl), edge_ticks(comp))

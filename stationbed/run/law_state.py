@@ -25,7 +25,7 @@ import numpy as np
 
 from .controller_error import ControllerError, one_line
 
-__all__ = ["has_state", "initial", "symbolic", "hand_back"]
+__all__ = ["has_state", "initial", "symbolic", "hand_back", "law_numbers"]
 
 
 def has_state(ctrl) -> bool:
@@ -79,3 +79,15 @@ def hand_back(ctrl, s) -> None:
     """Give the law the state the compiled loop carried (``set_symbolic_state``)."""
     if len(s):
         ctrl.set_symbolic_state(np.array(s, dtype=float))
+
+
+def law_numbers(ctrl):
+    """The law's numbers for its symbolic form, ``ctrl.symbolic_params()`` (empty for a law
+    without one: the composition's key counts them); ControllerError naming the controller if
+    the user's code raises."""
+    if not callable(getattr(ctrl, "symbolic", None)):
+        return ()
+    try:
+        return ctrl.symbolic_params()
+    except Exception as e:
+        raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e

@@ -38,7 +38,8 @@ from .closed_loop import ControlLoop, ControllerFailure
 from .controller import BatchMeasurement, Controller
 from .fused import fused_ok
 from .blocks import Draws, held_rate, numbers, parts_ok, structure_key
-from .parts import NOISE_BLOCK, law_numbers, parts
+from .law_state import law_numbers
+from .parts import NOISE_BLOCK, parts
 from .prepare import prepare
 from .rows import Rows
 from .schedule import lockstep_hook

@@ -15,13 +15,13 @@ import numpy as np
 from ..core.compile import FastCall, compile_functions
 from ..integrators import IntegrationError
 from .blocks import Draws, composed, held_rate, numbers, structure_key
-from .composition import ControllerFailure
-from .controller import ControllerError, one_line
+from .controller_error import law_failure
+from .law_state import law_numbers
 from .measurement import Measurement
 from .schedule import parts_hook
 from .segments import edge_ticks, held_torque_from, max_edges, off_grid_ticks, tick_edges, tick_pieces
 
-__all__ = ["parts", "run_parts", "law_numbers", "NOISE_BLOCK", "generic_parts", "GenericTick"]
+__all__ = ["parts", "run_parts", "NOISE_BLOCK", "generic_parts", "GenericTick"]
 
 #: ticks of draws taken at a time (any size gives the same numbers: each stream in tick order)
 NOISE_BLOCK = 256
@@ -168,7 +168,7 @@ def run_parts(loop, K: int, update) -> None:
                 try:
                     cmd = update(t, M)
                 except Exception as e:  # the user's code: report it (chained), keep the trajectory
-                    raise ControllerFailure(t, f"controller '{ctrl.name}' raised {type(e).__name__}: {one_line(e)}") from e
+                    raise law_failure(ctrl, t, e) from e
                 # a tuple or list of ncmd real numbers, or a float64 array of ncmd values, is
                 # written as is; anything else, or a failed write (wrong size, strings...),
                 # goes to the checker, which raises or returns the values as floats
@@ -234,17 +234,6 @@ def run_parts(loop, K: int, update) -> None:
             m = fl.state.split(c[C.slice(fl.name)])
             fm = res.flight
             fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
-
-
-def law_numbers(ctrl):
-    """The law's numbers for its symbolic form (empty for a law without one): the composition's
-    key counts them."""
-    if not callable(getattr(ctrl, "symbolic", None)):
-        return ()
-    try:
-        return ctrl.symbolic_params()
-    except Exception as e:
-        raise ControllerError(f"controller '{ctrl.name}': symbolic_params() raised {type(e).__name__}: {one_line(e)}") from e
 
 
 _GENERIC: dict = {}
