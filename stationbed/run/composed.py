@@ -92,7 +92,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
     c0[C.slice("x")], c0[C.slice(law)] = res.x, s_law
     fm = res.flight
     if sense is not None:
-        c0[C.slice(sense)] = X.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
+        c0[C.slice(sense)] = fm.packed(X)
     for a in comp.memories:  # the chain's blocks' memory (the actuators, [fdir]), by each block's name
         c0[C.slice(a.name)] = a.x
     rc, rp, rw = row.args
@@ -177,8 +177,7 @@ def run_composed(comp, res, K: int, symbolic_params, edges) -> None:
             res.row(t, x, lim | sat | tail_flag, u_cmg=u_cmg, cmd=cmd, q_ref=r[r_q], xs=xs, ys=ys)
             if k == K:
                 if sense is not None:
-                    m = X.split(C.get(c0, sense))
-                    fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
+                    fm.take(X, C.get(c0, sense))
                 s_end = r[r_s].copy()  # the law's update at the last tick
                 break
             counts = run_pieces(chunk, C, P, tick_pieces(k, n_tick, edges, duration, period), k, period, torque_at, draws,

@@ -178,6 +178,17 @@ class FlightMemory:
     xs: np.ndarray
     ys: np.ndarray
 
+    def packed(self, X) -> np.ndarray:
+        """This memory as the sensing block's state (its layout ``X``: the carry an executor fills)."""
+        return X.pack(t_prev=self.t_prev, theta_B=self.theta_B, omega_prev=self.omega_prev, xs=self.xs)
+
+    def take(self, X, v) -> None:
+        """The previous tick's time and rate and ``theta_B`` from the sensing block's state ``v``
+        (layout ``X``) an executor carried (``xs`` and ``ys`` come with the rows)."""
+        m = X.split(v)
+        self.t_prev = float(m["t_prev"][0])
+        self.theta_B[:], self.omega_prev[:] = m["theta_B"], m["omega_prev"]
+
 
 class RunState:
     """What the executors of one run hand back: the rows, the state, the counts.

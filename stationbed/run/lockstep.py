@@ -310,8 +310,7 @@ class _Lockstep:
         if fl is not None:
             for i, s in enumerate(S):
                 fm = s.loop.res.flight
-                self.C[i, C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B,
-                                                             omega_prev=fm.omega_prev, xs=fm.xs)
+                self.C[i, C.slice(fl.name)] = fm.packed(fl.state)
         chain = [C.slice(a.name) for a in lp.memories]  # the chain's blocks' memory, handed back by each block's name
         cx = C.slice("x")
         i_fin = cx.start + lp.state_layout.slice(lp.system.formulation.rate_field).start  # the per-tick loop's finite probe
@@ -481,9 +480,7 @@ class _Lockstep:
                 for a, sl in zip(lo.comp.memories, chain):
                     a.x = self.C[i, sl].copy()
                 if fl is not None:
-                    m = fl.state.split(self.C[i, C.slice(fl.name)])
-                    fm = res.flight
-                    fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
+                    res.flight.take(fl.state, self.C[i, C.slice(fl.name)])
                 s.rows.flush()
                 e = errors.get(i)
                 if e is None:

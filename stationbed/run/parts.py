@@ -87,7 +87,7 @@ def run_parts(loop, K: int, update) -> None:
     fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's memory, handed back
     if fl is not None:
         fm = res.flight
-        c[C.slice(fl.name)] = fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B, omega_prev=fm.omega_prev, xs=fm.xs)
+        c[C.slice(fl.name)] = fm.packed(fl.state)
     # the chain's blocks' memory (Composition.memories), handed back by each block's name
     chain = [(a, C.slice(a.name)) for a in comp.memories]
     out = comp.end.outputs
@@ -231,9 +231,7 @@ def run_parts(loop, K: int, update) -> None:
         for ac, sl in chain:
             ac.x = c[sl].copy()
         if fl is not None:
-            m = fl.state.split(c[C.slice(fl.name)])
-            fm = res.flight
-            fm.t_prev, fm.theta_B, fm.omega_prev = float(m["t_prev"][0]), m["theta_B"].copy(), m["omega_prev"].copy()
+            res.flight.take(fl.state, c[C.slice(fl.name)])
 
 
 _GENERIC: dict = {}
@@ -285,8 +283,7 @@ class GenericTick:
         self.fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's memory, handed back
         if self.fl is not None:
             fm = res.flight
-            self.c[C.slice(self.fl.name)] = self.fl.state.pack(t_prev=fm.t_prev, theta_B=fm.theta_B,
-                                                               omega_prev=fm.omega_prev, xs=fm.xs)
+            self.c[C.slice(self.fl.name)] = fm.packed(self.fl.state)
         self.sense_fc = fns["sense"]
         self.pieces = fns["chain"]
         self.chain = [(a, C.slice(a.name)) for a in comp.memories]  # the memories handed back, by name
@@ -327,10 +324,9 @@ class GenericTick:
         self.c[:] = fc.res[0]
         fl = self.fl
         if fl is not None:
-            m = fl.state.split(self.c[C.slice(fl.name)])
-            fm = self.res.flight
-            fm.t_prev = float(m["t_prev"][0])
-            fm.theta_B[:], fm.omega_prev[:], fm.xs[:] = m["theta_B"], m["omega_prev"], m["xs"]
+            v, fm = self.c[C.slice(fl.name)], self.res.flight
+            fm.take(fl.state, v)
+            fm.xs[:] = fl.state.get(v, "xs")
             fm.ys[:] = fl.outputs.get(self.cm.sense_outputs.get(fc.res[2], fl.name), "ys")
         return fc.res[1]
 
