@@ -12,7 +12,8 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 __all__ = [
     "SceneError", "FieldError", "Strict", "Vec3", "Mat3", "QUAT_NORM_TOL", "RTOL_MIN", "ATOL_MIN", "MIN_TIME_S",
-    "TIME_RESOLUTION", "Rtol", "Atol", "TimeS", "at_most", "unit_hint",
+    "TIME_RESOLUTION", "Rtol", "Atol", "TimeS", "at_most", "unit_hint", "DIRECTION_NORM_MIN", "Direction",
+    "UnitDirection",
 ]
 
 #: A quaternion typed in a file with ~8 digits is unit to ~1e-8; anything further off is a mistake.
@@ -112,6 +113,36 @@ TimeS = Annotated[float, _at_least(MIN_TIME_S, " s", "shorter than the integrato
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
+
+#: A direction (a thruster's force, a plate's normal, a port's axis, a boresight, a gimbal axis,
+#: the sun's) shorter than this is the zero vector typed with rounding noise, not a direction
+#: [its own units]: the floor of the three checks that had the smaller one, so every scene that
+#: loaded still loads (the other three refused below 1e-9).
+DIRECTION_NORM_MIN = 1e-12
+
+
+def _norm(v: list[float]) -> float:
+    return math.sqrt(sum(x * x for x in v))
+
+
+def _direction(v: list[float]) -> list[float]:
+    """``v`` unchanged; ValueError when it is the zero vector (:data:`DIRECTION_NORM_MIN`). NaN
+    and inf are refused before, by :class:`Strict` (``allow_inf_nan``)."""
+    if not _norm(v) >= DIRECTION_NORM_MIN:
+        raise ValueError("must be a non-zero vector")
+    return v
+
+
+def _unit(v: list[float]) -> list[float]:
+    n = _norm(v)
+    return [x / n for x in v]
+
+
+#: a direction: three finite numbers, not all zero (its length is the user's: each reader of it
+#: normalises); one line naming the field otherwise
+Direction = Annotated[Vec3, AfterValidator(_direction)]
+#: a :data:`Direction` stored normalised to unit length
+UnitDirection = Annotated[Direction, AfterValidator(_unit)]
 
 
 class Strict(BaseModel):

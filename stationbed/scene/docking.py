@@ -34,13 +34,12 @@ arm brings the vehicle in at rest relative to the port).
 
 from __future__ import annotations
 
-import math
 from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
 from ..core.massprops import InvalidMassProperties, checked_inertia_rows
-from .base import FieldError, Mat3, Strict, Vec3, unit_quaternion
+from .base import FieldError, Mat3, Strict, UnitDirection, Vec3, unit_quaternion
 from .environment import Surface
 
 __all__ = ["Port", "Vehicle", "Event", "EVENT_KINDS", "check_docking", "docked_at", "configuration_changes",
@@ -48,8 +47,6 @@ __all__ = ["Port", "Vehicle", "Event", "EVENT_KINDS", "check_docking", "docked_a
 
 #: the event kinds: what each does to the configuration
 EVENT_KINDS = ("dock", "berth", "undock")
-#: a port axis shorter than this is no direction [m]
-AXIS_MIN = 1e-12
 
 
 class Port(Strict):
@@ -57,16 +54,8 @@ class Port(Strict):
 
     name: str = Field(min_length=1)
     position: Vec3  # m, body coordinates (the origin of [body] cm)
-    axis: Vec3  # outward normal, B axes (normalised here)
+    axis: UnitDirection  # outward normal, B axes (normalised here)
     q_VB: list[float] = Field(default=[1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4)
-
-    @field_validator("axis")
-    @classmethod
-    def _unit(cls, v):
-        n = math.sqrt(sum(x * x for x in v))
-        if n < AXIS_MIN:
-            raise ValueError("must be a non-zero vector")
-        return [x / n for x in v]
 
     @field_validator("q_VB")
     @classmethod

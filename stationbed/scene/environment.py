@@ -11,7 +11,7 @@ from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from ..core.constants import MU_EARTH_M3_S2, R_EARTH_M
 from ..core.kepler import KEPLER_MAX_E, elements_from_rv
-from .base import FieldError, Strict, Vec3, unit_hint
+from .base import Direction, FieldError, Strict, Vec3, unit_hint
 
 __all__ = [
     "Orbit", "Elements", "ConstantTorque", "HarmonicTorque", "AeroTorque", "SrpTorque", "Torque",
@@ -231,7 +231,7 @@ class Surface(Strict):
     name: str = ""
     on: str = "body"
     area: float | None = Field(default=None, gt=0.0)
-    normal: Vec3 | None = None
+    normal: Direction | None = None
     size: Vec3 | None = None
     centre: Vec3 = [0.0, 0.0, 0.0]
     two_sided: bool = False
@@ -247,8 +247,6 @@ class Surface(Strict):
             raise ValueError("give a plate ('area' and 'normal') or a box ('size')")
         if plate and (self.area is None or self.normal is None):
             raise FieldError("area" if self.area is None else "normal", "a plate needs both 'area' and 'normal'")
-        if plate and math.sqrt(sum(x * x for x in self.normal)) < 1e-12:
-            raise FieldError("normal", "must be a non-zero vector")
         if self.size is not None and min(self.size) <= 0.0:
             raise FieldError("size", "edge lengths must be positive")
         if self.size is not None and self.two_sided:
@@ -308,7 +306,7 @@ class Sun(Strict):
 
     beta: float | None = None  # in [-pi/2, pi/2]
     u_noon: float = 0.0
-    direction_N: Vec3 | None = None
+    direction_N: Direction | None = None
     epoch: str | None = None
     eclipse: Literal["none", "cylindrical", "conical"] = "none"
 
@@ -337,8 +335,6 @@ class Sun(Strict):
     def _one(self):
         if sum(x is not None for x in (self.beta, self.direction_N, self.epoch)) != 1:
             raise ValueError("give exactly one of 'beta' (with u_noon), 'direction_N' or 'epoch'")
-        if self.direction_N is not None and math.sqrt(sum(x * x for x in self.direction_N)) < 1e-12:
-            raise ValueError("direction_N must be a non-zero vector")
         return self
 
 

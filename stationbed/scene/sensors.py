@@ -35,7 +35,7 @@ import numpy as np
 from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
 
 from ..core.rotation import quat_from_dcm
-from .base import QUAT_NORM_TOL, FieldError, Mat3, SceneError, Strict, TimeS, Vec3, at_most
+from .base import QUAT_NORM_TOL, Direction, FieldError, Mat3, SceneError, Strict, TimeS, Vec3, at_most
 from .tables import TAGS
 
 __all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing",
@@ -130,7 +130,7 @@ class StarTrackerSensor(Strict):
     name: SensorName
     period: TimeS  # s, update period
     q_SB: list[float] | None = Field(default=None, min_length=4, max_length=4)  # mounting, scalar first
-    boresight_B: Vec3 | None = None  # unit vector in B (alternative to q_SB), with roll
+    boresight_B: Direction | None = None  # unit vector in B (alternative to q_SB), with roll
     roll: float = 0.0  # rad, about the boresight (with boresight_B)
     nea_cross: Nea  # rad, 1 sigma per cross-boresight axis
     nea_about: Nea  # rad, 1 sigma about the boresight
@@ -145,8 +145,6 @@ class StarTrackerSensor(Strict):
             raise FieldError("q_SB", "give exactly one of q_SB or boresight_B")
         if self.q_SB is not None and abs(math.sqrt(sum(v * v for v in self.q_SB)) - 1.0) > QUAT_NORM_TOL:
             raise FieldError("q_SB", f"must be a unit quaternion (|q| within {QUAT_NORM_TOL:g} of 1)")
-        if self.boresight_B is not None and math.sqrt(sum(v * v for v in self.boresight_B)) < 1e-9:
-            raise FieldError("boresight_B", "must not be the zero vector")
         if self.roll != 0.0 and self.boresight_B is None:
             raise FieldError("roll", "applies with boresight_B (q_SB holds the roll)")
         for key in ("sun_exclusion", "earth_exclusion", "moon_exclusion"):

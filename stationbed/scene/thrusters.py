@@ -38,7 +38,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from ..core.massprops import composite_cm
-from .base import FieldError, Strict, Vec3
+from .base import Direction, FieldError, Strict, Vec3
 
 __all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "torque_arms", "torque_authority",
            "missing_torque", "AUTHORITY_ROUNDOFF_REL"]
@@ -66,18 +66,11 @@ class Thruster(Strict):
 
     name: ThrusterName
     position_B: Vec3  # m, point of application, body axes, same origin as [body] cm
-    direction_B: Vec3  # direction of the force on the station (normalised here)
+    direction_B: Direction  # direction of the force on the station (normalised here)
     force_N: float = Field(gt=0.0)  # N, thrust while on
     isp_s: float = Field(gt=0.0)  # s, specific impulse (m_dot = F / (isp g0))
     min_on_s: float = Field(default=0.0, ge=0.0)  # s, minimum pulse
     group: ThrusterName | None = None  # pod
-
-    @model_validator(mode="after")
-    def _physical(self):
-        n = math.sqrt(sum(v * v for v in self.direction_B))
-        if not n > 1e-9:
-            raise FieldError("direction_B", "must not be the zero vector")
-        return self
 
     @property
     def unit_B(self) -> list[float]:
