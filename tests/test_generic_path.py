@@ -20,6 +20,7 @@ import pytest
 
 from scenes import SCENARIOS
 from stationbed import load_scene, simulate
+from stationbed.run.controller import Controller
 from stationbed.scene import scene_from_dict
 from test_closed_loop_balance import RK4Generic, sphere_scene
 from test_executor_matrix import THRUSTER_START, _steps_inside, assert_balance, assert_same_rows
@@ -96,3 +97,31 @@ def test_a_block_in_python_between_compiled_pieces_keeps_the_balance():
     assert tr.cols("thr_firings")[-1, 0] > 0
     assert _acts(tr, "mtq_m_x") or _acts(tr, "mtq_m_y") or _acts(tr, "mtq_m_z")
     assert_balance(scene, tr)
+
+
+class _FormNeverBuilt(Controller):
+    """A law called in Python (``_update``: zero torque) that also has a ``symbolic`` form and
+    numbers, which raise when anything builds them."""
+
+    name = "form_never_built"
+
+    def _update(self, t, meas):
+        return (0.0, 0.0, 0.0)
+
+    def symbolic_params(self):
+        raise AssertionError("symbolic_params() was called")
+
+    def symbolic(self, t, y, cp):
+        raise AssertionError("symbolic() was called")
+
+
+def test_the_generic_path_never_builds_the_laws_symbolic_form():
+    """The generic path calls the law in Python every tick; the law's ``symbolic`` form is the
+    fused loop's, and the generic path's composition has a stand-in in its place (its compiled
+    parts are the sense blocks and the chain, whatever the law): neither the form nor its numbers
+    are built. The law still runs every tick."""
+    scene = _sphere_torquer()
+    tr = simulate(scene, integrator=RK4Generic, fused=False, controller=_FormNeverBuilt(period=PERIOD_S))
+    s = tr.meta["summary"]
+    assert "integrator" in s["not_fused"]  # it flew the generic path
+    assert s["controller_updates"] == s["ticks"] + 1  # (the last tick's command is reported, not flown)

@@ -46,18 +46,22 @@ def plant_of(comp, rate: int = 0) -> Plant:
                  comp.meas_layout, model.input_layout, (form.name, system.integrator_cls.name, model.structure.key), held)
 
 
-def law_block(comp, cp) -> Block:
+def law_block(comp, cp, in_python: bool = False) -> Block:
     """The law as a block: input the measurement it sees, outputs its command and reference,
-    memory its own state (``symbolic_state``), numbers ``symbolic_params``; not symbolic when
-    the law has no ``symbolic`` form (a Python or FMU law)."""
+    memory its own state (``symbolic_state``), numbers ``symbolic_params``; not symbolic (a
+    stand-in without expression, memory or numbers) when the law has no ``symbolic`` form (a
+    Python or FMU law), or ``in_python``: the executor calls the law itself and never the block
+    (the generic path, :func:`~.parts.generic_parts`)."""
     ctrl = comp.ctrl
     ny, ncmd = comp.meas_layout.size, comp.n_cmd
     Y = Layout(cmd=ncmd, q_ref=4)
-    if not callable(getattr(ctrl, "symbolic", None)):
+    has_form = callable(getattr(ctrl, "symbolic", None))
+    if in_python or not has_form:
         f = ca.Function("law", [ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h"), ca.SX(0, 1), ca.SX.sym("y", ny),
                                 ca.SX(0, 1), ca.SX(0, 1)], [ca.SX(0, 1), ca.SX.zeros(Y.size)])
-        return Block("law", "law", f, Layout(), Layout(), Layout(), Layout(y=ny), Y, symbolic=False,
-                     why=f"controller '{ctrl.name}' has no symbolic form (a Python law, called per tick)")
+        why = (f"controller '{ctrl.name}' is called in Python per tick" if has_form
+               else f"controller '{ctrl.name}' has no symbolic form (a Python law, called per tick)")
+        return Block("law", "law", f, Layout(), Layout(), Layout(), Layout(y=ny), Y, symbolic=False, why=why)
     s0 = law_state.initial(ctrl)
     ncp = len(cp)
     k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
@@ -113,9 +117,10 @@ def _tail_groups(geo) -> tuple:
     return getattr(base, "UNIT_TAIL", ("working",))
 
 
-def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
+def run_blocks(comp, cp, rate: int = 0, law_in_python: bool = False) -> list[Block]:
     """The blocks of the run composed by ``comp`` (module docstring), in the tick's order; with
-    an environment ``rate`` (ticks per evaluation), the held environment first."""
+    an environment ``rate`` (ticks per evaluation), the held environment first; the law's a
+    stand-in when ``law_in_python`` (:func:`law_block`)."""
     blocks = [env_block(comp, rate)] if rate else []
     if comp.flight is not None:
         blocks.append(sensing_block(comp.flight))
@@ -123,7 +128,7 @@ def run_blocks(comp, cp, rate: int = 0) -> list[Block]:
         blocks.append(delay_block(comp.delay, comp.meas_layout.size))
     if comp.ideal_noise is not None:
         blocks.append(corruption_block(comp.corruption, comp.meas_layout.size))
-    blocks.append(law_block(comp, cp))
+    blocks.append(law_block(comp, cp, law_in_python))
     for a in comp.actuators:  # the chain, in order (run/chain.py)
         blocks.append(actuator_block(a.cluster, a.name))
     if comp.fdir is not None:  # the last of the chain: it sees what is left to the CMGs
@@ -232,18 +237,20 @@ def rate_summary(loop, used_fused: bool, held: int = 0) -> dict:
     return out
 
 
-def composed(comp, cp, edges: bool = False) -> tuple[Composed, float]:
+def composed(comp, cp, edges: bool = False, law_in_python: bool = False) -> tuple[Composed, float]:
     """The run's composition composed (cached by its structure, :func:`structure_key`) and the
     seconds it took to build now (0 when cached); ``edges``: its edge tick's case (the step also
     cut at the scene's discontinuities inside the tick, :func:`~.segments.tick_edges`; the same
-    blocks, the parameters with ``edge`` appended)."""
-    key = structure_key(comp, cp) + (("edge case",) if edges else ())
+    blocks, the parameters with ``edge`` appended); ``law_in_python``: the law's block a
+    stand-in, for an executor that calls the law itself (:func:`law_block`)."""
+    key = (structure_key(comp, cp) + (("edge case",) if edges else ())
+           + (("law in Python",) if law_in_python else ()))
     hit = _COMPOSED.get(key)
     if hit is not None and hit[0] is comp.system:
         return hit[1], 0.0
     t0 = time.perf_counter()
     rate = held_rate(comp)[0]
-    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate), max_edges(comp) if edges else 0)
+    c = compose(plant_of(comp, rate), run_blocks(comp, cp, rate, law_in_python), max_edges(comp) if edges else 0)
     _COMPOSED[key] = (comp.system, c)
     return c, time.perf_counter() - t0
 

@@ -34,7 +34,6 @@ from .laws import build_controller
 from .pacing import paced
 from .rows import ROW_BATCH
 from .controller_error import law_failure, replan_failure
-from .law_state import law_numbers
 from .parts import NOISE_BLOCK, GenericTick, run_parts
 from .schedule import loop_hook, steps_summary
 from .segments import held_torque_from, segment_input
@@ -305,7 +304,7 @@ class ControlLoop:
         replan_at = comp.replan.tick if comp.replan is not None else -1
         M = self.M
         ticks = 0
-        self.generic = GenericTick(comp, res, law_numbers(ctrl))
+        self.generic = GenericTick(comp, res)
         steps, step = loop_hook(self)  # scheduled steps (run/schedule.py): their ticks, the hook
         try:
             if 0 in steps:

@@ -237,18 +237,20 @@ def run_parts(loop, K: int, update) -> None:
 _GENERIC: dict = {}
 
 
-def generic_parts(comp, cp=()) -> dict:
+def generic_parts(comp) -> dict:
     """``{"cm": Composed, "sense": FastCall or None, "chain": [(lo, hi, FastCall or None)]}``:
     the parts the generic path calls (:class:`GenericTick`) of the run composed by ``comp``:
     the sense blocks (the sensing, the ideal measurement's delay and noise) on a measurement
     they are handed (None: no sense block) and the chain's pieces in order
     (:meth:`~stationbed.loop.compose.Composed.chain_pieces`; None: a block that is not
-    symbolic, called in Python). Generated as C once per structure and cached."""
-    key = structure_key(comp, cp)
+    symbolic, called in Python). The law is called in Python by the path itself: its block a
+    stand-in (:func:`~.blocks.law_block`), so a law's ``symbolic`` form is not built here and
+    the generated C is the same whatever the law. Generated as C once per structure and cached."""
+    key = structure_key(comp, ())
     hit = _GENERIC.get(key)
     if hit is not None and hit["system"] is comp.system:
         return hit
-    cm, _ = composed(comp, cp)
+    cm, _ = composed(comp, (), law_in_python=True)
     pieces = [(lo, hi, all(b.symbolic for b in cm.chain[lo:hi])) for lo, hi in cm.chain_pieces()]
     fs = ([cm.sense_on_part()] if cm.sense else []) + [cm.chain_part(lo, hi) for lo, hi, sym in pieces if sym]
     tag = "generic_" + hashlib.sha256(repr((cm.key, pieces)).encode()).hexdigest()[:16]
@@ -268,17 +270,17 @@ class GenericTick:
     (:meth:`refresh` after a scheduled step). The sense blocks' draws come from their streams
     (:class:`~.blocks.Draws`), :data:`NOISE_BLOCK` ticks at a time in tick order."""
 
-    def __init__(self, comp, res, cp):
-        fns = generic_parts(comp, cp)
-        self.comp, self.res, self.cp = comp, res, cp
+    def __init__(self, comp, res):
+        fns = generic_parts(comp)
+        self.comp, self.res = comp, res
         cm = self.cm = fns["cm"]
         self.draws, self.K = Draws(comp, cm), comp.ticks()
         self.W, self.w0 = np.zeros((0, cm.noise.size)), 0
         C, P = cm.carry, cm.par
         self.c, self.par = np.zeros(C.size), np.zeros(P.size)
         self.refresh()
-        for name, (_, x) in numbers(comp, cp).items():  # each block's memory at t = 0, by its name
-            if x is not None and name in C and len(x):
+        for name, (_, x) in numbers(comp, ()).items():  # each block's memory at t = 0, by its name
+            if name != "law" and x is not None and name in C and len(x):  # (the law keeps its own)
                 self.c[C.slice(name)] = x
         self.fl = next((b for b in cm.sense if b.name == "sensing"), None)  # the flight's memory, handed back
         if self.fl is not None:
@@ -298,8 +300,8 @@ class GenericTick:
         """``par``'s numbers from the run's (the model's p, each block's by its name)."""
         P = self.cm.par
         self.par[P.slice("p")] = self.comp.p
-        for name, (p, _) in numbers(self.comp, self.cp).items():
-            if name in P and len(p):
+        for name, (p, _) in numbers(self.comp, ()).items():
+            if name != "law" and name in P and len(p):
                 self.par[P.slice(name)] = p
 
     def _at(self, k: int, t: float) -> None:
