@@ -38,10 +38,7 @@ without re-building); the construction alone is reported too.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-import platform
 import statistics
 import sys
 import time
@@ -440,12 +437,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-closed-loop", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
-    duration = None
-    if args.smoke:
-        args.repeats, duration = 1, _smoke.SMOKE_DURATION_S
+    args = _smoke.parse(ap, argv)
+    duration = _smoke.SMOKE_DURATION_S if args.smoke else None
     import stationbed
 
     bsk = Basilisk is not None
@@ -454,12 +447,11 @@ def main(argv=None) -> int:
 
         bskLogging.setDefaultLogLevel(bskLogging.BSK_WARNING)
         ver = getattr(Basilisk, "__version__", None) or _bsk_version()
-        print(f"Basilisk {ver}, stationbed {stationbed.__version__}, {platform.processor() or platform.machine()}, "
-              f"{os.cpu_count()} cores, python {platform.python_version()}")
+        print(f"Basilisk {ver}, stationbed {stationbed.__version__}, {_smoke.machine()}")
     else:
         print("Basilisk is not installed (optional; `pip install bsk` to compare): the stationbed side of each "
               f"scene runs alone, without Basilisk rows; stationbed {stationbed.__version__}, "
-              f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
+              f"{_smoke.machine()}")
     rows = open_loop(args.repeats, bsk, duration)
     print("\n(a) open loop: rigid JEOD-ISS inertia, gravity gradient, one orbit free drift from LVLH")
     print("| path | wall [s] (median) | Basilisk / stationbed rk4, same step | Basilisk / stationbed dop853 "
@@ -485,8 +477,7 @@ def main(argv=None) -> int:
                   f"{math.degrees(r['err0_rad']):.3f} / {math.degrees(r['err_end_rad']):.4f} / "
                   f"{math.degrees(r['err_max_last_half_rad']):.4f} |")
         out["closed_loop"] = rows_b
-    if args.json:
-        args.json.write_text(json.dumps(out, indent=2))
+    _smoke.write_json(args.json, out)
     return 0
 
 

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import json
 import math
 import os
 import platform
@@ -129,12 +128,11 @@ def main(argv=None) -> int:
     mem.add_argument("--memory", action="store_true", help="print only the peak-memory table")
     mem.add_argument("--no-memory", action="store_true", help="skip the memory measurements")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers as JSON")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, one repeat, memory of each path once")
+    args = _smoke.parse(ap, argv,
+                        f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, one repeat, memory of each path once")
     duration = None
     if args.smoke:
-        args.n, args.repeats, args.check, duration = SMOKE_N, 1, 1, _smoke.SMOKE_DURATION_S
+        args.n, args.check, duration = SMOKE_N, 1, _smoke.SMOKE_DURATION_S
     thread_counts = [int(t) for t in args.threads.split(",")]
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     stamp = _dt.datetime.now().isoformat(timespec="seconds")
@@ -143,8 +141,7 @@ def main(argv=None) -> int:
         rows = _memory_table(args.n, max(thread_counts), duration)
         _print_memory(rows)
         print(f"\n{_basilisk_note()}\nmachine: {machine}; {stamp}")
-        if args.json:
-            args.json.write_text(json.dumps(dict(memory=rows, machine=machine, when=stamp), indent=2))
+        _smoke.write_json(args.json, dict(memory=rows, machine=machine, when=stamp))
         return 0
 
     scene = stationbed.load_scene(SCENE)
@@ -221,19 +218,9 @@ def main(argv=None) -> int:
         mem_rows = _memory_table(n, best, duration)
         _print_memory(mem_rows)
     print(f"\n{_basilisk_note()}\nmachine: {machine}; {stamp}")
-    if args.json:
-        out = dict(
-            machine=machine,
-            when=stamp,
-            samples=n,
-            orbit_s=T,
-            target_s=TARGET_S,
-            passed=bool(ok),
-            batch=[{k: v for k, v in r.items() if k != "b"} | dict(iterations=r["b"].meta["iterations"])
-                   for r in rows],
-            memory=mem_rows,
-        )
-        args.json.write_text(json.dumps(out, indent=2))
+    batch = [{k: v for k, v in r.items() if k != "b"} | dict(iterations=r["b"].meta["iterations"]) for r in rows]
+    _smoke.write_json(args.json, dict(machine=machine, when=stamp, samples=n, orbit_s=T, target_s=TARGET_S,
+                                      passed=bool(ok), batch=batch, memory=mem_rows))
     return _smoke.targets_exit(ok, args.smoke)
 
 

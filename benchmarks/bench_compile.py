@@ -18,7 +18,6 @@ operations than the integrator's ``RHS_INLINE_MAX_OPS`` (DOP853: always; RK4: ab
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -97,9 +96,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rhs-inline-max", type=float, default=None, metavar="OPS",
                     help="override the integrator's RHS_INLINE_MAX_OPS (inf: inline the RHS into every stage)")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"arrays {SMOKE_ARRAYS}")
+    args = _smoke.parse(ap, argv, f"arrays {SMOKE_ARRAYS}")
     if args.smoke:
         args.arrays = SMOKE_ARRAYS
     rows = []
@@ -113,8 +110,7 @@ def main(argv=None) -> int:
         r = measure(n, args.formulation, args.integrator, args.rhs_inline_max)
         rows.append(r)
         print(f"| {r['arrays']} | {r['rhs_ops']} | {r['c_kB']:.0f} | {r['build_s']:.1f} | {r['evaluator']} |", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+    _smoke.write_json(args.json, rows, indent=1)
     return 0
 
 

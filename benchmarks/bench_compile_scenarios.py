@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     args = _smoke.parse(ap, argv, what="one small scene")
     names = SMOKE_SCENES if args.smoke else args.only
     paths = [p for p in SCENARIOS if names is None or p.stem in names]
-    load0 = os.getloadavg()[0]
+    load0 = _smoke.load_now()
     rows = []
     print("| scenario | executor | cold compile, wall [s] | its CPU [s] | warm, wall [s] | libraries | size [kB] |")
     print("|---|---|---:|---:|---:|---:|---:|")
@@ -97,7 +97,7 @@ def main(argv=None) -> int:
         print(f"| `{r['scenario']}` | {r['executor']} | {r['cold_s']:.1f} | {r['cold_cpu_s']:.1f} | {r['warm_s']:.1f} | "
               f"{r['libraries']} | "
               f"{r['library_kB']:.0f} |", flush=True)
-    load = (load0 + os.getloadavg()[0]) / 2
+    load = _smoke.mean_load(load0)
     print(f"# load average {load:.1f} on {os.cpu_count()} cores; cold: a fresh process, empty STATIONBED_CACHE; "
           "warm: a fresh process on the filled cache")
     ok = True
@@ -106,8 +106,7 @@ def main(argv=None) -> int:
             ok = r["cold_s"] <= TARGET[1]
             print(f"target: {TARGET[0]} cold compile {r['cold_s']:.1f} s <= {TARGET[1]:g} s: "
                   f"{_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps({"load": load, "rows": rows}, indent=1))
+    _smoke.write_json(args.json, {"load": load, "rows": rows}, indent=1)
     return _smoke.targets_exit(ok, args.smoke)
 
 

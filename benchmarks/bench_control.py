@@ -29,10 +29,6 @@ comparable station with 4 CMGs and a 10 Hz controller on this machine.
 from __future__ import annotations
 
 import argparse
-import json
-import math
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -66,7 +62,7 @@ def main(argv=None) -> int:
     args = _smoke.parse(ap, argv)
 
     scene = stationbed.load_scene(args.scene)
-    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / scene.orbit.mean_motion
+    T = _smoke.orbit_s(scene, args.smoke)
     every = scene.replace({"simulation.environment_rate": 0})
     runs = {
         "python": lambda: stationbed.simulate(scene, duration=T, fused=False),
@@ -92,8 +88,7 @@ def main(argv=None) -> int:
 
     ticks = first["python"].meta["summary"]["ticks"]
     print(f"# closed loop, one orbit ({T:.1f} s, {ticks} ticks at 10 Hz) of {scene.name}")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"python {platform.python_version()}; warm-up incl. compile/load: {build_s:.1f} s")
+    print(f"machine: {_smoke.machine()}; warm-up incl. compile/load: {build_s:.1f} s")
     print()
     print("| path | wall per orbit [s] | CPU per orbit [s] | per tick [us] | RHS evaluations | max attitude error [rad] |")
     print("|---|---|---|---|---|---|")
@@ -117,7 +112,7 @@ def main(argv=None) -> int:
     print(f"default accuracy: environment every {summ['environment_rate_ticks']} ticks ({summ['environment_rate_asked']}; "
           f"bound {summ['environment_rate_bound_rad']} rad); {med[fe] / med['fused']:.2f}x faster than every stage; "
           f"attitude difference from it {env_diff:.2e} rad (target <= {TARGET_ENV_DIFF_RAD:g}): "
-          f"{_smoke.verdict(env_diff <= TARGET_ENV_DIFF_RAD, args.smoke)}; load average {os.getloadavg()[0]:.1f}")
+          f"{_smoke.verdict(env_diff <= TARGET_ENV_DIFF_RAD, args.smoke)}; load average {_smoke.load_now():.1f}")
     print(f"CPU per orbit (medians): " + ", ".join(f"{k} {v:.3f} s" for k, v in med_cpu.items())
           + f" (fused at the default, target <= {TARGET_FUSED_S} s: "
           + f"{_smoke.verdict(med_cpu['fused'] <= TARGET_FUSED_S, args.smoke)}); the default's probe alone "
@@ -125,10 +120,9 @@ def main(argv=None) -> int:
           + f"{med_cpu['fused'] + probe_cpu:.3f} s)")
     print(f"fused / python speed-up: {med['python'] / med['fused']:.1f}x; all runs: "
           + ", ".join(f"{k} {[round(w, 3) for w in v]}" for k, v in walls.items()))
-    if args.json:
-        args.json.write_text(json.dumps({"median_s": med, "median_cpu_s": med_cpu, "walls_s": walls, "cpus_s": cpus,
-                                         "rows": rows, "ticks": ticks, "probe_cpu_s": probe_cpu,
-                                         "environment_rate": summ["environment_rate_ticks"]}, indent=2))
+    _smoke.write_json(args.json, {"median_s": med, "median_cpu_s": med_cpu, "walls_s": walls, "cpus_s": cpus,
+                                  "rows": rows, "ticks": ticks, "probe_cpu_s": probe_cpu,
+                                  "environment_rate": summ["environment_rate_ticks"]})
     return 0
 
 

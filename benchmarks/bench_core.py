@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import gc
-import json
 import math
 import os
 import platform
@@ -204,11 +203,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rk4-step", type=float, default=RK4_STEP_S, help="RK4's fixed step [s] (default %(default)s)")
     ap.add_argument("--no-flex", action="store_true", help="skip the flexible-scene rows (issue 6)")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers as JSON")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s instead of an orbit, one repeat")
+    args = _smoke.parse(ap, argv)
     if args.smoke:
-        args.repeats = args.scipy_repeats = 1
+        args.scipy_repeats = 1
 
     scene_path = args.scene
     if not scene_path.exists() and scene_path == DEFAULT_SCENE and FALLBACK_SCENE.exists():
@@ -499,7 +496,7 @@ def main(argv=None) -> int:
             date=now.isoformat(timespec="seconds"),
         )
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        _smoke.write_json(args.json, payload, newline=True)
     return _smoke.targets_exit(all(tg["ok"] for tg in targets), args.smoke)
 
 

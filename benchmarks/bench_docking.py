@@ -51,22 +51,15 @@ def main(argv=None) -> int:
         "fused_bare": lambda: stationbed.simulate(bare, fused=True),
         "fused_docking": lambda: stationbed.simulate(dock, fused=True),
     }
-    first, build_s, med, cpu, load, *_ = _smoke.interleaved(runs, args.repeats)
-    ratio_wall = med["fused_docking"] / med["fused_bare"]
-    ratio = cpu["fused_docking"] / cpu["fused_bare"]
-    s = first["fused_docking"].meta["summary"]
-    assert s["fused"] and first["fused_bare"].meta["summary"]["fused"], "both runs must take the fused loop"
+    timed = _smoke.interleaved(runs, args.repeats)
+    s, bare_s = (timed.first[k].meta["summary"] for k in ("fused_docking", "fused_bare"))
+    assert s["fused"] and bare_s["fused"], "both runs must take the fused loop"
     assert len(s["events"]) == 2, "the docking and the law's update must both be applied"
-    rates = (first["fused_bare"].meta["summary"]["environment_rate_ticks"], s["environment_rate_ticks"])
     print(f"# {T:g} s of {dock.name}, fused, a docking at {dock.event[0].t:g} s vs none "
-          f"(median of {args.repeats}, interleaved; warm-up incl. compile/load {build_s:.1f} s; load average {load:.1f}); "
-          f"environment every {rates[0]} / {rates[1]} ticks")
-    print("| fused loop | no docking [s] | docking [s] | ratio |")
-    print("|---|---|---|---|")
-    print(f"| CPU time | {cpu['fused_bare']:.3f} | {cpu['fused_docking']:.3f} | {ratio:.2f} |")
-    print(f"| wall time | {med['fused_bare']:.3f} | {med['fused_docking']:.3f} | {ratio_wall:.2f} |")
-    ok = ratio <= TARGET_RATIO
-    print(f"fused with a docking / without, CPU time: {ratio:.2f} (target <= {TARGET_RATIO}): {_smoke.verdict(ok, args.smoke)}")
+          f"(median of {args.repeats}, interleaved; {_smoke.warmup_load(timed)}); "
+          f"environment every {bare_s['environment_rate_ticks']} / {s['environment_rate_ticks']} ticks")
+    ratio, _ = _smoke.ratio_table(timed, "fused_bare", "fused_docking", "no docking", "docking")
+    ok = _smoke.ratio_target("fused with a docking / without, CPU time", ratio, TARGET_RATIO, args.smoke)
     return _smoke.targets_exit(ok, args.smoke)
 
 

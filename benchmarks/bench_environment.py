@@ -21,8 +21,6 @@ runs, after a warm-up run that compiles or loads the cached build), one orbit ea
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -59,7 +57,7 @@ def main(argv=None) -> int:
     args = _smoke.parse(ap, argv)
     out = {}
     for label, (base, new) in scenes().items():
-        T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / base.orbit.mean_motion
+        T = _smoke.orbit_s(base, args.smoke)
         kw = {"fused": True} if base.controller is not None else {}
         runs = {"before": lambda s=base: stationbed.simulate(s, duration=T, **kw),
                 "with environment": lambda s=new: stationbed.simulate(s, duration=T, **kw)}
@@ -71,9 +69,8 @@ def main(argv=None) -> int:
         print(f"{label:25s} before {med['before'] * 1e3:8.1f} ms/orbit ({out[label]['n_rhs_before']} RHS)   "
               f"with aero+SRP+eclipse {med['with environment'] * 1e3:8.1f} ms/orbit ({out[label]['n_rhs_env']} RHS)   "
               f"ratio {ratio:.2f} (target <= {target:g}) "
-              + ("not judged (smoke)" if args.smoke else "ok" if ratio <= target else "MISSED"))
-    if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=2))
+              + _smoke.verdict(ratio <= target, args.smoke, "ok", "MISSED"))
+    _smoke.write_json(args.json, out)
     return 0  # a report, like the other benchmarks (a missed target is printed, not an error)
 
 

@@ -25,9 +25,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -56,7 +54,7 @@ def main(argv=None) -> int:
     truth = est.replace({"sensor": [], "estimator": None})
     every = args.environment_rate == "auto"  # the every-stage pair beside the defaults
     est0, truth0 = (s.replace({"simulation.environment_rate": 0}) for s in (est, truth))
-    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / est.orbit.mean_motion
+    T = _smoke.orbit_s(est, args.smoke)
     runs = {
         "fused_truth": lambda: stationbed.simulate(truth, duration=T, fused=True),
         "fused_estimated": lambda: stationbed.simulate(est, duration=T, fused=True),
@@ -66,14 +64,15 @@ def main(argv=None) -> int:
     if every:
         runs["fused_every_truth"] = lambda: stationbed.simulate(truth0, duration=T, fused=True)
         runs["fused_every_estimated"] = lambda: stationbed.simulate(est0, duration=T, fused=True)
-    first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
+    timed = _smoke.interleaved(runs, args.repeats)
+    first, med, cpu = timed.first, timed.wall, timed.cpu
     ratio = med["fused_estimated"] / med["fused_truth"]
     ratio_tick = med["per_tick_estimated"] / med["per_tick_truth"]
     ratio_cpu = cpu["fused_estimated"] / cpu["fused_truth"]
     s = first["fused_estimated"].meta["summary"]
     print(f"# one orbit ({T:.1f} s) of {est.name}, fused and per-tick, estimated vs truth-fed "
-          f"(median of {args.repeats} interleaved; warm-up incl. compile/load {build_s:.1f} s; "
-          f"load average {load:.1f} on {os.cpu_count()} cores; environment_rate {args.environment_rate}: "
+          f"(median of {args.repeats} interleaved; {_smoke.warmup_load(timed, cores=True)}; "
+          f"environment_rate {args.environment_rate}: "
           f"{first['fused_truth'].meta['summary'].get('environment_rate_ticks')} / "
           f"{first['fused_estimated'].meta['summary'].get('environment_rate_ticks')} ticks run)")
     print("| path | truth-fed wall [s] | estimated wall [s] | ratio | truth-fed CPU [s] | estimated CPU [s] | CPU ratio |")
@@ -95,12 +94,10 @@ def main(argv=None) -> int:
         print("|---|---|---|---|---|")
         for name in ("fused_truth", "fused_estimated"):
             print("| " + name + " | " + " | ".join(f"{v:.3f}" for v in _split(runs[name])) + " |")
-    ok = ratio <= TARGET_RATIO
-    print(f"fused estimated / truth-fed: {ratio:.2f} (target <= {TARGET_RATIO}): {_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps({"walls": walls, "cpu": cpus, "median": med, "median_cpu": cpu,
-                                         "load_average": load, "ratio_fused_cpu": ratio_cpu, "ratio_fused": ratio,
-                                         "ratio_per_tick": ratio_tick, "summary": s}, indent=1, default=float))
+    ok = _smoke.ratio_target("fused estimated / truth-fed", ratio, TARGET_RATIO, args.smoke)
+    _smoke.write_json(args.json, {"walls": timed.walls, "cpu": timed.cpus, "median": med, "median_cpu": cpu,
+                                  "load_average": timed.load, "ratio_fused_cpu": ratio_cpu, "ratio_fused": ratio,
+                                  "ratio_per_tick": ratio_tick, "summary": s}, indent=1, default=float)
     return _smoke.targets_exit(ok, args.smoke)
 
 

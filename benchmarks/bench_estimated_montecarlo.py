@@ -28,7 +28,6 @@ ratios and the CPU times mean much.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -57,9 +56,7 @@ def main(argv=None) -> int:
     ap.add_argument("--environment-rate", type=lambda v: v if v == "auto" else int(v), default="auto",
                     help="[simulation] environment_rate of every sample (ticks; 0 = every stage; default auto, the scenarios')")
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, {SMOKE_WORKERS} worker")
+    args = _smoke.parse(ap, argv, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, {SMOKE_WORKERS} worker")
     est = load_scene(SCENE)
     truth = bench_scene("pd", environment_rate=args.environment_rate)
     est = est.replace({"simulation.environment_rate": args.environment_rate})
@@ -73,7 +70,7 @@ def main(argv=None) -> int:
         r = resource.getrusage(resource.RUSAGE_CHILDREN)
         return r.ru_utime + r.ru_stime
 
-    load0 = os.getloadavg()[0]
+    load0 = _smoke.load_now()
     rows: dict = {"samples": args.samples, "workers": args.workers, "environment_rate": args.environment_rate}
     for name, s in (("estimated", est), ("truth_fed", truth)):
         # the whole call, as a user runs it: the driver's warm-up, its own forked local cluster
@@ -88,7 +85,7 @@ def main(argv=None) -> int:
         if name == "estimated":
             rows["estimation"] = {m: float(res.df[m].mean()) for m in
                                   ("max_est_err_deg", "rms_est_err_deg", "mean_nees", "est_inside_3sigma")}
-    load = (load0 + os.getloadavg()[0]) / 2
+    load = _smoke.mean_load(load0)
     e, t = rows["estimated"], rows["truth_fed"]
     measured = args.samples == TARGET_N
     total = e["wall_s"] * TARGET_N / args.samples  # (fixed costs scaled too: an upper estimate below 1000)
@@ -109,8 +106,7 @@ def main(argv=None) -> int:
     ok = total <= TARGET_S
     print(f"{TARGET_N} samples: {total:.1f} s ({'measured' if measured else 'extrapolated from ' + str(args.samples)}"
           f"; start-up included; target <= {TARGET_S:g} s): {_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1, default=float) + "\n")
+    _smoke.write_json(args.json, rows, indent=1, default=float, newline=True)
     return _smoke.targets_exit(ok, args.smoke)
 
 

@@ -14,8 +14,6 @@ compiles or loads the cached builds; judged on CPU time (one thread each).
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -43,32 +41,25 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
     args = _smoke.parse(ap, argv)
-    T = _smoke.SMOKE_DURATION_S if args.smoke else None
     nominal = stationbed.load_scene(SCENE)
-    T = T or 2 * math.pi / nominal.orbit.mean_motion
+    T = _smoke.orbit_s(nominal, args.smoke)
     T = round(T / nominal.simulation.output_dt) * nominal.simulation.output_dt
     nominal = nominal.replace({"simulation.duration": T})
     faulted = nominal.replace({"fault": faults(T, nominal.controller.period)})
     runs = {"nominal": lambda: stationbed.simulate(nominal, fused=True),
             "faulted": lambda: stationbed.simulate(faulted, fused=True)}
-    first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
-    s = first["faulted"].meta["summary"]
+    timed = _smoke.interleaved(runs, args.repeats)
+    s = timed.first["faulted"].meta["summary"]
     assert s["fused"] and "not_fused" not in s, f"the faulted run must fly fused: {s.get('not_fused')}"
     assert len(s["faults"]) == 2, s["faults"]
-    ratio, ratio_wall = cpu["faulted"] / cpu["nominal"], med["faulted"] / med["nominal"]
     print(f"# one orbit ({T:.0f} s) of {nominal.name}, fused, two faults vs none "
-          f"(median of {args.repeats}, interleaved; warm-up incl. compile/load {build_s:.1f} s; load average {load:.1f})")
-    print("| fused loop | nominal [s] | two faults [s] | ratio |")
-    print("|---|---|---|---|")
-    print(f"| CPU time | {cpu['nominal']:.3f} | {cpu['faulted']:.3f} | {ratio:.2f} |")
-    print(f"| wall time | {med['nominal']:.3f} | {med['faulted']:.3f} | {ratio_wall:.2f} |")
+          f"(median of {args.repeats}, interleaved; {_smoke.warmup_load(timed)})")
+    ratio, ratio_wall = _smoke.ratio_table(timed, "nominal", "faulted", "nominal", "two faults")
     print("faults applied: " + ", ".join(f"{f['kind']} unit {f['unit']} at {f['t']:.1f} s" for f in s["faults"]))
-    ok = ratio <= TARGET_RATIO
-    print(f"faulted / nominal, CPU time: {ratio:.2f} (target <= {TARGET_RATIO}): {_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps({"walls": walls, "cpus": cpus, "median": med, "median_cpu": cpu,
-                                         "ratio_cpu": ratio, "ratio_wall": ratio_wall, "summary": s},
-                                        indent=1, default=float))
+    ok = _smoke.ratio_target("faulted / nominal, CPU time", ratio, TARGET_RATIO, args.smoke)
+    _smoke.write_json(args.json, {"walls": timed.walls, "cpus": timed.cpus, "median": timed.wall,
+                                  "median_cpu": timed.cpu, "ratio_cpu": ratio, "ratio_wall": ratio_wall, "summary": s},
+                      indent=1, default=float)
     return _smoke.targets_exit(ok, args.smoke)
 
 

@@ -23,8 +23,6 @@ cache). docs/design.md "The floor at the default" holds a measured table and the
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -60,24 +58,21 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s, the default and every-stage rows, one repeat")
+    args = _smoke.parse(ap, argv, f"{_smoke.SMOKE_DURATION_S:g} s, the default and every-stage rows, one repeat")
     scene = stationbed.load_scene(SCENE)
-    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / scene.orbit.mean_motion
+    T = _smoke.orbit_s(scene, args.smoke)
     rows = variants(scene, args.smoke)
     runs = {k: (lambda s=s: stationbed.simulate(s, duration=T, keep=False)) for k, s in rows.items()}
-    timed = _smoke.interleaved(runs, 1 if args.smoke else args.repeats)
+    timed = _smoke.interleaved(runs, args.repeats)
     base = timed.cpu["default"]
-    print(f"# iss_lvlh_hold fused, {T:.1f} s; CPU medians of {1 if args.smoke else args.repeats} interleaved "
+    print(f"# iss_lvlh_hold fused, {T:.1f} s; CPU medians of {args.repeats} interleaved "
           f"rounds; load average {timed.load:.1f}")
     print("| variant | CPU [s] | minus the default [s] | environment ticks | fused |")
     print("|---|---:|---:|---:|---|")
     for k, cpu in timed.cpu.items():
         s = timed.first[k].meta["summary"]
         print(f"| {k} | {cpu:.4f} | {cpu - base:+.4f} | {s.get('environment_rate_ticks')} | {s.get('fused')} |")
-    if args.json:
-        args.json.write_text(json.dumps({"cpu_s": timed.cpu, "wall_s": timed.wall, "load": timed.load}, indent=2))
+    _smoke.write_json(args.json, {"cpu_s": timed.cpu, "wall_s": timed.wall, "load": timed.load})
     return 0
 
 

@@ -22,9 +22,6 @@ cancels). ``--smoke``: a 50 s run, one repeat (CI: does it run).
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -73,12 +70,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=600.0, help="s of simulated time per run (default 600)")
     ap.add_argument("--repeats", type=int, default=5)
-    _smoke.add_option(ap)
     ap.add_argument("--json", type=Path, default=None)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, "a 50 s run, one repeat")
+    args = _smoke.parse(ap, argv, "a 50 s run, one repeat")
     if args.smoke:
-        args.duration, args.repeats = 50.0, 1
+        args.duration = 50.0
     try:
         import fmpy
     except ImportError:
@@ -150,8 +145,7 @@ def main(argv=None) -> int:
 
     print(f"# FMU law cost per tick: {args.duration:g} s at {1 / ref.meta['summary']['period_s']:g} Hz "
           f"({ticks} ticks), median of {args.repeats}")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python "
-          f"{platform.python_version()}, FMPy {fmpy.__version__}")
+    print(f"machine: {_smoke.machine()}, FMPy {fmpy.__version__}")
     print()
     print("| law | wall per run [s] | per tick (slope) [us] | added per tick vs its Python twin [us] | FMU call alone [us] |")
     print("|---|---|---|---|---|")
@@ -163,9 +157,7 @@ def main(argv=None) -> int:
         print(f"| {name} | {why} | | | |")
     print()
     print("each FMU flies its Python twin's trajectory, bit for bit: yes")
-    if args.json:
-        args.json.write_text(json.dumps({"per_tick_s": per_tick, "walls_s": walls, "call_alone_s": alone,
-                                         "ticks": ticks}, indent=2))
+    _smoke.write_json(args.json, {"per_tick_s": per_tick, "walls_s": walls, "call_alone_s": alone, "ticks": ticks})
     return 0
 
 

@@ -22,9 +22,6 @@ thrusters' command), and the rest (the law and its state).
 from __future__ import annotations
 
 import argparse
-import json
-import math
-import os
 import sys
 from pathlib import Path
 
@@ -53,7 +50,7 @@ def main(argv=None) -> int:
                                                                            "damping": 0.8, "max_slew_rate": 0.001}})
     truth = stationbed.load_scene(TRUTH)
     rods = stationbed.load_scene(RODS)
-    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / full.orbit.mean_motion
+    T = _smoke.orbit_s(full, args.smoke)
     runs = {
         "truth_pd": lambda: stationbed.simulate(truth, duration=T, fused=True),
         "full_momentum_manager": lambda: stationbed.simulate(full, duration=T, fused=True),
@@ -69,9 +66,10 @@ def main(argv=None) -> int:
             "mm_no_dumping": lambda: stationbed.simulate(full.replace(quiet), duration=T, fused=True),
             "mm_held_20_no_dumping": lambda: stationbed.simulate(held[20].replace(quiet), duration=T, fused=True),
         })
-    first, build_s, med, cpu, load, walls, cpus = _smoke.interleaved(runs, args.repeats)
-    print(f"# one orbit ({T:.1f} s), fused, median of {args.repeats} interleaved; warm-up incl. compile/load "
-          f"{build_s:.1f} s; load average {load:.1f} on {os.cpu_count()} cores")
+    timed = _smoke.interleaved(runs, args.repeats)
+    first, med, cpu = timed.first, timed.wall, timed.cpu
+    print(f"# one orbit ({T:.1f} s), fused, median of {args.repeats} interleaved; "
+          f"{_smoke.warmup_load(timed, cores=True)}")
     ok = True
     for name in runs:
         fused = bool(first[name].meta["summary"]["fused"])
@@ -89,9 +87,8 @@ def main(argv=None) -> int:
     ratio = med["full_momentum_manager"] / med["truth_pd"]
     ok &= ratio <= TARGET_RATIO
     print(f"target full loop <= {TARGET_RATIO}x truth-fed pd: {ratio:.2f}x {_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps({"wall": med, "cpu": cpu, "walls": walls, "cpus": cpus, "load": load,
-                                         "build_s": build_s}, indent=1))
+    _smoke.write_json(args.json, {"wall": med, "cpu": cpu, "walls": timed.walls, "cpus": timed.cpus,
+                                  "load": timed.load, "build_s": timed.build_s}, indent=1)
     return _smoke.targets_exit(ok, args.smoke)
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import functools
 import gc
-import json
 import os
 import resource
 import sys
@@ -136,15 +135,13 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--breakdown", type=int, default=20, help="samples of the serial breakdown (0: none)")
     ap.add_argument("--json", type=Path, default=None)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, {SMOKE_WORKERS} worker")
+    args = _smoke.parse(ap, argv, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s, {SMOKE_WORKERS} worker")
     scene = load_scene(SCENE)
     if args.smoke:
         args.samples, args.workers, args.breakdown = SMOKE_N, SMOKE_WORKERS, SMOKE_BREAKDOWN
         scene = scene.replace({"simulation.duration": _smoke.SMOKE_DURATION_S,
                                "montecarlo.settle_s": _smoke.SMOKE_DURATION_S / 2})
-    load0 = os.getloadavg()[0]
+    load0 = _smoke.load_now()
     rows: dict = {"samples": args.samples, "workers": args.workers}
     measured = args.samples == TARGET_N
     scaled = not measured and args.samples <= FIXED_N  # (smoke) no fixed study: the wall scaled, an upper estimate
@@ -160,7 +157,7 @@ def main(argv=None) -> int:
         total = fixed + (st["wall_s"] - fixed) / (args.samples - FIXED_N) * TARGET_N
     if args.breakdown:
         rows["breakdown_ms"] = breakdown(scene, args.breakdown)
-    load = (load0 + os.getloadavg()[0]) / 2
+    load = _smoke.mean_load(load0)
     # what the 2 cores would take alone: the fixed wall plus the workers' CPU spread over them (a
     # loaded machine stretches the wall, much less the CPU)
     fixed_s = rows["fixed"]["wall_s"] if "fixed" in rows else 0.0
@@ -180,8 +177,7 @@ def main(argv=None) -> int:
     how = ("measured" if measured else "scaled from the whole wall" if scaled else
            f"extrapolated: the {FIXED_N}-sample study's {rows['fixed']['wall_s']:.1f} s + per sample")
     print(f"{TARGET_N} samples: {total:.1f} s ({how}; target <= {TARGET_S:g} s): {_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=1, default=float) + "\n")
+    _smoke.write_json(args.json, rows, indent=1, default=float, newline=True)
     return _smoke.targets_exit(ok, args.smoke)
 
 

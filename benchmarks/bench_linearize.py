@@ -17,7 +17,6 @@ The first call's time (building the casadi expressions and their Jacobians) is r
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -76,9 +75,8 @@ def main(argv=None) -> int:
         print(f"  {k[:-2]:<15} {res[k] * 1e3:8.1f} ms (median)")
     ok = res["linearize_s"] < TARGET_S
     print(f"  target: linearize < {TARGET_S:g} s once compiled: "
-          + ("not judged (smoke)" if args.smoke else "met" if ok else "MISSED"))
-    if args.json:
-        args.json.write_text(json.dumps(res, indent=1) + "\n")
+          + _smoke.verdict(ok, args.smoke, "met", "MISSED"))
+    _smoke.write_json(args.json, res, indent=1, newline=True)
     return _smoke.targets_exit(ok, args.smoke)
 
 

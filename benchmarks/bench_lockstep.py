@@ -31,7 +31,6 @@ every row and reports the medians.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -109,9 +108,7 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--repeats", type=int, default=1, help="interleaved rounds of every row (medians)")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, "4 samples of 2 s")
+    args = _smoke.parse(ap, argv, "4 samples of 2 s")
     if args.smoke:
         args.n, args.duration = 4, 2.0
     n, dur = args.n, args.duration
@@ -191,8 +188,7 @@ def main(argv=None) -> int:
         print(f"{name} / {base}, run alone = {r:.2f}")
     rows["loadavg"] = os.getloadavg()
     print(f"load average {rows['loadavg']} on {os.cpu_count()} cores", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    _smoke.write_json(args.json, rows, newline=True)
     return 0
 
 

@@ -22,10 +22,7 @@ the suite's tick to the fused loop's unchanged; the integrated loop itself is me
 from __future__ import annotations
 
 import argparse
-import json
-import statistics
 import sys
-import time
 import tomllib
 from pathlib import Path
 
@@ -91,12 +88,10 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path)
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
+    args = _smoke.parse(ap, argv, "200 ticks instead of an orbit, one repeat")
     global N_TICKS
-    _smoke.announce(args.smoke, "200 ticks instead of an orbit, one repeat")
     if args.smoke:
-        N_TICKS, args.repeats = 200, 1
+        N_TICKS = 200
 
     truth = _truth(N_TICKS)
     full, bare = Suite(_iss_set(True), TICK_S), Suite(_iss_set(False), TICK_S)
@@ -124,21 +119,12 @@ def main(argv=None) -> dict:
         "mekf": lambda: _run(mekf_c, xf0, z, np.tile(m.params, N_TICKS)),
         "fused_loop": lambda: stationbed.simulate(scene, fused=True),
     }
-    for f in paths.values():  # warm-up: compile or load the cached builds
-        f()
-    times = {k: [] for k in paths}
-    for _ in range(args.repeats):
-        for k, f in paths.items():
-            t0 = time.perf_counter()
-            f()
-            times[k].append(time.perf_counter() - t0)
-    med = {k: statistics.median(v) for k, v in times.items()}
+    med = _smoke.interleaved(paths, args.repeats).wall  # (its warm-up compiles or loads the cached builds)
     out = {"per_orbit_s": med, "ratio_fused_plus_suite": (med["fused_loop"] + med["suite"]) / med["fused_loop"]}
     for k, v in med.items():
         print(f"{k:>11}: {v:.3f} s per orbit")
     print(f"(fused loop + suite) / fused loop = {out['ratio_fused_plus_suite']:.2f} (target <= 1.5)")
-    if args.json:
-        args.json.write_text(json.dumps(out, indent=2))
+    _smoke.write_json(args.json, out)
     return out
 
 

@@ -38,7 +38,6 @@ dynamics in one compiled loop; it now runs fused with the noise too, README "Mon
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import statistics
@@ -112,9 +111,8 @@ def main(argv=None) -> int:
     ap.add_argument("--environment-rate", type=lambda v: v if v == "auto" else int(v), default="auto",
                     help="[simulation] environment_rate of every sample (ticks; 0 = every stage; default auto, "
                          "the scenario's)")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s per row, {SMOKE_WORKERS} workers")
+    args = _smoke.parse(ap, argv,
+                        f"{SMOKE_N} samples of {_smoke.SMOKE_DURATION_S:g} s per row, {SMOKE_WORKERS} workers")
     duration = None
     if args.samples is not None:
         args.n = args.n_python = args.samples
@@ -139,11 +137,10 @@ def main(argv=None) -> int:
                             "executors": res.summary.get("executors", {})}
         rows["memory_driver_peak_mib"] = vm_hwm_mib()
         print(f"pd fused (environment_rate {args.environment_rate}): {args.n} samples on {args.workers} workers: "
-              f"{wall:.1f} s (target 45 s); load average {os.getloadavg()[0]:.1f}; driver peak "
+              f"{wall:.1f} s (target 45 s); load average {_smoke.load_now():.1f}; driver peak "
               f"{rows['memory_driver_peak_mib']:.0f} MiB, worker peak {worker_mib:.0f} MiB", flush=True)
     if args.only_pd:
-        if args.json:
-            args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        _smoke.write_json(args.json, rows, newline=True)
         return 0
     # 2. example_hold (Python, lockstep batch) and momentum_manager (fused, the law's state carried)
     for law, key, target in (("example_hold", "example_hold", 150.0), ("momentum_manager", "momentum_manager", None)):
@@ -165,8 +162,7 @@ def main(argv=None) -> int:
               flush=True)
     if not want & {"efficiency", "per_sample"}:
         rows["loadavg_end"] = os.getloadavg()
-        if args.json:
-            args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        _smoke.write_json(args.json, rows, newline=True)
         return 0
     # 3. + 5. efficiency and worker memory, on clusters started beforehand
     walls, cpus = {}, {}
@@ -202,8 +198,7 @@ def main(argv=None) -> int:
     rows["loadavg_end"] = os.getloadavg()
     print(f"load average (1, 5, 15 min) at start {rows['loadavg_start']}, at end {rows['loadavg_end']} "
           f"on {os.cpu_count()} cores: other work on the machine inflates the walls", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    _smoke.write_json(args.json, rows, newline=True)
     return 0
 
 

@@ -19,10 +19,7 @@ wall time per orbit, the integrator's own wall, RHS evaluations, the operations 
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import os
-import platform
 import sys
 from pathlib import Path
 
@@ -75,11 +72,11 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path)
     args = _smoke.parse(ap, argv)
     results = {}
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
+    print(f"machine: {_smoke.machine()}")
     for name in SCENES:
         base = stationbed.load_scene(ROOT / "scenarios" / f"{name}.toml")
         scenes = variants(base)
-        T = _smoke.SMOKE_DURATION_S if args.smoke else 2.0 * math.pi / scenes["circular"].orbit.mean_motion
+        T = _smoke.orbit_s(scenes["circular"], args.smoke)
         runs = {k: (lambda s=s: stationbed.simulate(s, formulation="momentum", integrator="dop853", rtol=RTOL, atol=ATOL,
                                                     duration=T)) for k, s in scenes.items()}
         timed = _time_interleaved(runs, args.repeats, block=1 if args.smoke else 3)
@@ -96,8 +93,7 @@ def main(argv=None) -> int:
         worst = max(r["ratio"] for r in rows.values())
         print(f"\ntarget: two-body <= {TARGET_RATIO}x circular: {_smoke.verdict(worst <= TARGET_RATIO, args.smoke)} (worst {worst:.2f}x)")
         results[name] = rows
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2))
+    _smoke.write_json(args.json, results)
     return 0
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -42,10 +41,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", type=Path, default=ROOT / "scenarios" / "iss_zpm_2006.toml")
     ap.add_argument("--refine", type=int, default=None, help="finer mesh (default 2 x the scene's intervals)")
-    _smoke.add_option(ap)
     ap.add_argument("--json", type=Path, default=None)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, "a 12-interval mesh refined to 16")
+    args = _smoke.parse(ap, argv, "a 12-interval mesh refined to 16")
     scene = load_scene(args.scene)
     coarse = 12 if args.smoke else scene.plan.intervals
     fine = 16 if args.smoke else (args.refine or 2 * coarse)
@@ -84,8 +81,7 @@ def main(argv=None) -> int:
           f"({100 * res['peak_fraction']:.1f} % of capacity)")
     print(f"  refined to {fine} intervals: {res['refined_iterations']} iterations, {refine_s:.2f} s, "
           f"cost change {100 * res['cost_change']:+.4f} %")
-    if args.json:
-        args.json.write_text(json.dumps(res, indent=2) + "\n")
+    _smoke.write_json(args.json, res, newline=True)
     print(f"target: plan in <= {TARGET_S:g} s: {_smoke.verdict(plan_s <= TARGET_S, args.smoke)}")
     return _smoke.targets_exit(plan_s <= TARGET_S, args.smoke)
 

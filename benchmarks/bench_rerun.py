@@ -109,16 +109,8 @@ def _variants(scene, tmp: Path, inside: dict):
 
 def _interleaved_medians_ms(fns: dict, repeats: int) -> tuple[dict, dict]:
     """Medians of wall time and of the process's CPU time (all threads: rerun's writer too) [ms]."""
-    ts = {k: [] for k in fns}
-    cs = {k: [] for k in fns}
-    for _ in range(repeats):
-        for k, fn in fns.items():
-            c0, t0 = time.process_time(), time.perf_counter()
-            fn()
-            ts[k].append(time.perf_counter() - t0)
-            cs[k].append(time.process_time() - c0)
     med = lambda d: {k: 1e3 * statistics.median(v) for k, v in d.items()}  # noqa: E731
-    return med(ts), med(cs)
+    return tuple(map(med, _smoke.rounds(fns, repeats)))
 
 
 def _parts_ms(scene, traj, tmp: Path, repeats: int) -> dict:
@@ -160,7 +152,7 @@ def _cli_ms(scene_path: Path, tmp: Path, repeats: int, duration: float | None = 
 def _print_cli(name: str, scene_path: Path, tmp: Path, repeats: int, duration: float | None = None) -> tuple:
     t_cli, t_cli_rrd, a, b = _cli_ms(scene_path, tmp, repeats, duration)
     ratio = t_cli_rrd / t_cli
-    verdict = "not judged (smoke)" if duration is not None else "PASS" if ratio <= TARGET_RATIO else "MISS"
+    verdict = _smoke.verdict(ratio <= TARGET_RATIO, duration is not None, failed="MISS")
     print(f"`stationbed run` process ({name}), median of {repeats} interleaved: {t_cli:.0f} ms, with --rrd "
           f"{t_cli_rrd:.0f} ms ({t_cli_rrd - t_cli:+.0f} ms, {100 * (ratio - 1):+.1f} %): {verdict}")
     print(f"  runs [s]: without {' '.join(f'{x:.2f}' for x in a)}; with --rrd {' '.join(f'{x:.2f}' for x in b)}")
@@ -174,18 +166,17 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", action="store_true", help="also time the RrdSink's open / send / close")
     ap.add_argument("--cli-repeats", type=int, default=0, help="also time whole `stationbed run` processes")
     ap.add_argument("--cli-only", action="store_true", help="only the `stationbed run` processes (default 7 repeats)")
-    _smoke.add_option(ap)
-    args = ap.parse_args(argv)
-    _smoke.announce(args.smoke, f"{_smoke.SMOKE_DURATION_S:g} s runs, one repeat, parts and one CLI pair for the first scene")
+    args = _smoke.parse(ap, argv,
+                        f"{_smoke.SMOKE_DURATION_S:g} s runs, one repeat, parts and one CLI pair for the first scene")
     duration = None
     if args.smoke:
-        args.repeats, args.parts, args.cli_repeats, duration = 1, True, 1, _smoke.SMOKE_DURATION_S
+        args.parts, args.cli_repeats, duration = True, 1, _smoke.SMOKE_DURATION_S
 
     if args.cli_only:
         import os
 
         tmp = Path(tempfile.mkdtemp(prefix="bench_rerun_"))
-        load = f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+        load = f"load average {_smoke.load_now():.1f} on {os.cpu_count()} CPUs"
         print(f"whole processes, {load} at the start")
         rows = [_print_cli(p.stem, p, tmp, args.cli_repeats or 7, duration) for p in (args.scene or DEFAULT_SCENES)]
         print("\n| scene | `stationbed run` [ms] | with `--rrd` [ms] | added | target <= 10 % |")
@@ -228,7 +219,7 @@ def main(argv=None) -> int:
         ratio = med["csv + rrd"] / med["csv"]
         added = med["csv + rrd"] - med["csv"]
         share = med_in["csv + rrd"] / med["csv"]
-        verdict = _smoke.verdict(ratio <= TARGET_RATIO, args.smoke).replace("FAIL", "MISS")
+        verdict = _smoke.verdict(ratio <= TARGET_RATIO, args.smoke, failed="MISS")
         print(f"\nrecording adds {added:+.1f} ms = {100 * (ratio - 1):+.1f} % to `stationbed run` in process "
               f"(target <= {100 * (TARGET_RATIO - 1):.0f} %): {verdict}; time inside the sink "
               f"{med_in['csv + rrd']:.1f} ms = {100 * share:.1f} % (the low-noise measure of the same cost)")

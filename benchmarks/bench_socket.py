@@ -23,7 +23,6 @@ On the tests' scene (tests/test_socket_law.py: a small station in LVLH, no CMG) 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import shutil
@@ -169,8 +168,7 @@ def main(argv=None) -> int:
               f"x{r['realtime_achieved_factor']:.5g}, {r['realtime_misses']} of {r['realtime_deadlines']} deadlines missed "
               f"(> 1 ms late), worst lateness {r['realtime_worst_late_ms']:.3g} ms, work per tick median "
               f"{r['realtime_work_ms_p50']:.3g} ms, 99 % {r['realtime_work_ms_p99']:.3g} ms")
-    if args.json:
-        args.json.write_text(json.dumps(out, indent=2, default=str))
+    _smoke.write_json(args.json, out, default=str)
     return _smoke.targets_exit(ok, args.smoke)
 
 

@@ -15,7 +15,6 @@ fire during the timed run (the summary line says how often).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -39,32 +38,26 @@ def main(argv=None) -> int:
     args = _smoke.parse(ap, argv)
     thr = stationbed.load_scene(SCENE)
     bare = thr.replace({"thruster": [], "thrusters": None})
-    T = _smoke.SMOKE_DURATION_S if args.smoke else 2 * math.pi / thr.orbit.mean_motion
+    T = _smoke.orbit_s(thr, args.smoke)
     runs = {
         "fused_bare": lambda: stationbed.simulate(bare, duration=T, fused=True),
         "fused_thrusters": lambda: stationbed.simulate(thr, duration=T, fused=True),
     }
-    first, build_s, med, cpu, load, *_ = _smoke.interleaved(runs, args.repeats)
-    ratio_wall = med["fused_thrusters"] / med["fused_bare"]
+    timed = _smoke.interleaved(runs, args.repeats)
+    s = timed.first["fused_thrusters"].meta["summary"]
+    assert s["fused"] and timed.first["fused_bare"].meta["summary"]["fused"], "both runs must take the fused loop"
+    print(f"# one orbit ({T:.1f} s) of {thr.name}, fused, 16 thrusters in assist vs none "
+          f"(median of {args.repeats}, interleaved; {_smoke.warmup_load(timed)})")
     # judged on CPU time: both runs are one thread, and on a machine shared with other jobs the
     # wall time also counts the waits for a core (the wall ratio is printed beside it)
-    ratio = cpu["fused_thrusters"] / cpu["fused_bare"]
-    s = first["fused_thrusters"].meta["summary"]
-    assert s["fused"] and first["fused_bare"].meta["summary"]["fused"], "both runs must take the fused loop"
-    print(f"# one orbit ({T:.1f} s) of {thr.name}, fused, 16 thrusters in assist vs none "
-          f"(median of {args.repeats}, interleaved; warm-up incl. compile/load {build_s:.1f} s; load average {load:.1f})")
-    print("| fused loop | no thrusters [s] | 16 thrusters, assist [s] | ratio |")
-    print("|---|---|---|---|")
-    print(f"| CPU time | {cpu['fused_bare']:.3f} | {cpu['fused_thrusters']:.3f} | {ratio:.2f} |")
-    print(f"| wall time | {med['fused_bare']:.3f} | {med['fused_thrusters']:.3f} | {ratio_wall:.2f} |")
+    ratio, ratio_wall = _smoke.ratio_table(timed, "fused_bare", "fused_thrusters", "no thrusters",
+                                           "16 thrusters, assist")
     print(f"thrusters: {s.get('thruster_firings')} firings, {s.get('thruster_impulse_Ns', math.nan):.1f} N s, "
           f"{s.get('propellant_kg', math.nan):.4f} kg propellant")
-    ok = ratio <= TARGET_RATIO
-    print(f"fused with thrusters / without, CPU time: {ratio:.2f} (target <= {TARGET_RATIO}): {_smoke.verdict(ok, args.smoke)}")
-    if args.json:
-        args.json.write_text(json.dumps({"walls": walls, "cpus": cpus, "median": med, "median_cpu": cpu,
-                                         "ratio_fused_cpu": ratio, "ratio_fused_wall": ratio_wall, "summary": s},
-                                        indent=1, default=float))
+    ok = _smoke.ratio_target("fused with thrusters / without, CPU time", ratio, TARGET_RATIO, args.smoke)
+    _smoke.write_json(args.json, {"walls": timed.walls, "cpus": timed.cpus, "median": timed.wall,
+                                  "median_cpu": timed.cpu, "ratio_fused_cpu": ratio, "ratio_fused_wall": ratio_wall,
+                                  "summary": s}, indent=1, default=float)
     return _smoke.targets_exit(ok, args.smoke)
 
 
