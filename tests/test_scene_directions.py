@@ -19,6 +19,8 @@ from scenes import ROOT
 from stationbed import SceneError, load_scene
 from stationbed.scene.base import DIRECTION_NORM_MIN
 
+#: a normalised axis against its exact unit vector: a few ulps of 1 (one division per component)
+UNIT_TOL = 1e-15
 #: a plate added to the full flight loop's surfaces (it has boxes and wings only) [m², -]
 PLATE = {"name": "radiator", "area": 10.0, "normal": [0.0, 0.0, 1.0]}
 
@@ -81,4 +83,4 @@ def test_a_direction_of_any_length_is_taken(field):
 def test_a_port_axis_is_stored_unit_length():
     axis = [0.0, -3.0, 4.0]  # m: length 5
     s = _scene("iss_progress_docking").replace({"port[0].axis": axis})
-    assert_allclose(s.port[0].axis, [0.0, -0.6, 0.8], rtol=0.0, atol=1e-15)  # 1e-15: a few ulps of 1
+    assert_allclose(s.port[0].axis, [0.0, -0.6, 0.8], rtol=0.0, atol=UNIT_TOL)
