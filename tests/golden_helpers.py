@@ -70,8 +70,8 @@ def _flat(value, key: str, into: dict) -> None:
     elif isinstance(value, list):
         for i, v in enumerate(value):
             _flat(v, f"{key}.{i}", into)
-    else:
-        into[key] = value
+    else:  # JSON has no NaN: null stands for it, as in the columns
+        into[key] = None if isinstance(value, float) and math.isnan(value) else value
 
 
 def flat_summary(summary: dict) -> dict:

@@ -34,8 +34,8 @@ def main(argv: list[str]) -> int:
             t0 = time.process_time()
             header, data, summary = run_scene(scene, Path(tmp) / scene.stem)
             write_golden(golden_path(scene), record(header, data, summary), scene)
-            print(f"{golden_path(scene).relative_to(Path.cwd()) if golden_path(scene).is_relative_to(Path.cwd()) else golden_path(scene)}: "
-                  f"{len(data)} rows x {len(header)} columns, {time.process_time() - t0:.2f} s CPU")
+            print(f"{golden_path(scene)}: {len(data)} rows x {len(header)} columns, "
+                  f"{time.process_time() - t0:.2f} s CPU")
     return 0
 
 
