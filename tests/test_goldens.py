@@ -147,9 +147,11 @@ def mismatches(name: str, ref: dict, new: dict, solver: bool = False) -> list[st
                 d = "NaN" if a is None or b is None else f"{abs(a - b):.3g}"
                 out.append(f"{name}: column {col} at t = {t[i]:g} s: golden {a!r}, now {b!r} (|diff| {d} {why})")
         for stat in STATS:
-            if _differ(r[stat], f[stat], tol):
-                out.append(f"{name}: column {col}, its {stat} over t = {t[0]:g}..{t[-1]:g} s: golden {r[stat]!r}, "
-                           f"now {f[stat]!r} {why}")
+            a, b = r[stat], f[stat]
+            if _differ(a, b, tol):
+                d = "NaN" if a is None or b is None else f"{abs(a - b):.3g}"
+                out.append(f"{name}: column {col}, its {stat} over t = {t[0]:g}..{t[-1]:g} s: golden {a!r}, "
+                           f"now {b!r} (|diff| {d} {why})")
         if r["nan_rows"] != f["nan_rows"]:
             out.append(f"{name}: column {col}: {f['nan_rows']} NaN rows, golden {r['nan_rows']}")
     return out + _summary_mismatches(name, ref["summary"], new["summary"], SOLVER_REL if solver else SUMMARY_REL)
