@@ -256,7 +256,7 @@ def test_chain_in_order_rods_thrusters_then_cmgs(full_runs):
     end; the composer's blocks and the CSV columns in the same order."""
     from stationbed.run.blocks import run_blocks  # noqa: PLC0415
     from stationbed.run.closed_loop import ControlLoop  # noqa: PLC0415
-    from stationbed.run.fused import _symbolic_params  # noqa: PLC0415
+    from stationbed.run.law_state import law_numbers  # noqa: PLC0415
     from stationbed.run.prepare import prepare  # noqa: PLC0415
     from stationbed.run.rows import Rows  # noqa: PLC0415
     from stationbed.run.segments import breakpoints  # noqa: PLC0415
@@ -268,7 +268,7 @@ def test_chain_in_order_rods_thrusters_then_cmgs(full_runs):
     loop = ControlLoop(s, run.system, run.integrator, run.p, run.x0.copy(), Rows(s, run.system, run.p, None, True),
                        20.0, PERIOD_S, bps, lambda t, x: x, None, True)
     assert [a.kind for a in loop.comp.chain] == ["magnetorquers", "thrusters", "cmg_cluster"]
-    cp = _symbolic_params(loop.comp.ctrl)
+    cp = law_numbers(loop.comp.ctrl)
     assert [bl.name for bl in run_blocks(loop.comp, cp) if bl.role == "actuator"] == ["magnetorquers", "thrusters"]
     assert b.columns.index("mtq_m_x") < b.columns.index("thr_mode")
 
