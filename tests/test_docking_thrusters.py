@@ -230,3 +230,39 @@ def test_set_through_the_docked_mass_centre_is_refused(docked, events, where):
     c = ", ".join(f"{v:.6g}" for v in c_docked(R_AXIAL))
     assert "the set makes no torque about -x, +x, -y, +y, -z, +z of B" in msg
     assert f"(about the composite mass centre [{c}] m{where})" in msg, msg
+
+
+#: the LP mapping (scipy HiGHS) meets its equality rows to its primal feasibility tolerance (1e-7
+#: on rows scaled to F_max = 1, x 2e3 N m of arm times force: 2e-4 N m at worst; measured 1.3e-12,
+#: HiGHS's vertex solved to round-off); the mapping on a wrong c is ~7e1 N m off
+LP_ABS_NM = 1e-3
+
+
+def test_lp_mapping_on_the_configuration_told():
+    """``mapping = "lp"`` (per tick, in Python) maps on the mass centre flight software was told of
+    too: the berth's dump, as :func:`test_dump_delivered_once_the_configuration_is_known`."""
+    d = station(False, [BERTH])
+    d["thrusters"]["mapping"] = "lp"
+    tr = simulate(scene_from_dict(d), fused=False)
+    pulses = _pulses(tr)
+    h = tr.cols("hx", "hy", "hz")[:-1]
+    hn = np.linalg.norm(h, axis=1)[:, None]
+    request = -(hn - H_MIN * H_MAX_NMS) / hn * h / DUMP_TIME_S
+    G = np.array([t["direction_B"] for t in one_way()]) * F_N
+    for k, t in enumerate(tr.t[:-1]):
+        c_true, c_known = _true_c("berth", t), _known_c("berth", t)
+        made = pulses[k] @ _arms(c_true) / PERIOD_S
+        assert_allclose(made, request[k] + np.cross(c_known - c_true, pulses[k] @ G / PERIOD_S), rtol=0, atol=LP_ABS_NM,
+                        err_msg=f"tick at {t:g} s")
+
+
+def test_mapping_whose_structure_would_change_cannot_be_told():
+    """:func:`one_way`'s pods at ±x alone have no positive null vector about the station's mass
+    centre (no shift: forces clipped) but one about the docked station's: the compiled mapping
+    cannot become the other, so telling flight software is refused, naming the event's key."""
+    few = one_way()[:4]
+    scene = scene_from_dict(station(False, [BERTH], thrusters=few))
+    with pytest.raises(ValueError, match=r"^event\[0\]\.update_after_s: thrusters: the mapping on the configuration"
+                                         r".*\(use update_after_s = \"never\"\)$"):
+        simulate(scene, fused=False)
+    simulate(scene.replace({"event[0].update_after_s": "never"}), fused=False)

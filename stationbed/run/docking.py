@@ -143,7 +143,10 @@ def docking_steps(comp) -> list[Step]:
         if cp is None:
             raise ValueError(f"event[{i}].update_after_s: controller '{comp.ctrl.name}' has no symbolic form, so it "
                              "cannot be told a new configuration mid-run; give update_after_s = \"never\"")
-        told = {"law": dict(enumerate(cp.tolist())), **_actuator_numbers(comp, known=known)}  # (the thrusters' mapping)
+        try:  # (the thrusters' mapping on the c flight software is told of)
+            told = {"law": dict(enumerate(cp.tolist())), **_actuator_numbers(comp, known=known)}
+        except ValueError as err:
+            raise ValueError(f"event[{i}].update_after_s: {err}") from None
         steps.append(Step(ku, f"event[{i}] update", {}, told, False, info=dict(info, update=True)))
     return steps
 
