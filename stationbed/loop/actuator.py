@@ -91,6 +91,9 @@ class Actuator:
        field, index)``, the memory before each row's tick) or ``columns(scene)`` and
        ``row_index()``, and ``summary(x)`` (what the run summary adds from the memory ``x``
        at the end). ``python_only`` (with ``why``) keeps a run per tick.
+    10. Optionally write ``configuration_numbers(truth, known)`` when some of its numbers
+        depend on the station's mass properties (the thrusters' arms about the composite mass
+        centre): a docking or undocking sets them as a step, the compiled code unchanged.
     """
 
     kind: ClassVar[str] = ""
@@ -147,6 +150,14 @@ class Actuator:
 
     def summary(self, x: np.ndarray) -> dict:
         """What the run's summary adds from its memory ``x`` at the end of the run."""
+        return {}
+
+    def configuration_numbers(self, truth=None, known=None) -> dict[int, float]:
+        """``{index in its numbers: value}`` of the numbers that depend on the station's
+        configuration (rule 10): those of the truth flown, from the scene ``truth``, and those
+        flight software knows, from ``known`` (either None: left out). A docking event sets the
+        truth's at its tick and the knowledge's when flight software is told (run/docking.py).
+        None by default (a kind whose numbers do not depend on the mass properties)."""
         return {}
 
     # -- declarations -------------------------------------------------------------------

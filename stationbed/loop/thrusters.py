@@ -28,9 +28,17 @@ Per tick (one casadi expression, :meth:`ThrusterCluster._command`):
 
 The torque of thruster i is ``(r_i - c) × F_i ĝ_i`` about the composite mass centre c. The
 arrays are balanced about their rotation axes (DESIGN §4), so c does not move as they turn: it
-is the constant ``Σ m r / Σ m`` of the scene (flexible modes shift it by their modal
-displacement, neglected here: ~ m_p |η| / m_total, below a millimetre for the shipped modes).
-The executors use the truth's c; the mapping uses the knowledge scene's. The force is recorded
+is ``Σ m r / Σ m`` of the body, the arrays and the vehicles docked
+(:func:`~stationbed.scene.docking.mass_centre_B`; flexible modes shift it by their modal
+displacement, neglected here: ~ m_p |η| / m_total, below a millimetre for the shipped modes),
+constant between configuration changes. The executors use the truth's c (the numbers
+``torque_B``); the mapping uses the c flight software knows (``M``, ``V`` and ``c_known``, the
+knowledge scene's). A docking or undocking (``[[event]]``) moves c: its step sets ``torque_B``
+about the new c at the event's tick, and the mapping's numbers when flight software is told
+(``update_after_s``; :meth:`ThrusterCluster.configuration_numbers`, run/docking.py), the
+compiled code unchanged. Until then the thrusters make ``(c_known - c) × Σ F_i ĝ_i`` more than
+asked, ``Σ F_i ĝ_i`` the net force of the pulses (none for an exact pure couple, whose torque
+is the same about any point). The force is recorded
 (the impulse) but does not change the orbit (docs/loop.md: the orbit is prescribed, and the
 ISS's attitude thrusters' net impulse is a pure couple where they can make one).
 """
@@ -44,6 +52,7 @@ import casadi as ca
 import numpy as np
 
 from ..model.cmg import held_momentum_B
+from ..scene.docking import mass_centre_B
 from ..scene.thrusters import missing_torque, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
@@ -195,9 +204,8 @@ class ThrusterCluster(Actuator):
         self.n = len(scene.thruster)
         self.names = [t.name for t in scene.thruster]
         self.D, self.G = torque_arms(scene)
-        self.D_known, self.G_known = torque_arms(known)
-        pairs = opposed_pairs([t.position_B for t in known.thruster], [t.unit_B for t in known.thruster])
-        self.M, self.V, self.pure = mapping_matrices(self.D_known, self.G_known, pairs)
+        self.known = known
+        self.c_known, self.M, self.V, self.pure = self._mapping(known)
         self.support = supports(self.V)
         self.capacity = float(capacity_Nms)
         self.h_held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
@@ -206,6 +214,36 @@ class ThrusterCluster(Actuator):
         #: the mode manager commands the mode (``[fdir]``, loop/fdir.py: its memory ``fdir_mode``)
         self.commanded = getattr(scene, "fdir", None) is not None
         super().__init__()
+
+    @staticmethod
+    def _mapping(known) -> tuple:
+        """``(c_known, M, V, pure)``: flight software's mass centre [m] and mapping
+        (:func:`mapping_matrices`) on the configuration ``known``."""
+        D, G = torque_arms(known)
+        pairs = opposed_pairs([t.position_B for t in known.thruster], [t.unit_B for t in known.thruster])
+        return (mass_centre_B(known), *mapping_matrices(D, G, pairs))
+
+    def configuration_numbers(self, truth=None, known=None) -> dict[int, float]:
+        """The numbers a configuration sets (:meth:`Actuator.configuration_numbers`): from
+        ``truth`` each thruster's torque ``torque_B`` about its mass centre, from ``known`` the
+        mapping's (``M``, ``V``, ``c_known``). ValueError when ``known``'s mapping has another
+        structure (a pure couple, or which thrusters a shift moves: it shapes the compiled code)."""
+        L = self.param_layout
+        fields = {}
+        if truth is not None:
+            fields["torque_B"] = torque_arms(truth)[0] * self.f_max
+        if known is not None:
+            c, M, V, pure = self._mapping(known)
+            if pure != self.pure or V.shape != self.V.shape or supports(V) != self.support:
+                raise ValueError(f"thrusters: the mapping on the configuration of mass centre {np.round(c, 6).tolist()} m "
+                                 f"is {'a pure couple' if pure else 'not a pure couple'} with shifts moving "
+                                 f"{supports(V)}, the run's {'is' if self.pure else 'is not'} with {self.support}: "
+                                 "flight software cannot be told it mid-run (use update_after_s = \"never\")")
+            fields.update(M=M, V=V, c_known=c)
+        values = L.split(self.params)
+        values.update(fields)
+        new = L.pack(values)
+        return {i: float(new[i]) for name in fields for i in range(L.slice(name).start, L.slice(name).stop)}
 
     @classmethod
     def from_scene(cls, scene, known, plant) -> "ThrusterCluster":
@@ -278,7 +316,7 @@ class ThrusterCluster(Actuator):
         state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
                        impulse_Ns=1, propellant_kg=1)
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
-                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n)
+                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n, c_known=3)
         outputs = Layout(request_B=3, force_N=n)
         return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1, "cmg_capacity": 1} if self.commanded else {}))
 
@@ -292,7 +330,8 @@ class ThrusterCluster(Actuator):
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
                     inhibit=[v for w in o.inhibit for v in w] or [0.0],
-                    ok=np.ones(self.n), leak=np.zeros(self.n))  # the truth's valves (scheduled faults)
+                    ok=np.ones(self.n), leak=np.zeros(self.n),  # the truth's valves (scheduled faults)
+                    c_known=self.c_known)  # the mass centre the mapping is about (the LP's arms)
 
     def _initial(self) -> dict:
         """Everything 0: CMG control, not dumping, nothing fired (``thruster_only``: its first
@@ -423,12 +462,13 @@ class ThrusterCluster(Actuator):
         request, fire = self._lp
         req, aux = (np.asarray(v).ravel() for v in request(t, h, x, r, tau_B, self.params))
         F = None
-        if np.any(req != 0.0):
-            F = map_lp(self.D_known * self.f_max, self.G_known * self.f_max, np.ones(self.n), req,
-                       1.0 / self.isp, self.pure)
+        L = self.param_layout
+        if np.any(req != 0.0):  # on the configuration flight software was told of (its c_known)
+            D_known, G_known = torque_arms(self.known, L.get(self.params, "c_known"))
+            F = map_lp(D_known * self.f_max, G_known * self.f_max, np.ones(self.n), req, 1.0 / self.isp, self.pure)
             F = None if F is None else F * self.f_max
         if F is None:
-            F = map_min_norm_shift(self.M, self.V, self.f_max, req)
+            F = map_min_norm_shift(L.get(self.params, "M"), L.get(self.params, "V"), self.f_max, req)
         x_next, rest, on, Tq, out = (np.asarray(v).ravel() for v in fire(t, h, x, tau_B, self.params, F, aux))
         out[self.outputs.slice("request_B")] = req
         self.n_commands += 1

@@ -23,35 +23,10 @@ import numpy as np
 
 from ..core.linalg import inv3
 from ..core.massprops import composite_cm, parallel_axis
-from ..core.rotation import dcm
+from ..scene.docking import docked_parts, vehicle_in_B  # (the scene's geometry, re-exported: one definition)
 
 __all__ = ["vehicle_in_B", "docked_parts", "composite", "reduced_mass", "capture_terms", "separation_impulse",
            "separation_terms", "event_jump", "event_terms"]
-
-
-def vehicle_in_B(vehicle, port):
-    """A vehicle docked at ``port``: mass [kg], mass centre (body coordinates [m], (3,)),
-    inertia about its own mass centre in B axes [kg m²] (3, 3) and ``C_BV`` (3, 3).
-
-    The vehicle's axes V are the port's (``q_VB``); its ``cm`` is measured from its docking
-    interface, which sits at the port's ``position``."""
-    C_VB = dcm(np.asarray(port.q_VB, float))
-    C_BV = C_VB.T
-    r_B = np.asarray(port.position, float) + C_BV @ np.asarray(vehicle.cm, float)
-    I_B = C_BV @ np.asarray(vehicle.inertia, float) @ C_VB
-    return float(vehicle.mass), r_B, I_B, C_BV
-
-
-def docked_parts(scene) -> list[tuple]:
-    """``(mass, r_B, I_B)`` of every vehicle docked in ``scene``, in ``[[vehicle]]`` order
-    (:func:`vehicle_in_B`); a massless vehicle is left out (it changes nothing, bit for bit)."""
-    ports = {p.name: p for p in scene.port}
-    out = []
-    for v in scene.vehicle:
-        if v.port and v.mass > 0.0:
-            m, r, I_B, _ = vehicle_in_B(v, ports[v.port])
-            out.append((m, r, I_B))
-    return out
 
 
 def composite(masses, cms, inertias):

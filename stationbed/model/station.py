@@ -24,11 +24,11 @@ import numpy as np
 
 from ..core.layout import Layout
 from ..core.linalg import inv3
-from ..core.massprops import composite_cm, parallel_axis
+from ..core.massprops import parallel_axis
 from ..core.rotation import dcm
+from ..scene.docking import docked_parts, mass_centre_B
 from .appendages import drive_acceleration, drive_from_error, glider_error, joint_kinematics, profile, sun_targets
 from .cmg import CmgModel
-from .docking import docked_parts
 from .environment import sun_direction_N
 from .flex import Modes
 from .orbit import OrbitAt, orbit_at, orbit_params, orbit_plane
@@ -128,9 +128,8 @@ class StationModel:
         L = self.layout
         p = np.zeros(L.size)
         masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-        cms = [scene.body.cm] + [a.cm for a in scene.appendage]
         vehicles = docked_parts(scene)  # issue 35: docked vehicles are rigid parts of the body
-        r_O = composite_cm(masses + [m for m, _, _ in vehicles], cms + [r for _, r, _ in vehicles])
+        r_O = mass_centre_B(scene)
         I0 = np.array(scene.body.inertia) + parallel_axis(scene.body.mass, np.array(scene.body.cm) - r_O)
         for m_v, r_v, I_v in vehicles:
             I0 += I_v + parallel_axis(m_v, r_v - r_O)

@@ -37,9 +37,8 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from ..core.massprops import composite_cm
-from .docking import docked_parts, vehicle_in_B
 from ..scene import Surface
+from ..scene.docking import mass_centre_B, vehicle_in_B
 
 __all__ = ["PLATE_FIELDS", "Plate", "scene_plates", "surface_origin_params", "vehicle_places", "default_surfaces", "plates_B", "aero_torque_B", "srp_torque_B"]
 
@@ -134,10 +133,7 @@ def surface_origin_params(scene) -> np.ndarray:
     """The ``surf_O`` parameters: the composite mass centre ``r_O``, then each appendage's mass
     centre ``a_k`` (body coordinates [m]), then a vehicle plate set's on flag (1 while that
     vehicle is docked at that port, :func:`vehicle_places`), shape (3 + 3 n_app + n_places,)."""
-    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    vehicles = docked_parts(scene)
-    r_O = composite_cm(masses + [m for m, _, _ in vehicles], [scene.body.cm] + [a.cm for a in scene.appendage]
-                       + [r for _, r, _ in vehicles])
+    r_O = mass_centre_B(scene)
     on = [1.0 if v.port == p.name else 0.0 for v, p in vehicle_places(scene)]
     return np.concatenate([np.asarray(r_O, float)] + [np.asarray(a.cm, float) for a in scene.appendage] + [on])
 

@@ -12,6 +12,12 @@ Knowledge: the law flies the configuration it was told of. ``update_after_s`` af
 (the first tick at or after it) it is told the new one: a law with a ``symbolic`` form gets the
 numbers it would design on the new plant (a copy of it designs, :func:`law_numbers_after`) as a
 step of its block's numbers ("law"), on every executor; ``"never"`` leaves it on the old ones.
+
+Actuators whose numbers depend on the mass properties (the thrusters: each one's torque
+``(r_i - c) × F_i ĝ_i`` about the composite mass centre c, docked vehicles included) get the
+truth's numbers of the new configuration in the event's step and flight software's (the
+thrusters' mapping on the c it is told of) in the update's
+(:meth:`~stationbed.loop.actuator.Actuator.configuration_numbers`), as steps of their block's numbers.
 """
 
 from __future__ import annotations
@@ -92,6 +98,18 @@ def law_numbers_after(ctrl, system, period: float, known_scene) -> np.ndarray | 
     return np.asarray([float(v) for v in other.symbolic_params()], float)
 
 
+def _actuator_numbers(comp, truth=None, known=None) -> dict:
+    """Block name -> {index: value}: the actuators' numbers of a configuration, the truth's
+    from the scene ``truth`` or flight software's from ``known``
+    (:meth:`~stationbed.loop.actuator.Actuator.configuration_numbers`; kinds with none left out)."""
+    out = {}
+    for a in comp.actuators:
+        nums = a.cluster.configuration_numbers(truth=truth, known=known)
+        if nums:
+            out[a.name] = nums
+    return out
+
+
 def docking_steps(comp) -> list[Step]:
     """The steps of the scene's ``[[event]]`` tables (a :data:`~.schedule.SOURCES` entry)."""
     scene = comp.scene
@@ -113,18 +131,23 @@ def docking_steps(comp) -> list[Step]:
         plant = {int(j): float(ps[i + 1][j]) for j in changed}
         info = {"event": i, "kind": e.kind, "vehicle": e.vehicle, "port": e.port or configs[i].vehicle[
             [v.name for v in configs[i].vehicle].index(e.vehicle)].port}
-        steps.append(Step(k, f"event[{i}] {e.kind} {e.vehicle}", plant, {}, False, info=info, kick=_kick(form, K, c)))
+        truth = _actuator_numbers(comp, truth=configs[i + 1])  # e.g. the thrusters' arms about the new mass centre
+        steps.append(Step(k, f"event[{i}] {e.kind} {e.vehicle}", plant, truth, False, info=info, kick=_kick(form, K, c)))
         ku = update_tick(e, period)
         if ku is None or ku > ticks:
             continue
         from ..scene.knowledge import knowledge_scene  # noqa: PLC0415
 
-        cp = law_numbers_after(comp.ctrl, comp.system, period, knowledge_scene(configs[i + 1]))
+        known = knowledge_scene(configs[i + 1])
+        cp = law_numbers_after(comp.ctrl, comp.system, period, known)
         if cp is None:
             raise ValueError(f"event[{i}].update_after_s: controller '{comp.ctrl.name}' has no symbolic form, so it "
                              "cannot be told a new configuration mid-run; give update_after_s = \"never\"")
-        steps.append(Step(ku, f"event[{i}] update", {}, {"law": dict(enumerate(cp.tolist()))}, False,
-                          info=dict(info, update=True)))
+        try:  # (the thrusters' mapping on the c flight software is told of)
+            told = {"law": dict(enumerate(cp.tolist())), **_actuator_numbers(comp, known=known)}
+        except ValueError as err:
+            raise ValueError(f"event[{i}].update_after_s: {err}") from None
+        steps.append(Step(ku, f"event[{i}] update", {}, told, False, info=dict(info, update=True)))
     return steps
 
 

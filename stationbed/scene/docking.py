@@ -36,14 +36,16 @@ from __future__ import annotations
 
 from typing import Literal
 
+import numpy as np
 from pydantic import Field, field_validator, model_validator
 
-from ..core.massprops import InvalidMassProperties, checked_inertia_rows
+from ..core.massprops import InvalidMassProperties, checked_inertia_rows, composite_cm
+from ..core.rotation import dcm
 from .base import FieldError, Mat3, Strict, UnitDirection, Vec3, unit_quaternion
 from .environment import Surface
 
 __all__ = ["Port", "Vehicle", "Event", "EVENT_KINDS", "check_docking", "docked_at", "configuration_changes",
-           "configuration_at"]
+           "configuration_at", "vehicle_in_B", "docked_parts", "mass_centre_B", "configuration_ports"]
 
 #: the event kinds: what each does to the configuration
 EVENT_KINDS = ("dock", "berth", "undock")
@@ -144,6 +146,58 @@ def _named(names: list[str], name: str, field: str, what: str) -> None:
 def docked_at(scene) -> dict[str, str]:
     """Vehicle name -> the port it is docked at in ``scene`` (free vehicles left out)."""
     return {v.name: v.port for v in scene.vehicle if v.port}
+
+
+def vehicle_in_B(vehicle, port):
+    """A vehicle docked at ``port``: mass [kg], mass centre (body coordinates [m], (3,)),
+    inertia about its own mass centre in B axes [kg m²] (3, 3) and ``C_BV`` (3, 3).
+
+    The vehicle's axes V are the port's (``q_VB``); its ``cm`` is measured from its docking
+    interface, which sits at the port's ``position``."""
+    C_VB = dcm(np.asarray(port.q_VB, float))
+    C_BV = C_VB.T
+    r_B = np.asarray(port.position, float) + C_BV @ np.asarray(vehicle.cm, float)
+    I_B = C_BV @ np.asarray(vehicle.inertia, float) @ C_VB
+    return float(vehicle.mass), r_B, I_B, C_BV
+
+
+def docked_parts(scene, where: dict | None = None) -> list[tuple]:
+    """``(mass, r_B, I_B)`` of every vehicle docked in ``scene``, in ``[[vehicle]]`` order
+    (:func:`vehicle_in_B`); a massless vehicle is left out (it changes nothing, bit for bit).
+    ``where`` (vehicle name -> port, :func:`configuration_ports`) puts them elsewhere."""
+    ports = {p.name: p for p in scene.port}
+    out = []
+    for v in scene.vehicle:
+        port = v.port if where is None else where.get(v.name, "")
+        if port and v.mass > 0.0:
+            m, r, I_B, _ = vehicle_in_B(v, ports[port])
+            out.append((m, r, I_B))
+    return out
+
+
+def mass_centre_B(scene, where: dict | None = None) -> np.ndarray:
+    """The composite mass centre [m], body coordinates, shape (3,): ``Σ m r / Σ m`` of the body,
+    the appendages (balanced about their axes: it does not move as they turn) and the vehicles
+    docked (:func:`docked_parts`, ``where`` as there). The one definition: the model's
+    parameters (inertia about it, surfaces from it) and the thrusters' arms use it."""
+    vehicles = docked_parts(scene, where)
+    masses = [scene.body.mass] + [a.mass for a in scene.appendage] + [m for m, _, _ in vehicles]
+    cms = [scene.body.cm] + [a.cm for a in scene.appendage] + [r for _, r, _ in vehicles]
+    return composite_cm(masses, cms)
+
+
+def configuration_ports(scene) -> list[dict[str, str]]:
+    """Vehicle name -> port (``""`` free) in each configuration of ``scene``: as it starts, then
+    after each of its ``[[event]]`` tables still to come (an event ``done`` is history: the
+    scene's ports already say so). A valid scene's (:func:`check_docking`)."""
+    where = {v.name: v.port for v in scene.vehicle}
+    out = [dict(where)]
+    for e in scene.event:
+        if e.done:
+            continue
+        where[e.vehicle] = "" if e.kind == "undock" else e.port
+        out.append(dict(where))
+    return out
 
 
 def check_docking(scene) -> None:

@@ -98,11 +98,11 @@ class Scene(Strict):
         _check_plan(self)
         _check_sensors(self)
         _check_knowledge(self)
+        check_docking(self)  # (first: the thrusters' arms are about the mass centre of each configuration)
         check_thrusters(self)
         check_magnetorquers(self)
         check_fdir(self)
         check_faults(self)
-        check_docking(self)
         return self
 
     # -- convenience -------------------------------------------------------------------

@@ -19,7 +19,8 @@ The scene holds them as ``Scene.thruster`` (list) and ``Scene.thrusters`` (optio
 loop fires them (docs/loop.md, "Actuators").
 
 Thrusters push one way only: a set turns the station about an axis when it makes torque both
-ways (:func:`torque_authority`, about the composite mass centre). ``mode = "thruster_only"``
+ways (:func:`torque_authority`, about the composite mass centre, docked vehicles included, in
+each configuration the ``[[event]]`` tables make). ``mode = "thruster_only"``
 with a set that cannot, or ``"assist"`` with one that makes no torque at all, is refused at
 load, naming the directions and the thrusters that make no torque (the classic mistake:
 positions from the mass centre, not from the origin of ``[body] cm``); an assist set that
@@ -37,11 +38,11 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..core.massprops import composite_cm
 from .base import Direction, FieldError, Strict, Vec3
+from .docking import configuration_ports, mass_centre_B
 
 __all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "torque_arms", "torque_authority",
-           "missing_torque", "AUTHORITY_ROUNDOFF_REL"]
+           "missing_torque", "mass_centres", "AUTHORITY_ROUNDOFF_REL"]
 
 #: a thruster's torque per newton, or the set's torque authority about an axis, below this fraction
 #: of the set's scale (the largest |r_i - c| + 1 m; Σ |(r_i - c) × ĝ_i| F_i) is round-off of the
@@ -121,18 +122,14 @@ class ThrusterOptions(Strict):
         return self
 
 
-def _mass_centre(scene) -> np.ndarray:
-    """The composite mass centre [m], B axes (the body's and the appendages')."""
-    masses = [scene.body.mass] + [a.mass for a in scene.appendage]
-    return composite_cm(masses, [scene.body.cm] + [a.cm for a in scene.appendage])
-
-
-def torque_arms(scene) -> tuple[np.ndarray, np.ndarray]:
+def torque_arms(scene, c_B=None) -> tuple[np.ndarray, np.ndarray]:
     """(D, G), each (3, n): column i the torque per newton ``(r_i - c) × ĝ_i`` [m] and the unit
-    force direction ĝ_i of thruster i, c the scene's composite mass centre (B axes). The arrays
-    are balanced about their rotation axes (DESIGN §4), so c is the constant ``Σ m r / Σ m`` of
-    the body and the appendages' mass centres, whatever the arrays' angles."""
-    c = _mass_centre(scene)
+    force direction ĝ_i of thruster i, c the composite mass centre (B axes) of the body, the
+    appendages and the vehicles docked in ``scene`` (:func:`~.docking.mass_centre_B`), or
+    ``c_B`` [m] when given (another configuration's). The arrays are balanced about their
+    rotation axes (DESIGN §4), so c is the constant ``Σ m r / Σ m`` of the configuration,
+    whatever the arrays' angles; a docking or undocking moves it (run/docking.py)."""
+    c = mass_centre_B(scene) if c_B is None else np.asarray(c_B, dtype=float)
     G = np.array([t.unit_B for t in scene.thruster], dtype=float).T
     R = np.array([t.position_B for t in scene.thruster], dtype=float).T - c[:, None]
     return np.cross(R.T, G.T).T, G
@@ -166,10 +163,11 @@ def _named(names: list[str]) -> str:
     return ", ".join(names[:NAMED_MAX]) + (f" and {more} more" if more > 0 else "")
 
 
-def missing_torque(scene) -> list[str]:
-    """The directions of B (``"-x"``, ``"+y"``, ...) the thrusters cannot turn the station about:
-    :func:`torque_authority` at round-off (:data:`AUTHORITY_ROUNDOFF_REL`)."""
-    D, _ = torque_arms(scene)
+def missing_torque(scene, c_B=None) -> list[str]:
+    """The directions of B (``"-x"``, ``"+y"``, ...) the thrusters cannot turn the station about
+    (about its mass centre, or ``c_B`` as :func:`torque_arms`): :func:`torque_authority` at
+    round-off (:data:`AUTHORITY_ROUNDOFF_REL`)."""
+    D, _ = torque_arms(scene, c_B)
     f_max = np.array([t.force_N for t in scene.thruster])
     return list(_missing(D.tobytes(), f_max.tobytes()))
 
@@ -217,24 +215,39 @@ def _shown(D: np.ndarray, f_max: np.ndarray, floor: float) -> bool:
     return True
 
 
+def mass_centres(scene) -> list[tuple[str, np.ndarray]]:
+    """``(where, c)`` of each configuration the scene flies with a mass centre of its own: as it
+    starts (``where`` ""), then after each ``[[event]]`` that moves it (``" after event[i] (kind
+    vehicle)"``), c [m] in body coordinates (:func:`~.docking.mass_centre_B`)."""
+    out = [("", mass_centre_B(scene))]
+    todo = [(i, e) for i, e in enumerate(scene.event) if not e.done]
+    for (i, e), where in zip(todo, configuration_ports(scene)[1:]):
+        c = mass_centre_B(scene, where)
+        if not any(np.array_equal(c, c0) for _, c0 in out):
+            out.append((f" after event[{i}] ({e.kind} {e.vehicle})", c))
+    return out
+
+
 def _check_authority(scene, mode: str) -> None:
-    """Refuse a set that cannot deliver what ``mode`` asks of it at every tick: thruster-only
-    control needs torque both ways about each axis; assist needs some torque to dump with (a set
-    that dumps about some axes only is flown, and its run's summary says which it lacks). The
-    message names the directions and the thrusters that make no torque at all."""
-    missing = missing_torque(scene)
-    if not missing or (mode == "assist" and len(missing) < 6):
-        return
-    D, _ = torque_arms(scene)
-    c = _mass_centre(scene)
-    size_m = 1.0 + max(np.linalg.norm(np.asarray(t.position_B) - c) for t in scene.thruster)
-    none = [t.name for t, a in zip(scene.thruster, np.linalg.norm(D, axis=0)) if a <= AUTHORITY_ROUNDOFF_REL * size_m]
-    who = (f"; {_named(none)} make no torque at all (their lines of action pass through the mass centre: "
-           "position_B is from the origin of [body] cm, not from the mass centre)") if none else ""
-    why = "dumps momentum" if mode == "assist" else "controls attitude about every axis"
-    where = ", ".join(f"{v:.6g}" for v in c)
-    raise FieldError("thruster", f"the set makes no torque about {', '.join(missing)} of B (about the composite "
-                                 f"mass centre [{where}] m), and mode '{mode}' {why}{who}")
+    """Refuse a set that cannot deliver what ``mode`` asks of it at every tick, in every
+    configuration (:func:`mass_centres`: a docked vehicle moves the mass centre the arms are
+    about): thruster-only control needs torque both ways about each axis; assist needs some
+    torque to dump with (a set that dumps about some axes only is flown, and its run's summary
+    says which it lacks). The message names the directions, the configuration and the
+    thrusters that make no torque at all."""
+    for where, c in mass_centres(scene):
+        missing = missing_torque(scene, c)
+        if not missing or (mode == "assist" and len(missing) < 6):
+            continue
+        D, _ = torque_arms(scene, c)
+        size_m = 1.0 + max(np.linalg.norm(np.asarray(t.position_B) - c) for t in scene.thruster)
+        none = [t.name for t, a in zip(scene.thruster, np.linalg.norm(D, axis=0)) if a <= AUTHORITY_ROUNDOFF_REL * size_m]
+        who = (f"; {_named(none)} make no torque at all (their lines of action pass through the mass centre: "
+               "position_B is from the origin of [body] cm, not from the mass centre)") if none else ""
+        why = "dumps momentum" if mode == "assist" else "controls attitude about every axis"
+        at = ", ".join(f"{v:.6g}" for v in c)
+        raise FieldError("thruster", f"the set makes no torque about {', '.join(missing)} of B (about the composite "
+                                     f"mass centre [{at}] m{where}), and mode '{mode}' {why}{who}")
 
 
 def check_thrusters(scene) -> None:
