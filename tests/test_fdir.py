@@ -184,7 +184,8 @@ def test_the_thrusters_dump_on_the_capacity_the_mode_manager_knows():
     c = ThrusterCluster(s, s, h4)
     dumping = []
     for cap in (h4, h3):
-        r = c.reads.pack(h_B=[0.17 * h4, 0.0, 0.0], fdir_mode=1.0, cmg_capacity=cap)
+        r = c.reads.pack(h_B=[0.17 * h4, 0.0, 0.0], fdir_mode=1.0, cmg_capacity=cap,  # (no unit declared: h_B itself)
+                         gimbal=np.zeros(8), t_unit=np.full(4, -1.0))
         x1 = c.command(0.0, H_S, c.x0, r, np.zeros(3))[0]
         dumping.append(c.state.get(x1, "dumping")[0])
     assert dumping == [0.0, 1.0]

@@ -4,7 +4,10 @@ hand-over to thruster-only control, force mapping, Schmitt pulse modulation, pro
 Per tick (one casadi expression, :meth:`ThrusterCluster._command`):
 
 1. **Mode and dump law.** ``f = |h| / capacity``, h and the capacity of the working units as
-   flight software knows them (a failed unit it knows of: its held momentum left out). Thruster-only control starts at ``f >= handover`` and ends at
+   flight software knows them (:meth:`ThrusterCluster._working_h`: a failed unit it knows of
+   from the start, its held momentum left out; with ``[fdir]``, once a unit is declared, the
+   units neither known failed nor declared, each one's rotor momentum at its measured gimbal
+   angles). Thruster-only control starts at ``f >= handover`` and ends at
    ``f <= handback`` (``mode = "assist"``; ``"thruster_only"``: always; ``"off"``: never
    fires). Dumping starts at ``f >= assist_on`` and stops at ``f <= dump_stop``; the dump
    request is ``ΔH = -(|h| - h_min)/|h| h`` and its torque ``ΔH / dump_time_s``, at most
@@ -43,7 +46,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..model.cmg import held_momentum_B
+from ..model.cmg import cmg_geometry, held_momentum_B
 from ..scene.thrusters import missing_torque, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
@@ -205,6 +208,12 @@ class ThrusterCluster(Actuator):
         self.isp = np.array([t.isp_s for t in scene.thruster])
         #: the mode manager commands the mode (``[fdir]``, loop/fdir.py: its memory ``fdir_mode``)
         self.commanded = getattr(scene, "fdir", None) is not None
+        #: the known cluster's geometry when the mode manager may declare a unit of a gimballed
+        #: cluster (then the working units' momentum is summed from their gimbal angles:
+        #: :meth:`_working_h`), else None
+        geo = cmg_geometry(known.cmg) if self.commanded and getattr(known, "cmg", None) is not None else None
+        self.cmg_geo = geo if geo is not None and geo.gimballed else None
+        self.cmg_pc = self.cmg_geo.params(known.cmg) if self.cmg_geo is not None else np.zeros(0)
         super().__init__()
 
     @classmethod
@@ -271,16 +280,24 @@ class ThrusterCluster(Actuator):
     def _structure(self) -> tuple:
         # which thrusters each shift moves (it shapes the compiled code)
         shifts = hashlib.sha1(repr(self.support).encode()).hexdigest()[:8]
-        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts) + (("fdir",) if self.commanded else ())
+        cmg = (self.cmg_geo.kind, self.cmg_geo.n_units) if self.cmg_geo is not None else ()
+        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts) + (("fdir", *cmg) if self.commanded else ())
 
     def _layouts(self):
         n, ni = self.n, len(self.opt.inhibit)
         state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
                        impulse_Ns=1, propellant_kg=1)
+        g = self.cmg_geo
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
-                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n)
+                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n,
+                        **({"cmg_pc": g.n_par} if g is not None else {}))
         outputs = Layout(request_B=3, force_N=n)
-        return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1, "cmg_capacity": 1} if self.commanded else {}))
+        # with [fdir]: its mode, the capacity it knows, and (a gimballed cluster) the gimbal angles
+        # and each unit's declaration time (its memory ``t_unit``, -1: not declared)
+        reads = {"fdir_mode": 1, "cmg_capacity": 1} if self.commanded else {}
+        if g is not None:
+            reads.update(gimbal=g.n_gimbals, t_unit=g.n_units)
+        return state, params, outputs, Layout(h_B=3, **reads)
 
     def _n_channels(self) -> int:
         return self.n
@@ -292,7 +309,8 @@ class ThrusterCluster(Actuator):
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
                     inhibit=[v for w in o.inhibit for v in w] or [0.0],
-                    ok=np.ones(self.n), leak=np.zeros(self.n))  # the truth's valves (scheduled faults)
+                    ok=np.ones(self.n), leak=np.zeros(self.n),  # the truth's valves (scheduled faults)
+                    **({"cmg_pc": self.cmg_pc} if self.cmg_geo is not None else {}))  # the known cluster's numbers
 
     def _initial(self) -> dict:
         """Everything 0: CMG control, not dumping, nothing fired (``thruster_only``: its first
@@ -302,7 +320,7 @@ class ThrusterCluster(Actuator):
     # -- the tick ---------------------------------------------------------------------------
     def _request(self, t, x, r, tau, p):
         """(mode, dumping, inhibited, L_dump, request): steps 1-2 of the module docstring."""
-        h_B = r["h_B"] - p["h_held"]  # the working units' momentum, as flight software knows them
+        h_B = self._working_h(r, p)
         hn = ca.norm_2(h_B)
         cap = self._capacity(r, p)
         f = hn / cap
@@ -325,6 +343,24 @@ class ThrusterCluster(Actuator):
             inh = ca.fmax(inh, ca.if_else(ca.logic_and(t >= w[2 * k], t < w[2 * k + 1]), 1.0, 0.0))
         req = (1.0 - inh) * (mode * tau + dumping * L_dump)
         return mode, dumping, inh, L_dump, req
+
+    def _working_h(self, r, p):
+        """The working units' momentum as flight software knows them, B [N m s]: ``h_B`` less the
+        held momentum of the units it knows failed from the start (``[cmg] failed``); with the
+        mode manager (``[fdir]``) of a gimballed cluster, once it has declared a unit (its memory
+        ``t_unit``), the sum over the units neither known failed nor declared of each one's rotor
+        momentum (the known ``h_rotor``) at its measured gimbal angles: a declared unit's
+        momentum (a stuck gimbal's rotor spinning on, a stopped rotor's nothing) is never the
+        working units' to dump. Until a declaration, exactly the first (the same numbers)."""
+        h = r["h_B"] - p["h_held"]
+        g = self.cmg_geo
+        if g is None:
+            return h
+        pc, d = p["cmg_pc"], [r["t_unit"][i] >= 0.0 for i in range(g.n_units)]
+        w = [pc[g.unit_index("working", i + 1)] * (1 - d[i]) for i in range(g.n_units)]
+        spins = [s for s, _ in g.spins(r["gimbal"], pc)]
+        h_work = pc[0] * sum((w[i] * spins[i] for i in range(1, g.n_units)), w[0] * spins[0])
+        return ca.if_else(sum(d[1:], d[0]) > 0, h_work, h)
 
     def _capacity(self, r, p):
         """The working units' capacity flight software knows: the table's; with the mode manager
@@ -380,7 +416,7 @@ class ThrusterCluster(Actuator):
         below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
         exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
         skip it (the fused loop does, behind a ``Function.if_else``)."""
-        f = ca.norm_2(r["h_B"] - p["h_held"]) / self._capacity(r, p)
+        f = ca.norm_2(self._working_h(r, p)) / self._capacity(r, p)
         m = self._mode_opt(r, p)
         quiet = ca.logic_and(m < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
         quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))
