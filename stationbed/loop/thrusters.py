@@ -50,6 +50,7 @@ from ..model.cmg import cmg_geometry, held_momentum_B
 from ..scene.thrusters import missing_torque, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
+from .working_momentum import working_momentum
 
 __all__ = ["ThrusterCluster", "G0_M_S2", "mapping_matrices", "map_min_norm_shift", "map_lp", "MODES", "opposed_pairs",
            "supports", "torque_arms"]
@@ -345,22 +346,16 @@ class ThrusterCluster(Actuator):
         return mode, dumping, inh, L_dump, req
 
     def _working_h(self, r, p):
-        """The working units' momentum as flight software knows them, B [N m s]: ``h_B`` less the
-        held momentum of the units it knows failed from the start (``[cmg] failed``); with the
-        mode manager (``[fdir]``) of a gimballed cluster, once it has declared a unit (its memory
-        ``t_unit``), the sum over the units neither known failed nor declared of each one's rotor
-        momentum (the known ``h_rotor``) at its measured gimbal angles: a declared unit's
-        momentum (a stuck gimbal's rotor spinning on, a stopped rotor's nothing) is never the
-        working units' to dump. Until a declaration, exactly the first (the same numbers)."""
-        h = r["h_B"] - p["h_held"]
+        """The working units' momentum as flight software knows them, B [N m s]
+        (:func:`~.working_momentum.working_momentum`): ``h_B`` less the held momentum of the
+        units known failed from the start; with the mode manager (``[fdir]``) of a gimballed
+        cluster, once it has declared a unit (its memory ``t_unit``), the sum over the units
+        left at their measured gimbal angles."""
         g = self.cmg_geo
         if g is None:
-            return h
-        pc, d = p["cmg_pc"], [r["t_unit"][i] >= 0.0 for i in range(g.n_units)]
-        w = [pc[g.unit_index("working", i + 1)] * (1 - d[i]) for i in range(g.n_units)]
-        spins = [s for s, _ in g.spins(r["gimbal"], pc)]
-        h_work = pc[0] * sum((w[i] * spins[i] for i in range(1, g.n_units)), w[0] * spins[0])
-        return ca.if_else(sum(d[1:], d[0]) > 0, h_work, h)
+            return r["h_B"] - p["h_held"]
+        declared = [r["t_unit"][i] >= 0.0 for i in range(g.n_units)]
+        return working_momentum(g, p["cmg_pc"], r["h_B"], p["h_held"], r["gimbal"], declared)
 
     def _capacity(self, r, p):
         """The working units' capacity flight software knows: the table's; with the mode manager
