@@ -136,3 +136,20 @@ def test_registry_and_scene_know_the_same_kinds():
     assert set(CMG_GEOMETRIES) == set(CMG_KINDS)
     for kind, cls in CMG_GEOMETRIES.items():
         assert cls.gimbals_per_unit == CMG_KINDS[kind].gimbals
+
+
+@pytest.mark.parametrize("kind", GIMBALLED)
+def test_envelope_of_the_units_left_is_the_capacity_with_the_others_failed(kind):
+    """``envelope(pc, weights)`` (the saturation flag's capacity of the units that move, symbolic)
+    times h_rotor is the kind's ``capacity`` of the scene with the units of weight 0 failed, for
+    every set of failed units but all."""
+    import itertools  # noqa: PLC0415
+
+    c = cfg(kind)
+    geo = cmg_geometry(c)
+    pc = geo.params(c)
+    for k in range(geo.n_units):
+        for failed in itertools.combinations(range(1, geo.n_units + 1), k):
+            w = [0.0 if i + 1 in failed else 1.0 for i in range(geo.n_units)]
+            got = float(geo.envelope(ca.DM(pc), w)) * c.h_rotor
+            assert got == pytest.approx(geo.capacity(c.model_copy(update={"failed": list(failed)})), rel=ROUNDOFF_REL)

@@ -50,8 +50,8 @@ RESIDUAL_ROUNDOFF = 1e-9
 SCENE = Path(__file__).resolve().parents[1] / "scenarios" / "iss_cmg_failure_fdir.toml"
 
 
-def _spec(modes=(), capacity_of=None, **kw):
-    more = {} if capacity_of is None else {"capacity_of": capacity_of}
+def _spec(modes=(), capacity_of=None, cmg=None, **kw):
+    more = ({} if capacity_of is None else {"capacity_of": capacity_of}) | ({} if cmg is None else {"cmg": cmg})
     return FdirSpec(Fdir(**kw), [ModeCommand(**m) for m in modes], N_UNITS, GPU, CAPACITY_NMS, **more)
 
 
@@ -175,6 +175,33 @@ def test_the_mode_manager_climbs_on_the_working_units_capacity():
     assert S.get(xs, "cmg_capacity").ravel()[-1] == 0.75 * CAPACITY_NMS
 
 
+def test_the_mode_manager_climbs_on_the_working_units_momentum():
+    """Four DGCMGs at small gimbal angles (spins near +z, +x, -z, -x: the cluster's total |h| ~ 100 N m s,
+    1 % of the capacity); unit 3 stops at tick 15 and is declared at 17 (on_cmg_fault = hold).
+    From tick 18 the climb reads the three units left, near +z h_rotor (the -z rotor held is not
+    theirs): |h_work| / (3 h_rotor) ~ 0.28 >= assist_at = 0.25, from the unit geometry written in
+    tests/test_fault_momentum.py at the ticks' gimbal angles."""
+    from stationbed.model.cmg import cmg_geometry  # noqa: PLC0415
+    from stationbed.scene import Cmg  # noqa: PLC0415
+    from test_fault_momentum import dgcmg_unit_momenta  # noqa: PLC0415
+
+    n, h_rotor = 30, CAPACITY_NMS / N_UNITS  # N m s: a DGCMG's capacity is n h_rotor
+    g = np.outer(np.arange(n), 1e-3 * np.arange(1, N_UNITS * GPU + 1))
+    g[15:, 4:6] = g[14, 4:6]
+    r = np.zeros((n, 3))
+    r[15:, 2] = 10.0  # N m
+    cfg = Cmg(kind="dgcmg", h_rotor=h_rotor)
+    geo = cmg_geometry(cfg)
+    spec = _spec(cmg_persistence=3, initial_mode="hold", on_cmg_fault="hold", assist_at=0.25,
+                 capacity_of=_working_capacity, cmg=(geo, geo.params(cfg), np.zeros(3)))
+    b, xs, _ = _fly(spec, r, gimbal=g)
+    S = b.state
+    assert S.get(xs, "t_unit")[-1].tolist() == [-1.0, -1.0, pytest.approx(17 * H_S, abs=1e-12), -1.0]
+    left = np.linalg.norm(dgcmg_unit_momenta(g, h_rotor)[:, [0, 1, 3]].sum(axis=1), axis=1) / (3 * h_rotor)
+    assert left[18] >= 0.25 * (1 + 0.01)  # (clear of the threshold at the first tick after the declaration)
+    assert S.get(xs, "fdir_mode").ravel().tolist() == [0.0] * 18 + [1.0] * 12
+
+
 def test_the_thrusters_dump_on_the_capacity_the_mode_manager_knows():
     """In assist, |h| = 0.17 of the four DGCMGs' capacity (4 h_rotor): under assist_on = 0.2 of
     it, over 0.2 of the three units' (3 h_rotor) the mode manager knows after a declaration."""
@@ -184,7 +211,8 @@ def test_the_thrusters_dump_on_the_capacity_the_mode_manager_knows():
     c = ThrusterCluster(s, s, h4)
     dumping = []
     for cap in (h4, h3):
-        r = c.reads.pack(h_B=[0.17 * h4, 0.0, 0.0], fdir_mode=1.0, cmg_capacity=cap)
+        r = c.reads.pack(h_B=[0.17 * h4, 0.0, 0.0], fdir_mode=1.0, cmg_capacity=cap,  # (no unit declared: h_B itself)
+                         gimbal=np.zeros(8), t_unit=np.full(4, -1.0))
         x1 = c.command(0.0, H_S, c.x0, r, np.zeros(3))[0]
         dumping.append(c.state.get(x1, "dumping")[0])
     assert dumping == [0.0, 1.0]

@@ -34,8 +34,9 @@ reads (``h_B``, ``omega_BN_B``, ``gimbal``: the law's view, the estimate's rate 
 3. **Mode manager.** ``hold`` (CMGs alone, thrusters off) < ``assist`` (the thrusters' assist
    logic as ``[thrusters]`` sets it) < ``thruster_only`` < ``drift`` (nothing commanded). The
    base mode starts at ``initial_mode``, rises to ``on_cmg_fault`` at a detection and from
-   ``hold`` to ``assist`` when ``|h| >= assist_at`` x capacity; a ``[[mode]]`` command
-   overrides it over its window (the last listed wins). The mode is the memory field
+   ``hold`` to ``assist`` when ``|h| >= assist_at`` x capacity (h the working units' momentum as
+   flight software knows them, :func:`~.working_momentum.working_momentum`, as the thrusters'
+   dump law reads it); a ``[[mode]]`` command overrides it over its window (the last listed wins). The mode is the memory field
    ``fdir_mode`` (the thrusters read it by name); in ``drift`` the CMGs are asked nothing. The
    capacity is the working units' as flight software knows them, the memory field
    ``cmg_capacity`` (the thrusters' dump and hand-over thresholds read it by name too): the
@@ -56,6 +57,7 @@ from scipy.stats import chi2
 from ..core.layout import Layout
 from .block import ACT_OUT, Block
 from .sensor_faults import NEVER_S, in_window
+from .working_momentum import working_momentum
 
 #: one scheduled mode command (a column of the block's ``cmds``): its window [s] and its mode
 MODE_CMD = Layout(window=2, mode=1)
@@ -95,10 +97,13 @@ class FdirSpec:
     """The numbers of one scene's ``[fdir]`` and ``[[mode]]`` tables, as the block's parameters."""
 
     def __init__(self, fdir, modes, n_units: int, gimbals_per_unit: int, capacity_Nms: float,
-                 tau_max_Nm: float = NEVER_S, suite=None, capacity_of=None):
+                 tau_max_Nm: float = NEVER_S, suite=None, capacity_of=None, cmg=None):
         """``capacity_of(declared)``: the working units' capacity flight software knows once the
         units ``declared`` (a tuple of 1-based numbers) are out [N m s]; None: ``capacity_Nms``
-        whatever is declared (the block alone, no cluster to ask)."""
+        whatever is declared (the block alone, no cluster to ask). ``cmg``: ``(geometry, pc,
+        h_held_B)`` of the known gimballed cluster (its numbers, the held momentum of its units
+        known failed) for the working units' momentum the ``assist_at`` climb reads; None: the
+        measured ``h_B`` itself."""
         self.n_units, self.gpu = int(n_units), int(gimbals_per_unit)
         self.n_cmd = len(modes)
         cmds = [MODE_CMD.pack(window=[m.t, NEVER_S if m.until is None else m.until], mode=MODE_NUMBERS[m.mode])
@@ -109,6 +114,11 @@ class FdirSpec:
                            tau_max=tau_max_Nm, cmds=np.array(cmds, float).T,
                            cap_table=[capacity_Nms if capacity_of is None or not m else capacity_of(_units(m))
                                       for m in range(2**self.n_units)])
+        #: the known cluster's geometry (or None) and its numbers for the working units' momentum
+        self.cmg_geo = None if cmg is None else cmg[0]
+        self.values["h_held"] = np.zeros(3) if cmg is None else np.asarray(cmg[2], float).reshape(3)
+        if cmg is not None:
+            self.values["cmg_pc"] = np.asarray(cmg[1], float)
         self.initial_mode = MODE_NUMBERS[fdir.initial_mode]
         self.alpha, self.n = fdir.cmg_alpha, fdir.cmg_persistence
         #: the flight's sensor suite (loop/suite.py) whose gyro detections inhibit the CMG test
@@ -154,12 +164,13 @@ def rate_suspect(suite, xs, t, settle):
     return ca.logic_or(ca.logic_and(suspect, ca.logic_not(switched)), settling)
 
 
-def _layouts(ng: int, n_units: int, n_cmd: int, n_xs: int = 0):
+def _layouts(ng: int, n_units: int, n_cmd: int, n_xs: int = 0, n_pc: int = 0):
     X = Layout(tau_prev=3, h_prev=3, w_prev=3, g_prev=ng, have=1, count=1, nis=1, cmg_fault=1, t_cmg=1, cmg_unit=1,
                cmg_excluded=n_units, base_mode=1, fdir_mode=1, mode_s=len(MODE_NUMBERS), mode_changes=1,
                t_unit=n_units, cmg_capacity=1)
     P = Layout(sigma=1, gamma=1, persist=1, isolate=1, on_fault=1, assist_at=1, tau_max=1,
-               cmds=(MODE_CMD.size, max(n_cmd, 1)), settle=1, cap_table=2**n_units)
+               cmds=(MODE_CMD.size, max(n_cmd, 1)), settle=1, cap_table=2**n_units, h_held=3,
+               **({"cmg_pc": n_pc} if n_pc else {}))
     # xs: the suite's memory (the sensing block's, read by name: what it was after the last
     # tick); tau_B last (the composer appends the chain's request to the fields it reads)
     U = Layout(h_B=3, omega_BN_B=3, gimbal=ng, **({"xs": n_xs} if n_xs else {}), tau_B=3)
@@ -173,7 +184,8 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     n_units, gpu = spec.n_units, spec.gpu
     ng = n_units * gpu
     n_xs = spec.suite.STATE.size if spec.suite is not None else 0
-    X, P, U, out = _layouts(ng, n_units, spec.n_cmd, n_xs)
+    geo = spec.cmg_geo
+    X, P, U, out = _layouts(ng, n_units, spec.n_cmd, n_xs, geo.n_par if geo is not None else 0)
     Y = ACT_OUT(0, out)
     k, t, h = ca.SX.sym("k"), ca.SX.sym("t"), ca.SX.sym("h")
     x, u, p = X.symbol("x"), U.symbol("u"), P.symbol("p")
@@ -207,7 +219,8 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
     t_unit = ca.vertcat(*[ca.if_else(ca.logic_and(new, unit == i + 1), t, xs["t_unit"][i]) for i in range(n_units)])
     # 3. the mode manager (on the capacity flight software knew after the last tick)
     base = ca.fmax(xs["base_mode"], new * ps["on_fault"])
-    climb = ca.logic_and(base < 0.5, ca.norm_2(h_B) >= ps["assist_at"] * xs["cmg_capacity"])
+    h_work = working_momentum(geo, ps["cmg_pc"] if geo is not None else None, h_B, ps["h_held"], g, declared)
+    climb = ca.logic_and(base < 0.5, ca.norm_2(h_work) >= ps["assist_at"] * xs["cmg_capacity"])
     base = ca.if_else(climb, float(MODE_NUMBERS["assist"]), base)
     mode = base
     for j in range(max(spec.n_cmd, 1)):
@@ -227,6 +240,6 @@ def fdir_block(spec: FdirSpec, name: str = "fdir") -> Block:
                 count=0.0, nis=0.0, cmg_fault=0.0, t_cmg=NOT_YET, cmg_unit=0.0, cmg_excluded=np.zeros(n_units),
                 base_mode=float(spec.initial_mode), fdir_mode=float(spec.initial_mode), mode_s=np.zeros(len(MODE_NUMBERS)),
                 mode_changes=0.0, t_unit=np.full(n_units, NOT_YET), cmg_capacity=spec.values["cap_table"][0])
-    return Block(name, "actuator", step, X, P, Layout(), U, Y, key=("fdir", ng, n_units, spec.n_cmd,
+    return Block(name, "actuator", step, X, P, Layout(), U, Y, key=("fdir", ng, n_units, spec.n_cmd, geo is not None,
                                                                       None if spec.suite is None else spec.suite.STATE.size), x0=x0,
                  p0=P.pack(spec.values))

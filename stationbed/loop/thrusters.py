@@ -4,7 +4,10 @@ hand-over to thruster-only control, force mapping, Schmitt pulse modulation, pro
 Per tick (one casadi expression, :meth:`ThrusterCluster._command`):
 
 1. **Mode and dump law.** ``f = |h| / capacity``, h and the capacity of the working units as
-   flight software knows them (a failed unit it knows of: its held momentum left out). Thruster-only control starts at ``f >= handover`` and ends at
+   flight software knows them (:meth:`ThrusterCluster._working_h`: a failed unit it knows of
+   from the start, its held momentum left out; with ``[fdir]``, once a unit is declared, the
+   units neither known failed nor declared, each one's rotor momentum at its measured gimbal
+   angles). Thruster-only control starts at ``f >= handover`` and ends at
    ``f <= handback`` (``mode = "assist"``; ``"thruster_only"``: always; ``"off"``: never
    fires). Dumping starts at ``f >= assist_on`` and stops at ``f <= dump_stop``; the dump
    request is ``ΔH = -(|h| - h_min)/|h| h`` and its torque ``ΔH / dump_time_s``, at most
@@ -51,11 +54,12 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..model.cmg import held_momentum_B
+from ..model.cmg import cmg_geometry, held_momentum_B
 from ..scene.docking import mass_centre_B
 from ..scene.thrusters import missing_torque, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
+from .working_momentum import working_momentum
 
 __all__ = ["ThrusterCluster", "G0_M_S2", "mapping_matrices", "map_min_norm_shift", "map_lp", "MODES", "opposed_pairs",
            "supports", "torque_arms"]
@@ -213,6 +217,12 @@ class ThrusterCluster(Actuator):
         self.isp = np.array([t.isp_s for t in scene.thruster])
         #: the mode manager commands the mode (``[fdir]``, loop/fdir.py: its memory ``fdir_mode``)
         self.commanded = getattr(scene, "fdir", None) is not None
+        #: the known cluster's geometry when the mode manager may declare a unit of a gimballed
+        #: cluster (then the working units' momentum is summed from their gimbal angles:
+        #: :meth:`_working_h`), else None
+        geo = cmg_geometry(known.cmg) if self.commanded and getattr(known, "cmg", None) is not None else None
+        self.cmg_geo = geo if geo is not None and geo.gimballed else None
+        self.cmg_pc = self.cmg_geo.params(known.cmg) if self.cmg_geo is not None else np.zeros(0)
         super().__init__()
 
     @staticmethod
@@ -309,16 +319,24 @@ class ThrusterCluster(Actuator):
     def _structure(self) -> tuple:
         # which thrusters each shift moves (it shapes the compiled code)
         shifts = hashlib.sha1(repr(self.support).encode()).hexdigest()[:8]
-        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts) + (("fdir",) if self.commanded else ())
+        cmg = (self.cmg_geo.kind, self.cmg_geo.n_units) if self.cmg_geo is not None else ()
+        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts) + (("fdir", *cmg) if self.commanded else ())
 
     def _layouts(self):
         n, ni = self.n, len(self.opt.inhibit)
         state = Layout(prev_on_s=n, acc_s=n, dumping=1, mode=1, on_total_s=n, firings=1, control_s=1,
                        impulse_Ns=1, propellant_kg=1)
+        g = self.cmg_geo
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
-                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n, c_known=3)
+                        levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n, c_known=3,
+                        **({"cmg_pc": g.n_par} if g is not None else {}))
         outputs = Layout(request_B=3, force_N=n)
-        return state, params, outputs, Layout(h_B=3, **({"fdir_mode": 1, "cmg_capacity": 1} if self.commanded else {}))
+        # with [fdir]: its mode, the capacity it knows, and (a gimballed cluster) the gimbal angles
+        # and each unit's declaration time (its memory ``t_unit``, -1: not declared)
+        reads = {"fdir_mode": 1, "cmg_capacity": 1} if self.commanded else {}
+        if g is not None:
+            reads.update(gimbal=g.n_gimbals, t_unit=g.n_units)
+        return state, params, outputs, Layout(h_B=3, **reads)
 
     def _n_channels(self) -> int:
         return self.n
@@ -331,7 +349,8 @@ class ThrusterCluster(Actuator):
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
                     inhibit=[v for w in o.inhibit for v in w] or [0.0],
                     ok=np.ones(self.n), leak=np.zeros(self.n),  # the truth's valves (scheduled faults)
-                    c_known=self.c_known)  # the mass centre the mapping is about (the LP's arms)
+                    c_known=self.c_known,  # the mass centre the mapping is about (the LP's arms)
+                    **({"cmg_pc": self.cmg_pc} if self.cmg_geo is not None else {}))  # the known cluster's numbers
 
     def _initial(self) -> dict:
         """Everything 0: CMG control, not dumping, nothing fired (``thruster_only``: its first
@@ -341,7 +360,7 @@ class ThrusterCluster(Actuator):
     # -- the tick ---------------------------------------------------------------------------
     def _request(self, t, x, r, tau, p):
         """(mode, dumping, inhibited, L_dump, request): steps 1-2 of the module docstring."""
-        h_B = r["h_B"] - p["h_held"]  # the working units' momentum, as flight software knows them
+        h_B = self._working_h(r, p)
         hn = ca.norm_2(h_B)
         cap = self._capacity(r, p)
         f = hn / cap
@@ -364,6 +383,18 @@ class ThrusterCluster(Actuator):
             inh = ca.fmax(inh, ca.if_else(ca.logic_and(t >= w[2 * k], t < w[2 * k + 1]), 1.0, 0.0))
         req = (1.0 - inh) * (mode * tau + dumping * L_dump)
         return mode, dumping, inh, L_dump, req
+
+    def _working_h(self, r, p):
+        """The working units' momentum as flight software knows them, B [N m s]
+        (:func:`~.working_momentum.working_momentum`): ``h_B`` less the held momentum of the
+        units known failed from the start; with the mode manager (``[fdir]``) of a gimballed
+        cluster, once it has declared a unit (its memory ``t_unit``), the sum over the units
+        left at their measured gimbal angles."""
+        g = self.cmg_geo
+        if g is None:
+            return r["h_B"] - p["h_held"]
+        declared = [r["t_unit"][i] >= 0.0 for i in range(g.n_units)]
+        return working_momentum(g, p["cmg_pc"], r["h_B"], p["h_held"], r["gimbal"], declared)
 
     def _capacity(self, r, p):
         """The working units' capacity flight software knows: the table's; with the mode manager
@@ -419,7 +450,7 @@ class ThrusterCluster(Actuator):
         below both thresholds, no pulse or remainder pending. :meth:`_command` then gives
         exactly ``(x, tau, 0, torque_B)`` (every term it adds is an exact 0), so an executor may
         skip it (the fused loop does, behind a ``Function.if_else``)."""
-        f = ca.norm_2(r["h_B"] - p["h_held"]) / self._capacity(r, p)
+        f = ca.norm_2(self._working_h(r, p)) / self._capacity(r, p)
         m = self._mode_opt(r, p)
         quiet = ca.logic_and(m < 0.5, ca.logic_and(x["mode"] < 0.5, x["dumping"] < 0.5))
         quiet = ca.logic_and(quiet, ca.logic_and(f < p["assist"][0], f < p["hand"][0]))

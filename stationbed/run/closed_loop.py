@@ -395,6 +395,8 @@ class ControlLoop:
             if held:
                 out["h_held_units_Nms"] = [{"t": a, "until": None if math.isinf(b) else b, "h_B": h.tolist()}
                                            for a, b, h in held]
+            if rs.capacity_steps:  # the working units' capacity as a fault takes units out (None: the start's)
+                out["h_capacity_steps_Nms"] = [{"t": a, "capacity_Nms": c} for a, c in rs.capacity_steps]
         if not res.used_fused:  # the one block (or part of the clock) that kept it off the fused path
             out["not_fused"] = why_not_fused(comp) or "fused = False asked"
         out.update(rs.values())

@@ -32,7 +32,7 @@ from typing import Callable
 from ..scene.faults import FAULT_KINDS, fault_tick
 from .schedule import SOURCES, Step
 
-__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "held_units", "SPIN_DOWN_STEPS_PER_TAU",
+__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "held_units", "capacity_steps", "SPIN_DOWN_STEPS_PER_TAU",
            "SPIN_DOWN_END_TAU"]
 
 #: a spinning-down rotor's staircase: steps per time constant (the rotor's momentum is exact at
@@ -74,6 +74,32 @@ def held_units(scene, cmg, columns) -> list:
         return lambda row: geo.unit_momenta_B(cfg, row[gi])[unit - 1]
 
     return [(f.t, math.inf if f.until is None else f.until, momentum(f.unit)) for f in stuck]
+
+
+#: the kinds after which (over their window) a unit is out of the working units: its gimbals held
+OUT_KINDS = ("cmg_failed", "gimbal_stuck")
+
+
+def capacity_steps(scene, cmg) -> list:
+    """The working units' capacity as the truth's CMG faults change it, for the metrics
+    (:class:`~.metrics.RunMetrics` ``capacity_steps``): ``(t, capacity)`` [s, N m s] at each
+    time the set of units out changes, in time order; ``capacity`` None where none is out (the
+    capacity at the start). A unit is out over its fault's window when the fault holds its
+    gimbals (``cmg_failed``, ``gimbal_stuck``): the capacity is then the cluster's with it
+    failed as ``[cmg] failed`` states one (:func:`~stationbed.model.cmg.capacity`). Empty
+    without such a fault."""
+    out = [f for f in getattr(scene, "fault", None) or () if f.kind in OUT_KINDS and f.enabled]
+    if cmg is None or not out or not cmg.geometry.gimballed:
+        return []
+    cfg, geo = scene.cmg, cmg.geometry
+    ends = [(f.t, math.inf if f.until is None else f.until, f.unit) for f in out]
+    steps = []
+    for t in sorted({e for a, b, _ in ends for e in (a, b) if math.isfinite(e)}):
+        units = sorted({u for a, b, u in ends if a <= t < b} - set(cfg.failed))
+        cap = geo.capacity(cfg.model_copy(update={"failed": sorted(set(cfg.failed) | set(units))})) if units else None
+        if not steps or steps[-1][1] != cap:
+            steps.append((t, cap))
+    return steps
 
 
 def _cmg(comp, unit: int, **values) -> dict:

@@ -14,6 +14,7 @@ import numpy as np
 from ..loop.fdir import MODE_NUMBERS, FdirSpec, false_alarms_per_hour, fdir_block
 from ..loop.sensor_faults import NEVER_S, SENSOR_FAULTS
 from ..loop.suite import Suite
+from ..model.cmg import held_momentum_B
 from .faults import register_fault_effect
 
 __all__ = ["FdirLoop", "fdir_for", "fdir_columns", "FDIR_COLUMNS", "detections_vs_truth"]
@@ -58,8 +59,10 @@ def fdir_for(scene, model, plant) -> "FdirLoop | None":
     def capacity_of(declared):
         return geo.capacity(known.model_copy(update={"failed": sorted(set(known.failed) | set(declared))}))
 
+    # the known cluster for the working units' momentum the assist_at climb reads (loop/working_momentum.py)
+    cmg = (geo, geo.params(known), held_momentum_B(known)) if geo.gimballed else None
     return FdirLoop(scene, FdirSpec(scene.fdir, scene.mode, geo.n_units, geo.gimbals_per_unit, plant.h_capacity, tau_max,
-                                    suite=suite, capacity_of=capacity_of))
+                                    suite=suite, capacity_of=capacity_of, cmg=cmg))
 
 
 class FdirLoop:

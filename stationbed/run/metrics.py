@@ -90,7 +90,8 @@ METRICS: dict[str, Metric] = {
     "rms_att_err_deg": Metric("deg", "RMS attitude error, time mean (trapezoid between rows) over t >= settle_s"),
     "max_h_Nms": Metric("N m s", "largest momentum |h| of the CMG cluster's working units over the output rows "
                         "(a failed unit's held rotor momentum left out)"),
-    "max_h_fraction": Metric("1", "max_h_Nms as a fraction of the working units' momentum capacity"),
+    "max_h_fraction": Metric("1", "largest |h| of the working units as a fraction of their momentum capacity over "
+                             "the output rows (each row's: a fault that holds a unit's gimbals takes its share out)"),
     "min_singularity": Metric("1", "smallest CMG singularity measure (cmg_singularity) over the rows", "low"),
     "rate_limited_ticks": Metric("ticks", "controller ticks whose gimbal-rate command was limited"),
     "momentum_saturated_ticks": Metric("ticks", "controller ticks at which the cluster was saturated"),
@@ -281,6 +282,13 @@ class RunMetrics:
         and left out of ``max_h_Nms`` the same way; ``h_B`` a callable instead: it gives the
         momentum from the first row in the window (the unit's at the angles it is held at, as
         every later row has them), then kept (:attr:`held_units`, what the summary records).
+    capacity_steps : list of (t_s, capacity_Nms), optional
+        The working units' capacity from ``t_s`` on [N m s] (None: ``h_capacity_Nms``, the
+        start's), in time order (:func:`~stationbed.run.faults.capacity_steps`): a fault that
+        holds a unit's gimbals takes it out of the working units there. ``max_h_fraction`` is
+        then the largest of each row's ``|h - held|`` over that row's capacity; without steps,
+        ``max_h_Nms / h_capacity_Nms`` (the same number: a division by one positive number keeps
+        the order).
 
     Attributes
     ----------
@@ -293,7 +301,7 @@ class RunMetrics:
     """
 
     def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None,
-                 h_held_B=None, orbit_period_s: float | None = None, held_units=None):
+                 h_held_B=None, orbit_period_s: float | None = None, held_units=None, capacity_steps=None):
         col = {c: i for i, c in enumerate(columns)}
         self.columns = list(columns)
         self.settle_s = settle_s
@@ -301,6 +309,9 @@ class RunMetrics:
         self.h_held_B = None if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
         self.held_units = [[float(a), float(b), h if callable(h) else np.asarray(h, dtype=float).reshape(3)]
                            for a, b, h in held_units or ()]
+        self.capacity_steps = [(float(a), None if c is None else float(c)) for a, c in capacity_steps or ()]
+        self._max_h_start = None  # max |h| of the working units over the rows at the start's capacity
+        self._max_frac = None  # max |h| / capacity over the rows at a step's capacity
         self._t = col.get("t", 0)
         self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
         self._sing = col.get("cmg_singularity")
@@ -340,8 +351,20 @@ class RunMetrics:
                     if callable(u[2]):
                         u[2] = np.asarray(u[2](rows[np.argmax(on)]), dtype=float).reshape(3)
                     hb[on] -= u[2]
-            h = float(row_norms(hb).max())
+            hn = row_norms(hb)
+            h = float(hn.max())
             self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
+            if self.capacity_steps:  # each row over its own capacity (the start's: known at the end)
+                cap = np.full(len(rows), math.nan)
+                for a, c in self.capacity_steps:
+                    cap[t >= a - HELD_T_TOL_S] = math.nan if c is None else c
+                start, stepped = np.isnan(cap), ~np.isnan(cap)
+                if start.any():
+                    m = float(hn[start].max())
+                    self._max_h_start = m if self._max_h_start is None else max(self._max_h_start, m)
+                if stepped.any():
+                    m = float((hn[stepped] / cap[stepped]).max())
+                    self._max_frac = m if self._max_frac is None else max(self._max_frac, m)
         if self._sing is not None:
             m = float(rows[:, self._sing].min())
             self._min_sing = m if self._min_sing is None else float(np.minimum(self._min_sing, m))
@@ -390,7 +413,12 @@ class RunMetrics:
             out["max_h_Nms"] = self._max_h
             cap = self.h_capacity_Nms
             if cap is not None and math.isfinite(cap):
-                out["max_h_fraction"] = float(self._max_h / cap)
+                if not self.capacity_steps:
+                    out["max_h_fraction"] = float(self._max_h / cap)
+                else:
+                    parts = ([self._max_h_start / cap] if self._max_h_start is not None else []) + \
+                        ([self._max_frac] if self._max_frac is not None else [])
+                    out["max_h_fraction"] = float(max(parts))
         if self._min_sing is not None:
             out["min_singularity"] = self._min_sing
         if self._err_finite:
@@ -454,8 +482,8 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
         The run's rows with the CSV columns.
     summary : dict, optional
         The run's summary (``summary.json``'s ``summary``, ``traj.meta["summary"]``): the tick
-        counts, the cluster capacity (``h_capacity_Nms``) and a failed unit's held momentum
-        (``h_held_B_Nms``) come from it. Taken from
+        counts, the cluster capacity (``h_capacity_Nms``, and its steps ``h_capacity_steps_Nms``)
+        and a failed unit's held momentum (``h_held_B_Nms``) come from it. Taken from
         ``traj.meta`` when None and the trajectory has one.
     settle_s : float, optional
         Settling time [s] for ``rms_att_err_deg`` and the estimation metrics (None: all rows).
@@ -477,7 +505,8 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
     m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap, h_held_B=summary.get("h_held_B_Nms"),
                    orbit_period_s=summary.get("orbit_period_s"),
                    held_units=[(u["t"], math.inf if u["until"] is None else u["until"], u["h_B"])
-                               for u in summary.get("h_held_units_Nms", ())])
+                               for u in summary.get("h_held_units_Nms", ())],
+                   capacity_steps=[(u["t"], u["capacity_Nms"]) for u in summary.get("h_capacity_steps_Nms", ())])
     if len(data):
         m.update(np.asarray(data, dtype=float))
     if "rate_limited_ticks" in summary:

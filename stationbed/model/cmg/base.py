@@ -14,8 +14,9 @@ from .steering import rate_limit, singularity_measure, steer
 
 __all__ = ["CmgGeometry", "GimballedGeometry", "HEAD_PAR", "UNIT_TAIL", "RATE_CAP_NONE"]
 
-#: numbers at the head of the cluster's slice of p, before the geometry (limits, steering)
-HEAD_PAR = 7
+#: numbers at the head of the cluster's slice of p, before the geometry (limits, steering,
+#: saturation)
+HEAD_PAR = 8
 #: the per-unit numbers at the tail of the cluster's slice of p, one group of ``n_units`` each:
 #: ``working`` (1; 0: ``[cmg] failed``, its gimbals held and left out of steering), ``rotor`` (the
 #: rotor's momentum as a fraction of ``h_rotor``; 1) and ``rate_cap`` (each of its gimbals' rate
@@ -41,7 +42,7 @@ class CmgGeometry:
        ``unit_par`` (geometry numbers per unit in ``pc``), ``state_kind`` (``"momentum"`` or
        ``"attitude"``: the units of the state's atol) and ``state_names`` when the state is not
        the gimbal angles.
-    2. Numbers: write ``_head_params(cfg)`` (:data:`HEAD_PAR` numbers: limits, steering constants),
+    2. Numbers: write ``_head_params(cfg)`` (:data:`HEAD_PAR` numbers: limits, steering constants, saturation),
        ``_geometry_params(cfg)`` (``n_units * unit_par`` numbers), ``_capacity(cfg)`` (the
        momentum envelope [N m s]) and ``_initial_state(cfg)`` (shape (nx,)).
     3. Symbols: write ``_h(xc, pc)`` (the cluster's momentum relative to the body, B components
@@ -282,6 +283,9 @@ class GimballedGeometry(CmgGeometry):
       derivatives by each of the unit's gimbal angles (a list);
     * ``_unit_spins_B(cfg, gimbal_angles)``: the same spin axes in numpy, shape (..., n_units, 3)
       (the contract test holds the two equal through :meth:`h` = Σ :meth:`unit_momenta_B`);
+    * ``_unit_reach(geo)``: from a unit's geometry numbers, the largest component its spin axis
+      can take along body x, y and z (casadi (3, 1)): the envelope of :meth:`envelope`, which
+      the contract test holds equal to ``capacity / h_rotor`` for every set of failed units;
     * ``_mount_axes_B(cfg)``.
     """
 
@@ -297,6 +301,7 @@ class GimballedGeometry(CmgGeometry):
             cfg.sr_mu,
             cfg.dither_eps0,
             cfg.dither_omega,
+            cfg.saturation_fraction * cfg.h_rotor,
         ]
 
     def _initial_state(self, cfg):
@@ -328,6 +333,16 @@ class GimballedGeometry(CmgGeometry):
         """The singularity measure ``sqrt(det(Â Âᵀ))`` at ``xc`` (casadi scalar)."""
         return singularity_measure(self.A_hat(xc, pc))
 
+    def envelope(self, pc, weights):
+        """The capacity of units weighted by ``weights`` (one per unit: 0 out, a rotor's
+        fraction of ``h_rotor``), over ``h_rotor`` (casadi scalar): along each body axis the sum
+        of the weighted units' :meth:`_unit_reach`, the least of the three (the capacity's
+        definition: ``_capacity`` with the units of weight 0 failed, times ``h_rotor``)."""
+        geo, k = pc[HEAD_PAR:], self.unit_par
+        reach = [self._unit_reach(geo[k * i: k * i + k]) for i in range(self.n_units)]
+        along = sum((weights[i] * reach[i] for i in range(1, self.n_units)), weights[0] * reach[0])
+        return ca.fmin(along[0], ca.fmin(along[1], along[2]))
+
     def _tail(self, pc, name: str) -> list:
         """The per-unit numbers ``name`` (:data:`UNIT_TAIL`) from ``pc``, one per unit (casadi)."""
         i0 = self.unit_index(name, 1)
@@ -357,7 +372,7 @@ class GimballedGeometry(CmgGeometry):
         return ca.vertcat(*[w[i] for i in range(self.n_units) for _ in range(self.gimbals_per_unit)])
 
     def _actuate(self, t, xc, tau_cmd, omega_BN_B, pc, steering, direct_rates):
-        h_rotor, max_rate, h_sat, lam0, mu, eps0, om = (pc[i] for i in range(HEAD_PAR))
+        h_rotor, max_rate, h_sat, lam0, mu, eps0, om, h_sat_unit = (pc[i] for i in range(HEAD_PAR))
         # a failed unit's gimbals are held (rate 0): its rotor keeps its momentum, and steering
         # and the singularity measure see only the working units' Jacobian columns
         working = self.working(pc)
@@ -380,6 +395,11 @@ class GimballedGeometry(CmgGeometry):
         # saturation of the working units: their momentum (the failed units' is held) against
         # their capacity (h_sat = saturation_fraction x capacity of the working units)
         w_unit = self._tail(pc, "working")
+        if self.unit_faults:  # a unit whose gimbals a fault holds (rate_cap 0) is out too, and a
+            # rotor counts at its fraction: the units that move, against their own envelope
+            cap, rotor = self._tail(pc, "rate_cap"), self._tail(pc, "rotor")
+            w_unit = [w_unit[i] * ca.if_else(cap[i] > 0.0, 1.0, 0.0) * rotor[i] for i in range(self.n_units)]
+            h_sat = h_sat_unit * self.envelope(pc, w_unit)
         spins = [s for s, _ in self.spins(xc, pc)]
         h_work = h_rotor * sum((w_unit[i] * spins[i] for i in range(1, self.n_units)), w_unit[0] * spins[0])
         sat = ca.if_else(ca.norm_2(h_work) >= h_sat, 1.0, 0.0)
@@ -390,4 +410,7 @@ class GimballedGeometry(CmgGeometry):
         raise NotImplementedError
 
     def _unit_spins_B(self, cfg, gimbal_angles):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _unit_reach(self, geo):  # pragma: no cover - abstract
         raise NotImplementedError

@@ -83,5 +83,9 @@ class DoubleGimbal(GimballedGeometry):
         e1, e2, e3 = triads[:, 0], triads[:, 1], triads[:, 2]
         return np.sin(d_in) * e1 + np.cos(d_in) * (np.cos(d_out) * e3 - np.sin(d_out) * e2)
 
+    def _unit_reach(self, geo):
+        # two gimbals turn the spin anywhere: it reaches 1 along every axis
+        return ca.DM.ones(3)
+
     def _mount_axes_B(self, cfg):
         return dgcmg_triads(cfg.outer_axes_B)[:, 0]

@@ -25,7 +25,7 @@ class IdealCluster(CmgGeometry):
     """A momentum store: ``h`` is the state, the torque command the input.
 
     Head of ``pc``: ``max_torque`` [N m], ``max_momentum`` [N m s] (1e300: none),
-    ``saturation_fraction``, then four unused zeros.
+    ``saturation_fraction``, then five unused zeros.
     """
 
     kind = "ideal"
@@ -39,7 +39,7 @@ class IdealCluster(CmgGeometry):
 
     # -- numbers -----------------------------------------------------------------------
     def _head_params(self, cfg):
-        return [cfg.max_torque or NO_LIMIT, cfg.max_momentum or NO_LIMIT, cfg.saturation_fraction, 0.0, 0.0, 0.0, 0.0]
+        return [cfg.max_torque or NO_LIMIT, cfg.max_momentum or NO_LIMIT, cfg.saturation_fraction, 0.0, 0.0, 0.0, 0.0, 0.0]
 
     def _capacity(self, cfg):
         return math.inf if cfg.max_momentum is None else cfg.max_momentum

@@ -71,5 +71,10 @@ class Pyramid(GimballedGeometry):
         d = gimbal_angles[..., None]
         return np.cos(d) * s0 + np.sin(d) * np.cross(g, s0)
 
+    def _unit_reach(self, geo):
+        # the spin turns in the plane normal to g: along body axis e it reaches |g x e|
+        g = geo[0:3]
+        return ca.vertcat(*[ca.norm_2(ca.cross(g, ca.DM(e))) for e in np.eye(3)])
+
     def _mount_axes_B(self, cfg):
         return pyramid_axes(cfg.skew)[0]
