@@ -20,6 +20,7 @@ from numpy.testing import assert_allclose
 from scenes import ROOT
 from stationbed import load_scene, simulate
 from stationbed.model.cmg import capacity, cluster_functions, held_momentum_B
+from stationbed.run.working_h import WorkingH
 from stationbed.scene import Cmg
 from stationbed.studies.montecarlo.samples import EnvelopeSink
 
@@ -126,6 +127,6 @@ def test_montecarlo_envelope_fraction_follows_the_working_units():
     """The envelope's h_fraction per row: |h - h_held| / capacity of the working units."""
     cols = ["t", "att_err_deg", "hx", "hy", "hz"]
     rows = np.array([[0.0, 1.0, 0.0, 0.0, 0.0], [10.0, 2.0, -2 * H0, 0.0, 0.0]])
-    sink = EnvelopeSink(cols, 10.0, 2, 3 * H0, h_held_B=[H0, 0.0, 0.0])
+    sink = EnvelopeSink(cols, 10.0, 2, WorkingH(cols, 3 * H0, h_held_B=[H0, 0.0, 0.0]))
     sink.write(rows)
     assert_allclose(sink.values[:, 1], [1.0 / 3.0, 1.0], rtol=1e-15)

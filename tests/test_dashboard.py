@@ -123,8 +123,8 @@ def test_dashboard_panels_of_a_closed_loop_run(hold_run, monkeypatch):
 
 def test_h_fraction_is_a_norm_over_capacity():
     tr = Trajectory(["t", "hx", "hy", "hz"], np.array([[0.0, -3.0, -4.0, 0.0], [1.0, 0.0, 0.0, -10.0]]))
-    assert_allclose(h_fraction(tr, 10.0), [0.5, 1.0])
-    assert h_fraction(tr, None) is None and h_fraction(tr, math.inf) is None
+    assert_allclose(h_fraction(tr, {"h_capacity_Nms": 10.0}), [0.5, 1.0])
+    assert h_fraction(tr, {}) is None and h_fraction(tr, {"h_capacity_Nms": math.inf}) is None
 
 
 def test_delivered_torque_of_an_analytic_momentum_history():

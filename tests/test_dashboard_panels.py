@@ -151,7 +151,7 @@ def _limit_rows(n):
 def test_recording_names_the_rate_limit_and_the_saturation():
     tr = _limit_rows(12)
     ev = Events.of(load_scene(HOLD), tr.columns)
-    assert ev._cmg[1] == pytest.approx(HOLD_H_SAT_NMS, rel=1e-15)
+    assert ev._cmg[1] * ev._cmg[2].capacity_Nms == pytest.approx(HOLD_H_SAT_NMS, rel=1e-15)
     got = [(t, text) for t, _, text in ev.changes(tr)]
     assert got == [(30.0, "CMG gimbal-rate limit begins"), (60.0, "CMG gimbal-rate limit ends"),
                    (80.0, "CMG momentum saturation begins"), (100.0, "CMG momentum saturation ends")]

@@ -15,8 +15,8 @@ import numpy as np
 from ..core.plotting import pyplot, save_png
 from ..run.metrics import ESTIMATION_WINDOW, METRICS, trajectory_metrics
 from ..run.trajectory import Trajectory
-from .dashboard import capacity_Nms, load_run, run_state, time_axis
-from .signals import relative_rate
+from .dashboard import load_run, run_state, time_axis
+from .signals import h_fraction, relative_rate
 
 __all__ = ["compare", "metrics_table", "settled_metrics", "metric_scope", "WHOLE_RUN", "default_png"]
 
@@ -105,7 +105,7 @@ def _norm(tr, *cols):
 def _panels(runs):
     """(title, values-of-a-run function) of the panels some run has values for."""
     deg = np.degrees(1.0)
-    frac = lambda tr, meta: None if (h := _norm(tr, "hx", "hy", "hz")) is None or not (cap := capacity_Nms(meta.get("summary") or {})) else h / cap  # noqa: E731
+    frac = lambda tr, meta: h_fraction(tr, meta.get("summary") or {})  # noqa: E731
     rel = lambda tr, meta: None if (w := relative_rate(tr)) is None else np.linalg.norm(w, axis=1) * deg  # noqa: E731
     panels = [("attitude error to the reference [deg]", lambda tr, meta: tr["att_err_deg"] if "att_err_deg" in tr.columns else None),
               ("pitch attitude error att_err_y_deg [deg]", lambda tr, meta: tr["att_err_y_deg"] if "att_err_y_deg" in tr.columns else None),

@@ -32,6 +32,7 @@ import numpy as np
 from ..core.plotting import pyplot, save_png
 from ..loop.flight import st_dropouts
 from ..run.trajectory import Trajectory
+from ..run.working_h import summary_capacity_Nms
 from .signals import (CMG_MOMENTUM_SATURATED, CMG_RATE_LIMIT, ERR_AXES, cmg_limit_kinds, cmg_limit_name,
                       delivered_torque, h_fraction, relative_rate)
 
@@ -112,11 +113,8 @@ def time_axis(t_end: float) -> tuple[float, str]:
 
 
 def capacity_Nms(summary: dict) -> float | None:
-    """The CMG cluster's momentum capacity [N m s] a run reported (None when it has none)."""
-    cap = summary.get("h_capacity_Nms")
-    if cap is None and summary.get("max_h_fraction"):
-        cap = summary["max_h_Nms"] / summary["max_h_fraction"]
-    return float(cap) if cap is not None and math.isfinite(cap) and cap > 0 else None
+    """The CMG cluster's momentum capacity at the start [N m s] a run reported (None when it has none)."""
+    return summary_capacity_Nms(summary)
 
 
 def saturation_Nms(summary: dict) -> float | None:
@@ -156,7 +154,7 @@ def _panels(tr: Trajectory, summ: dict) -> list[tuple[str, list, dict]]:
         out.append(("angular momentum H_O, inertial [N m s]", [(tr[c], a, {}) for c, a in zip(("HNx", "HNy", "HNz"), axes3)]))
     if has("hx"):
         out.append(("CMG momentum h (B) [N m s]", [(tr[c], a, {}) for c, a in zip(("hx", "hy", "hz"), axes3)]))
-        frac = h_fraction(tr, capacity_Nms(summ))
+        frac = h_fraction(tr, summ)
         if frac is not None:
             out.append(("CMG momentum |h| / capacity", [(frac, "|h| / capacity", {"color": "k", "lw": 1.0})]))
     gim = [c for c in tr.columns if c.startswith("gimbal_") and not c.endswith("_rate")]
@@ -273,11 +271,12 @@ def _limit_marks(tr: Trajectory, summ: dict) -> list[tuple[np.ndarray, str, str]
     """(rows, label, colour) of the CMG limit ticks: momentum saturation, and the rate (torque) limit."""
     if "cmg_saturated" not in tr.columns:
         return []
-    h = np.linalg.norm(tr.cols("hx", "hy", "hz") - np.asarray(summ.get("h_held_B_Nms", np.zeros(3))), axis=1) \
-        if "hx" in tr.columns else np.full(len(tr), np.nan)
+    frac = h_fraction(tr, summ)  # the working units' |h| over their capacity at the row, as the flag weighs it
+    h_sat, cap = saturation_Nms(summ), capacity_Nms(summ)
     ticks = (summ["rate_limited_ticks"], summ["momentum_saturated_ticks"]) \
         if summ.get("rate_limited_ticks") is not None and summ.get("momentum_saturated_ticks") is not None else None
-    kind = cmg_limit_kinds(tr["cmg_saturated"], h, saturation_Nms(summ), ticks=ticks)
+    kind = cmg_limit_kinds(tr["cmg_saturated"], np.full(len(tr), np.nan) if frac is None else frac,
+                           None if frac is None or h_sat is None else h_sat / cap, ticks=ticks)
     limit = cmg_limit_name(any(c.startswith("gimbal_") for c in tr.columns))
     marks = [(kind == CMG_MOMENTUM_SATURATED, "CMG momentum saturation", "tab:red"),
              (kind == CMG_RATE_LIMIT, f"CMG {limit}", "tab:orange")]

@@ -8,7 +8,10 @@
   that turns at a constant rate about a fixed axis (LVLH on a circular orbit, an inertial hold).
   LVLH turns at the orbital rate (0.065 deg/s at 400 km): the inertial rate ``ω_BN_B`` of a
   station that holds LVLH is that rate, and a transient of 1e-4 deg/s is invisible beside it.
-* :func:`h_fraction` - ``|h|`` over the cluster's capacity (never negative: a norm).
+* :func:`h_fraction` - the working units' ``|h|`` over their capacity at each row (never negative:
+  a norm), from the run's summary (:meth:`WorkingH.fraction <stationbed.run.working_h.WorkingH.fraction>`:
+  a failed or stuck unit's held momentum left out, a fault's unit out of the capacity from its
+  time): the series whose largest value is the summary's ``max_h_fraction``.
 * :func:`delivered_torque` - the torque the CMG cluster puts on the body,
   ``τ_B = -(dh/dt|_B + ω_BN_B × h_B)`` (the cluster's momentum balance about the composite mass
   centre: what the cluster gains the body loses), with ``dh/dt`` by central differences of the
@@ -17,7 +20,8 @@
 * :func:`cmg_limit_kinds` - what a row's ``cmg_saturated`` flag was: the cluster's momentum
   saturated or only a gimbal-rate (an ideal cluster's torque) limit. The flag is set for either
   since the previous row; the momentum is saturated where the working units' ``|h|`` reaches the
-  run's threshold (``saturation_fraction`` of the capacity, summary.json ``h_saturation_Nms``).
+  run's threshold (``saturation_fraction`` of the working units' capacity at the row: the
+  callers pass :func:`h_fraction` and ``h_saturation_Nms / h_capacity_Nms``).
 """
 
 
@@ -26,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.rotation import dcm, quat_conj, quat_mult, rotation_vector
+from ..run.working_h import WorkingH
 
 __all__ = ["ERR_AXES", "relative_rate", "h_fraction", "delivered_torque", "rate_of_change", "cmg_limit_kinds",
            "CMG_NO_LIMIT", "CMG_RATE_LIMIT", "CMG_MOMENTUM_SATURATED", "cmg_limit_name"]
@@ -85,11 +90,11 @@ def relative_rate(tr) -> np.ndarray | None:
     return w_BN_B - np.einsum("kij,kj->ki", C_BR, w_RN_R)
 
 
-def h_fraction(tr, capacity_Nms: float | None) -> np.ndarray | None:
-    """``|h| / capacity`` per row (>= 0), or None without CMG columns or a finite capacity."""
-    if "hx" not in tr.columns or not capacity_Nms or not np.isfinite(capacity_Nms):
-        return None
-    return np.linalg.norm(tr.cols("hx", "hy", "hz"), axis=1) / float(capacity_Nms)
+def h_fraction(tr, summary: dict) -> np.ndarray | None:
+    """The working units' ``|h|`` over their capacity at each row (>= 0) of a run whose summary
+    is ``summary`` (summary.json's: the capacity, held momenta and the capacity's steps), or None
+    without CMG columns or a finite capacity."""
+    return WorkingH.of_summary(tr.columns, summary).fraction(tr.data)
 
 
 def delivered_torque(tr) -> np.ndarray | None:
@@ -115,7 +120,7 @@ def cmg_limit_name(gimballed: bool) -> str:
     return "gimbal-rate limit" if gimballed else "torque limit"
 
 
-def cmg_limit_kinds(flag, h_Nms, h_sat_Nms: float | None, h_before_Nms: float = np.nan,
+def cmg_limit_kinds(flag, h, h_sat: float | None, h_before: float = np.nan,
                     ticks: tuple[int, int] | None = None) -> np.ndarray:
     """The kind of each row's CMG limit flag: :data:`CMG_NO_LIMIT`, :data:`CMG_RATE_LIMIT` or
     :data:`CMG_MOMENTUM_SATURATED`.
@@ -123,10 +128,11 @@ def cmg_limit_kinds(flag, h_Nms, h_sat_Nms: float | None, h_before_Nms: float = 
     Parameters
     ----------
     flag : ndarray, shape (k,)  The rows' ``cmg_saturated`` (1: a limit at a tick since the previous row).
-    h_Nms : ndarray, shape (k,)  The working units' ``|h|`` at each row [N m s].
-    h_sat_Nms : float or None  The momentum threshold of saturation [N m s] (None or inf: the
-        cluster cannot saturate, every flag is a rate or torque limit).
-    h_before_Nms : float  ``|h|`` of the row before the first (a recording's earlier batch) [N m s].
+    h : ndarray, shape (k,)  The working units' ``|h|`` over their capacity at each row
+        (:func:`h_fraction`; or ``|h|`` [N m s] against a threshold in N m s).
+    h_sat : float or None  The threshold of saturation, in ``h``'s unit (``saturation_fraction``;
+        None or inf: the cluster cannot saturate, every flag is a rate or torque limit).
+    h_before : float  ``h`` of the row before the first (a recording's earlier batch).
     ticks : (rate_limited_ticks, momentum_saturated_ticks), optional  The run's counts: a run
         with no saturated tick has only rate limits, one with no rate-limited tick only saturation.
 
@@ -137,11 +143,11 @@ def cmg_limit_kinds(flag, h_Nms, h_sat_Nms: float | None, h_before_Nms: float = 
         (the ticks between them are the ones the flag covers), else rate (torque) limited.
     """
     flag = np.asarray(flag, float) >= 0.5
-    h = np.asarray(h_Nms, float)
+    h = np.asarray(h, float)
     reached = np.zeros(len(h), bool)
-    if h_sat_Nms is not None and np.isfinite(h_sat_Nms):
-        at = h >= h_sat_Nms * (1.0 - H_SAT_REL_TOL)
-        before = np.r_[h_before_Nms, h[:-1]] >= h_sat_Nms * (1.0 - H_SAT_REL_TOL) if len(h) else at
+    if h_sat is not None and np.isfinite(h_sat):
+        at = h >= h_sat * (1.0 - H_SAT_REL_TOL)
+        before = np.r_[h_before, h[:-1]] >= h_sat * (1.0 - H_SAT_REL_TOL) if len(h) else at
         reached = at | before
     if ticks is not None:
         rate_ticks, sat_ticks = ticks

@@ -56,19 +56,20 @@ def register_fault_effect(kind: str):
     return deco
 
 
-def held_units(scene, cmg, columns) -> list:
-    """The units whose gimbals a ``gimbal_stuck`` fault of the truth holds, for the metrics
-    (:class:`~.metrics.RunMetrics` ``held_units``): per fault ``(t, until, momentum(row))``, the
+def held_units(scene, geo, columns) -> list:
+    """The units whose gimbals a ``gimbal_stuck`` fault of the truth holds, for the working
+    units' momentum (:class:`~.working_h.WorkingH` ``held_units``; ``geo`` the cluster's
+    :class:`~stationbed.model.cmg.CmgGeometry`, None: no cluster): per fault ``(t, until, momentum(row))``, the
     unit's rotor momentum (B [N m s], the nominal rotor's: the fault leaves it spinning) at the
     row's gimbal angles, which from ``t`` are the angles it is held at. Like a unit failed from
     the start (``[cmg] failed``, ``held_momentum_B``), its momentum is then not the working
     units': ``max_h`` leaves it out. (``cmg_failed`` stops its rotor: nothing is left to hold.)"""
     stuck = [f for f in getattr(scene, "fault", None) or () if f.kind == "gimbal_stuck" and f.enabled]
-    if cmg is None or not stuck or not cmg.geometry.gimballed:
+    if geo is None or not stuck or not geo.gimballed:
         return []
     col = {c: i for i, c in enumerate(columns)}
-    gi = [col[g] for g in cmg.gimbal_names]
-    geo, cfg = cmg.geometry, scene.cmg
+    gi = [col[g] for g in geo.gimbal_names]
+    cfg = scene.cmg
 
     def momentum(unit):
         return lambda row: geo.unit_momenta_B(cfg, row[gi])[unit - 1]
@@ -80,18 +81,18 @@ def held_units(scene, cmg, columns) -> list:
 OUT_KINDS = ("cmg_failed", "gimbal_stuck")
 
 
-def capacity_steps(scene, cmg) -> list:
-    """The working units' capacity as the truth's CMG faults change it, for the metrics
-    (:class:`~.metrics.RunMetrics` ``capacity_steps``): ``(t, capacity)`` [s, N m s] at each
+def capacity_steps(scene, geo) -> list:
+    """The working units' capacity as the truth's CMG faults change it, for the working units'
+    momentum (:class:`~.working_h.WorkingH` ``capacity_steps``; ``geo`` as :func:`held_units`): ``(t, capacity)`` [s, N m s] at each
     time the set of units out changes, in time order; ``capacity`` None where none is out (the
     capacity at the start). A unit is out over its fault's window when the fault holds its
     gimbals (``cmg_failed``, ``gimbal_stuck``): the capacity is then the cluster's with it
     failed as ``[cmg] failed`` states one (:func:`~stationbed.model.cmg.capacity`). Empty
     without such a fault."""
     out = [f for f in getattr(scene, "fault", None) or () if f.kind in OUT_KINDS and f.enabled]
-    if cmg is None or not out or not cmg.geometry.gimballed:
+    if geo is None or not out or not geo.gimballed:
         return []
-    cfg, geo = scene.cmg, cmg.geometry
+    cfg = scene.cmg
     ends = [(f.t, math.inf if f.until is None else f.until, f.unit) for f in out]
     steps = []
     for t in sorted({e for a, b, _ in ends for e in (a, b) if math.isfinite(e)}):

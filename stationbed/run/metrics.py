@@ -50,6 +50,7 @@ import numpy as np
 
 from ..core.linalg import row_norms
 from ..loop.flight import st_dropouts
+from .working_h import WorkingH
 
 __all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics", "CONVERGED_FRACTION", "ESTIMATION_WINDOW"]
 
@@ -58,9 +59,6 @@ __all__ = ["Metric", "METRICS", "RunMetrics", "trajectory_metrics", "CONVERGED_F
 #: by an order of magnitude below what the filter started out allowing (for the ISS-like set of
 #: iss_lvlh_hold_estimated: 0.030 deg, against a settled error of ~4e-4 deg RMS and 1.5e-3 deg at most)
 CONVERGED_FRACTION = 0.1
-#: a row at a scheduled fault's time belongs to its window: the rows' times are ticks times the
-#: period, the fault's on the same grid (round-off ~1e-12 s; a tick is at least a millisecond)
-HELD_T_TOL_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -272,23 +270,16 @@ class RunMetrics:
     h_capacity_Nms : float or None
         The CMG cluster's momentum capacity [N m s] for ``max_h_fraction`` (None or not finite:
         no fraction): its working units' (:func:`~stationbed.model.cmg.capacity`).
-    h_held_B : array_like, shape (3,), optional
-        The failed units' held rotor momentum, B components [N m s]
-        (:func:`~stationbed.model.cmg.held_momentum_B`): ``max_h_Nms`` is that of the working
-        units, ``|h - h_held_B|`` (None: no failed unit).
-    held_units : list of (t_s, until_s, h_B), optional
-        Units whose gimbals a scheduled fault holds over ``[t_s, until_s)`` (``gimbal_stuck``):
-        their rotor momentum ``h_B`` (B [N m s], shape (3,)) is held there as a failed unit's
-        and left out of ``max_h_Nms`` the same way; ``h_B`` a callable instead: it gives the
-        momentum from the first row in the window (the unit's at the angles it is held at, as
-        every later row has them), then kept (:attr:`held_units`, what the summary records).
-    capacity_steps : list of (t_s, capacity_Nms), optional
-        The working units' capacity from ``t_s`` on [N m s] (None: ``h_capacity_Nms``, the
-        start's), in time order (:func:`~stationbed.run.faults.capacity_steps`): a fault that
-        holds a unit's gimbals takes it out of the working units there. ``max_h_fraction`` is
-        then the largest of each row's ``|h - held|`` over that row's capacity; without steps,
-        ``max_h_Nms / h_capacity_Nms`` (the same number: a division by one positive number keeps
-        the order).
+    h_held_B, held_units, capacity_steps : optional
+        The working units' facts (:class:`~.working_h.WorkingH`: the failed units' held rotor
+        momentum, the units a scheduled fault holds, the capacity's steps), when ``working`` is
+        not given. ``max_h_Nms`` is the largest working ``|h|`` of a row; ``max_h_fraction``
+        the largest of each row's ``|h_work|`` over that row's capacity (the series
+        :meth:`WorkingH.fraction <.working_h.WorkingH.fraction>` gives the charts); without
+        steps, ``max_h_Nms / h_capacity_Nms`` (the same number: a division by one positive
+        number keeps the order).
+    working : WorkingH, optional
+        The working units' momentum per row (:meth:`WorkingH.of_scene <.working_h.WorkingH.of_scene>`).
 
     Attributes
     ----------
@@ -301,19 +292,17 @@ class RunMetrics:
     """
 
     def __init__(self, columns, settle_s: float | None = None, h_capacity_Nms: float | None = None,
-                 h_held_B=None, orbit_period_s: float | None = None, held_units=None, capacity_steps=None):
+                 h_held_B=None, orbit_period_s: float | None = None, held_units=None, capacity_steps=None,
+                 working: WorkingH | None = None):
         col = {c: i for i, c in enumerate(columns)}
         self.columns = list(columns)
         self.settle_s = settle_s
         self.h_capacity_Nms = h_capacity_Nms
-        self.h_held_B = None if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
-        self.held_units = [[float(a), float(b), h if callable(h) else np.asarray(h, dtype=float).reshape(3)]
-                           for a, b, h in held_units or ()]
-        self.capacity_steps = [(float(a), None if c is None else float(c)) for a, c in capacity_steps or ()]
+        self.working = working if working is not None else \
+            WorkingH(columns, h_held_B=h_held_B, held_units=held_units, capacity_steps=capacity_steps)
         self._max_h_start = None  # max |h| of the working units over the rows at the start's capacity
         self._max_frac = None  # max |h| / capacity over the rows at a step's capacity
         self._t = col.get("t", 0)
-        self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
         self._sing = col.get("cmg_singularity")
         self._err = col.get("att_err_deg")
         self._tau = [col[c] for c in ("tau_cmd_x", "tau_cmd_y", "tau_cmd_z")] if "tau_cmd_x" in col else None
@@ -343,21 +332,11 @@ class RunMetrics:
         self.last = rows[-1].copy()
         t = rows[:, self._t]
         settled = np.ones(len(rows), bool) if self.settle_s is None else t >= self.settle_s
-        if self._h is not None:
-            hb = rows[:, self._h] if self.h_held_B is None else rows[:, self._h] - self.h_held_B
-            for u in self.held_units:  # units held by a scheduled fault, over their window
-                on = (t >= u[0] - HELD_T_TOL_S) & (t < u[1] - HELD_T_TOL_S)
-                if on.any():
-                    if callable(u[2]):
-                        u[2] = np.asarray(u[2](rows[np.argmax(on)]), dtype=float).reshape(3)
-                    hb[on] -= u[2]
-            hn = row_norms(hb)
+        if self.working.has_h:
+            hn, cap = self.working.norms(rows)
             h = float(hn.max())
             self._max_h = h if self._max_h is None else float(np.maximum(self._max_h, h))
             if self.capacity_steps:  # each row over its own capacity (the start's: known at the end)
-                cap = np.full(len(rows), math.nan)
-                for a, c in self.capacity_steps:
-                    cap[t >= a - HELD_T_TOL_S] = math.nan if c is None else c
                 start, stepped = np.isnan(cap), ~np.isnan(cap)
                 if start.any():
                     m = float(hn[start].max())
@@ -384,6 +363,19 @@ class RunMetrics:
         if self._tau is not None:
             tau = row_norms(rows[:, self._tau])
             self._tau_max = float(np.fmax(self._tau_max, np.fmax.reduce(tau)))
+
+    # the working units' facts (what the summary records of them)
+    @property
+    def h_held_B(self):
+        return self.working.h_held_B
+
+    @property
+    def held_units(self) -> list:
+        return self.working.held_units
+
+    @property
+    def capacity_steps(self) -> list:
+        return self.working.capacity_steps
 
     def count_ticks(self, rate_limited: int, momentum_saturated: int) -> None:
         """Set the tick counts the closed loop keeps (they are not in the rows)."""
@@ -499,14 +491,9 @@ def trajectory_metrics(traj, summary: dict | None = None, settle_s: float | None
         columns, data = [str(c) for c in traj.columns], traj.to_numpy(dtype=float)
     else:
         columns, data = traj.columns, traj.data
-    cap = summary.get("h_capacity_Nms")
-    if cap is None and "max_h_fraction" in summary and summary.get("max_h_fraction"):
-        cap = summary["max_h_Nms"] / summary["max_h_fraction"]
-    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=cap, h_held_B=summary.get("h_held_B_Nms"),
-                   orbit_period_s=summary.get("orbit_period_s"),
-                   held_units=[(u["t"], math.inf if u["until"] is None else u["until"], u["h_B"])
-                               for u in summary.get("h_held_units_Nms", ())],
-                   capacity_steps=[(u["t"], u["capacity_Nms"]) for u in summary.get("h_capacity_steps_Nms", ())])
+    working = WorkingH.of_summary(columns, summary)
+    m = RunMetrics(columns, settle_s=settle_s, h_capacity_Nms=working.capacity_Nms,
+                   orbit_period_s=summary.get("orbit_period_s"), working=working)
     if len(data):
         m.update(np.asarray(data, dtype=float))
     if "rate_limited_ticks" in summary:

@@ -26,8 +26,8 @@ from .metrics import RunMetrics
 from .system import OUT_CHUNK
 from .chain import chain_columns
 from .fdir_run import fdir_columns
-from .faults import capacity_steps, held_units
 from .trajectory import Trajectory, base_columns
+from .working_h import WorkingH
 
 __all__ = ["trajectory_columns", "ATT_ERR_AXES", "Rows", "SinkError", "check_rows", "ROW_BATCH", "FLUSH_S", "BULK_ROWS"]
 
@@ -173,12 +173,9 @@ class Rows:
         self.rows: list[np.ndarray] = []
         mc = getattr(scene, "montecarlo", None)
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
-        cmg = system.formulation.model.cmg
-        held = None if cmg is None or not scene.cmg.failed else cmg.geometry.held_momentum_B(scene.cmg)
         period = None if scene.orbit is None or not scene.thruster else 2.0 * math.pi / scene.orbit.mean_motion
-        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held,
-                                  orbit_period_s=period, held_units=held_units(scene, cmg, self.columns),
-                                  capacity_steps=capacity_steps(scene, cmg))
+        self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, orbit_period_s=period,
+                                  working=WorkingH.of_scene(scene, self.columns))
         self._pending = ([], [], [])  # times, states, held values of rows not yet made
         self._q_refs = []  # the controller's reference per pending row (None: no reference)
         self._bulk = []  # bulk rows made and checked, not yet handed on: (rows, q_refs, q) per call

@@ -5,7 +5,8 @@
 
 * ``cmg_saturated``, named for what it was (:func:`~stationbed.analysis.signals.cmg_limit_kinds`:
   the flag is set for either): "CMG momentum saturation begins" (WARN) / "ends" where the working
-  units' |h| reached the saturation threshold (``saturation_fraction`` of the capacity), else
+  units' |h| reached the saturation threshold (``saturation_fraction`` of their capacity at the
+  row: :class:`~stationbed.run.working_h.WorkingH`, a unit a fault holds out of both), else
   "CMG gimbal-rate limit begins" (WARN) / "ends" (an ideal cluster: "CMG torque limit");
 * ``eclipse`` (lit fraction of the sun) leaving 1: "eclipse entry", back to 1: "eclipse exit";
 * ``st_valid_<head>``: "star tracker <head> first valid sample" (INFO), then 1 -> 0 "star tracker
@@ -108,9 +109,11 @@ class Events:
     ----------
     columns : list of str
         The rows' columns.
-    cmg : (gimballed, h_sat_Nms or None, h_held_B (3,)), optional
-        The cluster's facts that name its limit flag (:meth:`of` reads them from the scene);
-        without them every flag is a rate limit.
+    cmg : (gimballed, saturation_fraction or None, WorkingH), optional
+        The cluster's facts that name its limit flag (:meth:`of` reads them from the scene):
+        the flag is momentum saturation where the working units' |h| over their capacity at the
+        row (:meth:`WorkingH.fraction <stationbed.run.working_h.WorkingH.fraction>`) reaches
+        ``saturation_fraction``; without them every flag is a rate limit.
 
     Attributes
     ----------
@@ -127,33 +130,32 @@ class Events:
         self._last = {}
         self.log = []
         self._seen = {}  # a head's valid sample came in an earlier batch
-        self._h_last = math.nan  # the working units' |h| of the previous batch's last row
+        self._h_last = math.nan  # the working units' |h| / capacity of the previous batch's last row
         self._cmg = cmg
-        self._h_cols = [c for c in ("hx", "hy", "hz") if c in columns]
 
     @classmethod
     def of(cls, scene, columns) -> Events:
-        """The events of a scene's rows: the cluster's saturation threshold and held momentum
-        (failed units) name its limit flag."""
+        """The events of a scene's rows: the cluster's saturation threshold and working units
+        (failed and stuck units' held momentum, the capacity's steps) name its limit flag."""
         cfg = getattr(scene, "cmg", None)
         if cfg is None:
             return cls(columns)
-        from ...model.cmg import capacity, cmg_geometry, held_momentum_B
+        from ...model.cmg import capacity, cmg_geometry
+        from ...run.working_h import WorkingH
 
         cap = capacity(cfg)
-        return cls(columns, cmg=(cmg_geometry(cfg).gimballed, cfg.saturation_fraction * cap if math.isfinite(cap) else None,
-                                 held_momentum_B(cfg)))
+        return cls(columns, cmg=(cmg_geometry(cfg).gimballed, cfg.saturation_fraction if math.isfinite(cap) else None,
+                                 WorkingH.of_scene(scene, columns, cap)))
 
     def _states(self, col: str, rows) -> list:
         """The state of ``col`` at each row (None: not a number)."""
         v = rows[col]
         if col == "cmg_saturated":  # named for what it was: momentum saturation or the rate limit
-            gimballed, h_sat, h_held = self._cmg or (True, None, np.zeros(3))
-            if len(self._h_cols) == 3:
-                h = np.linalg.norm(rows.cols(*self._h_cols) - h_held, axis=1)
-            else:
+            gimballed, h_sat, working = self._cmg or (True, None, None)
+            h = None if working is None else working.fraction(rows.data)
+            if h is None:
                 h = np.full(len(v), math.nan)
-            kinds = cmg_limit_kinds(np.nan_to_num(v), h, h_sat, h_before_Nms=self._h_last)
+            kinds = cmg_limit_kinds(np.nan_to_num(v), h, h_sat, h_before=self._h_last)
             if len(h):
                 self._h_last = float(h[-1])
             names = {CMG_MOMENTUM_SATURATED: "CMG momentum saturation", CMG_RATE_LIMIT: f"CMG {cmg_limit_name(gimballed)}"}

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...core.linalg import row_norms
-from ...model.cmg import capacity, held_momentum_B
+from ...model.cmg import capacity
 from ...run.controller import one_line
 from ...run.metrics import METRICS, RunMetrics
 from ...run.rows import trajectory_columns
 from ...run.lockstep import run_lockstep
 from ...run.simulation import SimulationError, simulate
 from ...run.trajectory import Trajectory
+from ...run.working_h import WorkingH
 from .dispersions import draw, sample_seed
 
 __all__ = ["run_sample", "run_batch", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink",
@@ -39,39 +39,39 @@ ENVELOPE_SERIES = ("att_err_deg", "h_fraction")
 
 class EnvelopeSink:
     """Keeps the rows of a run at the envelope times (multiples of ``dt``): attitude error [deg]
-    and |h| / capacity (NaN where the run has no such column).
+    and the working units' |h| over their capacity at the row (NaN where the run has no such
+    column): :meth:`WorkingH.fraction <stationbed.run.working_h.WorkingH.fraction>`, the series
+    whose largest value is the run's ``max_h_fraction``.
 
     Parameters
     ----------
     columns : list of str  The run's columns.
     dt : float  Envelope sampling [s].
     n_times : int  Envelope times ``0, dt, ..., (n_times - 1) dt``.
-    capacity : float  CMG momentum capacity of the working units [N m s] (inf/None: no fraction).
-    h_held_B : array_like, shape (3,), optional  The failed units' held momentum [N m s]: the
-        fraction is the working units' ``|h - h_held_B| / capacity``.
+    working : WorkingH or None  The run's working units (:meth:`WorkingH.of_scene
+        <stationbed.run.working_h.WorkingH.of_scene>` with the start's capacity; None: no fraction).
     """
 
-    def __init__(self, columns, dt: float, n_times: int, capacity, h_held_B=None):
+    def __init__(self, columns, dt: float, n_times: int, working: WorkingH | None = None):
         col = {c: i for i, c in enumerate(columns)}
         self.dt = dt
         self.values = np.full((n_times, len(ENVELOPE_SERIES)), np.nan)
         self._err = col.get("att_err_deg")
-        self._h = [col[c] for c in ("hx", "hy", "hz")] if "hx" in col else None
-        self._cap = capacity if capacity and math.isfinite(capacity) else None
-        self._held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
+        self._working = working
 
     def write(self, rows: np.ndarray) -> None:
         k = rows[:, 0] / self.dt
         i = np.rint(k)
         on = (np.abs(k - i) < 1e-9 * np.maximum(1.0, i)) & (i < len(self.values))
+        # every row to the working units (a held unit's momentum is its window's first row's)
+        frac = None if self._working is None else self._working.fraction(rows)
         if not on.any():
             return
         idx = i[on].astype(int)
-        r = rows[on]
         if self._err is not None:
-            self.values[idx, 0] = r[:, self._err]
-        if self._h is not None and self._cap is not None:
-            self.values[idx, 1] = row_norms(r[:, self._h] - self._held) / self._cap
+            self.values[idx, 0] = rows[on][:, self._err]
+        if frac is not None:
+            self.values[idx, 1] = frac[on]
 
 
 def _capacity(scene) -> float | None:
@@ -156,8 +156,8 @@ def _drawn(scene, k: int, env_times: int, data: dict | None = None):
         row["status"], row["reason"] = "refused", refused
         return row, None, None
     if env_times:
-        held = None if s.cmg is None else held_momentum_B(s.cmg)
-        sink = EnvelopeSink(trajectory_columns(s), mc.envelope_dt, env_times, _capacity(s), held)
+        columns = trajectory_columns(s)
+        sink = EnvelopeSink(columns, mc.envelope_dt, env_times, WorkingH.of_scene(s, columns, _capacity(s)))
     return row, s, sink
 
 
