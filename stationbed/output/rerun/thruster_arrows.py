@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...scene.thrusters import flown_thrusters
 from .sdk import TIMELINE, import_rerun
 
 __all__ = ["ThrusterArrows", "PLUME_FRACTION", "RGB_FIRING", "RGB_IDLE", "firing_rows"]
@@ -55,7 +56,7 @@ class ThrusterArrows:
 
     @classmethod
     def of(cls, scene, columns, geom) -> ThrusterArrows | None:
-        thr = list(getattr(scene, "thruster", None) or [])
+        thr = flown_thrusters(scene) if hasattr(scene, "thruster") else []
         if not thr or not all(f"thr_on_s_{t.name}" in columns for t in thr):
             return None
         return cls(thr, geom.r_cm_B, geom.extent)
