@@ -241,3 +241,36 @@ def test_vehicle_thruster_name_clash_is_refused():
     d["thruster"][0]["name"] = "v_r0"
     with pytest.raises(SceneError, match=r"names must be unique.*'v_r0'"):
         scene_from_dict(d)
+
+
+def test_recording_draws_the_vehicle_thrusters_while_docked(runs, tmp_path):
+    """Read back from the .rrd: the vehicle's arrows sit at ``r_port + C_BV r_V`` (from the mass
+    centre of the scene as it starts: the origin, the vehicle away) with plumes along ``-C_BV ĝ_V``,
+    transparent (alpha 0) before the berth and from the undock, opaque while docked."""
+    rerun_chunk = pytest.importorskip("rerun.chunk")
+    from stationbed.output.rerun.recording import write_recording  # noqa: PLC0415
+
+    scene = scene_from_dict(station(False))
+    tr = runs["vehicle_only"]["fused"]
+    path = write_recording(tr, scene, tmp_path / "v.rrd")
+    static, colours = None, {}
+    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
+        if c.entity_path.lstrip("/") != "world/station/thrusters":
+            continue
+        rb = c.to_record_batch()
+        if c.is_static:
+            static = {n: rb.column(n).to_pylist()[0] for n in rb.schema.names if ":" in n}
+            continue
+        for i, t in enumerate(rb.column("sim_time").cast("int64").to_pylist()):
+            colours[round(t * 1e-9, 6)] = rb.column("Arrows3D:colors")[i].as_py()
+    thr = _all_thrusters(False)
+    assert static["Arrows3D:labels"] == [n for n, _, _ in thr]
+    assert_allclose(static["Arrows3D:origins"], [r for _, r, _ in thr], atol=1e-5)  # (float32)
+    v = np.array(static["Arrows3D:vectors"])
+    assert_allclose(v / np.linalg.norm(v, axis=1, keepdims=True), -np.array([F / F_N for _, _, F in thr]), atol=1e-6)
+    times = sorted(colours)
+    for t in tr.t:
+        latest = colours[max(s for s in times if s <= t + 1e-9)]
+        alpha = np.array([int(col) & 0xFF for col in latest])
+        docked = T_BERTH_S - 1e-9 <= t < T_UNDOCK_S - 1e-9
+        assert (alpha == (255 if docked else 0)).all(), (t, alpha)
