@@ -78,11 +78,14 @@ def vehicle_thrusters() -> list[dict]:
 
 
 def station_thrusters() -> list[dict]:
-    """Six station thrusters in opposed pairs at (0, 0, ±12) m firing ±x, ±y (torque about x and y)
-    and at (12, 0, 0) firing ±z (about y): a set of its own, flown all the run."""
+    """Six station thrusters in three opposed pairs: at (0, 0, 12) m firing ±x (torque about y) and
+    ±y (about x), at (12, 0, 0) firing ±y (about z). Alone, three shift vectors (one per pair);
+    with the vehicle's one-way set, one (a positive null vector of all 14): the compiled mapping has
+    three columns, the docked configuration's two of them zero, and zero entries for the vehicle's
+    thrusters while it is away."""
     out = []
-    for k, (pos, g) in enumerate((([0, 0, 12], [1, 0, 0]), ([0, 0, 12], [-1, 0, 0]), ([0, 0, -12], [0, 1, 0]),
-                                  ([0, 0, -12], [0, -1, 0]), ([12, 0, 0], [0, 0, 1]), ([12, 0, 0], [0, 0, -1]))):
+    for k, (pos, g) in enumerate((([0, 0, 12], [1, 0, 0]), ([0, 0, 12], [-1, 0, 0]), ([0, 0, 12], [0, 1, 0]),
+                                  ([0, 0, 12], [0, -1, 0]), ([12, 0, 0], [0, 1, 0]), ([12, 0, 0], [0, -1, 0]))):
         out.append({"name": f"s{k}", "position_B": pos, "direction_B": g, "force_N": F_N, "isp_s": ISP_S})
     return out
 
@@ -189,6 +192,43 @@ def test_vehicle_thrusters_fire_only_while_docked(runs, case, executor):
     assert (pulses[told] > 0.0).all()  # the dump keeps them firing while told and docked
 
 
+#: a tick's delivered torque against the request (as tests/test_docking_thrusters.py: the mapping's
+#: pseudo-inverse ~1e-15 relative on ~4e2 N m, on-times differenced from totals of ~1 s; there
+#: measured <= 2e-12 N m); a shift along a zero entry (a thruster that cannot fire) gives no finite
+#: forces at all, and the mapping on the wrong thrusters is ~1e2 N m off
+DUMP_ABS_NM = 1e-8
+H_MIN, DUMP_TIME_S = 0.1, 20.0
+
+
+@pytest.mark.parametrize("executor", EXECUTORS)
+@pytest.mark.parametrize("case", list(CASES))
+def test_dump_delivered_where_flight_software_knows_the_thrusters(runs, case, executor):
+    """With ``min_on_s = 0`` every tick's thruster torque (logged on-times, true arms) is the dump
+    request on the logged CMG momentum plus ``(c_known - c_true) × Σ F_i ĝ_i`` wherever the thrusters
+    flight software maps on are those that fire: the station's alone before the berth is told (3 s)
+    and after the undock is (7 s), both sets in between; over [6, 7) s it still asks the departed
+    vehicle's (left out). Without a station set, from the told berth to the undock."""
+    tr = runs[case][executor]
+    thr = _all_thrusters(CASES[case])
+    pulses = _pulses(tr, [n for n, _, _ in thr])
+    assert (pulses < PERIOD_S).all()  # no thruster saturated: no request scaled down
+    h = tr.cols("hx", "hy", "hz")[:-1]
+    hn = np.linalg.norm(h, axis=1)[:, None]
+    request = -(hn - H_MIN * H_MAX_NMS) / hn * h / DUMP_TIME_S
+    checked = 0
+    for k, t in enumerate(tr.t[:-1]):
+        told_docked = T_BERTH_S + UPDATE_AFTER_S - 1e-9 <= t < T_UNDOCK_S - 1e-9
+        if not (told_docked or (CASES[case] and not T_UNDOCK_S - 1e-9 <= t < T_UNDOCK_S + UPDATE_AFTER_S - 1e-9)):
+            continue
+        c_known = C_DOCKED if told_docked else np.zeros(3)
+        made = sum(pulses[k, i] * np.cross(r - _c(t), F) for i, (_, r, F) in enumerate(thr)) / PERIOD_S
+        force = sum(pulses[k, i] * F for i, (_, _, F) in enumerate(thr)) / PERIOD_S
+        assert_allclose(made, request[k] + np.cross(c_known - _c(t), force), rtol=0, atol=DUMP_ABS_NM,
+                        err_msg=f"tick at {t:g} s")
+        checked += 1
+    assert checked == (80 if CASES[case] else 30)
+
+
 @pytest.mark.parametrize("case", list(CASES))
 def test_executors_agree_through_the_events(runs, case):
     a = runs[case]["per_tick"]
@@ -274,3 +314,44 @@ def test_recording_draws_the_vehicle_thrusters_while_docked(runs, tmp_path):
         alpha = np.array([int(col) & 0xFF for col in latest])
         docked = T_BERTH_S - 1e-9 <= t < T_UNDOCK_S - 1e-9
         assert (alpha == (255 if docked else 0)).all(), (t, alpha)
+
+
+#: the compiled shift against the numbers written out here: the same divisions and maxima in the
+#: same order (round-off of one division and one add per column)
+SHIFT_REL = 1e-14
+
+
+def test_masked_shift_skips_zero_entries_and_zero_columns():
+    """The shift whose supports are numbers (a vehicle's thrusters come and go): along each column
+    of V the least ``s = max_{i: V_ik > 0} (-F_i / V_ik)`` (zero entries never chosen: a thruster
+    that cannot fire), none along an all-zero column, then clipped at 0 and scaled so no force
+    exceeds its F_max; written out here in numpy on draws with zero entries and a zero column."""
+    import casadi as ca
+
+    from stationbed.loop.thrusters import map_min_norm_shift
+
+    rng = np.random.default_rng(35)
+    n, m = 7, 3
+    M_s, V_s, f_s, L_s = ca.SX.sym("M", n, 3), ca.SX.sym("V", n, m), ca.SX.sym("f", n), ca.SX.sym("L", 3)
+    f = ca.Function("f", [M_s, V_s, f_s, L_s], [map_min_norm_shift(M_s, V_s, f_s, L_s, None)])
+    for _ in range(50):
+        M = rng.normal(size=(n, 3))
+        V = np.abs(rng.normal(size=(n, m))) * (rng.random((n, m)) < 0.5)
+        V[:, 2] = 0.0  # a padding column
+        f_max = rng.uniform(50.0, 150.0, n)
+        L = rng.normal(size=3) * 100.0
+        F = M @ L
+        for k in range(m):
+            sup = V[:, k] > 0.0
+            if sup.any():
+                F = F + max(-F[sup] / V[sup, k]) * V[:, k]
+        F = np.maximum(F, 0.0)
+        F = F / max(1.0, max(F / f_max))
+        assert_allclose(np.array(f(M, V, f_max, L)).ravel(), F, rtol=SHIFT_REL, atol=SHIFT_REL * np.abs(F).max())
+
+
+def test_lp_mapping_with_vehicle_thrusters_is_refused():
+    d = station(False)
+    d["thrusters"]["mapping"] = "lp"
+    with pytest.raises(SceneError, match=r"thrusters\.mapping: 'lp' is not flown with a vehicle's thrusters"):
+        scene_from_dict(d)

@@ -331,7 +331,7 @@ class ThrusterCluster(Actuator):
         out = [f"thrusters {s['thruster_firings']} firings, impulse {s['thruster_impulse_Ns']:.4g} N s, propellant "
                f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
         if s.get("propellant_kg_by_vehicle"):
-            out.append("of which " + ", ".join(f"{v} {kg:.4g} kg" for v, kg in s["propellant_kg_by_vehicle"].items()))
+            out.append("by vehicle: " + ", ".join(f"{v} {kg:.4g} kg" for v, kg in s["propellant_kg_by_vehicle"].items()))
         if s.get("thruster_no_torque_about"):
             out.append(f"thrusters make no torque about {s['thruster_no_torque_about']}: a dump or hand-over "
                        "there is not delivered")
