@@ -355,3 +355,22 @@ def test_lp_mapping_with_vehicle_thrusters_is_refused():
     d["thrusters"]["mapping"] = "lp"
     with pytest.raises(SceneError, match=r"thrusters\.mapping: 'lp' is not flown with a vehicle's thrusters"):
         scene_from_dict(d)
+
+
+def test_docked_from_the_start_flies_as_the_station_own_thrusters():
+    """A vehicle docked at t = 0 with no event flies its thrusters as the same thrusters declared
+    as the station's (``[[thruster]]`` at ``r_port + C_BV r_V`` along ``C_BV ĝ_V``, written out by
+    hand, named as the vehicle's channels): the same rows bit for bit, the availability path
+    (numbers) against the fixed supports' code: the same mapping numbers, the same divisions and
+    maxima in the same order, the masks exact selects (``fmax(-1e300, x) = x``), ``avail`` = 1 an
+    exact product."""
+    d = station(False, events=[])
+    d["vehicle"][0]["port"] = "aft"
+    vehicle = simulate(scene_from_dict(d), fused=True)
+    d["vehicle"][0]["thruster"] = []
+    d["thruster"] = [{"name": n, "position_B": r.tolist(), "direction_B": (F / F_N).tolist(), "force_N": F_N,
+                      "isp_s": ISP_S} for n, r, F in _all_thrusters(False)]
+    own = simulate(scene_from_dict(d), fused=True)
+    assert vehicle.columns == own.columns
+    assert _pulses(own, [n for n, _, _ in _all_thrusters(False)]).sum() > 1.0  # s: they fired
+    assert np.array_equal(vehicle.data, own.data, equal_nan=True)
