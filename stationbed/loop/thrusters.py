@@ -41,6 +41,14 @@ asked, ``Σ F_i ĝ_i`` the net force of the pulses (none for an exact pure coupl
 is the same about any point). The force is recorded
 (the impulse) but does not change the orbit (docs/loop.md: the orbit is prescribed, and the
 ISS's attitude thrusters' net impulse is a pure couple where they can make one).
+
+A visiting vehicle's thrusters (``[[vehicle.thruster]]``,
+:func:`~stationbed.scene.thrusters.flown_thrusters`) are channels of this block from t = 0, one
+per thruster at each port the vehicle uses in the run, each with an availability number
+``avail`` (1 while the vehicle is docked there) that multiplies its valve's on-time; the event's
+step sets it. Flight software's mapping gives the thrusters it knows cannot fire zero rows, and
+the shifts' supports become numbers (:func:`_masked_shift`), so one compiled block serves every
+configuration; scenes without a vehicle's thrusters compile neither (their code as before).
 """
 
 from __future__ import annotations
@@ -52,8 +60,7 @@ import casadi as ca
 import numpy as np
 
 from ..model.cmg import held_momentum_B
-from ..scene.docking import mass_centre_B
-from ..scene.docking import configuration_ports
+from ..scene.docking import configuration_ports, mass_centre_B
 from ..scene.thrusters import available, flown_thrusters, missing_torque, thruster_owners, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
@@ -68,6 +75,9 @@ MODES = {"assist": 0.0, "thruster_only": 1.0, "off": 2.0}
 #: a positive null-space vector exists when the LP finds one with all entries >= 1 and the
 #: residual of A v is below this fraction of |A| |v| (round-off of HiGHS's solution)
 NULL_RESIDUAL_REL = 1e-9
+#: the masked shift's candidate for an entry it skips (V_ik = 0): below any -F_i / V_ik a force of
+#: at most ~1e6 N over an entry of at least ~1e-290 makes, and finite (x 0 is 0, not NaN)
+NO_SHIFT = -1e300
 
 
 def _positive_null(A: np.ndarray) -> np.ndarray | None:
@@ -175,10 +185,10 @@ def _masked_shift(F, V, f_max):
     numbers; compiled only for scenes with a vehicle's thrusters (their availability varies)."""
     n, m = F.shape[0], V.shape[1]
     for k in range(m):
-        s, any_k = -1e300, 0.0
+        s, any_k = NO_SHIFT, 0.0
         for i in range(n):
             pos = V[i, k] > 0.0
-            s = ca.fmax(s, ca.if_else(pos, -F[i] / ca.if_else(pos, V[i, k], 1.0), -1e300))
+            s = ca.fmax(s, ca.if_else(pos, -F[i] / ca.if_else(pos, V[i, k], 1.0), NO_SHIFT))
             any_k = ca.fmax(any_k, ca.if_else(pos, 1.0, 0.0))
         F = F + ca.if_else(any_k > 0.5, s, 0.0) * V[:, k]
     F = ca.fmax(F, 0.0)
@@ -280,6 +290,9 @@ class ThrusterCluster(Actuator):
         if on.size:
             pairs = opposed_pairs([thr[i].position_B for i in on], [thr[i].unit_B for i in on])
             M_on, V_on, pure = mapping_matrices(D[:, on], G[:, on], pairs)
+            if V_on.shape[1] > self.n_shift:  # (a configuration the run's events do not make)
+                raise ValueError(f"thrusters: the mapping on the configuration {self._where(known)} needs "
+                                 f"{V_on.shape[1]} shift vectors, the run's {self.n_shift}")
             M[on], V[on, :V_on.shape[1]] = M_on, V_on
         return c, M, V, pure
 

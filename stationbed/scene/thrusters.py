@@ -16,7 +16,9 @@ mapping = "min_norm_shift" # or "lp" (scipy HiGHS, per-tick loop only)
 ```
 
 The scene holds them as ``Scene.thruster`` (list) and ``Scene.thrusters`` (options); the closed
-loop fires them (docs/loop.md, "Actuators").
+loop fires them (docs/loop.md, "Actuators"), with the visiting vehicles' ``[[vehicle.thruster]]``
+tables (scene/docking.py), each flown at every port its vehicle uses in the run while it is
+docked there (:func:`flown_thrusters`, :func:`available`).
 
 Thrusters push one way only: a set turns the station about an axis when it makes torque both
 ways (:func:`torque_authority`, about the composite mass centre, docked vehicles included, in
