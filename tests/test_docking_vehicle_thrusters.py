@@ -389,3 +389,21 @@ def test_lockstep_samples_with_their_own_vehicle_and_update():
         rel = np.nanmax(np.abs(ref.data - tr.data) / np.maximum(np.abs(ref.data), 1.0))
         assert rel < EXEC_REL, rel
     assert not np.array_equal(t1.data, t2.data)
+
+
+def test_vehicle_name_that_cannot_name_columns_is_refused():
+    d = station(False)
+    d["vehicle"][0]["name"] = "pro-gress"
+    d["event"] = [dict(e, vehicle="pro-gress") for e in d["event"]]
+    with pytest.raises(SceneError, match=r"vehicle\.pro-gress\.name: 'pro-gress' names its thrusters' columns"):
+        scene_from_dict(d)
+
+
+def test_thruster_only_with_the_vehicle_away_is_refused():
+    """Thruster-only control needs thrusters that can fire in every configuration: before the
+    berth the vehicle's cannot, and the station has none (assist flies there on the CMGs alone)."""
+    d = station(False)
+    d["thrusters"]["mode"] = "thruster_only"
+    with pytest.raises(SceneError, match=r"about the composite mass centre \[0, 0, 0\] m\), and mode 'thruster_only'"
+                                         r".*no thruster can fire"):
+        scene_from_dict(d)
