@@ -407,3 +407,24 @@ def test_thruster_only_with_the_vehicle_away_is_refused():
     with pytest.raises(SceneError, match=r"about the composite mass centre \[0, 0, 0\] m\), and mode 'thruster_only'"
                                          r".*no thruster can fire"):
         scene_from_dict(d)
+
+
+#: a tick's on-time differenced from totals of at most ~1 s (round-off ~2e-16 s on 0.1 s)
+LEAK_REL = 1e-12
+
+
+def test_a_vehicle_thruster_stuck_on_leaks_only_while_docked():
+    """``thruster_stuck_on`` on a vehicle's thruster (named as its column, ``v_r0``) from 1 s: it
+    fires the whole of every tick it is on the station (a full period per tick from the berth to
+    the undock) and nothing while the vehicle is away (a leak there pushes the vehicle, not the
+    station); its propellant counted in the vehicle's."""
+    d = station(False)
+    d["fault"] = [{"t": 1.0, "kind": "thruster_stuck_on", "unit": "v_r0"}]
+    tr = simulate(scene_from_dict(d), fused=True)
+    p = _pulses(tr, ["v_r0"])[:, 0]
+    t0 = tr.t[:-1]
+    docked = (t0 >= T_BERTH_S - 1e-9) & (t0 < T_UNDOCK_S - 1e-9)
+    assert_allclose(p[docked], PERIOD_S, rtol=LEAK_REL)
+    assert (p[~docked] == 0.0).all()
+    on = tr.data[-1, [tr.columns.index(f"thr_on_s_v_{t['name']}") for t in vehicle_thrusters()]]
+    assert_allclose(tr.meta["summary"]["propellant_kg_by_vehicle"]["v"], on.sum() * F_N / (ISP_S * G0), rtol=PROP_REL)
