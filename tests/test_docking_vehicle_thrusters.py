@@ -409,7 +409,7 @@ def test_thruster_only_with_the_vehicle_away_is_refused():
         scene_from_dict(d)
 
 
-#: a tick's on-time differenced from totals of at most ~1 s (round-off ~2e-16 s on 0.1 s)
+#: a tick's on-time differenced from totals of at most 4 s (round-off ~1e-15 s on 0.1 s)
 LEAK_REL = 1e-12
 
 
