@@ -22,6 +22,7 @@ from ..loop.flight import flight_columns
 from ..model.cmg import CmgModel
 from ..model.torques import TORQUES
 from ..scene import Scene
+from ..scene.thrusters import flown_thrusters
 from .metrics import RunMetrics
 from .system import OUT_CHUNK
 from .chain import chain_columns
@@ -175,7 +176,7 @@ class Rows:
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
         cmg = system.formulation.model.cmg
         held = None if cmg is None or not scene.cmg.failed else cmg.geometry.held_momentum_B(scene.cmg)
-        period = None if scene.orbit is None or not scene.thruster else 2.0 * math.pi / scene.orbit.mean_motion
+        period = None if scene.orbit is None or not flown_thrusters(scene) else 2.0 * math.pi / scene.orbit.mean_motion
         self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, h_held_B=held,
                                   orbit_period_s=period, held_units=held_units(scene, cmg, self.columns),
                                   capacity_steps=capacity_steps(scene, cmg))
