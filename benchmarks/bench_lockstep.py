@@ -155,8 +155,8 @@ def main(argv=None) -> int:
             su, smp = cpu(lambda: [_Sample(s, None, False, fused) for s in sc])
         finally:
             cl.build_controller = orig
-        if kind == "batch":
-            assert all(s.kind == "batch" for s in smp)
+        if kind == "batch":  # (the default looping update_batch: executor() sends it per tick; timed in the batch here)
+            assert all(s.kind == ("batch" if cls is None else "per-tick") for s in smp), [s.kind for s in smp]
             run, res = cpu(lambda: _Lockstep(smp).run(SimulationError))
             assert not any(isinstance(r, BaseException) for r in res), res[:1]
         else:

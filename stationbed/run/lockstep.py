@@ -66,10 +66,14 @@ def _tick_ok(comp) -> bool:
 
 def executor(loop) -> str:
     """``"fused"``, ``"batch"`` or ``"per-tick"``: the executor a sample of ``loop`` (a
-    :class:`~.closed_loop.ControlLoop`) runs on."""
+    :class:`~.closed_loop.ControlLoop`) runs on. The batch only for a law that is
+    :func:`vectorised`: with the default ``update_batch`` (each member's ``update`` in a Python
+    loop) the law's Python is per sample either way, and the batch's own per-tick numpy on top
+    made it 1.09-1.28x the per-tick loop's CPU in groups of 4-16 (docs/speed.md, "The lockstep
+    batch")."""
     if loop.fused and fused_ok(loop.comp):
         return "fused"
-    if _tick_ok(loop.comp):
+    if _tick_ok(loop.comp) and vectorised(loop.comp.ctrl):
         return "batch"
     return "per-tick"
 
