@@ -74,3 +74,13 @@ def one_error_line(stderr: str) -> str:
     assert len(errors) == 1 and lines[-1] == errors[0], stderr
     assert all(ln.startswith("stationbed: ") for ln in lines) and "Traceback" not in stderr, stderr
     return errors[0]
+
+
+def lockstep_batch(scenes, keep: bool = True) -> list:
+    """The lockstep batch itself on ``scenes`` (stationbed/run/lockstep.py ``_Lockstep``), each a
+    sample of one batch whatever ``executor`` would choose (a law with only ``_update`` is sent
+    per tick there): the results, as ``run_lockstep``'s, for tests of the batch's own paths."""
+    from stationbed.run.lockstep import _Lockstep, _Sample  # noqa: PLC0415
+    from stationbed.run.simulation import SimulationError  # noqa: PLC0415
+
+    return _Lockstep([_Sample(s, None, keep, False) for s in scenes]).run(SimulationError)
