@@ -32,6 +32,8 @@ from stationbed import simulate
 from stationbed.run.lockstep import run_lockstep
 from stationbed.scene import SceneError, scene_from_dict
 
+from scenes import EXECUTORS, fly_on
+
 PERIOD_S = 0.1  # s
 T_BERTH_S = 2.0  # s, a whole number of ticks
 T_UNDOCK_S = 6.0  # s
@@ -132,24 +134,14 @@ def _c(t) -> np.ndarray:
     return C_DOCKED if T_BERTH_S - 1e-9 <= t < T_UNDOCK_S - 1e-9 else np.zeros(3)
 
 
-EXECUTORS = ("per_tick", "fused", "lockstep")
 CASES = {"vehicle_only": False, "with_station_set": True}
 
 
-def _run(scene, executor):
-    if executor == "lockstep":  # two samples: the mapped parts' batch (one alone runs the per-tick loop)
-        [(kind, tr), (kind2, tr2)] = run_lockstep([scene, scene], keep=True, fused=False)
-        assert kind == kind2 == "batch"
-        assert np.array_equal(tr.data, tr2.data, equal_nan=True)
-        return tr
-    tr = simulate(scene, fused=executor == "fused")
-    assert tr.meta["summary"]["fused"] == (executor == "fused"), tr.meta["summary"].get("not_fused")
-    return tr
 
 
 @pytest.fixture(scope="module")
 def runs():
-    return {case: {ex: _run(scene_from_dict(station(own)), ex) for ex in EXECUTORS} for case, own in CASES.items()}
+    return {case: {ex: fly_on(scene_from_dict(station(own)), ex) for ex in EXECUTORS} for case, own in CASES.items()}
 
 
 def _pulses(tr, names) -> np.ndarray:
