@@ -22,6 +22,13 @@ load hits every row alike. Rows (CPU time of this process, ``time.process_time``
    ``momentum_manager`` designs an LQR and its loop margins per sample), which every executor pays
    once per sample, whatever its duration.
 
+``--full-loop``: instead, the full flight loop's Monte Carlo samples
+(``scenarios/iss_full_flight_loop_montecarlo.toml`` drawn as the study draws them: CMGs, 16 assist
+thrusters, gyros, star trackers, the MEKF, ``momentum_manager``), three rows: ``fused`` (what the
+study chooses), ``batch`` (the lockstep batch, ``fused=False``: the law's compiled form mapped
+over the samples) and ``per_tick`` (each sample on the per-tick loop, ``fused=False``); e.g.
+``--full-loop --n 16 --duration 5553.6 --repeats 3`` (one orbit, nothing extrapolated).
+
 Each row is extrapolated to one-orbit samples as ``set-up + (row - set-up) x orbit/duration``
 (the set-up does not grow with the duration), and to 1000 of them on 2 workers (x 500), and said
 so: a measured ratio on a loaded machine, not a wall. ``--repeats R`` interleaves R rounds of
@@ -77,6 +84,16 @@ def estimated_scenes(n: int, duration: float):
     return [s.replace({"controller.sensor": {"seed": 7 + k}}) for k in range(n)]
 
 
+def full_loop_scenes(n: int, duration: float):
+    """Samples 0..n-1 of iss_full_flight_loop_montecarlo, drawn as the study draws them, of
+    ``duration`` seconds."""
+    from stationbed import load_scene  # noqa: PLC0415
+
+    s = load_scene(ROOT / "scenarios" / "iss_full_flight_loop_montecarlo.toml").replace(
+        {"simulation.duration": duration, "montecarlo.settle_s": duration / 3, "montecarlo.n": max(n, 2)})
+    return [sample_scene(s, k) for k in range(n)]
+
+
 def cpu(fn):
     c0 = time.process_time()
     out = fn()
@@ -108,10 +125,14 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--repeats", type=int, default=1, help="interleaved rounds of every row (medians)")
+    ap.add_argument("--full-loop", action="store_true",
+                    help="the full flight loop's samples: fused, batch and per tick (module docstring)")
     args = _smoke.parse(ap, argv, "4 samples of 2 s")
     if args.smoke:
         args.n, args.duration = 4, 2.0
     n, dur = args.n, args.duration
+    if args.full_loop:
+        return full_loop(args)
     from stationbed.controllers.example_hold import ExampleHold  # noqa: PLC0415
     import stationbed.run.closed_loop as cl  # noqa: PLC0415
 
@@ -134,8 +155,8 @@ def main(argv=None) -> int:
             su, smp = cpu(lambda: [_Sample(s, None, False, fused) for s in sc])
         finally:
             cl.build_controller = orig
-        if kind == "batch":
-            assert all(s.kind == "batch" for s in smp)
+        if kind == "batch":  # (the default looping update_batch: executor() sends it per tick; timed in the batch here)
+            assert all(s.kind == ("batch" if cls is None else "per-tick") for s in smp), [s.kind for s in smp]
             run, res = cpu(lambda: _Lockstep(smp).run(SimulationError))
             assert not any(isinstance(r, BaseException) for r in res), res[:1]
         else:
@@ -188,6 +209,50 @@ def main(argv=None) -> int:
         print(f"{name} / {base}, run alone = {r:.2f}")
     rows["loadavg"] = os.getloadavg()
     print(f"load average {rows['loadavg']} on {os.cpu_count()} cores", flush=True)
+    _smoke.write_json(args.json, rows, newline=True)
+    return 0
+
+
+def full_loop(args) -> int:
+    """``--full-loop``: the full flight loop's samples fused, in the lockstep batch and per tick,
+    ``--repeats`` interleaved rounds; set-up and run per sample, medians."""
+    n, dur = args.n, args.duration
+    sc = full_loop_scenes(n, dur)
+    for fused in (True, False):  # compile / load once, outside the timings
+        simulate(sc[0].replace({"simulation.duration": 1.0}), keep=False, fused=fused)
+    run_lockstep([s.replace({"simulation.duration": 0.3}) for s in sc[:2]], fused=False)
+
+    def row(kind):
+        su, smp = cpu(lambda: [_Sample(s, None, False, kind == "fused") for s in sc])
+        want = "per-tick" if kind == "per_tick" else kind
+        assert want == "per-tick" or all(s.kind == want for s in smp), [s.kind for s in smp]
+        if kind == "batch":
+            run, res = cpu(lambda: _Lockstep(smp).run(SimulationError))
+            assert not any(isinstance(r, BaseException) for r in res), res[:1]
+        else:
+            run, _ = cpu(lambda: [s.loop.run() for s in smp])
+        return su, run
+
+    kinds = ("fused", "batch", "per_tick")
+    samples = {k: [] for k in kinds}
+    load0 = _smoke.load_now()
+    for _ in range(args.repeats):
+        for k in kinds:
+            samples[k].append(row(k))
+    load = _smoke.mean_load(load0)
+    rows = {}
+    print(f"# the full flight loop's Monte Carlo samples, {n} x {dur:g} s, medians of {args.repeats} interleaved "
+          f"rounds, load average {load:.1f} on {os.cpu_count()} cores ({_smoke.machine()})")
+    print("| executor | set-up, ms per sample | run, ms per sample | µs per sample-tick | one-orbit sample, s CPU |")
+    print("|---|---|---|---|---|")
+    for k in kinds:
+        su = statistics.median(s for s, _ in samples[k]) / n
+        run = statistics.median(r for _, r in samples[k]) / n
+        orbit = su + run * ORBIT_S / dur
+        rows[k] = {"setup_ms": 1e3 * su, "run_ms": 1e3 * run, "us_per_sample_tick": 1e6 * run / (dur / 0.1),
+                   "one_orbit_sample_s": orbit, "rounds_setup_run_s": samples[k]}
+        print(f"| {k} | {1e3 * su:.1f} | {1e3 * run:.1f} | {rows[k]['us_per_sample_tick']:.2f} | {orbit:.3f} |")
+    rows["loadavg"] = load
     _smoke.write_json(args.json, rows, newline=True)
     return 0
 

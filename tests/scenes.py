@@ -74,3 +74,34 @@ def one_error_line(stderr: str) -> str:
     assert len(errors) == 1 and lines[-1] == errors[0], stderr
     assert all(ln.startswith("stationbed: ") for ln in lines) and "Traceback" not in stderr, stderr
     return errors[0]
+
+
+def lockstep_batch(scenes, keep: bool = True) -> list:
+    """The lockstep batch itself on ``scenes`` (stationbed/run/lockstep.py ``_Lockstep``), each a
+    sample of one batch whatever ``executor`` would choose (a law with only ``_update`` is sent
+    per tick there): the results, as ``run_lockstep``'s, for tests of the batch's own paths."""
+    from stationbed.run.lockstep import _Lockstep, _Sample  # noqa: PLC0415
+    from stationbed.run.simulation import SimulationError  # noqa: PLC0415
+
+    return _Lockstep([_Sample(s, None, keep, False) for s in scenes]).run(SimulationError)
+
+
+#: the executors a closed-loop run can take, by the name the tests give them
+EXECUTORS = ("per_tick", "fused", "lockstep")
+
+
+def fly_on(scene, executor: str):
+    """``scene`` flown on ``executor`` (:data:`EXECUTORS`), checked to have run there: fused or
+    per tick as the summary says; lockstep as a batch of two copies (one sample alone runs the
+    per-tick loop), both copies' rows the same."""
+    from stationbed import simulate  # noqa: PLC0415
+    from stationbed.run.lockstep import run_lockstep  # noqa: PLC0415
+
+    if executor == "lockstep":
+        [(kind, tr), (kind2, tr2)] = run_lockstep([scene, scene], keep=True, fused=False)
+        assert kind == kind2 == "batch"
+        assert np.array_equal(tr.data, tr2.data, equal_nan=True)
+        return tr
+    tr = simulate(scene, fused=executor == "fused")
+    assert tr.meta["summary"]["fused"] == (executor == "fused"), tr.meta["summary"].get("not_fused")
+    return tr

@@ -387,9 +387,16 @@ def test_every_torque_kind_balance_batch():
 LOCKSTEP_SHIFT_S = 0.037
 
 
-def _lockstep(scenes):
+def _lockstep(scenes, itself: bool = False):
+    """The samples' results in the lockstep batch: through run_lockstep (each must be chosen for
+    the batch), or with ``itself`` the batch run directly (a law with only ``_update``, which
+    run_lockstep sends per tick: the batch's default looping update_batch)."""
     from stationbed.run.lockstep import run_lockstep  # noqa: PLC0415
 
+    if itself:
+        from scenes import lockstep_batch  # noqa: PLC0415
+
+        return lockstep_batch(scenes)
     res = run_lockstep(scenes, keep=True, fused=False)
     # every sample in the batch: one with an edge between ticks flies that tick as the edge tick's case
     assert [k for k, _ in res] == ["batch"] * len(scenes), [k for k, _ in res]
@@ -423,7 +430,7 @@ def test_held_command_acts_over_its_period_lockstep(windows):
         d["controller"] = {"name": f"{__name__}:SineTorque", "period": PERIOD_S}
         d["simulation"]["output_dt"] = 0.5
         scenes.append(scene_from_dict(d))
-    for tr in _lockstep(scenes):
+    for tr in _lockstep(scenes, itself=True):
         dH = tr.H_O_N - tr.H_O_N[0]
         assert tr.t[-1] == duration
         expect = held_command_impulse(tr.t, duration) + window_impulse_x(windows, tr.t)

@@ -18,8 +18,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from stationbed import simulate
-from stationbed.run.lockstep import run_lockstep
 from stationbed.scene import scene_from_dict
+
+from scenes import fly_on
 
 T_EVENT_S = 10.0  # s
 DURATION_S = 20.0  # s
@@ -56,13 +57,6 @@ EVENT = {"kind": "dock", "t": T_EVENT_S, "vehicle": "v", "port": "aft", "closing
          "rate_VB_B": RATE_VB_B.tolist()}
 
 
-def _run(scene, executor):
-    if executor == "lockstep":  # two samples: the mapped parts' batch (one alone runs the per-tick loop)
-        [(kind, tr), (kind2, tr2)] = run_lockstep([scene, scene], keep=True, fused=False)
-        assert kind == kind2 == "batch"
-        assert_array_equal(tr2.data, tr.data)
-        return tr
-    return simulate(scene, fused=executor == "fused")
 
 
 def _captured(row):
@@ -100,7 +94,7 @@ COLS = ("qw", "qx", "qy", "qz", "wx", "wy", "wz", "hx", "hy", "hz")
 
 @pytest.mark.parametrize("executor", ["fused", "per_tick", "lockstep"])
 def test_docking_run_equals_the_split_run(split, executor):
-    tr = _run(scene_from_dict({**BASE, "event": [EVENT]}), executor)
+    tr = fly_on(scene_from_dict({**BASE, "event": [EVENT]}), executor)
     after = tr.t >= T_EVENT_S
     assert_allclose(tr.t[after] - T_EVENT_S, split.t, rtol=0, atol=1e-12)
     assert_allclose(tr.cols(*COLS)[after], split.cols(*COLS), rtol=RTOL, atol=ATOL)
@@ -112,9 +106,9 @@ def test_docking_run_equals_the_split_run(split, executor):
 @pytest.mark.parametrize("executor", ["fused", "per_tick", "lockstep"])
 def test_massless_vehicle_changes_no_row(executor):
     """A vehicle of zero mass and no surfaces docking changes nothing, bit for bit."""
-    plain = _run(scene_from_dict(BASE), executor)
+    plain = fly_on(scene_from_dict(BASE), executor)
     d = {**BASE, "event": [EVENT], "vehicle": [{"name": "v", "mass": 0.0, "inertia": [[0.0] * 3] * 3}]}
-    tr = _run(scene_from_dict(d), executor)
+    tr = fly_on(scene_from_dict(d), executor)
     assert_array_equal(tr.data[:, : len(plain.columns)], plain.data)
 
 

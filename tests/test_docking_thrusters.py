@@ -29,8 +29,9 @@ import pytest
 from numpy.testing import assert_allclose
 
 from stationbed import simulate
-from stationbed.run.lockstep import run_lockstep
 from stationbed.scene import SceneError, scene_from_dict
+
+from scenes import EXECUTORS, fly_on
 
 PERIOD_S = 0.1  # s
 T_EVENT_S = 4.0  # s, a whole number of ticks
@@ -109,18 +110,8 @@ UNDOCK = {"kind": "undock", "t": T_EVENT_S, "vehicle": "v", "delta_v": 0.05, "up
 CASES = {"starts_docked": (True, [], c_docked(), c_docked()),
          "berth": (False, [BERTH], np.zeros(3), c_docked()),
          "undock": (True, [UNDOCK], c_docked(), np.zeros(3))}
-EXECUTORS = ("per_tick", "fused", "lockstep")
 
 
-def _run(scene, executor):
-    if executor == "lockstep":  # two samples: the mapped parts' batch (one alone runs the per-tick loop)
-        [(kind, tr), (kind2, tr2)] = run_lockstep([scene, scene], keep=True, fused=False)
-        assert kind == kind2 == "batch"
-        assert np.array_equal(tr.data, tr2.data, equal_nan=True)
-        return tr
-    tr = simulate(scene, fused=executor == "fused")
-    assert tr.meta["summary"]["fused"] == (executor == "fused"), tr.meta["summary"].get("not_fused")
-    return tr
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +119,7 @@ def runs():
     out = {}
     for case, (docked, events, _, _) in CASES.items():
         scene = scene_from_dict(station(docked, events))
-        out[case] = {ex: _run(scene, ex) for ex in EXECUTORS}
+        out[case] = {ex: fly_on(scene, ex) for ex in EXECUTORS}
     return out
 
 

@@ -86,10 +86,11 @@ OFF_FUSED = {
     "iss_zpm_2006_dgcmg": "law: controller 'schedule' has no symbolic form",
     "sgcmg_singularity": "law: controller 'torque_command' has no symbolic form",
 }
-#: the shipped scenes whose samples the lockstep batch leaves to the per-tick loop (since the batch maps the
-#: composed parts, only a law with no symbolic form, the nonlinear MPC; [fdir]'s memory is handed back
-#: like an actuator's, ``Composition.memories``)
-LOCKSTEP_PER_TICK = {"eigenaxis_slew_mpc"}
+#: the shipped scenes whose samples the lockstep batch leaves to the per-tick loop: the laws without a
+#: vectorised update_batch or a symbolic form (the nonlinear MPC, the ZPM's schedule: their Python runs per
+#: sample either way, and the batch's own per-tick work made it slower, run/lockstep.py ``executor``);
+#: [fdir]'s memory is handed back like an actuator's, ``Composition.memories``
+LOCKSTEP_PER_TICK = {"eigenaxis_slew_mpc", "iss_zpm_2006", "iss_zpm_2006_dgcmg"}
 
 
 def _closed_loop(path) -> bool:
@@ -393,8 +394,9 @@ def test_drawn_blocks_fly_alike_and_keep_the_balance(c):
     # blocks, an edge between ticks the edge tick's case, an explicit environment rate a block
     assert sm["fused"] and "not_fused" not in sm, (c, sm.get("not_fused"))
     # the lockstep batch takes every combination but those with thrusters (it has no pulses: each
-    # such sample runs the per-tick loop, an upper bound as above)
-    assert runs["lockstep"][0] == "batch" or c["thrusters"], runs["lockstep"][0]
+    # such sample runs the per-tick loop, an upper bound as above) and those of the law with a
+    # state, whose Python _update has no vectorised update_batch (run/lockstep.py executor: per tick)
+    assert runs["lockstep"][0] == "batch" or c["thrusters"] or c["state"], runs["lockstep"][0]
     # (a law in Python has no reference attitude: its att_err columns are the per-tick loop's own)
     skip = ("att_err",) if c["state"] else ()
     for _, [(_, tr), *_] in (runs["fused"], runs["lockstep"]):

@@ -212,7 +212,13 @@ def test_a_carried_state_in_the_lockstep_executor(fused):
     orig = cl.build_controller
     cl.build_controller = lambda spec, base_dir=None: CountedSine(period=spec.period)
     try:
-        res = run_lockstep(scenes, keep=True, fused=fused)
+        if fused:
+            res = run_lockstep(scenes, keep=True, fused=True)
+        else:  # the batch itself: executor() sends a law with only _update per tick (run/lockstep.py)
+            from stationbed.run.lockstep import _Lockstep, _Sample  # noqa: PLC0415
+            from stationbed.run.simulation import SimulationError  # noqa: PLC0415
+
+            res = [("batch", tr) for tr in _Lockstep([_Sample(s, None, True, False) for s in scenes]).run(SimulationError)]
     finally:
         cl.build_controller = orig
     for w, (kind, tr) in zip(wins, res):

@@ -20,7 +20,7 @@ from scenes import ROOT
 from stationbed import load_scene, simulate
 from stationbed.controllers.pd import PD
 from stationbed.run.controller import Controller
-from stationbed.run.lockstep import executor, run_lockstep, vectorised
+from stationbed.run.lockstep import _Lockstep, _Sample, executor, run_lockstep, vectorised
 from stationbed.run.simulation import SimulationError
 from stationbed.scene import scene_from_dict
 
@@ -109,15 +109,19 @@ def _law(scene):
 
 
 def _run_with(scenes, cls):
-    """run_lockstep with the law replaced by ``cls`` (a module-less class: patched into the registry's lookup)."""
+    """The lockstep batch itself on ``scenes`` with the law replaced by ``cls`` (a module-less
+    class: patched into the registry's lookup), whichever executor :func:`executor` would choose
+    for it (a law without a vectorised update_batch is sent per tick: the batch's own paths are
+    tested here)."""
     import stationbed.run.closed_loop as cl  # noqa: PLC0415
 
     orig = cl.build_controller
     cl.build_controller = lambda spec, base_dir=None: cls(period=spec.period, **spec.params)
     try:
-        return [tr for _, tr in run_lockstep(scenes, keep=True, fused=False)]
+        samples = [_Sample(s, None, True, False) for s in scenes]
     finally:
         cl.build_controller = orig
+    return _Lockstep(samples).run(SimulationError)
 
 
 class FailsOne(Controller):
@@ -159,8 +163,9 @@ def test_a_failing_sample_fails_alone_with_its_single_runs_reason(how):
 
 
 def test_executor_choice_by_capability():
-    """pd with its symbolic form: fused (where the fused loop applies); a law without one: batch;
-    a non-fusable integrator: per-tick. run_lockstep says which ran each sample."""
+    """pd with its symbolic form: fused (where the fused loop applies); a law without one but
+    with a vectorised update_batch: batch; the same law with the default (looping) update_batch:
+    per-tick; a non-fusable integrator: per-tick. run_lockstep says which ran each sample."""
     pd_scenes = _samples({"reference": "lvlh"}, "pd")
     res = run_lockstep(pd_scenes[:2], keep=True)
     assert [k for k, _ in res] == ["fused", "fused"]
@@ -168,6 +173,20 @@ def test_executor_choice_by_capability():
         _same(tr, simulate(s))
     eh = _samples({"reference": "lvlh"}, "example_hold")
     assert [k for k, _ in run_lockstep(eh[:2])] == ["batch", "batch"]
+    import stationbed.run.closed_loop as cl  # noqa: PLC0415
+
+    class OnlyUpdate(type(_law(eh[0]))):  # the same law without its vectorised update_batch
+        update_batch = Controller.update_batch
+
+    orig = cl.build_controller
+    cl.build_controller = lambda spec, base_dir=None: OnlyUpdate(period=spec.period, **spec.params)
+    try:  # per tick: the default update_batch loops each member's update, the law's Python per sample either way
+        res = run_lockstep(eh[:2], keep=True)
+    finally:
+        cl.build_controller = orig
+    assert [k for k, _ in res] == ["per-tick", "per-tick"]
+    for s, (_, tr) in zip(eh, res):
+        _same(tr, simulate(s, fused=False, controller=OnlyUpdate(period=0.1, reference="lvlh")))
     dop = [s.replace({"simulation.integrator": "dop853", "simulation.step": None}) for s in eh[:2]]
     kinds = [k for k, _ in run_lockstep(dop)]
     assert kinds == ["per-tick", "per-tick"]

@@ -84,7 +84,8 @@ class Actuator:
        ``HELD = "<name>"`` when the ``OUTPUTS`` field of that name is the model's held input of
        the same name (``model.input_layout``, e.g. the CMG cluster's ``u_cmg``).
     9. Declare where it sits in the run: ``TABLE``, the scene field holding its tables (the
-       chain has the kind when that field is set and not empty); ``ORDER``, its place in the
+       chain has the kind when that field is set and not empty, or override ``present(scene)``
+       as the thrusters do: a visiting vehicle's tables count); ``ORDER``, its place in the
        chain (lower first: what costs nothing takes its part of the request first); and
        write ``from_scene(scene, known, plant)`` (the truth flown, what flight software
        knows, the law's plant facts). Optionally ``ROW_COLUMNS`` (CSV column -> ``(STATE

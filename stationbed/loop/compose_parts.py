@@ -43,6 +43,8 @@ class PartsMixin:
         return ca.Function("cl_sense_on", [c, par, y, w], list(self._sensed(c, par, w, C.get(c, "i"), C.get(c, "x"), y)))
 
     def _sensed(self, c, par, w, i, x, y=None):
+        if y is None and self._sense_case() is not None:  # the plain tick's sensing where it applies
+            return tuple(self._sense_case()(c, par, w))
         C, P = self.carry, self.par
         t, k = P.get(par, "t0") + i * P.get(par, "h"), P.get(par, "k0") + i
         if y is None:
@@ -52,6 +54,44 @@ class PartsMixin:
         fields.update(mem)
         outs = ca.vertcat(*(outs[b.name] for b in self.sense)) if self.sense else type(x)(0, 1)
         return C.pack(fields, symbolic=True), v, outs
+
+    def _sense_case(self) -> ca.Function | None:
+        """``(c, par, w) -> (c_sensed, v, outs)`` at the carry's tick as the fused tick chooses
+        its front (:meth:`~.compose.Composed.tick`): on a plain tick (every sense block has a
+        plain form and its ``is_plain``) the plain sensing as one SX function, else the general
+        one (the switches lazy); an explicit branch, so the generated C evaluates only the case
+        taken. None where there is no such choice (no sense block without a plain form on every
+        tick). The plain forms are exact: the same numbers as the general sensing."""
+        if "sense_case" in self._cache:
+            return self._cache["sense_case"]
+        plains = [b for b in self.sense if b.plain is not None]
+        sometimes = [b for b in plains if b.is_plain is not None]
+        if not self.sense or len(plains) < len(self.sense) or not sometimes:
+            self._cache["sense_case"] = None
+            return None
+        C, P, N = self.carry, self.par, self.noise
+
+        def sensed(cls, plain):
+            c, par, w = C.symbol("c", cls), P.symbol("par", cls), N.symbol("w", cls)
+            i, x, h = C.get(c, "i"), C.get(c, "x"), P.get(par, "h")
+            t, k = P.get(par, "t0") + i * h, P.get(par, "k0") + i
+            v, mem, outs = self._sense(k, t, h, self.plant.meas(t, x, P.get(par, "p")), c, w, par, plain=plain)
+            fields = {f: C.get(c, f) for f in C.names}
+            fields.update(mem)
+            out = [C.pack(fields, symbolic=True), v, ca.vertcat(*(outs[b.name] for b in self.sense))]
+            if plain:  # (dense: the two cases' outputs must have one sparsity)
+                return sx_function("cl_sense_plain", [c, par, w], [ca.densify(e) for e in out])
+            return ca.Function("cl_sense_general", [c, par, w], out)
+
+        MX = ca.MX
+        c, par, w = C.symbol("c", MX), P.symbol("par", MX), N.symbol("w", MX)
+        k = P.get(par, "k0") + C.get(c, "i")
+        flag = sometimes[0].is_plain(k)
+        for b in sometimes[1:]:
+            flag = ca.logic_and(flag, b.is_plain(k))
+        case = ca.Function.if_else("cl_sense_case", sensed(ca.SX, True), sensed(MX, False))
+        f = self._cache["sense_case"] = ca.Function("cl_sensed", [c, par, w], case(flag, c, par, w))
+        return f
 
     def _acted_plain(self, c, par, cmd):
         """The rest of a tick without actuators (SX): the end on the law's request, one step;
@@ -95,10 +135,7 @@ class PartsMixin:
             y = self.plant.meas(t, x, p) if self._truth else None  # the truth, for what reads it
             reads = [r for a in self.actuators for r in self._reads(a, v, y, ce)]
             reads = ca.vertcat(*reads) if reads else MX(0, 1)
-            if self._never_quiet:  # each actuator behind its own idle test, as the busy tick
-                rest, on, tq, full, xa = self._chain_lazy(k, t, h, ce, par, cmd, reads)
-            else:
-                rest, on, tq, _, full, *xa = chain(k, t, h, ce, par, cmd, reads)
+            rest, on, tq, full, xa = self._chain_lazy(k, t, h, ce, par, cmd, reads)
             held = self._u_ext(ce, u_ext)  # (plus the torque of the actuators on the whole tick)
             act, u, sat = self._end(t, h, x, rest, held + full if self._full_tick else held, p, self._end_extra(ce))
             x1 = pulse(ca.sum1(on) > 0, t, x, h, u, p, on, tq, *self._edge_args(par))

@@ -44,6 +44,14 @@ asked, ``Σ F_i ĝ_i`` the net force of the pulses (none for an exact pure coupl
 is the same about any point). The force is recorded
 (the impulse) but does not change the orbit (docs/loop.md: the orbit is prescribed, and the
 ISS's attitude thrusters' net impulse is a pure couple where they can make one).
+
+A visiting vehicle's thrusters (``[[vehicle.thruster]]``,
+:func:`~stationbed.scene.thrusters.flown_thrusters`) are channels of this block from t = 0, one
+per thruster at each port the vehicle uses in the run, each with an availability number
+``avail`` (1 while the vehicle is docked there) that multiplies its valve's on-time; the event's
+step sets it. Flight software's mapping gives the thrusters it knows cannot fire zero rows, and
+the shifts' supports become numbers (:func:`_masked_shift`), so one compiled block serves every
+configuration; scenes without a vehicle's thrusters compile neither (their code as before).
 """
 
 from __future__ import annotations
@@ -55,8 +63,8 @@ import casadi as ca
 import numpy as np
 
 from ..model.cmg import cmg_geometry, held_momentum_B
-from ..scene.docking import mass_centre_B
-from ..scene.thrusters import missing_torque, torque_arms
+from ..scene.docking import configuration_ports, mass_centre_B
+from ..scene.thrusters import available, flown_thrusters, missing_torque, thruster_owners, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
 from .working_momentum import working_momentum
@@ -71,6 +79,9 @@ MODES = {"assist": 0.0, "thruster_only": 1.0, "off": 2.0}
 #: a positive null-space vector exists when the LP finds one with all entries >= 1 and the
 #: residual of A v is below this fraction of |A| |v| (round-off of HiGHS's solution)
 NULL_RESIDUAL_REL = 1e-9
+#: the masked shift's candidate for an entry it skips (V_ik = 0): below any -F_i / V_ik a force of
+#: at most ~1e6 N over an entry of at least ~1e-290 makes, and finite (x 0 is 0, not NaN)
+NO_SHIFT = -1e300
 
 
 def _positive_null(A: np.ndarray) -> np.ndarray | None:
@@ -147,6 +158,8 @@ def map_min_norm_shift(M, V, f_max, L, support=None):
     kept). Without a shift vector negative forces are clipped to 0."""
     if isinstance(L, (ca.SX, ca.MX)):
         F = ca.mtimes(M, L)
+        if support is None:  # the shifts' supports are numbers (a vehicle's thrusters come and go)
+            return _masked_shift(F, V, f_max)
         for k, sup in enumerate(support):
             if sup:
                 s = -F[sup[0]] / V[sup[0], k]
@@ -166,6 +179,27 @@ def map_min_norm_shift(M, V, f_max, L, support=None):
             F = F + max(-F[i] / V[i, k] for i in sup) * V[:, k]
     F = np.maximum(F, 0.0)
     return F / max(1.0, float(np.max(F / f_max)))
+
+
+def _masked_shift(F, V, f_max):
+    """:func:`map_min_norm_shift`'s shift and scaling with the supports read from the numbers
+    ``V`` (symbolic, (n, m)): along column k the least ``s_k = max_{i: V_ik > 0} (-F_i / V_ik)``,
+    none when the column is all zero (a padding column; an entry of a thruster that cannot fire
+    is 0, so it is never chosen). The same forces as the fixed supports' code on the same
+    numbers; compiled only for scenes with a vehicle's thrusters (their availability varies)."""
+    n, m = F.shape[0], V.shape[1]
+    for k in range(m):
+        s, any_k = NO_SHIFT, 0.0
+        for i in range(n):
+            pos = V[i, k] > 0.0
+            s = ca.fmax(s, ca.if_else(pos, -F[i] / ca.if_else(pos, V[i, k], 1.0), NO_SHIFT))
+            any_k = ca.fmax(any_k, ca.if_else(pos, 1.0, 0.0))
+        F = F + ca.if_else(any_k > 0.5, s, 0.0) * V[:, k]
+    F = ca.fmax(F, 0.0)
+    kk = 1.0
+    for i in range(n):
+        kk = ca.fmax(kk, F[i] / f_max[i])
+    return F / kk
 
 
 def map_lp(D, G, f_max, L, weights, pure: bool):
@@ -205,16 +239,21 @@ class ThrusterCluster(Actuator):
         from ..scene.thrusters import ThrusterOptions
 
         self.scene, self.opt = scene, scene.thrusters or ThrusterOptions()
-        self.n = len(scene.thruster)
-        self.names = [t.name for t in scene.thruster]
+        #: the station's thrusters, then each vehicle's at each port it uses (scene/thrusters.py)
+        self.thr, self.owners = flown_thrusters(scene), thruster_owners(scene)
+        #: a vehicle's thrusters fly: each one's availability is a number (``avail``, 1 while docked)
+        self.varying = any(o is not None for o in self.owners)
+        self.n = len(self.thr)
+        self.names = [t.name for t in self.thr]
         self.D, self.G = torque_arms(scene)
         self.known = known
+        self.n_shift = self._shift_columns() if self.varying else 0
         self.c_known, self.M, self.V, self.pure = self._mapping(known)
-        self.support = supports(self.V)
+        self.support = None if self.varying else supports(self.V)
         self.capacity = float(capacity_Nms)
         self.h_held = np.zeros(3) if h_held_B is None else np.asarray(h_held_B, dtype=float).reshape(3)
-        self.f_max = np.array([t.force_N for t in scene.thruster])
-        self.isp = np.array([t.isp_s for t in scene.thruster])
+        self.f_max = np.array([t.force_N for t in self.thr])
+        self.isp = np.array([t.isp_s for t in self.thr])
         #: the mode manager commands the mode (``[fdir]``, loop/fdir.py: its memory ``fdir_mode``)
         self.commanded = getattr(scene, "fdir", None) is not None
         #: the known cluster's geometry when the mode manager may declare a unit of a gimballed
@@ -225,13 +264,47 @@ class ThrusterCluster(Actuator):
         self.cmg_pc = self.cmg_geo.params(known.cmg) if self.cmg_geo is not None else np.zeros(0)
         super().__init__()
 
-    @staticmethod
-    def _mapping(known) -> tuple:
+    @classmethod
+    def present(cls, scene) -> bool:
+        """Whether ``scene`` flies thrusters: its own or a vehicle's (from t = 0, every channel
+        unavailable while its vehicle is away)."""
+        return bool(flown_thrusters(scene))
+
+    def _where(self, scene) -> dict:
+        return {v.name: v.port for v in scene.vehicle}
+
+    def _shift_columns(self) -> int:
+        """The mapping's shift columns in every configuration of the run: the most opposed pairs
+        among the thrusters that can fire in one (at least 1)."""
+        out = 1
+        for where in configuration_ports(self.scene):
+            on = np.flatnonzero(available(self.owners, where))
+            pairs = opposed_pairs([self.thr[i].position_B for i in on], [self.thr[i].unit_B for i in on])
+            out = max(out, len(pairs or ()))
+        return out
+
+    def _mapping(self, known) -> tuple:
         """``(c_known, M, V, pure)``: flight software's mass centre [m] and mapping
-        (:func:`mapping_matrices`) on the configuration ``known``."""
-        D, G = torque_arms(known)
-        pairs = opposed_pairs([t.position_B for t in known.thruster], [t.unit_B for t in known.thruster])
-        return (mass_centre_B(known), *mapping_matrices(D, G, pairs))
+        (:func:`mapping_matrices`) on the configuration ``known``. With a vehicle's thrusters,
+        on those it knows can fire (the vehicles docked in ``known``), the others' rows 0 and V
+        padded with zero columns to :meth:`_shift_columns` (the compiled shape of every
+        configuration)."""
+        D, G = torque_arms(known, base=self.scene)
+        c = mass_centre_B(known)
+        thr = flown_thrusters(known, self.scene)
+        if not self.varying:
+            pairs = opposed_pairs([t.position_B for t in thr], [t.unit_B for t in thr])
+            return (c, *mapping_matrices(D, G, pairs))
+        on = np.flatnonzero(available(self.owners, self._where(known)))
+        M, V, pure = np.zeros((self.n, 3)), np.zeros((self.n, self.n_shift)), False
+        if on.size:
+            pairs = opposed_pairs([thr[i].position_B for i in on], [thr[i].unit_B for i in on])
+            M_on, V_on, pure = mapping_matrices(D[:, on], G[:, on], pairs)
+            if V_on.shape[1] > self.n_shift:  # (a configuration the run's events do not make)
+                raise ValueError(f"thrusters: the mapping on the configuration {self._where(known)} needs "
+                                 f"{V_on.shape[1]} shift vectors, the run's {self.n_shift}")
+            M[on], V[on, :V_on.shape[1]] = M_on, V_on
+        return c, M, V, pure
 
     def configuration_numbers(self, truth=None, known=None) -> dict[int, float]:
         """The numbers a configuration sets (:meth:`Actuator.configuration_numbers`): from
@@ -241,10 +314,12 @@ class ThrusterCluster(Actuator):
         L = self.param_layout
         fields = {}
         if truth is not None:
-            fields["torque_B"] = torque_arms(truth)[0] * self.f_max
+            fields["torque_B"] = torque_arms(truth, base=self.scene)[0] * self.f_max
+            if self.varying:  # the vehicles' thrusters fire while docked at their port
+                fields["avail"] = available(self.owners, self._where(truth))
         if known is not None:
             c, M, V, pure = self._mapping(known)
-            if pure != self.pure or V.shape != self.V.shape or supports(V) != self.support:
+            if not self.varying and (pure != self.pure or V.shape != self.V.shape or supports(V) != self.support):
                 raise ValueError(f"thrusters: the mapping on the configuration of mass centre {np.round(c, 6).tolist()} m "
                                  f"is {'a pure couple' if pure else 'not a pure couple'} with shifts moving "
                                  f"{supports(V)}, the run's {'is' if self.pure else 'is not'} with {self.support}: "
@@ -278,6 +353,8 @@ class ThrusterCluster(Actuator):
         per = f" ({s['propellant_kg_per_orbit']:.4g} kg per orbit)" if "propellant_kg_per_orbit" in s else ""
         out = [f"thrusters {s['thruster_firings']} firings, impulse {s['thruster_impulse_Ns']:.4g} N s, propellant "
                f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
+        if s.get("propellant_kg_by_vehicle"):
+            out.append("by vehicle: " + ", ".join(f"{v} {kg:.4g} kg" for v, kg in s["propellant_kg_by_vehicle"].items()))
         if s.get("thruster_no_torque_about"):
             out.append(f"thrusters make no torque about {s['thruster_no_torque_about']}: a dump or hand-over "
                        "there is not delivered")
@@ -291,10 +368,11 @@ class ThrusterCluster(Actuator):
         (``thr_mode`` 1 = thruster-only control, ``thr_dumping`` 1 = dumping), and totals over
         [0, t]: firings, time in thruster-only control [s], impulse Σ F t_on [N s], propellant
         [kg], and each thruster's on-time [s]."""
-        if not scene.thruster:
+        thr = flown_thrusters(scene)
+        if not thr:
             return []
         cols = ["thr_mode", "thr_dumping", "thr_firings", "thr_control_s", "thr_impulse_Ns", "thr_propellant_kg"]
-        return cols + [f"thr_on_s_{t.name}" for t in scene.thruster]
+        return cols + [f"thr_on_s_{t.name}" for t in thr]
 
     def row_index(self) -> np.ndarray:
         s = self.state
@@ -308,8 +386,13 @@ class ThrusterCluster(Actuator):
         if self.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
             out["orbit_period_s"] = 2.0 * math.pi / self.scene.orbit.mean_motion
         missing = missing_torque(self.scene) if self.opt.mode != "off" else []
-        if missing:  # an assist set that dumps about some axes only (the scene check refuses the rest)
+        if missing and len(missing) < 6:  # (all six: none can fire yet, a vehicle's set away)  # an assist set that dumps about some axes only (the scene check refuses the rest)
             out["thruster_no_torque_about"] = ", ".join(missing)
+        if self.varying:  # each vehicle's propellant (the totals count every thruster)
+            kg = self.state.get(np.asarray(x, float), "on_total_s") * self.f_max / (self.isp * G0_M_S2)
+            out["propellant_kg_by_vehicle"] = {v.name: float(sum(kg[i] for i, o in enumerate(self.owners)
+                                                                 if o is not None and o[0] == v.name))
+                                               for v in self.scene.vehicle if v.thruster}
         return out
 
     def command_numeric(self, t: float, h: float, x, r, tau_B):
@@ -320,7 +403,10 @@ class ThrusterCluster(Actuator):
         # which thrusters each shift moves (it shapes the compiled code)
         shifts = hashlib.sha1(repr(self.support).encode()).hexdigest()[:8]
         cmg = (self.cmg_geo.kind, self.cmg_geo.n_units) if self.cmg_geo is not None else ()
-        return (self.n, len(self.opt.inhibit), int(self.pure), int(self.opt.remainder), shifts) + (("fdir", *cmg) if self.commanded else ())
+        if self.varying:  # the supports are numbers (:func:`_masked_shift`); the valves' availability too
+            shifts = f"avail{self.n_shift}"
+        return (self.n, len(self.opt.inhibit), int(self.pure and not self.varying), int(self.opt.remainder),
+                shifts) + (("fdir", *cmg) if self.commanded else ())
 
     def _layouts(self):
         n, ni = self.n, len(self.opt.inhibit)
@@ -329,7 +415,7 @@ class ThrusterCluster(Actuator):
         g = self.cmg_geo
         params = Layout(f_max=n, isp=n, min_on=n, torque_B=(3, n), M=(n, 3), V=self.V.shape, capacity=1, h_held=3, mode=1,
                         levels=2, assist=3, dump=2, hand=2, inhibit=max(2 * ni, 1), ok=n, leak=n, c_known=3,
-                        **({"cmg_pc": g.n_par} if g is not None else {}))
+                        **({"cmg_pc": g.n_par} if g is not None else {}), **({"avail": n} if self.varying else {}))
         outputs = Layout(request_B=3, force_N=n)
         # with [fdir]: its mode, the capacity it knows, and (a gimballed cluster) the gimbal angles
         # and each unit's declaration time (its memory ``t_unit``, -1: not declared)
@@ -343,7 +429,8 @@ class ThrusterCluster(Actuator):
 
     def _params(self) -> dict:
         o = self.opt
-        return dict(f_max=self.f_max, isp=self.isp, min_on=[t.min_on_s for t in self.scene.thruster],
+        more = {"avail": available(self.owners, self._where(self.scene))} if self.varying else {}
+        return dict(**more, f_max=self.f_max, isp=self.isp, min_on=[t.min_on_s for t in self.thr],
                     torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, h_held=self.h_held, mode=MODES[o.mode],
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],
                     dump=[o.dump_time_s, o.max_dump_torque_Nm], hand=[o.handover, o.handback],
@@ -433,7 +520,10 @@ class ThrusterCluster(Actuator):
         Tq = p["torque_B"]
         # the valves' truth (a scheduled fault, run/faults.py): stuck off (ok = 0) loses the
         # command, stuck on (leak = 1) fires the whole tick; healthy (1, 0): exactly the command
-        on = ca.vertcat(*[p["leak"][i] * h + (1.0 - p["leak"][i]) * p["ok"][i] * on[i] for i in range(self.n)])
+        on = [p["leak"][i] * h + (1.0 - p["leak"][i]) * p["ok"][i] * on[i] for i in range(self.n)]
+        if self.varying:  # a vehicle's thruster fires only while it is docked at its port (avail = 1)
+            on = [p["avail"][i] * on[i] for i in range(self.n)]
+        on = ca.vertcat(*on)
         L_thr = ca.mtimes(Tq, on) / ca.fmax(h, 1e-300)
         rest = (1.0 - mode) * (tau - L_thr) - mode * dumping * (1.0 - inh) * L_dump
         fired = [ca.if_else(ca.logic_and(on[i] > 0.0, x["prev_on_s"][i] < h), 1.0, 0.0) for i in range(self.n)]

@@ -161,14 +161,16 @@ class CompiledBatch:
             self.fc.args[3][:] = s.ravel()
             self.ns = s.shape[1]
             self.out = _out_layout(self.fc.res[0].size // n - 4)
+            out = self.fc.res[0].reshape(n, -1)  # (views on the result buffer, made once)
+            self._cmd, self._q = out[:, self.out.slice("cmd")], out[:, self.out.slice("q_ref_BN")]
+            self._y = self.fc.args[1].reshape(n, ny)
         fc = self.fc
         fc.args[0][:] = t
-        fc.args[1][:] = meas.y.ravel()
+        self._y[:] = meas.y
         fc()
         if self.ns:
             fc.args[3][:] = fc.res[1]
-        out = fc.res[0].reshape(n, -1)
-        return self.out.get(out, "cmd").copy(), self.out.get(out, "q_ref_BN").copy()
+        return self._cmd.copy(), self._q.copy()
 
     def finish(self) -> None:
         """Hand each member its state."""

@@ -27,6 +27,7 @@ fused loop applies), ``batch`` (the composed parts, :func:`~.blocks.parts_ok`) o
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -65,10 +66,14 @@ def _tick_ok(comp) -> bool:
 
 def executor(loop) -> str:
     """``"fused"``, ``"batch"`` or ``"per-tick"``: the executor a sample of ``loop`` (a
-    :class:`~.closed_loop.ControlLoop`) runs on."""
+    :class:`~.closed_loop.ControlLoop`) runs on. The batch only for a law that is
+    :func:`vectorised`: with the default ``update_batch`` (each member's ``update`` in a Python
+    loop) the law's Python is per sample either way, and the batch's own per-tick numpy on top
+    made it 1.09-1.28x the per-tick loop's CPU in groups of 4-16 (docs/speed.md, "The lockstep
+    batch")."""
     if loop.fused and fused_ok(loop.comp):
         return "fused"
-    if _tick_ok(loop.comp):
+    if _tick_ok(loop.comp) and vectorised(loop.comp.ctrl):
         return "batch"
     return "per-tick"
 
@@ -229,16 +234,21 @@ class _Lockstep:
         self.outs = np.zeros((n, ns))
         self.M = BatchMeasurement(self.seen, lp.meas_layout)
         self.draws = [Draws(s.loop.comp, cm) for s in samples]  # each sample's own streams (sensors, noise)
-        self.wblk = [(np.zeros((0, nw)), 0)] * n
+        # every sample's draws of a block of ticks, (n, ticks, nw), from tick w0: each sample asks its
+        # stream for the same ticks in the same order (all start at tick 0 and step together), so one
+        # block serves all and a tick's draws are one copy, not n Python calls
+        self.wblk, self.w0 = np.zeros((n, 0, nw)), 0
 
     # -- sensors -------------------------------------------------------------------------
-    def _w(self, i: int, k: int, K: int):
-        """Sample i's draws of tick k (a block of ticks at a time, in tick order)."""
-        W, w0 = self.wblk[i]
-        if k - w0 >= len(W):
-            W, w0 = self.draws[i].rows(k, min(NOISE_BLOCK, K + 1 - k)), k
-            self.wblk[i] = (W, w0)
-        return W[k - w0]
+    def _w(self, k: int, K: int) -> np.ndarray:
+        """Every sample's draws of tick k, (n, nw) (a block of ticks at a time, in tick order)."""
+        if k - self.w0 >= self.wblk.shape[1]:
+            m = min(NOISE_BLOCK, K + 1 - k)
+            blk = np.empty((self.n, m, self.wblk.shape[2]))
+            for i, d in enumerate(self.draws):
+                blk[i] = d.rows(k, m)
+            self.wblk, self.w0 = blk, k
+        return self.wblk[:, k - self.w0]
 
     def _start(self, due, k: int, K: int) -> None:
         """The samples ``due`` start a piece at tick k (their next ``(a, b, h)``): their numbers,
@@ -257,8 +267,8 @@ class _Lockstep:
             if a in self.edge_at[i]:
                 self.edge_now[i] = tick_edges(comp, a, h, max_edges(comp))
             self.C[i, C.slice("i")] = 0.0
-            if self.W.shape[1]:
-                self.SW[i] = self._w(i, k, K)
+        if self.W.shape[1]:
+            self.SW[due] = self._w(k, K)[due]
         self.SPAR[:] = self.PAR
         self.SC[:] = self.C
         self.sense()
@@ -376,8 +386,8 @@ class _Lockstep:
                         c.__cause__ = exc
                         fail(i, c)
                 if vec:
-                    finite = np.isfinite(cmd).all(axis=1)
-                    if not finite.all():
+                    if not math.isfinite(cmd.sum()):  # (a NaN or inf anywhere makes the sum one)
+                        finite = np.isfinite(cmd).all(axis=1)
                         for i in np.flatnonzero(alive & ~finite):
                             try:
                                 S[i].loop.check_command(t, cmd[i])
@@ -407,8 +417,7 @@ class _Lockstep:
                     xs = fl.state.get(self.C[:, C.slice(fl.name)], "xs").copy() if fl is not None else None
                     ys = fl.outputs.get(self.outs[:, SO.slice(fl.name)], "ys").copy() if fl is not None else None
                 if nw and k < K:
-                    for i in range(n):
-                        self.W[i] = self._w(i, k + 1, K)
+                    self.W[:] = self._w(k + 1, K)
                 self.act()
                 if self.edge_now:
                     self._act_edges()

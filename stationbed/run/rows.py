@@ -22,6 +22,7 @@ from ..loop.flight import flight_columns
 from ..model.cmg import CmgModel
 from ..model.torques import TORQUES
 from ..scene import Scene
+from ..scene.thrusters import flown_thrusters
 from .metrics import RunMetrics
 from .system import OUT_CHUNK
 from .chain import chain_columns
@@ -173,7 +174,7 @@ class Rows:
         self.rows: list[np.ndarray] = []
         mc = getattr(scene, "montecarlo", None)
         #: the run's :class:`~.metrics.RunMetrics` (the closed loop sets the cluster capacity)
-        period = None if scene.orbit is None or not scene.thruster else 2.0 * math.pi / scene.orbit.mean_motion
+        period = None if scene.orbit is None or not flown_thrusters(scene) else 2.0 * math.pi / scene.orbit.mean_motion
         self.summary = RunMetrics(self.columns, settle_s=None if mc is None else mc.settle_s, orbit_period_s=period,
                                   working=WorkingH.of_scene(scene, self.columns))
         self._pending = ([], [], [])  # times, states, held values of rows not yet made

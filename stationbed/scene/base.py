@@ -13,7 +13,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 __all__ = [
     "SceneError", "FieldError", "Strict", "Vec3", "Mat3", "QUAT_NORM_TOL", "RTOL_MIN", "ATOL_MIN", "MIN_TIME_S",
     "TIME_RESOLUTION", "Rtol", "Atol", "TimeS", "at_most", "unit_hint", "DIRECTION_NORM_MIN", "Direction",
-    "UnitDirection",
+    "UnitDirection", "ThrusterName",
 ]
 
 #: A quaternion typed in a file with ~8 digits is unit to ~1e-8; anything further off is a mistake.
@@ -143,6 +143,8 @@ def _unit(v: list[float]) -> list[float]:
 Direction = Annotated[Vec3, AfterValidator(_direction)]
 #: a :data:`Direction` stored normalised to unit length
 UnitDirection = Annotated[Direction, AfterValidator(_unit)]
+#: a thruster's or group's name: it becomes a column stem (letters, digits, underscores)
+ThrusterName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
 
 
 class Strict(BaseModel):

@@ -15,6 +15,12 @@ inertia = [[1.2e4, 0, 0], [0, 3.0e4, 0], [0, 0, 3.0e4]]   # kg m², about its ow
 cm = [-3.5, 0.0, 0.0]            # m, its mass centre from its docking interface, V axes
 port = ""                        # the port it is docked at at t = 0 ("" = free flying)
 [[vehicle.surface]]              # as [[surface]] (on = "body"), V axes, centre from its interface
+[[vehicle.thruster]]             # as [[thruster]], V axes, position from its interface: flown while docked
+name = "rcs_p"
+position_V = [-6.0, 1.3, 0.0]    # m, where the force acts, from its docking interface, V axes
+direction_V = [0.0, -1.0, 0.0]   # the force's direction on the vehicle (and the station it is docked to)
+force_N = 130.0
+isp_s = 280.0
 
 [[event]]
 kind = "dock"                    # "dock" | "berth" | "undock"
@@ -41,10 +47,10 @@ from pydantic import Field, field_validator, model_validator
 
 from ..core.massprops import InvalidMassProperties, checked_inertia_rows, composite_cm
 from ..core.rotation import dcm
-from .base import FieldError, Mat3, Strict, UnitDirection, Vec3, unit_quaternion
+from .base import Direction, FieldError, Mat3, Strict, ThrusterName, UnitDirection, Vec3, unit_quaternion
 from .environment import Surface
 
-__all__ = ["Port", "Vehicle", "Event", "EVENT_KINDS", "check_docking", "docked_at", "configuration_changes",
+__all__ = ["Port", "Vehicle", "VehicleThruster", "Event", "EVENT_KINDS", "check_docking", "docked_at", "configuration_changes",
            "configuration_at", "vehicle_in_B", "docked_parts", "mass_centre_B", "configuration_ports"]
 
 #: the event kinds: what each does to the configuration
@@ -65,6 +71,20 @@ class Port(Strict):
         return unit_quaternion(q)
 
 
+class VehicleThruster(Strict):
+    """``[[vehicle.thruster]]``: one of a vehicle's thrusters, in its axes V, flown while it is
+    docked (:func:`~.thrusters.flown_thrusters`: a channel of the station's thrusters at each port
+    the vehicle occupies in the run)."""
+
+    name: ThrusterName
+    position_V: Vec3  # m, point of application from its docking interface, V axes
+    direction_V: Direction  # direction of the force on the vehicle, V axes
+    force_N: float = Field(gt=0.0)  # N, thrust while on
+    isp_s: float = Field(gt=0.0)  # s, specific impulse
+    min_on_s: float = Field(default=0.0, ge=0.0)  # s, minimum pulse
+    group: ThrusterName | None = None  # pod
+
+
 class Vehicle(Strict):
     """``[[vehicle]]``: a visiting vehicle, declared once (its mass properties in its own axes V)."""
 
@@ -74,9 +94,14 @@ class Vehicle(Strict):
     cm: Vec3 = [0.0, 0.0, 0.0]  # m, its mass centre from its docking interface, V axes
     port: str = ""  # docked there at t = 0 ("": free flying)
     surface: list[Surface] = []  # V axes, centres from its docking interface (on = "body")
+    thruster: list[VehicleThruster] = []  # V axes, positions from its docking interface (flown while docked)
 
     @model_validator(mode="after")
     def _physical(self):
+        names = [t.name for t in self.thruster]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise FieldError("thruster", f"names must be unique, repeated: {dup}")
         if self.mass == 0.0 and not any(any(r) for r in self.inertia):
             return self  # a massless vehicle (the no-op of the tests)
         try:

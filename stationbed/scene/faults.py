@@ -29,6 +29,12 @@ from pydantic import ConfigDict, Field, model_validator
 
 from .base import FieldError, Strict
 
+
+def _flown(scene):
+    from .thrusters import flown_thrusters  # noqa: PLC0415 (scene/thrusters.py imports the scene's tables)
+
+    return flown_thrusters(scene)
+
 __all__ = ["Fault", "FaultKind", "FaultParam", "FAULT_KINDS", "register_fault_kind", "check_faults", "fault_tick",
            "TARGETS"]
 
@@ -57,7 +63,7 @@ def _cmg_units(scene) -> list:
 #: target type -> the scene's valid units of that type (and what a message calls them)
 TARGETS: dict[str, tuple[Callable, str]] = {
     "cmg": (_cmg_units, "a gimballed [cmg] unit number"),
-    "thruster": (lambda scene: [t.name for t in scene.thruster], "a [[thruster]] name"),
+    "thruster": (lambda scene: [t.name for t in _flown(scene)], "a [[thruster]] name (a vehicle's: <vehicle>_<name>)"),
     "gyro": (lambda scene: [s.name for s in scene.sensor if s.kind == "gyro"], "a gyro [[sensor]] name"),
     "star_tracker": (lambda scene: [s.name for s in scene.sensor if s.kind == "star_tracker"],
                      "a star_tracker [[sensor]] name"),

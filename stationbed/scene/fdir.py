@@ -32,6 +32,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from .base import FieldError, Strict
+from .thrusters import flown_thrusters as _flown
 
 __all__ = ["Fdir", "ModeCommand", "MODES", "check_fdir"]
 
@@ -83,5 +84,5 @@ def check_fdir(scene) -> None:
     wanted = [("fdir.initial_mode", scene.fdir.initial_mode), ("fdir.on_cmg_fault", scene.fdir.on_cmg_fault)]
     wanted += [(f"mode[{i}].mode", m.mode) for i, m in enumerate(scene.mode)]
     for where, m in wanted:
-        if m in ("assist", "thruster_only") and not scene.thruster:
+        if m in ("assist", "thruster_only") and not _flown(scene):
             raise FieldError(where, f"mode '{m}' needs [[thruster]] tables")

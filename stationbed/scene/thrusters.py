@@ -16,7 +16,9 @@ mapping = "min_norm_shift" # or "lp" (scipy HiGHS, per-tick loop only)
 ```
 
 The scene holds them as ``Scene.thruster`` (list) and ``Scene.thrusters`` (options); the closed
-loop fires them (docs/loop.md, "Actuators").
+loop fires them (docs/loop.md, "Actuators"), with the visiting vehicles' ``[[vehicle.thruster]]``
+tables (scene/docking.py), each flown at every port its vehicle uses in the run while it is
+docked there (:func:`flown_thrusters`, :func:`available`).
 
 Thrusters push one way only: a set turns the station about an axis when it makes torque both
 ways (:func:`torque_authority`, about the composite mass centre, docked vehicles included, in
@@ -33,16 +35,19 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import re
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
-from .base import Direction, FieldError, Strict, Vec3
+from .base import Direction, FieldError, Strict, ThrusterName, Vec3
+from ..core.rotation import dcm
 from .docking import configuration_ports, mass_centre_B
 
-__all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "torque_arms", "torque_authority",
-           "missing_torque", "mass_centres", "AUTHORITY_ROUNDOFF_REL"]
+__all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "flown_thrusters", "thruster_owners",
+           "available", "torque_arms", "torque_authority",
+           "missing_torque", "AUTHORITY_ROUNDOFF_REL"]
 
 #: a thruster's torque per newton, or the set's torque authority about an axis, below this fraction
 #: of the set's scale (the largest |r_i - c| + 1 m; Σ |(r_i - c) × ĝ_i| F_i) is round-off of the
@@ -58,8 +63,6 @@ SHOWN_REL = 1e-4
 #: sets of at most this many thrusters look for the firings first (C(n, 3) triples: 9880 at 40)
 SHOWN_MAX_THRUSTERS = 40
 
-#: a thruster's or group's name: it becomes a column stem (letters, digits, underscores)
-ThrusterName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
 
 
 class Thruster(Strict):
@@ -78,6 +81,63 @@ class Thruster(Strict):
         """The force's direction, unit length, body axes."""
         n = math.sqrt(sum(v * v for v in self.direction_B))
         return [v / n for v in self.direction_B]
+
+
+def _vehicle_ports(scene) -> dict[str, list[str]]:
+    """Vehicle name -> the ports it occupies in the run (as it starts, after each event still to
+    come, and the ports of the dock and berth events already done), first use first; vehicles
+    with ``[[vehicle.thruster]]`` tables only."""
+    used = {v.name: [] for v in scene.vehicle if v.thruster}
+    seen = [{v.name: v.port for v in scene.vehicle}] + [{e.vehicle: e.port} for e in scene.event if e.done]
+    for where in seen + configuration_ports(scene):
+        for name, ports in used.items():
+            p = where.get(name, "")
+            if p and p not in ports:
+                ports.append(p)
+    return used
+
+
+def _flown(scene, base=None) -> list[tuple[Thruster, tuple[str, str] | None]]:
+    """(thruster in B, owner) of :func:`flown_thrusters` (owner ``(vehicle, port)`` or None)."""
+    out = [(t, None) for t in scene.thruster]
+    if not any(v.thruster for v in scene.vehicle):
+        return out
+    used = _vehicle_ports(scene if base is None else base)
+    ports = {p.name: p for p in scene.port}
+    for v in scene.vehicle:
+        for pname in used.get(v.name, []):
+            port = ports[pname]
+            C_BV = dcm(np.asarray(port.q_VB, float)).T
+            for t in v.thruster:
+                name = f"{v.name}_{t.name}" if len(used[v.name]) == 1 else f"{v.name}_{pname}_{t.name}"
+                r = np.asarray(port.position, float) + C_BV @ np.asarray(t.position_V, float)
+                g = C_BV @ np.asarray(t.direction_V, float)
+                out.append((Thruster.model_construct(name=name, position_B=r.tolist(), direction_B=g.tolist(),
+                                                     force_N=t.force_N, isp_s=t.isp_s, min_on_s=t.min_on_s,
+                                                     group=t.group), (v.name, pname)))
+    return out
+
+
+def flown_thrusters(scene, base=None) -> list[Thruster]:
+    """The thrusters the run flies, B axes: the scene's ``[[thruster]]`` tables, then each
+    ``[[vehicle.thruster]]`` once per port its vehicle occupies in the run (docked at t = 0 or
+    by an event), at that port (position ``port.position + C_BV r_V``, direction ``C_BV ĝ_V``),
+    named ``<vehicle>_<name>`` (``<vehicle>_<port>_<name>`` when the vehicle uses several ports).
+    A vehicle's thrusters fire only while it is docked there (:func:`available`). ``base``: the
+    scene whose events say which ports are used (default ``scene``; a configuration of a run
+    passes the run's scene, so its channels are the run's)."""
+    return [t for t, _ in _flown(scene, base)]
+
+
+def thruster_owners(scene, base=None) -> list[tuple[str, str] | None]:
+    """Per :func:`flown_thrusters` entry its ``(vehicle, port)``, or None for a station thruster."""
+    return [o for _, o in _flown(scene, base)]
+
+
+def available(owners, where: dict) -> np.ndarray:
+    """(n,) 1.0 for each thruster that can fire in the configuration ``where`` (vehicle name ->
+    port): the station's, and a vehicle's at the port it is docked at; else 0.0."""
+    return np.array([1.0 if o is None or where.get(o[0], "") == o[1] else 0.0 for o in owners])
 
 
 class ThrusterOptions(Strict):
@@ -122,7 +182,7 @@ class ThrusterOptions(Strict):
         return self
 
 
-def torque_arms(scene, c_B=None) -> tuple[np.ndarray, np.ndarray]:
+def torque_arms(scene, c_B=None, base=None) -> tuple[np.ndarray, np.ndarray]:
     """(D, G), each (3, n): column i the torque per newton ``(r_i - c) × ĝ_i`` [m] and the unit
     force direction ĝ_i of thruster i, c the composite mass centre (B axes) of the body, the
     appendages and the vehicles docked in ``scene`` (:func:`~.docking.mass_centre_B`), or
@@ -130,8 +190,9 @@ def torque_arms(scene, c_B=None) -> tuple[np.ndarray, np.ndarray]:
     rotation axes (DESIGN §4), so c is the constant ``Σ m r / Σ m`` of the configuration,
     whatever the arrays' angles; a docking or undocking moves it (run/docking.py)."""
     c = mass_centre_B(scene) if c_B is None else np.asarray(c_B, dtype=float)
-    G = np.array([t.unit_B for t in scene.thruster], dtype=float).T
-    R = np.array([t.position_B for t in scene.thruster], dtype=float).T - c[:, None]
+    thr = flown_thrusters(scene, base)
+    G = np.array([t.unit_B for t in thr], dtype=float).reshape(-1, 3).T
+    R = np.array([t.position_B for t in thr], dtype=float).reshape(-1, 3).T - c[:, None]
     return np.cross(R.T, G.T).T, G
 
 
@@ -163,13 +224,19 @@ def _named(names: list[str]) -> str:
     return ", ".join(names[:NAMED_MAX]) + (f" and {more} more" if more > 0 else "")
 
 
-def missing_torque(scene, c_B=None) -> list[str]:
+def missing_torque(scene, c_B=None, avail=None) -> list[str]:
     """The directions of B (``"-x"``, ``"+y"``, ...) the thrusters cannot turn the station about
     (about its mass centre, or ``c_B`` as :func:`torque_arms`): :func:`torque_authority` at
-    round-off (:data:`AUTHORITY_ROUNDOFF_REL`)."""
+    round-off (:data:`AUTHORITY_ROUNDOFF_REL`). ``avail`` ((n,), :func:`available`): those that
+    can fire (default: the station's and those of the vehicles docked in ``scene``)."""
     D, _ = torque_arms(scene, c_B)
-    f_max = np.array([t.force_N for t in scene.thruster])
-    return list(_missing(D.tobytes(), f_max.tobytes()))
+    f_max = np.array([t.force_N for t in flown_thrusters(scene)])
+    if avail is None:
+        avail = available(thruster_owners(scene), {v.name: v.port for v in scene.vehicle})
+    keep = np.asarray(avail) > 0.0
+    if not keep.any():
+        return [f"{sg}{ax}" for ax in "xyz" for sg in "-+"]
+    return list(_missing(np.ascontiguousarray(D[:, keep]).tobytes(), np.ascontiguousarray(f_max[keep]).tobytes()))
 
 
 @functools.lru_cache(maxsize=64)
@@ -215,35 +282,44 @@ def _shown(D: np.ndarray, f_max: np.ndarray, floor: float) -> bool:
     return True
 
 
-def mass_centres(scene) -> list[tuple[str, np.ndarray]]:
-    """``(where, c)`` of each configuration the scene flies with a mass centre of its own: as it
-    starts (``where`` ""), then after each ``[[event]]`` that moves it (``" after event[i] (kind
-    vehicle)"``), c [m] in body coordinates (:func:`~.docking.mass_centre_B`)."""
-    out = [("", mass_centre_B(scene))]
+def _configurations(scene) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """``(where, c, avail)`` of each configuration the scene flies with a mass centre or a set of
+    thrusters that can fire of its own: as it starts (``where`` ""), then after each
+    ``[[event]]`` still to come (``" after event[i] (kind vehicle)"``), c [m] in body
+    coordinates (:func:`~.docking.mass_centre_B`), avail (:func:`available`)."""
+    owners = thruster_owners(scene)
     todo = [(i, e) for i, e in enumerate(scene.event) if not e.done]
-    for (i, e), where in zip(todo, configuration_ports(scene)[1:]):
-        c = mass_centre_B(scene, where)
-        if not any(np.array_equal(c, c0) for _, c0 in out):
-            out.append((f" after event[{i}] ({e.kind} {e.vehicle})", c))
+    labels = [""] + [f" after event[{i}] ({e.kind} {e.vehicle})" for i, e in todo]
+    out = []
+    for label, where in zip(labels, configuration_ports(scene)):
+        c, avail = mass_centre_B(scene, where), available(owners, where)
+        if not any(np.array_equal(c, c0) and np.array_equal(avail, a0) for _, c0, a0 in out):
+            out.append((label, c, avail))
     return out
 
 
 def _check_authority(scene, mode: str) -> None:
     """Refuse a set that cannot deliver what ``mode`` asks of it at every tick, in every
-    configuration (:func:`mass_centres`: a docked vehicle moves the mass centre the arms are
-    about): thruster-only control needs torque both ways about each axis; assist needs some
-    torque to dump with (a set that dumps about some axes only is flown, and its run's summary
-    says which it lacks). The message names the directions, the configuration and the
-    thrusters that make no torque at all."""
-    for where, c in mass_centres(scene):
-        missing = missing_torque(scene, c)
+    configuration (:func:`_configurations`: a docked vehicle moves the mass centre the arms are
+    about, and its thrusters fire only while it is docked): thruster-only control needs torque
+    both ways about each axis; assist needs some torque to dump with (a set that dumps about some
+    axes only is flown, and its run's summary says which it lacks; a configuration with no
+    thruster that can fire, a vehicle's set while it is away, is flown by the CMGs alone). The
+    message names the directions, the configuration and the thrusters that make no torque at all."""
+    thr = flown_thrusters(scene)
+    for where, c, avail in _configurations(scene):
+        if mode == "assist" and not avail.any():
+            continue
+        missing = missing_torque(scene, c, avail)
         if not missing or (mode == "assist" and len(missing) < 6):
             continue
         D, _ = torque_arms(scene, c)
-        size_m = 1.0 + max(np.linalg.norm(np.asarray(t.position_B) - c) for t in scene.thruster)
-        none = [t.name for t, a in zip(scene.thruster, np.linalg.norm(D, axis=0)) if a <= AUTHORITY_ROUNDOFF_REL * size_m]
+        on = [i for i in range(len(thr)) if avail[i]]
+        size_m = 1.0 + max((np.linalg.norm(np.asarray(thr[i].position_B) - c) for i in on), default=0.0)
+        none = [thr[i].name for i in on if np.linalg.norm(D[:, i]) <= AUTHORITY_ROUNDOFF_REL * size_m]
         who = (f"; {_named(none)} make no torque at all (their lines of action pass through the mass centre: "
                "position_B is from the origin of [body] cm, not from the mass centre)") if none else ""
+        who += "" if on else "; no thruster can fire (a vehicle's fire only while it is docked)"
         why = "dumps momentum" if mode == "assist" else "controls attitude about every axis"
         at = ", ".join(f"{v:.6g}" for v in c)
         raise FieldError("thruster", f"the set makes no torque about {', '.join(missing)} of B (about the composite "
@@ -251,15 +327,26 @@ def _check_authority(scene, mode: str) -> None:
 
 
 def check_thrusters(scene) -> None:
-    """``[[thruster]]`` and ``[thrusters]`` agree with each other and the rest of the scene."""
-    if not scene.thruster:
+    """``[[thruster]]``, ``[[vehicle.thruster]]`` and ``[thrusters]`` agree with each other and
+    the rest of the scene."""
+    for i, v in enumerate(scene.vehicle):
+        if v.thruster and not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", v.name):
+            raise FieldError(f"vehicle[{i}].name", f"'{v.name}' names its thrusters' columns (<vehicle>_<name>): "
+                                                   "letters, digits, underscores")
+    for i, p in enumerate(scene.port):
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", p.name) and any(
+                p.name in ports and len(ports) > 1 for ports in _vehicle_ports(scene).values()):
+            raise FieldError(f"port[{i}].name", f"'{p.name}' names a vehicle's thrusters' columns "
+                                                "(<vehicle>_<port>_<name>): letters, digits, underscores")
+    thr = flown_thrusters(scene)
+    if not thr:
         if scene.thrusters is not None:
             raise FieldError("thrusters", "options without any [[thruster]]")
         return
-    names = [t.name for t in scene.thruster]
+    names = [t.name for t in thr]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise FieldError("thruster", f"names must be unique, repeated: {dup}")
+        raise FieldError("thruster", f"names must be unique (a vehicle's are <vehicle>_<name>), repeated: {dup}")
     if scene.controller is None:
         raise FieldError("thruster", "thrusters are fired by the closed loop: add a [controller] table")
     if scene.cmg is None:
@@ -269,9 +356,14 @@ def check_thrusters(scene) -> None:
         raise FieldError("thrusters.mode", "'assist' acts on |h| as a fraction of the CMG capacity: give "
                                            "cmg.max_momentum (kind 'ideal' has no capacity otherwise)")
     period = scene.controller.period
-    for i, t in enumerate(scene.thruster):
+    if opt.mapping == "lp" and len(thr) > len(scene.thruster):
+        raise FieldError("thrusters.mapping", "'lp' is not flown with a vehicle's thrusters (they come and go): "
+                                              "use 'min_norm_shift'")
+    tables = [(f"thruster[{i}]", t) for i, t in enumerate(scene.thruster)]
+    tables += [(f"vehicle[{i}].thruster[{j}]", t) for i, v in enumerate(scene.vehicle) for j, t in enumerate(v.thruster)]
+    for where, t in tables:
         if t.min_on_s > period:
-            raise FieldError(f"thruster[{i}].min_on_s", f"{t.min_on_s:g} s is longer than the controller period "
-                                                        f"({period:g} s): a pulse is cut at the period")
+            raise FieldError(f"{where}.min_on_s", f"{t.min_on_s:g} s is longer than the controller period "
+                                                  f"({period:g} s): a pulse is cut at the period")
     if opt.mode != "off":
         _check_authority(scene, opt.mode)

@@ -26,6 +26,7 @@ from ...run.lockstep import run_lockstep
 from ...run.simulation import SimulationError, simulate
 from ...run.trajectory import Trajectory
 from ...run.working_h import WorkingH
+from ...scene.thrusters import flown_thrusters
 from .dispersions import draw, sample_seed
 
 __all__ = ["run_sample", "run_batch", "run_chunk", "held_warnings", "ID_COLUMNS", "ENVELOPE_SERIES", "EnvelopeSink",
@@ -86,7 +87,7 @@ def scene_metrics(scene) -> list[str]:
     column, capacity or count to come from. The study's table has these columns only."""
     columns = trajectory_columns(scene)
     cap = _capacity(scene)
-    period = 2.0 * math.pi / scene.orbit.mean_motion if scene.orbit is not None and scene.thruster else None
+    period = 2.0 * math.pi / scene.orbit.mean_motion if scene.orbit is not None and flown_thrusters(scene) else None
     m = RunMetrics(columns, h_capacity_Nms=cap, orbit_period_s=period)
     row = np.zeros((1, len(columns)))
     row[0, columns.index("t")] = 1.0  # s, after the start (a per-orbit figure needs a run length)
