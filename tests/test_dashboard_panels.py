@@ -31,6 +31,8 @@ from stationbed.loop.flight import st_dropouts
 from stationbed.output.rerun.events import Events
 from stationbed.run.trajectory import Trajectory
 
+from rrd_helpers import entity_rows
+
 ROOT = Path(__file__).resolve().parents[1]
 ESTIMATED = ROOT / "scenarios" / "iss_lvlh_hold_estimated.toml"
 HOLD = ROOT / "scenarios" / "iss_lvlh_hold.toml"
@@ -292,7 +294,7 @@ def thr_run(tmp_path_factory):
 
 
 def test_recording_lights_the_thrusters_that_fired(thr_run, tmp_path):
-    rerun_chunk = pytest.importorskip("rerun.chunk")
+    pytest.importorskip("rerun.chunk")
     from stationbed.output.rerun.recording import write_recording
 
     scene = load_scene(THRUST)
@@ -309,17 +311,8 @@ def test_recording_lights_the_thrusters_that_fired(thr_run, tmp_path):
     tr = Trajectory(list(cols), np.column_stack(list(cols.values())))
     path = write_recording(tr, scene, tmp_path / "t.rrd")
     lit_by_hand = np.vstack([on[:1] > 0, np.diff(on, axis=0) > 0])
-    colors = {}
-    static = None
-    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
-        if c.entity_path.lstrip("/") != "world/station/thrusters":
-            continue
-        rb = c.to_record_batch()
-        if c.is_static:
-            static = {n: rb.column(n).to_pylist()[0] for n in rb.schema.names if ":" in n}
-            continue
-        for i, t in enumerate(rb.column("sim_time").cast("int64").to_pylist()):
-            colors[round(t * 1e-9, 6)] = rb.column("Arrows3D:colors")[i].as_py()
+    static, rows = entity_rows(path, "world/station/thrusters")
+    colors = {round(t, 6): row["Arrows3D:colors"] for t, row in rows}
     assert static["Arrows3D:labels"] == names
     # the station's arrays balance about y: the composite mass centre is the body's origin
     assert_allclose(static["Arrows3D:origins"], [t.position_B for t in scene.thruster], atol=1e-5)

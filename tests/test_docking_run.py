@@ -20,6 +20,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from stationbed import simulate
 from stationbed.scene import scene_from_dict
 
+from rrd_helpers import entity_rows
 from scenes import fly_on
 
 T_EVENT_S = 10.0  # s
@@ -163,21 +164,13 @@ def test_recording_draws_the_vehicle_at_its_port_while_docked(tmp_path):
     r_port + cm = (-8.5, 0.5, 1) m from the mass centre, here at the origin), with the uniform
     box of its moments (edges² = 6 (I_j + I_k - I_i) / m: 16.5, 4.5, 1.5 m²), and is cleared at
     the undock."""
-    rerun_chunk = pytest.importorskip("rerun.chunk")
+    pytest.importorskip("rerun.chunk")
     from stationbed.output.rerun.recording import write_recording  # noqa: PLC0415
 
     undock = {"kind": "undock", "t": 15.0, "vehicle": "v", "delta_v": 0.05}
     scene = scene_from_dict({**BASE, "event": [EVENT, undock]})
     path = write_recording(simulate(scene), scene, tmp_path / "dock.rrd")
-    rows = []
-    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
-        if c.is_static or c.entity_path.lstrip("/") != "world/station/vehicle/v":
-            continue
-        rb = c.to_record_batch()
-        t = rb.column("sim_time").cast("int64").to_pylist()
-        for i in range(rb.num_rows):
-            rows.append((t[i] * 1e-9, {n: rb.column(n)[i].as_py() for n in rb.schema.names if ":" in n}))
-    rows.sort(key=lambda r: r[0])
+    rows = sorted(entity_rows(path, "world/station/vehicle/v")[1], key=lambda r: r[0])
     assert_allclose([t for t, _ in rows], [T_EVENT_S, 15.0], rtol=0, atol=1e-9)  # (ns on the time line)
     box = rows[0][1]
     assert_allclose(box["Boxes3D:centers"][0], R_PORT + CM_V, rtol=1e-6)  # (float32 in the recording)

@@ -32,6 +32,7 @@ from stationbed import simulate
 from stationbed.run.lockstep import run_lockstep
 from stationbed.scene import SceneError, scene_from_dict
 
+from rrd_helpers import entity_rows
 from scenes import EXECUTORS, fly_on
 
 PERIOD_S = 0.1  # s
@@ -279,22 +280,14 @@ def test_recording_draws_the_vehicle_thrusters_while_docked(runs, tmp_path):
     """Read back from the .rrd: the vehicle's arrows sit at ``r_port + C_BV r_V`` (from the mass
     centre of the scene as it starts: the origin, the vehicle away) with plumes along ``-C_BV ĝ_V``,
     transparent (alpha 0) before the berth and from the undock, opaque while docked."""
-    rerun_chunk = pytest.importorskip("rerun.chunk")
+    pytest.importorskip("rerun.chunk")
     from stationbed.output.rerun.recording import write_recording  # noqa: PLC0415
 
     scene = scene_from_dict(station(False))
     tr = runs["vehicle_only"]["fused"]
     path = write_recording(tr, scene, tmp_path / "v.rrd")
-    static, colours = None, {}
-    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
-        if c.entity_path.lstrip("/") != "world/station/thrusters":
-            continue
-        rb = c.to_record_batch()
-        if c.is_static:
-            static = {n: rb.column(n).to_pylist()[0] for n in rb.schema.names if ":" in n}
-            continue
-        for i, t in enumerate(rb.column("sim_time").cast("int64").to_pylist()):
-            colours[round(t * 1e-9, 6)] = rb.column("Arrows3D:colors")[i].as_py()
+    static, rows = entity_rows(path, "world/station/thrusters")
+    colours = {round(t, 6): row["Arrows3D:colors"] for t, row in rows}
     thr = _all_thrusters(False)
     assert static["Arrows3D:labels"] == [n for n, _, _ in thr]
     assert_allclose(static["Arrows3D:origins"], [r for _, r, _ in thr], atol=1e-5)  # (float32)

@@ -23,6 +23,7 @@ from stationbed.run.trajectory import Trajectory
 from stationbed.scene.sensors import StarTrackerSensor
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
+from rrd_helpers import entity_rows  # noqa: E402
 from test_rerun_blueprint import TABS, blueprint_tree  # noqa: E402  (same folder: pytest puts it on sys.path)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,15 +51,8 @@ def static_components(path) -> dict[str, dict[str, list]]:
 
 def temporal_rows(path, entity) -> list[tuple[float, dict]]:
     """(t [s], {component: value}) of every temporal row of ``entity``, time-sorted."""
-    rows = []
-    for c in rerun_chunk.RrdReader(path).stream().to_chunks():
-        if c.is_static or c.entity_path.lstrip("/") != entity:
-            continue
-        rb = c.to_record_batch()
-        t = rb.column("sim_time").cast("int64").to_pylist()
-        for i in range(rb.num_rows):
-            comp = {n: rb.column(n)[i].as_py() for n in rb.schema.names if ":" in n}
-            rows.append((t[i] * 1e-9, {n: v[0] if isinstance(v, list) and len(v) == 1 else v for n, v in comp.items()}))
+    rows = [(t, {n: v[0] if isinstance(v, list) and len(v) == 1 else v for n, v in comp.items()})
+            for t, comp in entity_rows(path, entity)[1]]
     return sorted(rows, key=lambda r: r[0])
 
 
