@@ -23,13 +23,13 @@ import json
 import numpy as np
 import pytest
 
-from stationbed import simulate
+from stationbed import load_scene, simulate
 from stationbed.analysis import dashboard as dash
 from stationbed.output.rerun.events import Events
 from stationbed.scene import scene_from_dict
 from stationbed.studies.montecarlo.dispersions import draw
 from stationbed.studies.montecarlo.samples import run_sample
-from test_fault_momentum import STUCK_UNIT, T_STUCK_S, TORQUE_Z_NM, dgcmg_unit_momenta, pyramid_envelope, stuck_scene
+from test_fault_momentum import SCENE, STUCK_UNIT, T_STUCK_S, TORQUE_Z_NM, dgcmg_unit_momenta, pyramid_envelope, stuck_scene
 from test_faults import box, pyramid_h
 
 #: the working momentum from the rows against the library's: the same sums in another order
@@ -154,3 +154,80 @@ def test_dashboard_and_recording_name_the_saturation_of_the_units_left(pyramid_s
     said = [t for t, _, text in Events.of(s, tr.columns).changes(tr) if text == "CMG momentum saturation begins"]
     starts = tr.t[sat & ~np.r_[False, sat[:-1]]]
     np.testing.assert_array_equal(said, starts)
+
+
+# -- a rotor at a fraction: a wheel_speed_drop, a failed unit spinning down (the DGCMG) -------------
+T_ROTOR_S = 5.0  # s, on the tick grid: unit 2's rotor drops, or the unit fails and spins down
+DROP_FRACTION = 0.5  # of unit 2's rotor lost: it runs on at 0.5 h_rotor, a working unit
+SPIN_DOWN_S = 10.0  # s, the failed rotor's time constant: a step every 0.5 s (5 ticks), exp(-1.5) = 0.22 of it left at 20 s
+
+
+def _rotor_scene(kind):
+    s = load_scene(SCENE)
+    f = dict(s.fault[0].model_dump(exclude_unset=True), kind=kind, t=T_ROTOR_S, unit=STUCK_UNIT)
+    f.update({"fraction": DROP_FRACTION} if kind == "wheel_speed_drop" else {"spin_down_s": SPIN_DOWN_S})
+    return s.replace({"simulation.duration": 20.0, "simulation.output_dt": 0.1, "fault": [f]})
+
+
+def hw_vec(tr, s):
+    """The three units other than unit 2: their summed momentum per row, B [N m s]."""
+    g = tr.data[:, [tr.columns.index(c) for c in tr.columns if c.startswith("gimbal_") and not c.endswith("_rate")]]
+    hu = dgcmg_unit_momenta(g, s.cmg.h_rotor)
+    return hu.sum(axis=1) - hu[:, STUCK_UNIT - 1]
+
+
+def _rotor_truth(tr, s, kind):
+    """|h_work| and its capacity per row. A dropped rotor's unit works: all four units' momenta
+    from the gimbal angles, unit 2's times 1 - fraction from the drop, over (3 + 1 - fraction)
+    h_rotor (the DGCMG's spherical envelope: each unit reaches its own rotor's momentum along any
+    axis). A failed unit is out from its fault whatever its rotor still holds: the three others'
+    momenta over 3 h_rotor (nothing of the spin-down staircase needed)."""
+    g = tr.data[:, [tr.columns.index(c) for c in tr.columns if c.startswith("gimbal_") and not c.endswith("_rate")]]
+    hu = dgcmg_unit_momenta(g, s.cmg.h_rotor)
+    after = tr.t >= T_ROTOR_S
+    r2 = (1.0 - DROP_FRACTION) if kind == "wheel_speed_drop" else 0.0
+    hu[after, STUCK_UNIT - 1] *= r2
+    return np.linalg.norm(hu.sum(axis=1), axis=1), np.where(after, 3.0 + r2, 4.0) * s.cmg.h_rotor
+
+
+@pytest.fixture(scope="module", params=["wheel_speed_drop", "cmg_failed"])
+def rotor_run(request):
+    s = _rotor_scene(request.param)
+    return request.param, s, simulate(s, fused=True)
+
+
+def test_summary_and_dashboard_weigh_a_rotor_at_its_fraction(rotor_run, tmp_path, monkeypatch):
+    """After a wheel_speed_drop the working capacity counts the unit's rotor at its fraction;
+    after a cmg_failed with a spin-down the unit's decaying rotor (up to 4760 N m s) is out of
+    |h_work| and the unit out of the capacity. The summary's max_h_Nms and max_h_fraction are
+    the truth's largest values, the dashboard draws the truth's series."""
+    kind, s, tr = rotor_run
+    hw, cap = _rotor_truth(tr, s, kind)
+    sm = tr.meta["summary"]
+    after = tr.t >= T_ROTOR_S
+    if kind == "wheel_speed_drop":  # the rows' h is the truth's |h_work| (the dropped rotor in it)
+        h = tr.data[:, [tr.columns.index(c) for c in ("hx", "hy", "hz")]]
+        np.testing.assert_allclose(np.linalg.norm(h, axis=1), hw, rtol=H_ROUNDOFF_REL, atol=0)
+    else:  # the failed rotor (the rows' h less the three others') still holds a fifth of its momentum at the end
+        h = tr.data[:, [tr.columns.index(c) for c in ("hx", "hy", "hz")]]
+        assert np.linalg.norm(h[-1] - hw_vec(tr, s)[-1]) > 0.2 * s.cmg.h_rotor
+    assert (hw[after] / cap[after]).max() > 0.0
+    np.testing.assert_allclose(sm["max_h_Nms"], hw.max(), rtol=H_ROUNDOFF_REL)
+    np.testing.assert_allclose(sm["max_h_fraction"], (hw / cap).max(), rtol=H_ROUNDOFF_REL)
+    lines = _drawn_lines(monkeypatch, _write_run(tr, tmp_path / "run"))
+    _, y = lines["CMG momentum |h| / capacity"]["|h| / capacity"]
+    np.testing.assert_allclose(y, hw / cap, rtol=H_ROUNDOFF_REL, atol=0)
+
+
+def test_montecarlo_envelope_weighs_a_rotor_at_its_fraction(rotor_run):
+    """The Monte Carlo's h_fraction envelope of the same scene at every row is the truth's series."""
+    kind, s, _ = rotor_run
+    mc = s.replace({"montecarlo": {"n": 1, "seed": 7, "envelope_dt": s.simulation.output_dt}})
+    n_t = int(round(s.simulation.duration / s.simulation.output_dt)) + 1
+    row, env = run_sample(mc, 0, env_times=n_t)
+    assert row["status"] == "ok"
+    drawn_scene = draw(mc, 0)[0]
+    tr = simulate(drawn_scene, fused=True)
+    hw, cap = _rotor_truth(tr, drawn_scene, kind)
+    np.testing.assert_allclose(env[:, 1], hw / cap, rtol=H_ROUNDOFF_REL, atol=0)
+    assert float(np.nanmax(env[:, 1])) == row["max_h_fraction"]

@@ -32,7 +32,10 @@ from typing import Callable
 from ..scene.faults import FAULT_KINDS, fault_tick
 from .schedule import SOURCES, Step
 
-__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "held_units", "capacity_steps", "SPIN_DOWN_STEPS_PER_TAU",
+#: the kinds after which (over their window) a unit is out of the working units: its gimbals held
+OUT_KINDS = ("cmg_failed", "gimbal_stuck")
+
+__all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "held_units", "capacity_steps", "rotor_changes", "spin_down_staircase", "SPIN_DOWN_STEPS_PER_TAU",
            "SPIN_DOWN_END_TAU"]
 
 #: a spinning-down rotor's staircase: steps per time constant (the rotor's momentum is exact at
@@ -56,49 +59,109 @@ def register_fault_effect(kind: str):
     return deco
 
 
+def spin_down_staircase(tau: float, period: float) -> list:
+    """A ``cmg_failed`` rotor's spin-down with time constant ``tau`` [s] on a control ``period``
+    [s]: ``(ticks after the fault, rotor fraction of h_rotor)`` at each step after the first
+    (module docstring), the last one 0."""
+    every = max(1, round(tau / SPIN_DOWN_STEPS_PER_TAU / period))  # ticks between steps
+    end = math.ceil(SPIN_DOWN_END_TAU * tau / period)
+    return [(j, math.exp(-j * period / tau)) for j in range(every, end, every)] + [(end, 0.0)]
+
+
+def _cmg_faults(scene, kinds) -> list:
+    return [f for f in getattr(scene, "fault", None) or () if f.kind in kinds and f.enabled]
+
+
+def rotor_changes(scene) -> dict:
+    """Per unit the times its rotor's momentum is set by a truth fault, ``{unit: [(t, fraction
+    of h_rotor), ...]}`` in time order (a fraction holds from its t to the next): a
+    ``wheel_speed_drop``'s ``1 - fraction``, a ``cmg_failed``'s 0 at t or its spin-down
+    staircase (:func:`spin_down_staircase`). A unit without one: not a key (its rotor at 1)."""
+    period = scene.controller.period
+    out: dict = {}
+    for f in _cmg_faults(scene, ("wheel_speed_drop", "cmg_failed")):
+        if f.kind == "wheel_speed_drop":
+            ch = [(f.t, 1.0 - f.param("fraction"))]
+        elif f.param("spin_down_s") == 0.0:
+            ch = [(f.t, 0.0)]
+        else:
+            ch = [(f.t + j * period, r) for j, r in spin_down_staircase(f.param("spin_down_s"), period)]
+        out.setdefault(f.unit, []).extend(ch)
+    for ch in out.values():
+        ch.sort(key=lambda c: c[0])  # stable: at one time, the later fault's
+    return out
+
+
+def _rotor_at(changes, t: float) -> float:
+    r = 1.0
+    for a, c in changes:
+        if a <= t:
+            r = c
+    return r
+
+
 def held_units(scene, geo, columns) -> list:
-    """The units whose gimbals a ``gimbal_stuck`` fault of the truth holds, for the working
-    units' momentum (:class:`~.working_h.WorkingH` ``held_units``; ``geo`` the cluster's
-    :class:`~stationbed.model.cmg.CmgGeometry`, None: no cluster): per fault ``(t, until, momentum(row))``, the
-    unit's rotor momentum (B [N m s], the nominal rotor's: the fault leaves it spinning) at the
-    row's gimbal angles, which from ``t`` are the angles it is held at. Like a unit failed from
-    the start (``[cmg] failed``, ``held_momentum_B``), its momentum is then not the working
-    units': ``max_h`` leaves it out. (``cmg_failed`` stops its rotor: nothing is left to hold.)"""
-    stuck = [f for f in getattr(scene, "fault", None) or () if f.kind == "gimbal_stuck" and f.enabled]
-    if geo is None or not stuck or not geo.gimballed:
+    """The units whose gimbals a fault of the truth holds, for the working units' momentum
+    (:class:`~.working_h.WorkingH` ``held_units``; ``geo`` the cluster's
+    :class:`~stationbed.model.cmg.CmgGeometry`, None: no cluster): per stretch of a held window
+    over which the unit's rotor is constant, ``(t, until, momentum(row))``, the unit's rotor
+    momentum (B [N m s]) at the row's gimbal angles, which from ``t`` are the angles it is held
+    at, times its rotor's fraction there (:func:`rotor_changes`). A ``gimbal_stuck`` holds it
+    over its window (its rotor spins on, at what a ``wheel_speed_drop`` left); a ``cmg_failed``
+    from t on, its rotor spinning down (``spin_down_s`` = 0: stopped, nothing to hold). Like a
+    unit failed from the start (``[cmg] failed``, ``held_momentum_B``), its momentum is then not
+    the working units': ``max_h`` leaves it out."""
+    held = _cmg_faults(scene, ("gimbal_stuck", "cmg_failed"))
+    if geo is None or not held or not geo.gimballed:
         return []
     col = {c: i for i, c in enumerate(columns)}
     gi = [col[g] for g in geo.gimbal_names]
     cfg = scene.cmg
+    rotors = rotor_changes(scene)
 
-    def momentum(unit):
-        return lambda row: geo.unit_momenta_B(cfg, row[gi])[unit - 1]
+    def momentum(unit, r):
+        return lambda row: r * geo.unit_momenta_B(cfg, row[gi])[unit - 1]
 
-    return [(f.t, math.inf if f.until is None else f.until, momentum(f.unit)) for f in stuck]
-
-
-#: the kinds after which (over their window) a unit is out of the working units: its gimbals held
-OUT_KINDS = ("cmg_failed", "gimbal_stuck")
+    out = []
+    for f in held:
+        a, b = f.t, math.inf if f.until is None else f.until
+        ch = rotors.get(f.unit, [])
+        cuts = [a] + sorted({c for c, _ in ch if a < c < b}) + [b]
+        for lo, hi in zip(cuts[:-1], cuts[1:]):
+            r = _rotor_at(ch, lo)
+            if r > 0.0:
+                out.append((lo, hi, momentum(f.unit, r)))
+    return out
 
 
 def capacity_steps(scene, geo) -> list:
     """The working units' capacity as the truth's CMG faults change it, for the working units'
-    momentum (:class:`~.working_h.WorkingH` ``capacity_steps``; ``geo`` as :func:`held_units`): ``(t, capacity)`` [s, N m s] at each
-    time the set of units out changes, in time order; ``capacity`` None where none is out (the
-    capacity at the start). A unit is out over its fault's window when the fault holds its
-    gimbals (``cmg_failed``, ``gimbal_stuck``): the capacity is then the cluster's with it
-    failed as ``[cmg] failed`` states one (:func:`~stationbed.model.cmg.capacity`). Empty
-    without such a fault."""
-    out = [f for f in getattr(scene, "fault", None) or () if f.kind in OUT_KINDS and f.enabled]
-    if geo is None or not out or not geo.gimballed:
+    momentum (:class:`~.working_h.WorkingH` ``capacity_steps``; ``geo`` as :func:`held_units`):
+    ``(t, capacity)`` [s, N m s] at each time it changes, in time order; ``capacity`` None where
+    it is the start's. A unit is out over its fault's window when the fault holds its gimbals
+    (``cmg_failed``, ``gimbal_stuck``); a ``wheel_speed_drop`` weighs the unit's rotor at its
+    fraction. The capacity is the cluster's with the units out failed as ``[cmg] failed``
+    states them (:func:`~stationbed.model.cmg.capacity`), and with a rotor at a fraction the
+    envelope's (:meth:`~stationbed.model.cmg.base.GimballedGeometry.rotor_capacity`, the
+    saturation flag's). Empty without such a fault."""
+    out = _cmg_faults(scene, OUT_KINDS)
+    rotors = {u: ch for u, ch in rotor_changes(scene).items()
+              if any(f.kind == "wheel_speed_drop" and f.unit == u for f in _cmg_faults(scene, ("wheel_speed_drop",)))}
+    if geo is None or not (out or rotors) or not geo.gimballed:
         return []
     cfg = scene.cmg
     ends = [(f.t, math.inf if f.until is None else f.until, f.unit) for f in out]
+    times = {e for a, b, _ in ends for e in (a, b) if math.isfinite(e)} | {c for ch in rotors.values() for c, _ in ch}
     steps = []
-    for t in sorted({e for a, b, _ in ends for e in (a, b) if math.isfinite(e)}):
-        units = sorted({u for a, b, u in ends if a <= t < b} - set(cfg.failed))
-        cap = geo.capacity(cfg.model_copy(update={"failed": sorted(set(cfg.failed) | set(units))})) if units else None
-        if not steps or steps[-1][1] != cap:
+    for t in sorted(times):
+        units = sorted({u for a, b, u in ends if a <= t < b} | set(cfg.failed))
+        r = [0.0 if i + 1 in units else _rotor_at(rotors.get(i + 1, []), t) for i in range(geo.n_units)]
+        if any(0.0 < x < 1.0 for x in r):
+            cap = geo.rotor_capacity(cfg, r)
+        else:
+            units = sorted({i + 1 for i, x in enumerate(r) if x == 0.0})
+            cap = geo.capacity(cfg.model_copy(update={"failed": units})) if units != sorted(cfg.failed) else None
+        if (steps[-1][1] if steps else None) != cap:
             steps.append((t, cap))
     return steps
 
@@ -116,11 +179,8 @@ def _cmg_failed(f, comp):
     tau = f.param("spin_down_s")
     if tau == 0.0:
         return _cmg(comp, f.unit, rate_cap=0.0, rotor=0.0), {}, True
-    every = max(1, round(tau / SPIN_DOWN_STEPS_PER_TAU / comp.period))  # ticks between steps
-    end = math.ceil(SPIN_DOWN_END_TAU * tau / comp.period)
     steps = [(0, _cmg(comp, f.unit, rate_cap=0.0), {}, False)]
-    steps += [(j, _cmg(comp, f.unit, rotor=math.exp(-j * comp.period / tau)), {}, True) for j in range(every, end, every)]
-    return steps + [(end, _cmg(comp, f.unit, rotor=0.0), {}, True)]
+    return steps + [(j, _cmg(comp, f.unit, rotor=r), {}, True) for j, r in spin_down_staircase(tau, comp.period)]
 
 
 @register_fault_effect("gimbal_stuck")

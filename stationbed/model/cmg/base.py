@@ -318,6 +318,15 @@ class GimballedGeometry(CmgGeometry):
     def _unit_momenta_B(self, cfg, gimbal_angles):
         return cfg.h_rotor * self._unit_spins_B(cfg, gimbal_angles)
 
+    def rotor_capacity(self, cfg, rotors) -> float:
+        """The capacity [N m s] of the units with each rotor at its fraction ``rotors[i]`` of
+        ``h_rotor`` (0: the unit out): :meth:`envelope` times ``h_rotor``, what the saturation
+        flag weighs a scheduled fault's units by. With every fraction 0 or 1 it is
+        :meth:`capacity` with the 0s failed (the contract test), which a caller should use then."""
+        self._check(cfg)
+        pc = ca.DM(self.params(cfg))
+        return float(cfg.h_rotor * self.envelope(pc, [float(r) for r in rotors]))
+
     # -- symbols -----------------------------------------------------------------------
     def spins(self, xc, pc) -> list:
         """Per unit ``(s_i, [∂s_i/∂δ_j for the unit's gimbals])``, B components (casadi)."""
