@@ -10,8 +10,11 @@ Truths, none from the library's momentum or capacity code:
 * each unit's rotor momentum from the rows' gimbal angles by the unit geometry written in the
   tests (the DGCMG's in tests/test_fault_momentum.py ``dgcmg_unit_momenta``, Wie's pyramid in
   tests/test_faults.py ``pyramid_h``);
-* capacities: the DGCMG's ``n h_rotor`` (a spherical envelope), the pyramid's by brute force
+* capacities: the DGCMG's ``n h_rotor`` (a spherical envelope; with a rotor at a fraction r of
+  h_rotor, that unit counts r: ``(n - 1 + r) h_rotor``), the pyramid's by brute force
   (tests/test_fault_momentum.py ``pyramid_envelope``);
+* a failed unit spinning down (``cmg_failed``, ``spin_down_s`` > 0) or stuck after its rotor
+  dropped is out: the others' momenta from the gimbal angles (its rotor's is not needed);
 * the saturation ticks: a flagged row whose working |h| (or the row before's) reaches
   ``saturation_fraction`` of that row's capacity, else a gimbal-rate limit.
 """
@@ -162,11 +165,20 @@ DROP_FRACTION = 0.5  # of unit 2's rotor lost: it runs on at 0.5 h_rotor, a work
 SPIN_DOWN_S = 10.0  # s, the failed rotor's time constant: a step every 0.5 s (5 ticks), exp(-1.5) = 0.22 of it left at 20 s
 
 
+T_DROP_FIRST_S = 3.0  # s: in "drop_then_stuck", unit 2's rotor drops here, its gimbals stick at T_ROTOR_S
+
+
 def _rotor_scene(kind):
     s = load_scene(SCENE)
-    f = dict(s.fault[0].model_dump(exclude_unset=True), kind=kind, t=T_ROTOR_S, unit=STUCK_UNIT)
-    f.update({"fraction": DROP_FRACTION} if kind == "wheel_speed_drop" else {"spin_down_s": SPIN_DOWN_S})
-    return s.replace({"simulation.duration": 20.0, "simulation.output_dt": 0.1, "fault": [f]})
+    f = dict(s.fault[0].model_dump(exclude_unset=True), t=T_ROTOR_S, unit=STUCK_UNIT)
+    if kind == "wheel_speed_drop":
+        faults = [dict(f, kind=kind, fraction=DROP_FRACTION)]
+    elif kind == "cmg_failed":
+        faults = [dict(f, kind=kind, spin_down_s=SPIN_DOWN_S)]
+    else:  # the stuck unit holds the momentum its dropped rotor has
+        faults = [dict(f, name="drop", kind="wheel_speed_drop", t=T_DROP_FIRST_S, fraction=DROP_FRACTION),
+                  dict(f, name="stuck", kind="gimbal_stuck")]
+    return s.replace({"simulation.duration": 20.0, "simulation.output_dt": 0.1, "fault": faults})
 
 
 def hw_vec(tr, s):
@@ -180,17 +192,21 @@ def _rotor_truth(tr, s, kind):
     """|h_work| and its capacity per row. A dropped rotor's unit works: all four units' momenta
     from the gimbal angles, unit 2's times 1 - fraction from the drop, over (3 + 1 - fraction)
     h_rotor (the DGCMG's spherical envelope: each unit reaches its own rotor's momentum along any
-    axis). A failed unit is out from its fault whatever its rotor still holds: the three others'
-    momenta over 3 h_rotor (nothing of the spin-down staircase needed)."""
+    axis). A failed or stuck unit is out from its fault whatever its rotor holds: the three
+    others' momenta over 3 h_rotor (nothing of the spin-down staircase or the drop needed)."""
     g = tr.data[:, [tr.columns.index(c) for c in tr.columns if c.startswith("gimbal_") and not c.endswith("_rate")]]
     hu = dgcmg_unit_momenta(g, s.cmg.h_rotor)
-    after = tr.t >= T_ROTOR_S
-    r2 = (1.0 - DROP_FRACTION) if kind == "wheel_speed_drop" else 0.0
-    hu[after, STUCK_UNIT - 1] *= r2
-    return np.linalg.norm(hu.sum(axis=1), axis=1), np.where(after, 3.0 + r2, 4.0) * s.cmg.h_rotor
+    r2 = np.ones(len(tr.t))
+    if kind == "wheel_speed_drop":
+        r2[tr.t >= T_ROTOR_S] = 1.0 - DROP_FRACTION
+    else:
+        r2[tr.t >= T_DROP_FIRST_S] = 1.0 - DROP_FRACTION if kind == "drop_then_stuck" else 1.0
+        r2[tr.t >= T_ROTOR_S] = 0.0
+    hu[:, STUCK_UNIT - 1] *= r2[:, None]
+    return np.linalg.norm(hu.sum(axis=1), axis=1), (3.0 + r2) * s.cmg.h_rotor
 
 
-@pytest.fixture(scope="module", params=["wheel_speed_drop", "cmg_failed"])
+@pytest.fixture(scope="module", params=["wheel_speed_drop", "cmg_failed", "drop_then_stuck"])
 def rotor_run(request):
     s = _rotor_scene(request.param)
     return request.param, s, simulate(s, fused=True)
@@ -208,7 +224,7 @@ def test_summary_and_dashboard_weigh_a_rotor_at_its_fraction(rotor_run, tmp_path
     if kind == "wheel_speed_drop":  # the rows' h is the truth's |h_work| (the dropped rotor in it)
         h = tr.data[:, [tr.columns.index(c) for c in ("hx", "hy", "hz")]]
         np.testing.assert_allclose(np.linalg.norm(h, axis=1), hw, rtol=H_ROUNDOFF_REL, atol=0)
-    else:  # the failed rotor (the rows' h less the three others') still holds a fifth of its momentum at the end
+    else:  # the held rotor (the rows' h less the three others'): a fifth of h_rotor at the end, or half
         h = tr.data[:, [tr.columns.index(c) for c in ("hx", "hy", "hz")]]
         assert np.linalg.norm(h[-1] - hw_vec(tr, s)[-1]) > 0.2 * s.cmg.h_rotor
     assert (hw[after] / cap[after]).max() > 0.0
