@@ -391,7 +391,7 @@ class ControlLoop:
                 out["h_saturation_Nms"] = float(comp.scene.cmg.saturation_fraction * self.capacity)
             if rs.h_held_B is not None:  # failed units: their held momentum, left out of max_h
                 out["h_held_B_Nms"] = rs.h_held_B.tolist()
-            held = [u for u in rs.held_units if not callable(u[2])]  # units a fault held (gimbal_stuck), as the rows met them
+            held = [u for u in rs.held_units if not callable(u[2])]  # units a fault held (gimbal_stuck, cmg_failed), as the rows met them
             if held:
                 out["h_held_units_Nms"] = [{"t": a, "until": None if math.isinf(b) else b, "h_B": h.tolist()}
                                            for a, b, h in held]

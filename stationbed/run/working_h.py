@@ -7,10 +7,11 @@ summary's ``max_h_fraction`` is the largest value of the series the charts draw.
 
 A row's working momentum is ``h - h_held_B - Σ held`` (the measured cluster momentum less the
 rotor momentum of the units failed from the start, ``[cmg] failed``, and of each unit whose
-gimbals a scheduled ``gimbal_stuck`` holds, over its window); its capacity the working units'
-(:func:`~stationbed.model.cmg.capacity`) with the units a fault takes out at that row
-(:func:`~.faults.capacity_steps`: ``cmg_failed``, ``gimbal_stuck``). Without a fault: ``|h -
-h_held_B| / capacity``, as before.
+gimbals a scheduled ``gimbal_stuck`` holds, over its window, or a ``cmg_failed`` from its time,
+its rotor at the fraction the faults left it: :func:`~.faults.held_units`); its capacity the
+working units' (:func:`~stationbed.model.cmg.capacity`) with the units a fault takes out at that
+row and a dropped rotor at its fraction (:func:`~.faults.capacity_steps`: ``cmg_failed``,
+``gimbal_stuck``, ``wheel_speed_drop``). Without a fault: ``|h - h_held_B| / capacity``, as before.
 
 The facts come from the scene (:meth:`WorkingH.of_scene`, what a run uses) or from a finished
 run's summary (:meth:`WorkingH.of_summary`: ``h_capacity_Nms``, ``h_held_B_Nms``,
