@@ -247,3 +247,29 @@ def test_montecarlo_envelope_weighs_a_rotor_at_its_fraction(rotor_run):
     hw, cap = _rotor_truth(tr, drawn_scene, kind)
     np.testing.assert_allclose(env[:, 1], hw / cap, rtol=H_ROUNDOFF_REL, atol=0)
     assert float(np.nanmax(env[:, 1])) == row["max_h_fraction"]
+
+
+def test_pyramid_capacity_weighs_a_dropped_rotor_by_its_envelope():
+    """The pyramid's capacity after unit 1's rotor drops to half, then with unit 3 stuck too: by
+    brute force, along each body axis the sum of each unit's sampled reach (Wie's pyramid) times
+    its rotor's fraction (0: out), the least of the three axes."""
+    from stationbed.model.cmg import cmg_geometry
+    from stationbed.run.faults import capacity_steps
+    from test_fault_momentum import REACH_SAMPLES
+    from test_faults import H_ROTOR_NMS
+
+    s = scene_from_dict(box([{"kind": "wheel_speed_drop", "unit": 1, "t": 2.0, "fraction": DROP_FRACTION},
+                             {"kind": "gimbal_stuck", "unit": 3, "t": 4.0}], duration=6.0))
+    d = np.linspace(0.0, 2.0 * np.pi, REACH_SAMPLES, endpoint=False)
+    reach = [np.array([pyramid_h(np.full(4, di), [float(i == u) for i in range(4)]) for di in d]).max(axis=0)
+             for u in range(4)]  # (3,) each: unit u's largest momentum along x, y, z at h_rotor
+
+    def brute(rotors):
+        return float(sum(r * reach[u] for u, r in enumerate(rotors)).min())
+
+    steps = capacity_steps(s, cmg_geometry(s.cmg))
+    assert [t for t, _ in steps] == [2.0, 4.0]
+    want = [brute([1.0 - DROP_FRACTION, 1.0, 1.0, 1.0]), brute([1.0 - DROP_FRACTION, 1.0, 0.0, 1.0])]
+    # the full pyramid's 3.2 h_rotor is what the drop takes from (the brute force's scale)
+    assert abs(brute([1.0] * 4) / H_ROTOR_NMS - 3.2) < ENVELOPE_REL * 3.2
+    np.testing.assert_allclose([c for _, c in steps], want, rtol=ENVELOPE_REL)
