@@ -188,3 +188,38 @@ def test_fused_rows_in_bulk_around_edges_equal_the_per_tick_loop(events):
     fused, per_tick = simulate(scene, fused=True), simulate(scene, fused=False)
     assert fused.meta["summary"]["fused"] and not per_tick.meta["summary"]["fused"]
     assert_allclose(fused.data, per_tick.data, rtol=LOOPS_RTOL, atol=LOOPS_ATOL)
+
+
+#: positions read back from a recording: float32 (~6e-8 relative) of ~2 m, and a rotation of float32
+#: quaternion components
+RRD_ABS = 1e-6  # m
+
+
+def test_recording_origin_is_the_docked_mass_centre(tmp_path):
+    """Read back from the .rrd: a station that starts with the vehicle docked is drawn about the
+    composite mass centre of body and vehicle, c0 = m_v (r_port + cm) / (m_s + m_v) by hand (the
+    body's box at -c0, the vehicle's at r_port + cm - c0), so it turns about the point the
+    physics turns it about; after the undock the mass centre is the body's (the origin of B),
+    and the station's frame is put at C_NB c0 (the body's centre at the world origin again)."""
+    pytest.importorskip("rerun.chunk")
+    from scipy.spatial.transform import Rotation  # noqa: PLC0415 (independent of the library's rotations)
+
+    from stationbed.output.rerun.recording import write_recording  # noqa: PLC0415
+
+    undock = {"kind": "undock", "t": T_EVENT_S, "vehicle": "v", "delta_v": 0.05}
+    vehicle = [{**BASE["vehicle"][0], "port": "aft"}]
+    scene = scene_from_dict({**BASE, "vehicle": vehicle, "event": [undock]})
+    path = write_recording(simulate(scene), scene, tmp_path / "undock.rrd")
+    c0 = M_V * (R_PORT + CM_V) / (M_S + M_V)  # m, the composite's (the vehicle's axes are B's)
+    body, _ = entity_rows(path, "world/station/body")
+    assert_allclose(body["Boxes3D:centers"][0], -c0, rtol=0, atol=RRD_ABS)
+    box = sorted(entity_rows(path, "world/station/vehicle/v")[1], key=lambda r: r[0])[0]
+    assert box[0] == 0.0
+    assert_allclose(box[1]["Boxes3D:centers"][0], R_PORT + CM_V - c0, rtol=0, atol=RRD_ABS)
+    frames = entity_rows(path, "world/station")[1]
+    assert len(frames) == DURATION_S + 1  # a row a second
+    for t, row in frames:
+        C_NB = Rotation.from_quat(row["Transform3D:quaternion"][0]).as_matrix()
+        origin_N = np.asarray(row.get("Transform3D:translation", [[0.0, 0.0, 0.0]])[0])
+        body_N = origin_N + C_NB @ -c0  # where the body's mass centre is drawn
+        assert_allclose(body_N, -C_NB @ c0 if t < T_EVENT_S else np.zeros(3), rtol=0, atol=RRD_ABS, err_msg=f"t = {t} s")

@@ -94,7 +94,10 @@ class Actuator:
        at the end). ``python_only`` (with ``why``) keeps a run per tick.
     10. Optionally write ``configuration_numbers(truth, known)`` when some of its numbers
         depend on the station's mass properties (the thrusters' arms about the composite mass
-        centre): a docking or undocking sets them as a step, the compiled code unchanged.
+        centre): a docking or undocking sets them as a step, the compiled code unchanged; and
+        ``configuration_summary(truth)`` when the summary should say something of each
+        configuration the run flies (the thrusters' axes without torque): each docking event's
+        entry of the summary's ``events`` carries it.
     """
 
     kind: ClassVar[str] = ""
@@ -159,6 +162,11 @@ class Actuator:
         flight software knows, from ``known`` (either None: left out). A docking event sets the
         truth's at its tick and the knowledge's when flight software is told (run/docking.py).
         None by default (a kind whose numbers do not depend on the mass properties)."""
+        return {}
+
+    def configuration_summary(self, truth) -> dict:
+        """What the summary's entry of a docking event says of the configuration after it, the
+        scene ``truth`` (run/docking.py). None by default."""
         return {}
 
     # -- declarations -------------------------------------------------------------------

@@ -64,7 +64,7 @@ import numpy as np
 
 from ..model.cmg import cmg_geometry, held_momentum_B
 from ..scene.docking import configuration_ports, mass_centre_B
-from ..scene.thrusters import available, flown_thrusters, missing_torque, thruster_owners, torque_arms
+from ..scene.thrusters import available, flown_thrusters, no_torque_about, no_torque_parts, thruster_owners, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
 from .working_momentum import working_momentum
@@ -330,6 +330,10 @@ class ThrusterCluster(Actuator):
         new = L.pack(values)
         return {i: float(new[i]) for name in fields for i in range(L.slice(name).start, L.slice(name).stop)}
 
+    def configuration_summary(self, truth) -> dict:
+        """``thruster_no_torque_about`` of the configuration ``truth`` (:func:`no_torque_about`; none when off)."""
+        return {} if self.opt.mode == "off" else {"thruster_no_torque_about": no_torque_about(self.scene, self._where(truth))}
+
     @classmethod
     def from_scene(cls, scene, known, plant) -> "ThrusterCluster":
         """Flight software's mapping on ``known``, the dump law on the working units' capacity
@@ -355,9 +359,7 @@ class ThrusterCluster(Actuator):
                f"{s['propellant_kg']:.4g} kg{per}, {s['thruster_control_s']:g} s in thruster-only control"]
         if s.get("propellant_kg_by_vehicle"):
             out.append("by vehicle: " + ", ".join(f"{v} {kg:.4g} kg" for v, kg in s["propellant_kg_by_vehicle"].items()))
-        if s.get("thruster_no_torque_about"):
-            out.append(f"thrusters make no torque about {s['thruster_no_torque_about']}: a dump or hand-over "
-                       "there is not delivered")
+        out += no_torque_parts(s)
         if "thrusters_not_fused" in s:
             out.append(f"thrusters flown per tick: {s['thrusters_not_fused']}")
         return out
@@ -385,9 +387,9 @@ class ThrusterCluster(Actuator):
         out = {"thruster_mapping": self.opt.mapping, "thruster_pure_couple": bool(self.pure)}
         if self.scene.orbit is not None:  # for trajectory_metrics' propellant_kg_per_orbit
             out["orbit_period_s"] = 2.0 * math.pi / self.scene.orbit.mean_motion
-        missing = missing_torque(self.scene) if self.opt.mode != "off" else []
-        if missing and len(missing) < 6:  # (all six: none can fire yet, a vehicle's set away)  # an assist set that dumps about some axes only (the scene check refuses the rest)
-            out["thruster_no_torque_about"] = ", ".join(missing)
+        missing = self.configuration_summary(self.scene).get("thruster_no_torque_about", "")
+        if missing and missing.count(",") < 5:  # an assist set that dumps about some axes only (all six: none can fire yet)
+            out["thruster_no_torque_about"] = missing
         if self.varying:  # each vehicle's propellant (the totals count every thruster)
             kg = self.state.get(np.asarray(x, float), "on_total_s") * self.f_max / (self.isp * G0_M_S2)
             out["propellant_kg_by_vehicle"] = {v.name: float(sum(kg[i] for i, o in enumerate(self.owners)

@@ -131,8 +131,10 @@ def docking_steps(comp) -> list[Step]:
         plant = {int(j): float(ps[i + 1][j]) for j in changed}
         info = {"event": i, "kind": e.kind, "vehicle": e.vehicle, "port": e.port or configs[i].vehicle[
             [v.name for v in configs[i].vehicle].index(e.vehicle)].port}
+        said = {k: v for a in comp.actuators for k, v in a.cluster.configuration_summary(configs[i + 1]).items()}
         truth = _actuator_numbers(comp, truth=configs[i + 1])  # e.g. the thrusters' arms about the new mass centre
-        steps.append(Step(k, f"event[{i}] {e.kind} {e.vehicle}", plant, truth, False, info=info, kick=_kick(form, K, c)))
+        steps.append(Step(k, f"event[{i}] {e.kind} {e.vehicle}", plant, truth, False, info=dict(info, **said),
+                          kick=_kick(form, K, c)))
         ku = update_tick(e, period)
         if ku is None or ku > ticks:
             continue

@@ -47,7 +47,7 @@ from .docking import configuration_ports, mass_centre_B
 
 __all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "flown_thrusters", "thruster_owners",
            "available", "torque_arms", "torque_authority",
-           "missing_torque", "AUTHORITY_ROUNDOFF_REL"]
+           "missing_torque", "no_torque_about", "no_torque_parts", "AUTHORITY_ROUNDOFF_REL"]
 
 #: a thruster's torque per newton, or the set's torque authority about an axis, below this fraction
 #: of the set's scale (the largest |r_i - c| + 1 m; Σ |(r_i - c) × ĝ_i| F_i) is round-off of the
@@ -237,6 +237,31 @@ def missing_torque(scene, c_B=None, avail=None) -> list[str]:
     if not keep.any():
         return [f"{sg}{ax}" for ax in "xyz" for sg in "-+"]
     return list(_missing(np.ascontiguousarray(D[:, keep]).tobytes(), np.ascontiguousarray(f_max[keep]).tobytes()))
+
+
+def no_torque_about(scene, where: dict) -> str:
+    """The summary's ``thruster_no_torque_about`` of the configuration ``where`` (vehicle name
+    -> port, :func:`~.docking.configuration_ports`) of ``scene``'s thrusters
+    (:func:`flown_thrusters`): :func:`missing_torque` about that configuration's mass centre with
+    the thrusters that can fire there, as ``"-y, +y"``; ``""`` about every axis; all six when
+    none can fire (a vehicle's set away: the CMGs alone)."""
+    c, avail = mass_centre_B(scene, where), available(thruster_owners(scene), where)
+    return ", ".join(missing_torque(scene, c, avail))
+
+
+def no_torque_parts(s: dict) -> list[str]:
+    """The run line's parts on what the thrusters cannot turn the station about: as it starts
+    (``thruster_no_torque_about``), then, when some configuration lacks an axis, after each
+    docking event (the summary's ``events`` entries carrying the key, with their times)."""
+    start = s.get("thruster_no_torque_about", "")
+    after = [e for e in s.get("events", []) if "thruster_no_torque_about" in e]
+    out = [f"thrusters make no torque about {start}: a dump or hand-over there is not delivered"] if start else []
+    if any(e["thruster_no_torque_about"] for e in after):
+        def say(m: str) -> str:
+            return "every axis" if not m else "none can fire" if m.count(",") == 5 else f"none about {m}"
+        out.append("thruster torque after " + "; ".join(f"event[{e['event']}] at {e['t']:g} s: "
+                                                         f"{say(e['thruster_no_torque_about'])}" for e in after))
+    return out
 
 
 @functools.lru_cache(maxsize=64)

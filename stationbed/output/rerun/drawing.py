@@ -10,6 +10,13 @@ fixed) sun direction with a ``[sun]``; the CMG cluster's arrows (:mod:`.cmg_arro
 centre lines of flexible arrays (:mod:`.elastic`); the attitude thrusters, lit while they fire
 (:mod:`.thruster_arrows`). Rerun stores the rotations as float32
 quaternions (~6e-8 resolution).
+
+The origin is the composite mass centre of the scene as it starts, docked vehicles included
+(:attr:`.geometry.StationGeometry.r_cm_B`): the station's parts are drawn in B about it. A docking
+event moves the true mass centre c(t) in B (the vehicle's mass joins or leaves); the parts stay
+where they are in B and ``world/station`` gets the translation ``-C_NB (c(t) - c(0))`` from the
+event's time on, so the world origin (where ``H_O_N`` and the LVLH triad start) stays the mass
+centre the station turns about. Without such an event the transform is a rotation alone.
 """
 
 from __future__ import annotations
@@ -18,7 +25,9 @@ import math
 
 import numpy as np
 
+from ...core.rotation import dcm
 from ...run.trajectory import Trajectory
+from ...scene.docking import configuration_ports, mass_centre_B
 from .cmg_arrows import CmgArrows
 from .elastic import ElasticLines
 from .events import Events, SensorParts
@@ -78,6 +87,7 @@ class StationDrawing:
         self.thrusters = ThrusterArrows.of(scene, columns, self.geom)
         self.vehicles = VehicleBoxes.of(scene, self.geom.r_cm_B)  # docked vehicles, while docked (issue 35)
         self._H_scale = None  # [m per N m s], fixed at the first row with H != 0
+        self._moved = _origin_moves(scene, self.geom.r_cm_B)  # the mass centre after each event, or None
 
     def log_static(self, rec) -> None:
         """Log the parts that do not move relative to their entity (static): boxes, axes, the
@@ -180,7 +190,14 @@ class StationDrawing:
         rr = import_rerun()
         g, scene = self.geom, self.scene
         k = len(rows)
-        send("world/station", rr.Transform3D.columns(quaternion=xyzw(rows.q_BN)))
+        if self._moved is None:
+            send("world/station", rr.Transform3D.columns(quaternion=xyzw(rows.q_BN)))
+        else:  # the station's points r drawn at C_NB (r - c(t)): its frame put at -C_NB (c(t) - c(0))
+            times, dc_B = self._moved
+            dc = dc_B[np.searchsorted(times, np.asarray(rows.t, float) + 1e-9, side="right")]  # (k, 3)
+            C_BN = dcm(np.asarray(rows.q_BN, dtype=float).T)  # (3, 3, k)
+            send("world/station", rr.Transform3D.columns(translation=-np.einsum("jik,kj->ki", C_BN, dc),
+                                                         quaternion=xyzw(rows.q_BN)))
         for name, r, _, _ in g.arrays:
             q = xyzw_C_BP(rows[f"alpha_{name}"], rows[f"beta_{name}"])
             send(f"world/station/{name}", rr.Transform3D.columns(translation=np.tile(r, (k, 1)), quaternion=q))
@@ -231,3 +248,14 @@ def _boxes(boxes, color, labels=None):
         kw["centers"] = [b[0] for b in boxes]
     return rr.Boxes3D(half_sizes=[b[1] for b in boxes], quaternions=[xyzw_of_dcm(b[2]) for b in boxes], colors=[color],
                       fill_mode="solid", **kw)
+
+
+def _origin_moves(scene, c0_B) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(times [s], dc_B (n + 1, 3) [m])``: the events still to come and the composite mass centre
+    of each configuration (:func:`~stationbed.scene.docking.mass_centre_B`) less the drawing's
+    origin ``c0_B`` (the start's), B axes; None when no event moves it (nothing is translated)."""
+    events = [e.t for e in getattr(scene, "event", None) or [] if not e.done]
+    if not events:
+        return None
+    dc = np.array([mass_centre_B(scene, w) for w in configuration_ports(scene)]) - np.asarray(c0_B, float)
+    return (np.array(events, float), dc) if np.any(dc) else None

@@ -13,6 +13,7 @@ import itertools
 import numpy as np
 
 from ...core.massprops import composite_cm
+from ...scene.docking import mass_centre_B
 
 __all__ = ["MIN_BOX_FRACTION", "box_half_sizes", "StationGeometry"]
 
@@ -72,7 +73,8 @@ class StationGeometry:
     Attributes
     ----------
     r_cm_B : ndarray, shape (3,)
-        Composite mass centre in the scene's body coordinates, B components [m].
+        Composite mass centre in the scene's body coordinates, B components [m]: of the body,
+        the arrays and the vehicles docked as the scene starts (the drawing's origin).
     body_center : ndarray, shape (3,)
         Body mass centre relative to the composite one, B components [m].
     body_half : ndarray, shape (3,)
@@ -96,7 +98,9 @@ class StationGeometry:
         body, apps = scene.body, scene.appendage
         masses = [body.mass] + [a.mass for a in apps]
         cms = [body.cm] + [a.cm for a in apps]
-        self.r_cm_B = composite_cm(masses, cms)
+        # the configuration's as it starts, docked vehicles included (:func:`~...scene.docking.mass_centre_B`,
+        # the point the station turns about); a scene without vehicles (or duck-typed) the same sum
+        self.r_cm_B = mass_centre_B(scene) if getattr(scene, "vehicle", None) else composite_cm(masses, cms)
         self.body_center = np.asarray(body.cm, float) - self.r_cm_B
         self.body_half, self.body_C = box_half_sizes(body.mass, body.inertia)
         extent = _corners_extent(self.body_center, self.body_half, self.body_C)

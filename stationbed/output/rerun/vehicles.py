@@ -3,7 +3,8 @@
 ``world/station/vehicle/<name>``: the uniform box of the vehicle's mass properties
 (:func:`~.geometry.box_half_sizes`) in its axes V (``C_BV`` of the port, ``q_VB``), centred on its
 mass centre relative to the drawing's origin (the composite mass centre of the scene as it
-starts: the drawing does not move the 0.5 m an event moves the true one). It is logged at t = 0
+starts, docked vehicles included; an event's move of the true one is the station frame's
+translation, drawing.py). It is logged at t = 0
 when the vehicle is docked then, at each dock or berth (at that port), and cleared at each undock,
 on the time line: the viewer shows it exactly while it is there. A massless vehicle is not drawn.
 """
