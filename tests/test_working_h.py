@@ -273,3 +273,25 @@ def test_pyramid_capacity_weighs_a_dropped_rotor_by_its_envelope():
     # the full pyramid's 3.2 h_rotor is what the drop takes from (the brute force's scale)
     assert abs(brute([1.0] * 4) / H_ROTOR_NMS - 3.2) < ENVELOPE_REL * 3.2
     np.testing.assert_allclose([c for _, c in steps], want, rtol=ENVELOPE_REL)
+
+
+def test_a_dropped_rotor_spins_down_from_what_it_has():
+    """A wheel_speed_drop (half lost at 3 s) then a cmg_failed spinning down (τ = 10 s from 5 s)
+    of the same unit: the failed rotor's momentum (the rows' h less the three others', from their
+    gimbal angles) is the dropped half times exp(-(t_j - 5 s)/τ) at each staircase step t_j, never
+    more than the half it had (the staircase of the nominal rotor spun it back up to 0.95)."""
+    s = load_scene(SCENE)
+    f = dict(s.fault[0].model_dump(exclude_unset=True), unit=STUCK_UNIT)
+    faults = [dict(f, name="drop", kind="wheel_speed_drop", t=T_DROP_FIRST_S, fraction=DROP_FRACTION),
+              dict(f, name="fail", kind="cmg_failed", t=T_ROTOR_S, spin_down_s=SPIN_DOWN_S)]
+    s = s.replace({"simulation.duration": 20.0, "simulation.output_dt": 0.1, "fault": faults})
+    tr = simulate(s, fused=True)
+    h = tr.data[:, [tr.columns.index(c) for c in ("hx", "hy", "hz")]]
+    h2 = np.linalg.norm(h - hw_vec(tr, s), axis=1) / s.cmg.h_rotor  # unit 2's rotor, of h_rotor
+    step_s = SPIN_DOWN_S / 20  # the staircase's step (SPIN_DOWN_STEPS_PER_TAU = 20 per τ)
+    for k in (0, 1, 5, 20):  # rows just after staircase steps t_j = 5 s + (k + 1) step_s
+        t_j = T_ROTOR_S + (k + 1) * step_s
+        row = int(np.searchsorted(tr.t, t_j + 1e-9))
+        want = (1.0 - DROP_FRACTION) * np.exp(-(t_j - T_ROTOR_S) / SPIN_DOWN_S)
+        np.testing.assert_allclose(h2[row], want, rtol=1e-9)  # (the rows' %.17g; sums of ~5e3 N m s)
+    assert h2[tr.t >= T_DROP_FIRST_S + 0.05].max() <= (1.0 - DROP_FRACTION) * (1.0 + 1e-9)

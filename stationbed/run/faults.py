@@ -7,15 +7,15 @@ Truth-side kinds (the CMG unit's numbers: :data:`~stationbed.model.cmg.base.UNIT
 * ``cmg_failed``: the unit's gimbals held (``rate_cap`` 0) and its rotor stopped at t
   (``spin_down_s = 0``: ``rotor`` 0) or spinning down with time constant ``spin_down_s`` = τ:
   a staircase of steps, one every :data:`SPIN_DOWN_STEPS_PER_TAU`-th of τ (at least a tick, on
-  the tick grid), the rotor's momentum ``exp(-(t_j - t) / τ)`` of the nominal at each step t_j,
+  the tick grid), the rotor's momentum ``exp(-(t_j - t) / τ)`` of what it had at t at each step t_j,
   0 from :data:`SPIN_DOWN_END_TAU` τ on. At every step the rotor's momentum lost goes to the
   body through the bearing: the system's angular momentum is kept (the state jumps). Flight
   software is not told: the steering law keeps the unit until it is (``[knowledge]``, FDIR).
 * ``gimbal_stuck``: the unit's gimbals held at their angles at t (``rate_cap`` 0); its rotor
   spins on. ``gimbal_rate_limit``: its gimbal rates clamped to ``limit`` [rad/s] after the
   steering law (the cluster's own limit still applies). Both may clear (``until``).
-* ``wheel_speed_drop``: the unit's rotor momentum drops to ``1 - fraction`` of the nominal at t
-  (the state jumps, momentum kept).
+* ``wheel_speed_drop``: the unit's rotor loses ``fraction`` of its momentum at t (of the nominal
+  unless an earlier drop slowed it; the state jumps, momentum kept).
 * ``thruster_stuck_off``: the thruster's valve ignores its commands (``ok`` 0);
   ``thruster_stuck_on``: it fires the whole of every tick (``leak`` 1), its propellant counted
   in the ledger and its torque on the body. Both may clear.
@@ -34,6 +34,8 @@ from .schedule import SOURCES, Step
 
 #: the kinds after which (over their window) a unit is out of the working units: its gimbals held
 OUT_KINDS = ("cmg_failed", "gimbal_stuck")
+#: the kinds that set a unit's rotor momentum (each on what the rotor has at its time)
+ROTOR_KINDS = ("wheel_speed_drop", "cmg_failed")
 
 __all__ = ["FAULT_EFFECTS", "register_fault_effect", "fault_steps", "held_units", "capacity_steps", "rotor_changes", "spin_down_staircase", "SPIN_DOWN_STEPS_PER_TAU",
            "SPIN_DOWN_END_TAU"]
@@ -77,19 +79,36 @@ def rotor_changes(scene) -> dict:
     of h_rotor), ...]}`` in time order (a fraction holds from its t to the next): a
     ``wheel_speed_drop``'s ``1 - fraction``, a ``cmg_failed``'s 0 at t or its spin-down
     staircase (:func:`spin_down_staircase`). A unit without one: not a key (its rotor at 1)."""
-    period = scene.controller.period
     out: dict = {}
-    for f in _cmg_faults(scene, ("wheel_speed_drop", "cmg_failed")):
-        if f.kind == "wheel_speed_drop":
-            ch = [(f.t, 1.0 - f.param("fraction"))]
-        elif f.param("spin_down_s") == 0.0:
-            ch = [(f.t, 0.0)]
-        else:
-            ch = [(f.t + j * period, r) for j, r in spin_down_staircase(f.param("spin_down_s"), period)]
-        out.setdefault(f.unit, []).extend(ch)
-    for ch in out.values():
-        ch.sort(key=lambda c: c[0])  # stable: at one time, the later fault's
+    for f in sorted(_cmg_faults(scene, ROTOR_KINDS), key=lambda f: f.t):  # stable: at one time, the later fault's
+        ch = out.setdefault(f.unit, [])
+        ch.extend(_rotor_steps(f, _rotor_at(ch, f.t), scene.controller.period))
+        ch.sort(key=lambda c: c[0])
     return out
+
+
+def _rotor_steps(f, r0: float, period: float) -> list:
+    """``(t, fraction of h_rotor)`` of a rotor fault ``f`` on a rotor at ``r0`` of h_rotor at its
+    time: a ``wheel_speed_drop`` loses ``fraction`` of what the rotor has, a ``cmg_failed``
+    stops it or spins it down from there (:func:`spin_down_staircase`)."""
+    if f.kind == "wheel_speed_drop":
+        return [(f.t, r0 * (1.0 - f.param("fraction")))]
+    if f.param("spin_down_s") == 0.0:
+        return [(f.t, 0.0)]
+    return [(f.t + j * period, r0 * r) for j, r in spin_down_staircase(f.param("spin_down_s"), period)]
+
+
+def _rotor_before(scene, fault) -> float:
+    """The fraction of h_rotor ``fault``'s unit has at its time from the rotor faults before it
+    (earlier, or at the same time and declared first)."""
+    before = []
+    for f in sorted(_cmg_faults(scene, ROTOR_KINDS), key=lambda f: f.t):
+        if f is fault or f.t > fault.t:
+            break
+        if f.unit == fault.unit:
+            before.extend(_rotor_steps(f, _rotor_at(before, f.t), scene.controller.period))
+            before.sort(key=lambda c: c[0])
+    return _rotor_at(before, fault.t)
 
 
 def _rotor_at(changes, t: float) -> float:
@@ -179,8 +198,9 @@ def _cmg_failed(f, comp):
     tau = f.param("spin_down_s")
     if tau == 0.0:
         return _cmg(comp, f.unit, rate_cap=0.0, rotor=0.0), {}, True
+    r0 = _rotor_before(comp.scene, f)  # a rotor a wheel_speed_drop slowed spins down from there
     steps = [(0, _cmg(comp, f.unit, rate_cap=0.0), {}, False)]
-    return steps + [(j, _cmg(comp, f.unit, rotor=r), {}, True) for j, r in spin_down_staircase(tau, comp.period)]
+    return steps + [(j, _cmg(comp, f.unit, rotor=r0 * r), {}, True) for j, r in spin_down_staircase(tau, comp.period)]
 
 
 @register_fault_effect("gimbal_stuck")
@@ -195,7 +215,7 @@ def _gimbal_rate_limit(f, comp):
 
 @register_fault_effect("wheel_speed_drop")
 def _wheel_speed_drop(f, comp):
-    return _cmg(comp, f.unit, rotor=1.0 - f.param("fraction")), {}, True
+    return _cmg(comp, f.unit, rotor=_rotor_before(comp.scene, f) * (1.0 - f.param("fraction"))), {}, True
 
 
 def _valve(comp, name: str, field: str, value: float) -> dict:
