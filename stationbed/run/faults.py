@@ -74,13 +74,17 @@ def _cmg_faults(scene, kinds) -> list:
     return [f for f in getattr(scene, "fault", None) or () if f.kind in kinds and f.enabled]
 
 
-def rotor_changes(scene) -> dict:
+def rotor_changes(scene, before=None) -> dict:
     """Per unit the times its rotor's momentum is set by a truth fault, ``{unit: [(t, fraction
-    of h_rotor), ...]}`` in time order (a fraction holds from its t to the next): a
-    ``wheel_speed_drop``'s ``1 - fraction``, a ``cmg_failed``'s 0 at t or its spin-down
-    staircase (:func:`spin_down_staircase`). A unit without one: not a key (its rotor at 1)."""
+    of h_rotor), ...]}`` in time order (a fraction holds from its t to the next), each fault on
+    what the faults before it left (:func:`_rotor_steps`): a ``wheel_speed_drop`` takes its
+    ``fraction``, a ``cmg_failed`` stops the rotor or spins it down (:func:`spin_down_staircase`).
+    A unit without one: not a key (its rotor at 1). ``before``: only the faults before that one
+    (earlier, or at its time and declared first)."""
     out: dict = {}
     for f in sorted(_cmg_faults(scene, ROTOR_KINDS), key=lambda f: f.t):  # stable: at one time, the later fault's
+        if before is not None and (f is before or f.t > before.t):
+            break
         ch = out.setdefault(f.unit, [])
         ch.extend(_rotor_steps(f, _rotor_at(ch, f.t), scene.controller.period))
         ch.sort(key=lambda c: c[0])
@@ -99,16 +103,8 @@ def _rotor_steps(f, r0: float, period: float) -> list:
 
 
 def _rotor_before(scene, fault) -> float:
-    """The fraction of h_rotor ``fault``'s unit has at its time from the rotor faults before it
-    (earlier, or at the same time and declared first)."""
-    before = []
-    for f in sorted(_cmg_faults(scene, ROTOR_KINDS), key=lambda f: f.t):
-        if f is fault or f.t > fault.t:
-            break
-        if f.unit == fault.unit:
-            before.extend(_rotor_steps(f, _rotor_at(before, f.t), scene.controller.period))
-            before.sort(key=lambda c: c[0])
-    return _rotor_at(before, fault.t)
+    """The fraction of h_rotor ``fault``'s unit has at its time from the rotor faults before it."""
+    return _rotor_at(rotor_changes(scene, before=fault).get(fault.unit, []), fault.t)
 
 
 def _rotor_at(changes, t: float) -> float:
@@ -164,8 +160,8 @@ def capacity_steps(scene, geo) -> list:
     envelope's (:meth:`~stationbed.model.cmg.base.GimballedGeometry.rotor_capacity`, the
     saturation flag's). Empty without such a fault."""
     out = _cmg_faults(scene, OUT_KINDS)
-    rotors = {u: ch for u, ch in rotor_changes(scene).items()
-              if any(f.kind == "wheel_speed_drop" and f.unit == u for f in _cmg_faults(scene, ("wheel_speed_drop",)))}
+    dropped = {f.unit for f in _cmg_faults(scene, ("wheel_speed_drop",))}
+    rotors = {u: ch for u, ch in rotor_changes(scene).items() if u in dropped}
     if geo is None or not (out or rotors) or not geo.gimballed:
         return []
     cfg = scene.cmg
