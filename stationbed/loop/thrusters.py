@@ -63,7 +63,7 @@ import casadi as ca
 import numpy as np
 
 from ..model.cmg import cmg_geometry, held_momentum_B
-from ..scene.docking import configuration_ports, mass_centre_B
+from ..scene.docking import configuration_ports, docked_at, mass_centre_B
 from ..scene.thrusters import available, flown_thrusters, no_torque_about, no_torque_parts, thruster_owners, torque_arms
 from .actuator import Actuator, register_actuator
 from .layout import Layout
@@ -270,9 +270,6 @@ class ThrusterCluster(Actuator):
         unavailable while its vehicle is away)."""
         return bool(flown_thrusters(scene))
 
-    def _where(self, scene) -> dict:
-        return {v.name: v.port for v in scene.vehicle}
-
     def _shift_columns(self) -> int:
         """The mapping's shift columns in every configuration of the run: the most opposed pairs
         among the thrusters that can fire in one (at least 1)."""
@@ -295,13 +292,13 @@ class ThrusterCluster(Actuator):
         if not self.varying:
             pairs = opposed_pairs([t.position_B for t in thr], [t.unit_B for t in thr])
             return (c, *mapping_matrices(D, G, pairs))
-        on = np.flatnonzero(available(self.owners, self._where(known)))
+        on = np.flatnonzero(available(self.owners, docked_at(known)))
         M, V, pure = np.zeros((self.n, 3)), np.zeros((self.n, self.n_shift)), False
         if on.size:
             pairs = opposed_pairs([thr[i].position_B for i in on], [thr[i].unit_B for i in on])
             M_on, V_on, pure = mapping_matrices(D[:, on], G[:, on], pairs)
             if V_on.shape[1] > self.n_shift:  # (a configuration the run's events do not make)
-                raise ValueError(f"thrusters: the mapping on the configuration {self._where(known)} needs "
+                raise ValueError(f"thrusters: the mapping on the configuration {docked_at(known)} needs "
                                  f"{V_on.shape[1]} shift vectors, the run's {self.n_shift}")
             M[on], V[on, :V_on.shape[1]] = M_on, V_on
         return c, M, V, pure
@@ -316,7 +313,7 @@ class ThrusterCluster(Actuator):
         if truth is not None:
             fields["torque_B"] = torque_arms(truth, base=self.scene)[0] * self.f_max
             if self.varying:  # the vehicles' thrusters fire while docked at their port
-                fields["avail"] = available(self.owners, self._where(truth))
+                fields["avail"] = available(self.owners, docked_at(truth))
         if known is not None:
             c, M, V, pure = self._mapping(known)
             if not self.varying and (pure != self.pure or V.shape != self.V.shape or supports(V) != self.support):
@@ -332,7 +329,7 @@ class ThrusterCluster(Actuator):
 
     def configuration_summary(self, truth) -> dict:
         """``thruster_no_torque_about`` of the configuration ``truth`` (:func:`no_torque_about`; none when off)."""
-        return {} if self.opt.mode == "off" else {"thruster_no_torque_about": no_torque_about(self.scene, self._where(truth))}
+        return {} if self.opt.mode == "off" else {"thruster_no_torque_about": no_torque_about(self.scene, docked_at(truth))}
 
     @classmethod
     def from_scene(cls, scene, known, plant) -> "ThrusterCluster":
@@ -431,7 +428,7 @@ class ThrusterCluster(Actuator):
 
     def _params(self) -> dict:
         o = self.opt
-        more = {"avail": available(self.owners, self._where(self.scene))} if self.varying else {}
+        more = {"avail": available(self.owners, docked_at(self.scene))} if self.varying else {}
         return dict(**more, f_max=self.f_max, isp=self.isp, min_on=[t.min_on_s for t in self.thr],
                     torque_B=self.D * self.f_max, M=self.M, V=self.V, capacity=self.capacity, h_held=self.h_held, mode=MODES[o.mode],
                     levels=[o.level_on, o.level_off], assist=[o.assist_on, o.dump_stop, o.h_min],

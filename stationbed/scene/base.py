@@ -143,8 +143,10 @@ def _unit(v: list[float]) -> list[float]:
 Direction = Annotated[Vec3, AfterValidator(_direction)]
 #: a :data:`Direction` stored normalised to unit length
 UnitDirection = Annotated[Direction, AfterValidator(_unit)]
-#: a thruster's or group's name: it becomes a column stem (letters, digits, underscores)
-ThrusterName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
+#: a name that becomes a column stem: a letter, then letters, digits, underscores
+COLUMN_STEM = r"[A-Za-z][A-Za-z0-9_]*"
+#: a thruster's or group's name: it becomes a column stem
+ThrusterName = Annotated[str, Field(pattern=f"^{COLUMN_STEM}$", max_length=40)]
 
 
 class Strict(BaseModel):

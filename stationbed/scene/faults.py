@@ -27,7 +27,7 @@ from typing import Callable
 
 from pydantic import ConfigDict, Field, model_validator
 
-from .base import FieldError, Strict
+from .base import COLUMN_STEM, FieldError, Strict
 
 
 def _flown(scene):
@@ -121,7 +121,7 @@ class Fault(Strict):
 
     model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False, strict=True)
 
-    name: str | None = Field(default=None, pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)
+    name: str | None = Field(default=None, pattern=f"^{COLUMN_STEM}$", max_length=40)
     t: float = Field(ge=0.0)
     until: float | None = None
     kind: str

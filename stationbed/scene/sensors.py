@@ -35,7 +35,7 @@ import numpy as np
 from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
 
 from ..core.rotation import quat_from_dcm
-from .base import QUAT_NORM_TOL, Direction, FieldError, Mat3, SceneError, Strict, TimeS, Vec3, at_most
+from .base import COLUMN_STEM, QUAT_NORM_TOL, Direction, FieldError, Mat3, SceneError, Strict, TimeS, Vec3, at_most
 from .tables import TAGS
 
 __all__ = ["GyroSensor", "StarTrackerSensor", "SensorEntry", "MekfEstimator", "Sensing",
@@ -77,7 +77,7 @@ Nea = Annotated[float, Field(ge=0.0), at_most(NEA_MAX_RAD, "rad", "coarser than 
 
 
 #: a sensor's name: it becomes a column stem and a layout field (letters, digits, underscores)
-SensorName = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=40)]
+SensorName = Annotated[str, Field(pattern=f"^{COLUMN_STEM}$", max_length=40)]
 
 
 def _whole(ratio: float) -> bool:

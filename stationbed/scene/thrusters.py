@@ -41,9 +41,9 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from .base import Direction, FieldError, Strict, ThrusterName, Vec3
+from .base import COLUMN_STEM, Direction, FieldError, Strict, ThrusterName, Vec3
 from ..core.rotation import dcm
-from .docking import configuration_ports, mass_centre_B
+from .docking import configuration_ports, docked_at, mass_centre_B
 
 __all__ = ["Thruster", "ThrusterOptions", "ThrusterName", "check_thrusters", "flown_thrusters", "thruster_owners",
            "available", "torque_arms", "torque_authority",
@@ -232,7 +232,7 @@ def missing_torque(scene, c_B=None, avail=None) -> list[str]:
     D, _ = torque_arms(scene, c_B)
     f_max = np.array([t.force_N for t in flown_thrusters(scene)])
     if avail is None:
-        avail = available(thruster_owners(scene), {v.name: v.port for v in scene.vehicle})
+        avail = available(thruster_owners(scene), docked_at(scene))
     keep = np.asarray(avail) > 0.0
     if not keep.any():
         return [f"{sg}{ax}" for ax in "xyz" for sg in "-+"]
@@ -355,11 +355,11 @@ def check_thrusters(scene) -> None:
     """``[[thruster]]``, ``[[vehicle.thruster]]`` and ``[thrusters]`` agree with each other and
     the rest of the scene."""
     for i, v in enumerate(scene.vehicle):
-        if v.thruster and not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", v.name):
+        if v.thruster and not re.fullmatch(COLUMN_STEM, v.name):
             raise FieldError(f"vehicle[{i}].name", f"'{v.name}' names its thrusters' columns (<vehicle>_<name>): "
                                                    "letters, digits, underscores")
     for i, p in enumerate(scene.port):
-        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", p.name) and any(
+        if not re.fullmatch(COLUMN_STEM, p.name) and any(
                 p.name in ports and len(ports) > 1 for ports in _vehicle_ports(scene).values()):
             raise FieldError(f"port[{i}].name", f"'{p.name}' names a vehicle's thrusters' columns "
                                                 "(<vehicle>_<port>_<name>): letters, digits, underscores")
